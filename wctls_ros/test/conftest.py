@@ -1,0 +1,62 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""Shared fixtures: a private ROS domain per test session and a per-test rclpy context."""
+
+import os
+import time
+
+import pytest
+
+# Keep this session's DDS traffic away from anything else running on the machine (a demo, another
+# test run); subprocesses started by the tests inherit the variable.
+os.environ.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
+
+
+@pytest.fixture
+def ros_context():
+    """
+    Yield an initialised rclpy context that is shut down after the test.
+
+    :return: an ``rclpy.context.Context``
+    """
+    rclpy = pytest.importorskip('rclpy')
+    context = rclpy.context.Context()
+    rclpy.init(context=context)
+    try:
+        yield context
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
+@pytest.fixture
+def executor(ros_context):
+    """
+    Yield a single-threaded executor bound to the test's context.
+
+    :return: an ``rclpy.executors.SingleThreadedExecutor``
+    """
+    from rclpy.executors import SingleThreadedExecutor
+    executor = SingleThreadedExecutor(context=ros_context)
+    try:
+        yield executor
+    finally:
+        for node in list(executor.get_nodes()):
+            executor.remove_node(node)
+            node.destroy_node()
+        executor.shutdown()
+
+
+def spin_until(executor, predicate, timeout_s=5.0):
+    """
+    Step the executor until ``predicate()`` is true or the timeout passes.
+
+    :param executor: executor with the nodes to step
+    :param predicate: callable returning True when done
+    :param timeout_s: wall-clock limit, s
+    :return: the final value of ``predicate()``
+    """
+    deadline = time.monotonic() + timeout_s
+    while not predicate() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.01)
+    return predicate()

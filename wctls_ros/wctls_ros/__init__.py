@@ -1,0 +1,1 @@
+"""Line segments and corners with calibrated covariances from 2D LiDAR scans."""

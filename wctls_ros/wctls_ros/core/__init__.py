@@ -1,0 +1,1 @@
+"""Estimation core: plain numpy, no ROS imports."""

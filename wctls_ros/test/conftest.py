@@ -4,6 +4,7 @@
 """Shared fixtures: a private ROS domain per test session and a per-test rclpy context."""
 
 import os
+import pathlib
 import time
 
 import pytest
@@ -11,6 +12,10 @@ import pytest
 # Keep this session's DDS traffic away from anything else running on the machine (a demo, another
 # test run); subprocesses started by the tests inherit the variable.
 os.environ.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
+
+# Real recordings shared by every checkout at ../shared/data (tests skip when absent).
+SHARED_DATA = pathlib.Path(os.environ.get(
+    'WCTLS_DATA_DIR', pathlib.Path(__file__).resolve().parents[2].parent / 'shared' / 'data'))
 
 
 @pytest.fixture

@@ -1,0 +1,199 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""Line fits and corner propagation against finite differences and Monte Carlo."""
+
+import math
+
+import numpy as np
+import pytest
+from wctls_ros.core import find_corners, fit_lines, intersect, METHODS, nees, segment_returns
+from wctls_ros.core.lines import normal_form, utls, wctls, wtls
+
+RANGE_SIGMA = 0.05
+BEARING_SIGMA = math.radians(0.391)
+
+
+def wall_returns(normal_angle, radius, along_m, rng=None, sigmas=(0.0, 0.0)):
+    """Polar returns of points on a wall, optionally with polar noise."""
+    foot = radius * np.array([math.cos(normal_angle), math.sin(normal_angle)])
+    direction = np.array([-math.sin(normal_angle), math.cos(normal_angle)])
+    xy = foot + np.asarray(along_m)[:, None] * direction
+    rho, theta = np.hypot(xy[:, 0], xy[:, 1]), np.arctan2(xy[:, 1], xy[:, 0])
+    if rng is not None:
+        rho = rho + rng.normal(0.0, sigmas[0], rho.shape)
+        theta = theta + rng.normal(0.0, sigmas[1], theta.shape)
+    return rho, theta
+
+
+def fd_covariance(estimate, rho, theta, step=1e-6):
+    """Covariance of estimate(rho, theta) by central differences over every return."""
+    columns = []
+    for values, sigma in ((rho, RANGE_SIGMA), (theta, BEARING_SIGMA)):
+        for i in range(len(values)):
+            up, down = values.copy(), values.copy()
+            h = step * max(1.0, abs(values[i]))
+            up[i] += h
+            down[i] -= h
+            args_up = (up, theta) if values is rho else (rho, up)
+            args_down = (down, theta) if values is rho else (rho, down)
+            columns.append(sigma * (estimate(*args_up) - estimate(*args_down)) / (2 * h))
+    jac = np.column_stack(columns)
+    return jac @ jac.T
+
+
+def single(rho, theta):
+    return segment_returns(rho, theta, [0], [len(rho)])
+
+
+@pytest.mark.parametrize('fit', [utls, wtls, wctls], ids=['utls', 'wtls', 'wctls'])
+@pytest.mark.parametrize('normal_angle,radius,along', [
+    (0.3, 2.0, np.linspace(-1.0, 1.5, 25)),
+    (-2.4, 3.7, np.linspace(0.4, 2.9, 60)),
+    (1.9, 1.1, np.linspace(-0.2, 0.3, 12)),
+])
+def test_analytic_covariance_matches_finite_differences(fit, normal_angle, radius, along):
+    rho, theta = wall_returns(normal_angle, radius, along, np.random.default_rng(7),
+                              (0.02, 0.002))
+    _, analytic = fit(single(rho, theta), RANGE_SIGMA, BEARING_SIGMA)
+    numeric = fd_covariance(lambda r, t: fit(single(r, t), 1.0, 1.0)[0][0], rho, theta)
+    assert np.abs(numeric - analytic[0]).max() / np.abs(analytic[0]).max() < 1e-5
+
+
+def test_normal_form_covariance_matches_finite_differences():
+    rho, theta = wall_returns(2.2, 1.6, np.linspace(-0.8, 0.6, 30),
+                              np.random.default_rng(3), (0.02, 0.002))
+    returns = single(rho, theta)
+    _, _, analytic = normal_form(*utls(returns, RANGE_SIGMA, BEARING_SIGMA))
+
+    def angle_radius(r, t):
+        angle, radius, _ = normal_form(*utls(single(r, t), 1.0, 1.0))
+        return np.array([angle[0], radius[0]])
+    numeric = fd_covariance(angle_radius, rho, theta)
+    assert np.abs(numeric - analytic[0]).max() / np.abs(analytic[0]).max() < 1e-5
+
+
+def test_ml_fisher_covariance_equals_propagated_covariance_on_exact_returns():
+    # At zero residuals the first-order covariance of the ML estimator is exactly F^-1.
+    rho, theta = wall_returns(-0.7, 2.4, np.linspace(-1.2, 0.9, 40))
+
+    def angle_radius(r, t):
+        fits = fit_lines('ml', single(r, t), RANGE_SIGMA, BEARING_SIGMA)
+        return np.array([fits.angle_rad[0], fits.radius_m[0]])
+    fisher_inverse = fit_lines('ml', single(rho, theta), RANGE_SIGMA,
+                               BEARING_SIGMA).normal_covariance[0]
+    numeric = fd_covariance(angle_radius, rho, theta)
+    assert np.abs(numeric - fisher_inverse).max() / np.abs(fisher_inverse).max() < 1e-5
+    assert fit_lines('ml', single(rho, theta), RANGE_SIGMA, BEARING_SIGMA).radius_m[0] == \
+        pytest.approx(2.4, abs=1e-12)
+
+
+def two_walls(corner, first_direction, second_direction, counts, rng=None):
+    """Return the returns of two walls leaving a corner, as one batch of two segments."""
+    corner = np.asarray(corner, dtype=float)
+    parts = []
+    for direction, count in zip((first_direction, second_direction), counts):
+        u = np.array([math.cos(direction), math.sin(direction)])
+        xy = corner + np.linspace(0.1, 1.3, count)[:, None] * u
+        rho, theta = np.hypot(*xy.T), np.arctan2(xy[:, 1], xy[:, 0])
+        if rng is not None:
+            rho = rho + rng.normal(0.0, RANGE_SIGMA, count)
+            theta = theta + rng.normal(0.0, BEARING_SIGMA, count)
+        parts.append((rho, theta))
+    return segment_returns(np.concatenate([parts[0][0], parts[1][0]]),
+                           np.concatenate([parts[0][1], parts[1][1]]),
+                           [0, counts[0]], list(counts))
+
+
+def corner_of(fits, scale=(1.0, 1.0)):
+    """Corner (x, y, yaw) and its 3x3 covariance from two fitted lines, lines rescaled."""
+    k = np.asarray(scale)[:, None]
+    line = fits.line * k
+    cov = fits.line_covariance * (k * k)[:, :, None]
+    ends = np.array([[5.0, 5.0], [5.0, 5.0]])
+    found = find_corners(line, cov, ends, ends, [0], [1], 0.1, 1e9)
+    return found
+
+
+@pytest.mark.parametrize('method', METHODS)
+def test_corner_covariance_is_invariant_to_rescaling_a_line(method):
+    fits = fit_lines(method, two_walls([2.5, 1.0], math.pi, -math.pi / 2, (40, 30),
+                                       np.random.default_rng(11)), RANGE_SIGMA, BEARING_SIGMA)
+    reference = corner_of(fits).covariance[0]
+    for scale in [(1e6, 1.0), (1.0, 1e-6), (-1e-6, 1e6), (-3.0, -1.0)]:
+        scaled = corner_of(fits, scale).covariance[0]
+        assert np.abs(scaled - reference).max() / np.abs(reference).max() < 1e-9
+
+
+def test_wctls_corner_equals_wtls_corner():
+    returns = two_walls([-1.8, 2.7], 0.0, -math.pi / 2, (25, 70), np.random.default_rng(5))
+    wtls_corner = corner_of(fit_lines('wtls', returns, RANGE_SIGMA, BEARING_SIGMA))
+    wctls_corner = corner_of(fit_lines('wctls', returns, RANGE_SIGMA, BEARING_SIGMA))
+    np.testing.assert_allclose(wctls_corner.xy_m, wtls_corner.xy_m, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(wctls_corner.covariance, wtls_corner.covariance, rtol=1e-9)
+    # ... while the lines' own covariances are in different parameterisations.
+    assert not np.allclose(fit_lines('wctls', returns, 1, 1).line_covariance,
+                           fit_lines('wtls', returns, 1, 1).line_covariance)
+
+
+def test_joint_corner_covariance_matches_finite_differences():
+    fits = fit_lines('utls', two_walls([2.0, -1.5], math.pi / 2, math.pi + 0.3, (30, 30),
+                                       np.random.default_rng(2)), RANGE_SIGMA, BEARING_SIGMA)
+    ends = np.full((2, 2), 5.0)
+
+    def corner_state(line):
+        found = find_corners(line, fits.line_covariance, ends, ends, [0], [1], 0.1, 1e9)
+        return np.array([*found.xy_m[0], found.yaw_rad[0]])
+    jac = np.zeros((3, 6))
+    for j in range(6):
+        h = 1e-7 * max(1.0, abs(fits.line.flat[j]))
+        up, down = fits.line.copy(), fits.line.copy()
+        up.flat[j] += h
+        down.flat[j] -= h
+        jac[:, j] = (corner_state(up) - corner_state(down)) / (2 * h)
+    block = np.zeros((6, 6))
+    block[:3, :3], block[3:, 3:] = fits.line_covariance
+    numeric = jac @ block @ jac.T
+    analytic = corner_of(fits).covariance[0]
+    assert np.abs(numeric - analytic).max() / np.abs(analytic).max() < 1e-5
+
+
+def test_intersection_is_the_common_point_of_both_lines():
+    lines = np.array([[1.0, 0.0, -2.0], [0.0, 2.0, -3.0]])     # x = 2 and y = 1.5
+    xy, cov, _, _ = intersect(lines[:1], np.eye(3)[None], lines[1:], np.eye(3)[None])
+    np.testing.assert_allclose(xy, [[2.0, 1.5]])
+    assert np.all(np.linalg.eigvalsh(cov[0]) > 0)
+
+
+# Corners 1.5-4 m away, 15-100 returns per wall, at the paper's S1 noise figures.
+MONTE_CARLO_CASES = [
+    ([2.5, 1.0], math.pi, -math.pi / 2, (40, 40)),
+    ([1.5, -0.5], math.pi / 2, math.pi, (15, 15)),
+    ([-2.0, 3.0], 0.0, -math.pi / 2, (30, 80)),
+    ([-1.2, -2.6], 0.4, math.pi / 2 + 0.4, (100, 20)),
+]
+
+
+@pytest.mark.parametrize('corner,first,second,counts', MONTE_CARLO_CASES)
+def test_monte_carlo_corner_covariance_is_calibrated(corner, first, second, counts):
+    trials = 400
+    rng = np.random.default_rng(20261122)
+    batches = [two_walls(corner, first, second, counts, rng) for _ in range(trials)]
+    rho = np.concatenate([b.rho for b in batches])
+    theta = np.concatenate([b.theta for b in batches])
+    lengths = np.tile(counts, trials)
+    offsets = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+    returns = segment_returns(rho, theta, offsets, lengths)
+    for method in METHODS:
+        fits = fit_lines(method, returns, RANGE_SIGMA, BEARING_SIGMA)
+        ends = np.full((2 * trials, 2), 1e3)
+        found = find_corners(fits.line, fits.line_covariance, ends, ends,
+                             np.arange(0, 2 * trials, 2), np.arange(1, 2 * trials, 2), 0.1, 1e9)
+        assert len(found) == trials
+        error = found.xy_m - np.asarray(corner)
+        covariance = found.covariance[:, :2, :2]
+        mean_nees = nees(error, covariance).mean()
+        area_ratio = math.sqrt(np.linalg.det(covariance.mean(axis=0))
+                               / np.linalg.det(np.cov(error.T)))
+        assert 1.8 <= mean_nees <= 2.2, f'{method}: mean NEES {mean_nees:.2f}'
+        assert 0.9 <= area_ratio <= 1.1, f'{method}: area ratio {area_ratio:.3f}'

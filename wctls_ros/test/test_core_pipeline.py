@@ -1,0 +1,269 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""The per-scan pipeline: scan conversion, segmentation, corners, hostile input, properties."""
+
+import math
+
+from hypothesis import given, settings, strategies as st
+import numpy as np
+import pytest
+from wctls_ros.core import (extract_features, FeatureConfig, fit_lines, nees, scan_to_points,
+                            ScanError, segment_returns)
+from wctls_ros.simulation import (floor_plan_from_dict, full_turn_bearings, NOISELESS,
+                                  NoiseModel, simulate_ranges)
+
+ROOM = {'name': 'room', 'polylines': [
+    {'closed': True, 'points': [[0.0, 0.0], [4.5, 0.0], [4.5, 2.5], [0.0, 2.5]]}],
+    'boxes': [{'center': [2.6, 2.0], 'size': [0.4, 0.4]}]}
+SMALL_NOISE = NoiseModel(range_sigma_m=0.01, bearing_sigma_rad=math.radians(0.05))
+SMALL_NOISE_CONFIG = FeatureConfig(range_sigma_m=0.01, bearing_sigma_rad=math.radians(0.05))
+
+
+def room_scan(pose=(1.6, 1.1, 0.3), noise=SMALL_NOISE, seed=0, beams=1080, plan=ROOM):
+    """Return a full-turn scan of a room: (ranges, angle_min, increment, true corners)."""
+    walls, corners = floor_plan_from_dict(plan).in_sensor_frame(pose)
+    angle_min, increment, bearings = full_turn_bearings(beams)
+    ranges = simulate_ranges(walls, bearings, noise, np.random.default_rng(seed))
+    return ranges, angle_min, increment, corners
+
+
+def nearest(found_xy, truth_xy):
+    """Index of the nearest found corner to each true one, and the distances."""
+    distance = np.hypot(*(found_xy[None, :, :] - truth_xy[:, None, :]).transpose(2, 0, 1))
+    return distance.argmin(axis=1), distance.min(axis=1)
+
+
+# --- scan conversion ---------------------------------------------------------------------------
+
+def test_invalid_returns_are_dropped_and_indices_kept():
+    ranges = [1.0, math.nan, math.inf, -math.inf, 0.01, 50.0, 0.0, 2.0]
+    points = scan_to_points(ranges, 0.0, 0.1, range_min_m=0.05, range_max_m=30.0)
+    assert points.index.tolist() == [0, 7]
+    np.testing.assert_allclose(points.xy_m[1], [2.0 * math.cos(0.7), 2.0 * math.sin(0.7)])
+    assert not points.full_turn
+
+
+def test_negative_increment_and_full_turn_detection():
+    points = scan_to_points(np.ones(360), math.pi, -2 * math.pi / 360)
+    assert points.full_turn
+    assert points.bearing_rad[1] == pytest.approx(math.pi - 2 * math.pi / 360)
+    # sllidar_ros2's layout: N beams from -pi to +pi inclusive is a full turn too.
+    angle_min, increment, _ = full_turn_bearings(1080)
+    assert scan_to_points(np.ones(1080), angle_min, np.float32(increment)).full_turn
+    assert not scan_to_points(np.ones(541), -2.356, 0.0087).full_turn
+
+
+@pytest.mark.parametrize('ranges,angle_min,increment,message', [
+    (np.ones(10), 0.0, 0.0, 'angle_increment is 0'),
+    (np.ones(10), math.nan, 0.1, 'finite'),
+    (np.ones(400), 0.0, 2 * math.pi / 300, 'more than a full turn'),
+    (np.ones((2, 5)), 0.0, 0.1, 'one-dimensional'),
+])
+def test_impossible_geometry_is_a_clear_error(ranges, angle_min, increment, message):
+    with pytest.raises(ScanError, match=message):
+        extract_features(ranges, angle_min, increment)
+
+
+# --- the pipeline on simulated rooms -----------------------------------------------------------
+
+def test_room_corners_are_found_within_their_covariance():
+    ranges, angle_min, increment, truth = room_scan()
+    features = extract_features(ranges, angle_min, increment, SMALL_NOISE_CONFIG)
+    # 4 room corners and the box corner facing the sensor (its other corners are at the
+    # silhouette, where the walls behind do not meet it).
+    facing_box_corner = truth[4 + np.argmin(np.hypot(*truth[4:].T))]
+    expected = np.vstack([truth[:4], facing_box_corner])
+    index, distance = nearest(features.corners.xy_m, expected)
+    assert distance.max() < 0.03
+    errors = features.corners.xy_m[index] - expected
+    assert nees(errors, features.corners.covariance[index, :2, :2]).max() < 11.8   # 3 sigma
+    assert len(features.corners) == 5
+
+
+def test_corner_fields_are_consistent():
+    ranges, angle_min, increment, _ = room_scan()
+    features = extract_features(ranges, angle_min, increment, SMALL_NOISE_CONFIG)
+    segments, corners = features.segments, features.corners
+    for corner in corners:
+        assert 0 <= corner.first_segment < len(segments)
+        assert 0 <= corner.second_segment < len(segments)
+        assert np.all(np.linalg.eigvalsh(corner.covariance) > 0)
+        np.testing.assert_allclose(corner.covariance, corner.covariance.T)
+        # the bisector points from the corner into the room, i.e. roughly at the sensor
+        to_sensor = math.atan2(-corner.y_m, -corner.x_m)
+        assert abs(math.remainder(corner.yaw_rad - to_sensor, 2 * math.pi)) < math.pi / 2
+    concave = [c.opening_angle_rad < math.pi for c in corners]
+    assert sum(concave) == 4 and len(concave) == 5
+    assert all(s.radius_m >= 0 for s in segments)
+    assert [s.first_index for s in segments] == sorted(s.first_index for s in segments)
+
+
+def test_a_wall_crossing_the_seam_is_one_segment():
+    # Sensor in the middle of the room facing +x: the wall behind it spans bearing +-pi.
+    ranges, angle_min, increment, truth = room_scan(pose=(2.6, 1.25, 0.0))
+    features = extract_features(ranges, angle_min, increment, SMALL_NOISE_CONFIG)
+    behind = [s for s in features.segments if abs(abs(s.angle_rad) - math.pi) < 0.05
+              and s.radius_m == pytest.approx(2.6, abs=0.03)]
+    assert len(behind) == 1
+    assert behind[0].first_index > behind[0].last_index        # it wraps around the seam
+    assert behind[0].num_points > 140
+    # and the corners at its two ends, one on each side of the seam, are both found
+    _, distance = nearest(features.corners.xy_m, truth[[0, 3]])
+    assert distance.max() < 0.03
+
+
+def test_every_method_gives_the_same_segments():
+    ranges, angle_min, increment, _ = room_scan(seed=4)
+    results = [extract_features(ranges, angle_min, increment,
+                                SMALL_NOISE_CONFIG.replace(method=m)) for m in
+               ('utls', 'wtls', 'wctls', 'ml')]
+    for other in results[1:]:
+        assert other.segments.first_index.tolist() == results[0].segments.first_index.tolist()
+        np.testing.assert_allclose(other.corners.xy_m, results[0].corners.xy_m, atol=0.01)
+
+
+# --- degenerate and hostile input --------------------------------------------------------------
+
+def assert_finite(features):
+    for array in (features.segments.angle_rad, features.segments.covariance,
+                  features.segments.line_covariance, features.corners.xy_m,
+                  features.corners.covariance, features.corners.yaw_rad):
+        assert np.isfinite(array).all()
+
+
+@pytest.mark.parametrize('ranges', [
+    np.zeros(0), np.full(720, math.nan), np.full(720, math.inf), np.full(720, -1.0),
+    np.array([1.0]), np.array([1.0, 1.1]), np.array([1.0, 1.1, 1.2]),
+    np.full(720, 1e6), np.where(np.arange(720) % 2, math.nan, 2.0),
+], ids=['empty', 'nan', 'inf', 'negative', '1', '2', '3', 'huge', 'every-other-nan'])
+def test_hostile_scans_give_empty_or_finite_results(ranges):
+    features = extract_features(ranges, -math.pi, 2 * math.pi / 720)
+    assert_finite(features)
+
+
+def test_collinear_exact_returns_give_one_finite_segment():
+    bearings = np.linspace(-0.6, 0.6, 200)
+    features = extract_features(2.0 / np.cos(bearings), -0.6, bearings[1] - bearings[0])
+    assert len(features.segments) == 1 and len(features.corners) == 0
+    assert features.segments[0].radius_m == pytest.approx(2.0, abs=1e-9)
+    assert_finite(features)
+
+
+def test_returns_along_a_ray_through_the_sensor_are_dropped_not_nan():
+    # All returns on the line through the origin at bearing 0.2: no line fit is defined.
+    ranges = np.full(100, math.nan)
+    ranges[40:60] = np.linspace(1.0, 3.0, 20)
+    features = extract_features(ranges, 0.2, 0.0, FeatureConfig()) if False else None
+    points_on_ray = extract_features(np.linspace(1.0, 3.0, 20), 0.2, 1e-9)
+    assert features is None
+    assert_finite(points_on_ray)
+    assert len(points_on_ray.corners) == 0
+
+
+def test_parallel_walls_make_no_corner():
+    walls = np.array([[-5.0, 1.0, 5.0, 1.0], [-5.0, -1.5, 5.0, -1.5]])
+    angle_min, increment, bearings = full_turn_bearings(1440)
+    ranges = simulate_ranges(walls, bearings, SMALL_NOISE, np.random.default_rng(1))
+    features = extract_features(ranges, angle_min, increment, SMALL_NOISE_CONFIG)
+    assert len(features.segments) == 2
+    assert len(features.corners) == 0
+
+
+def test_config_limits_are_applied():
+    ranges, angle_min, increment, _ = room_scan(noise=NOISELESS)
+    near = extract_features(ranges, angle_min, increment, FeatureConfig(range_max_m=1.5))
+    assert all(np.hypot(*s.start_xy_m) <= 1.5 + 1e-9 for s in near.segments)
+
+
+@pytest.mark.parametrize('changes,message', [
+    ({'method': 'tls'}, 'method'),
+    ({'range_sigma_m': 0.0}, 'range_sigma_m'),
+    ({'bearing_sigma_rad': -1e-3}, 'bearing_sigma_rad'),
+    ({'iepf_threshold_m': math.nan}, 'iepf_threshold_m'),
+    ({'min_segment_points': 2}, 'min_segment_points'),
+    ({'min_segment_points': 8.0}, 'min_segment_points'),
+    ({'range_min_m': 5.0, 'range_max_m': 4.0}, 'below range_max_m'),
+    ({'min_corner_angle_rad': 2.0}, 'min_corner_angle_rad'),
+])
+def test_invalid_configuration_is_refused_with_the_reason(changes, message):
+    with pytest.raises(ValueError, match=message):
+        FeatureConfig().replace(**changes)
+
+
+def test_unknown_configuration_field_is_refused():
+    with pytest.raises(ValueError, match='iepf_treshold'):
+        FeatureConfig().replace(iepf_treshold=0.1)
+
+
+# --- properties ---------------------------------------------------------------------------------
+
+def random_room(draw_pose, seed, beams):
+    return room_scan(pose=draw_pose, seed=seed, beams=beams)
+
+
+poses = st.tuples(st.floats(0.8, 3.7), st.floats(0.6, 1.9), st.floats(-math.pi, math.pi))
+
+
+def matched(a, b):
+    """Order of the corners of b matching those of a (by position)."""
+    index, distance = nearest(b, a)
+    return index, distance
+
+
+@settings(max_examples=25, deadline=None)
+@given(pose=poses, seed=st.integers(0, 2 ** 16), shift=st.floats(-math.pi, math.pi),
+       beams=st.sampled_from([360, 1080, 1441]))
+def test_shifting_angle_min_rotates_every_corner_and_its_covariance(pose, seed, shift, beams):
+    ranges, angle_min, increment, _ = room_scan(pose=pose, seed=seed, beams=beams)
+    base = extract_features(ranges, angle_min, increment, SMALL_NOISE_CONFIG)
+    turned = extract_features(ranges, angle_min + shift, increment, SMALL_NOISE_CONFIG)
+    assert len(turned.corners) == len(base.corners)
+    c, s = math.cos(shift), math.sin(shift)
+    rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    np.testing.assert_allclose(turned.corners.xy_m, base.corners.xy_m @ rotation[:2, :2].T,
+                               atol=1e-9)
+    np.testing.assert_allclose(
+        np.cos(turned.corners.yaw_rad - base.corners.yaw_rad - shift), 1.0, atol=1e-12)
+    expected = rotation @ base.corners.covariance @ rotation.T
+    np.testing.assert_allclose(turned.corners.covariance, expected,
+                               atol=1e-9 * np.abs(expected).max())
+
+
+@settings(max_examples=25, deadline=None)
+@given(pose=poses, seed=st.integers(0, 2 ** 16), beams=st.sampled_from([360, 1080, 1441]),
+       half_turn=st.booleans())
+def test_reversing_the_beam_order_gives_the_same_features(pose, seed, beams, half_turn):
+    ranges, angle_min, increment, _ = room_scan(pose=pose, seed=seed, beams=beams)
+    if half_turn:
+        ranges = ranges[: beams // 2]
+    base = extract_features(ranges, angle_min, increment, SMALL_NOISE_CONFIG)
+    flipped = extract_features(ranges[::-1], angle_min + (len(ranges) - 1) * increment,
+                               -increment, SMALL_NOISE_CONFIG)
+    assert len(flipped.segments) == len(base.segments)
+    assert len(flipped.corners) == len(base.corners)
+    if len(base.corners):
+        index, distance = matched(base.corners.xy_m, flipped.corners.xy_m)
+        assert distance.max() < 1e-9
+        np.testing.assert_allclose(flipped.corners.covariance[index], base.corners.covariance,
+                                   rtol=1e-7, atol=1e-15)
+        np.testing.assert_allclose(flipped.corners.opening_angle_rad[index],
+                                   base.corners.opening_angle_rad, atol=1e-9)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2 ** 16), k=st.floats(0.1, 10.0),
+       method=st.sampled_from(['utls', 'wtls', 'wctls', 'ml']))
+def test_scaling_both_sigmas_by_k_scales_covariances_by_k_squared(seed, k, method):
+    rng = np.random.default_rng(seed)
+    counts = rng.integers(5, 60, size=3)
+    theta = np.concatenate([np.sort(rng.uniform(-1.0, 1.0, n)) + 2.0 * j
+                            for j, n in enumerate(counts)])
+    rho = rng.uniform(0.5, 6.0, len(theta))
+    returns = segment_returns(rho, theta, np.concatenate([[0], np.cumsum(counts)[:-1]]), counts)
+    sigmas = (0.03, math.radians(0.2))
+    base = fit_lines(method, returns, *sigmas)
+    scaled = fit_lines(method, returns, k * sigmas[0], k * sigmas[1])
+    np.testing.assert_allclose(scaled.line, base.line, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(scaled.normal_covariance, k * k * base.normal_covariance,
+                               rtol=1e-8)

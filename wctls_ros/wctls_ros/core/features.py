@@ -1,0 +1,171 @@
+"""
+The extracted features of one scan.
+
+Segments and corners are held as arrays (``SegmentSet``, ``CornerSet``: one row per feature, fast
+to convert to messages) and read one at a time as small records (``Segment``, ``Corner``):
+``features.corners[0].x_m`` or ``for corner in features.corners``.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Segment:
+    """
+    One straight segment: the line x cos(angle) + y sin(angle) = radius and its extent.
+
+    :ivar angle_rad: normal angle, from the sensor towards the line, rad in (-pi, pi]
+    :ivar radius_m: distance of the line from the sensor, m (>= 0)
+    :ivar covariance: covariance of (angle, radius), shape (2, 2): rad^2, rad m, m^2
+    :ivar line: (a, b, c) of a x + b y + c = 0 as the method defines them, shape (3,)
+    :ivar line_covariance: covariance of (a, b, c), shape (3, 3)
+    :ivar start_xy_m: first return projected on the line, shape (2,), m
+    :ivar end_xy_m: last return projected on the line, shape (2,), m
+    :ivar first_index: beam index of the first return in the scan's ranges
+    :ivar last_index: beam index of the last return (smaller than first_index on a segment
+        that crosses the seam of a full turn)
+    :ivar num_points: number of returns fitted
+    """
+
+    angle_rad: float
+    radius_m: float
+    covariance: np.ndarray
+    line: np.ndarray
+    line_covariance: np.ndarray
+    start_xy_m: np.ndarray
+    end_xy_m: np.ndarray
+    first_index: int
+    last_index: int
+    num_points: int
+
+
+@dataclass(frozen=True)
+class Corner:
+    """
+    One corner: where two adjacent walls meet.
+
+    :ivar x_m: position x, m
+    :ivar y_m: position y, m
+    :ivar yaw_rad: bisector of the walls, pointing into the open side the sensor sees, rad
+    :ivar covariance: joint covariance of (x, y, yaw), shape (3, 3): m^2, m rad, rad^2
+    :ivar opening_angle_rad: angle between the walls through the open side, rad in (0, 2 pi)
+    :ivar first_segment: index of the earlier segment in the same Features
+    :ivar second_segment: index of the later segment
+    """
+
+    x_m: float
+    y_m: float
+    yaw_rad: float
+    covariance: np.ndarray
+    opening_angle_rad: float
+    first_segment: int
+    second_segment: int
+
+    @property
+    def position_covariance(self) -> np.ndarray:
+        """
+        Return the covariance of (x, y).
+
+        :return: shape (2, 2), m^2
+        """
+        return self.covariance[:2, :2]
+
+
+class _Rows:
+    """Iteration over a struct of arrays one row (record) at a time."""
+
+    def __iter__(self):
+        return (self[i] for i in range(len(self)))
+
+
+@dataclass(frozen=True)
+class SegmentSet(_Rows):
+    """
+    The segments of one scan as arrays, one row per segment (fields as in :class:`Segment`).
+
+    Shapes: angle_rad, radius_m, first_index, last_index, num_points (S,); covariance (S, 2, 2);
+    line (S, 3); line_covariance (S, 3, 3); start_xy_m, end_xy_m (S, 2).
+    """
+
+    angle_rad: np.ndarray
+    radius_m: np.ndarray
+    covariance: np.ndarray
+    line: np.ndarray
+    line_covariance: np.ndarray
+    start_xy_m: np.ndarray
+    end_xy_m: np.ndarray
+    first_index: np.ndarray
+    last_index: np.ndarray
+    num_points: np.ndarray
+
+    def __len__(self):
+        return len(self.angle_rad)
+
+    def __getitem__(self, i: int) -> Segment:
+        return Segment(float(self.angle_rad[i]), float(self.radius_m[i]), self.covariance[i],
+                       self.line[i], self.line_covariance[i], self.start_xy_m[i],
+                       self.end_xy_m[i], int(self.first_index[i]), int(self.last_index[i]),
+                       int(self.num_points[i]))
+
+    @staticmethod
+    def empty() -> 'SegmentSet':
+        """
+        Return a set without segments.
+
+        :return: the empty set
+        """
+        return SegmentSet(np.zeros(0), np.zeros(0), np.zeros((0, 2, 2)), np.zeros((0, 3)),
+                          np.zeros((0, 3, 3)), np.zeros((0, 2)), np.zeros((0, 2)),
+                          np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0, np.intp))
+
+
+@dataclass(frozen=True)
+class CornerSet(_Rows):
+    """
+    The corners of one scan as arrays, one row per corner (fields as in :class:`Corner`).
+
+    Shapes: xy_m (C, 2); yaw_rad, opening_angle_rad, first_segment, second_segment (C,);
+    covariance (C, 3, 3) over (x, y, yaw).
+    """
+
+    xy_m: np.ndarray
+    yaw_rad: np.ndarray
+    covariance: np.ndarray
+    opening_angle_rad: np.ndarray
+    first_segment: np.ndarray
+    second_segment: np.ndarray
+
+    def __len__(self):
+        return len(self.yaw_rad)
+
+    def __getitem__(self, i: int) -> Corner:
+        return Corner(float(self.xy_m[i, 0]), float(self.xy_m[i, 1]), float(self.yaw_rad[i]),
+                      self.covariance[i], float(self.opening_angle_rad[i]),
+                      int(self.first_segment[i]), int(self.second_segment[i]))
+
+    @staticmethod
+    def empty() -> 'CornerSet':
+        """
+        Return a set without corners.
+
+        :return: the empty set
+        """
+        return CornerSet(np.zeros((0, 2)), np.zeros(0), np.zeros((0, 3, 3)), np.zeros(0),
+                         np.zeros(0, np.intp), np.zeros(0, np.intp))
+
+
+@dataclass(frozen=True)
+class Features:
+    """
+    Everything extracted from one scan.
+
+    :ivar method: the line fit used: 'utls', 'wtls', 'wctls' or 'ml'
+    :ivar segments: the segments, in scan order
+    :ivar corners: the corners, in scan order; their segment indices point into ``segments``
+    """
+
+    method: str
+    segments: SegmentSet
+    corners: CornerSet

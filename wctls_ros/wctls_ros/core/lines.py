@@ -1,0 +1,393 @@
+"""
+Line fits with first-order covariance, batched over many segments at once.
+
+Every fit works on the returns of S segments laid end to end: ``rho`` and ``theta`` of shape
+(P,), segment k owning ``rho[offsets[k]:offsets[k] + counts[k]]``. The noise is independent per
+return with std ``range_sigma`` (m) and ``bearing_sigma`` (rad), and every covariance is
+
+    C = sum_i [ range_sigma^2 (dphi/drho_i)(dphi/drho_i)^T
+                + bearing_sigma^2 (dphi/dtheta_i)(dphi/dtheta_i)^T ]
+
+with the analytic Jacobians of ``../shared/spec/math.md`` (the paper's eqs. (6)-(23) with its
+typos corrected). Each method returns the line in its own implicit form a x + b y + c = 0 and
+the 3x3 covariance of (a, b, c); :func:`normal_form` gives every method's line in one common form
+x cos(angle) + y sin(angle) = radius, radius >= 0, with the 2x2 covariance of (angle, radius).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._linalg import inverse_2x2, solve_2x2
+
+# Gauss-Newton of the maximum-likelihood fit stops once every step is below this (rad and m)...
+_ML_STEP_TOLERANCE = 1e-12
+# ... or after this many iterations (it starts from the WTLS line and converges in 2-4).
+_ML_MAX_ITERATIONS = 8
+
+
+@dataclass(frozen=True)
+class SegmentReturns:
+    """
+    The returns of S segments laid end to end.
+
+    :ivar rho: ranges, shape (P,), m
+    :ivar theta: bearings, shape (P,), rad
+    :ivar x: rho cos(theta), shape (P,), m
+    :ivar y: rho sin(theta), shape (P,), m
+    :ivar offsets: first return of each segment, shape (S,)
+    :ivar counts: returns per segment, shape (S,), each >= 2
+    :ivar segment: the segment each return belongs to, shape (P,)
+    """
+
+    rho: np.ndarray
+    theta: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    offsets: np.ndarray
+    counts: np.ndarray
+    segment: np.ndarray
+
+    def sums(self, values: np.ndarray) -> np.ndarray:
+        """
+        Sum per-return values over each segment.
+
+        :param values: shape (P,) or (P, k)
+        :return: shape (S,) or (S, k)
+        """
+        return np.add.reduceat(values, self.offsets, axis=0)
+
+
+def segment_returns(rho, theta, offsets, counts) -> SegmentReturns:
+    """
+    Bundle the returns of consecutive segments for the batched fits.
+
+    :param rho: ranges, shape (P,), m
+    :param theta: bearings, shape (P,), rad
+    :param offsets: first return of each segment, shape (S,)
+    :param counts: returns per segment, shape (S,), each >= 2
+    :return: the bundle
+    """
+    rho = np.asarray(rho, dtype=float)
+    theta = np.asarray(theta, dtype=float)
+    counts = np.asarray(counts, dtype=np.intp)
+    return SegmentReturns(rho, theta, rho * np.cos(theta), rho * np.sin(theta),
+                          np.asarray(offsets, dtype=np.intp), counts,
+                          np.repeat(np.arange(counts.size), counts))
+
+
+@dataclass(frozen=True)
+class LineFits:
+    """
+    Fitted lines of S segments, in the method's own form and in normal form.
+
+    :ivar line: (a, b, c) of a x + b y + c = 0 as the method defines them, shape (S, 3)
+    :ivar line_covariance: covariance of (a, b, c), shape (S, 3, 3), in units of (a, b, c)^2
+    :ivar angle_rad: direction of the line's normal, pointing from the origin to the line,
+        shape (S,), rad in (-pi, pi]
+    :ivar radius_m: distance of the line from the origin, shape (S,), m, >= 0
+    :ivar normal_covariance: covariance of (angle, radius), shape (S, 2, 2): rad^2, rad m, m^2
+    """
+
+    line: np.ndarray
+    line_covariance: np.ndarray
+    angle_rad: np.ndarray
+    radius_m: np.ndarray
+    normal_covariance: np.ndarray
+
+    def select(self, keep: np.ndarray) -> 'LineFits':
+        """
+        Return the fits where ``keep`` selects (a boolean or index array over the segments).
+
+        :param keep: selection over the segments
+        :return: the selected fits
+        """
+        return LineFits(self.line[keep], self.line_covariance[keep], self.angle_rad[keep],
+                        self.radius_m[keep], self.normal_covariance[keep])
+
+
+def _propagate(jac_rho: np.ndarray, jac_theta: np.ndarray, returns: SegmentReturns,
+               range_sigma: float, bearing_sigma: float) -> np.ndarray:
+    """
+    Sum per-return Jacobian outer products into per-segment covariances.
+
+    :param jac_rho: d(params)/d(rho_i), shape (P, k)
+    :param jac_theta: d(params)/d(theta_i), shape (P, k)
+    :return: covariance of the k parameters per segment, shape (S, k, k)
+    """
+    k = jac_rho.shape[1]
+    outer = (range_sigma ** 2 * jac_rho[:, :, None] * jac_rho[:, None, :]
+             + bearing_sigma ** 2 * jac_theta[:, :, None] * jac_theta[:, None, :])
+    return returns.sums(outer.reshape(-1, k * k)).reshape(-1, k, k)
+
+
+def _moments(returns: SegmentReturns, weight):
+    """Return per-segment total weight and weighted means X, Y, X2, Y2, XY, each (S,)."""
+    x, y = returns.x, returns.y
+    sums = returns.sums(np.column_stack([weight, weight * x, weight * y, weight * x * x,
+                                         weight * y * y, weight * x * y]))
+    total = sums[:, 0]
+    return total, *(sums[:, 1:] / total[:, None]).T
+
+
+def _algebraic_line(total, mx, my, mxx, myy, mxy):
+    """Return (a, b, c) of eqs. (2)-(4) / (10)-(12) from the (weighted) means, shape (S, 3)."""
+    t2 = total * total
+    return np.column_stack([t2 * (mx * myy - my * mxy), t2 * (my * mxx - mx * mxy),
+                            t2 * (mxy * mxy - mxx * myy)])
+
+
+def utls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
+    """
+    Unweighted algebraic fit of eqs. (2)-(4) with the covariance of eqs. (6)-(7) (corrected).
+
+    :param returns: the segments' returns
+    :param range_sigma: range noise std, m
+    :param bearing_sigma: bearing noise std, rad
+    :return: (line (S, 3), covariance (S, 3, 3))
+    """
+    total, mx, my, mxx, myy, mxy = _moments(returns, np.ones_like(returns.rho))
+    line = _algebraic_line(total, mx, my, mxx, myy, mxy)
+    s = returns.segment
+    n, mx, my, mxx, myy, mxy = total[s], mx[s], my[s], mxx[s], myy[s], mxy[s]
+    x, y, rho = returns.x, returns.y, returns.rho
+    xy, dxy = x * y, x * x - y * y
+    jac_rho = (n / rho)[:, None] * np.column_stack([
+        x * myy + 2 * y * y * mx - y * mxy - 2 * xy * my,
+        y * mxx + 2 * x * x * my - x * mxy - 2 * xy * mx,
+        2 * (2 * xy * mxy - x * x * myy - y * y * mxx)])
+    jac_theta = n[:, None] * np.column_stack([
+        -y * myy + 2 * xy * mx - x * mxy - dxy * my,
+        x * mxx - 2 * xy * my + y * mxy - dxy * mx,
+        2 * (dxy * mxy + xy * (myy - mxx))])
+    return line, _propagate(jac_rho, jac_theta, returns, range_sigma, bearing_sigma)
+
+
+def _range_weights(returns: SegmentReturns):
+    """
+    Return the WTLS weights, proportional to eq. (8): w_i = 1 / rho_i^2.
+
+    The paper's constant factor 1 / (range_sigma bearing_sigma)^2 is left out: it scales
+    (a_w, b_w, c_w) by a constant, which cancels in the normal form, in the WCTLS point Q and in
+    every corner, and it is undefined for a zero bearing sigma.
+    """
+    return 1.0 / (returns.rho * returns.rho)
+
+
+def wtls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
+    """
+    Weighted algebraic fit of eqs. (8)-(12) with the covariance of eqs. (14)-(15) (corrected).
+
+    :param returns: the segments' returns
+    :param range_sigma: range noise std, m
+    :param bearing_sigma: bearing noise std, rad
+    :return: (line (S, 3), covariance (S, 3, 3))
+    """
+    w = _range_weights(returns)
+    total, mx, my, mxx, myy, mxy = _moments(returns, w)
+    line = _algebraic_line(total, mx, my, mxx, myy, mxy)
+    s = returns.segment
+    ww = w * total[s]
+    mx, my, mxx, myy, mxy = mx[s], my[s], mxx[s], myy[s], mxy[s]
+    x, y = returns.x, returns.y
+    xy, dxy = x * y, x * x - y * y
+    jac_rho = (ww / returns.rho)[:, None] * np.column_stack([
+        -x * myy + y * mxy, -y * mxx + x * mxy, np.zeros_like(x)])
+    jac_theta = ww[:, None] * np.column_stack([
+        -y * myy + 2 * xy * mx - x * mxy - dxy * my,
+        x * mxx - 2 * xy * my + y * mxy - dxy * mx,
+        2 * (dxy * mxy + xy * (myy - mxx))])
+    return line, _propagate(jac_rho, jac_theta, returns, range_sigma, bearing_sigma)
+
+
+def wctls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
+    """
+    Weighted conformal fit of eqs. (16)-(23): the normalised line from the point Q.
+
+    Q is the weighted least-squares solution of x_Q x - y_Q y = 1 with the WTLS weights, and C_Q
+    its exact first-order covariance (math.md; the paper never defines C_Q).
+
+    :param returns: the segments' returns
+    :param range_sigma: range noise std, m
+    :param bearing_sigma: bearing noise std, rad
+    :return: (line (S, 3) with a^2 + b^2 = 1 and c > 0, covariance (S, 3, 3) of rank 2)
+    """
+    w = _range_weights(returns)
+    total, mx, my, mxx, myy, mxy = _moments(returns, w)
+    # p solves M p = g with M = sum w z z^T, g = sum w z (divided through by the total weight).
+    inv = inverse_2x2(np.stack([np.stack([mxx, mxy], -1), np.stack([mxy, myy], -1)], -2))
+    p = np.einsum('sij,sj->si', inv, np.column_stack([mx, my]))
+    s = returns.segment
+    x, y, rho = returns.x, returns.y, returns.rho
+    inv_w = inv[s] * (w / total[s])[:, None, None]
+    z = np.column_stack([x, y])
+    z_perp = np.column_stack([-y, x])
+    p_i = p[s]
+    residual = 1.0 - np.einsum('pi,pi->p', p_i, z)
+    dp_drho = -np.einsum('pij,pj->pi', inv_w, z) / rho[:, None]
+    dp_dtheta = np.einsum('pij,pj->pi', inv_w, residual[:, None] * z_perp
+                          - z * np.einsum('pi,pi->p', p_i, z_perp)[:, None])
+    cov_p = _propagate(dp_drho, dp_dtheta, returns, range_sigma, bearing_sigma)
+    flip = np.array([1.0, -1.0])
+    xq, yq = p[:, 0], -p[:, 1]                     # Q = F p, F = diag(1, -1)
+    cov_q = cov_p * flip[:, None] * flip[None, :]
+    norm = np.hypot(xq, yq)
+    line = np.column_stack([-xq, yq, np.ones_like(xq)]) / norm[:, None]
+    jac = np.stack([np.stack([-yq * yq, xq * yq], -1),
+                    np.stack([-xq * yq, xq * xq], -1),
+                    np.stack([-xq, -yq], -1)], -2) / (norm ** 3)[:, None, None]
+    return line, jac @ cov_q @ jac.transpose(0, 2, 1)
+
+
+def line_angle_radius(line: np.ndarray):
+    """
+    Return the normal form of implicit lines a x + b y + c = 0 (no covariance).
+
+    :param line: (a, b, c), shape (S, 3)
+    :return: (angle (S,) rad in (-pi, pi], radius (S,) m >= 0; NaN where a = b = 0)
+    """
+    a, b, c = line.T
+    sign = np.where(c > 0.0, -1.0, 1.0)            # so that radius = -sign c / |(a, b)| >= 0
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return np.arctan2(sign * b, sign * a), -sign * c / np.hypot(a, b)
+
+
+def normal_form(line: np.ndarray, line_covariance: np.ndarray):
+    """
+    Convert implicit lines a x + b y + c = 0 to x cos(angle) + y sin(angle) = radius >= 0.
+
+    :param line: (a, b, c), shape (S, 3)
+    :param line_covariance: shape (S, 3, 3)
+    :return: (angle (S,) rad, radius (S,) m, covariance of (angle, radius) (S, 2, 2))
+    """
+    angle, radius = line_angle_radius(line)
+    a, b, c = line.T
+    n2 = a * a + b * b
+    n = np.sqrt(n2)
+    sign = np.where(c > 0.0, -1.0, 1.0)
+    zero = np.zeros_like(a)
+    with np.errstate(divide='ignore', invalid='ignore'):   # a = b = 0 gives NaN, caught later
+        jac = np.stack([np.stack([-b / n2, a / n2, zero], -1),
+                        np.stack([sign * c * a / (n2 * n), sign * c * b / (n2 * n), -sign / n],
+                                 -1)], -2)
+    return angle, radius, jac @ line_covariance @ jac.transpose(0, 2, 1)
+
+
+def quick_fit(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
+    """
+    Fit lines cheaply for segmentation decisions: the WTLS line and its Cramer-Rao covariance.
+
+    The covariance is the inverse Fisher information at the WTLS line (one pass over the
+    returns, no Jacobians). It is within about 10 % of every method's own covariance, and using
+    one fit for segmentation gives every method the same segments.
+
+    :param returns: the segments' returns
+    :param range_sigma: range noise std, m
+    :param bearing_sigma: bearing noise std, rad
+    :return: (angle (S,) rad, radius (S,) m, covariance of (angle, radius) (S, 2, 2))
+    """
+    angle, radius = line_angle_radius(
+        _algebraic_line(*_moments(returns, _range_weights(returns))))
+    s = returns.segment
+    fisher, _ = _ml_fisher_and_step(returns.rho, returns.theta, angle[s], radius[s], returns,
+                                    range_sigma, bearing_sigma)
+    return angle, radius, inverse_2x2(fisher)
+
+
+def implicit_from_normal(angle: np.ndarray, radius: np.ndarray, covariance: np.ndarray):
+    """
+    Convert normal-form lines to L = (cos angle, sin angle, -radius) with covariance J C J^T.
+
+    :param angle: shape (S,), rad
+    :param radius: shape (S,), m
+    :param covariance: covariance of (angle, radius), shape (S, 2, 2)
+    :return: (line (S, 3), covariance (S, 3, 3))
+    """
+    c, s = np.cos(angle), np.sin(angle)
+    zero = np.zeros_like(c)
+    jac = np.stack([np.stack([-s, zero], -1), np.stack([c, zero], -1),
+                    np.stack([zero, -np.ones_like(c)], -1)], -2)
+    return np.column_stack([c, s, -radius]), jac @ covariance @ jac.transpose(0, 2, 1)
+
+
+def ml(returns: SegmentReturns, range_sigma: float, bearing_sigma: float,
+       start_angle: np.ndarray, start_radius: np.ndarray):
+    """
+    Maximum-likelihood line (Pfister et al. 2003) with the inverse Fisher information.
+
+    Minimises sum d_i^2 / s_i^2, d_i = rho_i cos(theta_i - angle) - radius,
+    s_i^2 = range_sigma^2 cos^2(theta_i - angle) + bearing_sigma^2 rho_i^2 sin^2(theta_i - angle),
+    by Gauss-Newton with the variances re-evaluated at each iterate.
+
+    :param returns: the segments' returns
+    :param range_sigma: range noise std, m
+    :param bearing_sigma: bearing noise std, rad
+    :param start_angle: initial normal angles, shape (S,), rad (e.g. the WTLS line)
+    :param start_radius: initial radii, shape (S,), m
+    :return: (angle (S,), radius (S,), covariance of (angle, radius) (S, 2, 2))
+    """
+    angle = np.array(start_angle, dtype=float)
+    radius = np.array(start_radius, dtype=float)
+    s = returns.segment
+    rho, theta = returns.rho, returns.theta
+    for _ in range(_ML_MAX_ITERATIONS):
+        fisher, step = _ml_fisher_and_step(rho, theta, angle[s], radius[s], returns,
+                                           range_sigma, bearing_sigma)
+        angle, radius = angle + step[:, 0], radius + step[:, 1]
+        if not (np.abs(step) > _ML_STEP_TOLERANCE).any():
+            break
+    fisher, _ = _ml_fisher_and_step(rho, theta, angle[s], radius[s], returns,
+                                    range_sigma, bearing_sigma)
+    flip = radius < 0.0
+    angle = np.where(flip, angle + np.pi, angle)
+    angle = np.angle(np.exp(1j * angle))
+    covariance = inverse_2x2(fisher)
+    # Reflecting (angle, radius) -> (angle + pi, -radius) flips the sign of their correlation.
+    covariance[flip, 0, 1] *= -1.0
+    covariance[flip, 1, 0] *= -1.0
+    return angle, np.abs(radius), covariance
+
+
+def _ml_fisher_and_step(rho, theta, angle, radius, returns, range_sigma, bearing_sigma):
+    """
+    Return the Fisher information (S, 2, 2) and the Gauss-Newton step (S, 2).
+
+    The variances s_i^2 use the range to the current line along each beam instead of the
+    measured range: a weight computed from the noisy range would correlate with the residual
+    and bias the line (by several mm at grazing incidence).
+    """
+    cos_d, sin_d = np.cos(theta - angle), np.sin(theta - angle)
+    residual = rho * cos_d - radius
+    on_line = radius / cos_d
+    inv_var = 1.0 / (range_sigma ** 2 * cos_d ** 2 + (bearing_sigma * on_line * sin_d) ** 2)
+    g_angle = on_line * sin_d                      # d residual / d angle; d / d radius = -1
+    sums = returns.sums(np.column_stack([inv_var * g_angle * g_angle, -inv_var * g_angle,
+                                         inv_var, inv_var * g_angle * residual,
+                                         -inv_var * residual]))
+    fisher = np.stack([sums[:, 0:2], sums[:, 1:3]], -2)
+    step = -solve_2x2(fisher, sums[:, 3:5])
+    return fisher, step
+
+
+def fit_lines(method: str, returns: SegmentReturns, range_sigma: float,
+              bearing_sigma: float) -> LineFits:
+    """
+    Fit every segment with one method and report it in both forms.
+
+    :param method: 'utls', 'wtls', 'wctls' or 'ml'
+    :param returns: the segments' returns (each segment with >= 2 returns)
+    :param range_sigma: range noise std, m
+    :param bearing_sigma: bearing noise std, rad
+    :return: the fits
+    :raises ValueError: on an unknown method
+    """
+    if method == 'ml':
+        start = normal_form(*wtls(returns, range_sigma, bearing_sigma))
+        angle, radius, covariance = ml(returns, range_sigma, bearing_sigma, *start[:2])
+        line, line_covariance = implicit_from_normal(angle, radius, covariance)
+        return LineFits(line, line_covariance, angle, radius, covariance)
+    fits = {'utls': utls, 'wtls': wtls, 'wctls': wctls}
+    if method not in fits:
+        raise ValueError(f'unknown line fit {method!r}; use one of utls, wtls, wctls, ml')
+    line, line_covariance = fits[method](returns, range_sigma, bearing_sigma)
+    return LineFits(line, line_covariance, *normal_form(line, line_covariance))

@@ -1,0 +1,110 @@
+"""The per-scan pipeline of the paper's Algorithm 1: returns -> segments -> lines -> corners."""
+
+import math
+
+import numpy as np
+
+from .config import FeatureConfig
+from .corners import find_corners
+from .features import CornerSet, Features, SegmentSet
+from .lines import fit_lines, LineFits, quick_fit, segment_returns
+from .scan import scan_to_points
+from .segmentation import (breakpoints, chains, iterative_end_point_fit, merge_collinear,
+                           MIN_FIT_RETURNS, SegmentRanges)
+
+_DEFAULT_CONFIG = FeatureConfig()
+
+
+def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
+                     config: FeatureConfig = _DEFAULT_CONFIG, range_min_m: float = 0.0,
+                     range_max_m: float = math.inf) -> Features:
+    """
+    Extract straight segments and corners with covariances from one 2D scan.
+
+    The scan is a LaserScan's geometry: beam i has bearing angle_min + i * angle_increment and
+    range ``ranges_m[i]``; invalid returns (NaN, +-inf, outside the range limits) are skipped.
+    Steps: adaptive breakpoints, Iterative End Point Fit, merging of collinear neighbours,
+    the configured line fit with its covariance, and the corners of adjacent segments
+    (across the +-pi seam on a full turn) with their propagated (x, y, yaw) covariance.
+
+    :param ranges_m: ranges, shape (N,), m
+    :param angle_min_rad: bearing of the first beam, rad
+    :param angle_increment_rad: bearing step, rad (non-zero, either sign)
+    :param config: the pipeline's settings (noise model, thresholds, method)
+    :param range_min_m: the scan's own range_min (LaserScan.range_min), m
+    :param range_max_m: the scan's own range_max (LaserScan.range_max), m
+    :return: the segments and corners, in scan order
+    :raises wctls_ros.core.ScanError: when the scan geometry makes no sense (a ValueError)
+    """
+    points = scan_to_points(ranges_m, angle_min_rad, angle_increment_rad,
+                            max(range_min_m, config.range_min_m),
+                            min(range_max_m, config.range_max_m))
+    n = len(points)
+    if n < config.min_segment_points:
+        return Features(config.method, SegmentSet.empty(), CornerSet.empty())
+    separated = breakpoints(points, config.range_sigma_m, config.bearing_sigma_rad,
+                            config.breakpoint_lambda_rad)
+    contour = chains(points, separated)
+    order = contour.order
+    rho, theta = points.range_m[order], points.bearing_rad[order]
+    xy = points.xy_m[order]
+
+    def returns_of(segments: SegmentRanges):
+        counts = segments.stop - segments.start
+        offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.intp)
+        owner = np.repeat(np.arange(len(segments)), counts)
+        position = np.arange(counts.sum()) - offsets[owner] + segments.start[owner]
+        return segment_returns(rho[position], theta[position], offsets, counts)
+
+    def quick(segments: SegmentRanges):
+        return quick_fit(returns_of(segments), config.range_sigma_m, config.bearing_sigma_rad)
+
+    segments = iterative_end_point_fit(xy, contour.start, contour.stop, contour.chain,
+                                       config.iepf_threshold_m)
+    segments = segments.select(segments.stop - segments.start >= MIN_FIT_RETURNS)
+    if not len(segments):
+        return Features(config.method, SegmentSet.empty(), CornerSet.empty())
+    segments = merge_collinear(segments, points.full_turn, n, quick, config.merge_chi2)
+    fits = fit_lines(config.method, returns_of(segments), config.range_sigma_m,
+                     config.bearing_sigma_rad)
+
+    start_xy = _project(xy[segments.start], fits)
+    end_xy = _project(xy[segments.stop - 1], fits)
+    counts = segments.stop - segments.start
+    keep = ((counts >= config.min_segment_points)
+            & (np.hypot(*(end_xy - start_xy).T) >= config.min_segment_length_m)
+            & _finite_and_positive(fits))
+    first_index = points.index[order[segments.start]]
+    by_scan_order = np.flatnonzero(keep)[np.argsort(first_index[keep], kind='stable')]
+    fits = fits.select(by_scan_order)
+    segment_set = SegmentSet(
+        fits.angle_rad, fits.radius_m, fits.normal_covariance, fits.line, fits.line_covariance,
+        start_xy[by_scan_order], end_xy[by_scan_order], first_index[by_scan_order],
+        points.index[order[segments.stop - 1]][by_scan_order], counts[by_scan_order])
+
+    count = len(segment_set)
+    first = np.arange(count - 1)
+    if points.full_turn and count >= 3:
+        first = np.arange(count)               # the last segment meets the first at the seam
+    corners = find_corners(fits.line, fits.line_covariance, segment_set.start_xy_m,
+                           segment_set.end_xy_m, first, (first + 1) % max(count, 1),
+                           config.min_corner_angle_rad, config.max_corner_gap_m)
+    return Features(config.method, segment_set, corners)
+
+
+def _project(xy_m: np.ndarray, fits: LineFits) -> np.ndarray:
+    """Return the foot of the perpendicular from each point to its segment's line, (S, 2)."""
+    normal = np.column_stack([np.cos(fits.angle_rad), np.sin(fits.angle_rad)])
+    offset = np.einsum('si,si->s', xy_m, normal) - fits.radius_m
+    return xy_m - offset[:, None] * normal
+
+
+def _finite_and_positive(fits: LineFits) -> np.ndarray:
+    """Return which fits are usable: finite everywhere, positive-definite normal covariance."""
+    cov = fits.normal_covariance
+    finite = (np.isfinite(fits.line).all(axis=1)
+              & np.isfinite(fits.line_covariance).all(axis=(1, 2))
+              & np.isfinite(fits.angle_rad) & np.isfinite(fits.radius_m)
+              & np.isfinite(cov).all(axis=(1, 2)))
+    with np.errstate(invalid='ignore'):
+        return finite & (cov[:, 0, 0] > 0.0) & (cov[:, 0, 0] * cov[:, 1, 1] > cov[:, 0, 1] ** 2)

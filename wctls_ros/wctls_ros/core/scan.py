@@ -1,0 +1,81 @@
+"""LaserScan geometry to Cartesian points, with REP-117 filtering of invalid returns."""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+# A scan whose beams, each counted with its width, cover at least this fraction of a turn is
+# treated as a full turn: its last beam neighbours its first across the +-pi seam.
+_FULL_TURN_FRACTION = 1.0 - 1e-6
+# More than a full turn between the first and last beam (beyond float32 rounding of the
+# LaserScan's angle_increment) would revisit bearings: refused.
+_OVER_TURN_TOLERANCE = 1e-4
+
+
+class ScanError(ValueError):
+    """A scan that cannot be interpreted (bad geometry, mismatched arrays)."""
+
+
+@dataclass(frozen=True)
+class ScanPoints:
+    """
+    The valid returns of one scan, in beam order.
+
+    :ivar index: beam index of each return in the original ranges array, shape (n,)
+    :ivar range_m: measured range, shape (n,), m
+    :ivar bearing_rad: beam bearing, shape (n,), rad (angle_min + index * angle_increment)
+    :ivar xy_m: Cartesian position in the scan frame, shape (n, 2), m
+    :ivar full_turn: True when the beams cover a full turn (the first and last are neighbours)
+    :ivar beam_count: number of beams of the scan, valid or not
+    """
+
+    index: np.ndarray
+    range_m: np.ndarray
+    bearing_rad: np.ndarray
+    xy_m: np.ndarray
+    full_turn: bool
+    beam_count: int
+
+    def __len__(self):
+        return len(self.index)
+
+
+def scan_to_points(ranges_m, angle_min_rad: float, angle_increment_rad: float,
+                   range_min_m: float = 0.0, range_max_m: float = math.inf) -> ScanPoints:
+    """
+    Convert the ranges of a LaserScan to Cartesian points, keeping only valid returns.
+
+    Invalid per REP-117: NaN, +-inf, ranges outside [range_min_m, range_max_m], and 0. Any beam
+    count, either sign of angle_increment, any field of view up to a full turn.
+
+    :param ranges_m: ranges, shape (N,), m
+    :param angle_min_rad: bearing of the first beam, rad
+    :param angle_increment_rad: bearing step between beams, rad (non-zero, either sign)
+    :param range_min_m: closest valid range, m
+    :param range_max_m: farthest valid range, m
+    :return: the valid returns
+    :raises ScanError: on a non-finite or zero increment, or more than a full turn of beams
+    """
+    ranges = np.asarray(ranges_m, dtype=float)
+    if ranges.ndim != 1:
+        raise ScanError(f'ranges must be one-dimensional, got shape {ranges.shape}')
+    if not (math.isfinite(angle_min_rad) and math.isfinite(angle_increment_rad)):
+        raise ScanError('angle_min and angle_increment must be finite')
+    if angle_increment_rad == 0.0 and ranges.size > 1:
+        raise ScanError('angle_increment is 0: the beams have no distinct bearings')
+    beam_count = ranges.size
+    span = abs(angle_increment_rad) * max(beam_count - 1, 0)
+    if span > 2.0 * math.pi * (1.0 + _OVER_TURN_TOLERANCE):
+        raise ScanError(f'{beam_count} beams of {angle_increment_rad:g} rad span {span:.4f} rad, '
+                        'more than a full turn')
+    full_turn = abs(angle_increment_rad) * beam_count >= 2.0 * math.pi * _FULL_TURN_FRACTION
+    with np.errstate(invalid='ignore'):
+        # A zero range is a point at the sensor itself: never a wall return.
+        valid = ((ranges >= range_min_m) & (ranges <= range_max_m) & np.isfinite(ranges)
+                 & (ranges > 0.0))
+    index = np.flatnonzero(valid)
+    range_m = ranges[index]
+    bearing = angle_min_rad + index * angle_increment_rad
+    xy = np.column_stack([range_m * np.cos(bearing), range_m * np.sin(bearing)])
+    return ScanPoints(index, range_m, bearing, xy, bool(full_turn), beam_count)

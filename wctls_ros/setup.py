@@ -26,6 +26,7 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
+            'feature_node = wctls_ros.feature_node:main',
         ],
     },
 )

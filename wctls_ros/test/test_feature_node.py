@@ -1,0 +1,222 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""feature_node with the real rclpy: topics, headers, QoS, parameters, malformed scans."""
+
+import math
+import os
+import pathlib
+import subprocess
+import sys
+
+from conftest import spin_until
+import numpy as np
+import pytest
+
+pytest.importorskip('rclpy')
+
+from rclpy.node import Node  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
+from scans import NODE_PARAMETERS, room_scan_message, room_truth  # noqa: E402
+from sensor_msgs.msg import LaserScan  # noqa: E402
+from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
+from wctls_msgs.msg import CornerArray, LineSegmentArray  # noqa: E402
+from wctls_ros.core import nees  # noqa: E402
+from wctls_ros.feature_node import FeatureNode, PARAMETERS  # noqa: E402
+import yaml  # noqa: E402
+
+PACKAGE = pathlib.Path(__file__).resolve().parents[1]
+
+
+class Harness:
+    """A feature node plus a peer node publishing scans and collecting the outputs."""
+
+    def __init__(self, context, executor, parameters=NODE_PARAMETERS,
+                 reliability=ReliabilityPolicy.RELIABLE):
+        self.node = FeatureNode(
+            context=context, use_global_arguments=False,
+            parameter_overrides=[Parameter(k, value=v) for k, v in parameters.items()])
+        self.peer = Node('peer', context=context)
+        for node in (self.node, self.peer):
+            executor.add_node(node)
+        self.executor = executor
+        self.scans = self.peer.create_publisher(
+            LaserScan, 'scan', QoSProfile(depth=10, reliability=reliability))
+        self.received = {'corners': [], 'lines': [], 'markers': []}
+        for topic, kind in (('corners', CornerArray), ('lines', LineSegmentArray),
+                            ('markers', MarkerArray)):
+            self.peer.create_subscription(kind, topic, self.received[topic].append, 10)
+
+    def wait_for_subscriber(self):
+        assert spin_until(self.executor, lambda: self.scans.get_subscription_count() > 0)
+
+    def exchange(self, scan, count=1):
+        """Publish a scan and step until `count` CornerArrays in total have arrived."""
+        self.wait_for_subscriber()
+        self.scans.publish(scan)
+        assert spin_until(self.executor, lambda: len(self.received['corners']) >= count
+                          and len(self.received['lines']) >= count)
+        return self.received['corners'][-1], self.received['lines'][-1]
+
+
+def pose_covariance(corner):
+    return np.array(corner.pose.covariance).reshape(6, 6)
+
+
+def test_room_corners_arrive_with_header_covariance_and_indices(ros_context, executor):
+    harness = Harness(ros_context, executor)
+    scan = room_scan_message()
+    corners, lines = harness.exchange(scan)
+    assert corners.header == scan.header and lines.header == scan.header
+    assert corners.method == lines.method == 'wctls'
+    truth = room_truth()
+    found = np.array([[c.pose.pose.position.x, c.pose.pose.position.y] for c in corners.corners])
+    distance = np.hypot(*(found[None] - truth[:, None]).transpose(2, 0, 1))
+    index = distance.argmin(axis=1)
+    assert len(corners.corners) == len(truth) and sorted(index) == list(range(len(truth)))
+    for corner, true_xy in zip([corners.corners[i] for i in index], truth):
+        full = pose_covariance(corner)
+        np.testing.assert_array_equal(full, full.T)
+        xy_yaw = full[np.ix_([0, 1, 5], [0, 1, 5])]
+        assert np.all(np.linalg.eigvalsh(xy_yaw) > 0)
+        assert np.count_nonzero(full) == np.count_nonzero(xy_yaw) == 9
+        error = np.array([corner.pose.pose.position.x, corner.pose.pose.position.y]) - true_xy
+        assert nees(error, xy_yaw[:2, :2]) < 11.8                       # within 3 sigma
+        assert corner.pose.pose.position.z == 0.0
+        q = corner.pose.pose.orientation
+        assert q.x == q.y == 0.0 and q.z ** 2 + q.w ** 2 == pytest.approx(1.0)
+        assert corner.first_line < len(lines.segments)
+        assert corner.second_line < len(lines.segments)
+        assert 0.0 < corner.opening_angle < 2 * math.pi
+    for segment in lines.segments:
+        assert segment.radius >= 0.0 and segment.num_points >= 8
+        assert 0 <= segment.first_index < len(scan.ranges)
+        cov = np.array(segment.covariance).reshape(2, 2)
+        assert np.all(np.linalg.eigvalsh(cov) > 0)
+    markers = harness.received['markers']
+    assert spin_until(executor, lambda: markers)
+    assert markers[-1].markers[0].action == Marker.DELETEALL
+    namespaces = [m.ns for m in markers[-1].markers[1:]]
+    assert namespaces.count('ellipses') == namespaces.count('corner_ids') == len(truth)
+    assert all(m.header == scan.header for m in markers[-1].markers)
+
+
+@pytest.mark.parametrize('reliability', [ReliabilityPolicy.BEST_EFFORT,
+                                         ReliabilityPolicy.RELIABLE])
+def test_best_effort_and_reliable_publishers_both_reach_the_node(ros_context, executor,
+                                                                 reliability):
+    harness = Harness(ros_context, executor, reliability=reliability)
+    corners, _ = harness.exchange(room_scan_message())
+    assert len(corners.corners) == 5
+
+
+def test_parameter_changes_take_effect_on_the_next_scan(ros_context, executor):
+    harness = Harness(ros_context, executor)
+    corners, _ = harness.exchange(room_scan_message())
+    results = harness.node.set_parameters([Parameter('method', value='ml'),
+                                           Parameter('iepf_threshold_m', value=5.0)])
+    assert all(r.successful for r in results)
+    corners, lines = harness.exchange(room_scan_message(), count=2)
+    assert corners.method == lines.method == 'ml'
+    # A 5 m split threshold never splits a chain: the room's corners are gone.
+    assert len(corners.corners) < 5
+
+
+@pytest.mark.parametrize('name,value,reason', [
+    ('method', 'tls', 'method must be one of'),
+    ('range_min_m', 2000.0, 'range_min_m'),
+    ('iepf_threshold_m', -1.0, 'iepf_threshold_m'),
+])
+def test_invalid_parameter_changes_are_refused_with_the_reason(ros_context, executor, name,
+                                                               value, reason):
+    harness = Harness(ros_context, executor)
+    before = harness.node.get_parameter(name).value
+    result = harness.node.set_parameters([Parameter(name, value=value)])[0]
+    assert not result.successful and reason in result.reason
+    assert harness.node.get_parameter(name).value == before
+
+
+def test_cross_parameter_rule_is_checked(ros_context, executor):
+    harness = Harness(ros_context, executor)
+    harness.node.set_parameters([Parameter('range_max_m', value=3.0)])
+    result = harness.node.set_parameters([Parameter('range_min_m', value=4.0)])[0]
+    assert not result.successful and 'below range_max_m' in result.reason
+
+
+def malformed_scans():
+    good = room_scan_message()
+    cases = []
+    for change in (
+            {'ranges': np.zeros(0, np.float32)},
+            {'angle_increment': 0.0},
+            {'angle_increment': math.nan},
+            {'angle_min': math.inf},
+            {'angle_max': 1.0},
+            {'intensities': np.ones(10, np.float32)},
+            {'range_min': 50.0},
+            {'ranges': np.full(1080, np.nan, np.float32)},
+            {'ranges': np.full(1080, np.inf, np.float32)}):
+        scan = room_scan_message()
+        for key, value in change.items():
+            setattr(scan, key, value)
+        cases.append(scan)
+    return good, cases
+
+
+def test_a_burst_of_malformed_scans_then_a_good_one(ros_context, executor):
+    harness = Harness(ros_context, executor)
+    good, bad = malformed_scans()
+    for count, scan in enumerate(bad, start=1):
+        corners, lines = harness.exchange(scan, count)
+        assert corners.header == scan.header
+        assert len(corners.corners) == len(lines.segments) == 0
+    corners, _ = harness.exchange(good, count=len(bad) + 1)
+    assert len(corners.corners) == 5
+
+
+def test_config_file_holds_every_parameter_at_its_default():
+    config = yaml.safe_load((PACKAGE / 'config' / 'feature_node.yaml').read_text())
+    values = config['feature_node']['ros__parameters']
+    assert values == pytest.approx({spec.name: spec.default for spec in PARAMETERS})
+
+
+def installed_executable(name):
+    prefix = pathlib.Path(sys.prefix).parent.parent / 'install' / 'wctls_ros'
+    candidates = [pathlib.Path(p) / 'lib' / 'wctls_ros' / name
+                  for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
+    for path in candidates + [prefix / 'lib' / 'wctls_ros' / name]:
+        if path.is_file():
+            return path
+    pytest.skip(f'{name} is not installed (run colcon build)')
+
+
+def test_installed_executable_runs_with_the_params_file_and_a_remap(ros_context, executor):
+    executable = installed_executable('feature_node')
+    process = subprocess.Popen(
+        [str(executable), '--ros-args', '--params-file',
+         str(PACKAGE / 'config' / 'feature_node.yaml'), '-p', 'range_sigma_m:=0.01',
+         '-p', 'bearing_sigma_deg:=0.05', '-r', 'scan:=front/scan', '-r',
+         'corners:=front/corners'], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        peer = Node('peer', context=ros_context)
+        executor.add_node(peer)
+        publisher = peer.create_publisher(LaserScan, 'front/scan', 10)
+        received = []
+        peer.create_subscription(CornerArray, 'front/corners', received.append, 10)
+        scan = room_scan_message()
+        assert spin_until(executor, lambda: received or publisher.publish(scan), timeout_s=20.0)
+        assert received[0].header == scan.header and len(received[0].corners) == 5
+    finally:
+        process.terminate()
+        output, _ = process.communicate(timeout=10)
+    assert process.returncode == 0, output
+
+
+def test_installed_executable_refuses_an_invalid_configuration():
+    executable = installed_executable('feature_node')
+    result = subprocess.run(
+        [str(executable), '--ros-args', '-p', 'range_min_m:=5.0', '-p', 'range_max_m:=4.0'],
+        capture_output=True, text=True, timeout=30)
+    assert result.returncode == 1
+    assert 'range_min_m (5) must be below range_max_m (4)' in result.stdout + result.stderr

@@ -1,0 +1,149 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""Turn assembly and timing, and sllidar_ros2's LaserScan layout (against a port of its loops)."""
+
+import math
+
+import numpy as np
+import pytest
+from wctls_ros.rplidar.laserscan import compensation_multiple, turn_to_scan
+from wctls_ros.rplidar.protocol import Samples
+from wctls_ros.rplidar.turns import Turn, TurnAssembler
+
+
+def sllidar_reference(angle_deg, dist_mm, quality, angle_compensate, inverted, multiple):
+    """Port of sllidar_node.cpp: ascend, bin (or trim), then publish_scan's layout."""
+    order = np.argsort(angle_deg, kind='stable')
+    nodes = [(float(angle_deg[i]), float(dist_mm[i]), int(quality[i])) for i in order]
+    if angle_compensate:
+        count = 360 * multiple
+        binned = [(0.0, 0.0, 0)] * count
+        for angle, dist, qual in nodes:
+            if dist != 0:
+                value = int(angle * multiple)
+                for j in range(multiple):
+                    binned[min(value + j, count - 1)] = (angle, dist, qual)
+        nodes, angle_min, angle_max = binned, 0.0, math.radians(360.0)
+    else:
+        first = next(i for i, n in enumerate(nodes) if n[1] != 0)
+        last = max(i for i, n in enumerate(nodes) if n[1] != 0)
+        nodes = nodes[first:last + 1]
+        angle_min, angle_max = math.radians(nodes[0][0]), math.radians(nodes[-1][0])
+    reversed_ = angle_max > angle_min
+    lo, hi = (math.pi - angle_max, math.pi - angle_min) if reversed_ else (
+        math.pi - angle_min, math.pi - angle_max)
+    ranges = [math.inf if n[1] == 0 else n[1] / 1000.0 for n in nodes]
+    intensities = [float(n[2]) for n in nodes]
+    if (not inverted and reversed_) or (inverted and not reversed_):
+        ranges, intensities = ranges[::-1], intensities[::-1]
+    return lo, hi, (hi - lo) / (len(nodes) - 1), ranges, intensities
+
+
+def random_turn(rng, count, gaps=0.1):
+    """Return a turn of ``count`` samples at random angles, some without a return."""
+    angle = np.sort(rng.uniform(0.0, 360.0, count))
+    distance = np.where(rng.random(count) < gaps, 0.0, rng.uniform(100.0, 9000.0, count))
+    distance[[0, -1]] = 0.0                                  # exercise the trimming
+    return Turn(angle_deg=rng.permutation(angle), distance_mm=distance,
+                quality=rng.integers(0, 64, count).astype(np.uint8), first_sample_s=1.0,
+                period_s=0.1, last_byte_s=1.1)
+
+
+@pytest.mark.parametrize('angle_compensate', [False, True])
+@pytest.mark.parametrize('inverted', [False, True])
+@pytest.mark.parametrize('count', [411, 926, 1500])
+def test_layout_matches_sllidar(angle_compensate, inverted, count):
+    turn = random_turn(np.random.default_rng(count), count)
+    scan = turn_to_scan(turn, angle_compensate, inverted, multiple=3)
+    lo, hi, increment, ranges, intensities = sllidar_reference(
+        turn.angle_deg, turn.distance_mm, turn.quality, angle_compensate, inverted, 3)
+    assert (scan.angle_min, scan.angle_max) == pytest.approx((lo, hi), abs=1e-12)
+    assert scan.angle_increment == pytest.approx(increment, rel=1e-12)
+    np.testing.assert_array_equal(scan.ranges, np.float32(ranges))
+    np.testing.assert_array_equal(scan.intensities, np.float32(intensities))
+    assert scan.scan_time == 0.1
+    assert scan.time_increment == pytest.approx(increment / (2 * math.pi) * 0.1)
+
+
+def test_compensated_scan_is_1080_beams_from_minus_pi_to_pi_in_denseboost():
+    multiple = compensation_multiple(108.0, 10.0)
+    assert (multiple, compensation_multiple(244.0, 10.0)) == (3, 2)
+    scan = turn_to_scan(random_turn(np.random.default_rng(1), 926), True, False, multiple)
+    assert len(scan.ranges) == 1080
+    assert (scan.angle_min, scan.angle_max) == pytest.approx((-math.pi, math.pi))
+    assert scan.angle_increment == pytest.approx(2 * math.pi / 1079)
+
+
+def test_a_turn_without_returns_is_all_infinite():
+    turn = Turn(np.linspace(0, 359, 50), np.zeros(50), np.zeros(50, np.uint8), 0.0, 0.1, 0.1)
+    for compensate in (False, True):
+        scan = turn_to_scan(turn, compensate, False, 3)
+        assert np.isinf(scan.ranges).all() and len(scan.ranges) in (50, 1080)
+
+
+def stream(angles, start=None, received=None):
+    """Return samples (one per frame) at the given angles."""
+    n = len(angles)
+    return Samples(angle_deg=np.asarray(angles, float), distance_mm=np.full(n, 1000.0),
+                   quality=np.full(n, 47, np.uint8),
+                   start=np.zeros(n, bool) if start is None else np.asarray(start),
+                   frame_end=np.arange(1, n + 1) * 5, samples_after=np.zeros(n, np.int64))
+
+
+def test_turns_split_at_the_wrap_and_the_first_partial_turn_is_dropped():
+    step = 360.0 / 400
+    angles = (200.0 + step * np.arange(1300)) % 360.0
+    samples = stream(angles, start=np.r_[False, np.diff(angles) < 0])
+    assembler = TurnAssembler(244.0, 0.0)
+    turns = []
+    for part in np.array_split(np.arange(1300), 7):        # in arbitrary pieces
+        piece = Samples(*(getattr(samples, f)[part] for f in Samples.__dataclass_fields__))
+        turns += assembler.push(piece, np.zeros(len(part)))
+    assert [len(t.angle_deg) for t in turns] == [400, 400]
+    for turn in turns:
+        assert turn.angle_deg[0] < step and turn.angle_deg[-1] > 360.0 - step
+        assert turn.period_s == pytest.approx(400 * 244e-6)
+
+
+def test_a_corrupted_start_flag_does_not_split_and_a_lost_start_sample_does_not_merge():
+    step = 360.0 / 400
+    angles = (step * np.arange(1, 1601)) % 360.0
+    start = np.r_[False, np.diff(angles) < 0]
+    start[600] = True                  # an S bit set by corruption in mid-turn
+    lost = 799                         # the start node of the second full turn never arrives
+    assert start[lost] and start[399] and start[1199]
+    keep = np.arange(1600) != lost
+    samples = stream(angles[keep], start[keep])
+    turns = TurnAssembler(244.0, 0.0).push(samples, np.zeros(keep.sum()))
+    # The partial turn before the first wrap is dropped; the second lost its first sample.
+    assert [len(t.angle_deg) for t in turns] == [400, 399, 400]
+
+
+def test_stamp_is_the_first_sample_time_despite_late_reads():
+    rng = np.random.default_rng(3)
+    sample_s, per_frame = 108e-6, 40
+    n_frames = 100
+    angles = (np.arange(n_frames * per_frame) * 0.3887) % 360.0
+    measured = np.arange(n_frames * per_frame) * sample_s + 5.0          # true sample times
+    frame_last = measured.reshape(n_frames, per_frame)[:, -1]
+    # Frames arrive after transmission; reads see them up to 10 ms late, never early.
+    received = np.repeat(frame_last + 0.003 + rng.uniform(0, 0.01, n_frames), per_frame)
+    received[::per_frame * 7] = np.repeat(frame_last + 0.003, per_frame)[::per_frame * 7]
+    samples = Samples(angle_deg=angles, distance_mm=np.ones(angles.size),
+                      quality=np.ones(angles.size, np.uint8), start=np.zeros(angles.size, bool),
+                      frame_end=np.repeat(np.arange(1, n_frames + 1) * 84, per_frame),
+                      samples_after=np.tile(np.arange(per_frame - 1, -1, -1), n_frames))
+    turns = TurnAssembler(108.0, 0.003).push(samples, received)
+    assert len(turns) == 3           # 4.3 turns, of which the first is partial
+    for turn in turns:
+        first = measured[np.flatnonzero(angles == turn.angle_deg[0])[0]]
+        assert turn.first_sample_s == pytest.approx(first, abs=1e-6)
+        assert turn.period_s == pytest.approx(360.0 / 0.3887 * sample_s)
+
+
+def test_a_turn_that_never_ends_is_dropped_not_grown():
+    assembler = TurnAssembler(108.0, 0.0, max_samples=1000)
+    angles = np.linspace(10.0, 20.0, 3000)
+    assert assembler.push(stream(angles), np.zeros(3000)) == []
+    assert assembler.dropped_turns >= 1

@@ -1,0 +1,117 @@
+"""
+A turn as sllidar_ros2 publishes it: the LaserScan geometry, ranges and intensities (pure).
+
+- Published angle = pi - raw clockwise angle (counter-clockwise, REP-103); the arrays ascend in
+  published angle (``inverted`` mirrors the array order, as sllidar does for a sensor mounted
+  upside down).
+- ``angle_compensate``: the turn is binned into ``360 * k`` bins, bin ``floor(raw_deg * k)``;
+  each sample fills its bin and the next ``k - 1`` (later samples overwrite), empty bins stay
+  +inf, angle_min = -pi, angle_max = +pi, increment = 2 pi / (N - 1).
+- Otherwise every sample is a beam between the first and the last sample with a return, so the
+  beam count and angle_min/max change from turn to turn.
+- No return -> +inf; intensities = the 6-bit quality (sllidar's ``quality >> 2``).
+
+The timing fields are this driver's own, honest ones: scan_time is the measured rotation period
+and time_increment the time the sensor takes to sweep one angle_increment.
+"""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from .turns import Turn
+
+RANGE_MIN_M = 0.05
+
+
+@dataclass(frozen=True)
+class ScanArrays:
+    """
+    The fields of a sensor_msgs/LaserScan computed from one turn.
+
+    :ivar angle_min: rad
+    :ivar angle_max: rad
+    :ivar angle_increment: rad
+    :ivar time_increment: s between adjacent beams
+    :ivar scan_time: s per turn
+    :ivar ranges: float32, m, +inf for no return
+    :ivar intensities: float32, 6-bit quality
+    """
+
+    angle_min: float
+    angle_max: float
+    angle_increment: float
+    time_increment: float
+    scan_time: float
+    ranges: np.ndarray
+    intensities: np.ndarray
+
+
+def compensation_multiple(us_per_sample: float, scan_frequency_hz: float) -> int:
+    """
+    Return sllidar's bins per degree: ``floor(samples_per_turn / 360 + 1)``, at least 1.
+
+    :param us_per_sample: the scan mode's sample period, microseconds
+    :param scan_frequency_hz: the rotation frequency, Hz
+    :return: k (3 for DenseBoost at 10 Hz: 1080 bins)
+    """
+    samples_per_turn = int(1e6 / us_per_sample / scan_frequency_hz)
+    return max(int(samples_per_turn / 360.0 + 1), 1)
+
+
+def _binned(angle_deg: np.ndarray, ranges: np.ndarray, intensities: np.ndarray,
+            multiple: int) -> tuple:
+    """Bin returns sorted by angle the sllidar way; return (ranges, intensities) per bin."""
+    bins = 360 * multiple
+    binned_ranges, binned_intensities = np.full(bins, np.inf), np.zeros(bins, np.float32)
+    index = np.minimum(np.floor(angle_deg * multiple).astype(np.int64), bins - 1)
+    # Bin b ends up holding the last sample whose own bin is in [b - k + 1, b].
+    bin_ids = np.arange(bins)
+    owner = np.searchsorted(index, bin_ids, side='right') - 1
+    filled = owner >= 0
+    filled[filled] = index[owner[filled]] > bin_ids[filled] - multiple
+    binned_ranges[filled] = ranges[owner[filled]]
+    binned_intensities[filled] = intensities[owner[filled]]
+    return binned_ranges, binned_intensities
+
+
+def turn_to_scan(turn: Turn, angle_compensate: bool, inverted: bool,
+                 multiple: int) -> ScanArrays:
+    """
+    Lay one turn out as sllidar_ros2 does.
+
+    :param turn: the assembled turn
+    :param angle_compensate: bin into ``360 * multiple`` fixed beams
+    :param inverted: the sensor is mounted upside down (mirror the array order)
+    :param multiple: bins per degree for ``angle_compensate`` (see :func:`compensation_multiple`)
+    :return: the LaserScan fields
+    """
+    order = np.argsort(turn.angle_deg, kind='stable')
+    angle = turn.angle_deg[order]
+    ranges = np.where(turn.distance_mm[order] > 0, turn.distance_mm[order] / 1000.0, np.inf)
+    intensities = turn.quality[order].astype(np.float32)
+    valid = np.isfinite(ranges)
+    if angle_compensate:
+        ranges, intensities = _binned(angle[valid], ranges[valid], intensities[valid], multiple)
+        count = len(ranges)
+        raw_min, raw_max = 0.0, 2.0 * math.pi
+    elif valid.any():
+        first, last = np.flatnonzero(valid)[[0, -1]]
+        ranges, intensities = ranges[first:last + 1], intensities[first:last + 1]
+        count = len(ranges)
+        raw_min, raw_max = math.radians(angle[first]), math.radians(angle[last])
+    else:
+        count = len(ranges)
+        raw_min, raw_max = 0.0, math.radians(359.0)
+    forward = raw_max > raw_min
+    angle_min, angle_max = (math.pi - raw_max, math.pi - raw_min) if forward else (
+        math.pi - raw_min, math.pi - raw_max)
+    increment = (angle_max - angle_min) / (count - 1) if count > 1 else 0.0
+    if forward != inverted:
+        ranges, intensities = ranges[::-1], intensities[::-1]
+    return ScanArrays(angle_min=angle_min, angle_max=angle_max, angle_increment=increment,
+                      time_increment=abs(increment) / (2.0 * math.pi) * turn.period_s,
+                      scan_time=turn.period_s,
+                      ranges=np.ascontiguousarray(ranges, dtype=np.float32),
+                      intensities=np.ascontiguousarray(intensities, dtype=np.float32))

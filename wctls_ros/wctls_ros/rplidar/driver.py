@@ -1,0 +1,446 @@
+"""
+The RPLIDAR session on a background thread: handshake, scanning, turn assembly and recovery.
+
+A session stops any stale stream (STOP, then drain), reads the device info and health, lists the
+scan modes (GET_LIDAR_CONF; GET_SAMPLERATE on firmware older than 1.24), sets the motor speed and
+starts the requested mode (the typical one by default: DenseBoost on the S1). It then decodes the
+stream and hands every complete turn to a callback, on this thread.
+
+Recovery, without ever ending the thread: a link that cannot be opened or breaks (unplugged
+device, closed socket) is reopened with exponential back-off; a silent device, unanswered
+requests or a stream with no valid frame restart the session; a health warning is logged; a
+health error gets a RESET, a ~2 s wait and a new session, and after ``health_reset_attempts``
+failed resets the driver gives up with a clear error until the motor is started again.
+"""
+
+from dataclasses import dataclass, replace
+import enum
+import threading
+import time
+from typing import Callable, Optional
+
+import numpy as np
+
+from .protocol import (AnswerType, Command, ConfType, decode_conf_value, DenseCapsuleDecoder,
+                       DESCRIPTOR_SIZE, DeviceHealth, DeviceInfo, encode_conf_request,
+                       encode_express_scan, encode_motor_speed, encode_request, find_descriptor,
+                       HealthStatus, ProtocolError, SampleRate, ScanMode, SendMode,
+                       StandardNodeDecoder)
+from .transport import drain, LinkError, SerialLink, TcpLink
+from .turns import TurnAssembler
+
+ANSWER_TIMEOUT_S = 1.0
+RESET_WAIT_S = 2.0             # an S1 is silent for about 2 s after RESET
+BACKOFF_FIRST_S = 0.05
+BACKOFF_MAX_S = 1.0
+STREAM_READ_TIMEOUT_S = 0.1
+# The per-wake-up cost of reading and decoding dominates the CPU time, so the stream is read at
+# most this often, except around the predicted end of a turn, where every arrival is read at once
+# so that a complete turn is published without extra delay.
+STREAM_READ_PERIOD_S = 0.025
+LOG_THROTTLE_S = 5.0
+CONF_COMMANDS_FIRMWARE = (1, 24)   # GET_LIDAR_CONF exists from this firmware on
+LEGACY_MAX_DISTANCE_M = 16.0       # what the SDK assumes for devices without GET_LIDAR_CONF
+_CHUNK_LOG_SIZE = 256
+_DECODED_ANSWERS = (AnswerType.MEASUREMENT, AnswerType.DENSE_CAPSULE)
+
+
+@dataclass(frozen=True)
+class DriverConfig:
+    """
+    What to connect to and how to scan (sllidar_ros2's parameters plus recovery settings).
+
+    :ivar channel_type: ``'serial'`` or ``'tcp'``
+    :ivar serial_port: serial device path
+    :ivar serial_baudrate: bits per second (S1: 256000)
+    :ivar tcp_ip: address for ``'tcp'``
+    :ivar tcp_port: port for ``'tcp'``
+    :ivar scan_mode: scan mode name; ``''`` = the device's typical mode
+    :ivar scan_frequency_hz: requested rotation frequency, Hz (MOTOR_SPEED = 60 x this rpm)
+    :ivar data_timeout_s: silence (or garbage) that restarts the session, s
+    :ivar health_reset_attempts: RESETs tried on a health error before giving up
+    """
+
+    channel_type: str = 'serial'
+    serial_port: str = '/dev/ttyUSB0'
+    serial_baudrate: int = 256000
+    tcp_ip: str = '192.168.0.7'
+    tcp_port: int = 20108
+    scan_mode: str = ''
+    scan_frequency_hz: float = 10.0
+    data_timeout_s: float = 1.0
+    health_reset_attempts: int = 3
+
+    def __post_init__(self):
+        if self.channel_type not in ('serial', 'tcp'):
+            raise ValueError(f"channel_type must be 'serial' or 'tcp', got {self.channel_type!r}")
+
+
+class DriverState(enum.Enum):
+    """What the driver is doing."""
+
+    CONNECTING = 'connecting'
+    SCANNING = 'scanning'
+    MOTOR_STOPPED = 'motor stopped'
+    RESETTING = 'resetting'
+    FAILED = 'failed'
+    CLOSED = 'closed'
+
+
+@dataclass(frozen=True)
+class DriverStatus:
+    """
+    A snapshot of the driver for diagnostics.
+
+    :ivar state: :class:`DriverState`
+    :ivar message: what happened last, in words
+    :ivar link: the link's name
+    :ivar device: the device info, once read
+    :ivar health: the last health answer
+    :ivar mode: the scan mode streaming (or last streamed)
+    :ivar turns: turns handed to the callback
+    :ivar checksum_errors: capsules dropped for a wrong checksum
+    :ivar discarded_bytes: bytes skipped while resynchronising or flushing
+    :ivar reconnects: sessions that ended in an error
+    :ivar resets: RESETs sent after health errors
+    """
+
+    state: DriverState = DriverState.CONNECTING
+    message: str = 'starting'
+    link: str = ''
+    device: Optional[DeviceInfo] = None
+    health: Optional[DeviceHealth] = None
+    mode: Optional[ScanMode] = None
+    turns: int = 0
+    checksum_errors: int = 0
+    discarded_bytes: int = 0
+    reconnects: int = 0
+    resets: int = 0
+
+
+class DeviceError(Exception):
+    """The device did not answer, answered wrongly or streamed nothing usable."""
+
+
+class GiveUp(Exception):
+    """Retrying cannot help: an unsupported scan mode or a health error that RESET does not fix."""
+
+
+def open_link(config: DriverConfig):
+    """
+    Open the link the configuration names.
+
+    :param config: the driver configuration
+    :return: a :class:`SerialLink` or :class:`TcpLink`
+    :raises LinkError: when it cannot be opened
+    """
+    if config.channel_type == 'tcp':
+        return TcpLink(config.tcp_ip, config.tcp_port)
+    return SerialLink(config.serial_port, config.serial_baudrate)
+
+
+class RplidarDriver:
+    """
+    Runs RPLIDAR sessions on a background thread and hands complete turns to a callback.
+
+    :param config: what to connect to and how to scan
+    :param on_turn: called on the reader thread as ``on_turn(turn, mode)`` for each turn
+    :param logger: an rclpy-style logger (``info/warning/error(msg, throttle_duration_sec=)``)
+    :param link_factory: opens the link for a configuration (for tests; :func:`open_link`)
+    """
+
+    def __init__(self, config: DriverConfig, on_turn: Callable, logger,
+                 link_factory: Callable = open_link):
+        self._config = config
+        self._on_turn = on_turn
+        self._log = logger
+        self._link_factory = link_factory
+        self._closing = threading.Event()
+        self._motor_on = True
+        self._lock = threading.Lock()
+        self._status = DriverStatus()
+        self._thread = threading.Thread(target=self._run, name='rplidar_reader', daemon=True)
+
+    def start(self):
+        """Start the reader thread."""
+        self._thread.start()
+
+    def close(self, timeout_s: float = 3.0):
+        """
+        Stop the reader thread (the device is told to stop scanning if it is reachable).
+
+        :param timeout_s: longest wait for the thread, s
+        """
+        self._closing.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout_s)
+        self._update(state=DriverState.CLOSED, message='closed')
+
+    def set_motor(self, running: bool):
+        """
+        Request the motor (and scanning) on or off; also retries after the driver gave up.
+
+        :param running: True to scan, False to stop scanning and idle the motor
+        """
+        self._motor_on = running
+
+    def status(self) -> DriverStatus:
+        """
+        Return a snapshot of the driver's state and counters.
+
+        :return: :class:`DriverStatus`
+        """
+        with self._lock:
+            return self._status
+
+    def reader_cpu_s(self) -> float:
+        """
+        Return the CPU time the reader thread has used.
+
+        :return: CPU seconds (0 before the thread started)
+        """
+        if self._thread.ident is None or not self._thread.is_alive():
+            return 0.0
+        return time.clock_gettime(time.pthread_getcpuclockid(self._thread.ident))
+
+    def _update(self, **changes):
+        """Replace status fields; counters given as ``add_<name>=n`` are incremented."""
+        with self._lock:
+            for key in [k for k in changes if k.startswith('add_')]:
+                name = key[4:]
+                changes[name] = getattr(self._status, name) + changes.pop(key)
+            self._status = replace(self._status, **changes)
+
+    def _run(self):
+        backoff_s = BACKOFF_FIRST_S
+        while not self._closing.is_set():
+            try:
+                link = self._link_factory(self._config)
+            except LinkError as error:
+                self._update(state=DriverState.CONNECTING, message=str(error))
+                self._log.warning(f'{error}; retrying', throttle_duration_sec=LOG_THROTTLE_S)
+                self._closing.wait(backoff_s)
+                backoff_s = min(2.0 * backoff_s, BACKOFF_MAX_S)
+                continue
+            backoff_s = BACKOFF_FIRST_S
+            self._update(link=link.name)
+            try:
+                self._serve(link)
+            except GiveUp as error:
+                self._give_up(str(error))
+            except (LinkError, DeviceError, ProtocolError) as error:
+                self._update(state=DriverState.CONNECTING, message=str(error), add_reconnects=1)
+                self._log.warning(f'{error}; reconnecting', throttle_duration_sec=LOG_THROTTLE_S)
+            except Exception as error:  # a bug must not end the reader thread
+                self._update(state=DriverState.CONNECTING, add_reconnects=1,
+                             message=f'unexpected {type(error).__name__}: {error}')
+                self._log.error(f'unexpected {type(error).__name__} in the RPLIDAR reader: '
+                                f'{error}; reconnecting', throttle_duration_sec=LOG_THROTTLE_S)
+                self._closing.wait(BACKOFF_MAX_S)
+            finally:
+                link.close()
+
+    def _give_up(self, reason: str):
+        """Report a failure retrying cannot fix; wait until the motor is requested again."""
+        self._motor_on = False
+        self._update(state=DriverState.FAILED, message=reason)
+        self._log.error(f'{reason} (call the start_motor service to retry)')
+        while not self._closing.is_set() and not self._motor_on:
+            self._closing.wait(STREAM_READ_TIMEOUT_S)
+
+    def _serve(self, link):
+        """Run sessions on an open link until closing; raise on link or device trouble."""
+        failed_resets = 0
+        while not self._closing.is_set():
+            self._stop_stream(link)
+            device = DeviceInfo.decode(self._ask(link, Command.GET_INFO, AnswerType.DEVICE_INFO))
+            health = DeviceHealth.decode(
+                self._ask(link, Command.GET_HEALTH, AnswerType.DEVICE_HEALTH))
+            self._update(device=device, health=health)
+            if health.status == HealthStatus.ERROR:
+                if failed_resets >= self._config.health_reset_attempts:
+                    raise GiveUp('the device reports a health error (code '
+                                 f'0x{health.error_code:04X}) after {failed_resets} resets: '
+                                 'power-cycle the S1')
+                failed_resets += 1
+                self._reset(link, health, failed_resets)
+                continue
+            failed_resets = 0
+            if health.status != HealthStatus.OK:
+                self._log.warning(f'the device reports a health warning (status {health.status}, '
+                                  f'code 0x{health.error_code:04X}); scanning anyway',
+                                  throttle_duration_sec=LOG_THROTTLE_S)
+            mode = self._select_mode(*self._list_modes(link, device))
+            if self._motor_on:
+                self._scan(link, device, mode)
+            else:
+                self._idle(link)
+
+    def _stop_stream(self, link):
+        """Stop any scan in progress and discard the bytes still arriving."""
+        link.write(encode_request(Command.STOP))
+        self._closing.wait(0.002)
+        self._update(add_discarded_bytes=drain(link, quiet_s=0.02, limit_s=0.5))
+
+    def _reset(self, link, health: DeviceHealth, attempt: int):
+        """Send RESET after a health error and wait for the device to come back."""
+        self._update(state=DriverState.RESETTING, add_resets=1,
+                     message=f'health error (code 0x{health.error_code:04X}): reset '
+                             f'{attempt}/{self._config.health_reset_attempts}')
+        self._log.error(f'the device reports a health error (code 0x{health.error_code:04X}); '
+                        f'resetting it ({attempt}/{self._config.health_reset_attempts})')
+        link.write(encode_request(Command.RESET))
+        self._closing.wait(RESET_WAIT_S)
+
+    def _read_more(self, link, deadline: float, what: str) -> bytes:
+        """Read the next bytes before ``deadline`` or raise :class:`DeviceError`."""
+        remaining = deadline - time.monotonic()
+        data = link.read(remaining) if remaining > 0 else b''
+        if not data:
+            raise DeviceError(f'no {what} within {ANSWER_TIMEOUT_S:g} s on {link.name}: check '
+                              'the port, serial_baudrate (S1: 256000), the cable and the power '
+                              '(a weak USB port cannot run the S1)')
+        return data
+
+    def _request(self, link, request: bytes, answer_type: int, what: str) -> tuple:
+        """Send a request; return the answer's descriptor and the bytes received after it."""
+        link.write(request)
+        deadline = time.monotonic() + ANSWER_TIMEOUT_S
+        buffer = b''
+        while True:
+            descriptor, end = find_descriptor(buffer)
+            if descriptor is not None and descriptor.answer_type == answer_type:
+                return descriptor, buffer[end:]
+            if descriptor is not None:
+                # Stale bytes that look like another answer: search on past their sync.
+                buffer = buffer[end - DESCRIPTOR_SIZE + 1:]
+                continue
+            buffer = buffer[end:] + self._read_more(link, deadline, what)
+
+    def _ask(self, link, command: int, answer_type: int, request: bytes = b'') -> bytes:
+        """Send a request and return its single answer's payload."""
+        what = f'answer to {Command(command).name}'
+        descriptor, payload = self._request(link, request or encode_request(command),
+                                            answer_type, what)
+        deadline = time.monotonic() + ANSWER_TIMEOUT_S
+        while len(payload) < descriptor.length:
+            payload += self._read_more(link, deadline, what)
+        return payload[:descriptor.length]
+
+    def _conf(self, link, conf_type: int, mode: Optional[int] = None):
+        """Read one GET_LIDAR_CONF entry."""
+        payload = self._ask(link, Command.GET_LIDAR_CONF, AnswerType.LIDAR_CONF,
+                            encode_conf_request(conf_type, mode))
+        return decode_conf_value(conf_type, payload)
+
+    def _list_modes(self, link, device: DeviceInfo) -> tuple:
+        """Return the device's scan modes and the typical mode's id."""
+        if device.firmware < CONF_COMMANDS_FIRMWARE:
+            rate = SampleRate.decode(self._ask(link, Command.GET_SAMPLERATE,
+                                               AnswerType.SAMPLE_RATE))
+            return [ScanMode(0, 'Standard', float(rate.standard_us), LEGACY_MAX_DISTANCE_M,
+                             AnswerType.MEASUREMENT)], 0
+        modes = [ScanMode(mode_id=i, name=self._conf(link, ConfType.MODE_NAME, i),
+                          us_per_sample=self._conf(link, ConfType.US_PER_SAMPLE, i),
+                          max_distance_m=self._conf(link, ConfType.MAX_DISTANCE, i),
+                          answer_type=self._conf(link, ConfType.ANSWER_TYPE, i))
+                 for i in range(self._conf(link, ConfType.MODE_COUNT))]
+        bad = [m.name for m in modes if not m.us_per_sample > 0.0]
+        if bad:
+            raise DeviceError(f'the device reports 0 us/sample for mode(s) {bad}')
+        return modes, self._conf(link, ConfType.TYPICAL_MODE)
+
+    def _select_mode(self, modes: list, typical: int) -> ScanMode:
+        """Pick the configured mode (or the typical one); give up on an unusable choice."""
+        listing = '; '.join(m.describe() for m in modes)
+        wanted = self._config.scan_mode
+        chosen = [m for m in modes if (m.name == wanted if wanted else m.mode_id == typical)]
+        if not chosen:
+            raise GiveUp(f"scan_mode '{wanted or typical}' is not supported by this device; "
+                         f'supported modes: {listing}')
+        mode = chosen[0]
+        if mode.answer_type not in _DECODED_ANSWERS:
+            usable = [m.name for m in modes if m.answer_type in _DECODED_ANSWERS]
+            raise GiveUp(f"scan mode '{mode.name}' streams answer type 0x{mode.answer_type:02X}, "
+                         f'which this driver does not decode; use one of {usable}')
+        return mode
+
+    def _idle(self, link):
+        """Keep the motor idle and the link watched until scanning is requested."""
+        link.write(encode_motor_speed(0))
+        self._update(state=DriverState.MOTOR_STOPPED, message='motor stopped on request')
+        while not self._closing.is_set() and not self._motor_on:
+            self._update(add_discarded_bytes=len(link.read(STREAM_READ_TIMEOUT_S)))
+
+    def _scan(self, link, device: DeviceInfo, mode: ScanMode):
+        """Start ``mode`` and stream turns until closing or a motor stop request."""
+        link.write(encode_motor_speed(round(60.0 * self._config.scan_frequency_hz)))
+        if mode.answer_type == AnswerType.MEASUREMENT:
+            request, decoder = encode_request(Command.SCAN), StandardNodeDecoder()
+        else:
+            request = encode_express_scan(mode.mode_id)
+            decoder = DenseCapsuleDecoder(mode.us_per_sample)
+        descriptor, data = self._request(link, request, mode.answer_type,
+                                         f'{mode.name} scan descriptor')
+        if descriptor.send_mode != SendMode.MULTIPLE or descriptor.length != decoder.FRAME_SIZE:
+            raise DeviceError(f'unexpected scan descriptor {descriptor}')
+        assembler = TurnAssembler(mode.us_per_sample, decoder.FRAME_SIZE * link.byte_time_s)
+        self._update(state=DriverState.SCANNING, mode=mode,
+                     message=f'scanning in {mode.name}')
+        self._log.info(f'{device.describe()}; scanning {mode.describe()} on {link.name}')
+        self._stream(link, decoder, assembler, mode, data)
+        link.write(encode_request(Command.STOP))
+
+    def _stream(self, link, decoder, assembler: TurnAssembler, mode: ScanMode, data: bytes):
+        """Decode the stream into turns until closing or a motor stop request."""
+        offsets, times = [], []
+        stream_end = 0
+        seen = (0, 0)
+        now = time.monotonic()
+        last_bytes_s = last_samples_s = now
+        while not self._closing.is_set() and self._motor_on:
+            if data:
+                stream_end += len(data)
+                offsets.append(stream_end)
+                times.append(now)
+                del offsets[:-_CHUNK_LOG_SIZE], times[:-_CHUNK_LOG_SIZE]
+                samples = decoder.feed(data)
+                last_bytes_s = now
+                if len(samples):
+                    last_samples_s = now
+                    chunk = np.minimum(np.searchsorted(offsets, samples.frame_end), len(times) - 1)
+                    for turn in assembler.push(samples, np.asarray(times)[chunk]):
+                        self._hand_over(turn, mode)
+                errors = (decoder.checksum_errors, decoder.discarded_bytes)
+                if errors != seen:
+                    self._update(add_checksum_errors=errors[0] - seen[0],
+                                 add_discarded_bytes=errors[1] - seen[1])
+                    self._log.warning(f'corrupted stream: {decoder.checksum_errors} checksum '
+                                      f'errors, {decoder.discarded_bytes} bytes skipped in this '
+                                      'session (check the cable and the USB power)',
+                                      throttle_duration_sec=LOG_THROTTLE_S)
+                    seen = errors
+            wake_s = now + STREAM_READ_PERIOD_S
+            eta_s = assembler.turn_end_eta_s()
+            if eta_s is not None:
+                wake_s = min(wake_s, eta_s)
+            self._closing.wait(max(wake_s - time.monotonic(), 0.0))
+            data = link.read(STREAM_READ_TIMEOUT_S)
+            now = time.monotonic()
+            if now - last_bytes_s > self._config.data_timeout_s:
+                raise DeviceError(f'no scan data for {self._config.data_timeout_s:g} s on '
+                                  f'{link.name}')
+            if now - last_samples_s > self._config.data_timeout_s:
+                raise DeviceError(f'bytes arrive on {link.name} but no valid {mode.name} frame '
+                                  f'for {self._config.data_timeout_s:g} s: wrong '
+                                  'serial_baudrate (S1: 256000) or a damaged link?')
+
+    def _hand_over(self, turn, mode: ScanMode):
+        """Give a turn to the callback; a failing callback is logged, never fatal."""
+        try:
+            self._on_turn(turn, mode)
+        except Exception as error:  # the callback must not end the reader
+            self._log.error(f'publishing a turn failed: {type(error).__name__}: {error}',
+                            throttle_duration_sec=LOG_THROTTLE_S)
+            return
+        self._update(add_turns=1)

@@ -1,0 +1,223 @@
+"""
+``rplidar_node``: the RPLIDAR S1 as a ROS 2 node, with sllidar_ros2's parameters and conventions.
+
+Publishes sensor_msgs/LaserScan on ``scan`` (reliable, keep last 10, like sllidar_ros2) and
+diagnostic_msgs/DiagnosticArray on ``/diagnostics`` (1 Hz); offers ``start_motor`` and
+``stop_motor`` (std_srvs/Empty). The device is read on a background thread
+(:class:`~wctls_ros.rplidar.driver.RplidarDriver`), which publishes each turn as soon as it is
+complete. Unlike sllidar_ros2, header.stamp is the measurement time of the turn's first sample
+(raw angle ~0, published angle ~+pi; the sensor sweeps toward -pi) and scan_time the measured
+rotation period.
+"""
+
+import array
+import statistics
+import threading
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+import rclpy
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import LaserScan
+from std_srvs.srv import Empty
+
+from .driver import DriverConfig, DriverState, RplidarDriver
+from .laserscan import compensation_multiple, RANGE_MIN_M, turn_to_scan
+
+SCAN_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
+                      reliability=ReliabilityPolicy.RELIABLE)
+DIAGNOSTICS_PERIOD_S = 1.0
+_LATENCY_WINDOW = 1000
+_LEVELS = {DriverState.SCANNING: DiagnosticStatus.OK,
+           DriverState.MOTOR_STOPPED: DiagnosticStatus.OK,
+           DriverState.CONNECTING: DiagnosticStatus.WARN,
+           DriverState.RESETTING: DiagnosticStatus.WARN,
+           DriverState.FAILED: DiagnosticStatus.ERROR,
+           DriverState.CLOSED: DiagnosticStatus.STALE}
+
+
+def _range(low, high, integer=False):
+    """Return the descriptor field for a numeric range."""
+    if integer:
+        return {'integer_range': [IntegerRange(from_value=low, to_value=high, step=1)]}
+    return {'floating_point_range': [FloatingPointRange(from_value=low, to_value=high, step=0.0)]}
+
+
+# name: (default, description, range); all read-only (restart the node to change them).
+PARAMETERS = {
+    'channel_type': ('serial', "link to the device: 'serial' or 'tcp'", {}),
+    'serial_port': ('/dev/ttyUSB0', 'serial device of the S1 (a udev symlink such as '
+                    '/dev/rplidar is steadier)', {}),
+    'serial_baudrate': (256000, 'serial bits per second; the S1 needs 256000', _range(
+        9600, 4000000, integer=True)),
+    'tcp_ip': ('192.168.0.7', "device address when channel_type is 'tcp'", {}),
+    'tcp_port': (20108, "device TCP port when channel_type is 'tcp'", _range(
+        1, 65535, integer=True)),
+    'frame_id': ('laser', 'frame of the scans (x toward the raw 180 deg side, as sllidar_ros2)',
+                 {}),
+    'inverted': (False, 'the sensor is mounted upside down (mirror the beam order)', {}),
+    'angle_compensate': (True, 'bin each turn into 360*k fixed beams (k from the sample rate); '
+                         'false publishes every sample, with a varying beam count', {}),
+    'scan_mode': ('', "scan mode name, e.g. 'DenseBoost' or 'Standard'; '' = the device's "
+                  'typical mode', {}),
+    'scan_frequency': (10.0, 'rotation frequency requested from the motor, Hz (sets the '
+                       'angle_compensate bin count as in sllidar_ros2)', _range(5.0, 20.0)),
+    'data_timeout': (1.0, 'seconds without scan data (or with only garbage) before the '
+                     'session is restarted', _range(0.1, 10.0)),
+    'health_reset_attempts': (3, 'RESETs tried on a device health error before giving up',
+                              _range(0, 10, integer=True)),
+}
+
+
+class RplidarNode(Node):
+    """
+    The RPLIDAR driver node.
+
+    :param kwargs: passed to ``Node.__init__`` (e.g. ``context``, ``parameter_overrides``)
+    :raises ValueError: on an invalid channel_type
+    """
+
+    def __init__(self, **kwargs):
+        super().__init__('rplidar_node', **kwargs)
+        values = {}
+        for name, (default, description, constraint) in PARAMETERS.items():
+            descriptor = ParameterDescriptor(description=description, read_only=True,
+                                             **constraint)
+            values[name] = self.declare_parameter(name, default, descriptor).value
+        self._frame_id = values['frame_id']
+        self._inverted = values['inverted']
+        self._angle_compensate = values['angle_compensate']
+        self._scan_frequency_hz = values['scan_frequency']
+        config = DriverConfig(
+            channel_type=values['channel_type'], serial_port=values['serial_port'],
+            serial_baudrate=values['serial_baudrate'], tcp_ip=values['tcp_ip'],
+            tcp_port=values['tcp_port'], scan_mode=values['scan_mode'],
+            scan_frequency_hz=self._scan_frequency_hz, data_timeout_s=values['data_timeout'],
+            health_reset_attempts=values['health_reset_attempts'])
+        self._latency_lock = threading.Lock()
+        self._latencies_s = []
+        self._turns_at_last_report = (0, time.monotonic())
+        self._scan_pub = self.create_publisher(LaserScan, 'scan', SCAN_QOS)
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.create_service(Empty, 'start_motor', self._start_motor)
+        self.create_service(Empty, 'stop_motor', self._stop_motor)
+        self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
+        self._driver = RplidarDriver(config, self._publish_turn, self.get_logger())
+        self._driver.start()
+
+    @property
+    def driver(self) -> RplidarDriver:
+        """Give access to the RPLIDAR reader: its status and CPU time."""
+        return self._driver
+
+    def publish_latencies_s(self) -> list:
+        """
+        Return the recent delays from a turn's last byte to its LaserScan being published.
+
+        :return: seconds, oldest first (at most the last 1000 turns)
+        """
+        with self._latency_lock:
+            return list(self._latencies_s)
+
+    def destroy_node(self):
+        """Stop the reader thread, then destroy the node."""
+        self._driver.close()
+        super().destroy_node()
+
+    def _publish_turn(self, turn, mode):
+        """Publish one turn as a LaserScan (called on the reader thread)."""
+        scan = turn_to_scan(turn, self._angle_compensate, self._inverted,
+                            compensation_multiple(mode.us_per_sample, self._scan_frequency_hz))
+        msg = LaserScan()
+        msg.header.frame_id = self._frame_id
+        age = Duration(nanoseconds=int((time.monotonic() - turn.first_sample_s) * 1e9))
+        msg.header.stamp = (self.get_clock().now() - age).to_msg()
+        msg.angle_min = scan.angle_min
+        msg.angle_max = scan.angle_max
+        msg.angle_increment = scan.angle_increment
+        msg.time_increment = scan.time_increment
+        msg.scan_time = scan.scan_time
+        msg.range_min = RANGE_MIN_M
+        msg.range_max = mode.max_distance_m
+        msg.ranges = array.array('f', scan.ranges.tobytes())
+        msg.intensities = array.array('f', scan.intensities.tobytes())
+        self._scan_pub.publish(msg)
+        latency_s = time.monotonic() - turn.last_byte_s
+        with self._latency_lock:
+            self._latencies_s.append(latency_s)
+            del self._latencies_s[:-_LATENCY_WINDOW]
+
+    def _start_motor(self, request, response):
+        self.get_logger().info('start_motor: starting the motor and the scan')
+        self._driver.set_motor(True)
+        return response
+
+    def _stop_motor(self, request, response):
+        self.get_logger().info('stop_motor: stopping the scan and idling the motor')
+        self._driver.set_motor(False)
+        return response
+
+    def _publish_diagnostics(self):
+        status = self._driver.status()
+        now = time.monotonic()
+        turns, since = self._turns_at_last_report
+        rate_hz = (status.turns - turns) / max(now - since, 1e-9)
+        self._turns_at_last_report = (status.turns, now)
+        latencies = self.publish_latencies_s()[-100:]
+        level = _LEVELS[status.state]
+        message = status.message
+        if status.state == DriverState.SCANNING and rate_hz == 0.0:
+            level, message = DiagnosticStatus.WARN, f'{message}, but no complete turn lately'
+        values = {
+            'state': status.state.value,
+            'link': status.link,
+            'scan rate (Hz)': f'{rate_hz:.2f}',
+            'turns published': str(status.turns),
+            'checksum errors': str(status.checksum_errors),
+            'bytes discarded': str(status.discarded_bytes),
+            'reconnects': str(status.reconnects),
+            'health resets': str(status.resets),
+            'publish latency median (ms)': (f'{1e3 * statistics.median(latencies):.2f}'
+                                            if latencies else 'n/a'),
+        }
+        if status.device is not None:
+            values['device'] = status.device.describe()
+        if status.health is not None:
+            values['health'] = (f'status {status.health.status}, '
+                                f'code 0x{status.health.error_code:04X}')
+        if status.mode is not None:
+            values['scan mode'] = status.mode.describe()
+        array_msg = DiagnosticArray()
+        array_msg.header.stamp = self.get_clock().now().to_msg()
+        array_msg.status = [DiagnosticStatus(
+            level=level, name=f'{self.get_name()}: RPLIDAR', message=message,
+            hardware_id=(status.device.serial_number.hex().upper() if status.device
+                         else status.link),
+            values=[KeyValue(key=k, value=v) for k, v in values.items()])]
+        self._diagnostics_pub.publish(array_msg)
+
+
+def main(args=None):
+    """Run the node until shut down."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = RplidarNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ValueError as error:
+        rclpy.logging.get_logger('rplidar_node').fatal(str(error))
+        raise SystemExit(2)
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

@@ -27,6 +27,8 @@ setup(
     entry_points={
         'console_scripts': [
             'feature_node = wctls_ros.feature_node:main',
+            'rplidar_node = wctls_ros.rplidar.rplidar_node:main',
+            's1_emulator = wctls_ros.rplidar.emulator:main',
         ],
     },
 )

@@ -267,3 +267,36 @@ def test_scaling_both_sigmas_by_k_scales_covariances_by_k_squared(seed, k, metho
     np.testing.assert_allclose(scaled.line, base.line, rtol=1e-9, atol=0)
     np.testing.assert_allclose(scaled.normal_covariance, k * k * base.normal_covariance,
                                rtol=1e-8)
+
+
+def test_breakpoints_follow_the_adaptive_rule():
+    from wctls_ros.core.segmentation import breakpoints
+    increment = math.radians(0.5)
+    bearings = np.arange(-40, 41) * increment
+    wall = 2.0 / np.cos(bearings)                      # a wall 2 m ahead, seen head-on
+    points = scan_to_points(wall, bearings[0], increment)
+    assert np.flatnonzero(breakpoints(points, 0.01, 0.0, math.radians(10))).tolist() == [0]
+    # A 25 cm step back in depth behind beam 50 is an occlusion edge.
+    stepped = wall.copy()
+    stepped[50:] += 0.25
+    points = scan_to_points(stepped, bearings[0], increment)
+    assert np.flatnonzero(breakpoints(points, 0.01, 0.0, math.radians(10))).tolist() == [0, 50]
+    # Missing beams on the same wall widen the allowance ... up to lambda.
+    for missing, separated in ((8, False), (25, True)):
+        gappy = wall.copy()
+        gappy[30:30 + missing] = math.nan
+        points = scan_to_points(gappy, bearings[0], increment)
+        breaks = np.flatnonzero(breakpoints(points, 0.01, 0.0, math.radians(10)))
+        assert (breaks.tolist() == [0, 30]) == separated, (missing, breaks)
+
+
+@pytest.mark.parametrize('yaw', [0.0, 0.7, -2.0, math.pi])
+def test_a_closed_room_without_breakpoints_gives_its_four_walls_and_corners(yaw):
+    plain = {'name': 'plain', 'polylines': ROOM['polylines']}
+    ranges, angle_min, increment, truth = room_scan(pose=(2.6, 1.25, yaw), plan=plain)
+    features = extract_features(ranges, angle_min, increment, SMALL_NOISE_CONFIG)
+    assert len(features.segments) == 4
+    assert sum(s.first_index > s.last_index for s in features.segments) <= 1
+    assert features.segments.num_points.sum() >= len(ranges) - 8    # only corner returns lost
+    _, distance = nearest(features.corners.xy_m, truth)
+    assert len(features.corners) == 4 and distance.max() < 0.02

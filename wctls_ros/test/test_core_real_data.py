@@ -7,8 +7,9 @@ The pipeline on real static SICK recordings: repeatable corners, and their real 
 The LMS111 file holds 175 scans of a lab box from a sensor that never moves, so the scan-to-scan
 scatter of a corner is its real estimation error (up to a constant bias). With a range sigma
 estimated from the same data (per-beam std over the scans, about 8 mm) and independent per-beam
-noise, the propagated covariance is too small for this sensor: median NEES about 2.5-3.5 instead
-of 2, because the LMS111 adds a common-mode range offset to every beam of a scan (about 1 mm std,
+noise, the propagated covariance is too small for this sensor: the far corner scatters 1.6-1.8
+times its predicted std, median NEES 2.3 (a calibrated 2D estimate has median 2 ln 2 = 1.39 and
+mean 2). The LMS111 adds a common-mode range offset to every beam of a scan (about 1 mm std,
 slowly drifting: lag-1 correlation 0.8), which shifts every wall's radius together and which no
 independent per-beam model can represent. The calibration tool of the evaluation package fits
 that term; here the test pins down the measured gap so that a change in the propagation shows.
@@ -86,7 +87,7 @@ def test_propagated_covariance_against_real_scatter(scans, range_sigma):
     scatter = error.std(axis=0)
     print(f'far corner: scatter {scatter * 1e3} mm, predicted {predicted * 1e3} mm, '
           f'median NEES {median_nees:.2f}')
-    # Measured: scatter (2.3, 3.4) mm vs predicted (1.4, 1.6) mm, median NEES 2.5.
-    assert 1.5 < scatter[0] / predicted[0] < 2.0
-    assert 1.8 < scatter[1] / predicted[1] < 2.4
-    assert 2.0 < median_nees < 3.5
+    # Measured: scatter (2.2, 2.8) mm vs predicted (1.4, 1.5) mm, median NEES 2.25: the
+    # independent-noise model is too small by a factor 1.6-1.8 in std on this sensor.
+    assert np.all((1.3 < scatter / predicted) & (scatter / predicted < 2.5))
+    assert 2.0 < median_nees < 4.0

@@ -11,19 +11,28 @@ joint covariance is sum_k J_k C_k J_k^T with J_k stacking both (3 x 3). Since h 
 
 import numpy as np
 
-from ._linalg import inverse_2x2
 from .features import CornerSet
 
 
-def acute_angle_between(normal_a_rad: np.ndarray, normal_b_rad: np.ndarray) -> np.ndarray:
+def _solve(line_a: np.ndarray, line_b: np.ndarray):
     """
-    Return the acute angle between lines given by their normal angles.
+    Intersect pairs of lines by Cramer's rule (the paper's eqs. (24)-(25)).
 
-    :param normal_a_rad: shape (k,), rad
-    :param normal_b_rad: shape (k,), rad
-    :return: shape (k,), rad in [0, pi/2]
+    :return: (h = (x, y, 1) of shape (C, 3), the columns of A^-1 for each line, each (C, 2))
     """
-    return np.arcsin(np.minimum(np.abs(np.sin(normal_a_rad - normal_b_rad)), 1.0))
+    a1, b1, c1 = line_a.T
+    a2, b2, c2 = line_b.T
+    with np.errstate(divide='ignore', invalid='ignore'):
+        inv_det = 1.0 / (a1 * b2 - a2 * b1)
+    h = np.empty((len(a1), 3))
+    h[:, 0] = (b1 * c2 - b2 * c1) * inv_det
+    h[:, 1] = (a2 * c1 - a1 * c2) * inv_det
+    h[:, 2] = 1.0
+    column_a = np.empty((len(a1), 2))
+    column_a[:, 0], column_a[:, 1] = b2 * inv_det, -a2 * inv_det
+    column_b = np.empty((len(a1), 2))
+    column_b[:, 0], column_b[:, 1] = -b1 * inv_det, a1 * inv_det
+    return h, column_a, column_b
 
 
 def intersect(line_a: np.ndarray, cov_a: np.ndarray, line_b: np.ndarray,
@@ -38,28 +47,25 @@ def intersect(line_a: np.ndarray, cov_a: np.ndarray, line_b: np.ndarray,
     :return: (position (C, 2) m, covariance (C, 2, 2) m^2, position Jacobians w.r.t. line_a
         and line_b, each (C, 2, 3))
     """
-    matrix = np.stack([line_a[:, :2], line_b[:, :2]], axis=1)       # A, (C, 2, 2)
-    inverse = inverse_2x2(matrix)
-    xy = -np.einsum('cij,cj->ci', inverse, np.column_stack([line_a[:, 2], line_b[:, 2]]))
-    h = np.column_stack([xy, np.ones(len(xy))])
-    jac_a = -inverse[:, :, 0, None] * h[:, None, :]                # -A^-1 e_1 h^T
-    jac_b = -inverse[:, :, 1, None] * h[:, None, :]
+    h, column_a, column_b = _solve(line_a, line_b)
+    jac_a = -column_a[:, :, None] * h[:, None, :]                  # -A^-1 e_1 h^T
+    jac_b = -column_b[:, :, None] * h[:, None, :]
     covariance = (jac_a @ cov_a @ jac_a.transpose(0, 2, 1)
                   + jac_b @ cov_b @ jac_b.transpose(0, 2, 1))
-    return xy, covariance, jac_a, jac_b
+    return h[:, :2], covariance, jac_a, jac_b
 
 
-def _yaw_jacobian(line: np.ndarray) -> np.ndarray:
-    """Return d yaw / d(a, b, c) for each line, shape (C, 1, 3)."""
-    a, b = line[:, 0], line[:, 1]
-    n2 = 2.0 * (a * a + b * b)
-    return np.stack([-b / n2, a / n2, np.zeros_like(a)], -1)[:, None, :]
+def _yaw_gradient(line: np.ndarray) -> np.ndarray:
+    """Return d yaw / d(a, b, c) of each line: (-b, a, 0) / (2 (a^2 + b^2)), shape (C, 3)."""
+    gradient = np.zeros_like(line)
+    scale = 0.5 / (line[:, 0] ** 2 + line[:, 1] ** 2)
+    gradient[:, 0], gradient[:, 1] = -line[:, 1] * scale, line[:, 0] * scale
+    return gradient
 
 
 def find_corners(line: np.ndarray, line_covariance: np.ndarray,
                  start_xy_m: np.ndarray, end_xy_m: np.ndarray, first: np.ndarray,
-                 second: np.ndarray, min_angle_rad: float, max_gap_m: float
-                 ) -> CornerSet:
+                 second: np.ndarray, min_angle_rad: float, max_gap_m: float) -> CornerSet:
     """
     Intersect the given pairs of segments and keep the real corners.
 
@@ -79,35 +85,51 @@ def find_corners(line: np.ndarray, line_covariance: np.ndarray,
     """
     first = np.asarray(first, dtype=np.intp)
     second = np.asarray(second, dtype=np.intp)
-    angle_rad = np.arctan2(line[:, 1], line[:, 0])
-    steep = acute_angle_between(angle_rad[first], angle_rad[second]) >= min_angle_rad
+    unit = line[:, :2] / np.hypot(line[:, 0], line[:, 1])[:, None]          # line normals
+    sine = np.abs(unit[first, 0] * unit[second, 1] - unit[first, 1] * unit[second, 0])
+    steep = sine >= np.sin(min_angle_rad)
     first, second = first[steep], second[steep]
-    xy, _, jac_a, jac_b = intersect(line[first], line_covariance[first], line[second],
-                                    line_covariance[second])
-    gap_a = np.hypot(*(xy - end_xy_m[first]).T)
-    gap_b = np.hypot(*(xy - start_xy_m[second]).T)
-    near = (gap_a <= max_gap_m) & (gap_b <= max_gap_m) & np.isfinite(xy).all(axis=1)
-    first, second, xy = first[near], second[near], xy[near]
-    jac_a, jac_b = jac_a[near], jac_b[near]
+    h, column_a, column_b = _solve(line[first], line[second])
+    xy = h[:, :2]
+    gap_a = np.hypot(xy[:, 0] - end_xy_m[first, 0], xy[:, 1] - end_xy_m[first, 1])
+    gap_b = np.hypot(xy[:, 0] - start_xy_m[second, 0], xy[:, 1] - start_xy_m[second, 1])
+    near = np.flatnonzero((gap_a <= max_gap_m) & (gap_b <= max_gap_m))
+    first, second, h, xy = first[near], second[near], h[near], xy[near]
+    column_a, column_b = column_a[near], column_b[near]
 
+    # Both walls of every corner at once: rows [0, C) are the first walls, [C, 2C) the second.
+    count = len(xy)
+    walls = np.concatenate([first, second])
+    xy2 = np.concatenate([xy, xy])
+    h2 = np.concatenate([h, h])
     # Unit vectors from the corner along each wall, towards the segment's returns.
-    walls = []
-    for segment in (first, second):
-        middle = 0.5 * (start_xy_m[segment] + end_xy_m[segment]) - xy
-        direction = np.column_stack([-np.sin(angle_rad[segment]), np.cos(angle_rad[segment])])
-        sign = np.where(np.einsum('ci,ci->c', middle, direction) < 0.0, -1.0, 1.0)
-        walls.append(direction * sign[:, None])
-    bisector = walls[0] + walls[1]
-    between = np.arccos(np.clip(np.einsum('ci,ci->c', walls[0], walls[1]), -1.0, 1.0))
+    direction = np.empty((2 * count, 2))
+    direction[:, 0], direction[:, 1] = -unit[walls, 1], unit[walls, 0]
+    middle = 0.5 * (start_xy_m[walls] + end_xy_m[walls]) - xy2
+    direction[np.einsum('ci,ci->c', middle, direction) < 0.0] *= -1.0
+    bisector = direction[:count] + direction[count:]
+    between = np.arccos(np.clip(np.einsum('ci,ci->c', direction[:count], direction[count:]),
+                                -1.0, 1.0))
     # The sensor (origin) sees the open side: inside a concave corner it lies along +bisector.
-    concave = np.einsum('ci,ci->c', bisector, -xy) > 0.0
-    bisector = np.where(concave[:, None], bisector, -bisector)
+    concave = np.einsum('ci,ci->c', bisector, xy) < 0.0
+    bisector[~concave] *= -1.0
     opening = np.where(concave, between, 2.0 * np.pi - between)
 
-    full_a = np.concatenate([jac_a, _yaw_jacobian(line[first])], axis=1)     # (C, 3, 3)
-    full_b = np.concatenate([jac_b, _yaw_jacobian(line[second])], axis=1)
-    covariance = (full_a @ line_covariance[first] @ full_a.transpose(0, 2, 1)
-                  + full_b @ line_covariance[second] @ full_b.transpose(0, 2, 1))
-    covariance = 0.5 * (covariance + covariance.transpose(0, 2, 1))
+    # Joint covariance of (x, y, yaw): line k moves the position by -A^-1 e_k h^T dL_k and the
+    # yaw by g_k^T dL_k, so three quadratic forms of each C_k are all that is needed.
+    cov = line_covariance[walls]
+    gradient = _yaw_gradient(line[walls])
+    cov_h = np.einsum('cij,cj->ci', cov, h2)
+    along_h = np.einsum('ci,ci->c', h2, cov_h)                      # h^T C h
+    cross = np.einsum('ci,ci->c', gradient, cov_h)                  # g^T C h
+    yaw = np.einsum('ci,cij,cj->c', gradient, cov, gradient)        # g^T C g
+    column = np.concatenate([column_a, column_b])
+    covariance = np.empty((count, 3, 3))
+    weighted = column * along_h[:, None]
+    covariance[:, :2, :2] = (np.einsum('ci,cj->cij', weighted[:count], column[:count])
+                             + np.einsum('ci,cj->cij', weighted[count:], column[count:]))
+    offdiagonal = column * cross[:, None]
+    covariance[:, :2, 2] = covariance[:, 2, :2] = -(offdiagonal[:count] + offdiagonal[count:])
+    covariance[:, 2, 2] = yaw[:count] + yaw[count:]
     return CornerSet(xy, np.arctan2(bisector[:, 1], bisector[:, 0]), covariance, opening,
                      first, second)

@@ -58,7 +58,7 @@ class SegmentReturns:
         return np.add.reduceat(values, self.offsets, axis=0)
 
 
-def segment_returns(rho, theta, offsets, counts) -> SegmentReturns:
+def segment_returns(rho, theta, offsets, counts, x=None, y=None) -> SegmentReturns:
     """
     Bundle the returns of consecutive segments for the batched fits.
 
@@ -66,13 +66,16 @@ def segment_returns(rho, theta, offsets, counts) -> SegmentReturns:
     :param theta: bearings, shape (P,), rad
     :param offsets: first return of each segment, shape (S,)
     :param counts: returns per segment, shape (S,), each >= 2
+    :param x: rho cos(theta) when already known, shape (P,), m
+    :param y: rho sin(theta) when already known, shape (P,), m
     :return: the bundle
     """
     rho = np.asarray(rho, dtype=float)
     theta = np.asarray(theta, dtype=float)
     counts = np.asarray(counts, dtype=np.intp)
-    return SegmentReturns(rho, theta, rho * np.cos(theta), rho * np.sin(theta),
-                          np.asarray(offsets, dtype=np.intp), counts,
+    if x is None or y is None:
+        x, y = rho * np.cos(theta), rho * np.sin(theta)
+    return SegmentReturns(rho, theta, x, y, np.asarray(offsets, dtype=np.intp), counts,
                           np.repeat(np.arange(counts.size), counts))
 
 
@@ -116,9 +119,12 @@ def _propagate(jac_rho: np.ndarray, jac_theta: np.ndarray, returns: SegmentRetur
     :return: covariance of the k parameters per segment, shape (S, k, k)
     """
     k = jac_rho.shape[1]
-    outer = (range_sigma ** 2 * jac_rho[:, :, None] * jac_rho[:, None, :]
-             + bearing_sigma ** 2 * jac_theta[:, :, None] * jac_theta[:, None, :])
-    return returns.sums(outer.reshape(-1, k * k)).reshape(-1, k, k)
+    rows, cols = np.triu_indices(k)                 # symmetric: sum the upper triangle only
+    outer = (range_sigma ** 2 * jac_rho[:, rows] * jac_rho[:, cols]
+             + bearing_sigma ** 2 * jac_theta[:, rows] * jac_theta[:, cols])
+    covariance = np.empty((len(returns.counts), k, k))
+    covariance[:, rows, cols] = covariance[:, cols, rows] = returns.sums(outer)
+    return covariance
 
 
 def _moments(returns: SegmentReturns, weight):
@@ -214,28 +220,40 @@ def wctls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
     """
     w = _range_weights(returns)
     total, mx, my, mxx, myy, mxy = _moments(returns, w)
-    # p solves M p = g with M = sum w z z^T, g = sum w z (divided through by the total weight).
-    inv = inverse_2x2(np.stack([np.stack([mxx, mxy], -1), np.stack([mxy, myy], -1)], -2))
-    p = np.einsum('sij,sj->si', inv, np.column_stack([mx, my]))
+    # p solves M p = g with M = sum w z z^T, g = sum w z (divided through by the total weight);
+    # M^-1 = [[i_xx, i_xy], [i_xy, i_yy]] (symmetric).
+    with np.errstate(divide='ignore', invalid='ignore'):
+        inv_det = 1.0 / (mxx * myy - mxy * mxy)
+    i_xx, i_xy, i_yy = myy * inv_det, -mxy * inv_det, mxx * inv_det
+    px, py = i_xx * mx + i_xy * my, i_xy * mx + i_yy * my
     s = returns.segment
-    x, y, rho = returns.x, returns.y, returns.rho
-    inv_w = inv[s] * (w / total[s])[:, None, None]
-    z = np.column_stack([x, y])
-    z_perp = np.column_stack([-y, x])
-    p_i = p[s]
-    residual = 1.0 - np.einsum('pi,pi->p', p_i, z)
-    dp_drho = -np.einsum('pij,pj->pi', inv_w, z) / rho[:, None]
-    dp_dtheta = np.einsum('pij,pj->pi', inv_w, residual[:, None] * z_perp
-                          - z * np.einsum('pi,pi->p', p_i, z_perp)[:, None])
-    cov_p = _propagate(dp_drho, dp_dtheta, returns, range_sigma, bearing_sigma)
+    x, y = returns.x, returns.y
+    k = w / total[s]
+    a, b, d = i_xx[s], i_xy[s], i_yy[s]
+    # dp/drho_i = -w_i M^-1 z_i / rho_i ;
+    # dp/dtheta_i = w_i M^-1 ((1 - p.z_i) z_perp_i - z_i (p.z_perp_i)), z_perp = (-y, x).
+    scale = -k / returns.rho
+    jac_rho = np.empty((len(x), 2))
+    jac_rho[:, 0] = scale * (a * x + b * y)
+    jac_rho[:, 1] = scale * (b * x + d * y)
+    pxs, pys = px[s], py[s]
+    residual = 1.0 - pxs * x - pys * y
+    turn = pys * x - pxs * y                       # p . z_perp
+    qx, qy = -residual * y - x * turn, residual * x - y * turn
+    jac_theta = np.empty((len(x), 2))
+    jac_theta[:, 0] = k * (a * qx + b * qy)
+    jac_theta[:, 1] = k * (b * qx + d * qy)
+    cov_p = _propagate(jac_rho, jac_theta, returns, range_sigma, bearing_sigma)
     flip = np.array([1.0, -1.0])
-    xq, yq = p[:, 0], -p[:, 1]                     # Q = F p, F = diag(1, -1)
+    xq, yq = px, -py                               # Q = F p, F = diag(1, -1)
     cov_q = cov_p * flip[:, None] * flip[None, :]
     norm = np.hypot(xq, yq)
     line = np.column_stack([-xq, yq, np.ones_like(xq)]) / norm[:, None]
-    jac = np.stack([np.stack([-yq * yq, xq * yq], -1),
-                    np.stack([-xq * yq, xq * xq], -1),
-                    np.stack([-xq, -yq], -1)], -2) / (norm ** 3)[:, None, None]
+    jac = np.empty((len(xq), 3, 2))                 # J_WC of eq. (23)
+    jac[:, 0, 0], jac[:, 0, 1] = -yq * yq, xq * yq
+    jac[:, 1, 0], jac[:, 1, 1] = -xq * yq, xq * xq
+    jac[:, 2, 0], jac[:, 2, 1] = -xq, -yq
+    jac /= (norm ** 3)[:, None, None]
     return line, jac @ cov_q @ jac.transpose(0, 2, 1)
 
 
@@ -265,33 +283,73 @@ def normal_form(line: np.ndarray, line_covariance: np.ndarray):
     n2 = a * a + b * b
     n = np.sqrt(n2)
     sign = np.where(c > 0.0, -1.0, 1.0)
-    zero = np.zeros_like(a)
+    jac = np.zeros((len(a), 2, 3))
     with np.errstate(divide='ignore', invalid='ignore'):   # a = b = 0 gives NaN, caught later
-        jac = np.stack([np.stack([-b / n2, a / n2, zero], -1),
-                        np.stack([sign * c * a / (n2 * n), sign * c * b / (n2 * n), -sign / n],
-                                 -1)], -2)
+        jac[:, 0, 0], jac[:, 0, 1] = -b / n2, a / n2
+        jac[:, 1, 0], jac[:, 1, 1] = sign * c * a / (n2 * n), sign * c * b / (n2 * n)
+        jac[:, 1, 2] = -sign / n
     return angle, radius, jac @ line_covariance @ jac.transpose(0, 2, 1)
 
 
-def quick_fit(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
+def moment_prefix_sums(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """
-    Fit lines cheaply for segmentation decisions: the WTLS line and its Cramer-Rao covariance.
+    Return prefix sums of the per-return quantities :func:`moment_fit` needs.
 
-    The covariance is the inverse Fisher information at the WTLS line (one pass over the
-    returns, no Jacobians). It is within about 10 % of every method's own covariance, and using
-    one fit for segmentation gives every method the same segments.
+    Row i holds the sums over returns 0..i-1 of (1, x, y, x^2, y^2, x y, rho^2), so the sums
+    over returns [start, stop) are ``prefix[stop] - prefix[start]``.
 
-    :param returns: the segments' returns
+    :param x: shape (P,), m
+    :param y: shape (P,), m
+    :return: shape (P + 1, 7)
+    """
+    columns = np.empty((7, len(x) + 1))
+    columns[:, 0] = 0.0
+    rows = columns[:, 1:]
+    rows[0], rows[1], rows[2] = 1.0, x, y
+    np.multiply(x, x, out=rows[3])
+    np.multiply(y, y, out=rows[4])
+    np.multiply(x, y, out=rows[5])
+    np.add(rows[3], rows[4], out=rows[6])
+    np.cumsum(columns, axis=1, out=columns)
+    return columns.T
+
+
+def moment_fit(sums: np.ndarray, range_sigma: float, bearing_sigma: float):
+    """
+    Fit lines from per-segment sums alone: orthogonal regression with an isotropic covariance.
+
+    Cheap enough to refit merged segments from prefix sums in O(1) each; meant for
+    segmentation decisions, not for the published covariance. Each return is taken to scatter
+    isotropically with variance range_sigma^2 + bearing_sigma^2 rho^2 (an upper bound of its
+    scatter across the line), which gives Var(angle) = s2 / (N L), Cov(angle, radius) = d Var
+    (angle), Var(radius) = s2 / N + d^2 Var(angle), with L the variance of the returns along the
+    line and d the offset of their centroid from the foot of the perpendicular.
+
+    :param sums: per-segment sums, differences of :func:`moment_prefix_sums`, shape (S, 7)
     :param range_sigma: range noise std, m
     :param bearing_sigma: bearing noise std, rad
     :return: (angle (S,) rad, radius (S,) m, covariance of (angle, radius) (S, 2, 2))
     """
-    angle, radius = line_angle_radius(
-        _algebraic_line(*_moments(returns, _range_weights(returns))))
-    s = returns.segment
-    fisher, _ = _ml_fisher_and_step(returns.rho, returns.theta, angle[s], radius[s], returns,
-                                    range_sigma, bearing_sigma)
-    return angle, radius, inverse_2x2(fisher)
+    n = sums[:, 0]
+    mx, my, mxx, myy, mxy, mrr = (sums[:, 1:] / n[:, None]).T
+    cxx, cyy, cxy = mxx - mx * mx, myy - my * my, mxy - mx * my
+    angle = 0.5 * np.arctan2(-2.0 * cxy, cyy - cxx)        # normal: the minor axis
+    c, s = np.cos(angle), np.sin(angle)
+    radius = mx * c + my * s
+    angle = np.where(radius < 0.0, angle + np.pi, angle)
+    angle = np.where(angle > np.pi, angle - 2.0 * np.pi, angle)
+    radius = np.abs(radius)
+    c, s = np.cos(angle), np.sin(angle)
+    along = cxx * s * s + cyy * c * c - 2.0 * cxy * s * c     # variance along the line
+    offset = -mx * s + my * c
+    scatter = range_sigma ** 2 + bearing_sigma ** 2 * mrr
+    with np.errstate(divide='ignore', invalid='ignore'):
+        var_angle = scatter / (n * along)
+    covariance = np.empty((len(n), 2, 2))
+    covariance[:, 0, 0] = var_angle
+    covariance[:, 0, 1] = covariance[:, 1, 0] = offset * var_angle
+    covariance[:, 1, 1] = scatter / n + offset * offset * var_angle
+    return angle, radius, covariance
 
 
 def implicit_from_normal(angle: np.ndarray, radius: np.ndarray, covariance: np.ndarray):

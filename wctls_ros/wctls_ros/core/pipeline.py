@@ -7,7 +7,7 @@ import numpy as np
 from .config import FeatureConfig
 from .corners import find_corners
 from .features import CornerSet, Features, SegmentSet
-from .lines import fit_lines, LineFits, quick_fit, segment_returns
+from .lines import fit_lines, LineFits, moment_fit, moment_prefix_sums, segment_returns
 from .scan import scan_to_points
 from .segmentation import (breakpoints, chains, iterative_end_point_fit, merge_collinear,
                            MIN_FIT_RETURNS, SegmentRanges)
@@ -45,42 +45,54 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
     separated = breakpoints(points, config.range_sigma_m, config.bearing_sigma_rad,
                             config.breakpoint_lambda_rad)
     contour = chains(points, separated)
+    # Returns in circular order; a merged segment may run past position n on a full turn, so
+    # gathers wrap around.
     order = contour.order
     rho, theta = points.range_m[order], points.bearing_rad[order]
     xy = points.xy_m[order]
+    x, y = xy[:, 0].copy(), xy[:, 1].copy()
 
-    def returns_of(segments: SegmentRanges):
-        counts = segments.stop - segments.start
-        offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.intp)
-        owner = np.repeat(np.arange(len(segments)), counts)
-        position = np.arange(counts.sum()) - offsets[owner] + segments.start[owner]
-        return segment_returns(rho[position], theta[position], offsets, counts)
+    # Prefix sums make the segmentation's line fits O(1) per segment, merged or not.
+    prefix = moment_prefix_sums(x, y)
+    prefix = np.concatenate([prefix, prefix[1:] + prefix[-1]])
 
     def quick(segments: SegmentRanges):
-        return quick_fit(returns_of(segments), config.range_sigma_m, config.bearing_sigma_rad)
+        return moment_fit(prefix[segments.stop] - prefix[segments.start], config.range_sigma_m,
+                          config.bearing_sigma_rad)
 
-    segments = iterative_end_point_fit(xy, contour.start, contour.stop, contour.chain,
+    segments = iterative_end_point_fit(x, y, contour.start, contour.stop, contour.chain,
                                        config.iepf_threshold_m)
     segments = segments.select(segments.stop - segments.start >= MIN_FIT_RETURNS)
     if not len(segments):
         return Features(config.method, SegmentSet.empty(), CornerSet.empty())
     segments = merge_collinear(segments, points.full_turn, n, quick, config.merge_chi2)
-    fits = fit_lines(config.method, returns_of(segments), config.range_sigma_m,
-                     config.bearing_sigma_rad)
 
-    start_xy = _project(xy[segments.start], fits)
-    end_xy = _project(xy[segments.stop - 1], fits)
+    # Keep segments with enough returns and end returns far enough apart, in scan order.
+    first, last = segments.start, (segments.stop - 1) % n
     counts = segments.stop - segments.start
     keep = ((counts >= config.min_segment_points)
-            & (np.hypot(*(end_xy - start_xy).T) >= config.min_segment_length_m)
-            & _finite_and_positive(fits))
-    first_index = points.index[order[segments.start]]
+            & (np.hypot(x[last] - x[first], y[last] - y[first]) >= config.min_segment_length_m))
+    first_index = points.index[order[first]]
     by_scan_order = np.flatnonzero(keep)[np.argsort(first_index[keep], kind='stable')]
-    fits = fits.select(by_scan_order)
+    segments = segments.select(by_scan_order)
+    counts = counts[by_scan_order]
+    position = (np.arange(counts.sum())
+                + np.repeat(segments.start - (np.cumsum(counts) - counts), counts))
+    fits = fit_lines(config.method,
+                     segment_returns(rho.take(position, mode='wrap'),
+                                     theta.take(position, mode='wrap'), np.cumsum(counts) - counts,
+                                     counts, x.take(position, mode='wrap'),
+                                     y.take(position, mode='wrap')),
+                     config.range_sigma_m, config.bearing_sigma_rad)
+    usable = _finite_and_positive(fits)
+    if not usable.all():
+        segments, counts, fits = segments.select(usable), counts[usable], fits.select(usable)
+    last = (segments.stop - 1) % n
+    ends = _project(xy[np.concatenate([segments.start, last])], fits)
     segment_set = SegmentSet(
         fits.angle_rad, fits.radius_m, fits.normal_covariance, fits.line, fits.line_covariance,
-        start_xy[by_scan_order], end_xy[by_scan_order], first_index[by_scan_order],
-        points.index[order[segments.stop - 1]][by_scan_order], counts[by_scan_order])
+        ends[:len(counts)], ends[len(counts):], points.index[order[segments.start]],
+        points.index[order[last]], counts)
 
     count = len(segment_set)
     first = np.arange(count - 1)
@@ -93,18 +105,25 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
 
 
 def _project(xy_m: np.ndarray, fits: LineFits) -> np.ndarray:
-    """Return the foot of the perpendicular from each point to its segment's line, (S, 2)."""
-    normal = np.column_stack([np.cos(fits.angle_rad), np.sin(fits.angle_rad)])
-    offset = np.einsum('si,si->s', xy_m, normal) - fits.radius_m
+    """
+    Return the foot of the perpendicular from points to the lines.
+
+    :param xy_m: shape (k S, 2): k points per line, the lines' order repeated k times, m
+    :param fits: the S lines
+    :return: shape (k S, 2), m
+    """
+    repeat = len(xy_m) // len(fits.angle_rad)
+    angle, radius = np.tile(fits.angle_rad, repeat), np.tile(fits.radius_m, repeat)
+    normal = np.column_stack([np.cos(angle), np.sin(angle)])
+    offset = np.einsum('si,si->s', xy_m, normal) - radius
     return xy_m - offset[:, None] * normal
 
 
 def _finite_and_positive(fits: LineFits) -> np.ndarray:
     """Return which fits are usable: finite everywhere, positive-definite normal covariance."""
     cov = fits.normal_covariance
-    finite = (np.isfinite(fits.line).all(axis=1)
-              & np.isfinite(fits.line_covariance).all(axis=(1, 2))
-              & np.isfinite(fits.angle_rad) & np.isfinite(fits.radius_m)
-              & np.isfinite(cov).all(axis=(1, 2)))
+    # A NaN or inf anywhere makes the row's total non-finite.
+    finite = np.isfinite(fits.line.sum(axis=1) + fits.line_covariance.sum(axis=(1, 2))
+                         + fits.angle_rad + fits.radius_m + cov.sum(axis=(1, 2)))
     with np.errstate(invalid='ignore'):
         return finite & (cov[:, 0, 0] > 0.0) & (cov[:, 0, 0] * cov[:, 1, 1] > cov[:, 0, 1] ** 2)

@@ -1,6 +1,7 @@
 """LaserScan geometry to Cartesian points, with REP-117 filtering of invalid returns."""
 
 from dataclasses import dataclass
+import functools
 import math
 
 import numpy as np
@@ -28,6 +29,7 @@ class ScanPoints:
     :ivar xy_m: Cartesian position in the scan frame, shape (n, 2), m
     :ivar full_turn: True when the beams cover a full turn (the first and last are neighbours)
     :ivar beam_count: number of beams of the scan, valid or not
+    :ivar angle_increment_rad: bearing step between beams, rad
     """
 
     index: np.ndarray
@@ -36,9 +38,23 @@ class ScanPoints:
     xy_m: np.ndarray
     full_turn: bool
     beam_count: int
+    angle_increment_rad: float
 
     def __len__(self):
         return len(self.index)
+
+
+@functools.lru_cache(maxsize=16)
+def _beam_directions(angle_min_rad: float, angle_increment_rad: float, beam_count: int):
+    """
+    Return cos and sin of every beam's bearing, cached: a sensor's geometry rarely changes.
+
+    :return: (cos, sin), each shape (beam_count,), read-only
+    """
+    bearing = angle_min_rad + np.arange(beam_count) * angle_increment_rad
+    cos, sin = np.cos(bearing), np.sin(bearing)
+    cos.flags.writeable = sin.flags.writeable = False
+    return cos, sin
 
 
 def scan_to_points(ranges_m, angle_min_rad: float, angle_increment_rad: float,
@@ -77,5 +93,9 @@ def scan_to_points(ranges_m, angle_min_rad: float, angle_increment_rad: float,
     index = np.flatnonzero(valid)
     range_m = ranges[index]
     bearing = angle_min_rad + index * angle_increment_rad
-    xy = np.column_stack([range_m * np.cos(bearing), range_m * np.sin(bearing)])
-    return ScanPoints(index, range_m, bearing, xy, bool(full_turn), beam_count)
+    cos, sin = _beam_directions(float(angle_min_rad), float(angle_increment_rad), beam_count)
+    xy = np.empty((index.size, 2))
+    np.multiply(range_m, cos[index], out=xy[:, 0])
+    np.multiply(range_m, sin[index], out=xy[:, 1])
+    return ScanPoints(index, range_m, bearing, xy, bool(full_turn), beam_count,
+                      float(angle_increment_rad))

@@ -4,16 +4,17 @@ Split a scan into straight segments: breakpoints, Iterative End Point Fit, stati
 Positions here index the scan's valid returns in *circular order*: for a full turn the order is
 rotated to start at a breakpoint (or, on a closed contour without any, at the farthest return),
 so a wall crossing the +-pi seam is an ordinary run of positions. SegmentRanges are half-open
-position ranges [start, stop) into the order laid out twice, so a segment may run past the end
-of a closed contour.
+position ranges [start, stop) into that order; on a full turn a segment may run past its end
+(positions count modulo the number of returns).
 """
 
 from dataclasses import dataclass
+import math
 from typing import Callable
 
 import numpy as np
 
-from ._linalg import solve_2x2
+from ._linalg import mahalanobis_squared_2x2
 from .scan import ScanPoints
 
 # A chord shorter than this (m) has no usable direction: distances are measured from its start.
@@ -27,7 +28,7 @@ class Chains:
     """
     Runs of returns without a breakpoint between neighbours, in circular order.
 
-    :ivar order: indices into the ScanPoints arrays, the circular order laid out twice, (2n,)
+    :ivar order: indices into the ScanPoints arrays in circular order, shape (n,)
     :ivar start: first position of each run, shape (K,)
     :ivar stop: one past the last position of each run, shape (K,)
     :ivar chain: the chain each run belongs to, shape (K,) (the two arcs of a closed contour are
@@ -87,17 +88,31 @@ def breakpoints(points: ScanPoints, range_sigma_m: float, bearing_sigma_rad: flo
         seam between the last and the first return of a full turn, and is True otherwise)
     """
     n = len(points)
-    xy, rho, bearing = points.xy_m, points.range_m, points.bearing_rad
     if n == 0:
         return np.zeros(0, dtype=bool)
-    previous = np.roll(np.arange(n), 1)
-    gap = np.hypot(*(xy - xy[previous]).T)
-    dphi = np.abs(np.angle(np.exp(1j * (bearing - bearing[previous]))))
-    r = np.minimum(rho, rho[previous])
-    with np.errstate(divide='ignore', invalid='ignore'):
-        allowed = (r * np.sin(dphi) / np.sin(lambda_rad - dphi)
-                   + 3.0 * np.hypot(range_sigma_m, r * bearing_sigma_rad))
-    separated = (dphi >= lambda_rad) | (gap > allowed)
+    x, y, rho, index = points.xy_m[:, 0], points.xy_m[:, 1], points.range_m, points.index
+    # Each return against its predecessor; entry 0 against the last return, across the seam.
+    beams = np.empty(n)
+    beams[1:] = index[1:] - index[:-1]
+    beams[0] = index[0] + points.beam_count - index[-1]
+    dx, dy, r = np.empty(n), np.empty(n), np.empty(n)
+    dx[1:], dx[0] = x[1:] - x[:-1], x[0] - x[-1]
+    dy[1:], dy[0] = y[1:] - y[:-1], y[0] - y[-1]
+    np.minimum(rho[1:], rho[:-1], out=r[1:])
+    r[0] = min(rho[0], rho[-1])
+    # sin(dphi) / sin(lambda - dphi) is one number for neighbouring beams, the usual case.
+    # (dphi >= lambda: no surface is seen that obliquely, always separated: reach -1.)
+    step = abs(points.angle_increment_rad)
+    reach = np.full(n, math.sin(step) / math.sin(lambda_rad - step) if step < lambda_rad
+                    else -1.0)
+    wider = np.flatnonzero(beams != 1.0)
+    if wider.size:
+        dphi = beams[wider] * step
+        with np.errstate(divide='ignore', invalid='ignore'):
+            reach[wider] = np.where(dphi < lambda_rad,
+                                    np.sin(dphi) / np.sin(lambda_rad - dphi), -1.0)
+    allowed = r * reach + 3.0 * np.sqrt(range_sigma_m ** 2 + (r * bearing_sigma_rad) ** 2)
+    separated = (reach < 0.0) | (dx * dx + dy * dy > allowed * allowed)
     if not points.full_turn or n == 1:
         separated[0] = True
     return separated
@@ -120,7 +135,8 @@ def chains(points: ScanPoints, separated: np.ndarray) -> Chains:
     if n and not breaks.size:
         first = int(np.argmax(points.range_m))
         order = np.roll(np.arange(n), -first)
-        opposite = int(np.argmax(np.hypot(*(points.xy_m[order] - points.xy_m[first]).T)))
+        relative = points.xy_m[order] - points.xy_m[first]
+        opposite = int(np.argmax(relative[:, 0] ** 2 + relative[:, 1] ** 2))
         start, stop, chain = np.array([1, opposite + 1]), np.array([opposite, n]), np.zeros(2)
     else:
         first = int(breaks[0]) if n else 0
@@ -128,11 +144,12 @@ def chains(points: ScanPoints, separated: np.ndarray) -> Chains:
         start = breaks - first
         stop = np.append(start[1:], n) if n else start
         chain = np.arange(start.size)
-    return Chains(np.concatenate([order, order]), start, stop, chain.astype(np.intp))
+    return Chains(order, start, stop, chain.astype(np.intp))
 
 
-def iterative_end_point_fit(xy_m: np.ndarray, start: np.ndarray, stop: np.ndarray,
-                            chain: np.ndarray, threshold_m: float) -> SegmentRanges:
+def iterative_end_point_fit(x_m: np.ndarray, y_m: np.ndarray, start: np.ndarray,
+                            stop: np.ndarray, chain: np.ndarray,
+                            threshold_m: float) -> SegmentRanges:
     """
     Split runs of returns where a return lies farther than a threshold from the run's chord.
 
@@ -140,7 +157,8 @@ def iterative_end_point_fit(xy_m: np.ndarray, start: np.ndarray, stop: np.ndarra
     one nearest the corner and belongs to neither side (it would otherwise be shared, or bias
     one wall); merging restores it when the two sides turn out to be one line.
 
-    :param xy_m: returns in position order, shape (m, 2), m
+    :param x_m: x of the returns in position order, shape (m,), m
+    :param y_m: y of the returns in position order, shape (m,), m
     :param start: first position of each run, shape (K,)
     :param stop: one past the last position of each run, shape (K,)
     :param chain: the chain of each run, shape (K,)
@@ -150,35 +168,37 @@ def iterative_end_point_fit(xy_m: np.ndarray, start: np.ndarray, stop: np.ndarra
     done = []
     start, stop, chain = (np.asarray(a, dtype=np.intp) for a in (start, stop, chain))
     while start.size:
-        splittable = stop - start >= 3
-        done.append((start[~splittable], stop[~splittable], chain[~splittable]))
-        start, stop, chain = start[splittable], stop[splittable], chain[splittable]
-        if not start.size:
-            break
+        done.append((start, stop, chain))          # provisional: replaced below if split
         counts = stop - start
-        offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
-        owner = np.repeat(np.arange(start.size), counts)
-        position = np.arange(counts.sum()) - offsets[owner] + start[owner]
-        first, last = xy_m[start], xy_m[stop - 1]
-        chord = last - first
-        length = np.hypot(chord[:, 0], chord[:, 1])
-        has_direction = length > _MIN_CHORD_M
-        normal = np.column_stack([-chord[:, 1], chord[:, 0]]) / np.where(
-            has_direction, length, 1.0)[:, None]
-        relative = xy_m[position] - first[owner]
-        distance = np.where(has_direction[owner],
-                            np.abs(np.einsum('pi,pi->p', relative, normal[owner])),
-                            np.hypot(relative[:, 0], relative[:, 1]))
+        splittable = counts >= 3
+        if not splittable.all():
+            done[-1] = (start[~splittable], stop[~splittable], chain[~splittable])
+            start, stop, chain, counts = (a[splittable] for a in (start, stop, chain, counts))
+            if not start.size:
+                break
+            done.append((start, stop, chain))
+        # Distance of every return of each run to the line through the run's end points.
+        x0, y0 = x_m[start], y_m[start]
+        dx, dy = x_m[stop - 1] - x0, y_m[stop - 1] - y0
+        length = np.hypot(dx, dy)
+        length[length <= _MIN_CHORD_M] = np.inf    # no direction: never split at distance 0
+        nx, ny = -dy / length, dx / length
+        offsets = np.cumsum(counts) - counts
+        position = np.arange(offsets[-1] + counts[-1]) + np.repeat(start - offsets, counts)
+        distance = np.abs((x_m[position] - np.repeat(x0, counts)) * np.repeat(nx, counts)
+                          + (y_m[position] - np.repeat(y0, counts)) * np.repeat(ny, counts))
         farthest = np.maximum.reduceat(distance, offsets)
         split = farthest > threshold_m
-        done.append((start[~split], stop[~split], chain[~split]))
         if not split.any():
             break
-        # The first return of each run at its maximum distance is the split point.
-        at_max = np.flatnonzero(split[owner] & (distance == farthest[owner]))
-        first_at_max = at_max[np.r_[True, owner[at_max][1:] != owner[at_max][:-1]]]
-        cut = position[first_at_max]
-        parent = owner[first_at_max]
+        done[-1] = (start[~split], stop[~split], chain[~split])
+        # The first return of each split run at its maximum distance is the split point.
+        at_max = np.flatnonzero(distance == np.repeat(np.where(split, farthest, -1.0), counts))
+        run = np.searchsorted(offsets, at_max, side='right') - 1
+        first = np.empty(run.size, dtype=bool)
+        first[0] = True
+        np.not_equal(run[1:], run[:-1], out=first[1:])
+        cut, parent = position[at_max[first]], run[first]
         start = np.concatenate([start[parent], cut + 1])
         stop = np.concatenate([cut, stop[parent]])
         chain = np.concatenate([chain[parent], chain[parent]])
@@ -222,11 +242,11 @@ def merge_collinear(segments: SegmentRanges, circular: bool, contour_length: int
         wrapped_stop = segments.stop[second] + np.where(second == 0, contour_length, 0)
         pair_ok &= wrapped_stop - segments.start <= contour_length
         angle, radius, covariance = fit(segments)
-        diff = np.column_stack([np.angle(np.exp(1j * (angle - angle[second]))),
-                                radius - radius[second]])
+        diff = np.empty((count, 2))
+        diff[:, 0] = np.remainder(angle - angle[second] + np.pi, 2.0 * np.pi) - np.pi
+        diff[:, 1] = radius - radius[second]
+        distance = mahalanobis_squared_2x2(diff, covariance + covariance[second])
         with np.errstate(invalid='ignore'):
-            distance = np.einsum('pi,pi->p', diff,
-                                 solve_2x2(covariance + covariance[second], diff))
             candidates = np.flatnonzero(pair_ok & (distance < chi2_threshold))
         if not candidates.size:
             break

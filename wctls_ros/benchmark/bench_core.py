@@ -1,0 +1,71 @@
+#!/usr/bin/env python3
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""
+Benchmark extract_features per scan on simulated RPLIDAR S1 scans of a furnished room.
+
+Prints median and p99 time per scan (one core) for 1080-beam scans and 4x denser ones, for
+every method, and the mean number of segments and corners. Usage: python bench_core.py [scans]
+"""
+
+import os
+
+# One core: keep any BLAS thread pool from spreading the work.
+for variable in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
+    os.environ.setdefault(variable, '1')
+
+import sys  # noqa: E402
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
+from wctls_ros.core import extract_features, FeatureConfig, METHODS  # noqa: E402
+from wctls_ros.simulation import (full_turn_bearings, load_floor_plan, NoiseModel,  # noqa: E402
+                                  simulate_ranges)
+
+RANGE_NOISE_M = 0.01
+
+
+def scans(beams, count, seed=1):
+    """Return `count` noisy full-turn scans of environment A and their geometry."""
+    walls, _ = load_floor_plan('environment_a').in_sensor_frame()
+    angle_min, increment, bearings = full_turn_bearings(beams)
+    noise = NoiseModel(range_sigma_m=RANGE_NOISE_M, bearing_sigma_rad=0.0)
+    rng = np.random.default_rng(seed)
+    return angle_min, increment, [simulate_ranges(walls, bearings, noise, rng)
+                                  for _ in range(count)]
+
+
+def time_per_scan(beams, count, config):
+    """Return per-scan times (s) and mean segment / corner counts."""
+    angle_min, increment, ranges = scans(beams, count)
+    for r in ranges[:20]:                                  # warm up caches and allocators
+        extract_features(r, angle_min, increment, config)
+    times, segments, corners = [], [], []
+    for r in ranges:
+        start = time.perf_counter()
+        features = extract_features(r, angle_min, increment, config)
+        times.append(time.perf_counter() - start)
+        segments.append(len(features.segments))
+        corners.append(len(features.corners))
+    return np.array(times), np.mean(segments), np.mean(corners)
+
+
+def main():
+    count = int(sys.argv[1]) if len(sys.argv) > 1 else 1000
+    print(f'extract_features per scan: environment A, {RANGE_NOISE_M * 1e3:.0f} mm range noise,'
+          f' {count} scans, one core')
+    print(f'{"beams":>6} {"method":>6} {"median ms":>10} {"p99 ms":>8} {"p99/med":>8} '
+          f'{"segments":>9} {"corners":>8}')
+    for beams in (1080, 4320):
+        for method in METHODS:
+            config = FeatureConfig(method=method, range_sigma_m=RANGE_NOISE_M,
+                                   bearing_sigma_rad=0.0)
+            times, segments, corners = time_per_scan(beams, count, config)
+            median, p99 = np.median(times) * 1e3, np.percentile(times, 99) * 1e3
+            print(f'{beams:>6} {method:>6} {median:>10.3f} {p99:>8.3f} {p99 / median:>8.2f} '
+                  f'{segments:>9.1f} {corners:>8.1f}')
+
+
+if __name__ == '__main__':
+    main()

@@ -197,3 +197,10 @@ def test_monte_carlo_corner_covariance_is_calibrated(corner, first, second, coun
                                / np.linalg.det(np.cov(error.T)))
         assert 1.8 <= mean_nees <= 2.2, f'{method}: mean NEES {mean_nees:.2f}'
         assert 0.9 <= area_ratio <= 1.1, f'{method}: area ratio {area_ratio:.3f}'
+
+
+def test_corner_covariances_are_exactly_symmetric():
+    returns = two_walls([2.2, -0.7], 2.0, -2.5, (33, 47), np.random.default_rng(9))
+    fits = fit_lines('wctls', returns, RANGE_SIGMA, BEARING_SIGMA)
+    covariance = corner_of(fits).covariance
+    np.testing.assert_array_equal(covariance, covariance.transpose(0, 2, 1))

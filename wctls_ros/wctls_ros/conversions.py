@@ -18,8 +18,8 @@ from .core import ellipse, Features
 
 # Rows/columns of (x, y, yaw) in a geometry_msgs 6x6 pose covariance (x, y, z, roll, pitch, yaw).
 _POSE_INDEX = np.array([0, 1, 5])
-# Points on the outline of a drawn covariance ellipse.
-_ELLIPSE_VERTICES = 33
+# Height of the flat cylinders that draw covariance ellipses, m.
+_ELLIPSE_THICKNESS_M = 0.005
 
 
 @dataclass(frozen=True)
@@ -140,25 +140,6 @@ def _marker(header, namespace, marker_id, marker_type, color, scale, position=(0
                   color=ColorRGBA(r=color[0], g=color[1], b=color[2], a=color[3]), **fields)
 
 
-def ellipse_outlines(covariance_xy: np.ndarray, centre_xy: np.ndarray,
-                     scale: float) -> np.ndarray:
-    """
-    Return points on the outlines of scaled covariance ellipses.
-
-    :param covariance_xy: shape (C, 2, 2), m^2
-    :param centre_xy: shape (C, 2), m
-    :param scale: multiplier of the 1-sigma semi-axes
-    :return: shape (C, V, 2), m, closed outlines (last vertex == first)
-    """
-    shape = ellipse(covariance_xy)
-    t = np.linspace(0.0, 2.0 * math.pi, _ELLIPSE_VERTICES)
-    local = np.stack([np.cos(t)[None, :] * shape.semi_major[:, None],
-                      np.sin(t)[None, :] * shape.semi_minor[:, None]], -1) * scale
-    c, s = np.cos(shape.orientation_rad), np.sin(shape.orientation_rad)
-    rotation = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
-    return np.einsum('cij,cvj->cvi', rotation, local) + centre_xy[:, None, :]
-
-
 def marker_array(features: Features, header, style: MarkerStyle = MarkerStyle()) -> MarkerArray:
     """
     Draw one scan's features: segments, corners with ids, and covariance ellipses.
@@ -182,13 +163,18 @@ def marker_array(features: Features, header, style: MarkerStyle = MarkerStyle())
         markers.append(_marker(header, 'corners', 0, Marker.SPHERE_LIST, (1.0, 0.2, 0.2, 1.0),
                                (size, size, size),
                                points=[Point(x=x, y=y, z=0.0) for x, y in corners.xy_m.tolist()]))
-        outlines = ellipse_outlines(corners.covariance[:, :2, :2], corners.xy_m,
-                                    style.ellipse_sigma * style.ellipse_scale)
-        for i, ((x, y), outline) in enumerate(zip(corners.xy_m.tolist(), outlines.tolist())):
+        shape = ellipse(corners.covariance[:, :2, :2])
+        scale = 2.0 * style.ellipse_sigma * style.ellipse_scale
+        for i, ((x, y), major, minor, orientation) in enumerate(zip(
+                corners.xy_m.tolist(), shape.semi_major.tolist(), shape.semi_minor.tolist(),
+                shape.orientation_rad.tolist())):
             markers.append(_marker(header, 'corner_ids', i, Marker.TEXT_VIEW_FACING,
                                    (1.0, 1.0, 1.0, 1.0), (0.0, 0.0, 2.0 * size),
                                    (x, y, 2.0 * size), text=str(i)))
-            markers.append(_marker(header, 'ellipses', i, Marker.LINE_STRIP,
-                                   (1.0, 0.6, 0.0, 0.9), (style.line_width_m * 0.5, 0.0, 0.0),
-                                   points=[Point(x=px, y=py, z=0.0) for px, py in outline]))
+            # A flat elliptic cylinder: one marker per ellipse, no outline points to send.
+            ellipse_marker = _marker(header, 'ellipses', i, Marker.CYLINDER, (1.0, 0.6, 0.0, 0.5),
+                                     (scale * major, scale * minor, _ELLIPSE_THICKNESS_M),
+                                     (x, y, 0.0))
+            ellipse_marker.pose.orientation = _quaternion_from_yaw(orientation)
+            markers.append(ellipse_marker)
     return MarkerArray(markers=markers)

@@ -190,7 +190,9 @@ class FeatureNode(Node):
         try:
             self._corners.publish(corner_array(features, scan.header))
             self._lines.publish(line_segment_array(features, scan.header))
-            if self._publish_markers:
+            # Markers are costly to build (a Marker per corner label and ellipse): only for a
+            # listener such as RViz.
+            if self._publish_markers and self._markers.get_subscription_count():
                 self._markers.publish(marker_array(features, scan.header, self._style))
         except Exception:  # noqa: B902 - only a shutdown (Ctrl-C mid-callback) is expected here
             if self.context.ok():

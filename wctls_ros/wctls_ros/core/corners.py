@@ -125,9 +125,9 @@ def find_corners(line: np.ndarray, line_covariance: np.ndarray,
     yaw = np.einsum('ci,cij,cj->c', gradient, cov, gradient)        # g^T C g
     column = np.concatenate([column_a, column_b])
     covariance = np.empty((count, 3, 3))
-    weighted = column * along_h[:, None]
-    covariance[:, :2, :2] = (np.einsum('ci,cj->cij', weighted[:count], column[:count])
-                             + np.einsum('ci,cj->cij', weighted[count:], column[count:]))
+    # (c_i c_j) h^T C h: exactly symmetric in floating point.
+    block = np.einsum('ci,cj->cij', column, column) * along_h[:, None, None]
+    covariance[:, :2, :2] = block[:count] + block[count:]
     offdiagonal = column * cross[:, None]
     covariance[:, :2, 2] = covariance[:, 2, :2] = -(offdiagonal[:count] + offdiagonal[count:])
     covariance[:, 2, 2] = yaw[:count] + yaw[count:]

@@ -91,15 +91,20 @@ def stream(angles, start=None, received=None):
                    frame_end=np.arange(1, n + 1) * 5, samples_after=np.zeros(n, np.int64))
 
 
+def push_in_pieces(assembler, samples, received, pieces):
+    """Push samples in ``pieces`` consecutive parts, as reads deliver them; return the turns."""
+    turns = []
+    for part in np.array_split(np.arange(len(samples)), pieces):
+        piece = Samples(*(getattr(samples, f)[part] for f in Samples.__dataclass_fields__))
+        turns += assembler.push(piece, received[part])
+    return turns
+
+
 def test_turns_split_at_the_wrap_and_the_first_partial_turn_is_dropped():
     step = 360.0 / 400
     angles = (200.0 + step * np.arange(1300)) % 360.0
     samples = stream(angles, start=np.r_[False, np.diff(angles) < 0])
-    assembler = TurnAssembler(244.0, 0.0)
-    turns = []
-    for part in np.array_split(np.arange(1300), 7):        # in arbitrary pieces
-        piece = Samples(*(getattr(samples, f)[part] for f in Samples.__dataclass_fields__))
-        turns += assembler.push(piece, np.zeros(len(part)))
+    turns = push_in_pieces(TurnAssembler(244.0, 0.0), samples, np.zeros(1300), 7)
     assert [len(t.angle_deg) for t in turns] == [400, 400]
     for turn in turns:
         assert turn.angle_deg[0] < step and turn.angle_deg[-1] > 360.0 - step
@@ -118,6 +123,21 @@ def test_a_corrupted_start_flag_does_not_split_and_a_lost_start_sample_does_not_
     turns = TurnAssembler(244.0, 0.0).push(samples, np.zeros(keep.sum()))
     # The partial turn before the first wrap is dropped; the second lost its first sample.
     assert [len(t.angle_deg) for t in turns] == [400, 399, 400]
+
+
+def test_a_gap_longer_than_a_turn_still_ends_the_turn():
+    step, sample_s = 360.0 / 400, 244e-6
+    index = np.arange(2000)
+    keep = (index < 1000) | (index > 1450)      # 1.1 turns lost: from 180 deg to 225 deg
+    angles = (step * index[keep]) % 360.0
+    received = index[keep] * sample_s
+    samples = stream(angles, np.r_[False, np.diff(angles) < 0])
+    # In pieces: the period is known once the first turn has closed.
+    turns = push_in_pieces(TurnAssembler(244.0, 0.0), samples, received, 20)
+    # After the dropped partial turn: one whole turn, one cut short at 179.1 deg by the gap,
+    # then the turn after the lost one, from 225.9 deg (not merged with the one before).
+    assert [len(t.angle_deg) for t in turns] == [400, 200, 149]
+    assert turns[2].angle_deg[0] == pytest.approx(225.9)
 
 
 def test_stamp_is_the_first_sample_time_despite_late_reads():

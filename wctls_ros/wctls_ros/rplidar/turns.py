@@ -3,8 +3,10 @@ Turn assembly: decoded samples in, complete 360-degree turns with honest timing 
 
 A new turn starts where the raw angle falls back: at a flagged start sample whose angle is below
 its predecessor's (a corrupted S bit alone does not split a turn), or wherever the angle drops by
-more than 270 degrees (a lost start sample does not merge two turns). The first, partial turn
-after a (re)start is dropped.
+more than 270 degrees (a lost start sample does not merge two turns). Once the rotation period
+is known, the time between consecutive samples also counts the wraps between them, so a gap in
+the stream longer than a turn (a damaged link) cannot merge two turns either. The first, partial
+turn after a (re)start is dropped.
 
 Timing uses the device's own sample clock: with ``us`` the mode's microseconds per sample and
 ``step`` the median angle between consecutive samples, the rotation period is
@@ -87,13 +89,19 @@ class TurnAssembler:
         if not len(samples):
             return []
         angle = samples.angle_deg
-        previous = np.concatenate([[angle[0] if self._last_angle is None else self._last_angle],
-                                   angle[:-1]])
-        drop = previous - angle
-        boundary = (samples.start & (drop > 0.0)) | (drop > _MISSED_START_DROP_DEG)
-        self._last_angle = angle[-1]
         measured_s = (received_s - self._transmission_s
                       - samples.samples_after * self._sample_s)
+        first = self._last_angle is None
+        previous = np.concatenate([[angle[0] if first else self._last_angle], angle[:-1]])
+        drop = previous - angle
+        boundary = (samples.start & (drop > 0.0)) | (drop > _MISSED_START_DROP_DEG)
+        if self._period_s is not None and not first:
+            elapsed_s = np.diff(measured_s, prepend=self._last_sample_s)
+            # Wraps between consecutive samples by the clock; a fall in angle already shows one
+            # (and is judged above), so only wraps the angles cannot show count here.
+            wraps = np.floor((360.0 * elapsed_s / self._period_s + drop) / 360.0 + 0.5)
+            boundary |= wraps >= 1.0 + (drop > 0.0)
+        self._last_angle = angle[-1]
         self._last_sample_s = measured_s[-1]
         columns = (angle, samples.distance_mm, samples.quality, measured_s, received_s)
         turns = []

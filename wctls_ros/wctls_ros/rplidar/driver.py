@@ -34,10 +34,10 @@ RESET_WAIT_S = 2.0             # an S1 is silent for about 2 s after RESET
 BACKOFF_FIRST_S = 0.05
 BACKOFF_MAX_S = 1.0
 STREAM_READ_TIMEOUT_S = 0.1
-# The per-wake-up cost of reading and decoding dominates the CPU time, so the stream is read at
-# most this often, except around the predicted end of a turn, where every arrival is read at once
-# so that a complete turn is published without extra delay.
-STREAM_READ_PERIOD_S = 0.025
+# Decoding costs mostly per call, so received chunks (each timestamped on arrival) are decoded
+# together at most this often, except past the predicted end of a turn, where every arrival is
+# decoded at once so that a complete turn is published without extra delay.
+STREAM_DECODE_PERIOD_S = 0.025
 LOG_THROTTLE_S = 5.0
 CONF_COMMANDS_FIRMWARE = (1, 24)   # GET_LIDAR_CONF exists from this firmware on
 LEGACY_MAX_DISTANCE_M = 16.0       # what the SDK assumes for devices without GET_LIDAR_CONF
@@ -393,19 +393,24 @@ class RplidarDriver:
 
     def _stream(self, link, decoder, assembler: TurnAssembler, mode: ScanMode, data: bytes):
         """Decode the stream into turns until closing or a motor stop request."""
-        offsets, times = [], []
+        offsets, times, pending = [], [], []
         stream_end = 0
         seen = (0, 0)
         now = time.monotonic()
-        last_bytes_s = last_samples_s = now
+        last_bytes_s = last_samples_s = next_decode_s = now
         while not self._closing.is_set() and self._motor_on:
             if data:
                 stream_end += len(data)
                 offsets.append(stream_end)
                 times.append(now)
-                del offsets[:-_CHUNK_LOG_SIZE], times[:-_CHUNK_LOG_SIZE]
-                samples = decoder.feed(data)
+                pending.append(data)
                 last_bytes_s = now
+            eta_s = assembler.turn_end_eta_s()
+            if pending and (now >= next_decode_s or (eta_s is not None and now >= eta_s)):
+                samples = decoder.feed(b''.join(pending))
+                pending.clear()
+                next_decode_s = now + STREAM_DECODE_PERIOD_S
+                del offsets[:-_CHUNK_LOG_SIZE], times[:-_CHUNK_LOG_SIZE]
                 if len(samples):
                     last_samples_s = now
                     chunk = np.minimum(np.searchsorted(offsets, samples.frame_end), len(times) - 1)
@@ -420,17 +425,12 @@ class RplidarDriver:
                                       'session (check the cable and the USB power)',
                                       throttle_duration_sec=LOG_THROTTLE_S)
                     seen = errors
-            wake_s = now + STREAM_READ_PERIOD_S
-            eta_s = assembler.turn_end_eta_s()
-            if eta_s is not None:
-                wake_s = min(wake_s, eta_s)
-            self._closing.wait(max(wake_s - time.monotonic(), 0.0))
             data = link.read(STREAM_READ_TIMEOUT_S)
             now = time.monotonic()
             if now - last_bytes_s > self._config.data_timeout_s:
                 raise DeviceError(f'no scan data for {self._config.data_timeout_s:g} s on '
                                   f'{link.name}')
-            if now - last_samples_s > self._config.data_timeout_s:
+            if now - last_samples_s > self._config.data_timeout_s + STREAM_DECODE_PERIOD_S:
                 raise DeviceError(f'bytes arrive on {link.name} but no valid {mode.name} frame '
                                   f'for {self._config.data_timeout_s:g} s: wrong '
                                   'serial_baudrate (S1: 256000) or a damaged link?')

@@ -489,6 +489,7 @@ class EmulatorProcess:
     :param args: command line arguments, e.g. ``['--noiseless', '--tcp-port', '0']``
     :param startup_timeout_s: longest wait for the emulator to be ready, s
     :ivar pty: the pseudo-terminal's device path
+    :ivar link: the symlink to it (None without ``--link``)
     :ivar tcp_port: the TCP port served (None without ``--tcp-port``)
     :raises RuntimeError: when it does not become ready
     """
@@ -499,12 +500,14 @@ class EmulatorProcess:
             stdout=subprocess.PIPE, text=True, bufsize=1)
         self._lines = queue.Queue()
         threading.Thread(target=self._forward_lines, daemon=True).start()
-        self.tcp_port = None
+        self.link = self.tcp_port = None
         while True:
             line = self._next_line(startup_timeout_s)
             key, _, value = line.partition(' ')
             if key == 'pty':
                 self.pty = value
+            elif key == 'link':
+                self.link = value
             elif key == 'tcp':
                 self.tcp_port = int(value.rsplit(':', 1)[1])
             elif key == 'ready:':

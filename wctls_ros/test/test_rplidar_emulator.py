@@ -1,0 +1,161 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""The S1 emulator in its own process, over a real pseudo-terminal: bytes, timing, oracles."""
+
+import json
+import math
+import os
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from rplidar_testing import range_band, start_emulator, true_ranges
+import serial
+from wctls_ros.rplidar.protocol import StandardNodeDecoder
+
+
+@pytest.fixture(scope='module')
+def emulator(tmp_path_factory):
+    with start_emulator(tmp_path_factory.mktemp('s1'), '--tcp-port', '0') as process:
+        yield process
+
+
+@pytest.fixture
+def port(emulator):
+    """Open the emulator's terminal as a host would, after stopping any stream."""
+    with serial.Serial(emulator.link, 256000, timeout=1.0, dsrdtr=False, rtscts=False) as link:
+        link.write(bytes.fromhex('A5 25'))
+        time.sleep(0.05)
+        link.reset_input_buffer()
+        yield link
+
+
+def ask(link, request_hex, answer_size):
+    """Send a request (spec hex) and read a whole answer."""
+    link.write(bytes.fromhex(request_hex))
+    return link.read(answer_size).hex(' ').upper()
+
+
+def test_answers_are_the_bytes_of_a_real_s1(port):
+    assert ask(port, 'A5 50', 27).startswith('A5 5A 14 00 00 00 04 61 1C 01 12')
+    assert ask(port, 'A5 52', 10) == 'A5 5A 03 00 00 00 06 00 00 00'
+    assert ask(port, 'A5 59', 11) == 'A5 5A 04 00 00 00 15 F4 00 6C 00'
+    assert ask(port, 'A5 84 04 7C 00 00 00 59', 13) == 'A5 5A 06 00 00 00 20 7C 00 00 00 01 00'
+    assert ask(port, 'A5 84 06 71 00 00 00 01 00 57', 15).endswith('71 00 00 00 00 6C 00 00')
+    names = [ask(port, f'A5 84 06 7F 00 00 00 {m:02X} 00 {0x58 ^ m:02X}', size)[33:]
+             for m, size in ((0, 20), (1, 22))]
+    assert [bytes.fromhex(n).rstrip(b'\0').decode() for n in names] == ['Standard',
+                                                                        'DenseBoost']
+
+
+def test_reset_is_silent_and_the_device_reboots(port):
+    port.write(bytes.fromhex('A5 40 A5 50'))            # RESET, then GET_INFO at once
+    port.timeout = 1.0
+    assert port.read(1) == b''                           # no banner, no answer while booting
+    time.sleep(0.6)
+    assert ask(port, 'A5 50', 27).startswith('A5 5A 14')
+
+
+def read_stream(link, seconds):
+    """Return the bytes streamed during ``seconds``."""
+    data = b''
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        data += link.read(max(link.in_waiting, 1))
+    return data
+
+
+def test_denseboost_streams_capsules_at_real_timing_with_s_on_the_first_only(port):
+    port.write(bytes.fromhex('A5 A8 02 58 02 55 A5 82 05 01 00 00 00 00 23'))
+    assert port.read(7).hex(' ').upper() == 'A5 5A 54 00 00 40 85'
+    started = time.monotonic()
+    data = read_stream(port, 1.0)
+    elapsed = time.monotonic() - started
+    port.write(bytes.fromhex('A5 25'))
+    capsules = np.frombuffer(data[:len(data) // 84 * 84], np.uint8).reshape(-1, 84)
+    # 40 samples of 108 us per capsule: 231.5 capsules per second.
+    assert len(capsules) / elapsed == pytest.approx(1e6 / (40 * 108), rel=0.05)
+    assert ((capsules[:, 0] >> 4) == 0xA).all() and ((capsules[:, 1] >> 4) == 0x5).all()
+    checksums = np.bitwise_xor.reduce(capsules[:, 2:], axis=1)
+    np.testing.assert_array_equal((capsules[:, 0] & 0xF) | (capsules[:, 1] << 4), checksums)
+    assert (capsules[:, 3] >> 7).tolist() == [1] + [0] * (len(capsules) - 1)
+    time.sleep(0.05)
+    port.reset_input_buffer()
+    port.timeout = 0.2
+    assert port.read(1) == b''                           # STOP ends the stream
+
+
+def test_standard_nodes_decode_alike_with_the_rplidar_package_and_show_the_scene(port):
+    rplidar = pytest.importorskip('rplidar')
+    port.write(bytes.fromhex('A5 20'))
+    assert port.read(7).hex(' ').upper() == 'A5 5A 05 00 00 40 81'
+    data = read_stream(port, 0.5)
+    port.write(bytes.fromhex('A5 25'))
+    data = data[:len(data) // 5 * 5]
+    ours = StandardNodeDecoder().feed(data)
+    theirs = np.array([rplidar._process_scan(data[i:i + 5]) for i in range(0, len(data), 5)])
+    np.testing.assert_array_equal(theirs[:, 0], ours.start)
+    np.testing.assert_array_equal(theirs[:, 2], ours.angle_deg)
+    np.testing.assert_array_equal(theirs[:, 3], ours.distance_mm)
+    # 411.4 nodes of 244 us per 10 Hz turn, one S flag each.
+    turn_starts = np.flatnonzero(ours.start)
+    assert len(turn_starts) >= 3 and set(np.diff(turn_starts).tolist()) <= {411, 412}
+    bearing = math.pi - np.radians(ours.angle_deg)
+    np.testing.assert_allclose(ours.distance_mm / 1000.0, true_ranges(bearing), atol=1.25e-4)
+
+
+def test_serves_tcp_too(emulator):
+    with socket.create_connection(('127.0.0.1', emulator.tcp_port), timeout=2.0) as client:
+        client.sendall(bytes.fromhex('A5 52'))
+        answer = b''
+        while len(answer) < 10:
+            answer += client.recv(10)
+    assert answer == bytes.fromhex('A5 5A 03 00 00 00 06 00 00 00')
+
+
+def test_unplug_breaks_the_open_port_and_replug_brings_a_new_device(emulator):
+    with serial.Serial(emulator.link, 256000, timeout=1.0, dsrdtr=False, rtscts=False) as link:
+        assert emulator.command('unplug') == 'unplugged'
+        assert not os.path.exists(emulator.link)
+        with pytest.raises(serial.SerialException):
+            link.read(1)
+    assert emulator.command('replug') == f'replugged {os.path.realpath(emulator.link)}'
+    with serial.Serial(emulator.link, 256000, timeout=1.0, dsrdtr=False, rtscts=False) as link:
+        assert ask(link, 'A5 52', 10) == 'A5 5A 03 00 00 00 06 00 00 00'
+
+
+SDK_CLIENT = """
+import json, sys
+import pyrplidarsdk
+driver = pyrplidarsdk.RplidarDriver(port=sys.argv[1], baudrate=256000)
+assert driver.connect(), 'connect failed'
+info, health = driver.get_device_info(), driver.get_health()
+assert driver.start_scan(), 'start_scan failed'
+turns = [driver.get_scan_data() for _ in range(4)][1:]
+driver.stop_scan()
+driver.disconnect()
+print(json.dumps({'info': [info.model, info.firmware_version, info.hardware_version],
+                  'health': health.status, 'turns': [[list(t[0]), list(t[1])] for t in turns]}))
+"""
+
+
+def test_the_official_sdk_reads_the_emulator_end_to_end(emulator):
+    pytest.importorskip('pyrplidarsdk')
+    # The SDK holds the GIL while it blocks: it runs in its own process.
+    result = subprocess.run([sys.executable, '-c', SDK_CLIENT, emulator.link], timeout=60,
+                            capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert report['info'] == [0x61, 0x011C, 18] and report['health'] == 0
+    for angles, ranges in report['turns']:
+        angles, ranges = np.array(angles), np.array(ranges)
+        assert len(angles) in (926, 927)                 # DenseBoost, the typical mode
+        # The SDK truncates each angle to 1/64 degree, then to 90/16384 degree: the true raw
+        # angle lies up to their sum above the reported one.
+        bearing = math.pi - angles
+        low, high = range_band(bearing - math.radians(1 / 64 + 90 / 16384), bearing)
+        assert ((ranges >= low - 6e-4) & (ranges <= high + 6e-4)).all()

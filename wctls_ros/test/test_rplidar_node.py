@@ -1,0 +1,279 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""rplidar_node against the S1 emulator (separate process, real pty): scans, faults, recovery."""
+
+import ast
+import math
+import pathlib
+import time
+
+from conftest import spin_until
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402, I100
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import qos_profile_sensor_data  # noqa: E402
+from rplidar_testing import range_band, start_emulator, true_ranges  # noqa: E402
+from sensor_msgs.msg import LaserScan  # noqa: E402
+from std_srvs.srv import Empty  # noqa: E402
+from wctls_ros.rplidar.driver import DriverState  # noqa: E402
+from wctls_ros.rplidar.rplidar_node import PARAMETERS, RplidarNode  # noqa: E402
+import yaml  # noqa: E402
+
+PACKAGE_DIR = pathlib.Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope='module')
+def emulator(tmp_path_factory):
+    with start_emulator(tmp_path_factory.mktemp('s1'), '--tcp-port', '0') as process:
+        yield process
+
+
+@pytest.fixture
+def own_emulator(tmp_path):
+    """Give a starter of emulators of the test's own (for faults), taking extra options."""
+    started = []
+
+    def start(*options):
+        started.append(start_emulator(tmp_path, '--seed', '7', *options))
+        return started[-1]
+
+    yield start
+    for process in started:
+        process.close()
+
+
+class Listener:
+    """A node recording what rplidar_node publishes."""
+
+    def __init__(self, context):
+        self.node = rclpy.create_node('listener', context=context)
+        self.scans, self.diagnostics = [], []
+        self.node.create_subscription(LaserScan, 'scan', self._on_scan, qos_profile_sensor_data)
+        self.node.create_subscription(DiagnosticArray, '/diagnostics',
+                                      lambda m: self.diagnostics.append(m.status[0]), 10)
+
+    def _on_scan(self, msg):
+        self.scans.append((msg, self.node.get_clock().now().nanoseconds * 1e-9))
+
+    def call(self, executor, service):
+        client = self.node.create_client(Empty, service)
+        assert client.wait_for_service(timeout_sec=2.0)
+        future = client.call_async(Empty.Request())
+        assert spin_until(executor, future.done, 2.0)
+
+
+def start(executor, context, **parameters):
+    """Start rplidar_node with parameter overrides and a listener; return both."""
+    node = RplidarNode(context=context, use_global_arguments=False, parameter_overrides=[
+        Parameter(name, value=value) for name, value in parameters.items()])
+    listener = Listener(context)
+    executor.add_node(node)
+    executor.add_node(listener.node)
+    return node, listener
+
+
+def collect(executor, listener, count, timeout_s=5.0):
+    """Spin until ``count`` more scans arrived; return them."""
+    first = len(listener.scans)
+    assert spin_until(executor, lambda: len(listener.scans) >= first + count, timeout_s), (
+        f'{len(listener.scans) - first} of {count} scans')
+    return [scan for scan, _ in listener.scans[first:first + count]]
+
+
+def bearings(scan):
+    """Return the published beam angles."""
+    return scan.angle_min + scan.angle_increment * np.arange(len(scan.ranges))
+
+
+@pytest.mark.parametrize('mode, beams, us_per_sample', [('DenseBoost', (926, 927), 108e-6),
+                                                        ('Standard', (411, 412), 244e-6)])
+def test_ranges_match_the_scene_at_every_sample_angle(executor, ros_context, emulator, mode,
+                                                      beams, us_per_sample):
+    node, listener = start(executor, ros_context, serial_port=emulator.link,
+                           angle_compensate=False, scan_mode=mode)
+    scans = collect(executor, listener, 5)
+    for scan in scans:
+        assert len(scan.ranges) in beams and scan.header.frame_id == 'laser'
+        # The first and last samples lie within one sample step of raw 0 and 360 degrees.
+        step, pi = scan.angle_increment * 1.001, float(np.float32(math.pi))  # float32 fields
+        assert scan.angle_increment > 0 and -pi <= scan.angle_min < -pi + step
+        assert pi - step < scan.angle_max <= pi
+        assert (scan.range_min, scan.range_max) == (pytest.approx(0.05), 40.0)
+        # Noiseless scene, mm (DenseBoost) or 1/4 mm (Standard) distances: within 1 mm.
+        np.testing.assert_allclose(scan.ranges, true_ranges(bearings(scan)), atol=1e-3)
+        assert set(scan.intensities) == {47.0}
+        assert scan.scan_time == pytest.approx(0.1, rel=0.01)
+        assert scan.time_increment == pytest.approx(us_per_sample, rel=0.01)
+    # Honest timing: consecutive stamps one rotation apart, each a turn before its arrival.
+    stamps = np.array([s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec for s in scans])
+    np.testing.assert_allclose(np.diff(stamps), scans[0].scan_time, atol=1e-3)
+    age = np.array([received for _, received in listener.scans[-5:]]) - stamps
+    assert ((age > scans[0].scan_time) & (age < scans[0].scan_time + 0.05)).all()
+
+
+def test_angle_compensation_bins_a_turn_into_1080_beams_within_a_bin_of_the_scene(
+        executor, ros_context, emulator):
+    node, listener = start(executor, ros_context, serial_port=emulator.link)
+    for scan in collect(executor, listener, 3):
+        assert len(scan.ranges) == 1080
+        assert (scan.angle_min, scan.angle_max) == pytest.approx((-math.pi, math.pi))
+        assert scan.angle_increment == pytest.approx(2 * math.pi / 1079)
+        # Beam i is bin b = 1079 - i, holding the last sample with raw angle in
+        # [(b - 2) / 3, (b + 1) / 3) degrees; its laser bearing is pi - raw.
+        raw_bin = 1079 - np.arange(1080)
+        low, high = range_band(math.pi - np.radians((raw_bin + 1) / 3),
+                               math.pi - np.radians((raw_bin - 2) / 3))
+        ranges = np.asarray(scan.ranges)
+        # Samples are 0.39 degrees apart, so only bin 0 (raw [0, 1/3) degrees, the last beam)
+        # can be empty, when the turn's first sample falls after 1/3 degree: then it is +inf.
+        filled = np.isfinite(ranges)
+        assert filled[:-1].all()
+        assert ((ranges >= low - 1e-3) & (ranges <= high + 1e-3))[filled].all()
+
+
+def test_inverted_mirrors_the_scan(executor, ros_context, emulator):
+    node, listener = start(executor, ros_context, serial_port=emulator.link,
+                           angle_compensate=False, inverted=True)
+    for scan in collect(executor, listener, 2):
+        # Not reversed: beam i is the i-th sample from raw angle pi - angle_max on, so its true
+        # bearing is angle_min + angle_max - (its published angle): about the mirror image.
+        mirrored = scan.angle_min + scan.angle_max - bearings(scan)
+        np.testing.assert_allclose(scan.ranges, true_ranges(mirrored), atol=1e-3)
+
+
+def test_tcp_channel(executor, ros_context, emulator):
+    node, listener = start(executor, ros_context, channel_type='tcp', tcp_ip='127.0.0.1',
+                           tcp_port=emulator.tcp_port, angle_compensate=False)
+    scan = collect(executor, listener, 2)[-1]
+    np.testing.assert_allclose(scan.ranges, true_ranges(bearings(scan)), atol=1e-3)
+
+
+def test_stop_motor_and_start_motor(executor, ros_context, emulator):
+    node, listener = start(executor, ros_context, serial_port=emulator.link)
+    collect(executor, listener, 1)
+    listener.call(executor, 'stop_motor')
+    assert spin_until(executor, lambda: node.driver.status().state == DriverState.MOTOR_STOPPED)
+    spin_until(executor, lambda: False, 0.3)
+    count = len(listener.scans)
+    spin_until(executor, lambda: False, 0.5)
+    assert len(listener.scans) == count
+    listener.call(executor, 'start_motor')
+    collect(executor, listener, 2)
+
+
+def test_an_unknown_scan_mode_is_a_clear_error_that_lists_the_modes(executor, ros_context,
+                                                                    emulator):
+    node, listener = start(executor, ros_context, serial_port=emulator.link, scan_mode='Turbo')
+    assert spin_until(executor, lambda: any(
+        d.level == DiagnosticStatus.ERROR for d in listener.diagnostics), 3.0)
+    message = listener.diagnostics[-1].message
+    assert "'Turbo' is not supported" in message
+    assert 'Standard' in message and 'DenseBoost' in message
+    assert not listener.scans
+
+
+def test_old_firmware_falls_back_to_the_standard_mode_from_get_samplerate(
+        executor, ros_context, own_emulator):
+    device = own_emulator('--firmware', '1.20')
+    node, listener = start(executor, ros_context, serial_port=device.link,
+                           angle_compensate=False)
+    scan = collect(executor, listener, 2)[-1]
+    assert len(scan.ranges) in (411, 412) and scan.range_max == 16.0
+    np.testing.assert_allclose(scan.ranges, true_ranges(bearings(scan)), atol=1e-3)
+
+
+def test_one_percent_corrupted_bytes_still_publish_95_percent_of_the_turns(
+        executor, ros_context, own_emulator):
+    device = own_emulator('--corrupt-rate', '0.01')
+    node, listener = start(executor, ros_context, serial_port=device.link)
+    collect(executor, listener, 1)
+    first = len(listener.scans)
+    started = time.monotonic()
+    spin_until(executor, lambda: False, 4.0)
+    turns = (time.monotonic() - started) / 0.10003
+    published = len(listener.scans) - first
+    assert published >= 0.95 * turns, f'{published} scans for {turns:.1f} turns'
+    assert node.driver.status().checksum_errors > 0
+    assert node.driver.status().reconnects == 0
+
+
+def test_unplug_and_replug_recover_within_two_seconds(executor, ros_context, own_emulator):
+    device = own_emulator()
+    node, listener = start(executor, ros_context, serial_port=device.link)
+    collect(executor, listener, 2)
+    device.command('unplug')
+    spin_until(executor, lambda: False, 0.7)
+    device.command('replug')
+    replugged = time.monotonic()
+    count = len(listener.scans)
+    assert spin_until(executor, lambda: len(listener.scans) > count, 2.0)
+    assert time.monotonic() - replugged < 2.0
+    assert node.driver.status().reconnects >= 1
+
+
+def test_silence_restarts_the_session(executor, ros_context, own_emulator):
+    device = own_emulator()
+    node, listener = start(executor, ros_context, serial_port=device.link, data_timeout=0.5)
+    collect(executor, listener, 1)
+    device.command('silent 1.0')
+    spin_until(executor, lambda: node.driver.status().state == DriverState.CONNECTING, 2.0)
+    assert 'no scan data' in node.driver.status().message
+    collect(executor, listener, 2, timeout_s=4.0)
+
+
+def test_a_health_error_is_reset_and_scanning_resumes(executor, ros_context, own_emulator):
+    device = own_emulator('--health', 'error')
+    node, listener = start(executor, ros_context, serial_port=device.link)
+    collect(executor, listener, 2, timeout_s=8.0)
+    status = node.driver.status()
+    assert status.resets == 1 and status.health.status == 0
+
+
+def test_a_lasting_health_error_gives_up_clearly_until_start_motor(executor, ros_context,
+                                                                   own_emulator):
+    device = own_emulator('--health', 'error', '--health-error-resets', '99')
+    node, listener = start(executor, ros_context, serial_port=device.link,
+                           health_reset_attempts=1)
+    assert spin_until(executor, lambda: node.driver.status().state == DriverState.FAILED, 8.0)
+    assert 'power-cycle' in node.driver.status().message
+    assert spin_until(executor, lambda: any(
+        d.level == DiagnosticStatus.ERROR for d in listener.diagnostics), 2.0)
+    assert not listener.scans
+    device.command('health ok')
+    listener.call(executor, 'start_motor')
+    collect(executor, listener, 1, timeout_s=4.0)
+
+
+def test_a_health_warning_is_reported_and_scanning_goes_on(executor, ros_context, own_emulator):
+    device = own_emulator('--health', 'warning')
+    node, listener = start(executor, ros_context, serial_port=device.link)
+    collect(executor, listener, 1)
+    assert node.driver.status().health.status == 1 and node.driver.status().resets == 0
+
+
+def test_config_file_sets_every_parameter(executor, ros_context, tmp_path):
+    config = yaml.safe_load((PACKAGE_DIR / 'config' / 'rplidar_s1.yaml').read_text())
+    values = config['rplidar_node']['ros__parameters']
+    assert set(values) == set(PARAMETERS)
+    values['serial_port'] = str(tmp_path / 'absent')       # nothing to connect to: it retries
+    node, _ = start(executor, ros_context, **values)
+    for name, value in values.items():
+        assert node.get_parameter(name).value == value
+    assert values['serial_baudrate'] == 256000 and values['frame_id'] == 'laser'
+    assert spin_until(executor, lambda: 'no such device' in node.driver.status().message, 2.0)
+
+
+def test_launch_file_starts_the_driver_with_the_config():
+    source = (PACKAGE_DIR / 'launch' / 'rplidar_s1.launch.py').read_text()
+    tree = ast.parse(source)
+    assert any(isinstance(n, ast.FunctionDef) and n.name == 'generate_launch_description'
+               for n in tree.body)
+    assert "executable='rplidar_node'" in source and "'rplidar_s1.yaml'" in source
+    arguments = next(n.value for n in tree.body if isinstance(n, ast.Assign)
+                     and n.targets[0].id == 'ARGUMENTS')
+    assert {ast.literal_eval(item)[0] for item in arguments.elts} <= set(PARAMETERS)

@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 from wctls_ros.simulation import (cast_rays, floor_plan_from_dict, full_turn_bearings,
-                                  load_floor_plan, NOISELESS, NoiseModel, simulate_ranges)
+                                  load_floor_plan, NOISELESS, NoiseModel, simulate_ranges,
+                                  simulate_recording, visible_corners)
 
 SQUARE = {'name': 'square', 'polylines': [
     {'closed': True, 'points': [[-1.0, -2.0], [3.0, -2.0], [3.0, 2.0], [-1.0, 2.0]]}]}
@@ -70,3 +71,30 @@ def test_dropouts_and_range_limits_give_infinity():
 def test_missing_plan_is_a_clear_error():
     with pytest.raises(FileNotFoundError, match='environment_a'):
         load_floor_plan('no_such_plan')
+
+
+@pytest.mark.parametrize('name, visible', [('environment_a', 17), ('environment_b', 13)])
+def test_bundled_plans_show_many_corners_with_both_walls(name, visible):
+    walls, corners = load_floor_plan(name).in_sensor_frame()
+    seen = visible_corners(walls, corners, full_turn_bearings()[2])
+    assert seen.sum() == visible
+
+
+def test_a_corner_behind_an_obstacle_or_with_one_wall_hidden_is_not_visible():
+    walls, corners = floor_plan_from_dict(SQUARE).in_sensor_frame((0.0, 0.0, 0.0))
+    bearings = full_turn_bearings()[2]
+    assert visible_corners(walls, corners, bearings).all()
+    blocker = np.array([[2.0, 1.2, 2.0, 2.5]])               # hides the corner (3, 2)
+    hidden = visible_corners(np.vstack([walls, blocker]), corners, bearings)
+    assert not hidden[np.all(np.isclose(corners, [3.0, 2.0]), axis=1)].any()
+    assert hidden.sum() == 3
+
+
+def test_a_recording_moves_the_sensor_at_10_hz():
+    plan = floor_plan_from_dict(SQUARE)
+    recording = simulate_recording(plan, NOISELESS, 5, pose=(0.0, 0.0, 0.0),
+                                   velocity=(1.0, 0.0, 0.0))
+    np.testing.assert_allclose(recording.poses[:, 0], [0.0, 0.1, 0.2, 0.3, 0.4])
+    forward = np.argmin(np.abs(-math.pi + recording.angle_increment * np.arange(1080)))
+    np.testing.assert_allclose(recording.ranges[:, forward], 3.0 - recording.poses[:, 0],
+                               atol=1e-4)    # the beam nearest 0 deg is 0.17 deg off

@@ -1,0 +1,79 @@
+"""Which true corners of a floor plan a sensor can see well enough to extract (numpy only)."""
+
+import numpy as np
+
+from .raycast import cast_rays
+
+# A noiseless return lies on the wall it hit to within this distance, m.
+_ON_WALL_M = 1e-6
+# A corner is not occluded when the ray towards it ends this close to it, m.
+_UNOCCLUDED_M = 1e-3
+# Returns on one wall farther apart than this are split by a shadow, m.
+_SHADOW_M = 0.5
+# Two seen walls form a corner when they turn by more than 30 degrees.
+_MIN_TURN_SIN = 0.5
+
+
+def visible_corners(walls_m: np.ndarray, corners_m: np.ndarray, bearings_rad: np.ndarray,
+                    min_points: int = 8, min_length_m: float = 0.15, max_gap_m: float = 0.1,
+                    max_range_m: float = 40.0, min_incidence_cos: float = 0.17) -> np.ndarray:
+    """
+    Return which true corners a sensor at the origin sees with both of their walls.
+
+    A corner counts as visible when the ray towards it is not blocked, and each of the two walls
+    that meet there gets at least ``min_points`` noiseless returns spanning ``min_length_m`` at
+    an incidence no more grazing than ``arccos(min_incidence_cos)`` (80 degrees by default) in
+    one run from the corner (no shadow between), the nearest within ``max_gap_m`` of it. A
+    corner formed by a free-standing edge (one wall hidden) is not visible. This is the ground
+    truth an extractor can be held to: what it could possibly find.
+
+    :param walls_m: wall segments in the sensor frame, shape (K, 4), m
+    :param corners_m: true corners in the sensor frame, shape (M, 2), m
+    :param bearings_rad: the scan's beam bearings, shape (N,), rad
+    :param min_points: returns needed on each wall near the corner
+    :param min_length_m: extent the returns on each wall must span, m
+    :param max_gap_m: largest distance from the corner to the nearest return on each wall, m
+    :param max_range_m: the sensor's largest range, m
+    :param min_incidence_cos: smallest cosine between a beam and the wall normal that counts
+    :return: boolean, shape (M,)
+    """
+    walls = np.asarray(walls_m, dtype=float).reshape(-1, 4)
+    corners = np.asarray(corners_m, dtype=float).reshape(-1, 2)
+    bearings = np.asarray(bearings_rad, dtype=float).ravel()
+    ranges = cast_rays(walls, np.zeros(2), bearings)
+    hit = np.isfinite(ranges) & (ranges <= max_range_m)
+    direction = np.column_stack([np.cos(bearings[hit]), np.sin(bearings[hit])])
+    points = ranges[hit, None] * direction
+    start, edge = walls[:, :2], walls[:, 2:] - walls[:, :2]
+    length = np.hypot(edge[:, 0], edge[:, 1])
+    normal = np.column_stack([-edge[:, 1], edge[:, 0]]) / length[:, None]
+    # Which wall each return lies on (distance to the wall's line and within its extent).
+    along = np.einsum('pki,ki->pk', points[:, None, :] - start, edge) / length ** 2
+    across = np.abs(np.einsum('pki,ki->pk', points[:, None, :] - start, normal))
+    on_wall = (across < _ON_WALL_M) & (along >= -1e-9) & (along <= 1.0 + 1e-9)
+    incidence_ok = np.abs(direction @ normal.T) >= min_incidence_cos
+    usable = on_wall & incidence_ok                                    # (P, K)
+
+    corner_range = np.hypot(corners[:, 0], corners[:, 1])
+    towards = cast_rays(walls, np.zeros(2), np.arctan2(corners[:, 1], corners[:, 0]))
+    unoccluded = (towards >= corner_range - _UNOCCLUDED_M) & (corner_range <= max_range_m)
+    visible = np.zeros(len(corners), dtype=bool)
+    for m in np.flatnonzero(unoccluded):
+        # Walls through the corner: those ending there and any it lies on (e.g. a cabinet's
+        # side meets the room wall its back stands against).
+        relative = corners[m] - start
+        t = np.clip(np.einsum('ki,ki->k', relative, edge) / length ** 2, 0.0, 1.0)
+        through = np.hypot(*(relative - t[:, None] * edge).T) < _UNOCCLUDED_M
+        distance = np.hypot(*(points - corners[m]).T)
+        seen = []
+        for k in np.flatnonzero(through):
+            # The run of returns on this wall that starts at the corner (up to a shadow).
+            run = np.sort(distance[usable[:, k]])
+            if not run.size or run[0] > max_gap_m:
+                continue
+            run = run[:np.argmax(np.append(np.diff(run), np.inf) > _SHADOW_M) + 1]
+            if run.size >= min_points and run[-1] - run[0] >= min_length_m:
+                seen.append(np.arctan2(edge[k, 1], edge[k, 0]))
+        turns = np.abs(np.sin(np.subtract.outer(seen, seen)))
+        visible[m] = bool((turns > _MIN_TURN_SIN).any())
+    return visible

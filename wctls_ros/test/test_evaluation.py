@@ -4,11 +4,12 @@
 """
 The evaluation tools on simulated bags: corners found, NEES calibrated, reports written.
 
-An L-shaped room with long walls (and a cabinet that hides one corner) seen by an S1-like sensor with 1 cm range and 0.05 deg bearing noise: every visible corner must be
-associated across the scans and every method's propagated covariance must match the scatter. (Corners of short
-walls, under ~0.4 m, scatter up to 2-3 times more than propagated, for every method alike: the
-returns next to a corner move between the two segments from scan to scan. The bundled plans
-have many such corners; see docs/results.)
+An L-shaped room with long walls (and a cabinet that hides one corner) seen by an S1-like
+sensor with 1 cm range and 0.05 deg bearing noise: every visible corner must be associated
+across the scans and every method's propagated covariance must match the scatter. (Corners of
+short walls, under ~0.4 m, scatter up to 2-3 times more than propagated, for every method
+alike: the returns next to a corner move between the two segments from scan to scan. The
+bundled plans have many such corners; see docs/results.)
 """
 
 import math

@@ -1,13 +1,14 @@
 """
 Reading LaserScans from bags and writing bags, with the ``rosbags`` library (no ROS install).
 
-Reads ROS 2 bags (sqlite3 and mcap) and ROS 1 bags. Writes ROS 2 mcap bags whose messages are
-serialised by rclpy itself, so every type rclpy knows (including wctls_msgs) can be stored; the
-message definitions come from a rosbags typestore with wctls_msgs registered from its .msg files.
-A bag is written to a temporary folder and renamed into place when complete: an error never
-leaves half a bag behind.
+Reads ROS 2 bags (sqlite3 and mcap) and ROS 1 bags. Writes ROS 2 bags (mcap by default) whose
+messages are serialised by rclpy itself, so every type rclpy knows (including wctls_msgs) can be
+stored; the message definitions come from a rosbags typestore with wctls_msgs registered from
+its .msg files. A bag is written to a temporary folder and renamed into place when complete: an
+error never leaves half a bag behind.
 """
 
+import array
 from dataclasses import dataclass
 import functools
 import pathlib
@@ -15,12 +16,15 @@ import shutil
 import tempfile
 from typing import Iterator, Optional
 
+import numpy as np
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 
 LASER_SCAN = 'sensor_msgs/msg/LaserScan'
 MESSAGE_PACKAGE = 'wctls_msgs'
+# Files that hold a ROS 2 bag's messages when its metadata.yaml is missing (recorder killed).
+_STORAGE_SUFFIXES = ('.mcap', '.db3')
 
 
 class BagError(RuntimeError):
@@ -56,6 +60,13 @@ def _message_directory() -> pathlib.Path:
                    'workspace (install/setup.bash) first')
 
 
+def _float32_array(values) -> array.array:
+    """Return float32 values as the array.array that rclpy messages take without copying."""
+    out = array.array('f')
+    out.frombytes(np.ascontiguousarray(values, dtype=np.float32).tobytes())
+    return out
+
+
 @dataclass(frozen=True)
 class ScanRecord:
     """
@@ -70,17 +81,97 @@ class ScanRecord:
     topic: str
     scan: object
 
+    def laser_scan(self):
+        """
+        Return the scan as an rclpy sensor_msgs/LaserScan with the recorded header.
 
-def _open(path) -> AnyReader:
+        :return: a ``sensor_msgs.msg.LaserScan`` (a ROS 1 header's seq is dropped)
+        """
+        from builtin_interfaces.msg import Time
+        from sensor_msgs.msg import LaserScan
+        from std_msgs.msg import Header
+        scan = self.scan
+        stamp = scan.header.stamp
+        return LaserScan(
+            header=Header(stamp=Time(sec=int(stamp.sec), nanosec=int(stamp.nanosec)),
+                          frame_id=str(scan.header.frame_id)),
+            angle_min=float(scan.angle_min), angle_max=float(scan.angle_max),
+            angle_increment=float(scan.angle_increment),
+            time_increment=float(scan.time_increment), scan_time=float(scan.scan_time),
+            range_min=float(scan.range_min), range_max=float(scan.range_max),
+            ranges=_float32_array(scan.ranges), intensities=_float32_array(scan.intensities))
+
+
+@dataclass(frozen=True)
+class BagInfo:
+    """
+    What a bag holds.
+
+    :ivar path: the bag that was opened (a storage file when the folder had no metadata.yaml)
+    :ivar topics: topic -> (message type, message count), for every topic
+    :ivar start_ns: log time of the first message, ns (0 for an empty bag)
+    :ivar end_ns: log time of the last message, ns (0 for an empty bag)
+    """
+
+    path: pathlib.Path
+    topics: dict
+    start_ns: int
+    end_ns: int
+
+    def scan_topics(self) -> dict:
+        """
+        Return the LaserScan topics with their message counts.
+
+        :return: topic -> count
+        """
+        return {topic: count for topic, (kind, count) in self.topics.items()
+                if kind == LASER_SCAN}
+
+
+def _resolve(path) -> pathlib.Path:
+    """Return the path to open: a ROS 2 folder without metadata.yaml opens its one storage file."""
     path = pathlib.Path(path)
     if not path.exists():
         raise BagError(f'no bag at {path}')
+    if path.is_dir() and not (path / 'metadata.yaml').exists():
+        files = sorted(p for p in path.iterdir() if p.suffix in _STORAGE_SUFFIXES)
+        if len(files) != 1:
+            raise BagError(f'{path} is a folder without metadata.yaml and with '
+                           f'{len(files)} .mcap/.db3 files: not a ROS 2 bag')
+        return files[0]
+    return path
+
+
+def _open(path) -> AnyReader:
+    path = _resolve(path)
     try:
         reader = AnyReader([path], default_typestore=typestore())
         reader.open()
     except Exception as error:  # noqa: B902 - rosbags raises many types for a damaged bag
-        raise BagError(f'cannot open {path} as a ROS 1 or ROS 2 bag: {error}') from error
+        raise BagError(f'cannot read {path} as a ROS 1 or ROS 2 bag (corrupt, truncated or '
+                       f'another format): {error}') from error
     return reader
+
+
+def bag_info(path) -> BagInfo:
+    """
+    Summarise a bag: its topics with types and counts, and its time span.
+
+    :param path: a ROS 2 bag folder (or its .mcap/.db3 file) or a ROS 1 .bag file
+    :return: the summary
+    :raises BagError: when the path is missing or not a readable bag
+    """
+    reader = _open(path)
+    try:
+        topics = {}
+        for connection in reader.connections:
+            kind, count = topics.get(connection.topic, (connection.msgtype, 0))
+            topics[connection.topic] = (kind, count + connection.msgcount)
+        empty = not reader.message_count
+        return BagInfo(pathlib.Path(reader.paths[0]), topics,
+                       0 if empty else reader.start_time, 0 if empty else reader.end_time - 1)
+    finally:
+        reader.close()
 
 
 def scan_topics(path) -> dict:
@@ -91,83 +182,113 @@ def scan_topics(path) -> dict:
     :return: topic -> message count
     :raises BagError: when the path is missing or not a readable bag
     """
-    reader = _open(path)
-    try:
-        return {c.topic: c.msgcount for c in reader.connections if c.msgtype == LASER_SCAN}
-    finally:
-        reader.close()
+    return bag_info(path).scan_topics()
 
 
-def choose_scan_topic(path, topic: Optional[str] = None) -> str:
+def choose_scan_topic(path, topic: Optional[str] = None, info: Optional[BagInfo] = None) -> str:
     """
     Pick the LaserScan topic to read: the given one, or the only one in the bag.
 
     :param path: the bag
-    :param topic: the requested topic, or None to find it
+    :param topic: the requested topic, or None (or '') to find it
+    :param info: the bag's summary when already read (saves opening the bag again)
     :return: the topic
     :raises BagError: when the bag has no LaserScan, several without a choice, or not ``topic``
     """
-    topics = scan_topics(path)
-    if topic is not None:
+    info = info or bag_info(path)
+    topics = info.scan_topics()
+    if topic:
         if topic not in topics:
+            if topic in info.topics:
+                raise BagError(f'{path}: topic {topic} carries {info.topics[topic][0]}, not '
+                               f'{LASER_SCAN}; LaserScan topics: {sorted(topics)}')
             raise BagError(f'{path} has no LaserScan topic {topic!r}; it has {sorted(topics)}')
         return topic
     if not topics:
-        raise BagError(f'{path} holds no sensor_msgs/msg/LaserScan messages')
+        found = ', '.join(f'{name} ({kind})' for name, (kind, _) in sorted(info.topics.items()))
+        raise BagError(f'{path} holds no {LASER_SCAN} messages (topics: {found or "none"})')
     if len(topics) > 1:
         raise BagError(f'{path} has several LaserScan topics {sorted(topics)}: choose one')
     return next(iter(topics))
 
 
-def read_scans(path, topic: Optional[str] = None) -> Iterator[ScanRecord]:
+def read_scans(path, topic: Optional[str] = None,
+               start_ns: Optional[int] = None) -> Iterator[ScanRecord]:
     """
     Yield the LaserScans of one topic in log-time order, one at a time (constant memory).
 
     :param path: a ROS 2 bag (sqlite3 or mcap) or a ROS 1 bag
     :param topic: the LaserScan topic, or None for the bag's only one
+    :param start_ns: skip messages logged before this time, ns (None: from the start)
     :return: iterator of records
     :raises BagError: on a missing, corrupt or truncated bag, or no LaserScan topic
     """
     topic = choose_scan_topic(path, topic)
     reader = _open(path)
+    count = 0
     try:
         connections = [c for c in reader.connections if c.topic == topic]
         try:
-            for connection, timestamp, raw in reader.messages(connections=connections):
-                yield ScanRecord(timestamp, topic, reader.deserialize(raw, connection.msgtype))
+            for connection, timestamp, raw in reader.messages(connections=connections,
+                                                              start=start_ns):
+                record = ScanRecord(timestamp, topic, reader.deserialize(raw, connection.msgtype))
+                count += 1
+                yield record
         except BagError:
             raise
         except Exception as error:  # noqa: B902 - a truncated bag fails deep inside rosbags
-            raise BagError(f'{path} is damaged after some messages of {topic}: {error}') from error
+            raise BagError(f'{path} is damaged after {count} messages of {topic}: '
+                           f'{error}') from error
     finally:
         reader.close()
 
 
 class BagWriter:
     """
-    Write an mcap ROS 2 bag of rclpy messages; the bag appears only when closed without error.
+    Write a ROS 2 bag of rclpy messages; the bag appears only when closed without error.
 
     Use as a context manager::
 
         with BagWriter('out/run') as bag:
             bag.write('/scan', timestamp_ns, scan_msg)
+            bag.sidecar('corners.csv').write_text(...)   # a file shipped inside the bag folder
     """
 
-    def __init__(self, path):
+    def __init__(self, path, storage: str = 'mcap', overwrite: bool = False):
+        """
+        Prepare the bag (nothing appears at ``path`` until it is closed without error).
+
+        :param path: the bag folder to create
+        :param storage: 'mcap' (default; Foxglove opens it directly) or 'sqlite3'
+        :param overwrite: replace an existing ``path`` (only once the new bag is complete)
+        :raises BagError: when ``path`` exists and ``overwrite`` is false, or a bad storage
+        """
         self.path = pathlib.Path(path)
-        if self.path.exists():
+        plugins = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
+        if storage not in plugins:
+            raise BagError(f'storage must be one of {sorted(plugins)}, got {storage!r}')
+        if self.path.exists() and not overwrite:
             raise BagError(f'{self.path} exists: refusing to overwrite it')
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._staging = pathlib.Path(tempfile.mkdtemp(prefix='.partial-', dir=self.path.parent))
-        self._writer = Writer(self._staging / self.path.name, version=9,
-                              storage_plugin=StoragePlugin.MCAP)
+        self._plugin = plugins[storage]
+        self._staging = None
+        self._writer = None
         self._connections = {}
         self._serialize = None
 
     def __enter__(self) -> 'BagWriter':
-        self._writer.open()
         from rclpy.serialization import serialize_message
         self._serialize = serialize_message
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._staging = pathlib.Path(tempfile.mkdtemp(prefix='.partial-',
+                                                          dir=self.path.parent))
+            self._writer = Writer(self._staging / self.path.name, version=9,
+                                  storage_plugin=self._plugin)
+            self._writer.open()
+        except Exception as error:  # noqa: B902 - rosbags and the file system raise many types
+            if self._staging is not None:
+                shutil.rmtree(self._staging, ignore_errors=True)
+            raise BagError(f'cannot write {self.path}: {error}') from error
         return self
 
     def write(self, topic: str, timestamp_ns: int, message) -> None:
@@ -186,11 +307,29 @@ class BagWriter:
             self._connections[topic] = connection
         self._writer.write(connection, int(timestamp_ns), self._serialize(message))
 
+    def sidecar(self, name: str) -> pathlib.Path:
+        """
+        Return where to write an extra file that is shipped inside the bag folder.
+
+        The file appears together with the bag (or not at all); ROS bag readers ignore it.
+
+        :param name: a file name (no folders)
+        :return: its path in the staging folder, valid until the writer is closed
+        :raises BagError: for a name with folders in it or the bag's own metadata.yaml
+        """
+        if pathlib.Path(name).name != name or name in ('metadata.yaml', ''):
+            raise BagError(f'not a usable side file name: {name!r}')
+        return self._staging / self.path.name / name
+
     def __exit__(self, kind, value, traceback):
         try:
-            self._writer.close()
             if kind is None:
+                self._writer.close()
+                if self.path.exists():  # overwrite: the old bag goes with the staging folder
+                    self.path.rename(self._staging / '.replaced')
                 (self._staging / self.path.name).rename(self.path)
+            else:
+                self._writer.abort()
         finally:
             shutil.rmtree(self._staging, ignore_errors=True)
         return False

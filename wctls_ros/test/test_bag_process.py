@@ -1,0 +1,206 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""process_bag: output bags that rosbags reads back, corner tables, clear errors, all-or-none."""
+
+import csv
+import json
+import subprocess
+import tracemalloc
+
+import pytest
+
+pytest.importorskip('rclpy')
+
+from rosbags.highlevel import AnyReader  # noqa: E402
+from rosbags.typesys import get_typestore, Stores  # noqa: E402
+from scan_bags import (real_bag, REAL_BAGS, truncated_copy,  # noqa: E402
+                       write_bag_with_bad_message, write_scan_bag, write_string_bag,
+                       write_wide_invalid_bag)
+from test_feature_node import installed_executable  # noqa: E402
+from wctls_ros.bags import read_scans  # noqa: E402
+from wctls_ros.bags.params_file import load_parameters  # noqa: E402
+from wctls_ros.bags.process_bag import CSV_COLUMNS, main, process  # noqa: E402
+from wctls_ros.core import METHODS  # noqa: E402
+
+CORNERS = 'wctls_msgs/msg/CornerArray'
+LINES = 'wctls_msgs/msg/LineSegmentArray'
+MARKERS = 'visualization_msgs/msg/MarkerArray'
+SCAN = 'sensor_msgs/msg/LaserScan'
+
+
+def read_output(path):
+    """Read an output bag with only the definitions stored in it (as Foxglove does)."""
+    counts, stamps = {}, {}
+    with AnyReader([path], default_typestore=get_typestore(Stores.EMPTY)) as reader:
+        types = {c.topic: c.msgtype for c in reader.connections}
+        for connection, _, raw in reader.messages():
+            message = reader.deserialize(raw, connection.msgtype)
+            counts[connection.topic] = counts.get(connection.topic, 0) + 1
+            if hasattr(message, 'header'):
+                stamp = message.header.stamp
+                stamps.setdefault(connection.topic, []).append((stamp.sec, stamp.nanosec))
+    return types, counts, stamps
+
+
+def run(argv, capsys):
+    status = main([str(a) for a in argv])
+    captured = capsys.readouterr()
+    return status, captured.out, captured.err
+
+
+def test_one_method_writes_scans_corners_lines_markers_and_tables(tmp_path, capsys):
+    stamps = write_scan_bag(tmp_path / 'bag', count=5)
+    status, out, err = run([tmp_path / 'bag', '-o', tmp_path / 'out', '--method', 'ml'], capsys)
+    assert status == 0, err
+    assert 'wrote' in out and 'ml: 25 corners' in out
+    types, counts, read_stamps = read_output(tmp_path / 'out')
+    assert types == {'/scan': SCAN, '/corners': CORNERS, '/lines': LINES, '/markers': MARKERS}
+    assert counts == dict.fromkeys(types, 5)
+    assert read_stamps['/scan'] == read_stamps['/corners'] == read_stamps['/lines'] == stamps
+    with open(tmp_path / 'out' / 'corners.csv', newline='') as table:
+        rows = list(csv.DictReader(table))
+    assert len(rows) == 25 and tuple(rows[0]) == CSV_COLUMNS
+    assert {row['method'] for row in rows} == {'ml'}
+    assert rows[0]['stamp'] == f'{stamps[0][0]}.{stamps[0][1]:09d}'
+    assert float(rows[0]['var_x_m2']) > 0 and float(rows[0]['var_yaw_rad2']) > 0
+    document = json.loads((tmp_path / 'out' / 'corners.json').read_text())
+    assert document['methods'] == ['ml'] and len(document['scans']) == 5
+    first = document['scans'][0]['corners']['ml'][0]
+    assert first['x_m'] == pytest.approx(float(rows[0]['x_m']))
+
+
+@pytest.mark.parametrize('name,method', [
+    ('urg04lx_office', 'wctls'), ('ros1/urg04lx_office.bag', 'wctls'),
+    ('sick_lms111_static', 'all'), ('ros1/sick_lms1xx_static.bag', 'all')])
+def test_real_bags_give_an_output_bag_with_every_scan_and_method(name, method, tmp_path,
+                                                                 capsys):
+    path = real_bag(name) or pytest.skip(f'{name} is not in the shared data')
+    status, out, err = run([path, '-o', tmp_path / 'out', '-m', method, '--no-progress'],
+                           capsys)
+    assert status == 0, err
+    types, counts, stamps = read_output(tmp_path / 'out')
+    scan_topic = next(t for t, kind in types.items() if kind == SCAN)
+    methods = METHODS if method == 'all' else (method,)
+    expected = {scan_topic: SCAN}
+    for m in methods:
+        suffix = f'/{m}' if method == 'all' else ''
+        expected.update({f'/corners{suffix}': CORNERS, f'/lines{suffix}': LINES,
+                         f'/markers{suffix}': MARKERS})
+    count = dict(REAL_BAGS)[name]
+    assert types == expected and counts == dict.fromkeys(expected, count)
+    recorded = [(r.scan.header.stamp.sec, r.scan.header.stamp.nanosec)
+                for r in read_scans(path)]
+    corners_topic = '/corners/wctls' if method == 'all' else '/corners'
+    assert stamps[scan_topic] == stamps[corners_topic] == recorded
+    with open(tmp_path / 'out' / 'corners.csv', newline='') as table:
+        rows = list(csv.DictReader(table))
+    assert {row['method'] for row in rows} == set(methods)
+    for m in methods:
+        corners = sum(row['method'] == m for row in rows)
+        assert corners > count and f'{m}: {corners} corners' in out
+
+
+def test_config_file_is_checked_like_the_node_does(tmp_path, capsys):
+    write_scan_bag(tmp_path / 'bag', count=2)
+    config = tmp_path / 'params.yaml'
+    config.write_text('/**:\n  ros__parameters:\n    range_sigma_m: 0.01\n'
+                      'feature_node:\n  ros__parameters:\n    method: utls\n'
+                      '    publish_markers: false\n    use_sim_time: true\n')
+    status, out, err = run([tmp_path / 'bag', '-o', tmp_path / 'out', '-c', config], capsys)
+    assert status == 0, err
+    types, _, _ = read_output(tmp_path / 'out')
+    assert set(types) == {'/scan', '/corners', '/lines'}     # publish_markers: false
+    assert 'utls: 10 corners' in out
+    assert load_parameters(config, overrides={'method': 'ml'})['method'] == 'ml'
+    bad = {
+        'unknown': ('feature_node:\n  ros__parameters:\n    range_sigma: 0.1\n',
+                    "unknown feature_node parameters ['range_sigma']"),
+        'type': ('feature_node:\n  ros__parameters:\n    min_segment_points: 8.5\n',
+                 'min_segment_points must be of type int'),
+        'range': ('feature_node:\n  ros__parameters:\n    iepf_threshold_m: 20.0\n',
+                  'iepf_threshold_m = 20.0 is outside its range'),
+        'rule': ('feature_node:\n  ros__parameters:\n    range_min_m: 5.0\n'
+                 '    range_max_m: 4.0\n', 'range_min_m (5) must be below range_max_m (4)'),
+        'method': ('feature_node:\n  ros__parameters:\n    method: tls\n', 'method must be one'),
+        'section': ('other_node:\n  ros__parameters:\n    x: 1\n', 'no parameters for'),
+        'yaml': ('feature_node: [\n', 'cannot read the parameter file'),
+    }
+    for name, (text, reason) in bad.items():
+        config.write_text(text)
+        status, out, err = run([tmp_path / 'bag', '-o', tmp_path / name, '-c', config], capsys)
+        assert status == 2 and reason in err and len(err.splitlines()) == 1, (name, err)
+        assert not (tmp_path / name).exists()
+
+
+def test_bad_inputs_give_exit_2_one_line_and_write_nothing(tmp_path, capsys):
+    inputs = tmp_path / 'inputs'
+    inputs.mkdir()
+    write_string_bag(inputs / 'strings')
+    write_scan_bag(inputs / 'scans', count=4)
+    write_bag_with_bad_message(inputs / 'bad_message', count=6, bad_index=4)
+    (inputs / 'garbage.mcap').write_bytes(bytes(range(256)) * 16)
+    cases = [
+        ([inputs / 'missing'], 'no bag at'),
+        ([inputs / 'garbage.mcap'], 'corrupt, truncated'),
+        ([truncated_copy(inputs / 'scans', inputs / 'truncated')], 'corrupt, truncated'),
+        ([inputs / 'strings'], 'holds no sensor_msgs/msg/LaserScan'),
+        ([inputs / 'strings', '--topic', '/chatter'], 'carries std_msgs/msg/String'),
+        ([inputs / 'bad_message'], 'damaged after 4 messages of /scan'),
+        ([inputs / 'scans', '-c', inputs / 'missing.yaml'], 'cannot read the parameter file'),
+    ]
+    office = real_bag('ros1/urg04lx_office.bag')
+    if office is not None:
+        cases.append(([truncated_copy(office, inputs / 'office.bag', 0.7)], 'corrupt'))
+    out_dir = tmp_path / 'out'
+    out_dir.mkdir()
+    for argv, reason in cases:
+        status, out, err = run(argv + ['-o', out_dir / 'result'], capsys)
+        assert status == 2, (argv, err)
+        assert err.startswith('process_bag: error: ') and reason in err, (argv, err)
+        assert len(err.splitlines()) == 1 and out == ''
+        assert list(out_dir.iterdir()) == []        # no output, no staging folder left
+    # An existing output is kept unless --force.
+    (out_dir / 'result').mkdir()
+    status, _, err = run([inputs / 'scans', '-o', out_dir / 'result'], capsys)
+    assert status == 2 and 'exists' in err
+    status, _, err = run([inputs / 'scans', '-o', out_dir / 'result', '--force'], capsys)
+    assert status == 0 and read_output(out_dir / 'result')[1]['/corners'] == 4
+
+
+def test_installed_command_has_help_and_fails_cleanly(tmp_path):
+    executable = installed_executable('process_bag')
+    result = subprocess.run([str(executable), '--help'], capture_output=True, text=True,
+                            timeout=60)
+    assert result.returncode == 0
+    for option in ('--method', '--config', '--topic', '--output', 'all'):
+        assert option in result.stdout
+    result = subprocess.run([str(executable), str(tmp_path / 'missing')], cwd=tmp_path,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and 'Traceback' not in result.stderr
+    assert result.stderr.strip().splitlines() == [
+        f'process_bag: error: no bag at {tmp_path / "missing"}']
+    write_scan_bag(tmp_path / 'run', count=2)
+    result = subprocess.run([str(executable), str(tmp_path / 'run')], cwd=tmp_path,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / 'run_features' / 'corners.csv').is_file()
+
+
+def peak_memory(path, output, parameters):
+    tracemalloc.start()
+    try:
+        process(path, output, parameters, progress=False)
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def test_memory_does_not_grow_with_the_length_of_the_bag(tmp_path):
+    parameters = load_parameters(None)
+    write_wide_invalid_bag(tmp_path / 'short', count=40)      # 80 kB scans: 3.2 MB of scans
+    write_wide_invalid_bag(tmp_path / 'long', count=240)      # 19 MB of scans
+    short = peak_memory(tmp_path / 'short', tmp_path / 'short_out', parameters)
+    long = peak_memory(tmp_path / 'long', tmp_path / 'long_out', parameters)
+    # Holding the 200 extra scans would take 16 MB; streaming keeps the peak where it was.
+    assert long < short + 2_000_000, (short, long)

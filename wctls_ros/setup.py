@@ -26,6 +26,7 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
+            'bag_replay = wctls_ros.bags.replay_node:main',
             'calibrate = wctls_ros.evaluation.evaluate_cli:calibrate_main',
             'evaluate = wctls_ros.evaluation.evaluate_cli:main',
             'feature_node = wctls_ros.feature_node:main',

@@ -1,0 +1,217 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""bag_replay with the real rclpy: bags played through the real feature_node, timing, /clock."""
+
+import ast
+import pathlib
+import subprocess
+import time
+
+from conftest import spin_until
+import pytest
+
+pytest.importorskip('rclpy')
+
+from rclpy.node import Node  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import qos_profile_sensor_data  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+from scan_bags import (PERIOD_NS, real_bag, REAL_BAGS, START_NS, write_scan_bag,  # noqa: E402
+                       write_string_bag)
+from scans import NODE_PARAMETERS  # noqa: E402
+from sensor_msgs.msg import LaserScan  # noqa: E402
+from test_feature_node import installed_executable  # noqa: E402
+from wctls_msgs.msg import CornerArray  # noqa: E402
+from wctls_ros.bags import bag_info, BagError, read_scans  # noqa: E402
+from wctls_ros.bags.replay_node import BagReplay  # noqa: E402
+from wctls_ros.feature_node import FeatureNode  # noqa: E402
+
+PACKAGE = pathlib.Path(__file__).resolve().parents[1]
+
+
+def overrides(values):
+    return [Parameter(name, value=value) for name, value in values.items()]
+
+
+def stamp_of(message):
+    return message.header.stamp.sec, message.header.stamp.nanosec
+
+
+def recorded_stamps(path, topic=None, start_ns=None):
+    return [(r.scan.header.stamp.sec, r.scan.header.stamp.nanosec)
+            for r in read_scans(path, topic, start_ns)]
+
+
+class Graph:
+    """The real feature_node, optionally a bag_replay, and a peer collecting what they send."""
+
+    def __init__(self, context, executor, feature_parameters=None, **replay_parameters):
+        self.executor = executor
+        self.feature = FeatureNode(
+            context=context, use_global_arguments=False,
+            parameter_overrides=overrides({**NODE_PARAMETERS, 'publish_markers': False,
+                                           **(feature_parameters or {})}))
+        self.peer = Node('peer', context=context)
+        self.replay = None
+        if replay_parameters:
+            self.replay = BagReplay(context=context, use_global_arguments=False,
+                                    parameter_overrides=overrides(replay_parameters))
+        self.corners, self.scans, self.clock = [], [], []
+        self.peer.create_subscription(CornerArray, 'corners', self.corners.append, 100)
+        self.peer.create_subscription(LaserScan, 'scan', self.scans.append,
+                                      qos_profile_sensor_data)
+        self.peer.create_subscription(Clock, '/clock', self.clock.append,
+                                      qos_profile_sensor_data)
+        for node in (self.feature, self.peer, self.replay):
+            if node is not None:
+                executor.add_node(node)
+
+    def play(self, expected, timeout_s=30.0):
+        """Step until the replay has ended and `expected` CornerArrays have arrived."""
+        assert spin_until(self.executor, lambda: self.replay.done.done()
+                          and len(self.corners) >= expected, timeout_s)
+        spin_until(self.executor, lambda: False, 0.05)   # nothing more may arrive
+        return self.replay.done.result()
+
+
+def test_a_bag_plays_through_the_feature_node_at_recorded_timing(tmp_path, ros_context,
+                                                                 executor):
+    stamps = write_scan_bag(tmp_path / 'bag', count=8)
+    graph = Graph(ros_context, executor, bag=str(tmp_path / 'bag'), rate=2.0,
+                  wait_for_subscribers=2)
+    started = time.monotonic()
+    assert graph.play(expected=8) == 0
+    elapsed = time.monotonic() - started
+    # 7 gaps of 0.1 s at rate 2: 0.35 s of playback (plus discovery and processing).
+    assert 0.3 < elapsed < 10.0
+    assert [stamp_of(m) for m in graph.corners] == stamps
+    assert [stamp_of(m) for m in graph.scans] == stamps
+    assert all(m.header.frame_id == 'laser' and len(m.corners) == 5 for m in graph.corners)
+    assert graph.replay.published == 8
+
+
+def test_sqlite3_bag_with_start_offset_and_loop(tmp_path, ros_context, executor):
+    stamps = write_scan_bag(tmp_path / 'bag', count=6, storage='sqlite3')
+    graph = Graph(ros_context, executor, bag=str(tmp_path / 'bag'), rate=20.0, loop=True,
+                  start_offset_s=0.25, wait_for_subscribers=2)
+    assert spin_until(executor, lambda: len(graph.scans) >= 9, timeout_s=20.0)
+    # Scans 0.3, 0.4 and 0.5 s into the bag, over and over.
+    assert [stamp_of(m) for m in graph.scans[:9]] == stamps[3:] * 3
+    assert not graph.replay.done.done()
+    # rate changes while playing; what the bag is cannot.
+    assert graph.replay.set_parameters([Parameter('rate', value=50.0)])[0].successful
+    assert not graph.replay.set_parameters([Parameter('bag', value='other')])[0].successful
+    graph.replay.set_parameters([Parameter('loop', value=False)])
+    assert spin_until(executor, graph.replay.done.done, timeout_s=10.0)
+    assert graph.replay.done.result() == 0
+
+
+def test_clock_follows_the_bag_time(tmp_path, ros_context, executor):
+    write_scan_bag(tmp_path / 'bag', count=5)
+    graph = Graph(ros_context, executor, bag=str(tmp_path / 'bag'), rate=1.0,
+                  publish_clock=True, clock_rate_hz=50.0, wait_for_subscribers=2)
+    assert graph.play(expected=5) == 0
+    times = [m.clock.sec * 1_000_000_000 + m.clock.nanosec for m in graph.clock]
+    # 0.4 s of bag at 50 Hz and with every scan: about 25 ticks (best effort: allow losses).
+    assert len(times) >= 10 and times == sorted(times)
+    assert START_NS <= times[0] < START_NS + PERIOD_NS
+    assert START_NS + 4 * PERIOD_NS <= times[-1] < START_NS + 5 * PERIOD_NS
+
+
+@pytest.mark.parametrize('name,count', REAL_BAGS)
+def test_real_bags_give_one_corner_array_per_scan_with_the_original_stamps(
+        name, count, ros_context, executor):
+    path = real_bag(name) or pytest.skip(f'{name} is not in the shared data')
+    # Play the ROS 1 office bag from 30 s on (about 60 scans): enough, and tests the offset.
+    offset_s = 30.0 if name == 'ros1/urg04lx_office.bag' else 0.0
+    stamps = recorded_stamps(path, start_ns=bag_info(path).start_ns + round(offset_s * 1e9))
+    graph = Graph(ros_context, executor, {'range_sigma_m': 0.03}, bag=str(path), rate=100.0,
+                  start_offset_s=offset_s, wait_for_subscribers=2)
+    assert len(stamps) == (count if offset_s == 0.0 else len(stamps)) and len(stamps) > 50
+    assert graph.play(expected=len(stamps), timeout_s=40.0) == 0
+    assert [stamp_of(m) for m in graph.corners] == stamps
+    assert sum(len(m.corners) for m in graph.corners) > len(stamps)
+
+
+def test_bad_bags_and_parameters_are_refused_with_the_reason(tmp_path, ros_context):
+    write_string_bag(tmp_path / 'strings')
+    write_scan_bag(tmp_path / 'scans', count=2)
+    (tmp_path / 'garbage.bag').write_bytes(b'#ROSBAG V2.0\n' + bytes(range(256)) * 4)
+    cases = [
+        ({}, ValueError, 'parameter bag is required'),
+        ({'bag': str(tmp_path / 'missing')}, BagError, 'no bag at'),
+        ({'bag': str(tmp_path / 'garbage.bag')}, BagError, 'corrupt, truncated'),
+        ({'bag': str(tmp_path / 'strings')}, BagError, 'holds no sensor_msgs/msg/LaserScan'),
+        ({'bag': str(tmp_path / 'scans'), 'topic': '/other'}, BagError, 'no LaserScan topic'),
+        ({'bag': str(tmp_path / 'scans'), 'start_offset_s': 5.0}, ValueError,
+         'past the end of the bag'),
+    ]
+    for parameters, kind, reason in cases:
+        with pytest.raises(kind, match=reason):
+            BagReplay(context=ros_context, use_global_arguments=False,
+                      parameter_overrides=overrides(parameters))
+
+
+def test_installed_replay_feeds_a_sim_time_feature_node_and_exits_0(tmp_path, ros_context,
+                                                                    executor):
+    executable = installed_executable('bag_replay')
+    stamps = write_scan_bag(tmp_path / 'bag', count=6)
+    graph = Graph(ros_context, executor, {'use_sim_time': True})
+    process = subprocess.Popen(
+        [str(executable), '--ros-args', '-p', f'bag:={tmp_path / "bag"}', '-p', 'rate:=2.0',
+         '-p', 'publish_clock:=true', '-p', 'wait_for_subscribers:=2'],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert spin_until(executor, lambda: process.poll() is not None
+                          and len(graph.corners) >= 6, timeout_s=30.0)
+    finally:
+        if process.poll() is None:
+            process.terminate()
+        output, _ = process.communicate(timeout=10)
+    assert process.returncode == 0, output
+    assert 'end of the bag: published 6 scans' in output
+    assert [stamp_of(m) for m in graph.corners] == stamps
+    # The feature node runs on the bag's clock.
+    now = graph.feature.get_clock().now().nanoseconds
+    assert START_NS <= now <= START_NS + 6 * PERIOD_NS
+
+
+@pytest.mark.parametrize('arguments,reason', [
+    (['-p', 'bag:=/nonexistent/bag'], 'no bag at /nonexistent/bag'),
+    (['-p', 'rate:=1000.0'], 'rate out of range'),
+    (['-p', 'rate:=2'], "expecting type 'DOUBLE'"),
+])
+def test_installed_replay_exits_1_with_a_clear_message_and_no_traceback(arguments, reason):
+    executable = installed_executable('bag_replay')
+    result = subprocess.run([str(executable), '--ros-args'] + arguments, capture_output=True,
+                            text=True, timeout=30)
+    output = result.stdout + result.stderr
+    assert result.returncode == 1, output
+    assert reason in output and 'Traceback' not in output
+
+
+def launch_calls(name):
+    tree = ast.parse((PACKAGE / 'launch' / name).read_text())
+    calls = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call):
+            calls.setdefault(getattr(node.func, 'id', getattr(node.func, 'attr', None)),
+                             []).append(node)
+    return calls, ast.unparse(tree)
+
+
+def test_launch_file_starts_replay_and_feature_node_on_sim_time():
+    calls, source = launch_calls('replay.launch.py')
+    arguments = {c.args[0].value for c in calls['DeclareLaunchArgument']}
+    assert arguments == {'bag', 'rate', 'loop'}
+    executables = {k.value.value for c in calls['Node'] for k in c.keywords
+                   if k.arg == 'executable'}
+    assert executables == {'bag_replay'}
+    assert "'publish_clock': True" in source
+    assert "'feature_node.launch.py'" in source and "{'use_sim_time': 'true'}" in source
+    included_calls, _ = launch_calls('feature_node.launch.py')
+    included = {c.args[0].value for c in included_calls['DeclareLaunchArgument']}
+    assert {'method', 'params_file', 'use_sim_time'} <= included
+    setup = (PACKAGE / 'setup.py').read_text()
+    assert all(f"'{name} = " in setup for name in ('bag_replay', 'feature_node'))

@@ -65,6 +65,7 @@ def test_spec_standard_nodes_decode():
     assert samples.angle_deg.tolist() == [6.0, 90.0, 180.0]
     assert samples.distance_mm.tolist() == [1000.0, 2500.25, 0.0]
     assert samples.frame_end.tolist() == [5, 10, 15]
+    assert samples.slot.tolist() == [0, 1, 2]
 
 
 def test_spec_dense_capsule_bytes():
@@ -155,6 +156,7 @@ def test_dense_capsules_decode_at_interpolated_angles_across_the_wrap():
     assert set(samples.quality.tolist()) == {47}
     assert samples.frame_end.tolist() == np.repeat([84, 168, 252], 40).tolist()
     assert samples.samples_after.tolist()[:41] == list(range(39, -1, -1)) + [39]
+    assert samples.slot.tolist() == list(range(120))
     # The turn starts at the first sample past 360 degrees, and only there.
     assert np.flatnonzero(samples.start).tolist() == [int(np.argmin(expected.ravel()))]
 
@@ -166,6 +168,15 @@ def test_dense_capsules_far_apart_or_restarted_are_dropped():
     assert len(decoder.feed(far)) == 40
     restart = encode_dense_capsules([2000, 2995], np.ones((2, 40)), [True, False])
     assert len(decoder.feed(restart)) == 40        # the capsule before the S flag is dropped
+
+
+def test_slots_count_the_frames_sent_even_when_some_are_corrupted():
+    data = bytearray(encode_dense_capsules((np.arange(6) * 995) % 23040, np.ones((6, 40)),
+                                           np.arange(6) == 0))
+    data[2 * 84 + 10] ^= 0x40                              # capsule 2 fails its checksum
+    samples = DenseCapsuleDecoder(108).feed(bytes(data))
+    # Capsules 1 (no successor) and 2 are lost; 0, 3 and 4 keep their stream positions.
+    assert samples.slot.tolist() == list(range(40)) + list(range(120, 200))
 
 
 def sdk_node_reference(data):

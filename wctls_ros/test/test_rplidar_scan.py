@@ -82,13 +82,14 @@ def test_a_turn_without_returns_is_all_infinite():
         assert np.isinf(scan.ranges).all() and len(scan.ranges) in (50, 1080)
 
 
-def stream(angles, start=None, received=None):
-    """Return samples (one per frame) at the given angles."""
+def stream(angles, start=None, slot=None):
+    """Return samples (one per 5-byte frame) at the given angles, in the given slots."""
     n = len(angles)
+    slot = np.arange(n) if slot is None else np.asarray(slot)
     return Samples(angle_deg=np.asarray(angles, float), distance_mm=np.full(n, 1000.0),
                    quality=np.full(n, 47, np.uint8),
                    start=np.zeros(n, bool) if start is None else np.asarray(start),
-                   frame_end=np.arange(1, n + 1) * 5, samples_after=np.zeros(n, np.int64))
+                   frame_end=(slot + 1) * 5, samples_after=np.zeros(n, np.int64), slot=slot)
 
 
 def push_in_pieces(assembler, samples, received, pieces):
@@ -130,10 +131,9 @@ def test_a_gap_longer_than_a_turn_still_ends_the_turn():
     index = np.arange(2000)
     keep = (index < 1000) | (index > 1450)      # 1.1 turns lost: from 180 deg to 225 deg
     angles = (step * index[keep]) % 360.0
-    received = index[keep] * sample_s
-    samples = stream(angles, np.r_[False, np.diff(angles) < 0])
-    # In pieces: the period is known once the first turn has closed.
-    turns = push_in_pieces(TurnAssembler(244.0, 0.0), samples, received, 20)
+    samples = stream(angles, np.r_[False, np.diff(angles) < 0], slot=index[keep])
+    # In pieces: the angle per sample is known once the first turn has closed.
+    turns = push_in_pieces(TurnAssembler(244.0, 0.0), samples, index[keep] * sample_s, 20)
     # After the dropped partial turn: one whole turn, one cut short at 179.1 deg by the gap,
     # then the turn after the lost one, from 225.9 deg (not merged with the one before).
     assert [len(t.angle_deg) for t in turns] == [400, 200, 149]
@@ -153,7 +153,8 @@ def test_stamp_is_the_first_sample_time_despite_late_reads():
     samples = Samples(angle_deg=angles, distance_mm=np.ones(angles.size),
                       quality=np.ones(angles.size, np.uint8), start=np.zeros(angles.size, bool),
                       frame_end=np.repeat(np.arange(1, n_frames + 1) * 84, per_frame),
-                      samples_after=np.tile(np.arange(per_frame - 1, -1, -1), n_frames))
+                      samples_after=np.tile(np.arange(per_frame - 1, -1, -1), n_frames),
+                      slot=np.arange(angles.size))
     turns = TurnAssembler(108.0, 0.003).push(samples, received)
     assert len(turns) == 3           # 4.3 turns, of which the first is partial
     for turn in turns:

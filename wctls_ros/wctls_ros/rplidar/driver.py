@@ -34,10 +34,12 @@ RESET_WAIT_S = 2.0             # an S1 is silent for about 2 s after RESET
 BACKOFF_FIRST_S = 0.05
 BACKOFF_MAX_S = 1.0
 STREAM_READ_TIMEOUT_S = 0.1
-# Decoding costs mostly per call, so received chunks (each timestamped on arrival) are decoded
-# together at most this often, except past the predicted end of a turn, where every arrival is
-# decoded at once so that a complete turn is published without extra delay.
-STREAM_DECODE_PERIOD_S = 0.025
+# Waking up costs more than the work per byte, so the stream is read and decoded at most this
+# often, except from shortly before the predicted end of each turn until it is complete: there
+# every arrival is read (and timestamped) and decoded at once. The turn is published without
+# extra delay, and its last frames, timestamped on arrival, pin down its stamp.
+STREAM_READ_PERIOD_S = 0.05
+TURN_END_MARGIN_S = 0.005
 LOG_THROTTLE_S = 5.0
 CONF_COMMANDS_FIRMWARE = (1, 24)   # GET_LIDAR_CONF exists from this firmware on
 LEGACY_MAX_DISTANCE_M = 16.0       # what the SDK assumes for devices without GET_LIDAR_CONF
@@ -393,24 +395,19 @@ class RplidarDriver:
 
     def _stream(self, link, decoder, assembler: TurnAssembler, mode: ScanMode, data: bytes):
         """Decode the stream into turns until closing or a motor stop request."""
-        offsets, times, pending = [], [], []
+        offsets, times = [], []
         stream_end = 0
         seen = (0, 0)
         now = time.monotonic()
-        last_bytes_s = last_samples_s = next_decode_s = now
+        last_bytes_s = last_samples_s = now
         while not self._closing.is_set() and self._motor_on:
             if data:
                 stream_end += len(data)
                 offsets.append(stream_end)
                 times.append(now)
-                pending.append(data)
-                last_bytes_s = now
-            eta_s = assembler.turn_end_eta_s()
-            if pending and (now >= next_decode_s or (eta_s is not None and now >= eta_s)):
-                samples = decoder.feed(b''.join(pending))
-                pending.clear()
-                next_decode_s = now + STREAM_DECODE_PERIOD_S
                 del offsets[:-_CHUNK_LOG_SIZE], times[:-_CHUNK_LOG_SIZE]
+                last_bytes_s = now
+                samples = decoder.feed(data)
                 if len(samples):
                     last_samples_s = now
                     chunk = np.minimum(np.searchsorted(offsets, samples.frame_end), len(times) - 1)
@@ -425,12 +422,16 @@ class RplidarDriver:
                                       'session (check the cable and the USB power)',
                                       throttle_duration_sec=LOG_THROTTLE_S)
                     seen = errors
+            eta_s = assembler.turn_end_eta_s()
+            if eta_s is not None:
+                self._closing.wait(max(min(now + STREAM_READ_PERIOD_S,
+                                           eta_s - TURN_END_MARGIN_S) - time.monotonic(), 0.0))
             data = link.read(STREAM_READ_TIMEOUT_S)
             now = time.monotonic()
             if now - last_bytes_s > self._config.data_timeout_s:
                 raise DeviceError(f'no scan data for {self._config.data_timeout_s:g} s on '
                                   f'{link.name}')
-            if now - last_samples_s > self._config.data_timeout_s + STREAM_DECODE_PERIOD_S:
+            if now - last_samples_s > self._config.data_timeout_s:
                 raise DeviceError(f'bytes arrive on {link.name} but no valid {mode.name} frame '
                                   f'for {self._config.data_timeout_s:g} s: wrong '
                                   'serial_baudrate (S1: 256000) or a damaged link?')

@@ -493,6 +493,8 @@ class Samples:
         first sample whose angle is below its predecessor's)
     :ivar frame_end: stream offset just past the frame that carried the sample's distance
     :ivar samples_after: samples measured after this one within the same frame
+    :ivar slot: the sample's position in the stream, counting the frames sent before it by their
+        bytes (so corrupted or lost frames still count): frame index x samples per frame + k
     """
 
     angle_deg: np.ndarray
@@ -501,6 +503,7 @@ class Samples:
     start: np.ndarray
     frame_end: np.ndarray
     samples_after: np.ndarray
+    slot: np.ndarray
 
     def __len__(self):
         return len(self.angle_deg)
@@ -515,9 +518,10 @@ class Samples:
         """
         if len(parts) == 1:
             return parts[0]
-        fields = ('angle_deg', 'distance_mm', 'quality', 'start', 'frame_end', 'samples_after')
+        fields = ('angle_deg', 'distance_mm', 'quality', 'start', 'frame_end', 'samples_after',
+                  'slot')
         if not parts:
-            dtypes = (np.float64, np.float64, np.uint8, bool, np.int64, np.int64)
+            dtypes = (np.float64, np.float64, np.uint8, bool, np.int64, np.int64, np.int64)
             return cls(*(np.empty(0, dtype) for dtype in dtypes))
         return cls(*(np.concatenate([getattr(p, f) for p in parts]) for f in fields))
 
@@ -683,7 +687,8 @@ class StandardNodeDecoder(_FrameStreamDecoder):
                        quality=sync_quality >> 2,
                        start=(sync_quality & 1).astype(bool),
                        frame_end=ends,
-                       samples_after=np.zeros(len(ends), np.int64))
+                       samples_after=np.zeros(len(ends), np.int64),
+                       slot=ends // NODE_SIZE - 1)
 
 
 class DenseCapsuleDecoder(_FrameStreamDecoder):
@@ -739,10 +744,12 @@ class DenseCapsuleDecoder(_FrameStreamDecoder):
                                    angle[:-1]])
         if angle.size:
             self._last_angle = angle[-1]
-        count = int(keep.sum())
+        frame_end = np.repeat(ends[:-1][keep], SAMPLES_PER_CAPSULE)
+        position = np.tile(np.arange(SAMPLES_PER_CAPSULE), int(keep.sum()))
         return Samples(angle_deg=angle,
                        distance_mm=distance,
                        quality=np.where(distance > 0, DENSE_RETURN_QUALITY, 0).astype(np.uint8),
                        start=angle < previous,
-                       frame_end=np.repeat(ends[:-1][keep], SAMPLES_PER_CAPSULE),
-                       samples_after=np.tile(np.arange(SAMPLES_PER_CAPSULE - 1, -1, -1), count))
+                       frame_end=frame_end,
+                       samples_after=SAMPLES_PER_CAPSULE - 1 - position,
+                       slot=(frame_end // CAPSULE_SIZE - 1) * SAMPLES_PER_CAPSULE + position)

@@ -3,10 +3,11 @@ Turn assembly: decoded samples in, complete 360-degree turns with honest timing 
 
 A new turn starts where the raw angle falls back: at a flagged start sample whose angle is below
 its predecessor's (a corrupted S bit alone does not split a turn), or wherever the angle drops by
-more than 270 degrees (a lost start sample does not merge two turns). Once the rotation period
-is known, the time between consecutive samples also counts the wraps between them, so a gap in
-the stream longer than a turn (a damaged link) cannot merge two turns either. The first, partial
-turn after a (re)start is dropped.
+more than 270 degrees (a lost start sample does not merge two turns). Once a turn has given the
+angle per sample, the sample slots between consecutive samples (counted from stream offsets, so
+untouched by timing jitter) also count the wraps between them: a gap in the stream longer than a
+turn (a damaged link) cannot merge two turns either. The first, partial turn after a (re)start
+is dropped.
 
 Timing uses the device's own sample clock: with ``us`` the mode's microseconds per sample and
 ``step`` the median angle between consecutive samples, the rotation period is
@@ -64,19 +65,18 @@ class TurnAssembler:
         self._size = 0
         self._complete = False
         self._last_angle = None
-        self._last_sample_s = None
-        self._period_s = None
+        self._last_slot = None
+        self._step_deg = None
+        self._turn_end_s = None
         self.dropped_turns = 0
 
     def turn_end_eta_s(self):
         """
-        Estimate when the turn being assembled reaches 360 degrees.
+        Predict when the turn being assembled ends: a period after the last complete one.
 
         :return: monotonic time, s; None until a turn has been completed
         """
-        if self._period_s is None:
-            return None
-        return self._last_sample_s + (360.0 - self._last_angle) / 360.0 * self._period_s
+        return self._turn_end_s
 
     def push(self, samples: Samples, received_s: np.ndarray) -> list:
         """
@@ -95,14 +95,14 @@ class TurnAssembler:
         previous = np.concatenate([[angle[0] if first else self._last_angle], angle[:-1]])
         drop = previous - angle
         boundary = (samples.start & (drop > 0.0)) | (drop > _MISSED_START_DROP_DEG)
-        if self._period_s is not None and not first:
-            elapsed_s = np.diff(measured_s, prepend=self._last_sample_s)
-            # Wraps between consecutive samples by the clock; a fall in angle already shows one
-            # (and is judged above), so only wraps the angles cannot show count here.
-            wraps = np.floor((360.0 * elapsed_s / self._period_s + drop) / 360.0 + 0.5)
+        if self._step_deg is not None and not first:
+            swept_deg = np.diff(samples.slot, prepend=self._last_slot) * self._step_deg
+            # Wraps between consecutive samples by their slots; a fall in angle already shows
+            # one (and is judged above), so only wraps the angles cannot show count here.
+            wraps = np.floor((swept_deg + drop) / 360.0 + 0.5)
             boundary |= wraps >= 1.0 + (drop > 0.0)
         self._last_angle = angle[-1]
-        self._last_sample_s = measured_s[-1]
+        self._last_slot = samples.slot[-1]
         columns = (angle, samples.distance_mm, samples.quality, measured_s, received_s)
         turns = []
         begin = 0
@@ -138,9 +138,10 @@ class TurnAssembler:
         if not steps.size:
             self.dropped_turns += 1
             return None
-        step_deg = float(np.median(steps))
-        self._period_s = 360.0 / step_deg * self._sample_s
+        self._step_deg = step_deg = float(np.median(steps))
+        period_s = 360.0 / step_deg * self._sample_s
         first_sample_s = float(np.min(measured_s - (angle - angle[0]) / step_deg * self._sample_s))
+        self._turn_end_s = first_sample_s + (2.0 - angle[0] / 360.0) * period_s
         return Turn(angle_deg=angle, distance_mm=distance, quality=quality,
-                    first_sample_s=first_sample_s, period_s=self._period_s,
+                    first_sample_s=first_sample_s, period_s=period_s,
                     last_byte_s=float(received_s[-1]))

@@ -206,3 +206,13 @@ def test_real_hand_moved_office_recording_is_refused():
     from wctls_ros.evaluation import load_scans, MovingSensorError, require_still
     with pytest.raises(MovingSensorError, match='moved'):
         require_still(load_scans(OFFICE))
+
+
+def test_calibrate_command_prints_the_node_parameters(room_bag, capsys):
+    from wctls_ros.evaluation.evaluate_cli import calibrate_main
+    assert calibrate_main([str(room_bag)]) == 0
+    out = capsys.readouterr().out
+    assert 'feature_node:' in out and 'ros__parameters:' in out
+    range_sigma = float(out.split('range_sigma_m:')[1].split()[0])
+    assert 0.008 < range_sigma < 0.014                 # 10 mm simulated, scaled to NEES 2
+    assert calibrate_main([str(room_bag) + '_missing']) == 1

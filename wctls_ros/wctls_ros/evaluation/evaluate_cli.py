@@ -89,18 +89,28 @@ def main(argv=None) -> int:
     if unknown or not methods:
         print(f'evaluate: unknown methods {unknown}; choose among {METHODS}', file=sys.stderr)
         return 1
+    return _guarded('evaluate', lambda: _evaluate(args, methods, argv))
+
+
+def _guarded(prog: str, work) -> int:
+    """Run a command's work; a moving sensor exits 2, an unreadable input 1, with the reason."""
     from ..bags import BagError
     try:
-        scans = load_scans(args.bag, args.topic, args.limit)
-        still = require_still(scans)
-        noise, origin = _noise(args, scans)
-        evaluation = evaluate_scans(scans, noise, methods, args.propagation, args.min_presence)
+        return work()
     except MovingSensorError as error:
-        print(f'evaluate: refused: {error}', file=sys.stderr)
+        print(f'{prog}: refused: {error}', file=sys.stderr)
         return 2
     except (BagError, ValueError) as error:
-        print(f'evaluate: {error}', file=sys.stderr)
+        print(f'{prog}: {error}', file=sys.stderr)
         return 1
+
+
+def _evaluate(args, methods, argv) -> int:
+    """Load, check, analyse and write the report of ``evaluate``."""
+    scans = load_scans(args.bag, args.topic, args.limit)
+    still = require_still(scans)
+    noise, origin = _noise(args, scans)
+    evaluation = evaluate_scans(scans, noise, methods, args.propagation, args.min_presence)
     from .report import summary_rows, write_report
     command = 'evaluate ' + ' '.join(shlex.quote(a) for a in
                                      (sys.argv[1:] if argv is None else argv))
@@ -157,17 +167,14 @@ def calibrate_main(argv=None) -> int:
     :return: exit status (2 for a moving sensor)
     """
     args = calibrate_parser().parse_args(argv)
-    from ..bags import BagError
-    try:
-        scans = load_scans(args.bag, args.topic, args.limit)
-        require_still(scans)
-        fit, nees_independent, nees_full, scale = calibrate(scans, args.method)
-    except MovingSensorError as error:
-        print(f'calibrate: refused: {error}', file=sys.stderr)
-        return 2
-    except (BagError, ValueError) as error:
-        print(f'calibrate: {error}', file=sys.stderr)
-        return 1
+    return _guarded('calibrate', lambda: _calibrate(args))
+
+
+def _calibrate(args) -> int:
+    """Load, check and fit the recording of ``calibrate`` and print the results."""
+    scans = load_scans(args.bag, args.topic, args.limit)
+    require_still(scans)
+    fit, nees_independent, nees_full, scale = calibrate(scans, args.method)
     print(f'# calibrate {args.bag}: {len(scans)} scans, {fit.wall_beams} wall beams')
     print(f'# fitted: {fit.noise.describe()} (offset lag-1 correlation '
           f'{fit.offset_lag1:.2f})')

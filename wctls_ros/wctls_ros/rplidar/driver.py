@@ -34,10 +34,11 @@ RESET_WAIT_S = 2.0             # an S1 is silent for about 2 s after RESET
 BACKOFF_FIRST_S = 0.05
 BACKOFF_MAX_S = 1.0
 STREAM_READ_TIMEOUT_S = 0.1
-# Waking up costs more than the work per byte, so the stream is read and decoded at most this
-# often, except from shortly before the predicted end of each turn until it is complete: there
-# every arrival is read (and timestamped) and decoded at once. The turn is published without
-# extra delay, and its last frames, timestamped on arrival, pin down its stamp.
+# Waking up and decoding cost more than the work per byte, so the stream is read and decoded at
+# most this often, except around the predicted end of each turn: from shortly before it every
+# arrival is read (the turn's last frames, timestamped on arrival, pin down its stamp), and from
+# one frame after it, when the turn can be complete, every arrival is also decoded, so the turn
+# is published without extra delay.
 STREAM_READ_PERIOD_S = 0.05
 TURN_END_MARGIN_S = 0.005
 LOG_THROTTLE_S = 5.0
@@ -395,19 +396,25 @@ class RplidarDriver:
 
     def _stream(self, link, decoder, assembler: TurnAssembler, mode: ScanMode, data: bytes):
         """Decode the stream into turns until closing or a motor stop request."""
-        offsets, times = [], []
+        offsets, times, pending = [], [], []
         stream_end = 0
         seen = (0, 0)
+        frame_s = decoder.SAMPLES_PER_FRAME * mode.us_per_sample * 1e-6
         now = time.monotonic()
-        last_bytes_s = last_samples_s = now
+        last_bytes_s = last_samples_s = next_decode_s = now
         while not self._closing.is_set() and self._motor_on:
             if data:
                 stream_end += len(data)
                 offsets.append(stream_end)
                 times.append(now)
-                del offsets[:-_CHUNK_LOG_SIZE], times[:-_CHUNK_LOG_SIZE]
+                pending.append(data)
                 last_bytes_s = now
-                samples = decoder.feed(data)
+            eta_s = assembler.turn_end_eta_s()
+            if pending and (eta_s is None or now >= min(next_decode_s, eta_s + frame_s)):
+                del offsets[:-_CHUNK_LOG_SIZE], times[:-_CHUNK_LOG_SIZE]
+                samples = decoder.feed(b''.join(pending))
+                pending.clear()
+                next_decode_s = now + STREAM_READ_PERIOD_S
                 if len(samples):
                     last_samples_s = now
                     chunk = np.minimum(np.searchsorted(offsets, samples.frame_end), len(times) - 1)
@@ -422,7 +429,7 @@ class RplidarDriver:
                                       'session (check the cable and the USB power)',
                                       throttle_duration_sec=LOG_THROTTLE_S)
                     seen = errors
-            eta_s = assembler.turn_end_eta_s()
+                eta_s = assembler.turn_end_eta_s()
             if eta_s is not None:
                 self._closing.wait(max(min(now + STREAM_READ_PERIOD_S,
                                            eta_s - TURN_END_MARGIN_S) - time.monotonic(), 0.0))

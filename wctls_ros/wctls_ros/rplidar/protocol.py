@@ -597,6 +597,7 @@ class _FrameStreamDecoder:
     """
 
     FRAME_SIZE = 0
+    SAMPLES_PER_FRAME = 1
     _HEADER_OK = (b'', b'')
 
     def __init__(self):
@@ -704,6 +705,7 @@ class DenseCapsuleDecoder(_FrameStreamDecoder):
     """
 
     FRAME_SIZE = CAPSULE_SIZE
+    SAMPLES_PER_FRAME = SAMPLES_PER_CAPSULE
     _HEADER_OK = (_byte_table(lambda b: b >> 4 == 0xA), _byte_table(lambda b: b >> 4 == 0x5))
     _OFFSETS = np.arange(SAMPLES_PER_CAPSULE) / SAMPLES_PER_CAPSULE
 
@@ -745,7 +747,7 @@ class DenseCapsuleDecoder(_FrameStreamDecoder):
         if angle.size:
             self._last_angle = angle[-1]
         frame_end = np.repeat(ends[:-1][keep], SAMPLES_PER_CAPSULE)
-        position = np.tile(np.arange(SAMPLES_PER_CAPSULE), int(keep.sum()))
+        position = np.arange(frame_end.size) % SAMPLES_PER_CAPSULE
         return Samples(angle_deg=angle,
                        distance_mm=distance,
                        quality=np.where(distance > 0, DENSE_RETURN_QUALITY, 0).astype(np.uint8),

@@ -29,7 +29,7 @@ class MarkerStyle:
 
     :ivar ellipse_sigma: draw the k-sigma ellipse of each corner's position (1 = one sigma)
     :ivar ellipse_scale: extra magnification of the ellipses for visibility (the paper uses 10)
-    :ivar line_width_m: width of the segment lines and ellipse outlines, m
+    :ivar line_width_m: width of the segment lines, m
     :ivar corner_size_m: diameter of the corner spheres and height of their id labels, m
     """
 

@@ -115,7 +115,7 @@ MARKER_PARAMETERS = (
                   'Extra magnification of the drawn ellipses (the paper draws them x10)',
                   (0.1, 1000.0), 'ellipse_scale'),
     ParameterSpec('marker_line_width_m', _STYLE.line_width_m,
-                  'Width of segment lines and ellipse outlines, m', (1e-4, 1.0), 'line_width_m'),
+                  'Width of the segment lines, m', (1e-4, 1.0), 'line_width_m'),
 )
 PARAMETERS = FEATURE_PARAMETERS + MARKER_PARAMETERS
 

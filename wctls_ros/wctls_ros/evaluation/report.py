@@ -7,6 +7,7 @@ Figures are drawn with matplotlib's Agg backend (no display needed) into small P
 import csv
 import math
 import pathlib
+import textwrap
 from typing import List, Sequence
 
 import numpy as np
@@ -152,7 +153,7 @@ def plot_scan(evaluation: Evaluation, path: pathlib.Path, title: str) -> None:
     ax.set_aspect('equal')
     ax.set_xlabel('x (m)')
     ax.set_ylabel('y (m)')
-    ax.set_title(title, fontsize=9)
+    ax.set_title(textwrap.fill(title, 60), fontsize=8)
     ax.legend(fontsize=7, loc='best')
     fig.tight_layout()
     fig.savefig(path)
@@ -178,7 +179,7 @@ def plot_areas(evaluation: Evaluation, path: pathlib.Path, title: str) -> None:
         patch.set_alpha(0.5)
     ax.set_yscale('log')
     ax.set_ylabel('per-scan median 1-sigma ellipse area (mm$^2$)')
-    ax.set_title(title, fontsize=9)
+    ax.set_title(textwrap.fill(title, 60), fontsize=8)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
@@ -212,7 +213,7 @@ def plot_consistency(evaluation: Evaluation, path: pathlib.Path, title: str) -> 
     bottom.set_xlabel('corner')
     if count:
         bottom.set_xticks(range(1, count + 1))
-    top.set_title(title, fontsize=9)
+    top.set_title(textwrap.fill(title, 80), fontsize=8)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

@@ -17,7 +17,7 @@ import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
@@ -246,8 +246,11 @@ def main(args=None):
     rclpy.init(args=args)
     node = None
     try:
+        # Made before the (slower) node, so a signal during start-up rarely meets it half-built.
+        executor = SingleThreadedExecutor()
         node = BagReplay()
-        rclpy.spin_until_future_complete(node, node.done)
+        executor.add_node(node)
+        executor.spin_until_future_complete(node.done)
         node.wait_for_delivery()
         return node.done.result() if node.done.done() else 0
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -255,6 +258,12 @@ def main(args=None):
     except (BagError, ParameterException, ValueError) as error:
         rclpy.logging.get_logger('bag_replay').fatal(str(error))
         return 1
+    except Exception:  # noqa: B902 - see below
+        # SIGINT/SIGTERM shut the context down from a signal handler; whatever runs then (the
+        # executor's wait set, a publish while starting up) may fail with an RCLError instead
+        # of raising ExternalShutdownException: that is a shutdown, not an error.
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             node.destroy_node()

@@ -13,7 +13,7 @@ from wctls_ros.rplidar.protocol import (
     DeviceHealth, DeviceInfo, encode_answer, encode_conf_request, encode_conf_value,
     encode_dense_capsules, encode_express_scan, encode_motor_speed, encode_request,
     encode_standard_nodes, find_descriptor, ProtocolError, Request, RequestParser,
-    ResponseDescriptor, SampleRate, SendMode, StandardNodeDecoder)
+    ResponseDescriptor, SampleRate, Samples, SendMode, StandardNodeDecoder)
 
 
 def h(text):
@@ -279,6 +279,34 @@ def test_capsule_resync_is_the_sdk_state_machine(seed):
     assert len(got) == len(reference) > 100 * 40
     np.testing.assert_allclose(np.array(got), np.array(reference), atol=1e-9)
     assert decoder.checksum_errors > 0 and decoder.discarded_bytes > 0
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_bridging_keeps_every_sdk_sample_and_adds_lost_successors_on_the_true_grid(seed):
+    rng = np.random.default_rng(seed)
+    n = 300
+    # Distances name the capsule (index + 1), so every sample says where it came from.
+    clean = encode_dense_capsules((np.arange(n) * 995) % 23040,
+                                  np.repeat(np.arange(1, n + 1)[:, None], 40, axis=1),
+                                  np.arange(n) == 0)
+    data = damaged(clean, rng, corrupt=0.01)
+    decoder = DenseCapsuleDecoder(108, bridge_lost_successors=True)
+    samples = Samples.concat(feed_in_chunks(decoder, data, rng))
+    capsule = samples.distance_mm.astype(int) - 1
+    sdk_capsules = {int(d) - 1 for _, d in sdk_capsule_reference(data)}
+    assert sdk_capsules <= set(capsule.tolist())
+    assert len(set(capsule.tolist())) > 1.8 * len(sdk_capsules) and decoder.bridged > 0
+    # Two corrupted bytes can cancel in the XOR checksum (for the SDK too): leave out capsules
+    # that passed damaged, and those whose sweep was taken from one.
+    raw, truth = (np.frombuffer(d, np.uint8).reshape(n, 84) for d in (data, clean))
+    collided = np.flatnonzero((raw != truth).any(axis=1) & (
+        (raw[:, 0] & 0xF | raw[:, 1] << 4) == np.bitwise_xor.reduce(raw[:, 2:], axis=1)))
+    assert len(collided) <= 2
+    sent, position = np.divmod(samples.slot, 40)      # the capsule by stream position
+    sound = ~np.isin(sent, np.r_[collided, collided - 1])
+    np.testing.assert_array_equal(capsule[sound], sent[sound])
+    expected = (sent * 995 + position * 995 / 40) / 64.0 % 360.0
+    np.testing.assert_allclose(samples.angle_deg[sound], expected[sound], atol=1e-9)
 
 
 def test_pure_garbage_yields_nothing_and_is_counted():

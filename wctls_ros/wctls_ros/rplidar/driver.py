@@ -382,7 +382,7 @@ class RplidarDriver:
             request, decoder = encode_request(Command.SCAN), StandardNodeDecoder()
         else:
             request = encode_express_scan(mode.mode_id)
-            decoder = DenseCapsuleDecoder(mode.us_per_sample)
+            decoder = DenseCapsuleDecoder(mode.us_per_sample, bridge_lost_successors=True)
         descriptor, data = self._request(link, request, mode.answer_type,
                                          f'{mode.name} scan descriptor')
         if descriptor.send_mode != SendMode.MULTIPLE or descriptor.length != decoder.FRAME_SIZE:

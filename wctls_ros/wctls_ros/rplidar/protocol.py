@@ -632,7 +632,7 @@ class _FrameStreamDecoder:
                 pos += good * size
             if good == count:
                 break
-            self._desync()
+            parts.append(self._desync())
             if header_bad[good]:
                 resynced = self._resync(buffer, pos)
                 self.discarded_bytes += resynced - pos
@@ -661,8 +661,9 @@ class _FrameStreamDecoder:
         """Return which header-aligned frames fail the payload check (none by default)."""
         return np.zeros(len(raw), dtype=bool)
 
-    def _desync(self):
-        """React to skipped bytes (nothing by default)."""
+    def _desync(self) -> Samples:
+        """React to skipped bytes; return samples this releases (none by default)."""
+        return Samples.concat([])
 
     def _decode(self, raw: np.ndarray, ends: np.ndarray) -> Samples:
         raise NotImplementedError
@@ -698,10 +699,14 @@ class DenseCapsuleDecoder(_FrameStreamDecoder):
 
     A capsule is decoded when the next one arrives: with ``diff`` the start angle difference
     (+360 degrees on a wrap), sample k in 0..39 lies at ``start + k * diff / 40``. As in the SDK a
-    capsule is dropped when ``diff`` exceeds the largest plausible sweep, when the next capsule
-    carries the S flag (a stream restart) or when bytes between them were skipped.
+    capsule is dropped when ``diff`` exceeds the largest plausible sweep or when the next capsule
+    carries the S flag (a stream restart). The SDK also drops it when bytes after it had to be
+    skipped (a corrupted successor): with ``bridge_lost_successors`` such a capsule is decoded
+    with the last measured ``diff`` instead, which more than doubles the samples kept on a link
+    that corrupts 1% of the bytes; without it the output is exactly the SDK's.
 
     :param us_per_sample: the scan mode's microseconds per sample (sets the sweep limit)
+    :param bridge_lost_successors: decode a capsule whose successor was lost, with the last diff
     """
 
     FRAME_SIZE = CAPSULE_SIZE
@@ -709,20 +714,29 @@ class DenseCapsuleDecoder(_FrameStreamDecoder):
     _HEADER_OK = (_byte_table(lambda b: b >> 4 == 0xA), _byte_table(lambda b: b >> 4 == 0x5))
     _OFFSETS = np.arange(SAMPLES_PER_CAPSULE) / SAMPLES_PER_CAPSULE
 
-    def __init__(self, us_per_sample: float):
+    def __init__(self, us_per_sample: float, bridge_lost_successors: bool = False):
         super().__init__()
         # The SDK's integer formula: the sweep of 40 samples at 100 Hz, in whole degrees.
         self._max_diff_q8 = (360 * 100 * SAMPLES_PER_CAPSULE
                              // (1000000 // max(int(us_per_sample), 1))) << 8
+        self._bridge = bridge_lost_successors
         self._previous = None    # (start_q8, distances (40,), frame end) of the cached capsule
+        self._last_diff_q8 = None
         self._last_angle = None
+        self.bridged = 0
 
     def _payload_bad(self, raw: np.ndarray) -> np.ndarray:
         received = (raw[:, 0] & 0x0F) | (raw[:, 1] << 4)
         return received != _xor_rows(raw[:, 2:])
 
-    def _desync(self):
-        self._previous = None
+    def _desync(self) -> Samples:
+        previous, self._previous = self._previous, None
+        if not (self._bridge and previous is not None and self._last_diff_q8 is not None):
+            return Samples.concat([])
+        self.bridged += 1
+        start, distances, end = previous
+        return self._samples(np.array([start]), np.array([self._last_diff_q8]), distances[None],
+                             np.array([end]))
 
     def _decode(self, raw: np.ndarray, ends: np.ndarray) -> Samples:
         capsules = raw.reshape(-1).view(_CAPSULE_DTYPE)
@@ -739,14 +753,22 @@ class DenseCapsuleDecoder(_FrameStreamDecoder):
         diff = starts[1:] - starts[:-1]
         diff[diff < 0] += FULL_TURN_Q6 << 2
         keep = ~restarts[1:] & (diff <= self._max_diff_q8)
-        angles_q8 = starts[:-1][keep, None] + diff[keep, None] * self._OFFSETS
+        if keep.any():
+            self._last_diff_q8 = diff[keep][-1]
+        return self._samples(starts[:-1][keep], diff[keep], distances[:-1][keep],
+                             ends[:-1][keep])
+
+    def _samples(self, starts_q8: np.ndarray, diffs_q8: np.ndarray, distances: np.ndarray,
+                 ends: np.ndarray) -> Samples:
+        """Lay out the samples of capsules given their start angles and sweeps."""
+        angles_q8 = starts_q8[:, None] + diffs_q8[:, None] * self._OFFSETS
         angle = np.mod(angles_q8.reshape(-1) / 256.0, 360.0)
-        distance = distances[:-1][keep].reshape(-1).astype(np.float64)
+        distance = distances.reshape(-1).astype(np.float64)
         previous = np.concatenate([[-np.inf if self._last_angle is None else self._last_angle],
                                    angle[:-1]])
         if angle.size:
             self._last_angle = angle[-1]
-        frame_end = np.repeat(ends[:-1][keep], SAMPLES_PER_CAPSULE)
+        frame_end = np.repeat(ends, SAMPLES_PER_CAPSULE)
         position = np.arange(frame_end.size) % SAMPLES_PER_CAPSULE
         return Samples(angle_deg=angle,
                        distance_mm=distance,

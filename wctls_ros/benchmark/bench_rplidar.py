@@ -8,8 +8,8 @@ Benchmark rplidar_node against the S1 emulator (its own process) on a pseudo-ter
 For DenseBoost and Standard, in one run each: the CPU time the node's reader thread (reading,
 decoding, turn assembly and publishing) and the whole node process spend per second of stream,
 and the delay from a turn's last byte to its LaserScan being published (median, p99). Then the
-share of turns still published with 1% of the streamed bytes corrupted (against the clean run's
-turn rate).
+share of turns still published with 1% of the streamed bytes corrupted, or dropped (against the
+clean run's turn rate).
 Usage: python bench_rplidar.py [seconds per run]
 """
 
@@ -74,11 +74,13 @@ def main():
                       f'{1e3 * np.percentile(r["latency_s"], 99):>5.2f} ms')
         print('(CPU in % of one core per second of stream; latency from the last byte of a '
               'turn to publish())')
-        with EmulatorProcess(['--link', link, '--corrupt-rate', '0.01']):
-            r = measure(link, seconds, 'DenseBoost')
-        expected = rates['DenseBoost'] * r['wall_s']
-        print(f'1% corrupted bytes, DenseBoost: {r["turns"]} turns published of {expected:.1f} '
-              f'({100 * r["turns"] / expected:.1f}%), reader CPU {100 * r["reader_cpu"]:.2f}%')
+        for fault, what in (('--corrupt-rate', 'corrupted'), ('--drop-rate', 'dropped')):
+            with EmulatorProcess(['--link', link, fault, '0.01']):
+                r = measure(link, seconds, 'DenseBoost')
+            expected = rates['DenseBoost'] * r['wall_s']
+            print(f'1% {what} bytes, DenseBoost: {r["turns"]} turns published of '
+                  f'{expected:.1f} ({100 * r["turns"] / expected:.1f}%), reader CPU '
+                  f'{100 * r["reader_cpu"]:.2f}%')
 
 
 if __name__ == '__main__':

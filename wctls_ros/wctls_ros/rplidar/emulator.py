@@ -569,34 +569,42 @@ def _read_stdin_commands(commands: queue.Queue):
 
 def _parse_args(argv):
     parser = argparse.ArgumentParser(
-        prog='s1_emulator', description=__doc__.split('\n\n')[0].strip(),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+        prog='s1_emulator',
+        description='An RPLIDAR S1 speaking the real byte protocol on a pseudo-terminal (and '
+                    'TCP), streaming a simulated floor plan in real time.',
+        epilog='Lines on standard input control it while it runs: unplug, replug, silent SECONDS, '
+               'health ok|warning|error [RESETS], corrupt RATE, drop RATE, quit.')
     parser.add_argument('--link', help='symlink to point at the pseudo-terminal, e.g. /tmp/ttyS1')
     parser.add_argument('--tcp-port', type=int,
                         help='also serve on this TCP port (0 = any free port; S1 TCP: 20108)')
-    parser.add_argument('--tcp-host', default='127.0.0.1', help='address to listen on')
+    parser.add_argument('--tcp-host', default='127.0.0.1',
+                        help='address to listen on (default: %(default)s)')
     parser.add_argument('--floor-plan', default='environment_a',
-                        help='bundled plan name (environment_a, environment_b) or a YAML path')
+                        help='bundled plan name (environment_a, environment_b) or a YAML path '
+                             '(default: %(default)s)')
     parser.add_argument('--pose', type=float, nargs=3, metavar=('X', 'Y', 'YAW_DEG'),
-                        help="sensor pose in the plan (default: the plan's own)")
+                        help="sensor pose in the plan, m and degrees (default: the plan's own)")
     parser.add_argument('--range-sigma', type=float, default=NoiseModel.range_sigma_m,
-                        help='range noise std, m')
+                        help='range noise std, m (default: %(default)s)')
     parser.add_argument('--bearing-sigma-deg', type=float,
                         default=math.degrees(NoiseModel.bearing_sigma_rad),
-                        help='bearing noise std, degrees')
+                        help='bearing noise std, degrees (default: %(default).3f)')
     parser.add_argument('--noiseless', action='store_true', help='exact ranges (no noise)')
-    parser.add_argument('--seed', type=int, default=0, help='random seed')
-    parser.add_argument('--firmware', default='1.28', help='firmware version MAJOR.MINOR')
+    parser.add_argument('--seed', type=int, default=0, help='random seed (default: 0)')
+    parser.add_argument('--firmware', default='1.28',
+                        help='firmware version MAJOR.MINOR (default: %(default)s; before 1.24 '
+                             'there is no GET_LIDAR_CONF)')
     parser.add_argument('--corrupt-rate', type=float, default=0.0,
                         help='probability that a streamed byte is corrupted')
     parser.add_argument('--drop-rate', type=float, default=0.0,
                         help='probability that a streamed byte is dropped')
     parser.add_argument('--silent-after', type=float, help='go silent after this many seconds')
-    parser.add_argument('--silent-for', type=float, default=3.0, help='silence duration, s')
+    parser.add_argument('--silent-for', type=float, default=3.0,
+                        help='silence duration, s (default: %(default)s)')
     parser.add_argument('--health', choices=['ok', 'warning', 'error'], default='ok',
-                        help='health status to report')
+                        help='health status to report (default: %(default)s)')
     parser.add_argument('--health-error-resets', type=int, default=1,
-                        help='RESETs that clear a health error')
+                        help='RESETs that clear a health error (default: %(default)s)')
     return parser.parse_args(argv)
 
 

@@ -55,7 +55,7 @@ def single(rho, theta):
 def test_analytic_covariance_matches_finite_differences(fit, normal_angle, radius, along):
     rho, theta = wall_returns(normal_angle, radius, along, np.random.default_rng(7),
                               (0.02, 0.002))
-    _, analytic = fit(single(rho, theta), RANGE_SIGMA, BEARING_SIGMA)
+    _, analytic, _ = fit(single(rho, theta), RANGE_SIGMA, BEARING_SIGMA)
     numeric = fd_covariance(lambda r, t: fit(single(r, t), 1.0, 1.0)[0][0], rho, theta)
     assert np.abs(numeric - analytic[0]).max() / np.abs(analytic[0]).max() < 1e-5
 
@@ -64,10 +64,10 @@ def test_normal_form_covariance_matches_finite_differences():
     rho, theta = wall_returns(2.2, 1.6, np.linspace(-0.8, 0.6, 30),
                               np.random.default_rng(3), (0.02, 0.002))
     returns = single(rho, theta)
-    _, _, analytic = normal_form(*utls(returns, RANGE_SIGMA, BEARING_SIGMA))
+    _, _, analytic = normal_form(*utls(returns, RANGE_SIGMA, BEARING_SIGMA)[:2])
 
     def angle_radius(r, t):
-        angle, radius, _ = normal_form(*utls(single(r, t), 1.0, 1.0))
+        angle, radius, _ = normal_form(*utls(single(r, t), 1.0, 1.0)[:2])
         return np.array([angle[0], radius[0]])
     numeric = fd_covariance(angle_radius, rho, theta)
     assert np.abs(numeric - analytic[0]).max() / np.abs(analytic[0]).max() < 1e-5
@@ -204,3 +204,52 @@ def test_corner_covariances_are_exactly_symmetric():
     fits = fit_lines('wctls', returns, RANGE_SIGMA, BEARING_SIGMA)
     covariance = corner_of(fits).covariance
     np.testing.assert_array_equal(covariance, covariance.transpose(0, 2, 1))
+
+
+@pytest.mark.parametrize('method', METHODS)
+def test_offset_jacobian_matches_shifting_every_range(method):
+    # The ML fit's Jacobian is first order (like its Fisher covariance): exact on exact returns.
+    rng = None if method == 'ml' else np.random.default_rng(4)
+    returns = two_walls([2.4, 0.8], math.pi, -math.pi / 2 + 0.2, (35, 25), rng)
+
+    def fit(offset):
+        shifted = segment_returns(returns.rho + offset, returns.theta, returns.offsets,
+                                  returns.counts)
+        return fit_lines(method, shifted, RANGE_SIGMA, BEARING_SIGMA)
+    h = 1e-6
+    numeric_line = (fit(h).line - fit(-h).line) / (2 * h)
+    numeric_normal = np.column_stack([
+        (fit(h).angle_rad - fit(-h).angle_rad) / (2 * h),
+        (fit(h).radius_m - fit(-h).radius_m) / (2 * h)])
+    fits = fit(0.0)
+    scale = np.abs(fits.line_offset_jacobian).max()
+    assert np.abs(numeric_line - fits.line_offset_jacobian).max() < 1e-5 * scale
+    np.testing.assert_allclose(fits.normal_offset_jacobian, numeric_normal, rtol=1e-5,
+                               atol=1e-9)
+
+
+@pytest.mark.parametrize('method', METHODS)
+def test_common_range_offset_is_propagated_with_its_correlation(method):
+    # 1 mm independent noise and a 5 mm offset common to each scan: only the joint term
+    # (both walls move together) makes the corner covariance match the scatter.
+    trials, counts, corner = 400, (40, 30), np.array([2.0, 1.2])
+    rng = np.random.default_rng(77)
+    sigmas = (0.001, 0.0, 0.005)
+    batches = []
+    for _ in range(trials):
+        walls = two_walls(corner, math.pi, -math.pi / 2, counts)
+        batches.append((walls.rho + rng.normal(0.0, sigmas[0], walls.rho.shape)
+                        + rng.normal(0.0, sigmas[2]), walls.theta))
+    rho = np.concatenate([b[0] for b in batches])
+    theta = np.concatenate([b[1] for b in batches])
+    lengths = np.tile(counts, trials)
+    returns = segment_returns(rho, theta, np.cumsum(lengths) - lengths, lengths)
+    fits = fit_lines(method, returns, 0.001, 1e-9)
+    ends = np.full((2 * trials, 2), 1e3)
+    pairs = (np.arange(0, 2 * trials, 2), np.arange(1, 2 * trials, 2))
+    with_common = find_corners(fits.line, fits.line_covariance, ends, ends, *pairs, 0.1, 1e9,
+                               fits.line_offset_jacobian, sigmas[2])
+    without = find_corners(fits.line, fits.line_covariance, ends, ends, *pairs, 0.1, 1e9)
+    error = with_common.xy_m - corner
+    assert 1.8 <= nees(error, with_common.covariance[:, :2, :2]).mean() <= 2.2
+    assert nees(error, without.covariance[:, :2, :2]).mean() > 10.0

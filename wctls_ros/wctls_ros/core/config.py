@@ -17,6 +17,8 @@ class FeatureConfig:
     :ivar method: line fit whose covariance is propagated: 'utls', 'wtls', 'wctls' or 'ml'
     :ivar range_sigma_m: std of the range noise, m (> 0)
     :ivar bearing_sigma_rad: std of the bearing noise, rad (>= 0)
+    :ivar common_range_sigma_m: std of a range offset shared by every return of one scan, m
+        (>= 0; some sensors drift as a whole, e.g. the SICK LMS111 by about 1 mm)
     :ivar range_min_m: drop returns closer than this (on top of the scan's own range_min), m
     :ivar range_max_m: drop returns farther than this (on top of the scan's range_max), m
     :ivar breakpoint_lambda_rad: the adaptive breakpoint rule's worst incidence angle lambda: a
@@ -35,6 +37,7 @@ class FeatureConfig:
     method: str = 'wctls'
     range_sigma_m: float = 0.05
     bearing_sigma_rad: float = math.radians(0.391)
+    common_range_sigma_m: float = 0.0
     range_min_m: float = 0.0
     range_max_m: float = math.inf
     breakpoint_lambda_rad: float = math.radians(10.0)
@@ -80,6 +83,7 @@ def validation_errors(config: FeatureConfig):
     ranges = {  # field: (low, high, low inclusive, high inclusive)
         'range_sigma_m': (0.0, 10.0, False, True),
         'bearing_sigma_rad': (0.0, 0.2, True, True),
+        'common_range_sigma_m': (0.0, 1.0, True, True),
         'range_min_m': (0.0, math.inf, True, False),
         'range_max_m': (0.0, math.inf, False, True),
         'breakpoint_lambda_rad': (0.0, math.pi / 2, False, False),

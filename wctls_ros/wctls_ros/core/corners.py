@@ -65,7 +65,9 @@ def _yaw_gradient(line: np.ndarray) -> np.ndarray:
 
 def find_corners(line: np.ndarray, line_covariance: np.ndarray,
                  start_xy_m: np.ndarray, end_xy_m: np.ndarray, first: np.ndarray,
-                 second: np.ndarray, min_angle_rad: float, max_gap_m: float) -> CornerSet:
+                 second: np.ndarray, min_angle_rad: float, max_gap_m: float,
+                 line_offset_jacobian: np.ndarray = None,
+                 common_range_sigma_m: float = 0.0) -> CornerSet:
     """
     Intersect the given pairs of segments and keep the real corners.
 
@@ -81,6 +83,9 @@ def find_corners(line: np.ndarray, line_covariance: np.ndarray,
     :param second: later segment of each candidate pair, shape (k,)
     :param min_angle_rad: smallest angle between the two walls, rad
     :param max_gap_m: largest distance from the corner to either facing end point, m
+    :param line_offset_jacobian: d(a, b, c) / d(range offset common to the scan), (S, 3), per m
+    :param common_range_sigma_m: std of that common offset, m: it moves both lines together, so
+        its part of the corner covariance is sigma^2 j j^T with j = J_1 g_1 + J_2 g_2
     :return: the corners that pass both tests
     """
     first = np.asarray(first, dtype=np.intp)
@@ -131,5 +136,12 @@ def find_corners(line: np.ndarray, line_covariance: np.ndarray,
     offdiagonal = column * cross[:, None]
     covariance[:, :2, 2] = covariance[:, 2, :2] = -(offdiagonal[:count] + offdiagonal[count:])
     covariance[:, 2, 2] = yaw[:count] + yaw[count:]
+    if common_range_sigma_m > 0.0 and line_offset_jacobian is not None:
+        offset = line_offset_jacobian[walls]
+        shift = np.empty((2 * count, 3))
+        shift[:, :2] = -column * np.einsum('ci,ci->c', h2, offset)[:, None]
+        shift[:, 2] = np.einsum('ci,ci->c', gradient, offset)
+        common = shift[:count] + shift[count:]
+        covariance += common_range_sigma_m ** 2 * common[:, :, None] * common[:, None, :]
     return CornerSet(xy, np.arctan2(bisector[:, 1], bisector[:, 0]), covariance, opening,
                      first, second)

@@ -18,9 +18,13 @@ class Segment:
 
     :ivar angle_rad: normal angle, from the sensor towards the line, rad in (-pi, pi]
     :ivar radius_m: distance of the line from the sensor, m (>= 0)
-    :ivar covariance: covariance of (angle, radius), shape (2, 2): rad^2, rad m, m^2
+    :ivar covariance: covariance of (angle, radius), shape (2, 2): rad^2, rad m, m^2 (all noise
+        terms of the configuration, the common-mode range offset included)
     :ivar line: (a, b, c) of a x + b y + c = 0 as the method defines them, shape (3,)
-    :ivar line_covariance: covariance of (a, b, c), shape (3, 3)
+    :ivar line_covariance: covariance of (a, b, c) from the independent per-return noise,
+        shape (3, 3)
+    :ivar line_offset_jacobian: d(a, b, c) / d(range offset common to every return of the
+        scan), shape (3,), per m (the common-mode part of the covariance is sigma^2 g g^T)
     :ivar start_xy_m: first return projected on the line, shape (2,), m
     :ivar end_xy_m: last return projected on the line, shape (2,), m
     :ivar first_index: beam index of the first return in the scan's ranges
@@ -34,6 +38,7 @@ class Segment:
     covariance: np.ndarray
     line: np.ndarray
     line_covariance: np.ndarray
+    line_offset_jacobian: np.ndarray
     start_xy_m: np.ndarray
     end_xy_m: np.ndarray
     first_index: int
@@ -86,7 +91,7 @@ class SegmentSet(_Rows):
     The segments of one scan as arrays, one row per segment (fields as in :class:`Segment`).
 
     Shapes: angle_rad, radius_m, first_index, last_index, num_points (S,); covariance (S, 2, 2);
-    line (S, 3); line_covariance (S, 3, 3); start_xy_m, end_xy_m (S, 2).
+    line, line_offset_jacobian (S, 3); line_covariance (S, 3, 3); start_xy_m, end_xy_m (S, 2).
     """
 
     angle_rad: np.ndarray
@@ -94,6 +99,7 @@ class SegmentSet(_Rows):
     covariance: np.ndarray
     line: np.ndarray
     line_covariance: np.ndarray
+    line_offset_jacobian: np.ndarray
     start_xy_m: np.ndarray
     end_xy_m: np.ndarray
     first_index: np.ndarray
@@ -105,7 +111,8 @@ class SegmentSet(_Rows):
 
     def __getitem__(self, i: int) -> Segment:
         return Segment(float(self.angle_rad[i]), float(self.radius_m[i]), self.covariance[i],
-                       self.line[i], self.line_covariance[i], self.start_xy_m[i],
+                       self.line[i], self.line_covariance[i], self.line_offset_jacobian[i],
+                       self.start_xy_m[i],
                        self.end_xy_m[i], int(self.first_index[i]), int(self.last_index[i]),
                        int(self.num_points[i]))
 
@@ -117,7 +124,8 @@ class SegmentSet(_Rows):
         :return: the empty set
         """
         return SegmentSet(np.zeros(0), np.zeros(0), np.zeros((0, 2, 2)), np.zeros((0, 3)),
-                          np.zeros((0, 3, 3)), np.zeros((0, 2)), np.zeros((0, 2)),
+                          np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros((0, 2)),
+                          np.zeros((0, 2)),
                           np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0, np.intp))
 
 

@@ -9,9 +9,12 @@ return with std ``range_sigma`` (m) and ``bearing_sigma`` (rad), and every covar
                 + bearing_sigma^2 (dphi/dtheta_i)(dphi/dtheta_i)^T ]
 
 with the analytic Jacobians of ``../shared/spec/math.md`` (the paper's eqs. (6)-(23) with its
-typos corrected). Each method returns the line in its own implicit form a x + b y + c = 0 and
-the 3x3 covariance of (a, b, c); :func:`normal_form` gives every method's line in one common form
-x cos(angle) + y sin(angle) = radius, radius >= 0, with the 2x2 covariance of (angle, radius).
+typos corrected). Each method returns the line in its own implicit form a x + b y + c = 0, the
+3x3 covariance of (a, b, c) and the shift of (a, b, c) per metre of a range offset common to every
+return of the scan (d(a, b, c)/d offset = sum_i d(a, b, c)/d rho_i), which lets a common-mode
+range error be propagated with its correlation between lines; :func:`normal_form` gives every
+method's line in one common form x cos(angle) + y sin(angle) = radius, radius >= 0, with the 2x2
+covariance of (angle, radius).
 """
 
 from dataclasses import dataclass
@@ -90,6 +93,8 @@ class LineFits:
         shape (S,), rad in (-pi, pi]
     :ivar radius_m: distance of the line from the origin, shape (S,), m, >= 0
     :ivar normal_covariance: covariance of (angle, radius), shape (S, 2, 2): rad^2, rad m, m^2
+    :ivar line_offset_jacobian: d(a, b, c) / d(range offset common to all returns), (S, 3), per m
+    :ivar normal_offset_jacobian: d(angle, radius) / d(common range offset), (S, 2): rad/m, m/m
     """
 
     line: np.ndarray
@@ -97,6 +102,8 @@ class LineFits:
     angle_rad: np.ndarray
     radius_m: np.ndarray
     normal_covariance: np.ndarray
+    line_offset_jacobian: np.ndarray
+    normal_offset_jacobian: np.ndarray
 
     def select(self, keep: np.ndarray) -> 'LineFits':
         """
@@ -106,7 +113,8 @@ class LineFits:
         :return: the selected fits
         """
         return LineFits(self.line[keep], self.line_covariance[keep], self.angle_rad[keep],
-                        self.radius_m[keep], self.normal_covariance[keep])
+                        self.radius_m[keep], self.normal_covariance[keep],
+                        self.line_offset_jacobian[keep], self.normal_offset_jacobian[keep])
 
 
 def _propagate(jac_rho: np.ndarray, jac_theta: np.ndarray, returns: SegmentReturns,
@@ -150,7 +158,7 @@ def utls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
     :param returns: the segments' returns
     :param range_sigma: range noise std, m
     :param bearing_sigma: bearing noise std, rad
-    :return: (line (S, 3), covariance (S, 3, 3))
+    :return: (line (S, 3), covariance (S, 3, 3), offset Jacobian (S, 3))
     """
     total, mx, my, mxx, myy, mxy = _moments(returns, np.ones_like(returns.rho))
     line = _algebraic_line(total, mx, my, mxx, myy, mxy)
@@ -166,7 +174,8 @@ def utls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
         -y * myy + 2 * xy * mx - x * mxy - dxy * my,
         x * mxx - 2 * xy * my + y * mxy - dxy * mx,
         2 * (dxy * mxy + xy * (myy - mxx))])
-    return line, _propagate(jac_rho, jac_theta, returns, range_sigma, bearing_sigma)
+    return (line, _propagate(jac_rho, jac_theta, returns, range_sigma, bearing_sigma),
+            returns.sums(jac_rho))
 
 
 def _range_weights(returns: SegmentReturns):
@@ -187,7 +196,7 @@ def wtls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
     :param returns: the segments' returns
     :param range_sigma: range noise std, m
     :param bearing_sigma: bearing noise std, rad
-    :return: (line (S, 3), covariance (S, 3, 3))
+    :return: (line (S, 3), covariance (S, 3, 3), offset Jacobian (S, 3))
     """
     w = _range_weights(returns)
     total, mx, my, mxx, myy, mxy = _moments(returns, w)
@@ -203,7 +212,8 @@ def wtls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
         -y * myy + 2 * xy * mx - x * mxy - dxy * my,
         x * mxx - 2 * xy * my + y * mxy - dxy * mx,
         2 * (dxy * mxy + xy * (myy - mxx))])
-    return line, _propagate(jac_rho, jac_theta, returns, range_sigma, bearing_sigma)
+    return (line, _propagate(jac_rho, jac_theta, returns, range_sigma, bearing_sigma),
+            returns.sums(jac_rho))
 
 
 def wctls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
@@ -216,7 +226,8 @@ def wctls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
     :param returns: the segments' returns
     :param range_sigma: range noise std, m
     :param bearing_sigma: bearing noise std, rad
-    :return: (line (S, 3) with a^2 + b^2 = 1 and c > 0, covariance (S, 3, 3) of rank 2)
+    :return: (line (S, 3) with a^2 + b^2 = 1 and c > 0, covariance (S, 3, 3) of rank 2, offset
+        Jacobian (S, 3))
     """
     w = _range_weights(returns)
     total, mx, my, mxx, myy, mxy = _moments(returns, w)
@@ -247,6 +258,7 @@ def wctls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
     flip = np.array([1.0, -1.0])
     xq, yq = px, -py                               # Q = F p, F = diag(1, -1)
     cov_q = cov_p * flip[:, None] * flip[None, :]
+    offset_q = returns.sums(jac_rho) * flip
     norm = np.hypot(xq, yq)
     line = np.column_stack([-xq, yq, np.ones_like(xq)]) / norm[:, None]
     jac = np.empty((len(xq), 3, 2))                 # J_WC of eq. (23)
@@ -254,7 +266,7 @@ def wctls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
     jac[:, 1, 0], jac[:, 1, 1] = -xq * yq, xq * xq
     jac[:, 2, 0], jac[:, 2, 1] = -xq, -yq
     jac /= (norm ** 3)[:, None, None]
-    return line, jac @ cov_q @ jac.transpose(0, 2, 1)
+    return line, jac @ cov_q @ jac.transpose(0, 2, 1), np.einsum('sij,sj->si', jac, offset_q)
 
 
 def line_angle_radius(line: np.ndarray):
@@ -270,15 +282,8 @@ def line_angle_radius(line: np.ndarray):
         return np.arctan2(sign * b, sign * a), -sign * c / np.hypot(a, b)
 
 
-def normal_form(line: np.ndarray, line_covariance: np.ndarray):
-    """
-    Convert implicit lines a x + b y + c = 0 to x cos(angle) + y sin(angle) = radius >= 0.
-
-    :param line: (a, b, c), shape (S, 3)
-    :param line_covariance: shape (S, 3, 3)
-    :return: (angle (S,) rad, radius (S,) m, covariance of (angle, radius) (S, 2, 2))
-    """
-    angle, radius = line_angle_radius(line)
+def _normal_jacobian(line: np.ndarray) -> np.ndarray:
+    """Return d(angle, radius) / d(a, b, c) of implicit lines, shape (S, 2, 3)."""
     a, b, c = line.T
     n2 = a * a + b * b
     n = np.sqrt(n2)
@@ -288,7 +293,19 @@ def normal_form(line: np.ndarray, line_covariance: np.ndarray):
         jac[:, 0, 0], jac[:, 0, 1] = -b / n2, a / n2
         jac[:, 1, 0], jac[:, 1, 1] = sign * c * a / (n2 * n), sign * c * b / (n2 * n)
         jac[:, 1, 2] = -sign / n
-    return angle, radius, jac @ line_covariance @ jac.transpose(0, 2, 1)
+    return jac
+
+
+def normal_form(line: np.ndarray, line_covariance: np.ndarray):
+    """
+    Convert implicit lines a x + b y + c = 0 to x cos(angle) + y sin(angle) = radius >= 0.
+
+    :param line: (a, b, c), shape (S, 3)
+    :param line_covariance: shape (S, 3, 3)
+    :return: (angle (S,) rad, radius (S,) m, covariance of (angle, radius) (S, 2, 2))
+    """
+    jac = _normal_jacobian(line)
+    return (*line_angle_radius(line), jac @ line_covariance @ jac.transpose(0, 2, 1))
 
 
 def moment_prefix_sums(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -359,13 +376,12 @@ def implicit_from_normal(angle: np.ndarray, radius: np.ndarray, covariance: np.n
     :param angle: shape (S,), rad
     :param radius: shape (S,), m
     :param covariance: covariance of (angle, radius), shape (S, 2, 2)
-    :return: (line (S, 3), covariance (S, 3, 3))
+    :return: (line (S, 3), covariance (S, 3, 3), Jacobian d line / d(angle, radius) (S, 3, 2))
     """
     c, s = np.cos(angle), np.sin(angle)
-    zero = np.zeros_like(c)
-    jac = np.stack([np.stack([-s, zero], -1), np.stack([c, zero], -1),
-                    np.stack([zero, -np.ones_like(c)], -1)], -2)
-    return np.column_stack([c, s, -radius]), jac @ covariance @ jac.transpose(0, 2, 1)
+    jac = np.zeros((len(c), 3, 2))
+    jac[:, 0, 0], jac[:, 1, 0], jac[:, 2, 1] = -s, c, -1.0
+    return (np.column_stack([c, s, -radius]), jac @ covariance @ jac.transpose(0, 2, 1), jac)
 
 
 def ml(returns: SegmentReturns, range_sigma: float, bearing_sigma: float,
@@ -382,20 +398,21 @@ def ml(returns: SegmentReturns, range_sigma: float, bearing_sigma: float,
     :param bearing_sigma: bearing noise std, rad
     :param start_angle: initial normal angles, shape (S,), rad (e.g. the WTLS line)
     :param start_radius: initial radii, shape (S,), m
-    :return: (angle (S,), radius (S,), covariance of (angle, radius) (S, 2, 2))
+    :return: (angle (S,), radius (S,), covariance of (angle, radius) (S, 2, 2),
+        d(angle, radius) / d(common range offset) (S, 2))
     """
     angle = np.array(start_angle, dtype=float)
     radius = np.array(start_radius, dtype=float)
     s = returns.segment
     rho, theta = returns.rho, returns.theta
     for _ in range(_ML_MAX_ITERATIONS):
-        fisher, step = _ml_fisher_and_step(rho, theta, angle[s], radius[s], returns,
-                                           range_sigma, bearing_sigma)
+        fisher, step, _ = _ml_fisher_and_step(rho, theta, angle[s], radius[s], returns,
+                                              range_sigma, bearing_sigma)
         angle, radius = angle + step[:, 0], radius + step[:, 1]
         if not (np.abs(step) > _ML_STEP_TOLERANCE).any():
             break
-    fisher, _ = _ml_fisher_and_step(rho, theta, angle[s], radius[s], returns,
-                                    range_sigma, bearing_sigma)
+    fisher, _, offset = _ml_fisher_and_step(rho, theta, angle[s], radius[s], returns,
+                                            range_sigma, bearing_sigma)
     flip = radius < 0.0
     angle = np.where(flip, angle + np.pi, angle)
     angle = np.angle(np.exp(1j * angle))
@@ -403,16 +420,19 @@ def ml(returns: SegmentReturns, range_sigma: float, bearing_sigma: float,
     # Reflecting (angle, radius) -> (angle + pi, -radius) flips the sign of their correlation.
     covariance[flip, 0, 1] *= -1.0
     covariance[flip, 1, 0] *= -1.0
-    return angle, np.abs(radius), covariance
+    offset[flip, 1] *= -1.0
+    return angle, np.abs(radius), covariance, offset
 
 
 def _ml_fisher_and_step(rho, theta, angle, radius, returns, range_sigma, bearing_sigma):
     """
-    Return the Fisher information (S, 2, 2) and the Gauss-Newton step (S, 2).
+    Return the Fisher information (S, 2, 2), the Gauss-Newton step (S, 2) and the offset Jacobian.
 
     The variances s_i^2 use the range to the current line along each beam instead of the
     measured range: a weight computed from the noisy range would correlate with the residual
-    and bias the line (by several mm at grazing incidence).
+    and bias the line (by several mm at grazing incidence). The offset Jacobian is
+    d(angle, radius) / d(offset of every range) = -F^-1 sum_i s_i^-2 g_i cos(theta_i - angle),
+    from the estimating equations sum_i s_i^-2 g_i d_i = 0 (first order).
     """
     cos_d, sin_d = np.cos(theta - angle), np.sin(theta - angle)
     residual = rho * cos_d - radius
@@ -421,10 +441,10 @@ def _ml_fisher_and_step(rho, theta, angle, radius, returns, range_sigma, bearing
     g_angle = on_line * sin_d                      # d residual / d angle; d / d radius = -1
     sums = returns.sums(np.column_stack([inv_var * g_angle * g_angle, -inv_var * g_angle,
                                          inv_var, inv_var * g_angle * residual,
-                                         -inv_var * residual]))
+                                         -inv_var * residual, inv_var * g_angle * cos_d,
+                                         -inv_var * cos_d]))
     fisher = np.stack([sums[:, 0:2], sums[:, 1:3]], -2)
-    step = -solve_2x2(fisher, sums[:, 3:5])
-    return fisher, step
+    return fisher, -solve_2x2(fisher, sums[:, 3:5]), -solve_2x2(fisher, sums[:, 5:7])
 
 
 def fit_lines(method: str, returns: SegmentReturns, range_sigma: float,
@@ -440,12 +460,16 @@ def fit_lines(method: str, returns: SegmentReturns, range_sigma: float,
     :raises ValueError: on an unknown method
     """
     if method == 'ml':
-        start = normal_form(*wtls(returns, range_sigma, bearing_sigma))
-        angle, radius, covariance = ml(returns, range_sigma, bearing_sigma, *start[:2])
-        line, line_covariance = implicit_from_normal(angle, radius, covariance)
-        return LineFits(line, line_covariance, angle, radius, covariance)
+        start = line_angle_radius(wtls(returns, range_sigma, bearing_sigma)[0])
+        angle, radius, covariance, offset = ml(returns, range_sigma, bearing_sigma, *start)
+        line, line_covariance, jac = implicit_from_normal(angle, radius, covariance)
+        return LineFits(line, line_covariance, angle, radius, covariance,
+                        np.einsum('sij,sj->si', jac, offset), offset)
     fits = {'utls': utls, 'wtls': wtls, 'wctls': wctls}
     if method not in fits:
         raise ValueError(f'unknown line fit {method!r}; use one of utls, wtls, wctls, ml')
-    line, line_covariance = fits[method](returns, range_sigma, bearing_sigma)
-    return LineFits(line, line_covariance, *normal_form(line, line_covariance))
+    line, line_covariance, line_offset = fits[method](returns, range_sigma, bearing_sigma)
+    jac = _normal_jacobian(line)
+    return LineFits(line, line_covariance, *line_angle_radius(line),
+                    jac @ line_covariance @ jac.transpose(0, 2, 1), line_offset,
+                    np.einsum('sij,sj->si', jac, line_offset))

@@ -89,10 +89,12 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
         segments, counts, fits = segments.select(usable), counts[usable], fits.select(usable)
     last = (segments.stop - 1) % n
     ends = _project(xy[np.concatenate([segments.start, last])], fits)
+    common = config.common_range_sigma_m * fits.normal_offset_jacobian
     segment_set = SegmentSet(
-        fits.angle_rad, fits.radius_m, fits.normal_covariance, fits.line, fits.line_covariance,
-        ends[:len(counts)], ends[len(counts):], points.index[order[segments.start]],
-        points.index[order[last]], counts)
+        fits.angle_rad, fits.radius_m,
+        fits.normal_covariance + common[:, :, None] * common[:, None, :], fits.line,
+        fits.line_covariance, fits.line_offset_jacobian, ends[:len(counts)], ends[len(counts):],
+        points.index[order[segments.start]], points.index[order[last]], counts)
 
     count = len(segment_set)
     first = np.arange(count - 1)
@@ -100,7 +102,8 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
         first = np.arange(count)               # the last segment meets the first at the seam
     corners = find_corners(fits.line, fits.line_covariance, segment_set.start_xy_m,
                            segment_set.end_xy_m, first, (first + 1) % max(count, 1),
-                           config.min_corner_angle_rad, config.max_corner_gap_m)
+                           config.min_corner_angle_rad, config.max_corner_gap_m,
+                           fits.line_offset_jacobian, config.common_range_sigma_m)
     return Features(config.method, segment_set, corners)
 
 

@@ -115,8 +115,8 @@ def run_methods(scans: StaticScans, noise: NoiseParameters, methods: Sequence[st
     for method in methods:
         config = feature_config(noise, method, base)
         out[method] = [scan_corners(ranges, scans.angle_min, scans.angle_increment,
-                                    scans.range_min, scans.range_max, config,
-                                    noise.common_range_sigma_m)[1] for ranges in scans.ranges]
+                                    scans.range_min, scans.range_max, config)[1]
+                       for ranges in scans.ranges]
     return out
 
 

@@ -113,23 +113,23 @@ def node_yaml(noise: NoiseParameters, effective_scale: float = 1.0) -> str:
     """
     Return the feature_node parameter lines for a fitted noise model.
 
-    feature_node models independent per-beam noise only. When the corners scatter more (or
-    less) than that model predicts, from a common-mode range offset or anything else, the lines
-    give the independent sigmas scaled by ``effective_scale`` (chosen so that the corner NEES
-    of the independent model comes out at 2) and say so.
+    When the corners still scatter more (or less) than the fitted model predicts, the lines give
+    every sigma scaled by ``effective_scale`` (chosen so that the corner NEES comes out at 2)
+    and say so.
 
     :param noise: the fitted model
-    :param effective_scale: factor on both sigmas that absorbs what the node cannot model
+    :param effective_scale: factor on all three sigmas that absorbs what the model misses
     :return: YAML text for a params file
     """
     range_sigma = max(noise.range_sigma_m * effective_scale, 1e-4)
     bearing_deg = math.degrees(noise.bearing_sigma_rad) * effective_scale
+    common = noise.common_range_sigma_m * effective_scale
     lines = ['feature_node:', '  ros__parameters:',
              f'    range_sigma_m: {range_sigma:.4f}',
-             f'    bearing_sigma_deg: {bearing_deg:.4f}']
+             f'    bearing_sigma_deg: {bearing_deg:.4f}',
+             f'    common_range_sigma_m: {common:.5f}']
     if abs(effective_scale - 1.0) > 1e-9:
-        lines += [f'# fitted: {noise.describe()}.',
-                  '# feature_node models independent noise only: both sigmas above are scaled '
-                  f'by {effective_scale:.2f}',
-                  '# so that its corner NEES comes out at 2 on this recording.']
+        lines += [f'# fitted: {noise.describe()};',
+                  f'# every sigma above is scaled by {effective_scale:.2f} so that the corner '
+                  'NEES comes out at 2 on this recording.']
     return '\n'.join(lines)

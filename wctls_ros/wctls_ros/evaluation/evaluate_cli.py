@@ -149,13 +149,13 @@ def calibrate(scans, method: str = 'wtls'):
     :param scans: static scans
     :param method: the line fit used for the check
     :return: (NoiseFit, NEES with the independent terms only, NEES with the full model,
-        scale of the independent sigmas that brings the NEES to 2)
+        scale of the fitted sigmas that brings the NEES of the full model to 2)
     """
     fit = fit_noise(scans)
     independent = NoiseParameters(fit.noise.range_sigma_m, fit.noise.bearing_sigma_rad)
     nees_independent = evaluate_scans(scans, independent, [method]).pooled_nees(method)
     nees_full = evaluate_scans(scans, fit.noise, [method]).pooled_nees(method)
-    scale = math.sqrt(nees_independent / 2.0) if math.isfinite(nees_independent) else 1.0
+    scale = math.sqrt(nees_full / 2.0) if math.isfinite(nees_full) else 1.0
     return fit, nees_independent, nees_full, scale
 
 

@@ -2,14 +2,11 @@
 The corners of every scan, per method, with the covariances the analysis compares.
 
 For each scan and method the core's pipeline gives the segments and corners with their
-propagated (full) covariance. On top of that this module computes, from the same segments:
-
-- the covariance the paper's tables would show if the off-diagonal terms of each line's 3x3
-  covariance were dropped before propagating to the corner (``--propagation diagonal``, an
-  analysis of the paper's gap, never what the node does);
-- the shift of each corner per metre of a range offset common to all beams of a scan
-  (a term real sensors show and the core's independent-noise model leaves out), by central
-  differences of the same line fits.
+propagated (full) covariance, including a range offset common to all beams of a scan when the
+noise model has one. On top of that this module computes, from the same segments, the
+covariance the paper's tables would show if the off-diagonal terms of each line's 3x3 covariance
+were dropped before propagating to the corner (``--propagation diagonal``, an analysis of the
+paper's gap, never what the node does).
 """
 
 from dataclasses import dataclass
@@ -17,12 +14,9 @@ import math
 
 import numpy as np
 
-from ..core import (extract_features, FeatureConfig, fit_lines, intersect, scan_to_points,
-                    segment_returns)
+from ..core import extract_features, FeatureConfig, find_corners
 
 PAPER_METHODS = ('utls', 'wtls', 'wctls')
-# Range offset used for the central differences of the common-mode Jacobian, m.
-_OFFSET_STEP_M = 1e-4
 
 
 @dataclass(frozen=True)
@@ -56,18 +50,16 @@ class ScanCorners:
     The corners one method found in one scan.
 
     :ivar xy: positions, shape (C, 2), m
-    :ivar covariance: propagated covariance of the position with the full line covariances and
-        the common-mode term, shape (C, 2, 2), m^2
+    :ivar covariance: propagated covariance of the position with the full line covariances
+        (and the common-mode term of the noise model), shape (C, 2, 2), m^2
     :ivar diagonal_covariance: the same with each line covariance reduced to its diagonal,
         shape (C, 2, 2), m^2
-    :ivar common: corner shift per metre of common range offset, shape (C, 2)
     :ivar segments: (first, second) segment index of each corner, shape (C, 2)
     """
 
     xy: np.ndarray
     covariance: np.ndarray
     diagonal_covariance: np.ndarray
-    common: np.ndarray
     segments: np.ndarray
 
     def __len__(self):
@@ -88,19 +80,19 @@ def feature_config(noise: NoiseParameters, method: str, base: FeatureConfig = No
     """
     Return the pipeline configuration of one method under a noise model.
 
-    :param noise: the noise model (its independent part configures the pipeline)
+    :param noise: the noise model
     :param method: 'utls', 'wtls', 'wctls' or 'ml'
     :param base: other settings (defaults: the paper's)
     :return: the configuration
     """
     base = FeatureConfig() if base is None else base
     return base.replace(method=method, range_sigma_m=max(noise.range_sigma_m, 1e-6),
-                        bearing_sigma_rad=noise.bearing_sigma_rad)
+                        bearing_sigma_rad=noise.bearing_sigma_rad,
+                        common_range_sigma_m=noise.common_range_sigma_m)
 
 
 def scan_corners(ranges: np.ndarray, angle_min: float, angle_increment: float,
-                 range_min: float, range_max: float, config: FeatureConfig,
-                 common_range_sigma_m: float = 0.0):
+                 range_min: float, range_max: float, config: FeatureConfig):
     """
     Extract one scan's features with one method and the corners' covariance variants.
 
@@ -109,80 +101,16 @@ def scan_corners(ranges: np.ndarray, angle_min: float, angle_increment: float,
     :param angle_increment: bearing step, rad
     :param range_min: the scan's range_min, m
     :param range_max: the scan's range_max, m
-    :param config: the pipeline configuration (method and independent noise)
-    :param common_range_sigma_m: std of the per-scan common range offset, m
+    :param config: the pipeline configuration (method and noise model)
     :return: (the core's Features, ScanCorners)
     """
     features = extract_features(ranges, angle_min, angle_increment, config, range_min,
                                 range_max)
-    corners = features.corners
-    count = len(corners)
-    empty = np.zeros((0, 2, 2))
-    if not count:
-        return features, ScanCorners(np.zeros((0, 2)), empty, empty, np.zeros((0, 2)),
-                                     np.zeros((0, 2), np.intp))
-    segments = features.segments
+    corners, segments = features.corners, features.segments
     first, second = corners.first_segment, corners.second_segment
-    line, line_cov = segments.line, segments.line_covariance
-    diagonal = line_cov * np.eye(3)
-    _, diagonal_cov, _, _ = intersect(line[first], diagonal[first], line[second],
-                                      diagonal[second])
-    common = _common_mode_jacobian(ranges, angle_min, angle_increment, range_min, range_max,
-                                   config, segments, first, second)
-    extra = common_range_sigma_m ** 2 * common[:, :, None] * common[:, None, :]
-    return features, ScanCorners(
-        corners.xy_m.copy(), corners.covariance[:, :2, :2] + extra, diagonal_cov + extra,
-        common, np.column_stack([first, second]))
-
-
-def segment_returns_of(ranges, angle_min, angle_increment, range_min, range_max, config,
-                       segments):
-    """
-    Rebuild the returns each segment was fitted from (its valid beams in scan order).
-
-    :param ranges: the scan's ranges, shape (N,), m
-    :param angle_min: bearing of beam 0, rad
-    :param angle_increment: bearing step, rad
-    :param range_min: the scan's range_min, m
-    :param range_max: the scan's range_max, m
-    :param config: the pipeline configuration the segments came from
-    :param segments: the core's SegmentSet
-    :return: (rho (P,), theta (P,), offsets (S,), counts (S,))
-    :raises ValueError: when a segment's returns cannot be found again
-    """
-    points = scan_to_points(ranges, angle_min, angle_increment,
-                            max(range_min, config.range_min_m),
-                            min(range_max, config.range_max_m))
-    index = points.index
-    rho, theta, counts = [], [], []
-    for first, last, expected in zip(segments.first_index, segments.last_index,
-                                     segments.num_points):
-        inside = ((index >= first) & (index <= last) if first <= last
-                  else (index >= first) | (index <= last))
-        order = np.flatnonzero(inside)
-        if first > last:                        # across the seam: the end of the turn first
-            order = np.concatenate([order[index[order] >= first], order[index[order] <= last]])
-        if len(order) != expected:
-            raise ValueError(f'segment of beams {first}-{last}: found {len(order)} returns, '
-                             f'the pipeline fitted {expected}')
-        rho.append(points.range_m[order])
-        theta.append(points.bearing_rad[order])
-        counts.append(len(order))
-    counts = np.array(counts, dtype=np.intp)
-    offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.intp)
-    return np.concatenate(rho), np.concatenate(theta), offsets, counts
-
-
-def _common_mode_jacobian(ranges, angle_min, angle_increment, range_min, range_max, config,
-                          segments, first, second) -> np.ndarray:
-    """Return d(corner)/d(common range offset) by central differences of the fits, (C, 2)."""
-    rho, theta, offsets, counts = segment_returns_of(ranges, angle_min, angle_increment,
-                                                     range_min, range_max, config, segments)
-    shifted = []
-    for step in (_OFFSET_STEP_M, -_OFFSET_STEP_M):
-        fits = fit_lines(config.method, segment_returns(rho + step, theta, offsets, counts),
-                         config.range_sigma_m, config.bearing_sigma_rad)
-        xy, _, _, _ = intersect(fits.line[first], fits.line_covariance[first],
-                                fits.line[second], fits.line_covariance[second])
-        shifted.append(xy)
-    return (shifted[0] - shifted[1]) / (2.0 * _OFFSET_STEP_M)
+    # The same corners again (no rejection: they passed already) from diagonal line covariances.
+    diagonal = find_corners(segments.line, segments.line_covariance * np.eye(3),
+                            segments.start_xy_m, segments.end_xy_m, first, second, 0.0, np.inf,
+                            segments.line_offset_jacobian, config.common_range_sigma_m)
+    return features, ScanCorners(corners.xy_m.copy(), corners.covariance[:, :2, :2],
+                                 diagonal.covariance[:, :2, :2], np.column_stack([first, second]))

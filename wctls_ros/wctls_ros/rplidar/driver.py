@@ -21,11 +21,11 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from .protocol import (AnswerType, Command, ConfType, decode_conf_value, DenseCapsuleDecoder,
-                       DESCRIPTOR_SIZE, DeviceHealth, DeviceInfo, encode_conf_request,
-                       encode_express_scan, encode_motor_speed, encode_request, find_descriptor,
-                       HealthStatus, ProtocolError, SampleRate, ScanMode, SendMode,
-                       StandardNodeDecoder)
+from .protocol import (AnswerType, Command, CONF_COMMANDS_FIRMWARE, ConfType, decode_conf_value,
+                       DenseCapsuleDecoder, DESCRIPTOR_SIZE, DeviceHealth, DeviceInfo,
+                       encode_conf_request, encode_express_scan, encode_motor_speed,
+                       encode_request, find_descriptor, HealthStatus, ProtocolError, SampleRate,
+                       ScanMode, SendMode, StandardNodeDecoder)
 from .transport import drain, LinkError, SerialLink, TcpLink
 from .turns import TurnAssembler
 
@@ -42,7 +42,6 @@ STREAM_READ_TIMEOUT_S = 0.1
 STREAM_READ_PERIOD_S = 0.05
 TURN_END_MARGIN_S = 0.005
 LOG_THROTTLE_S = 5.0
-CONF_COMMANDS_FIRMWARE = (1, 24)   # GET_LIDAR_CONF exists from this firmware on
 LEGACY_MAX_DISTANCE_M = 16.0       # what the SDK assumes for devices without GET_LIDAR_CONF
 _CHUNK_LOG_SIZE = 256
 _DECODED_ANSWERS = (AnswerType.MEASUREMENT, AnswerType.DENSE_CAPSULE)

@@ -35,11 +35,12 @@ from typing import Optional
 
 import numpy as np
 
-from .protocol import (AnswerType, CAPSULE_SIZE, Command, ConfType, decode_conf_request,
-                       DeviceHealth, DeviceInfo, encode_answer, encode_conf_value,
-                       encode_dense_capsules, encode_standard_nodes, FULL_TURN_Q6,
-                       HealthStatus, MODE_CONF_TYPES, NODE_SIZE, ProtocolError, RequestParser,
-                       ResponseDescriptor, SampleRate, SAMPLES_PER_CAPSULE, ScanMode, SendMode)
+from .protocol import (AnswerType, CAPSULE_SIZE, Command, CONF_COMMANDS_FIRMWARE, ConfType,
+                       decode_conf_request, DeviceHealth, DeviceInfo, encode_answer,
+                       encode_conf_value, encode_dense_capsules, encode_standard_nodes,
+                       FULL_TURN_Q6, HealthStatus, MODE_CONF_TYPES, NODE_SIZE, ProtocolError,
+                       RequestParser, ResponseDescriptor, SampleRate, SAMPLES_PER_CAPSULE,
+                       ScanMode, SendMode)
 from ..simulation import load_floor_plan, NOISELESS, NoiseModel, simulate_ranges
 
 MODES = (ScanMode(0, 'Standard', 244.0, 40.0, AnswerType.MEASUREMENT),
@@ -52,7 +53,6 @@ DEFAULT_RPM = 600
 SERIAL_BAUD = 256000
 RESET_SILENCE_S = 1.5
 HEALTH_ERROR_CODE = 0x0001
-CONF_COMMANDS_FIRMWARE = (1, 24)
 MAX_NODE_DISTANCE_Q2 = 0xFFFF
 _CATCH_UP_LIMIT_S = 0.5
 _POLL_S = 0.001

@@ -28,6 +28,7 @@ DESCRIPTOR_SIZE = 7
 DENSE_RETURN_QUALITY = 0x2F
 SAMPLES_PER_CAPSULE = 40
 FULL_TURN_Q6 = 360 << 6
+CONF_COMMANDS_FIRMWARE = (1, 24)   # GET_LIDAR_CONF exists from this firmware (major, minor) on
 
 
 class ProtocolError(ValueError):

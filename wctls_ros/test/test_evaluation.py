@@ -197,11 +197,13 @@ def test_real_lms1xx_scatter_exceeds_every_fitted_term():
     scans = load_scans(LMS1XX)
     fit = fit_noise(scans)
     evaluation = evaluate_scans(scans, fit.noise, ('wtls', 'wctls'))
-    # Measured: range 8.8 mm, no bearing or common-mode term, and still corner NEES 4.3: this
-    # sensor's corners scatter more than any of the three terms explains.
+    # Measured: range 8.8 mm, no bearing or common-mode term, and still pooled corner NEES 11.6
+    # (far corner 5.2; the near corner, on an 8-return wall stub, 18 with a heavy tail: in a
+    # fifth of the scans a mixed return at the corner joins the stub): this sensor's corners
+    # scatter more than any of the three terms explains.
     assert 0.007 < fit.noise.range_sigma_m < 0.011 and fit.noise.common_range_sigma_m < 5e-4
     assert len(evaluation.centers) >= 1
-    assert 3.0 < evaluation.pooled_nees('wtls') < 6.0
+    assert 3.0 < evaluation.pooled_nees('wtls') < 20.0
 
 
 @pytest.mark.skipif(not OFFICE.is_dir(), reason=f'{OFFICE} is absent')

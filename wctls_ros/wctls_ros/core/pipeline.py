@@ -10,7 +10,7 @@ from .features import CornerSet, Features, SegmentSet
 from .lines import fit_lines, LineFits, moment_fit, moment_prefix_sums, segment_returns
 from .scan import scan_to_points
 from .segmentation import (breakpoints, chains, iterative_end_point_fit, merge_collinear,
-                           MIN_FIT_RETURNS, SegmentRanges)
+                           MIN_FIT_RETURNS, SegmentRanges, trim_ambiguous_ends)
 
 _DEFAULT_CONFIG = FeatureConfig()
 
@@ -67,15 +67,19 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
         return Features(config.method, SegmentSet.empty(), CornerSet.empty())
     segments = merge_collinear(segments, points.full_turn, n, quick, config.merge_chi2)
 
-    # Keep segments with enough returns and end returns far enough apart, in scan order.
+    # Keep segments with enough returns and end returns far enough apart; then leave out the
+    # returns where two kept segments meet that fit both lines; then put them in scan order.
     first, last = segments.start, (segments.stop - 1) % n
     counts = segments.stop - segments.start
-    keep = ((counts >= config.min_segment_points)
-            & (np.hypot(x[last] - x[first], y[last] - y[first]) >= config.min_segment_length_m))
-    first_index = points.index[order[first]]
-    by_scan_order = np.flatnonzero(keep)[np.argsort(first_index[keep], kind='stable')]
-    segments = segments.select(by_scan_order)
-    counts = counts[by_scan_order]
+    segments = segments.select(
+        (counts >= config.min_segment_points)
+        & (np.hypot(x[last] - x[first], y[last] - y[first]) >= config.min_segment_length_m))
+    angle, radius, _ = quick(segments)
+    segments = trim_ambiguous_ends(segments, points.full_turn, n, x, y, angle, radius,
+                                   config.range_sigma_m, config.bearing_sigma_rad,
+                                   config.min_segment_points)
+    segments = segments.select(np.argsort(points.index[order[segments.start]], kind='stable'))
+    counts = segments.stop - segments.start
     position = (np.arange(counts.sum())
                 + np.repeat(segments.start - (np.cumsum(counts) - counts), counts))
     fits = fit_lines(config.method,

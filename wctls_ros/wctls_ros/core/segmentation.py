@@ -263,3 +263,74 @@ def merge_collinear(segments: SegmentRanges, circular: bool, contour_length: int
         absorbed[second[stop != segments.stop]] = True
         segments = SegmentRanges(segments.start, stop, chain).select(~absorbed)
     return segments
+
+
+def trim_ambiguous_ends(segments: SegmentRanges, circular: bool, contour_length: int,
+                        x_m: np.ndarray, y_m: np.ndarray, angle_rad: np.ndarray,
+                        radius_m: np.ndarray, range_sigma_m: float, bearing_sigma_rad: float,
+                        min_returns: int, window: int = 8) -> SegmentRanges:
+    """
+    Drop the returns at the meeting ends of two neighbouring segments that could fit both lines.
+
+    Where two segments meet (no return, or only the IEPF split return, between them), the
+    returns nearest the corner lie within the noise of both lines, and which segment they
+    fall into changes from scan to scan. Left in, that switching adds corner scatter no
+    covariance describes (most on short walls). The two lines are closer to each other than
+    t = 3 sqrt(range_sigma^2 + (r bearing_sigma)^2) (3 sigma of a return at the corner's range
+    r) within a distance t / sin(angle between them) of their intersection: the returns at a
+    meeting end inside that radius, in an unbroken run from the end, are left out of both
+    segments. A segment keeps at least ``min_returns`` returns, shared evenly by its two ends
+    when both meet a neighbour (so that the rule does not depend on the beam order).
+
+    :param segments: segments sorted by start position (positions modulo contour_length)
+    :param circular: whether the returns cover a full turn (the last and first can meet)
+    :param contour_length: number of returns n
+    :param x_m: x of the returns in position order, shape (n,), m
+    :param y_m: y of the returns in position order, shape (n,), m
+    :param angle_rad: normal angle of each segment's line, shape (S,), rad
+    :param radius_m: radius of each segment's line, shape (S,), m
+    :param range_sigma_m: range noise std, m
+    :param bearing_sigma_rad: bearing noise std, rad
+    :param min_returns: never trim a segment below this many returns
+    :param window: most returns examined (and trimmed) at each end
+    :return: the trimmed segments
+    """
+    count = len(segments)
+    if count < 2:
+        return segments
+    second = np.arange(1, count + 1) % count
+    neighbours = np.ones(count, dtype=bool)
+    neighbours[-1] = circular and count > 2
+    k = np.flatnonzero(neighbours
+                       & ((segments.start[second] - segments.stop) % contour_length <= 1))
+    if not k.size:
+        return segments
+    j = second[k]
+    sine = np.abs(np.sin(angle_rad[k] - angle_rad[j]))
+    with np.errstate(divide='ignore', invalid='ignore'):
+        det = 1.0 / np.sin(angle_rad[j] - angle_rad[k])
+    corner_x = (radius_m[k] * np.sin(angle_rad[j]) - radius_m[j] * np.sin(angle_rad[k])) * det
+    corner_y = (radius_m[j] * np.cos(angle_rad[k]) - radius_m[k] * np.cos(angle_rad[j])) * det
+    tolerance = 3.0 * np.sqrt(range_sigma_m ** 2
+                              + (corner_x ** 2 + corner_y ** 2) * bearing_sigma_rad ** 2)
+    with np.errstate(divide='ignore'):
+        reach2 = (tolerance / sine) ** 2
+    steps = np.arange(window)
+
+    def run_inside(positions):
+        # Unbroken run (from column 0) of returns within reach of the lines' intersection.
+        position = positions % contour_length
+        inside = ((x_m[position] - corner_x[:, None]) ** 2
+                  + (y_m[position] - corner_y[:, None]) ** 2) < reach2[:, None]
+        return np.cumprod(inside, axis=1).sum(axis=1)
+
+    room = np.maximum(segments.stop - segments.start - min_returns, 0)
+    meets_next = np.zeros(count, dtype=bool)
+    meets_next[k] = True
+    meets_previous = np.zeros(count, dtype=bool)
+    meets_previous[j] = True
+    allowance = np.where(meets_next & meets_previous, room // 2, room)
+    stop, start = segments.stop.copy(), segments.start.copy()
+    stop[k] -= np.minimum(run_inside(segments.stop[k][:, None] - 1 - steps), allowance[k])
+    start[j] += np.minimum(run_inside(segments.start[j][:, None] + steps), allowance[j])
+    return SegmentRanges(start, stop, segments.chain)

@@ -235,3 +235,12 @@ def test_readme_lists_every_parameter_with_its_default():
         assert spec.name in rows, f'README does not list {spec.name}'
         expected = str(spec.default).lower() if isinstance(spec.default, bool) else spec.default
         assert rows[spec.name] == str(expected), spec.name
+
+
+def test_installed_executable_refuses_a_parameter_of_the_wrong_type_in_one_line():
+    executable = installed_executable('feature_node')
+    result = subprocess.run([str(executable), '--ros-args', '-p', 'range_sigma_m:=1'],
+                            capture_output=True, text=True, timeout=30)
+    assert result.returncode == 1
+    assert 'range_sigma_m' in result.stderr + result.stdout
+    assert 'Traceback' not in result.stderr + result.stdout

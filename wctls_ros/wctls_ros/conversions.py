@@ -14,7 +14,7 @@ from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 from wctls_msgs.msg import Corner, CornerArray, LineSegment, LineSegmentArray
 
-from .core import ellipse, Features
+from .core import CornerSet, ellipse, extract_features, FeatureConfig, Features, SegmentSet
 
 # Rows/columns of (x, y, yaw) in a geometry_msgs 6x6 pose covariance (x, y, z, roll, pitch, yaw).
 _POSE_INDEX = np.array([0, 1, 5])
@@ -69,6 +69,25 @@ def scan_problems(scan) -> list:
     if not 0.0 <= scan.range_min < scan.range_max:
         problems.append(f'range limits [{scan.range_min}, {scan.range_max}] are not ordered')
     return problems
+
+
+def scan_features(scan, config: FeatureConfig):
+    """
+    Extract the features of a LaserScan, or explain why it cannot be used.
+
+    :param scan: a sensor_msgs/LaserScan (rclpy or rosbags)
+    :param config: the pipeline configuration
+    :return: (Features, problems): empty features and the reasons when the scan is unusable
+    """
+    problems = scan_problems(scan)
+    if not problems:
+        try:
+            return extract_features(np.asarray(scan.ranges, dtype=float), scan.angle_min,
+                                    scan.angle_increment, config, scan.range_min,
+                                    scan.range_max), problems
+        except ValueError as error:
+            problems = [str(error)]
+    return Features(config.method, SegmentSet.empty(), CornerSet.empty()), problems
 
 
 def _quaternion_from_yaw(yaw: float) -> Quaternion:

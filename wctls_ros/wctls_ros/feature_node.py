@@ -12,19 +12,17 @@ import math
 import sys
 from typing import Optional
 
-import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import MarkerArray
 from wctls_msgs.msg import CornerArray, LineSegmentArray
 
-from .conversions import corner_array, line_segment_array, marker_array, MarkerStyle, scan_problems
-from .core import CornerSet, extract_features, FeatureConfig, Features, METHODS, SegmentSet
+from .conversions import corner_array, line_segment_array, marker_array, MarkerStyle, scan_features
+from .core import CornerSet, FeatureConfig, Features, METHODS, SegmentSet
+from .node_main import run_node
 
 # A throttled warning repeats at most this often, s.
 WARN_PERIOD_S = 5.0
@@ -169,19 +167,12 @@ class FeatureNode(Node):
         return SetParametersResult(successful=True)
 
     def _extract(self, scan: LaserScan) -> Features:
-        config = self._config
-        problems = scan_problems(scan)
-        if not problems:
-            try:
-                return extract_features(np.asarray(scan.ranges, dtype=float), scan.angle_min,
-                                        scan.angle_increment, config, scan.range_min,
-                                        scan.range_max)
-            except ValueError as error:
-                problems = [str(error)]
-        self.get_logger().warning(
-            f'dropping a scan from {scan.header.frame_id!r}: ' + '; '.join(problems),
-            throttle_duration_sec=WARN_PERIOD_S)
-        return Features(config.method, SegmentSet.empty(), CornerSet.empty())
+        features, problems = scan_features(scan, self._config)
+        if problems:
+            self.get_logger().warning(
+                f'dropping a scan from {scan.header.frame_id!r}: ' + '; '.join(problems),
+                throttle_duration_sec=WARN_PERIOD_S)
+        return features
 
     def _on_scan(self, scan: LaserScan):
         try:
@@ -202,23 +193,9 @@ class FeatureNode(Node):
                 raise
 
 
-def main(args=None):
+def main(args=None) -> int:
     """Run the node until Ctrl-C or shutdown; exit 1 on an invalid configuration."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = FeatureNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ValueError as error:
-        rclpy.logging.get_logger('feature_node').fatal(str(error))
-        return 1
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node('feature_node', FeatureNode, args=args)
 
 
 if __name__ == '__main__':

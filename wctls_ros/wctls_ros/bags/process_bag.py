@@ -25,12 +25,11 @@ import sys
 import time
 from typing import Optional
 
-import numpy as np
 
 from .bag_io import bag_info, BagError, BagWriter, choose_scan_topic, read_scans
 from .params_file import ConfigError, load_parameters
-from ..conversions import corner_array, line_segment_array, marker_array, scan_problems
-from ..core import CornerSet, extract_features, Features, METHODS, SegmentSet
+from ..conversions import corner_array, line_segment_array, marker_array, scan_features
+from ..core import CornerSet, METHODS
 from ..feature_node import settings_from_parameters
 
 ALL = 'all'
@@ -130,18 +129,6 @@ class _CornerTables:
         self._csv_file.close()
 
 
-def _features(scan, config, problems: list) -> Features:
-    """Run the pipeline on a scan that passed scan_problems; empty features otherwise."""
-    if not problems:
-        try:
-            return extract_features(np.asarray(scan.ranges, dtype=float), scan.angle_min,
-                                    scan.angle_increment, config, scan.range_min,
-                                    scan.range_max)
-        except ValueError as error:
-            problems.append(str(error))
-    return Features(config.method, SegmentSet.empty(), CornerSet.empty())
-
-
 def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = None,
             progress: Optional[bool] = None, overwrite: bool = False) -> Summary:
     """
@@ -182,10 +169,10 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
                 scan = record.laser_scan()
                 time_ns = record.timestamp_ns
                 writer.write(topic, time_ns, scan)
-                problems = scan_problems(scan)
-                results = {}
+                results, problems = {}, []
                 for method, (corners, lines, markers) in topics.items():
-                    features = results[method] = _features(scan, configs[method], problems)
+                    features, problems = scan_features(scan, configs[method])
+                    results[method] = features
                     writer.write(corners, time_ns, corner_array(features, scan.header))
                     writer.write(lines, time_ns, line_segment_array(features, scan.header))
                     if publish_markers:

@@ -13,11 +13,8 @@ the process exits 0 at the end of the bag unless ``loop`` is set.
 
 import sys
 
-import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
@@ -27,6 +24,7 @@ from sensor_msgs.msg import LaserScan
 
 from .bag_io import bag_info, BagError, choose_scan_topic, read_scans
 from ..feature_node import ParameterSpec
+from ..node_main import run_node
 
 SCAN_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                       reliability=ReliabilityPolicy.RELIABLE)
@@ -241,34 +239,16 @@ class BagReplay(Node):
         return self._scans.wait_for_all_acked(Duration(seconds=DELIVERY_TIMEOUT_S))
 
 
-def main(args=None):
+def _play(executor, node) -> int:
+    """Spin until the bag has been played (or shutdown); return the node's exit status."""
+    executor.spin_until_future_complete(node.done)
+    node.wait_for_delivery()
+    return node.done.result() if node.done.done() else 0
+
+
+def main(args=None) -> int:
     """Play the bag; exit 0 at its end, 1 on a bad bag or configuration."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        # Made before the (slower) node, so a signal during start-up rarely meets it half-built.
-        executor = SingleThreadedExecutor()
-        node = BagReplay()
-        executor.add_node(node)
-        executor.spin_until_future_complete(node.done)
-        node.wait_for_delivery()
-        return node.done.result() if node.done.done() else 0
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (BagError, ParameterException, ValueError) as error:
-        rclpy.logging.get_logger('bag_replay').fatal(str(error))
-        return 1
-    except Exception:  # noqa: B902 - see below
-        # SIGINT/SIGTERM shut the context down from a signal handler; whatever runs then (the
-        # executor's wait set, a publish while starting up) may fail with an RCLError instead
-        # of raising ExternalShutdownException: that is a shutdown, not an error.
-        if rclpy.ok():
-            raise
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node('bag_replay', BagReplay, _play, (BagError, ValueError), args)
 
 
 if __name__ == '__main__':

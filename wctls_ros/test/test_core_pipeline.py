@@ -52,6 +52,10 @@ def test_negative_increment_and_full_turn_detection():
     angle_min, increment, _ = full_turn_bearings(1080)
     assert scan_to_points(np.ones(1080), angle_min, np.float32(increment)).full_turn
     assert not scan_to_points(np.ones(541), -2.356, 0.0087).full_turn
+    # Every sample of a turn (sllidar_ros2 without angle_compensate): 926 beams of 0.3887 deg
+    # end 0.45 deg short of the first; the next turn's first sample would come 0.39 deg later.
+    assert scan_to_points(np.ones(926), -math.pi, math.radians(0.3887)).full_turn
+    assert not scan_to_points(np.ones(920), -math.pi, math.radians(0.3887)).full_turn
 
 
 @pytest.mark.parametrize('ranges,angle_min,increment,message', [

@@ -6,9 +6,11 @@ import math
 
 import numpy as np
 
-# A scan whose beams, each counted with its width, cover at least this fraction of a turn is
-# treated as a full turn: its last beam neighbours its first across the +-pi seam.
-_FULL_TURN_FRACTION = 1.0 - 1e-6
+# A scan whose last beam is at most this many increments short of a full turn after its first
+# is a full turn: its last beam neighbours its first across the +-pi seam. (A driver that
+# publishes every sample of a turn, like sllidar_ros2 without angle_compensate, gives 926 or 927
+# beams for 925.9 samples per turn: the seam gap varies between 0 and 2 increments.)
+_FULL_TURN_GAP_INCREMENTS = 2.5
 # More than a full turn between the first and last beam (beyond float32 rounding of the
 # LaserScan's angle_increment) would revisit bearings: refused.
 _OVER_TURN_TOLERANCE = 1e-4
@@ -27,7 +29,8 @@ class ScanPoints:
     :ivar range_m: measured range, shape (n,), m
     :ivar bearing_rad: beam bearing, shape (n,), rad (angle_min + index * angle_increment)
     :ivar xy_m: Cartesian position in the scan frame, shape (n, 2), m
-    :ivar full_turn: True when the beams cover a full turn (the first and last are neighbours)
+    :ivar full_turn: True when the beams cover a full turn (the first and last are neighbours,
+        at most 2.5 increments apart across the seam)
     :ivar beam_count: number of beams of the scan, valid or not
     :ivar angle_increment_rad: bearing step between beams, rad
     """
@@ -85,7 +88,8 @@ def scan_to_points(ranges_m, angle_min_rad: float, angle_increment_rad: float,
     if span > 2.0 * math.pi * (1.0 + _OVER_TURN_TOLERANCE):
         raise ScanError(f'{beam_count} beams of {angle_increment_rad:g} rad span {span:.4f} rad, '
                         'more than a full turn')
-    full_turn = abs(angle_increment_rad) * beam_count >= 2.0 * math.pi * _FULL_TURN_FRACTION
+    full_turn = (beam_count > 1 and 2.0 * math.pi - span
+                 <= _FULL_TURN_GAP_INCREMENTS * abs(angle_increment_rad))
     with np.errstate(invalid='ignore'):
         # A zero range is a point at the sensor itself: never a wall return.
         valid = ((ranges >= range_min_m) & (ranges <= range_max_m) & np.isfinite(ranges)

@@ -94,7 +94,10 @@ def breakpoints(points: ScanPoints, range_sigma_m: float, bearing_sigma_rad: flo
     # Each return against its predecessor; entry 0 against the last return, across the seam.
     beams = np.empty(n)
     beams[1:] = index[1:] - index[:-1]
-    beams[0] = index[0] + points.beam_count - index[-1]
+    # Across the seam: the rest of the turn, in increments (about 1 for a full turn).
+    step = abs(points.angle_increment_rad)
+    beams[0] = (index[0] + (2.0 * math.pi - (points.beam_count - 1) * step) / step
+                + (points.beam_count - 1 - index[-1]))
     dx, dy, r = np.empty(n), np.empty(n), np.empty(n)
     dx[1:], dx[0] = x[1:] - x[:-1], x[0] - x[-1]
     dy[1:], dy[0] = y[1:] - y[:-1], y[0] - y[-1]
@@ -102,7 +105,6 @@ def breakpoints(points: ScanPoints, range_sigma_m: float, bearing_sigma_rad: flo
     r[0] = min(rho[0], rho[-1])
     # sin(dphi) / sin(lambda - dphi) is one number for neighbouring beams, the usual case.
     # (dphi >= lambda: no surface is seen that obliquely, always separated: reach -1.)
-    step = abs(points.angle_increment_rad)
     reach = np.full(n, math.sin(step) / math.sin(lambda_rad - step) if step < lambda_rad
                     else -1.0)
     wider = np.flatnonzero(beams != 1.0)

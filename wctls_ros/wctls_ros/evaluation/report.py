@@ -13,18 +13,10 @@ from typing import List, Sequence
 import numpy as np
 
 from .analysis import Evaluation
-from ..core import ellipse
+from ..plotting import add_covariance_ellipses, PAPER_ELLIPSE_SCALE as ELLIPSE_SCALE, pyplot
 
 COLOURS = {'utls': 'tab:blue', 'wtls': 'tab:green', 'wctls': 'tab:red', 'ml': 'tab:gray'}
 LABELS = {'utls': 'UTLS', 'wtls': 'WTLS', 'wctls': 'WCTLS', 'ml': 'ML'}
-ELLIPSE_SCALE = 10.0            # the paper draws the 1-sigma ellipses x10
-
-
-def _pyplot():
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-    return plt
 
 
 def sigma_table(evaluation: Evaluation) -> List[list]:
@@ -113,9 +105,8 @@ def plot_scan(evaluation: Evaluation, path: pathlib.Path, title: str) -> None:
     :param path: PNG to write
     :param title: figure title
     """
-    from matplotlib.patches import Ellipse as EllipsePatch
     from .samples import feature_config, scan_corners
-    plt = _pyplot()
+    plt = pyplot()
     scans, t = evaluation.scans, evaluation.representative
     ranges = scans.ranges[t]
     valid = scans.valid()[t]
@@ -135,17 +126,12 @@ def plot_scan(evaluation: Evaluation, path: pathlib.Path, title: str) -> None:
         if method == 'ml':
             continue
         corners = evaluation.per_scan[method][t]
-        covariance = corners.covariances(evaluation.propagation)
-        for j, i in enumerate(evaluation.assignment[method][t]):
-            if i < 0:
-                continue
-            e = ellipse(covariance[i])
-            ax.add_patch(EllipsePatch(
-                corners.xy[i], 2 * ELLIPSE_SCALE * float(e.semi_major),
-                2 * ELLIPSE_SCALE * float(e.semi_minor),
-                angle=math.degrees(float(e.orientation_rad)), fill=False,
-                color=COLOURS[method], lw=1.0,
-                label=f'{LABELS[method]} x{ELLIPSE_SCALE:g}' if j == 0 else None))
+        found = evaluation.assignment[method][t]
+        found = found[found >= 0]
+        add_covariance_ellipses(ax, corners.xy[found],
+                                corners.covariances(evaluation.propagation)[found],
+                                ELLIPSE_SCALE, COLOURS[method],
+                                f'{LABELS[method]} x{ELLIPSE_SCALE:g}')
     for k, center in enumerate(evaluation.centers):
         ax.plot(*center, 'k^', ms=4)
         ax.annotate(str(k + 1), center, textcoords='offset points', xytext=(4, 4), fontsize=7)
@@ -168,7 +154,7 @@ def plot_areas(evaluation: Evaluation, path: pathlib.Path, title: str) -> None:
     :param path: PNG to write
     :param title: figure title
     """
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(5.0, 4.0), dpi=90)
     data = [evaluation.scan_median_areas(m) for m in evaluation.methods]
     data = [d[np.isfinite(d)] for d in data]
@@ -193,7 +179,7 @@ def plot_consistency(evaluation: Evaluation, path: pathlib.Path, title: str) -> 
     :param path: PNG to write
     :param title: figure title
     """
-    plt = _pyplot()
+    plt = pyplot()
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(7.0, 5.0), dpi=90, sharex=True)
     count = len(evaluation.centers)
     width = 0.8 / max(len(evaluation.methods), 1)

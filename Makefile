@@ -16,9 +16,10 @@ SOURCES := $(shell find wctls_msgs wctls_ros -type f -not -path '*/__pycache__/*
 WITH_ENV := source tools/env.sh &&
 PYTEST_ARGS ?=
 
-.PHONY: help deps build test lint bench results clean
+.PHONY: help deps build demo test lint bench results clean
 
 help:
+	@echo 'make demo   set up, then run the S1 emulator, driver and feature node live for ~20 s'
 	@echo 'make test   set up (venv, ROS 2 wheels, colcon build) and run every test and the lint'
 	@echo 'make build  set up and colcon build both packages into install/'
 	@echo 'make lint   only the ament-style lint (flake8 with ament rules, pep257)'
@@ -41,6 +42,9 @@ $(BUILD_STAMP): $(DEPS_STAMP) $(SOURCES)
 	$(WITH_ENV) colcon build --event-handlers console_cohesion- summary+ \
 	  --cmake-args -DPython3_EXECUTABLE=$(ROOT)/$(VENV)/bin/python
 	touch $@
+
+demo: $(BUILD_STAMP)
+	$(WITH_ENV) install/wctls_ros/lib/wctls_ros/demo
 
 test: $(BUILD_STAMP)
 	$(WITH_ENV) python -m pytest $(PYTEST_ARGS)

@@ -30,6 +30,7 @@ setup(
             'calibrate = wctls_ros.evaluation.evaluate_cli:calibrate_main',
             'evaluate = wctls_ros.evaluation.evaluate_cli:main',
             'feature_node = wctls_ros.feature_node:main',
+            'demo = wctls_ros.demo:main',
             'process_bag = wctls_ros.bags.process_bag:main',
             'rplidar_node = wctls_ros.rplidar.rplidar_node:main',
             's1_emulator = wctls_ros.rplidar.emulator:main',

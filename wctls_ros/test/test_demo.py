@@ -1,0 +1,55 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""`make demo`'s program end to end: emulator -> driver -> feature_node -> bag, table, figure."""
+
+import signal
+import subprocess
+import time
+
+import pytest
+from test_feature_node import installed_executable
+
+pytest.importorskip('rclpy')
+
+
+def leftovers(marker):
+    """Return the processes whose command line names this test's output folder."""
+    found = subprocess.run(['pgrep', '-f', str(marker)], capture_output=True, text=True)
+    return found.stdout.split()
+
+
+def test_demo_records_a_bag_and_writes_the_table_and_the_figure(tmp_path):
+    out = tmp_path / 'demo'
+    result = subprocess.run([str(installed_executable('demo')), '--seconds', '3',
+                             '--out', str(out)], capture_output=True, text=True, timeout=180)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert 'corners per scan' in result.stdout and 'NEES against the truth' in result.stdout
+    from wctls_ros.bags import bag_info
+    counts = {name: count for name, (_, count) in bag_info(out / 'bag').topics.items()}
+    assert set(counts) == {'/scan', '/corners', '/lines', '/markers'}
+    assert counts['/scan'] >= 25 and counts['/corners'] >= 25     # 10 Hz for 3 s
+    assert (out / 'scan.png').stat().st_size > 10000
+    assert '| corners per scan' in (out / 'summary.md').read_text()
+    assert not leftovers(out)
+
+
+def test_ctrl_c_stops_every_process_and_exits_0(tmp_path):
+    out = tmp_path / 'interrupted'
+    demo = subprocess.Popen([str(installed_executable('demo')), '--seconds', '60', '--out',
+                             str(out)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True)
+    try:
+        for line in demo.stdout:
+            if 'recording' in line:
+                break
+        assert leftovers(out), 'the emulator and the driver should be running'
+        demo.send_signal(signal.SIGINT)
+        assert demo.wait(timeout=30) == 0
+    finally:
+        if demo.poll() is None:
+            demo.kill()
+    deadline = time.monotonic() + 5.0
+    while leftovers(out) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not leftovers(out)

@@ -1,0 +1,316 @@
+"""
+demo: the whole system live on this machine, no sensor needed.
+
+Starts the S1 emulator on a pseudo-terminal (streaming a simulated floor plan), rplidar_node
+reading it, and feature_node extracting corners, each as its own process like ``ros2 run``
+would; records ``scan``, ``corners``, ``lines`` and ``markers`` into an mcap bag; then prints a
+table (corners per scan, their sigmas, their error against the simulated truth, latency) and
+draws one scan. Every process it started is stopped at the end, also on Ctrl-C.
+"""
+
+import argparse
+from dataclasses import dataclass, field
+import os
+import pathlib
+import random
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from typing import Dict, List
+
+import numpy as np
+
+from .bags import BagWriter
+from .bags.params_file import load_parameters
+from .core import nees
+from .feature_node import settings_from_parameters
+from .simulation import full_turn_bearings, load_floor_plan, S1_BEAMS_PER_TURN
+from .simulation.visibility import visible_corners
+
+# The emulated S1: 1 cm range noise and 0.05 deg bearing noise (a quieter unit than the
+# datasheet's 5 cm / 0.391 deg, which the paper's 4 cm IEPF threshold cannot segment).
+EMULATOR_RANGE_SIGMA_M = 0.01
+EMULATOR_BEARING_SIGMA_DEG = 0.05
+# feature_node's noise model is the emulator's. The driver runs with angle_compensate off, so
+# every sample is a beam at its own measured bearing (about 926 per turn, a different count
+# each turn): sllidar_ros2's 1/3 deg bins would repeat samples into neighbouring bins and shift
+# bearings by up to 0.2 deg, which no independent-noise model describes.
+MODEL_PARAMETERS = {'range_sigma_m': EMULATOR_RANGE_SIGMA_M,
+                    'bearing_sigma_deg': EMULATOR_BEARING_SIGMA_DEG}
+# A found corner is the true one when it is this close, m.
+MATCH_RADIUS_M = 0.1
+STOP_TIMEOUT_S = 10.0
+
+
+@dataclass
+class Recording:
+    """What the recorder saw, kept for the summary (times in ns)."""
+
+    scans: Dict[int, tuple] = field(default_factory=dict)    # stamp -> (receive time, msg)
+    corners: List[tuple] = field(default_factory=list)       # (receive time, CornerArray)
+
+
+def _executable(name: str) -> str:
+    """Return the installed executable of this package (what `ros2 run` would start)."""
+    from ament_index_python.packages import get_package_prefix
+    return str(pathlib.Path(get_package_prefix('wctls_ros')) / 'lib' / 'wctls_ros' / name)
+
+
+def _config_file() -> pathlib.Path:
+    from ament_index_python.packages import get_package_share_directory
+    return pathlib.Path(get_package_share_directory('wctls_ros')) / 'config'
+
+
+class Processes:
+    """Child processes, each in its own session so that one signal stops all of its threads."""
+
+    def __init__(self, log_dir: pathlib.Path):
+        self.log_dir = log_dir
+        self.running = []
+
+    def start(self, name: str, command: List[str]) -> subprocess.Popen:
+        """
+        Start a child process with its output in ``<log_dir>/<name>.log``.
+
+        :param name: short name for the log file
+        :param command: the command line
+        :return: the process
+        """
+        log = open(self.log_dir / f'{name}.log', 'w')
+        process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
+                                   stdin=subprocess.DEVNULL, start_new_session=True)
+        log.close()
+        self.running.append((name, process))
+        return process
+
+    def stop_all(self) -> None:
+        """Interrupt every child (as Ctrl-C would), and kill the ones that do not stop."""
+        for _, process in self.running:
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGINT)
+        deadline = time.monotonic() + STOP_TIMEOUT_S
+        for name, process in self.running:
+            try:
+                process.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                print(f'demo: {name} did not stop on SIGINT: killing it', file=sys.stderr)
+                os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
+        self.running.clear()
+
+
+def _wait_for(path: pathlib.Path, process: subprocess.Popen, timeout_s: float) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not path.exists():
+        if process.poll() is not None or time.monotonic() > deadline:
+            raise RuntimeError(f'the emulator did not create {path} (see its log)')
+        time.sleep(0.05)
+
+
+def record(bag_path: pathlib.Path, seconds: float) -> Recording:
+    """
+    Record the demo's topics into an mcap bag for ``seconds`` after the first corners arrive.
+
+    :param bag_path: the bag folder to write
+    :param seconds: how long to record once features flow, s
+    :return: what was seen, for the summary
+    """
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import LaserScan
+    from visualization_msgs.msg import MarkerArray
+    from wctls_msgs.msg import CornerArray, LineSegmentArray
+
+    seen = Recording()
+    context = rclpy.context.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('demo_recorder', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        with BagWriter(bag_path) as bag:
+            def keep(topic, message):
+                now = time.time_ns()
+                bag.write(topic, now, message)
+                if topic == '/scan':
+                    stamp = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
+                    seen.scans[stamp] = (now, message)
+                elif topic == '/corners':
+                    seen.corners.append((now, message))
+
+            node.create_subscription(LaserScan, 'scan', lambda m: keep('/scan', m),
+                                     qos_profile_sensor_data)
+            for topic, kind in (('corners', CornerArray), ('lines', LineSegmentArray),
+                                ('markers', MarkerArray)):
+                node.create_subscription(kind, topic, lambda m, t=topic: keep(f'/{t}', m), 10)
+            start_deadline = time.monotonic() + 60.0
+            while not seen.corners:
+                if time.monotonic() > start_deadline:
+                    raise RuntimeError('no corners within 60 s (see the logs)')
+                executor.spin_once(timeout_sec=0.1)
+            print(f'demo: features flowing; recording {seconds:g} s ...', flush=True)
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.1)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    return seen
+
+
+def summarise(seen: Recording, truth_xy: np.ndarray) -> List[tuple]:
+    """
+    Compute the demo's table from what was recorded.
+
+    :param seen: the recording
+    :param truth_xy: the corners the sensor can see, in the laser frame, shape (M, 2), m
+    :return: rows (measure, value)
+    """
+    counts, sigmas, errors, latency, age = [], [], [], [], []
+    for received, message in seen.corners:
+        stamp = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
+        counts.append(len(message.corners))
+        if stamp in seen.scans:
+            latency.append((received - seen.scans[stamp][0]) * 1e-6)
+        age.append((received - stamp) * 1e-6)
+        for corner in message.corners:
+            covariance = np.array(corner.pose.covariance).reshape(6, 6)[:2, :2]
+            sigmas.append(np.sqrt(np.diag(covariance)))
+            xy = np.array([corner.pose.pose.position.x, corner.pose.pose.position.y])
+            distance = np.hypot(*(truth_xy - xy).T) if len(truth_xy) else np.array([np.inf])
+            if distance.min() < MATCH_RADIUS_M:
+                errors.append(float(nees(xy - truth_xy[distance.argmin()], covariance)))
+    sigmas = np.array(sigmas).reshape(-1, 2)
+    counts = np.array(counts)
+    return [
+        ('scans recorded', f'{len(seen.scans)}'),
+        ('CornerArrays recorded', f'{len(seen.corners)}'),
+        ('corners per scan (mean, min-max)',
+         f'{counts.mean():.1f} ({counts.min()}-{counts.max()})' if counts.size else '-'),
+        ('true corners in view', f'{len(truth_xy)}'),
+        ('mean corner sigma x, y (mm)',
+         f'{1e3 * sigmas[:, 0].mean():.1f}, {1e3 * sigmas[:, 1].mean():.1f}'
+         if sigmas.size else '-'),
+        ('NEES against the truth (mean; 2 = calibrated)',
+         f'{np.mean(errors):.2f} over {len(errors)} corners' if errors else '-'),
+        ('feature_node latency, scan in -> corners in (median, p99 ms)',
+         f'{np.median(latency):.1f}, {np.percentile(latency, 99):.1f}' if latency else '-'),
+        ('age of the corners since the first beam (median ms)',
+         f'{np.median(age):.0f}' if age else '-'),
+    ]
+
+
+def draw(seen: Recording, config, truth_xy: np.ndarray, path: pathlib.Path) -> None:
+    """
+    Draw the scan with the median number of corners: segments, corners, ellipses x10, truth.
+
+    :param seen: the recording
+    :param config: the FeatureConfig feature_node ran with (to redraw the same features)
+    :param truth_xy: true corners in the laser frame, shape (M, 2), m
+    :param path: PNG to write
+    """
+    from .conversions import scan_features
+    from .plotting import draw_scan_features, pyplot
+    received = [message for _, message in seen.corners]
+    median = sorted(received, key=lambda m: len(m.corners))[len(received) // 2]
+    stamp = median.header.stamp.sec * 1_000_000_000 + median.header.stamp.nanosec
+    scan = seen.scans.get(stamp, next(iter(seen.scans.values())))[1]
+    features, _ = scan_features(scan, config)
+    ranges = np.asarray(scan.ranges, dtype=float)
+    bearings = scan.angle_min + np.arange(len(ranges)) * scan.angle_increment
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(8.0, 5.5), dpi=90)
+    draw_scan_features(ax, ranges, bearings, features)
+    ax.plot(truth_xy[:, 0], truth_xy[:, 1], 'x', color='tab:green', ms=6, label='true corners')
+    ax.set_title(f'make demo: one emulated S1 scan, {len(features.corners)} corners '
+                 f'({config.method}), 1-sigma ellipses x10', fontsize=9)
+    ax.legend(fontsize=7, loc='best')
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog='demo', description=__doc__.strip().splitlines()[0])
+    p.add_argument('--seconds', type=float, default=20.0,
+                   help='how long to record once features flow, s (default: %(default)s)')
+    p.add_argument('--out', default='out/demo', help='output folder (default: %(default)s)')
+    p.add_argument('--floor-plan', default='environment_a',
+                   help='emulated scene: environment_a, environment_b or a YAML file')
+    p.add_argument('--method', default='wctls', choices=('utls', 'wtls', 'wctls', 'ml'))
+    return p
+
+
+def main(argv=None) -> int:
+    """
+    Run the demo.
+
+    :param argv: arguments (default: sys.argv[1:])
+    :return: exit status
+    """
+    args = _parser().parse_args(argv)
+    out = pathlib.Path(args.out)
+    for stale in ('bag', 'logs', 'scan.png', 'summary.md', 'ttyS1'):
+        target = out / stale
+        if target.is_dir() and not target.is_symlink():
+            shutil.rmtree(target)
+        elif target.exists() or target.is_symlink():
+            target.unlink()
+    (out / 'logs').mkdir(parents=True, exist_ok=True)
+    # A private DDS domain keeps the demo from meeting (or disturbing) anything else running.
+    os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 100)))
+    tty = out.resolve() / 'ttyS1'
+    parameters = {**MODEL_PARAMETERS, 'method': args.method}
+    config = settings_from_parameters(
+        load_parameters(_config_file() / 'feature_node.yaml', overrides=parameters))[0]
+    processes = Processes(out / 'logs')
+    interrupted = False
+    seen = Recording()
+    try:
+        emulator = processes.start('s1_emulator', [
+            _executable('s1_emulator'), '--link', str(tty), '--floor-plan', args.floor_plan,
+            '--range-sigma', str(EMULATOR_RANGE_SIGMA_M),
+            '--bearing-sigma-deg', str(EMULATOR_BEARING_SIGMA_DEG)])
+        _wait_for(tty, emulator, 20.0)
+        processes.start('rplidar_node', [
+            _executable('rplidar_node'), '--ros-args', '--params-file',
+            str(_config_file() / 'rplidar_s1.yaml'), '-p', f'serial_port:={tty}',
+            '-p', 'angle_compensate:=false'])
+        processes.start('feature_node', [
+            _executable('feature_node'), '--ros-args', '--params-file',
+            str(_config_file() / 'feature_node.yaml')]
+            + [arg for k, v in parameters.items() for arg in ('-p', f'{k}:={v}')])
+        print(f'demo: S1 emulator on {tty} -> rplidar_node -> feature_node '
+              f'(ROS_DOMAIN_ID {os.environ["ROS_DOMAIN_ID"]}, logs in {out / "logs"})',
+              flush=True)
+        seen = record(out / 'bag', args.seconds)
+    except KeyboardInterrupt:
+        interrupted = True
+        print('demo: interrupted; stopping everything', file=sys.stderr)
+    finally:
+        processes.stop_all()
+    if interrupted or not seen.corners:
+        return 0 if interrupted else 1
+    plan = load_floor_plan(args.floor_plan)
+    walls, corners = plan.in_sensor_frame()
+    _, _, bearings = full_turn_bearings(S1_BEAMS_PER_TURN)
+    truth = corners[visible_corners(walls, corners, bearings)]
+    rows = summarise(seen, truth)
+    width = max(len(name) for name, _ in rows)
+    table = '\n'.join(f'{name:<{width}}  {value}' for name, value in rows)
+    draw(seen, config, truth, out / 'scan.png')
+    (out / 'summary.md').write_text(
+        '| measure | value |\n|---|---|\n'
+        + '\n'.join(f'| {name} | {value} |' for name, value in rows) + '\n')
+    print(f'\n{table}\n')
+    print(f'demo: wrote {out / "bag"} (mcap: open it in Foxglove), {out / "scan.png"} and '
+          f'{out / "summary.md"}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

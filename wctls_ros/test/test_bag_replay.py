@@ -3,7 +3,6 @@
 
 """bag_replay with the real rclpy: bags played through the real feature_node, timing, /clock."""
 
-import ast
 import pathlib
 import subprocess
 import time
@@ -189,29 +188,3 @@ def test_installed_replay_exits_1_with_a_clear_message_and_no_traceback(argument
     output = result.stdout + result.stderr
     assert result.returncode == 1, output
     assert reason in output and 'Traceback' not in output
-
-
-def launch_calls(name):
-    tree = ast.parse((PACKAGE / 'launch' / name).read_text())
-    calls = {}
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Call):
-            calls.setdefault(getattr(node.func, 'id', getattr(node.func, 'attr', None)),
-                             []).append(node)
-    return calls, ast.unparse(tree)
-
-
-def test_launch_file_starts_replay_and_feature_node_on_sim_time():
-    calls, source = launch_calls('replay.launch.py')
-    arguments = {c.args[0].value for c in calls['DeclareLaunchArgument']}
-    assert arguments == {'bag', 'rate', 'loop'}
-    executables = {k.value.value for c in calls['Node'] for k in c.keywords
-                   if k.arg == 'executable'}
-    assert executables == {'bag_replay'}
-    assert "'publish_clock': True" in source
-    assert "'feature_node.launch.py'" in source and "{'use_sim_time': 'true'}" in source
-    included_calls, _ = launch_calls('feature_node.launch.py')
-    included = {c.args[0].value for c in included_calls['DeclareLaunchArgument']}
-    assert {'method', 'params_file', 'use_sim_time'} <= included
-    setup = (PACKAGE / 'setup.py').read_text()
-    assert all(f"'{name} = " in setup for name in ('bag_replay', 'feature_node'))

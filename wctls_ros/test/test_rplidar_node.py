@@ -3,7 +3,6 @@
 
 """rplidar_node against the S1 emulator (separate process, real pty): scans, faults, recovery."""
 
-import ast
 import math
 import pathlib
 import time
@@ -279,14 +278,3 @@ def test_config_file_sets_every_parameter(executor, ros_context, tmp_path):
         assert node.get_parameter(name).value == value
     assert values['serial_baudrate'] == 256000 and values['frame_id'] == 'laser'
     assert spin_until(executor, lambda: 'no such device' in node.driver.status().message, 2.0)
-
-
-def test_launch_file_starts_the_driver_with_the_config():
-    source = (PACKAGE_DIR / 'launch' / 'rplidar_s1.launch.py').read_text()
-    tree = ast.parse(source)
-    assert any(isinstance(n, ast.FunctionDef) and n.name == 'generate_launch_description'
-               for n in tree.body)
-    assert "executable='rplidar_node'" in source and "'rplidar_s1.yaml'" in source
-    arguments = next(n.value for n in tree.body if isinstance(n, ast.Assign)
-                     and n.targets[0].id == 'ARGUMENTS')
-    assert {ast.literal_eval(item)[0] for item in arguments.elts} <= set(PARAMETERS)

@@ -12,14 +12,13 @@ rotation period.
 
 import array
 import statistics
+import sys
 import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-import rclpy
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
@@ -27,6 +26,7 @@ from std_srvs.srv import Empty
 
 from .driver import DriverConfig, DriverState, RplidarDriver
 from .laserscan import compensation_multiple, RANGE_MIN_M, turn_to_scan
+from ..node_main import run_node
 
 SCAN_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                       reliability=ReliabilityPolicy.RELIABLE)
@@ -201,23 +201,10 @@ class RplidarNode(Node):
         self._diagnostics_pub.publish(array_msg)
 
 
-def main(args=None):
-    """Run the node until shut down."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = RplidarNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ValueError as error:
-        rclpy.logging.get_logger('rplidar_node').fatal(str(error))
-        raise SystemExit(2)
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+def main(args=None) -> int:
+    """Run the node until shut down; exit 1 on an invalid configuration."""
+    return run_node('rplidar_node', RplidarNode, args=args)
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -18,6 +18,18 @@ SHARED_DATA = pathlib.Path(os.environ.get(
     'WCTLS_DATA_DIR', pathlib.Path(__file__).resolve().parents[2].parent / 'shared' / 'data'))
 
 
+@pytest.fixture(scope='module')
+def emulator(tmp_path_factory):
+    """
+    Yield an S1 emulator process (pseudo-terminal and TCP) shared by a test module.
+
+    :return: the running emulator (see rplidar_testing.start_emulator)
+    """
+    from rplidar_testing import start_emulator
+    with start_emulator(tmp_path_factory.mktemp('s1'), '--tcp-port', '0') as process:
+        yield process
+
+
 @pytest.fixture
 def ros_context():
     """

@@ -13,15 +13,9 @@ import time
 
 import numpy as np
 import pytest
-from rplidar_testing import range_band, start_emulator, true_ranges
+from rplidar_testing import range_band, true_ranges
 import serial
 from wctls_ros.rplidar.protocol import StandardNodeDecoder
-
-
-@pytest.fixture(scope='module')
-def emulator(tmp_path_factory):
-    with start_emulator(tmp_path_factory.mktemp('s1'), '--tcp-port', '0') as process:
-        yield process
 
 
 @pytest.fixture

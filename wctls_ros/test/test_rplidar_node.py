@@ -26,12 +26,6 @@ import yaml  # noqa: E402
 PACKAGE_DIR = pathlib.Path(__file__).resolve().parents[1]
 
 
-@pytest.fixture(scope='module')
-def emulator(tmp_path_factory):
-    with start_emulator(tmp_path_factory.mktemp('s1'), '--tcp-port', '0') as process:
-        yield process
-
-
 @pytest.fixture
 def own_emulator(tmp_path):
     """Give a starter of emulators of the test's own (for faults), taking extra options."""

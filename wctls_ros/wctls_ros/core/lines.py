@@ -151,6 +151,18 @@ def _algebraic_line(total, mx, my, mxx, myy, mxy):
                             t2 * (mxy * mxy - mxx * myy)])
 
 
+def _bearing_jacobian(x, y, mx, my, mxx, myy, mxy) -> np.ndarray:
+    """
+    Return the bracket shared by eqs. (7d)-(7f) and (15d)-(15f): d(a, b, c)/d theta_i / scale.
+
+    UTLS multiplies it by N, WTLS by w_i W (means weighted); shape (P, 3).
+    """
+    xy, dxy = x * y, x * x - y * y
+    return np.column_stack([-y * myy + 2 * xy * mx - x * mxy - dxy * my,
+                            x * mxx - 2 * xy * my + y * mxy - dxy * mx,
+                            2 * (dxy * mxy + xy * (myy - mxx))])
+
+
 def utls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
     """
     Unweighted algebraic fit of eqs. (2)-(4) with the covariance of eqs. (6)-(7) (corrected).
@@ -165,15 +177,12 @@ def utls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
     s = returns.segment
     n, mx, my, mxx, myy, mxy = total[s], mx[s], my[s], mxx[s], myy[s], mxy[s]
     x, y, rho = returns.x, returns.y, returns.rho
-    xy, dxy = x * y, x * x - y * y
+    xy = x * y
     jac_rho = (n / rho)[:, None] * np.column_stack([
         x * myy + 2 * y * y * mx - y * mxy - 2 * xy * my,
         y * mxx + 2 * x * x * my - x * mxy - 2 * xy * mx,
         2 * (2 * xy * mxy - x * x * myy - y * y * mxx)])
-    jac_theta = n[:, None] * np.column_stack([
-        -y * myy + 2 * xy * mx - x * mxy - dxy * my,
-        x * mxx - 2 * xy * my + y * mxy - dxy * mx,
-        2 * (dxy * mxy + xy * (myy - mxx))])
+    jac_theta = n[:, None] * _bearing_jacobian(x, y, mx, my, mxx, myy, mxy)
     return (line, _propagate(jac_rho, jac_theta, returns, range_sigma, bearing_sigma),
             returns.sums(jac_rho))
 
@@ -205,13 +214,9 @@ def wtls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
     ww = w * total[s]
     mx, my, mxx, myy, mxy = mx[s], my[s], mxx[s], myy[s], mxy[s]
     x, y = returns.x, returns.y
-    xy, dxy = x * y, x * x - y * y
     jac_rho = (ww / returns.rho)[:, None] * np.column_stack([
         -x * myy + y * mxy, -y * mxx + x * mxy, np.zeros_like(x)])
-    jac_theta = ww[:, None] * np.column_stack([
-        -y * myy + 2 * xy * mx - x * mxy - dxy * my,
-        x * mxx - 2 * xy * my + y * mxy - dxy * mx,
-        2 * (dxy * mxy + xy * (myy - mxx))])
+    jac_theta = ww[:, None] * _bearing_jacobian(x, y, mx, my, mxx, myy, mxy)
     return (line, _propagate(jac_rho, jac_theta, returns, range_sigma, bearing_sigma),
             returns.sums(jac_rho))
 

@@ -253,3 +253,22 @@ def test_common_range_offset_is_propagated_with_its_correlation(method):
     error = with_common.xy_m - corner
     assert 1.8 <= nees(error, with_common.covariance[:, :2, :2]).mean() <= 2.2
     assert nees(error, without.covariance[:, :2, :2]).mean() > 10.0
+
+
+def test_uncertainty_helpers():
+    from wctls_ros.core import confidence_scale, ellipse
+    c, s = math.cos(0.4), math.sin(0.4)
+    rotation = np.array([[c, -s], [s, c]])
+    covariance = rotation @ np.diag([0.03 ** 2, 0.01 ** 2]) @ rotation.T
+    shape = ellipse(covariance)
+    assert (shape.semi_major, shape.semi_minor) == pytest.approx((0.03, 0.01))
+    assert shape.orientation_rad == pytest.approx(0.4)
+    assert shape.area == pytest.approx(math.pi * math.sqrt(np.linalg.det(covariance)))
+    # The k-sigma ellipse holds p of a 2D Gaussian: checked by sampling.
+    k = confidence_scale(0.95)
+    assert k == pytest.approx(2.4477, abs=1e-4)
+    samples = np.random.default_rng(8).multivariate_normal([0, 0], covariance, 20000)
+    assert np.mean(nees(samples, np.broadcast_to(covariance, (20000, 2, 2))) <= k * k) == \
+        pytest.approx(0.95, abs=0.005)
+    with pytest.raises(ValueError, match='probability'):
+        confidence_scale(1.0)

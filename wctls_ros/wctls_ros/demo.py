@@ -146,10 +146,12 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
             for topic, kind in (('corners', CornerArray), ('lines', LineSegmentArray),
                                 ('markers', MarkerArray)):
                 node.create_subscription(kind, topic, lambda m, t=topic: keep(f'/{t}', m), 10)
+            # Discovery can match the recorder to feature_node before the driver (or the other
+            # way round) on a busy machine: start the clock once both scans and corners arrive.
             start_deadline = time.monotonic() + 60.0
-            while not seen.corners:
+            while not (seen.corners and seen.scans):
                 if time.monotonic() > start_deadline:
-                    raise RuntimeError('no corners within 60 s (see the logs)')
+                    raise RuntimeError('no scans and corners within 60 s (see the logs)')
                 executor.spin_once(timeout_sec=0.1)
             print(f'demo: features flowing; recording {seconds:g} s ...', flush=True)
             end = time.monotonic() + seconds

@@ -146,6 +146,15 @@ def test_hostile_scans_give_empty_or_finite_results(ranges):
     assert_finite(features)
 
 
+@pytest.mark.parametrize('config', [FeatureConfig(), FeatureConfig(min_segment_points=20)],
+                         ids=['too-short', 'too-few'])
+def test_segments_that_all_fail_the_size_rules_give_an_empty_result(config):
+    bearings = np.linspace(-0.01, 0.01, 10)              # 10 returns over 4 cm of wall
+    features = extract_features(2.0 / np.cos(bearings), bearings[0], bearings[1] - bearings[0],
+                                config)
+    assert len(features.segments) == len(features.corners) == 0
+
+
 def test_collinear_exact_returns_give_one_finite_segment():
     bearings = np.linspace(-0.6, 0.6, 200)
     features = extract_features(2.0 / np.cos(bearings), -0.6, bearings[1] - bearings[0])
@@ -305,3 +314,22 @@ def test_a_closed_room_without_breakpoints_gives_its_four_walls_and_corners(yaw)
     assert features.segments.num_points.sum() >= len(ranges) - 4 * 5
     _, distance = nearest(features.corners.xy_m, truth)
     assert len(features.corners) == 4 and distance.max() < 0.02
+
+
+@settings(max_examples=200, deadline=None)
+@given(ranges=st.lists(st.one_of(st.floats(0.0, 30.0), st.just(math.nan), st.just(math.inf),
+                                 st.floats(-1.0, 0.0), st.floats(1e3, 1e9)),
+                       min_size=0, max_size=400),
+       smooth=st.booleans(), angle_min=st.floats(-4.0, 4.0),
+       increment=st.floats(1e-4, 0.05) | st.floats(-0.05, -1e-4))
+def test_arbitrary_ranges_never_crash_nor_give_non_finite_output(
+        ranges, smooth, angle_min, increment):
+    ranges = np.array(ranges, dtype=float)
+    if smooth and ranges.size:               # walls: runs of slowly varying ranges
+        step = max(1, -(-ranges.size // 8))          # 8 walls
+        ranges = np.repeat(ranges[::step], step)[:ranges.size] + 0.001 * np.arange(ranges.size)
+    try:
+        features = extract_features(ranges, angle_min, increment)
+    except ScanError:
+        return                               # e.g. more than a full turn of beams
+    assert_finite(features)

@@ -74,6 +74,8 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
     segments = segments.select(
         (counts >= config.min_segment_points)
         & (np.hypot(x[last] - x[first], y[last] - y[first]) >= config.min_segment_length_m))
+    if not len(segments):
+        return Features(config.method, SegmentSet.empty(), CornerSet.empty())
     angle, radius, _ = quick(segments)
     segments = trim_ambiguous_ends(segments, points.full_turn, n, x, y, angle, radius,
                                    config.range_sigma_m, config.bearing_sigma_rad,
@@ -89,6 +91,8 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
                                      y.take(position, mode='wrap')),
                      config.range_sigma_m, config.bearing_sigma_rad)
     usable = _finite_and_positive(fits)
+    if not usable.any():
+        return Features(config.method, SegmentSet.empty(), CornerSet.empty())
     if not usable.all():
         segments, counts, fits = segments.select(usable), counts[usable], fits.select(usable)
     last = (segments.stop - 1) % n

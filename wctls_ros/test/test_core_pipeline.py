@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from wctls_ros.core import (extract_features, FeatureConfig, fit_lines, nees, scan_to_points,
                             ScanError, segment_returns)
+from wctls_ros.core.segmentation import SegmentRanges, trim_ambiguous_ends
 from wctls_ros.simulation import (floor_plan_from_dict, full_turn_bearings, NOISELESS,
                                   NoiseModel, simulate_ranges)
 
@@ -333,3 +334,36 @@ def test_arbitrary_ranges_never_crash_nor_give_non_finite_output(
     except ScanError:
         return                               # e.g. more than a full turn of beams
     assert_finite(features)
+
+
+def test_moving_the_seam_through_every_beam_changes_no_corner():
+    # One full turn of 360 beams 1 degree apart, its first beam moved through every position:
+    # segments that cross the seam (and get trimmed next to it) must come out as anywhere else.
+    walls, _ = floor_plan_from_dict(ROOM).in_sensor_frame((2.6, 1.25, 0.0))
+    increment = 2.0 * math.pi / 360
+    bearings = -math.pi + increment * np.arange(360)
+    ranges = simulate_ranges(walls, bearings, SMALL_NOISE, np.random.default_rng(3))
+    reference = extract_features(ranges, -math.pi, increment, SMALL_NOISE_CONFIG).corners
+    assert len(reference) >= 4
+    for shift in range(ranges.size):
+        corners = extract_features(np.roll(ranges, -shift), bearings[0] + shift * increment,
+                                   increment, SMALL_NOISE_CONFIG).corners
+        assert len(corners) == len(reference), shift
+        _, distance = nearest(corners.xy_m, reference.xy_m)
+        assert distance.max() < 1e-9, shift
+
+
+def test_trimming_a_segment_that_crosses_the_end_of_the_contour_keeps_it_in_range():
+    # Two walls meet at (1, 2); the later one starts just after the corner return (position
+    # 148 of 150) and runs past the end of the circular order. Trimming the two returns next to
+    # the corner moves its start past position 150: it must come back as position 1.
+    n = 150
+    position = np.arange(n)
+    along = np.where(position < 30, position + n, position)     # unwrapped positions
+    x = np.where(along < 148, 1.0 - (148 - along) * 0.011, 1.0)
+    y = np.where(along < 148, 2.0, 2.0 + (along - 148) * 0.011)
+    segments = SegmentRanges(np.array([30, 149]), np.array([148, 180]), np.array([0, 0]))
+    trimmed = trim_ambiguous_ends(segments, True, n, x, y, np.array([math.pi / 2, 0.0]),
+                                  np.array([2.0, 1.0]), 0.01, 0.0, 8)
+    assert trimmed.start.tolist() == [30, 1]
+    assert trimmed.stop.tolist() == [146, 30]

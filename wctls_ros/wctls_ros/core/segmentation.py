@@ -335,4 +335,6 @@ def trim_ambiguous_ends(segments: SegmentRanges, circular: bool, contour_length:
     stop, start = segments.stop.copy(), segments.start.copy()
     stop[k] -= np.minimum(run_inside(segments.stop[k][:, None] - 1 - steps), allowance[k])
     start[j] += np.minimum(run_inside(segments.start[j][:, None] + steps), allowance[j])
-    return SegmentRanges(start, stop, segments.chain)
+    # A segment that crosses the end of the contour may now start past it: back to [0, n).
+    wrapped = np.where(start >= contour_length, contour_length, 0)
+    return SegmentRanges(start - wrapped, stop - wrapped, segments.chain)

@@ -41,7 +41,8 @@ def test_invalid_returns_are_dropped_and_indices_kept():
     ranges = [1.0, math.nan, math.inf, -math.inf, 0.01, 50.0, 0.0, 2.0]
     points = scan_to_points(ranges, 0.0, 0.1, range_min_m=0.05, range_max_m=30.0)
     assert points.index.tolist() == [0, 7]
-    np.testing.assert_allclose(points.xy_m[1], [2.0 * math.cos(0.7), 2.0 * math.sin(0.7)])
+    np.testing.assert_allclose([points.x_m[1], points.y_m[1]],
+                               [2.0 * math.cos(0.7), 2.0 * math.sin(0.7)])
     assert not points.full_turn
 
 

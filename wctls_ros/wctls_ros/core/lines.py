@@ -21,11 +21,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._linalg import inverse_2x2, solve_2x2
-
 # Gauss-Newton of the maximum-likelihood fit stops once every step is below this (rad and m)...
 _ML_STEP_TOLERANCE = 1e-12
-# ... or after this many iterations (it starts from the WTLS line and converges in 2-4).
+# ... or after this many iterations. From the WTLS line it takes 5 to 8 on simulated S1 scans
+# (the variances move with the line, so convergence is linear), the last step below 1e-12.
 _ML_MAX_ITERATIONS = 8
 
 
@@ -40,7 +39,6 @@ class SegmentReturns:
     :ivar y: rho sin(theta), shape (P,), m
     :ivar offsets: first return of each segment, shape (S,)
     :ivar counts: returns per segment, shape (S,), each >= 2
-    :ivar segment: the segment each return belongs to, shape (P,)
     """
 
     rho: np.ndarray
@@ -49,16 +47,6 @@ class SegmentReturns:
     y: np.ndarray
     offsets: np.ndarray
     counts: np.ndarray
-    segment: np.ndarray
-
-    def sums(self, values: np.ndarray) -> np.ndarray:
-        """
-        Sum per-return values over each segment.
-
-        :param values: shape (P,) or (P, k)
-        :return: shape (S,) or (S, k)
-        """
-        return np.add.reduceat(values, self.offsets, axis=0)
 
 
 def segment_returns(rho, theta, offsets, counts, x=None, y=None) -> SegmentReturns:
@@ -78,8 +66,7 @@ def segment_returns(rho, theta, offsets, counts, x=None, y=None) -> SegmentRetur
     counts = np.asarray(counts, dtype=np.intp)
     if x is None or y is None:
         x, y = rho * np.cos(theta), rho * np.sin(theta)
-    return SegmentReturns(rho, theta, x, y, np.asarray(offsets, dtype=np.intp), counts,
-                          np.repeat(np.arange(counts.size), counts))
+    return SegmentReturns(rho, theta, x, y, np.asarray(offsets, dtype=np.intp), counts)
 
 
 @dataclass(frozen=True)
@@ -117,50 +104,221 @@ class LineFits:
                         self.line_offset_jacobian[keep], self.normal_offset_jacobian[keep])
 
 
-def _propagate(jac_rho: np.ndarray, jac_theta: np.ndarray, returns: SegmentReturns,
-               range_sigma: float, bearing_sigma: float) -> np.ndarray:
+def _square_order(k: int) -> np.ndarray:
     """
-    Sum per-return Jacobian outer products into per-segment covariances.
+    Return where each entry of a symmetric k x k matrix, in row-major order, is summed.
 
-    :param jac_rho: d(params)/d(rho_i), shape (P, k)
-    :param jac_theta: d(params)/d(theta_i), shape (P, k)
-    :return: covariance of the k parameters per segment, shape (S, k, k)
+    :func:`_lever_sums` sums the entries diagonal by diagonal: (0, 0), (1, 1), [(2, 2),] (0, 1),
+    [(1, 2), (0, 2)].
     """
-    k = jac_rho.shape[1]
-    rows, cols = np.triu_indices(k)                 # symmetric: sum the upper triangle only
-    outer = (range_sigma ** 2 * jac_rho[:, rows] * jac_rho[:, cols]
-             + bearing_sigma ** 2 * jac_theta[:, rows] * jac_theta[:, cols])
-    covariance = np.empty((len(returns.counts), k, k))
-    covariance[:, rows, cols] = covariance[:, cols, rows] = returns.sums(outer)
-    return covariance
+    order = np.empty((k, k), dtype=np.intp)
+    place = 0
+    for shift in range(k):
+        for row in range(k - shift):
+            order[row, row + shift] = order[row + shift, row] = place
+            place += 1
+    return order.ravel()
 
 
-def _moments(returns: SegmentReturns, weight):
-    """Return per-segment total weight and weighted means X, Y, X2, Y2, XY, each (S,)."""
+# Takes the summed entries, columns (S, k (k + 1) / 2), to the matrices (S, k, k) in one copy.
+_SQUARE = {k: _square_order(k) for k in (2, 3)}
+
+
+def _weighted_sums(returns: SegmentReturns, weighted: bool):
+    """
+    Return the per-segment sums S_x, S_y, S_xx, S_yy, S_xy, weighted or not.
+
+    The weights are those of eq. (8) up to its constant factor: w_i = 1 / rho_i^2. The factor
+    1 / (range_sigma bearing_sigma)^2 is left out: it scales (a_w, b_w, c_w) by a constant,
+    which cancels in the normal form, in the WCTLS point Q and in every corner, and it is
+    undefined for a zero bearing sigma.
+
+    :return: (1 / rho (P,), weights (P,), both None when unweighted; sums, shape (5, S))
+    """
     x, y = returns.x, returns.y
-    sums = returns.sums(np.column_stack([weight, weight * x, weight * y, weight * x * x,
-                                         weight * y * y, weight * x * y]))
-    total = sums[:, 0]
-    return total, *(sums[:, 1:] / total[:, None]).T
+    columns = np.empty((5, len(x)))
+    if weighted:
+        inv_rho = 1.0 / returns.rho
+        weight = inv_rho * inv_rho
+        wx = np.multiply(weight, x, out=columns[0])
+        wy = np.multiply(weight, y, out=columns[1])
+    else:
+        inv_rho, weight, wx, wy = None, None, x, y
+        columns[0], columns[1] = x, y
+    np.multiply(wx, x, out=columns[2])
+    np.multiply(wy, y, out=columns[3])
+    np.multiply(wx, y, out=columns[4])
+    return inv_rho, weight, np.add.reduceat(columns, returns.offsets, axis=1)
 
 
-def _algebraic_line(total, mx, my, mxx, myy, mxy):
-    """Return (a, b, c) of eqs. (2)-(4) / (10)-(12) from the (weighted) means, shape (S, 3)."""
-    t2 = total * total
-    return np.column_stack([t2 * (mx * myy - my * mxy), t2 * (my * mxx - mx * mxy),
-                            t2 * (mxy * mxy - mxx * myy)])
+def _algebraic_line(sums: np.ndarray) -> np.ndarray:
+    """Return (a, b, c) of eqs. (2)-(4) / (10)-(12) from the (weighted) sums, shape (S, 3)."""
+    s_x, s_y, s_xx, s_yy, s_xy = sums
+    line = np.empty((len(s_x), 3))
+    np.subtract(s_x * s_yy, s_y * s_xy, out=line[:, 0])
+    np.subtract(s_y * s_xx, s_x * s_xy, out=line[:, 1])
+    np.subtract(s_xy * s_xy, s_xx * s_yy, out=line[:, 2])
+    return line
 
 
-def _bearing_jacobian(x, y, mx, my, mxx, myy, mxy) -> np.ndarray:
+# A degenerate segment (det S_M = 0: every return on one ray) yields NaN or inf, not warnings.
+@np.errstate(divide='ignore', invalid='ignore')
+def _lever_sums(returns: SegmentReturns, range_sigma: float, bearing_sigma: float,
+                weighted: bool, scaled: bool):
     """
-    Return the bracket shared by eqs. (7d)-(7f) and (15d)-(15f): d(a, b, c)/d theta_i / scale.
+    Fit p of every segment and sum the first-order covariance of its coordinates u.
 
-    UTLS multiplies it by N, WTLS by w_i W (means weighted); shape (P, 3).
+    UTLS, WTLS and WCTLS all rest on the least-squares solution p of p.z = 1: S_M p = S_g with
+    S_M = sum w z z^T and S_g = sum w z. The (a, b, c) of eqs. (2)-(4) / (10)-(12) are
+    (a, b) = adj(S_M) S_g and c = -det S_M, so (a, b, c) = s (p, -1) with s = det S_M; WCTLS
+    gives (-p, 1) / |p| (eqs. (19)-(21) with Q = F p); and all have the normal form
+    angle = atan2(p_y, p_x), radius = 1 / |p|. A return moves p by S_M^-1 (dS_g - dS_M p):
+
+        dp/drho_i   = -(w_i / rho_i) S_M^-1 z_i           (eq. (8): w z z^T is free of rho)
+        dp/drho_i   = ((1 - 2 p.z_i) / rho_i) S_M^-1 z_i  (unit weights)
+        dp/dtheta_i = w_i S_M^-1 q_i,  q_i = (1 - p.z_i) z_perp_i - (p.z_perp_i) z_i
+
+    and s by d ln s = tr(S_M^-1 dS_M): 2 w_i z_i^T S_M^-1 z_perp_i per bearing, and per range 0
+    (eq. (8)) or 2 z_i^T S_M^-1 z_i / rho_i (unit weights). These are the Jacobians (7), (15)
+    and (22) in other coordinates. With Pi = [p_perp, p]^T S_M^-1 (2x2 per segment), Pi dp =
+    (p_perp.dp, p.dp) = (|p|^2 d angle, -|p|^3 d radius), and z^T S_M^-1 v =
+    (p_perp.z (Pi v)_1 + p.z (Pi v)_2) / |p|^2. Each return's derivatives are projected before
+    their products are summed: summing z z^T and applying S_M^-1 on both sides afterwards would
+    lose digits on short, distant segments, where S_M is ill-conditioned.
+
+    :param returns: the segments' returns
+    :param range_sigma: range noise std, m
+    :param bearing_sigma: bearing noise std, rad
+    :param weighted: use the weights of eq. (8), else unit weights
+    :param scaled: take u = (p_perp.dp, p.dp, |p|^2 d ln s / 2), for a line that carries the
+        scale s, else u = (d angle, d radius)
+    :return: ((a, b, c) (S, 3); p as (p_x, p_y), each (S,); 1 / |p| (S,); the covariance of u,
+        its entries in the order of :func:`_square_order` (k (k + 1) / 2, S); its offset Jacobian
+        du / d(range offset common to all returns) (k, S)), k = 3 if scaled else 2
     """
-    xy, dxy = x * y, x * x - y * y
-    return np.column_stack([-y * myy + 2 * xy * mx - x * mxy - dxy * my,
-                            x * mxx - 2 * xy * my + y * mxy - dxy * mx,
-                            2 * (dxy * mxy + xy * (myy - mxx))])
+    inv_rho, weight, sums = _weighted_sums(returns, weighted)
+    line = _algebraic_line(sums)
+    x, y = returns.x, returns.y
+    # Per segment Pi e_x, Pi e_y and p, repeated to every return, in rows Pi e_x, p_x, Pi e_y,
+    # p_y, -Pi e_x, -p_x: rows 0-5 times x plus rows 3-8 times y are Pi z, p.z, Pi z_perp and
+    # p.z_perp in one pass. S_M^-1 = adj(S_M) / det S_M makes the rows of Pi A^T adj(S_M) and
+    # B^T adj(S_M) with A = p_perp / det S_M and B = p / det S_M, here also scaled by
+    # (1 / |p|^2, -1 / |p|^3) when u = (d angle, d radius).
+    inv_det = -1.0 / line[:, 2]
+    basis = np.empty((9, len(inv_det)))
+    px = np.multiply(line[:, 0], inv_det, out=basis[2])
+    py = np.multiply(line[:, 1], inv_det, out=basis[5])
+    inv_norm = 1.0 / np.hypot(px, py)
+    if scaled:
+        to_angle, to_radius = inv_det, inv_det
+    else:
+        to_angle = inv_norm * inv_norm * inv_det
+        to_radius = -inv_norm * to_angle
+    a_x, a_y = -py * to_angle, px * to_angle
+    b_x, b_y = px * to_radius, py * to_radius
+    _, _, s_xx, s_yy, s_xy = sums
+    np.subtract(a_x * s_yy, a_y * s_xy, out=basis[0])
+    np.subtract(b_x * s_yy, b_y * s_xy, out=basis[1])
+    np.subtract(a_y * s_xx, a_x * s_xy, out=basis[3])
+    np.subtract(b_y * s_xx, b_x * s_xy, out=basis[4])
+    np.negative(basis[:3], out=basis[6:])
+    basis = np.repeat(basis, returns.counts, axis=1)
+    projected = basis[:6] * x
+    projected += basis[3:] * y
+    along, ahead, across, turn = projected[:2], projected[2], projected[3:5], projected[5]
+    k = 3 if scaled else 2
+    pairs = k * (k + 1) // 2
+    kinds = 1 if bearing_sigma == 0.0 else 2        # a zero bearing sigma adds nothing
+    # Per kind (bearing if kept, then range): du/dtheta_i or -du/drho_i (the sign that costs no
+    # operation, undone in the offset), then their products diagonal by diagonal.
+    work = np.empty((kinds, k + pairs, len(x)))
+    jac = work[:, :k]
+    if weighted:
+        np.multiply(along, weight * inv_rho, out=jac[-1, :2])
+    else:
+        inv_rho = 1.0 / returns.rho
+        np.multiply(along, (2.0 * ahead - 1.0) * inv_rho, out=jac[-1, :2])
+    if scaled and weighted:
+        jac[-1, 2] = 0.0
+    elif scaled:
+        np.multiply(turn * along[0] - ahead * along[1], inv_rho, out=jac[-1, 2])
+    if kinds == 2:
+        np.subtract((1.0 - ahead) * across, turn * along, out=jac[0, :2])
+        if scaled:
+            np.subtract(ahead * across[1], turn * across[0], out=jac[0, 2])
+        if weighted:
+            jac[0] *= weight
+    start = k
+    for shift in range(k):
+        np.multiply(jac[:, :k - shift], jac[:, shift:], out=work[:, start:start + k - shift])
+        start += k - shift
+    # Rows summed: [bearing products,] range -u, range products.
+    sums = np.add.reduceat(work.reshape(-1, len(x))[(kinds - 1) * k:], returns.offsets,
+                           axis=1)
+    covariance = range_sigma ** 2 * sums[-pairs:]
+    if kinds == 2:
+        covariance += bearing_sigma ** 2 * sums[:pairs]
+    return line, (px, py), inv_norm, covariance, -sums[-pairs - k:-pairs]
+
+
+def _algebraic_fits(returns: SegmentReturns, range_sigma: float, bearing_sigma: float,
+                    weighted: bool) -> LineFits:
+    """
+    Fit UTLS (unit weights) or WTLS (weights of eq. (8)) lines, see :func:`_lever_sums`.
+
+    d(angle, radius) = (u_1 / |p|^2, -u_2 / |p|^3) and, as (a, b, c) = s (p, -1),
+    d(a, b, c) = K u with K = (s / |p|^2) [(p_perp, 0), (p, 0), 2 (p, -1)] (by columns).
+    """
+    line, (px, py), inv_norm, pairs, offset = _lever_sums(returns, range_sigma, bearing_sigma,
+                                                          weighted, True)
+    covariance = pairs.T[:, _SQUARE[3]].reshape(-1, 3, 3)
+    inv_n2 = inv_norm * inv_norm
+    jac = np.zeros((len(px), 3, 3))
+    jac[:, 0, 0], jac[:, 0, 1], jac[:, 0, 2] = -py, px, 2.0 * px
+    jac[:, 1, 0], jac[:, 1, 1], jac[:, 1, 2] = px, py, 2.0 * py
+    jac[:, 2, 2] = -2.0
+    jac *= (-line[:, 2] * inv_n2)[:, None, None]
+    to_normal = np.empty((len(px), 2))              # d(angle, radius) / d(u_1, u_2)
+    to_normal[:, 0], to_normal[:, 1] = inv_n2, -inv_n2 * inv_norm
+    normal = covariance[:, :2, :2] * to_normal[:, :, None] * to_normal[:, None, :]
+    return LineFits(line, jac @ covariance @ jac.transpose(0, 2, 1), np.arctan2(py, px),
+                    inv_norm, normal, (jac @ offset.T[:, :, None])[:, :, 0],
+                    offset[:2].T * to_normal)
+
+
+def _conformal_fits(returns: SegmentReturns, range_sigma: float,
+                    bearing_sigma: float) -> LineFits:
+    """
+    Fit WCTLS lines, see :func:`_lever_sums`; there u = (d angle, d radius).
+
+    The line (-cos angle, -sin angle, radius) moves by (sin angle, -cos angle, 0) d angle and
+    (0, 0, 1) d radius: the J_WC of eq. (23) with Q = F p.
+    """
+    _, (px, py), inv_norm, pairs, offset = _lever_sums(returns, range_sigma, bearing_sigma,
+                                                       True, False)
+    var_angle, var_radius, covariance = pairs
+    count = len(px)
+    normal = pairs.T[:, _SQUARE[2]].reshape(-1, 2, 2)
+    line = np.empty((count, 3))
+    minus_inv_norm = -inv_norm
+    minus_cos = np.multiply(px, minus_inv_norm, out=line[:, 0])
+    np.multiply(py, minus_inv_norm, out=line[:, 1])
+    line[:, 2] = inv_norm
+    sin = py * inv_norm
+    line_covariance = np.empty((count, 3, 3))
+    sin_var = sin * var_angle
+    np.multiply(sin, sin_var, out=line_covariance[:, 0, 0])
+    line_covariance[:, 1, 0] = np.multiply(minus_cos, sin_var, out=line_covariance[:, 0, 1])
+    np.multiply(minus_cos, minus_cos * var_angle, out=line_covariance[:, 1, 1])
+    line_covariance[:, 2, 0] = np.multiply(sin, covariance, out=line_covariance[:, 0, 2])
+    line_covariance[:, 2, 1] = np.multiply(minus_cos, covariance, out=line_covariance[:, 1, 2])
+    line_covariance[:, 2, 2] = var_radius
+    line_offset = np.empty((count, 3))
+    np.multiply(sin, offset[0], out=line_offset[:, 0])
+    np.multiply(minus_cos, offset[0], out=line_offset[:, 1])
+    line_offset[:, 2] = offset[1]
+    return LineFits(line, line_covariance, np.arctan2(py, px), inv_norm, normal, line_offset,
+                    offset.T)
 
 
 def utls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
@@ -172,30 +330,8 @@ def utls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
     :param bearing_sigma: bearing noise std, rad
     :return: (line (S, 3), covariance (S, 3, 3), offset Jacobian (S, 3))
     """
-    total, mx, my, mxx, myy, mxy = _moments(returns, np.ones_like(returns.rho))
-    line = _algebraic_line(total, mx, my, mxx, myy, mxy)
-    s = returns.segment
-    n, mx, my, mxx, myy, mxy = total[s], mx[s], my[s], mxx[s], myy[s], mxy[s]
-    x, y, rho = returns.x, returns.y, returns.rho
-    xy = x * y
-    jac_rho = (n / rho)[:, None] * np.column_stack([
-        x * myy + 2 * y * y * mx - y * mxy - 2 * xy * my,
-        y * mxx + 2 * x * x * my - x * mxy - 2 * xy * mx,
-        2 * (2 * xy * mxy - x * x * myy - y * y * mxx)])
-    jac_theta = n[:, None] * _bearing_jacobian(x, y, mx, my, mxx, myy, mxy)
-    return (line, _propagate(jac_rho, jac_theta, returns, range_sigma, bearing_sigma),
-            returns.sums(jac_rho))
-
-
-def _range_weights(returns: SegmentReturns):
-    """
-    Return the WTLS weights, proportional to eq. (8): w_i = 1 / rho_i^2.
-
-    The paper's constant factor 1 / (range_sigma bearing_sigma)^2 is left out: it scales
-    (a_w, b_w, c_w) by a constant, which cancels in the normal form, in the WCTLS point Q and in
-    every corner, and it is undefined for a zero bearing sigma.
-    """
-    return 1.0 / (returns.rho * returns.rho)
+    fits = _algebraic_fits(returns, range_sigma, bearing_sigma, False)
+    return fits.line, fits.line_covariance, fits.line_offset_jacobian
 
 
 def wtls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
@@ -207,18 +343,8 @@ def wtls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
     :param bearing_sigma: bearing noise std, rad
     :return: (line (S, 3), covariance (S, 3, 3), offset Jacobian (S, 3))
     """
-    w = _range_weights(returns)
-    total, mx, my, mxx, myy, mxy = _moments(returns, w)
-    line = _algebraic_line(total, mx, my, mxx, myy, mxy)
-    s = returns.segment
-    ww = w * total[s]
-    mx, my, mxx, myy, mxy = mx[s], my[s], mxx[s], myy[s], mxy[s]
-    x, y = returns.x, returns.y
-    jac_rho = (ww / returns.rho)[:, None] * np.column_stack([
-        -x * myy + y * mxy, -y * mxx + x * mxy, np.zeros_like(x)])
-    jac_theta = ww[:, None] * _bearing_jacobian(x, y, mx, my, mxx, myy, mxy)
-    return (line, _propagate(jac_rho, jac_theta, returns, range_sigma, bearing_sigma),
-            returns.sums(jac_rho))
+    fits = _algebraic_fits(returns, range_sigma, bearing_sigma, True)
+    return fits.line, fits.line_covariance, fits.line_offset_jacobian
 
 
 def wctls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
@@ -234,44 +360,8 @@ def wctls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
     :return: (line (S, 3) with a^2 + b^2 = 1 and c > 0, covariance (S, 3, 3) of rank 2, offset
         Jacobian (S, 3))
     """
-    w = _range_weights(returns)
-    total, mx, my, mxx, myy, mxy = _moments(returns, w)
-    # p solves M p = g with M = sum w z z^T, g = sum w z (divided through by the total weight);
-    # M^-1 = [[i_xx, i_xy], [i_xy, i_yy]] (symmetric).
-    with np.errstate(divide='ignore', invalid='ignore'):
-        inv_det = 1.0 / (mxx * myy - mxy * mxy)
-    i_xx, i_xy, i_yy = myy * inv_det, -mxy * inv_det, mxx * inv_det
-    px, py = i_xx * mx + i_xy * my, i_xy * mx + i_yy * my
-    s = returns.segment
-    x, y = returns.x, returns.y
-    k = w / total[s]
-    a, b, d = i_xx[s], i_xy[s], i_yy[s]
-    # dp/drho_i = -w_i M^-1 z_i / rho_i ;
-    # dp/dtheta_i = w_i M^-1 ((1 - p.z_i) z_perp_i - z_i (p.z_perp_i)), z_perp = (-y, x).
-    scale = -k / returns.rho
-    jac_rho = np.empty((len(x), 2))
-    jac_rho[:, 0] = scale * (a * x + b * y)
-    jac_rho[:, 1] = scale * (b * x + d * y)
-    pxs, pys = px[s], py[s]
-    residual = 1.0 - pxs * x - pys * y
-    turn = pys * x - pxs * y                       # p . z_perp
-    qx, qy = -residual * y - x * turn, residual * x - y * turn
-    jac_theta = np.empty((len(x), 2))
-    jac_theta[:, 0] = k * (a * qx + b * qy)
-    jac_theta[:, 1] = k * (b * qx + d * qy)
-    cov_p = _propagate(jac_rho, jac_theta, returns, range_sigma, bearing_sigma)
-    flip = np.array([1.0, -1.0])
-    xq, yq = px, -py                               # Q = F p, F = diag(1, -1)
-    cov_q = cov_p * flip[:, None] * flip[None, :]
-    offset_q = returns.sums(jac_rho) * flip
-    norm = np.hypot(xq, yq)
-    line = np.column_stack([-xq, yq, np.ones_like(xq)]) / norm[:, None]
-    jac = np.empty((len(xq), 3, 2))                 # J_WC of eq. (23)
-    jac[:, 0, 0], jac[:, 0, 1] = -yq * yq, xq * yq
-    jac[:, 1, 0], jac[:, 1, 1] = -xq * yq, xq * xq
-    jac[:, 2, 0], jac[:, 2, 1] = -xq, -yq
-    jac /= (norm ** 3)[:, None, None]
-    return line, jac @ cov_q @ jac.transpose(0, 2, 1), np.einsum('sij,sj->si', jac, offset_q)
+    fits = _conformal_fits(returns, range_sigma, bearing_sigma)
+    return fits.line, fits.line_covariance, fits.line_offset_jacobian
 
 
 def line_angle_radius(line: np.ndarray):
@@ -313,67 +403,6 @@ def normal_form(line: np.ndarray, line_covariance: np.ndarray):
     return (*line_angle_radius(line), jac @ line_covariance @ jac.transpose(0, 2, 1))
 
 
-def moment_prefix_sums(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """
-    Return prefix sums of the per-return quantities :func:`moment_fit` needs.
-
-    Row i holds the sums over returns 0..i-1 of (1, x, y, x^2, y^2, x y, rho^2), so the sums
-    over returns [start, stop) are ``prefix[stop] - prefix[start]``.
-
-    :param x: shape (P,), m
-    :param y: shape (P,), m
-    :return: shape (P + 1, 7)
-    """
-    columns = np.empty((7, len(x) + 1))
-    columns[:, 0] = 0.0
-    rows = columns[:, 1:]
-    rows[0], rows[1], rows[2] = 1.0, x, y
-    np.multiply(x, x, out=rows[3])
-    np.multiply(y, y, out=rows[4])
-    np.multiply(x, y, out=rows[5])
-    np.add(rows[3], rows[4], out=rows[6])
-    np.cumsum(columns, axis=1, out=columns)
-    return columns.T
-
-
-def moment_fit(sums: np.ndarray, range_sigma: float, bearing_sigma: float):
-    """
-    Fit lines from per-segment sums alone: orthogonal regression with an isotropic covariance.
-
-    Cheap enough to refit merged segments from prefix sums in O(1) each; meant for
-    segmentation decisions, not for the published covariance. Each return is taken to scatter
-    isotropically with variance range_sigma^2 + bearing_sigma^2 rho^2 (an upper bound of its
-    scatter across the line), which gives Var(angle) = s2 / (N L), Cov(angle, radius) = d Var
-    (angle), Var(radius) = s2 / N + d^2 Var(angle), with L the variance of the returns along the
-    line and d the offset of their centroid from the foot of the perpendicular.
-
-    :param sums: per-segment sums, differences of :func:`moment_prefix_sums`, shape (S, 7)
-    :param range_sigma: range noise std, m
-    :param bearing_sigma: bearing noise std, rad
-    :return: (angle (S,) rad, radius (S,) m, covariance of (angle, radius) (S, 2, 2))
-    """
-    n = sums[:, 0]
-    mx, my, mxx, myy, mxy, mrr = (sums[:, 1:] / n[:, None]).T
-    cxx, cyy, cxy = mxx - mx * mx, myy - my * my, mxy - mx * my
-    angle = 0.5 * np.arctan2(-2.0 * cxy, cyy - cxx)        # normal: the minor axis
-    c, s = np.cos(angle), np.sin(angle)
-    radius = mx * c + my * s
-    angle = np.where(radius < 0.0, angle + np.pi, angle)
-    angle = np.where(angle > np.pi, angle - 2.0 * np.pi, angle)
-    radius = np.abs(radius)
-    c, s = np.cos(angle), np.sin(angle)
-    along = cxx * s * s + cyy * c * c - 2.0 * cxy * s * c     # variance along the line
-    offset = -mx * s + my * c
-    scatter = range_sigma ** 2 + bearing_sigma ** 2 * mrr
-    with np.errstate(divide='ignore', invalid='ignore'):
-        var_angle = scatter / (n * along)
-    covariance = np.empty((len(n), 2, 2))
-    covariance[:, 0, 0] = var_angle
-    covariance[:, 0, 1] = covariance[:, 1, 0] = offset * var_angle
-    covariance[:, 1, 1] = scatter / n + offset * offset * var_angle
-    return angle, radius, covariance
-
-
 def implicit_from_normal(angle: np.ndarray, radius: np.ndarray, covariance: np.ndarray):
     """
     Convert normal-form lines to L = (cos angle, sin angle, -radius) with covariance J C J^T.
@@ -389,6 +418,8 @@ def implicit_from_normal(angle: np.ndarray, radius: np.ndarray, covariance: np.n
     return (np.column_stack([c, s, -radius]), jac @ covariance @ jac.transpose(0, 2, 1), jac)
 
 
+# A singular Fisher information (e.g. every return on one ray) yields NaN or inf, not warnings.
+@np.errstate(divide='ignore', invalid='ignore')
 def ml(returns: SegmentReturns, range_sigma: float, bearing_sigma: float,
        start_angle: np.ndarray, start_radius: np.ndarray):
     """
@@ -408,48 +439,76 @@ def ml(returns: SegmentReturns, range_sigma: float, bearing_sigma: float,
     """
     angle = np.array(start_angle, dtype=float)
     radius = np.array(start_radius, dtype=float)
-    s = returns.segment
-    rho, theta = returns.rho, returns.theta
+    inv_rho = 1.0 / returns.rho
     for _ in range(_ML_MAX_ITERATIONS):
-        fisher, step, _ = _ml_fisher_and_step(rho, theta, angle[s], radius[s], returns,
-                                              range_sigma, bearing_sigma)
-        angle, radius = angle + step[:, 0], radius + step[:, 1]
+        sums, inv_det = _ml_sums(returns, inv_rho, angle, radius, range_sigma, bearing_sigma)
+        step = _ml_solve(sums, inv_det, 3)
+        angle += step[0]
+        radius += step[1]
         if not (np.abs(step) > _ML_STEP_TOLERANCE).any():
             break
-    fisher, _, offset = _ml_fisher_and_step(rho, theta, angle[s], radius[s], returns,
-                                            range_sigma, bearing_sigma)
+    sums, inv_det = _ml_sums(returns, inv_rho, angle, radius, range_sigma, bearing_sigma)
+    offset = _ml_solve(sums, inv_det, 5)
     flip = radius < 0.0
     angle = np.where(flip, angle + np.pi, angle)
     angle = np.angle(np.exp(1j * angle))
-    covariance = inverse_2x2(fisher)
     # Reflecting (angle, radius) -> (angle + pi, -radius) flips the sign of their correlation.
-    covariance[flip, 0, 1] *= -1.0
-    covariance[flip, 1, 0] *= -1.0
-    offset[flip, 1] *= -1.0
-    return angle, np.abs(radius), covariance, offset
+    sign = np.where(flip, -1.0, 1.0)
+    offset[1] *= sign
+    covariance = np.empty((len(angle), 2, 2))      # F^-1 = [[C, B], [B, A]] / det F
+    np.multiply(sums[0], inv_det, out=covariance[:, 0, 0])
+    np.multiply(sums[2], inv_det, out=covariance[:, 1, 1])
+    covariance[:, 1, 0] = np.multiply(sums[1], inv_det * sign, out=covariance[:, 0, 1])
+    return angle, np.abs(radius), covariance, offset.T
 
 
-def _ml_fisher_and_step(rho, theta, angle, radius, returns, range_sigma, bearing_sigma):
+def _ml_sums(returns, inv_rho, angle, radius, range_sigma, bearing_sigma):
     """
-    Return the Fisher information (S, 2, 2), the Gauss-Newton step (S, 2) and the offset Jacobian.
+    Return the sums of the Gauss-Newton system and 1 / det F at the lines (angle, radius).
 
-    The variances s_i^2 use the range to the current line along each beam instead of the
-    measured range: a weight computed from the noisy range would correlate with the residual
-    and bias the line (by several mm at grazing incidence). The offset Jacobian is
-    d(angle, radius) / d(offset of every range) = -F^-1 sum_i s_i^-2 g_i cos(theta_i - angle),
-    from the estimating equations sum_i s_i^-2 g_i d_i = 0 (first order).
+    With the residual d_i, its gradient (g_i, -1) by (angle, radius) and s_i^-2 as iv_i, the
+    rows are C = sum iv, B = sum iv g, A = sum iv g^2 (the Fisher information
+    F = [[A, -B], [-B, C]]), sum iv d, sum iv g d, sum iv cos(theta_i - angle),
+    sum iv g cos(theta_i - angle). The variances s_i^2 use the range to the current line along
+    each beam instead of the measured range: a weight computed from the noisy range would
+    correlate with the residual and bias the line (by several mm at grazing incidence).
+    rho cos(theta - angle) and rho sin(theta - angle) are x cos + y sin and y cos - x sin of the
+    angle, so no trigonometric function runs per return.
+
+    :return: (sums (7, S), 1 / det F (S,))
     """
-    cos_d, sin_d = np.cos(theta - angle), np.sin(theta - angle)
-    residual = rho * cos_d - radius
-    on_line = radius / cos_d
-    inv_var = 1.0 / (range_sigma ** 2 * cos_d ** 2 + (bearing_sigma * on_line * sin_d) ** 2)
-    g_angle = on_line * sin_d                      # d residual / d angle; d / d radius = -1
-    sums = returns.sums(np.column_stack([inv_var * g_angle * g_angle, -inv_var * g_angle,
-                                         inv_var, inv_var * g_angle * residual,
-                                         -inv_var * residual, inv_var * g_angle * cos_d,
-                                         -inv_var * cos_d]))
-    fisher = np.stack([sums[:, 0:2], sums[:, 1:3]], -2)
-    return fisher, -solve_2x2(fisher, sums[:, 3:5]), -solve_2x2(fisher, sums[:, 5:7])
+    cos, sin = np.cos(angle), np.sin(angle)
+    # Per segment, repeated to every return: rows 0-1 times x plus rows 2-3 times y are
+    # rho cos(theta - angle) and rho sin(theta - angle); row 4 is the radius.
+    basis = np.empty((5, len(angle)))
+    basis[0], basis[2], basis[3], basis[4] = cos, sin, cos, radius
+    np.negative(sin, out=basis[1])
+    basis = np.repeat(basis, returns.counts, axis=1)
+    beam = basis[:2] * returns.x
+    beam += basis[2:4] * returns.y
+    cos_d = beam[0] * inv_rho
+    residual = beam[0] - basis[4]
+    g_angle = basis[4] * beam[1] / beam[0]         # d residual / d angle; d / d radius = -1
+    columns = np.empty((7, len(cos_d)))
+    inv_var = np.divide(1.0, range_sigma ** 2 * (cos_d * cos_d)
+                        + bearing_sigma ** 2 * (g_angle * g_angle), out=columns[0])
+    np.multiply(inv_var, g_angle, out=columns[1])
+    np.multiply(columns[1], g_angle, out=columns[2])
+    np.multiply(columns[:2], residual, out=columns[3:5])
+    np.multiply(columns[:2], cos_d, out=columns[5:])
+    sums = np.add.reduceat(columns, returns.offsets, axis=1)
+    return sums, 1.0 / (sums[2] * sums[0] - sums[1] * sums[1])
+
+
+def _ml_solve(sums, inv_det, row):
+    """
+    Return -F^-1 (sum iv g q, -sum iv q) for the pair of rows (sum iv q, sum iv g q) at ``row``.
+
+    q = d gives the Gauss-Newton step; q = cos(theta - angle) the offset Jacobian
+    d(angle, radius) / d(offset of every range), from the estimating equations
+    sum_i s_i^-2 (g_i, -1) d_i = 0 (first order). Shape (2, S).
+    """
+    return (sums[1:3] * sums[row] - sums[:2] * sums[row + 1]) * inv_det
 
 
 def fit_lines(method: str, returns: SegmentReturns, range_sigma: float,
@@ -465,16 +524,13 @@ def fit_lines(method: str, returns: SegmentReturns, range_sigma: float,
     :raises ValueError: on an unknown method
     """
     if method == 'ml':
-        start = line_angle_radius(wtls(returns, range_sigma, bearing_sigma)[0])
+        start = line_angle_radius(_algebraic_line(_weighted_sums(returns, True)[-1]))  # WTLS
         angle, radius, covariance, offset = ml(returns, range_sigma, bearing_sigma, *start)
         line, line_covariance, jac = implicit_from_normal(angle, radius, covariance)
         return LineFits(line, line_covariance, angle, radius, covariance,
                         np.einsum('sij,sj->si', jac, offset), offset)
-    fits = {'utls': utls, 'wtls': wtls, 'wctls': wctls}
-    if method not in fits:
+    if method == 'wctls':
+        return _conformal_fits(returns, range_sigma, bearing_sigma)
+    if method not in ('utls', 'wtls'):
         raise ValueError(f'unknown line fit {method!r}; use one of utls, wtls, wctls, ml')
-    line, line_covariance, line_offset = fits[method](returns, range_sigma, bearing_sigma)
-    jac = _normal_jacobian(line)
-    return LineFits(line, line_covariance, *line_angle_radius(line),
-                    jac @ line_covariance @ jac.transpose(0, 2, 1), line_offset,
-                    np.einsum('sij,sj->si', jac, line_offset))
+    return _algebraic_fits(returns, range_sigma, bearing_sigma, method == 'wtls')

@@ -7,10 +7,11 @@ import numpy as np
 from .config import FeatureConfig
 from .corners import find_corners
 from .features import CornerSet, Features, SegmentSet
-from .lines import fit_lines, LineFits, moment_fit, moment_prefix_sums, segment_returns
+from .lines import fit_lines, LineFits, segment_returns
 from .scan import scan_to_points
 from .segmentation import (breakpoints, chains, iterative_end_point_fit, merge_collinear,
-                           MIN_FIT_RETURNS, SegmentRanges, trim_ambiguous_ends)
+                           moment_fit, moment_terms, piece_sums, SegmentRanges,
+                           trim_ambiguous_ends)
 
 _DEFAULT_CONFIG = FeatureConfig()
 
@@ -36,6 +37,16 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
     :return: the segments and corners, in scan order
     :raises wctls_ros.core.ScanError: when the scan geometry makes no sense (a ValueError)
     """
+    # Degenerate pieces (parallel lines, returns in one spot) give inf or NaN along the way;
+    # every such segment or corner is dropped before it reaches the result.
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return _extract_features(ranges_m, angle_min_rad, angle_increment_rad, config,
+                                 range_min_m, range_max_m)
+
+
+def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
+                      config: FeatureConfig, range_min_m: float, range_max_m: float) -> Features:
+    """Run :func:`extract_features` with floating-point warnings already silenced."""
     points = scan_to_points(ranges_m, angle_min_rad, angle_increment_rad,
                             max(range_min_m, config.range_min_m),
                             min(range_max_m, config.range_max_m))
@@ -49,34 +60,32 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
     # gathers wrap around.
     order = contour.order
     rho, theta = points.range_m[order], points.bearing_rad[order]
-    xy = points.xy_m[order]
-    x, y = xy[:, 0].copy(), xy[:, 1].copy()
-
-    # Prefix sums make the segmentation's line fits O(1) per segment, merged or not.
-    prefix = moment_prefix_sums(x, y)
-    prefix = np.concatenate([prefix, prefix[1:] + prefix[-1]])
-
-    def quick(segments: SegmentRanges):
-        return moment_fit(prefix[segments.stop] - prefix[segments.start], config.range_sigma_m,
-                          config.bearing_sigma_rad)
+    x, y = points.x_m[order], points.y_m[order]
 
     segments = iterative_end_point_fit(x, y, contour.start, contour.stop, contour.chain,
                                        config.iepf_threshold_m)
-    segments = segments.select(segments.stop - segments.start >= MIN_FIT_RETURNS)
     if not len(segments):
         return Features(config.method, SegmentSet.empty(), CornerSet.empty())
-    segments = merge_collinear(segments, points.full_turn, n, quick, config.merge_chi2)
+    # Sums over the pieces between segment ends make the segmentation's line fits O(1) per
+    # segment, merged or not: merging works on piece ranges.
+    sums = piece_sums(moment_terms(x, y), segments)
+
+    def quick(pieces: SegmentRanges):
+        return moment_fit(sums.over(pieces), config.range_sigma_m, config.bearing_sigma_rad)
+
+    pieces, (angle, radius, _) = merge_collinear(sums.pieces(segments), points.full_turn,
+                                                 sums.edges.size - 1, quick, config.merge_chi2)
+    segments = sums.positions(pieces)
 
     # Keep segments with enough returns and end returns far enough apart; then leave out the
     # returns where two kept segments meet that fit both lines; then put them in scan order.
     first, last = segments.start, (segments.stop - 1) % n
-    counts = segments.stop - segments.start
-    segments = segments.select(
-        (counts >= config.min_segment_points)
-        & (np.hypot(x[last] - x[first], y[last] - y[first]) >= config.min_segment_length_m))
-    if not len(segments):
+    dx, dy = x[last] - x[first], y[last] - y[first]
+    keep = ((segments.stop - first >= config.min_segment_points)
+            & (dx * dx + dy * dy >= config.min_segment_length_m ** 2))
+    if not keep.any():
         return Features(config.method, SegmentSet.empty(), CornerSet.empty())
-    angle, radius, _ = quick(segments)
+    segments, angle, radius = segments.select(keep), angle[keep], radius[keep]
     segments = trim_ambiguous_ends(segments, points.full_turn, n, x, y, angle, radius,
                                    config.range_sigma_m, config.bearing_sigma_rad,
                                    config.min_segment_points)
@@ -96,12 +105,12 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
     if not usable.all():
         segments, counts, fits = segments.select(usable), counts[usable], fits.select(usable)
     last = (segments.stop - 1) % n
-    ends = _project(xy[np.concatenate([segments.start, last])], fits)
+    start_xy, end_xy = _project(x, y, segments.start, last, fits)
     common = config.common_range_sigma_m * fits.normal_offset_jacobian
     segment_set = SegmentSet(
         fits.angle_rad, fits.radius_m,
         fits.normal_covariance + common[:, :, None] * common[:, None, :], fits.line,
-        fits.line_covariance, fits.line_offset_jacobian, ends[:len(counts)], ends[len(counts):],
+        fits.line_covariance, fits.line_offset_jacobian, start_xy, end_xy,
         points.index[order[segments.start]], points.index[order[last]], counts)
 
     count = len(segment_set)
@@ -115,19 +124,27 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
     return Features(config.method, segment_set, corners)
 
 
-def _project(xy_m: np.ndarray, fits: LineFits) -> np.ndarray:
+def _project(x_m: np.ndarray, y_m: np.ndarray, first: np.ndarray, last: np.ndarray,
+             fits: LineFits):
     """
-    Return the foot of the perpendicular from points to the lines.
+    Return the feet of the perpendiculars from each segment's end returns to its line.
 
-    :param xy_m: shape (k S, 2): k points per line, the lines' order repeated k times, m
+    :param x_m: x of the returns in position order, shape (n,), m
+    :param y_m: y of the returns in position order, shape (n,), m
+    :param first: position of each segment's first return, shape (S,)
+    :param last: position of each segment's last return, shape (S,)
     :param fits: the S lines
-    :return: shape (k S, 2), m
+    :return: (first returns projected (S, 2), last returns projected (S, 2)), m
     """
-    repeat = len(xy_m) // len(fits.angle_rad)
-    angle, radius = np.tile(fits.angle_rad, repeat), np.tile(fits.radius_m, repeat)
-    normal = np.column_stack([np.cos(angle), np.sin(angle)])
-    offset = np.einsum('si,si->s', xy_m, normal) - radius
-    return xy_m - offset[:, None] * normal
+    c, s = np.cos(fits.angle_rad), np.sin(fits.angle_rad)
+    feet = []
+    for position in (first, last):
+        x, y = x_m[position], y_m[position]
+        offset = x * c + y * s - fits.radius_m
+        foot = np.empty((position.size, 2))
+        foot[:, 0], foot[:, 1] = x - offset * c, y - offset * s
+        feet.append(foot)
+    return feet
 
 
 def _finite_and_positive(fits: LineFits) -> np.ndarray:

@@ -3,6 +3,7 @@
 from dataclasses import dataclass
 import functools
 import math
+import sys
 
 import numpy as np
 
@@ -28,7 +29,8 @@ class ScanPoints:
     :ivar index: beam index of each return in the original ranges array, shape (n,)
     :ivar range_m: measured range, shape (n,), m
     :ivar bearing_rad: beam bearing, shape (n,), rad (angle_min + index * angle_increment)
-    :ivar xy_m: Cartesian position in the scan frame, shape (n, 2), m
+    :ivar x_m: Cartesian x in the scan frame, shape (n,), m
+    :ivar y_m: Cartesian y in the scan frame, shape (n,), m
     :ivar full_turn: True when the beams cover a full turn (the first and last are neighbours,
         at most 2.5 increments apart across the seam)
     :ivar beam_count: number of beams of the scan, valid or not
@@ -38,7 +40,8 @@ class ScanPoints:
     index: np.ndarray
     range_m: np.ndarray
     bearing_rad: np.ndarray
-    xy_m: np.ndarray
+    x_m: np.ndarray
+    y_m: np.ndarray
     full_turn: bool
     beam_count: int
     angle_increment_rad: float
@@ -90,16 +93,12 @@ def scan_to_points(ranges_m, angle_min_rad: float, angle_increment_rad: float,
                         'more than a full turn')
     full_turn = (beam_count > 1 and 2.0 * math.pi - span
                  <= _FULL_TURN_GAP_INCREMENTS * abs(angle_increment_rad))
-    with np.errstate(invalid='ignore'):
-        # A zero range is a point at the sensor itself: never a wall return.
-        valid = ((ranges >= range_min_m) & (ranges <= range_max_m) & np.isfinite(ranges)
-                 & (ranges > 0.0))
-    index = np.flatnonzero(valid)
+    # NaN fails every comparison, +-inf one of the two; a zero range is a point at the sensor
+    # itself, never a wall return.
+    lower = (ranges >= range_min_m) if range_min_m > 0.0 else (ranges > 0.0)
+    index = (lower & (ranges <= min(range_max_m, sys.float_info.max))).nonzero()[0]
     range_m = ranges[index]
-    bearing = angle_min_rad + index * angle_increment_rad
     cos, sin = _beam_directions(float(angle_min_rad), float(angle_increment_rad), beam_count)
-    xy = np.empty((index.size, 2))
-    np.multiply(range_m, cos[index], out=xy[:, 0])
-    np.multiply(range_m, sin[index], out=xy[:, 1])
-    return ScanPoints(index, range_m, bearing, xy, bool(full_turn), beam_count,
+    return ScanPoints(index, range_m, angle_min_rad + index * angle_increment_rad,
+                      range_m * cos[index], range_m * sin[index], bool(full_turn), beam_count,
                       float(angle_increment_rad))

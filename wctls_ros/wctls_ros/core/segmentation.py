@@ -10,7 +10,7 @@ position ranges [start, stop) into that order; on a full turn a segment may run 
 
 from dataclasses import dataclass
 import math
-from typing import Callable
+from typing import Callable, Tuple
 
 import numpy as np
 
@@ -68,6 +68,129 @@ class SegmentRanges:
         return SegmentRanges(self.start[keep], self.stop[keep], self.chain[keep])
 
 
+def moment_terms(x_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:
+    """
+    Return the per-return quantities whose sums :func:`moment_fit` needs.
+
+    :param x_m: shape (P,), m
+    :param y_m: shape (P,), m
+    :return: rows (1, x, y, x^2, y^2, x y, rho^2), shape (7, P)
+    """
+    rows = np.empty((7, len(x_m)))
+    rows[0], rows[1], rows[2] = 1.0, x_m, y_m
+    np.multiply(x_m, x_m, out=rows[3])
+    np.multiply(y_m, y_m, out=rows[4])
+    np.multiply(x_m, y_m, out=rows[5])
+    np.add(rows[3], rows[4], out=rows[6])
+    return rows
+
+
+def moment_fit(sums: np.ndarray, range_sigma_m: float, bearing_sigma_rad: float):
+    """
+    Fit lines from per-segment sums alone: orthogonal regression with an isotropic covariance.
+
+    Cheap enough to refit merged segments from piece sums in O(1) each; meant for
+    segmentation decisions, not for the published covariance. Each return is taken to scatter
+    isotropically with variance range_sigma^2 + bearing_sigma^2 rho^2 (an upper bound of its
+    scatter across the line), which gives Var(angle) = s2 / (N L), Cov(angle, radius) = d Var
+    (angle), Var(radius) = s2 / N + d^2 Var(angle), with L the variance of the returns along the
+    line and d the offset of their centroid from the foot of the perpendicular.
+
+    :param sums: per-segment sums of :func:`moment_terms`, shape (S, 7)
+    :param range_sigma_m: range noise std, m
+    :param bearing_sigma_rad: bearing noise std, rad
+    :return: (angle (S,) rad in (-pi, pi], radius (S,) m >= 0, covariance of (angle, radius)
+        (S, 2, 2))
+    """
+    n = sums[:, 0]
+    mx, my, mxx, myy, mxy, mrr = (sums[:, 1:] / n[:, None]).T
+    cxx, cyy, cxy = mxx - mx * mx, myy - my * my, mxy - mx * my
+    normal = 0.5 * np.arctan2(-2.0 * cxy, cyy - cxx)         # the minor axis
+    c, s = np.cos(normal), np.sin(normal)
+    radius = mx * c + my * s
+    flip = np.copysign(1.0, radius)                          # the normal points to the line
+    c *= flip
+    s *= flip
+    along = cxx * s * s + cyy * c * c - 2.0 * cxy * s * c    # variance along the line
+    offset = my * c - mx * s
+    scatter = range_sigma_m ** 2 + bearing_sigma_rad ** 2 * mrr
+    var_angle = scatter / (n * along)                        # inf for returns all in one spot
+    covariance = np.empty((len(n), 2, 2))
+    covariance[:, 0, 0] = var_angle
+    covariance[:, 0, 1] = covariance[:, 1, 0] = offset * var_angle
+    covariance[:, 1, 1] = scatter / n + offset * offset * var_angle
+    return np.arctan2(s, c), np.abs(radius), covariance
+
+
+@dataclass(frozen=True)
+class PieceSums:
+    """
+    A contour cut into pieces at segment ends, with per-piece sums of per-return quantities.
+
+    Segments and their merges are whole runs of pieces: written as piece ranges (a
+    SegmentRanges over piece indices, wrapping modulo the number of pieces on a full turn),
+    each one's sums are a difference of two rows of ``prefix``, O(1) per segment.
+
+    :ivar edges: piece boundaries as positions, from 0 to n (the contour's length), shape (m + 1,)
+    :ivar prefix: sums over the pieces before each boundary, then once more after a full turn,
+        shape (2 m + 1, k)
+    """
+
+    edges: np.ndarray
+    prefix: np.ndarray
+
+    def pieces(self, segments: SegmentRanges) -> SegmentRanges:
+        """
+        Return segments whose ends are piece boundaries as piece ranges.
+
+        :param segments: position ranges, start in [0, n), stop in (start, n]
+        :return: the same segments over piece indices
+        """
+        return SegmentRanges(np.searchsorted(self.edges, segments.start),
+                             np.searchsorted(self.edges, segments.stop), segments.chain)
+
+    def positions(self, pieces: SegmentRanges) -> SegmentRanges:
+        """
+        Return piece ranges as position ranges (stop past n where a range wraps).
+
+        :param pieces: piece ranges, start in [0, m), stop in (start, start + m]
+        :return: the same segments over positions
+        """
+        count = self.edges.size - 1
+        wrapped = pieces.stop > count
+        stop = self.edges[pieces.stop - count * wrapped] + self.edges[-1] * wrapped
+        return SegmentRanges(self.edges[pieces.start], stop, pieces.chain)
+
+    def over(self, pieces: SegmentRanges) -> np.ndarray:
+        """
+        Return the sums over piece ranges.
+
+        :param pieces: piece ranges, start in [0, m), stop in (start, start + m]
+        :return: shape (S, k)
+        """
+        return self.prefix[pieces.stop] - self.prefix[pieces.start]
+
+
+def piece_sums(values: np.ndarray, segments: SegmentRanges) -> PieceSums:
+    """
+    Sum per-return values over the pieces of a contour cut at every segment end.
+
+    :param values: shape (k, n), one row per quantity
+    :param segments: position ranges within [0, n)
+    :return: the pieces and their sums
+    """
+    count = values.shape[1]
+    boundary = np.zeros(count + 1, dtype=bool)
+    boundary[segments.start] = boundary[segments.stop] = boundary[0] = boundary[count] = True
+    edges = boundary.nonzero()[0]
+    pieces = edges.size - 1
+    prefix = np.empty((2 * pieces + 1, values.shape[0]))
+    prefix[0] = 0.0
+    np.cumsum(np.add.reduceat(values, edges[:-1], axis=1).T, axis=0, out=prefix[1:pieces + 1])
+    np.add(prefix[1:pieces + 1], prefix[pieces], out=prefix[pieces + 1:])
+    return PieceSums(edges, prefix)
+
+
 def breakpoints(points: ScanPoints, range_sigma_m: float, bearing_sigma_rad: float,
                 lambda_rad: float) -> np.ndarray:
     """
@@ -90,7 +213,7 @@ def breakpoints(points: ScanPoints, range_sigma_m: float, bearing_sigma_rad: flo
     n = len(points)
     if n == 0:
         return np.zeros(0, dtype=bool)
-    x, y, rho, index = points.xy_m[:, 0], points.xy_m[:, 1], points.range_m, points.index
+    x, y, rho, index = points.x_m, points.y_m, points.range_m, points.index
     # Each return against its predecessor; entry 0 against the last return, across the seam.
     beams = np.empty(n)
     beams[1:] = index[1:] - index[:-1]
@@ -105,9 +228,9 @@ def breakpoints(points: ScanPoints, range_sigma_m: float, bearing_sigma_rad: flo
     r[0] = min(rho[0], rho[-1])
     # sin(dphi) / sin(lambda - dphi) is one number for neighbouring beams, the usual case.
     # (dphi >= lambda: no surface is seen that obliquely, always separated: reach -1.)
-    reach = np.full(n, math.sin(step) / math.sin(lambda_rad - step) if step < lambda_rad
-                    else -1.0)
-    wider = np.flatnonzero(beams != 1.0)
+    reach = np.empty(n)
+    reach.fill(math.sin(step) / math.sin(lambda_rad - step) if step < lambda_rad else -1.0)
+    wider = (beams != 1.0).nonzero()[0]
     if wider.size:
         dphi = beams[wider] * step
         with np.errstate(divide='ignore', invalid='ignore'):
@@ -133,19 +256,19 @@ def chains(points: ScanPoints, separated: np.ndarray) -> Chains:
     :return: the chains
     """
     n = len(points)
-    breaks = np.flatnonzero(separated)
+    breaks = separated.nonzero()[0]
     if n and not breaks.size:
         first = int(np.argmax(points.range_m))
-        order = np.roll(np.arange(n), -first)
-        relative = points.xy_m[order] - points.xy_m[first]
-        opposite = int(np.argmax(relative[:, 0] ** 2 + relative[:, 1] ** 2))
+        dx, dy = points.x_m - points.x_m[first], points.y_m - points.y_m[first]
+        opposite = (int(np.argmax(dx * dx + dy * dy)) - first) % n
         start, stop, chain = np.array([1, opposite + 1]), np.array([opposite, n]), np.zeros(2)
     else:
         first = int(breaks[0]) if n else 0
-        order = np.roll(np.arange(n), -first)
         start = breaks - first
         stop = np.append(start[1:], n) if n else start
         chain = np.arange(start.size)
+    order = np.arange(first, first + n)
+    order[n - first:] -= n
     return Chains(order, start, stop, chain.astype(np.intp))
 
 
@@ -155,65 +278,57 @@ def iterative_end_point_fit(x_m: np.ndarray, y_m: np.ndarray, start: np.ndarray,
     """
     Split runs of returns where a return lies farther than a threshold from the run's chord.
 
-    All runs are processed together, one split level per pass. The return at a split is the
-    one nearest the corner and belongs to neither side (it would otherwise be shared, or bias
-    one wall); merging restores it when the two sides turn out to be one line.
+    All runs are processed together, one split level per pass, as a partition of the positions
+    into pieces (a boundary mask): each pass measures every return against its piece's chord
+    and cuts the pieces whose farthest return is beyond the threshold. The return at a split is
+    the one nearest the corner and belongs to neither side (it would otherwise be shared, or
+    bias one wall); merging restores it when the two sides turn out to be one line.
 
     :param x_m: x of the returns in position order, shape (m,), m
     :param y_m: y of the returns in position order, shape (m,), m
-    :param start: first position of each run, shape (K,)
-    :param stop: one past the last position of each run, shape (K,)
+    :param start: first position of each run, sorted, shape (K,)
+    :param stop: one past the last position of each run, shape (K,) (runs do not overlap)
     :param chain: the chain of each run, shape (K,)
     :param threshold_m: the IEPF split distance, m
-    :return: the segments, sorted by start position
+    :return: the segments with at least MIN_FIT_RETURNS returns (fewer can be neither fitted
+        nor split), sorted by start position
     """
-    done = []
-    start, stop, chain = (np.asarray(a, dtype=np.intp) for a in (start, stop, chain))
-    while start.size:
-        done.append((start, stop, chain))          # provisional: replaced below if split
-        counts = stop - start
-        splittable = counts >= 3
-        if not splittable.all():
-            done[-1] = (start[~splittable], stop[~splittable], chain[~splittable])
-            start, stop, chain, counts = (a[splittable] for a in (start, stop, chain, counts))
-            if not start.size:
-                break
-            done.append((start, stop, chain))
-        # Distance of every return of each run to the line through the run's end points.
-        x0, y0 = x_m[start], y_m[start]
-        dx, dy = x_m[stop - 1] - x0, y_m[stop - 1] - y0
-        length = np.hypot(dx, dy)
-        length[length <= _MIN_CHORD_M] = np.inf    # no direction: never split at distance 0
-        nx, ny = -dy / length, dx / length
-        offsets = np.cumsum(counts) - counts
-        position = np.arange(offsets[-1] + counts[-1]) + np.repeat(start - offsets, counts)
-        distance = np.abs((x_m[position] - np.repeat(x0, counts)) * np.repeat(nx, counts)
-                          + (y_m[position] - np.repeat(y0, counts)) * np.repeat(ny, counts))
-        farthest = np.maximum.reduceat(distance, offsets)
-        split = farthest > threshold_m
+    count = x_m.size
+    boundary = np.zeros(count + 1, dtype=bool)
+    boundary[start] = boundary[stop] = boundary[0] = boundary[count] = True
+    threshold2 = threshold_m * threshold_m
+    while True:
+        edges = boundary.nonzero()[0]
+        first, last = edges[:-1], edges[1:] - 1
+        counts = edges[1:] - first
+        x0, y0, x1, y1 = x_m[first], y_m[first], x_m[last], y_m[last]
+        dx, dy = x1 - x0, y1 - y0
+        # |chord x (return - chord start)|: the return's distance times the chord length.
+        cross = np.repeat(dx, counts) * y_m
+        cross -= np.repeat(dy, counts) * x_m
+        cross += np.repeat(x0 * y1 - y0 * x1, counts)
+        np.abs(cross, out=cross)
+        farthest = np.maximum.reduceat(cross, first)
+        chord2 = dx * dx + dy * dy
+        # A chord too short to have a direction never splits (it would at distance 0).
+        split = (farthest * farthest > threshold2 * chord2) & (chord2 > _MIN_CHORD_M ** 2)
         if not split.any():
             break
-        done[-1] = (start[~split], stop[~split], chain[~split])
-        # The first return of each split run at its maximum distance is the split point.
-        at_max = np.flatnonzero(distance == np.repeat(np.where(split, farthest, -1.0), counts))
-        run = np.searchsorted(offsets, at_max, side='right') - 1
-        first = np.empty(run.size, dtype=bool)
-        first[0] = True
-        np.not_equal(run[1:], run[:-1], out=first[1:])
-        cut, parent = position[at_max[first]], run[first]
-        start = np.concatenate([start[parent], cut + 1])
-        stop = np.concatenate([cut, stop[parent]])
-        chain = np.concatenate([chain[parent], chain[parent]])
-        keep = stop > start
-        start, stop, chain = start[keep], stop[keep], chain[keep]
-    start, stop, chain = (np.concatenate(parts) for parts in zip(*done))
-    order = np.argsort(start, kind='stable')
-    return SegmentRanges(start[order], stop[order], chain[order])
+        farthest[~split] = np.inf
+        cut = (cross == np.repeat(farthest, counts)).nonzero()[0]
+        if cut.size > np.count_nonzero(split):       # ties: the first return at the maximum
+            piece = np.repeat(np.arange(first.size), counts)
+            cut = cut[np.concatenate(([True], piece[cut[1:]] != piece[cut[:-1]]))]
+        boundary[cut] = boundary[cut + 1] = True
+    # Keep the pieces inside a run (not the returns between runs) with enough returns.
+    run = np.searchsorted(start, first, side='right') - 1
+    keep = (edges[1:] - first >= MIN_FIT_RETURNS) & (run >= 0) & (first < stop[run])
+    return SegmentRanges(first[keep], edges[1:][keep], chain[run[keep]])
 
 
 def merge_collinear(segments: SegmentRanges, circular: bool, contour_length: int,
                     fit: Callable[[SegmentRanges], tuple], chi2_threshold: float
-                    ) -> SegmentRanges:
+                    ) -> Tuple[SegmentRanges, tuple]:
     """
     Merge neighbouring segments that are statistically the same line.
 
@@ -231,40 +346,60 @@ def merge_collinear(segments: SegmentRanges, circular: bool, contour_length: int
     :param contour_length: number of returns n (positions wrap modulo n)
     :param fit: returns (angle (S,) rad, radius (S,) m, covariance (S, 2, 2)) of segments
     :param chi2_threshold: merge below this squared Mahalanobis distance (0: never merge)
-    :return: the merged segments
+    :return: the merged segments and their fit (the last pass's, so not computed twice)
     """
-    while len(segments) >= 2 and chi2_threshold > 0.0:
+    while True:
+        line_fit = fit(segments)
         count = len(segments)
-        second = np.arange(1, count + 1) % count
-        touching = segments.stop % contour_length == segments.start[second]
-        pair_ok = (segments.chain == segments.chain[second]) | touching
+        if count < 2 or chi2_threshold <= 0.0:
+            break
+        start, stop, chain = segments.start, segments.stop, segments.chain
+        second = np.arange(1, count + 1)
+        second[-1] = 0
+        # A merged segment must not wrap onto itself around a closed contour.
+        merged_stop = stop[second]
+        merged_stop[-1] += contour_length
+        pair_ok = (((chain == chain[second]) | (stop % contour_length == start[second]))
+                   & (merged_stop - start <= contour_length))
         if not circular or count < 3:
             pair_ok[-1] = False                     # the last segment has no successor
-        # A merged segment must not wrap onto itself around a closed contour.
-        wrapped_stop = segments.stop[second] + np.where(second == 0, contour_length, 0)
-        pair_ok &= wrapped_stop - segments.start <= contour_length
-        angle, radius, covariance = fit(segments)
-        diff = np.empty((count, 2))
-        diff[:, 0] = np.remainder(angle - angle[second] + np.pi, 2.0 * np.pi) - np.pi
-        diff[:, 1] = radius - radius[second]
-        distance = mahalanobis_squared_2x2(diff, covariance + covariance[second])
-        with np.errstate(invalid='ignore'):
-            candidates = np.flatnonzero(pair_ok & (distance < chi2_threshold))
+        angle, radius, covariance = line_fit
+        distance = mahalanobis_squared_2x2(
+            np.remainder(angle - angle[second] + np.pi, 2.0 * np.pi) - np.pi,
+            radius - radius[second], covariance + covariance[second])
+        candidates = (pair_ok & (distance < chi2_threshold)).nonzero()[0]
         if not candidates.size:
             break
-        used = np.zeros(count, dtype=bool)
-        stop, chain = segments.stop.copy(), segments.chain.copy()
-        for k in candidates[np.argsort(distance[candidates], kind='stable')]:
-            j = second[k]
+        # Few candidates: plain Python is faster than numpy here.
+        used = [False] * count
+        absorbed = []
+        new_stop, chain_of = stop.copy(), chain.tolist()
+        joined = {}                                # chain -> the chain it joined
+
+        def root(label):
+            while label in joined:
+                label = joined[label]
+            return label
+
+        for k in candidates[np.argsort(distance[candidates], kind='stable')].tolist():
+            j = (k + 1) % count
             if not (used[k] or used[j]):
                 used[k] = used[j] = True
-                stop[k] = wrapped_stop[k]
+                absorbed.append(j)
+                new_stop[k] = merged_stop[k]
                 # Two chains joined by a merged segment are one chain from now on.
-                chain[chain == chain[j]] = chain[k]
-        absorbed = np.zeros(count, dtype=bool)
-        absorbed[second[stop != segments.stop]] = True
-        segments = SegmentRanges(segments.start, stop, chain).select(~absorbed)
-    return segments
+                into, other = root(chain_of[k]), root(chain_of[j])
+                if into != other:
+                    joined[other] = into
+        if joined:
+            relabel = np.arange(chain.max() + 1)
+            for label in joined:
+                relabel[label] = root(label)
+            chain = relabel[chain]
+        keep = np.ones(count, dtype=bool)
+        keep[absorbed] = False
+        segments = SegmentRanges(start, new_stop, chain).select(keep)
+    return segments, line_fit
 
 
 def trim_ambiguous_ends(segments: SegmentRanges, circular: bool, contour_length: int,
@@ -300,41 +435,43 @@ def trim_ambiguous_ends(segments: SegmentRanges, circular: bool, contour_length:
     count = len(segments)
     if count < 2:
         return segments
-    second = np.arange(1, count + 1) % count
-    neighbours = np.ones(count, dtype=bool)
-    neighbours[-1] = circular and count > 2
-    k = np.flatnonzero(neighbours
-                       & ((segments.start[second] - segments.stop) % contour_length <= 1))
+    start, stop = segments.start, segments.stop
+    second = np.arange(1, count + 1)
+    second[-1] = 0
+    meets = (start[second] - stop) % contour_length <= 1
+    meets[-1] &= circular and count > 2
+    k = meets.nonzero()[0]
     if not k.size:
         return segments
     j = second[k]
-    sine = np.abs(np.sin(angle_rad[k] - angle_rad[j]))
-    with np.errstate(divide='ignore', invalid='ignore'):
-        det = 1.0 / np.sin(angle_rad[j] - angle_rad[k])
-    corner_x = (radius_m[k] * np.sin(angle_rad[j]) - radius_m[j] * np.sin(angle_rad[k])) * det
-    corner_y = (radius_m[j] * np.cos(angle_rad[k]) - radius_m[k] * np.cos(angle_rad[j])) * det
-    tolerance = 3.0 * np.sqrt(range_sigma_m ** 2
-                              + (corner_x ** 2 + corner_y ** 2) * bearing_sigma_rad ** 2)
-    with np.errstate(divide='ignore'):
-        reach2 = (tolerance / sine) ** 2
+    cos_k, sin_k, cos_j, sin_j = (np.cos(angle_rad[k]), np.sin(angle_rad[k]),
+                                  np.cos(angle_rad[j]), np.sin(angle_rad[j]))
+    sine = sin_j * cos_k - cos_j * sin_k                      # sin(angle_j - angle_k)
+    # Parallel neighbours give inf / NaN here, and so no return inside reach.
+    corner_x = (radius_m[k] * sin_j - radius_m[j] * sin_k) / sine
+    corner_y = (radius_m[j] * cos_k - radius_m[k] * cos_j) / sine
+    reach2 = 9.0 * (range_sigma_m ** 2
+                    + (corner_x * corner_x + corner_y * corner_y) * bearing_sigma_rad ** 2
+                    ) / (sine * sine)
+    # Both meeting ends at once: rows [0, K) walk back from the ends of segments k, rows
+    # [K, 2 K) forward from the starts of segments j.
     steps = np.arange(window)
-
-    def run_inside(positions):
-        # Unbroken run (from column 0) of returns within reach of the lines' intersection.
-        position = positions % contour_length
-        inside = ((x_m[position] - corner_x[:, None]) ** 2
-                  + (y_m[position] - corner_y[:, None]) ** 2) < reach2[:, None]
-        return np.cumprod(inside, axis=1).sum(axis=1)
-
-    room = np.maximum(segments.stop - segments.start - min_returns, 0)
-    meets_next = np.zeros(count, dtype=bool)
-    meets_next[k] = True
-    meets_previous = np.zeros(count, dtype=bool)
-    meets_previous[j] = True
-    allowance = np.where(meets_next & meets_previous, room // 2, room)
-    stop, start = segments.stop.copy(), segments.start.copy()
-    stop[k] -= np.minimum(run_inside(segments.stop[k][:, None] - 1 - steps), allowance[k])
-    start[j] += np.minimum(run_inside(segments.start[j][:, None] + steps), allowance[j])
+    position = np.empty((2 * k.size, window), dtype=np.intp)
+    np.subtract(stop[k, None] - 1, steps, out=position[:k.size])
+    np.add(start[j, None], steps, out=position[k.size:])
+    position %= contour_length
+    dx = x_m[position] - np.concatenate((corner_x, corner_x))[:, None]
+    dy = y_m[position] - np.concatenate((corner_y, corner_y))[:, None]
+    # The run from the end is the first return outside (a last column that is never inside).
+    inside = np.zeros((2 * k.size, window + 1), dtype=bool)
+    np.less(dx * dx + dy * dy, np.concatenate((reach2, reach2))[:, None], out=inside[:, :window])
+    run = inside.argmin(axis=1)
+    room = np.maximum(stop - start - min_returns, 0)
+    meets_previous = np.concatenate((meets[-1:], meets[:-1]))
+    allowance = np.where(meets & meets_previous, room // 2, room)
+    stop, start = stop.copy(), start.copy()
+    stop[k] -= np.minimum(run[:k.size], allowance[k])
+    start[j] += np.minimum(run[k.size:], allowance[j])
     # A segment that crosses the end of the contour may now start past it: back to [0, n).
     wrapped = np.where(start >= contour_length, contour_length, 0)
     return SegmentRanges(start - wrapped, stop - wrapped, segments.chain)

@@ -4,35 +4,82 @@ Corners: intersections of adjacent lines with their jointly propagated (x, y, ya
 For lines L_k = (a_k, b_k, c_k) with covariances C_k (from disjoint returns, so independent), the
 corner z = -A^-1 (c_1, c_2), A = [[a_1, b_1], [a_2, b_2]] (the paper's eqs. (24)-(25)), has
 dz/dL_k = -A^-1 e_k h^T with h = (x, y, 1). The yaw of the bisector moves with each wall's
-direction by half its normal angle: d yaw / dL_k = (-b_k, a_k, 0) / (2 (a_k^2 + b_k^2)). The
-joint covariance is sum_k J_k C_k J_k^T with J_k stacking both (3 x 3). Since h . L_k = 0 and
-(-b_k, a_k, 0) . L_k = 0, it is exactly invariant to any rescaling of a line's (a, b, c).
+direction by half its normal angle: d yaw / dL_k = g_k = (-b_k, a_k, 0) / (2 (a_k^2 + b_k^2)).
+The joint covariance is sum_k J_k C_k J_k^T with J_k stacking both (3 x 3), so only three
+quadratic forms of each C_k enter it: h^T C_k h, g_k^T C_k h and g_k^T C_k g_k. Since h . L_k = 0
+and (-b_k, a_k, 0) . L_k = 0, it is exactly invariant to any rescaling of a line's (a, b, c).
+
+A scan has only tens of pairs, so the cost is the number of numpy calls, not their size: every
+quantity of a wall is one (2, k) array, row 0 for the first wall of each pair and row 1 for the
+second, written out entry by entry, and the rejected pairs are dropped in one step at the end.
 """
+
+import math
 
 import numpy as np
 
 from .features import CornerSet
 
+# The upper triangle of the symmetric (x, y, yaw) covariance, row by row: (row, column) of each
+# of its six entries, and which of them each entry of the full matrix is.
+_UPPER_ROW = np.array([0, 0, 0, 1, 1, 2])
+_UPPER_COLUMN = np.array([0, 1, 2, 1, 2, 2])
+_UPPER_TO_FULL = np.array([0, 1, 2, 1, 3, 4, 2, 4, 5])
 
-def _solve(line_a: np.ndarray, line_b: np.ndarray):
+
+def _solve(a: np.ndarray, b: np.ndarray, c: np.ndarray):
     """
     Intersect pairs of lines by Cramer's rule (the paper's eqs. (24)-(25)).
 
-    :return: (h = (x, y, 1) of shape (C, 3), the columns of A^-1 for each line, each (C, 2))
+    Row 0 of the inputs holds the first line of every pair, row 1 the second and row 2 the first
+    again, so that rows 1 and 2 are the partners of rows 0 and 1. Row 1 of the results swaps the
+    two lines: its determinant is -det A and its intersection the same, bit for bit (up to the
+    sign of a zero).
+
+    :param a: a of the lines, shape (3, C)
+    :param b: b of the lines, shape (3, C)
+    :param c: c of the lines, shape (3, C)
+    :return: (x, y) of the intersections and (u, w), the b and a of the partner line over the
+        row's determinant: the column A^-1 e_k of line k is (u, -w); each shape (2, C), row k
+        for line k
     """
-    a1, b1, c1 = line_a.T
-    a2, b2, c2 = line_b.T
-    with np.errstate(divide='ignore', invalid='ignore'):
-        inv_det = 1.0 / (a1 * b2 - a2 * b1)
-    h = np.empty((len(a1), 3))
-    h[:, 0] = (b1 * c2 - b2 * c1) * inv_det
-    h[:, 1] = (a2 * c1 - a1 * c2) * inv_det
-    h[:, 2] = 1.0
-    column_a = np.empty((len(a1), 2))
-    column_a[:, 0], column_a[:, 1] = b2 * inv_det, -a2 * inv_det
-    column_b = np.empty((len(a1), 2))
-    column_b[:, 0], column_b[:, 1] = -b1 * inv_det, a1 * inv_det
-    return h, column_a, column_b
+    a_own, b_own, c_own = a[:2], b[:2], c[:2]
+    a_partner, b_partner, c_partner = a[1:], b[1:], c[1:]
+    det = a_own * b_partner - a_partner * b_own
+    det[1] = -det[0]                     # exactly, zero too: parallel lines meet at the same inf
+    inv_det = 1.0 / det
+    x = (b_own * c_partner - b_partner * c_own) * inv_det
+    y = (a_partner * c_own - a_own * c_partner) * inv_det
+    return x, y, b_partner * inv_det, a_partner * inv_det
+
+
+def _covariance_times_h(covariance: np.ndarray, x: np.ndarray, y: np.ndarray):
+    """
+    Return the first two entries of C h, and h^T C h, for h = (x, y, 1).
+
+    :param covariance: the nine entries of each C, row by row, shape (9, ...)
+    :param x: x of h, shape (...)
+    :param y: y of h, shape (...)
+    :return: ((C h)_a, (C h)_b, h^T C h), each shape (...)
+    """
+    moved_a = covariance[0] * x + covariance[1] * y + covariance[2]
+    moved_b = covariance[3] * x + covariance[4] * y + covariance[5]
+    return (moved_a, moved_b,
+            x * (moved_a + covariance[6]) + y * (moved_b + covariance[7]) + covariance[8])
+
+
+def _position_covariance(u: np.ndarray, w: np.ndarray, along_h: np.ndarray):
+    """
+    Return sum_k (A^-1 e_k) (A^-1 e_k)^T h^T C_k h, the covariance of the corners' position.
+
+    :param u: x of A^-1 e_k, row k for line k, shape (2, C)
+    :param w: -y of A^-1 e_k, shape (2, C)
+    :param along_h: h^T C_k h, shape (2, C)
+    :return: its (xx, xy, yy) entries, each shape (C,)
+    """
+    u_along, w_along = u * along_h, w * along_h
+    xx, xy, yy = u * u_along, u * w_along, w * w_along
+    return xx[0] + xx[1], -(xy[0] + xy[1]), yy[0] + yy[1]
 
 
 def intersect(line_a: np.ndarray, cov_a: np.ndarray, line_b: np.ndarray,
@@ -47,20 +94,15 @@ def intersect(line_a: np.ndarray, cov_a: np.ndarray, line_b: np.ndarray,
     :return: (position (C, 2) m, covariance (C, 2, 2) m^2, position Jacobians w.r.t. line_a
         and line_b, each (C, 2, 3))
     """
-    h, column_a, column_b = _solve(line_a, line_b)
-    jac_a = -column_a[:, :, None] * h[:, None, :]                  # -A^-1 e_1 h^T
-    jac_b = -column_b[:, :, None] * h[:, None, :]
-    covariance = (jac_a @ cov_a @ jac_a.transpose(0, 2, 1)
-                  + jac_b @ cov_b @ jac_b.transpose(0, 2, 1))
-    return h[:, :2], covariance, jac_a, jac_b
-
-
-def _yaw_gradient(line: np.ndarray) -> np.ndarray:
-    """Return d yaw / d(a, b, c) of each line: (-b, a, 0) / (2 (a^2 + b^2)), shape (C, 3)."""
-    gradient = np.zeros_like(line)
-    scale = 0.5 / (line[:, 0] ** 2 + line[:, 1] ** 2)
-    gradient[:, 0], gradient[:, 1] = -line[:, 1] * scale, line[:, 0] * scale
-    return gradient
+    a, b, c = np.array([line_a, line_b, line_a], dtype=float).transpose(2, 0, 1)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        x, y, u, w = _solve(a, b, c)
+    covariance = np.array([cov_a, cov_b], dtype=float).reshape(2, -1, 9).transpose(2, 0, 1)
+    xx, xy, yy = _position_covariance(u, w, _covariance_times_h(covariance, x, y)[2])
+    h = np.stack([x[0], y[0], np.ones_like(x[0])], axis=-1)
+    jacobian = np.stack([-u, w], axis=-1)[..., None] * h[:, None, :]       # -A^-1 e_k h^T
+    return (h[:, :2], np.stack([xx, xy, xy, yy], axis=-1).reshape(-1, 2, 2), jacobian[0],
+            jacobian[1])
 
 
 def find_corners(line: np.ndarray, line_covariance: np.ndarray,
@@ -88,60 +130,66 @@ def find_corners(line: np.ndarray, line_covariance: np.ndarray,
         its part of the corner covariance is sigma^2 j j^T with j = J_1 g_1 + J_2 g_2
     :return: the corners that pass both tests
     """
-    first = np.asarray(first, dtype=np.intp)
-    second = np.asarray(second, dtype=np.intp)
-    unit = line[:, :2] / np.hypot(line[:, 0], line[:, 1])[:, None]          # line normals
-    sine = np.abs(unit[first, 0] * unit[second, 1] - unit[first, 1] * unit[second, 0])
-    steep = sine >= np.sin(min_angle_rad)
-    first, second = first[steep], second[steep]
-    h, column_a, column_b = _solve(line[first], line[second])
-    xy = h[:, :2]
-    gap_a = np.hypot(xy[:, 0] - end_xy_m[first, 0], xy[:, 1] - end_xy_m[first, 1])
-    gap_b = np.hypot(xy[:, 0] - start_xy_m[second, 0], xy[:, 1] - start_xy_m[second, 1])
-    near = np.flatnonzero((gap_a <= max_gap_m) & (gap_b <= max_gap_m))
-    first, second, h, xy = first[near], second[near], h[near], xy[near]
-    column_a, column_b = column_a[near], column_b[near]
+    pairs = np.array([first, second, first], dtype=np.intp)        # first again: see _solve
+    walls = pairs[:2]
+    lines = line.T.take(pairs, 1)
+    start, end = start_xy_m.T.take(walls, 1), end_xy_m.T.take(walls, 1)
+    covariance = line_covariance.reshape(-1, 9).T.take(walls, 1)
+    # Nearly parallel lines meet at inf / NaN: such pairs are carried along with the others and
+    # dropped with the rest of the rejected ones at the end.
+    with np.errstate(all='ignore'):
+        x, y, u, w = _solve(lines[0], lines[1], lines[2])
+        a, b = lines[0, :2], lines[1, :2]
+        norm = np.hypot(a, b)
+        normal_x, normal_y = a / norm, b / norm
+        sine = abs(normal_x[0] * normal_y[1] - normal_y[0] * normal_x[1])
+        from_start_x, from_start_y = x - start[0], y - start[1]
+        from_end_x, from_end_y = x - end[0], y - end[1]
+        gap = np.maximum(np.hypot(from_end_x, from_end_y)[0],
+                         np.hypot(from_start_x, from_start_y)[1])
+        kept = ((sine >= math.sin(min_angle_rad)) & (gap <= max_gap_m)).nonzero()[0]
 
-    # Both walls of every corner at once: rows [0, C) are the first walls, [C, 2C) the second.
-    count = len(xy)
-    walls = np.concatenate([first, second])
-    xy2 = np.concatenate([xy, xy])
-    h2 = np.concatenate([h, h])
-    # Unit vectors from the corner along each wall, towards the segment's returns.
-    direction = np.empty((2 * count, 2))
-    direction[:, 0], direction[:, 1] = -unit[walls, 1], unit[walls, 0]
-    middle = 0.5 * (start_xy_m[walls] + end_xy_m[walls]) - xy2
-    direction[np.einsum('ci,ci->c', middle, direction) < 0.0] *= -1.0
-    bisector = direction[:count] + direction[count:]
-    between = np.arccos(np.clip(np.einsum('ci,ci->c', direction[:count], direction[count:]),
-                                -1.0, 1.0))
-    # The sensor (origin) sees the open side: inside a concave corner it lies along +bisector.
-    concave = np.einsum('ci,ci->c', bisector, xy) < 0.0
-    bisector[~concave] *= -1.0
-    opening = np.where(concave, between, 2.0 * np.pi - between)
+        # Unit vectors from the corner along each wall, towards the middle of its returns: the
+        # wall direction (-normal_y, normal_x), reversed when that middle lies behind it. They
+        # are held as (-x, y), i.e. (normal_y, normal_x) * side.
+        side = np.copysign(1.0, normal_y * (from_start_x + from_end_x)
+                           - normal_x * (from_start_y + from_end_y))
+        direction_x, direction_y = normal_y * side, normal_x * side
+        direction_x_0, direction_x_1 = direction_x[0], direction_x[1]
+        direction_y_0, direction_y_1 = direction_y[0], direction_y[1]
+        between = np.arccos(np.minimum(np.maximum(
+            direction_x_0 * direction_x_1 + direction_y_0 * direction_y_1, -1.0), 1.0))
+        bisector_x, bisector_y = direction_x_0 + direction_x_1, direction_y_0 + direction_y_1
+        # The sensor (origin) sees the open side: inside a concave corner it lies along +bisector.
+        concave = bisector_y * y[0] - bisector_x * x[0] < 0.0
+        toward_sensor = np.where(concave, 1.0, -1.0)
+        yaw = np.arctan2(bisector_y * toward_sensor, bisector_x * -toward_sensor)
+        opening = np.where(concave, between, 2.0 * np.pi - between)
 
-    # Joint covariance of (x, y, yaw): line k moves the position by -A^-1 e_k h^T dL_k and the
-    # yaw by g_k^T dL_k, so three quadratic forms of each C_k are all that is needed.
-    cov = line_covariance[walls]
-    gradient = _yaw_gradient(line[walls])
-    cov_h = np.einsum('cij,cj->ci', cov, h2)
-    along_h = np.einsum('ci,ci->c', h2, cov_h)                      # h^T C h
-    cross = np.einsum('ci,ci->c', gradient, cov_h)                  # g^T C h
-    yaw = np.einsum('ci,cij,cj->c', gradient, cov, gradient)        # g^T C g
-    column = np.concatenate([column_a, column_b])
-    covariance = np.empty((count, 3, 3))
-    # (c_i c_j) h^T C h: exactly symmetric in floating point.
-    block = np.einsum('ci,cj->cij', column, column) * along_h[:, None, None]
-    covariance[:, :2, :2] = block[:count] + block[count:]
-    offdiagonal = column * cross[:, None]
-    covariance[:, :2, 2] = covariance[:, 2, :2] = -(offdiagonal[:count] + offdiagonal[count:])
-    covariance[:, 2, 2] = yaw[:count] + yaw[count:]
-    if common_range_sigma_m > 0.0 and line_offset_jacobian is not None:
-        offset = line_offset_jacobian[walls]
-        shift = np.empty((2 * count, 3))
-        shift[:, :2] = -column * np.einsum('ci,ci->c', h2, offset)[:, None]
-        shift[:, 2] = np.einsum('ci,ci->c', gradient, offset)
-        common = shift[:count] + shift[count:]
-        covariance += common_range_sigma_m ** 2 * common[:, :, None] * common[:, None, :]
-    return CornerSet(xy, np.arctan2(bisector[:, 1], bisector[:, 0]), covariance, opening,
-                     first, second)
+        # Joint covariance of (x, y, yaw): line k moves the position by -A^-1 e_k h^T dL_k and
+        # the yaw by g_k^T dL_k, so three quadratic forms of each C_k are all that is needed.
+        # Here g_k = (-gradient_x, gradient_y, 0).
+        half_inv_norm = 0.5 / norm
+        gradient_x, gradient_y = normal_y * half_inv_norm, normal_x * half_inv_norm
+        moved_a, moved_b, along_h = _covariance_times_h(covariance, x, y)
+        cross = gradient_x * moved_a - gradient_y * moved_b                # -g^T C h
+        yaw_variance = (gradient_x * (gradient_x * covariance[0] - gradient_y * covariance[1])
+                        + gradient_y * (gradient_y * covariance[4]
+                                        - gradient_x * covariance[3]))    # g^T C g
+        xx, xy, yy = _position_covariance(u, w, along_h)
+        # -A^-1 e_k g^T C h, with A^-1 e_k = (u, -w).
+        x_yaw, y_yaw = u * cross, w * cross
+        upper = np.array([xx, xy, x_yaw[0] + x_yaw[1], yy, -(y_yaw[0] + y_yaw[1]),
+                          yaw_variance[0] + yaw_variance[1]])
+        if common_range_sigma_m > 0.0 and line_offset_jacobian is not None:
+            offset_a, offset_b, offset_c = line_offset_jacobian.T.take(walls, 1)
+            offset_along_h = x * offset_a + y * offset_b + offset_c
+            # Each wall's share of -j = -sum_k (-A^-1 e_k h^T, g_k^T) dL_k / d offset (the sign
+            # drops out of j j^T).
+            shift = np.array([u * offset_along_h, -(w * offset_along_h),
+                              gradient_x * offset_a - gradient_y * offset_b])
+            common = common_range_sigma_m * (shift[:, 0] + shift[:, 1])
+            upper += common[_UPPER_ROW] * common[_UPPER_COLUMN]
+    covariance = upper.take(kept, 1).T.take(_UPPER_TO_FULL, 1).reshape(-1, 3, 3)
+    return CornerSet(np.array([x[0], y[0]]).T.take(kept, 0), yaw[kept], covariance,
+                     opening[kept], walls[0][kept], walls[1][kept])

@@ -89,14 +89,16 @@ def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float
     segments = trim_ambiguous_ends(segments, points.full_turn, n, x, y, angle, radius,
                                    config.range_sigma_m, config.bearing_sigma_rad,
                                    config.min_segment_points)
-    segments = segments.select(np.argsort(points.index[order[segments.start]], kind='stable'))
+    first_index = points.index[order[segments.start]]
+    by_scan = np.argsort(first_index, kind='stable')
+    segments, first_index = segments.select(by_scan), first_index[by_scan]
     counts = segments.stop - segments.start
-    position = (np.arange(counts.sum())
-                + np.repeat(segments.start - (np.cumsum(counts) - counts), counts))
+    offsets = np.cumsum(counts) - counts
+    position = np.arange(offsets[-1] + counts[-1]) + np.repeat(segments.start - offsets, counts)
     fits = fit_lines(config.method,
                      segment_returns(rho.take(position, mode='wrap'),
-                                     theta.take(position, mode='wrap'), np.cumsum(counts) - counts,
-                                     counts, x.take(position, mode='wrap'),
+                                     theta.take(position, mode='wrap'), offsets, counts,
+                                     x.take(position, mode='wrap'),
                                      y.take(position, mode='wrap')),
                      config.range_sigma_m, config.bearing_sigma_rad)
     usable = _finite_and_positive(fits)
@@ -104,6 +106,7 @@ def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float
         return Features(config.method, SegmentSet.empty(), CornerSet.empty())
     if not usable.all():
         segments, counts, fits = segments.select(usable), counts[usable], fits.select(usable)
+        first_index = first_index[usable]
     last = (segments.stop - 1) % n
     start_xy, end_xy = _project(x, y, segments.start, last, fits)
     common = config.common_range_sigma_m * fits.normal_offset_jacobian
@@ -111,7 +114,7 @@ def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float
         fits.angle_rad, fits.radius_m,
         fits.normal_covariance + common[:, :, None] * common[:, None, :], fits.line,
         fits.line_covariance, fits.line_offset_jacobian, start_xy, end_xy,
-        points.index[order[segments.start]], points.index[order[last]], counts)
+        first_index, points.index[order[last]], counts)
 
     count = len(segment_set)
     first = np.arange(count - 1)
@@ -153,5 +156,4 @@ def _finite_and_positive(fits: LineFits) -> np.ndarray:
     # A NaN or inf anywhere makes the row's total non-finite.
     finite = np.isfinite(fits.line.sum(axis=1) + fits.line_covariance.sum(axis=(1, 2))
                          + fits.angle_rad + fits.radius_m + cov.sum(axis=(1, 2)))
-    with np.errstate(invalid='ignore'):
-        return finite & (cov[:, 0, 0] > 0.0) & (cov[:, 0, 0] * cov[:, 1, 1] > cov[:, 0, 1] ** 2)
+    return finite & (cov[:, 0, 0] > 0.0) & (cov[:, 0, 0] * cov[:, 1, 1] > cov[:, 0, 1] ** 2)

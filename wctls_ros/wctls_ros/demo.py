@@ -17,6 +17,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
 from typing import Dict, List
 
@@ -120,13 +121,19 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import qos_profile_sensor_data
+    from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import LaserScan
     from visualization_msgs.msg import MarkerArray
     from wctls_msgs.msg import CornerArray, LineSegmentArray
 
     seen = Recording()
     context = rclpy.context.Context()
-    rclpy.init(context=context)
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    # Ctrl-C or SIGTERM ends the recording between two spins. A KeyboardInterrupt raised at any
+    # moment could cut a bag write short, or surface from inside rclpy's take as a RuntimeError.
+    stop = threading.Event()
+    previous_handlers = {number: signal.signal(number, lambda *_: stop.set())
+                         for number in (signal.SIGINT, signal.SIGTERM)}
     node = rclpy.create_node('demo_recorder', context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
@@ -149,18 +156,24 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
             # Discovery can match the recorder to feature_node before the driver (or the other
             # way round) on a busy machine: start the clock once both scans and corners arrive.
             start_deadline = time.monotonic() + 60.0
-            while not (seen.corners and seen.scans):
+            while not (seen.corners and seen.scans or stop.is_set()):
                 if time.monotonic() > start_deadline:
                     raise RuntimeError('no scans and corners within 60 s (see the logs)')
                 executor.spin_once(timeout_sec=0.1)
-            print(f'demo: features flowing; recording {seconds:g} s ...', flush=True)
+            if not stop.is_set():
+                print(f'demo: features flowing; recording {seconds:g} s ...', flush=True)
             end = time.monotonic() + seconds
-            while time.monotonic() < end:
+            while time.monotonic() < end and not stop.is_set():
                 executor.spin_once(timeout_sec=0.1)
     finally:
+        for number, handler in previous_handlers.items():
+            if handler is not None:                # None: not installed from Python
+                signal.signal(number, handler)
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
+    if stop.is_set():
+        raise KeyboardInterrupt
     return seen
 
 

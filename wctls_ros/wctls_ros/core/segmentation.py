@@ -338,12 +338,13 @@ def merge_collinear(segments: SegmentRanges, circular: bool, contour_length: int
     segment, computes for each neighbouring pair the squared Mahalanobis distance of the
     difference of their (angle, radius) under the sum of the two covariances (independent
     returns), and merges the pairs below ``chi2_threshold``, lowest first, each segment at most
-    once per pass. A merged segment spans both, including
-    any return between them left out by the split. Passes repeat until nothing merges.
+    once per pass. A merged segment spans both, including any return between them left out by
+    the split. Passes repeat until nothing merges. Positions may count returns or, as in the
+    pipeline, the pieces of :class:`PieceSums` (whose fits are then O(1) each).
 
     :param segments: segments with >= 3 returns each, sorted by start position
     :param circular: whether the returns cover a full turn (the last and first can be neighbours)
-    :param contour_length: number of returns n (positions wrap modulo n)
+    :param contour_length: number of positions n (they wrap modulo n)
     :param fit: returns (angle (S,) rad, radius (S,) m, covariance (S, 2, 2)) of segments
     :param chi2_threshold: merge below this squared Mahalanobis distance (0: never merge)
     :return: the merged segments and their fit (the last pass's, so not computed twice)

@@ -6,7 +6,10 @@
 Benchmark extract_features per scan on simulated RPLIDAR S1 scans of a furnished room.
 
 Prints median and p99 time per scan (one core) for 1080-beam scans and 4x denser ones, for
-every method, and the mean number of segments and corners. Usage: python bench_core.py [scans]
+every method, and the mean number of segments and corners. Then, for wctls, how the time grows
+with the beam count from 270 to 8640 beams: the exponent between each doubling (1 is linear; below
+1 is slower growth than N, let alone N log N) and a least-squares split of the time into a fixed
+per-scan cost and a cost per beam. Usage: python bench_core.py [scans]
 """
 
 import os
@@ -24,6 +27,7 @@ from wctls_ros.simulation import (full_turn_bearings, load_floor_plan, NoiseMode
                                   simulate_ranges)
 
 RANGE_NOISE_M = 0.01
+SWEEP_BEAMS = (270, 540, 1080, 2160, 4320, 8640)
 
 
 def scans(beams, count, seed=1):
@@ -65,6 +69,18 @@ def main():
             median, p99 = np.median(times) * 1e3, np.percentile(times, 99) * 1e3
             print(f'{beams:>6} {method:>6} {median:>10.3f} {p99:>8.3f} {p99 / median:>8.2f} '
                   f'{segments:>9.1f} {corners:>8.1f}')
+    print('growth with the beam count, wctls')
+    print(f'{"beams":>6} {"median ms":>10} {"exponent":>9} {"segments":>9} {"corners":>8}')
+    config = FeatureConfig(range_sigma_m=RANGE_NOISE_M, bearing_sigma_rad=0.0)
+    medians = []
+    for beams in SWEEP_BEAMS:
+        times, segments, corners = time_per_scan(beams, count, config)
+        medians.append(np.median(times) * 1e3)
+        # log2 of the time ratio over one doubling of the beams
+        exponent = f'{np.log2(medians[-1] / medians[-2]):.2f}' if len(medians) > 1 else '-'
+        print(f'{beams:>6} {medians[-1]:>10.3f} {exponent:>9} {segments:>9.1f} {corners:>8.1f}')
+    per_beam_ms, fixed_ms = np.polyfit(SWEEP_BEAMS, medians, 1)
+    print(f'least squares: {fixed_ms * 1e3:.0f} us per scan + {per_beam_ms * 1e6:.0f} ns per beam')
 
 
 if __name__ == '__main__':

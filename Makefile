@@ -15,6 +15,12 @@ SOURCES := $(shell find wctls_msgs wctls_ros -type f -not -path '*/__pycache__/*
 # Every recipe line that runs project code does so inside the venv + install overlay.
 WITH_ENV := source tools/env.sh &&
 PYTEST_ARGS ?=
+# The tests that need numpy alone run a second time with the oldest numpy requirements/python.txt
+# admits: Ubuntu 24.04's 1.26, which an apt install of ROS 2 Jazzy uses.
+OLDEST_NUMPY_VENV := .venv-oldest-numpy
+OLDEST_NUMPY_STAMP := $(OLDEST_NUMPY_VENV)/.deps.stamp
+NUMPY_ONLY_TESTS := $(addprefix wctls_ros/test/,test_core_lines.py test_core_pipeline.py \
+                      test_core_segmentation.py test_rplidar_scan.py test_simulation.py)
 
 .PHONY: help deps build demo test lint bench results clean
 
@@ -36,6 +42,14 @@ $(DEPS_STAMP): $(REQUIREMENTS) tools/fix_wheel_cmake_paths.sh
 	tools/fix_wheel_cmake_paths.sh $(VENV)
 	touch $@
 
+$(OLDEST_NUMPY_STAMP): requirements/python.txt requirements/test.txt
+	@test -x $(OLDEST_NUMPY_VENV)/bin/python || $(PYTHON) -m venv $(OLDEST_NUMPY_VENV)
+	$(OLDEST_NUMPY_VENV)/bin/python -m pip install --quiet --disable-pip-version-check \
+	  "numpy==$$(sed -n 's/^numpy>=//p' requirements/python.txt).*" \
+	  $$(grep -hE '^(PyYAML|pytest|hypothesis)[=>]' requirements/*.txt) 2>&1 \
+	  | { grep -v "^WARNING: Location" || true; }
+	touch $@
+
 build: $(BUILD_STAMP)
 
 $(BUILD_STAMP): $(DEPS_STAMP) $(SOURCES)
@@ -46,8 +60,11 @@ $(BUILD_STAMP): $(DEPS_STAMP) $(SOURCES)
 demo: $(BUILD_STAMP)
 	$(WITH_ENV) install/wctls_ros/lib/wctls_ros/demo
 
-test: $(BUILD_STAMP)
+test: $(BUILD_STAMP) $(OLDEST_NUMPY_STAMP)
 	$(WITH_ENV) python -m pytest $(PYTEST_ARGS)
+	PYTHONPATH=wctls_ros:wctls_ros/test $(OLDEST_NUMPY_VENV)/bin/python -m pytest -p no:cacheprovider \
+	  -o addopts='-ra --strict-markers' --junitxml=out/test-results-oldest-numpy.xml \
+	  $(NUMPY_ONLY_TESTS)
 
 lint: $(BUILD_STAMP)
 	$(WITH_ENV) python -m pytest -m linter $(PYTEST_ARGS)

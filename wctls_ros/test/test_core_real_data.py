@@ -91,3 +91,35 @@ def test_propagated_covariance_against_real_scatter(scans, range_sigma):
     # independent-noise model is too small by a factor 1.6-1.8 in std on this sensor.
     assert np.all((1.3 < scatter / predicted) & (scatter / predicted < 2.5))
     assert 2.0 < median_nees < 4.0
+
+
+def test_near_corner_scatter_is_segmentation_switching_not_the_utls_propagation(
+        scans, range_sigma):
+    # A small object stands between the near wall's end and the corner: its returns (beams
+    # 78-85) lie 5-38 mm off the wall, inside the 40 mm IEPF threshold, and in some scans the
+    # wall takes them in. The UTLS corner then moves far beyond its covariance, which describes
+    # the noise of a fixed set of returns, not that switch; within each set it is calibrated.
+    # (ML moves twice as far, and is overconfident even within a set: its variance model trusts
+    # this wall's grazing returns, at 5-25 degrees incidence, more than the sensor deserves.)
+    config = FeatureConfig(method='utls', range_sigma_m=range_sigma, bearing_sigma_rad=0.0)
+    features = [extract_features(np.asarray(s.ranges), s.angle_min, s.angle_increment, config,
+                                 s.range_min, s.range_max) for s in scans]
+    xy, covariance, long_wall = [], [], []
+    for f in features:
+        k = int(np.argmin(np.hypot(*(f.corners.xy_m - [-0.05, -0.68]).T)))
+        xy.append(f.corners.xy_m[k])
+        covariance.append(f.corners.covariance[k, :2, :2])
+        long_wall.append(f.segments.last_index[f.corners.first_segment[k]] >= 83)
+    xy, covariance, long_wall = np.array(xy), np.array(covariance), np.array(long_wall)
+    groups = (long_wall, ~long_wall)
+    assert all(group.sum() >= 20 for group in groups)
+    shift = np.hypot(*(xy[long_wall].mean(axis=0) - xy[~long_wall].mean(axis=0)))
+    overall = np.mean(nees(xy - xy.mean(axis=0), covariance))
+    within = [np.mean(nees(xy[g] - xy[g].mean(axis=0), covariance[g])) for g in groups]
+    print(f'UTLS: {long_wall.sum()} of {len(scans)} scans with the object in the wall, '
+          f'corner shift {shift * 1e3:.1f} mm, NEES {overall:.1f} overall, within '
+          f'{within[0]:.2f} / {within[1]:.2f}')
+    # Measured: 49 of 175 scans, shift 19 mm, NEES 112 overall, 1.6 / 2.8 within.
+    assert shift > 0.015
+    assert overall > 20.0
+    assert all(1.0 < value < 3.5 for value in within)

@@ -1,7 +1,7 @@
 # Copyright 2026 wctls_ros maintainers
 # SPDX-License-Identifier: Apache-2.0
 
-"""Segmentation internals against independent references: IEPF, piece sums, merging."""
+"""Segmentation internals against independent references: IEPF, sums, merging, end cuts."""
 
 import math
 
@@ -9,7 +9,8 @@ from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 from wctls_ros.core.segmentation import (iterative_end_point_fit, merge_collinear, moment_fit,
-                                         moment_terms, piece_sums, SegmentRanges)
+                                         moment_terms, piece_sums, SegmentRanges,
+                                         trim_offset_ends)
 
 
 def recursive_end_point_fit(x, y, start, stop, threshold):
@@ -127,3 +128,51 @@ def test_merging_across_touching_chains_makes_them_one_chain():
     assert merged.start.tolist() == [0, 80] and merged.stop.tolist() == [80, 100]
     assert merged.chain[0] != merged.chain[1]
     np.testing.assert_allclose(radius, [1.0, 2.0], atol=1e-9)
+
+
+@pytest.mark.parametrize('at_start', [False, True])
+def test_a_run_off_the_line_at_an_end_is_cut_exactly(at_start):
+    # The last 5 returns 2 sigma off the line: |Z_k| / sqrt(k) = 2 sqrt(k) rises to 4.47 at
+    # k = 5 and falls after it, since the other returns lie on the line: exactly 5 are cut.
+    sigma = 0.01
+    x, y = np.linspace(-0.8, 0.8, 40), np.full(40, 1.5)
+    off = slice(0, 5) if at_start else slice(35, 40)
+    y[off] -= 2.0 * sigma
+    segments = SegmentRanges(np.array([0]), np.array([40]), np.array([0]))
+    trimmed = trim_offset_ends(segments, 40, x, y, np.array([math.pi / 2]), np.array([1.5]),
+                               sigma, 0.0, 8, 4.0)
+    assert (trimmed.start[0], trimmed.stop[0]) == ((5, 40) if at_start else (0, 35))
+    # A step of 1.5 sigma peaks at 1.5 sqrt(5) = 3.35 < 4: kept.
+    y[off] += 0.5 * sigma
+    kept = trim_offset_ends(segments, 40, x, y, np.array([math.pi / 2]), np.array([1.5]),
+                            sigma, 0.0, 8, 4.0)
+    assert (kept.start[0], kept.stop[0]) == (0, 40)
+
+
+def test_an_end_cuts_at_most_half_the_returns_beyond_the_minimum():
+    sigma = 0.01
+    x, y = np.linspace(-0.8, 0.8, 14), np.full(14, 1.5)
+    y[-8:] += 10.0 * sigma                      # far off: the score peaks at the window's end
+    segments = SegmentRanges(np.array([0]), np.array([14]), np.array([0]))
+    trimmed = trim_offset_ends(segments, 14, x, y, np.array([math.pi / 2]), np.array([1.5]),
+                               sigma, 0.0, 8, 4.0)
+    assert (trimmed.start[0], trimmed.stop[0]) == (0, 11)        # (14 - 8) // 2 = 3 cut
+
+
+def test_straight_walls_are_rarely_cut():
+    # 4000 noisy straight walls fitted by moment_fit, as in the pipeline: on one line
+    # max_k |Z_k| / sqrt(k) over 8 returns exceeds 4 with probability below 8 P(|N| > 4) = 5e-4
+    # per end (fewer: the noise used is an upper bound). Without the sqrt(k) the rule would cut
+    # about 1 end in 6.
+    rng = np.random.default_rng(7)
+    sigma, walls, count = 0.01, 4000, 60
+    x = np.tile(np.linspace(-0.8, 0.8, count), walls)
+    y = 1.5 + rng.normal(0.0, sigma, walls * count)
+    start = np.arange(walls) * count
+    segments = SegmentRanges(start, start + count, np.arange(walls))
+    sums = np.add.reduceat(moment_terms(x, y), start, axis=1).T
+    angle, radius, _ = moment_fit(sums, sigma, 0.0)
+    trimmed = trim_offset_ends(segments, x.size, x, y, angle, radius, sigma, 0.0, 8, 4.0)
+    cut_ends = np.count_nonzero(trimmed.start != start) + np.count_nonzero(
+        trimmed.stop != start + count)
+    assert cut_ends <= 8                        # 2 * 4000 * 5e-4 = 4 expected at most

@@ -27,6 +27,10 @@ class FeatureConfig:
     :ivar iepf_threshold_m: split a chain where a point lies farther than this from the chord
     :ivar merge_chi2: merge adjacent segments whose line difference has a Mahalanobis distance
         (squared, 2 dof) below this; 0 disables merging (13.8 = 99.9 % for the same line)
+    :ivar end_offset_sigmas: cut the returns at a segment's end that lie off its line together
+        (another surface met at a shallow angle, within the IEPF threshold of the chord): the
+        last k returns go when their residuals, each in sigmas of its noise, sum to more than
+        this times sqrt(k); 0 disables
     :ivar min_segment_points: drop segments with fewer valid returns
     :ivar min_segment_length_m: drop segments shorter than this, m
     :ivar min_corner_angle_rad: no corner between lines closer to parallel than this, rad
@@ -43,6 +47,7 @@ class FeatureConfig:
     breakpoint_lambda_rad: float = math.radians(10.0)
     iepf_threshold_m: float = 0.04
     merge_chi2: float = 13.8
+    end_offset_sigmas: float = 4.0
     min_segment_points: int = 8
     min_segment_length_m: float = 0.15
     min_corner_angle_rad: float = math.radians(30.0)
@@ -89,6 +94,7 @@ def validation_errors(config: FeatureConfig):
         'breakpoint_lambda_rad': (0.0, math.pi / 2, False, False),
         'iepf_threshold_m': (0.0, 10.0, False, True),
         'merge_chi2': (0.0, 1e6, True, True),
+        'end_offset_sigmas': (0.0, 1e3, True, True),
         'min_segment_length_m': (0.0, 100.0, True, True),
         'min_corner_angle_rad': (0.0, math.pi / 2, False, True),
         'max_corner_gap_m': (0.0, 100.0, False, True),

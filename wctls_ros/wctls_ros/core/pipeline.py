@@ -11,7 +11,7 @@ from .lines import fit_lines, LineFits, segment_returns
 from .scan import scan_to_points
 from .segmentation import (breakpoints, chains, iterative_end_point_fit, merge_collinear,
                            moment_fit, moment_terms, piece_sums, SegmentRanges,
-                           trim_ambiguous_ends)
+                           trim_ambiguous_ends, trim_offset_ends)
 
 _DEFAULT_CONFIG = FeatureConfig()
 
@@ -25,8 +25,10 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
     The scan is a LaserScan's geometry: beam i has bearing angle_min + i * angle_increment and
     range ``ranges_m[i]``; invalid returns (NaN, +-inf, outside the range limits) are skipped.
     Steps: adaptive breakpoints, Iterative End Point Fit, merging of collinear neighbours,
-    the configured line fit with its covariance, and the corners of adjacent segments
-    (across the +-pi seam on a full turn) with their propagated (x, y, yaw) covariance.
+    trimming of the returns at segment ends that fit both walls of a corner or lie off the
+    segment's line together, the configured line fit with its covariance, and the corners of
+    adjacent segments (across the +-pi seam on a full turn) with their propagated (x, y, yaw)
+    covariance.
 
     :param ranges_m: ranges, shape (N,), m
     :param angle_min_rad: bearing of the first beam, rad
@@ -78,7 +80,8 @@ def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float
     segments = sums.positions(pieces)
 
     # Keep segments with enough returns and end returns far enough apart; then leave out the
-    # returns where two kept segments meet that fit both lines; then put them in scan order.
+    # returns where two kept segments meet that fit both lines, and runs at the ends that lie
+    # off the line together; then put them in scan order.
     first, last = segments.start, (segments.stop - 1) % n
     dx, dy = x[last] - x[first], y[last] - y[first]
     keep = ((segments.stop - first >= config.min_segment_points)
@@ -89,6 +92,10 @@ def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float
     segments = trim_ambiguous_ends(segments, points.full_turn, n, x, y, angle, radius,
                                    config.range_sigma_m, config.bearing_sigma_rad,
                                    config.min_segment_points)
+    if config.end_offset_sigmas > 0.0:
+        segments = trim_offset_ends(segments, n, x, y, angle, radius, config.range_sigma_m,
+                                    config.bearing_sigma_rad, config.min_segment_points,
+                                    config.end_offset_sigmas)
     first_index = points.index[order[segments.start]]
     by_scan = np.argsort(first_index, kind='stable')
     segments, first_index = segments.select(by_scan), first_index[by_scan]

@@ -1,5 +1,5 @@
 """
-Split a scan into straight segments: breakpoints, Iterative End Point Fit, statistical merging.
+Split a scan into straight segments: breakpoints, IEPF, statistical merging, trimmed ends.
 
 Positions here index the scan's valid returns in *circular order*: for a full turn the order is
 rotated to start at a breakpoint (or, on a closed contour without any, at the farthest return),
@@ -9,6 +9,7 @@ position ranges [start, stop) into that order; on a full turn a segment may run 
 """
 
 from dataclasses import dataclass
+import functools
 import math
 from typing import Callable, Tuple
 
@@ -454,25 +455,114 @@ def trim_ambiguous_ends(segments: SegmentRanges, circular: bool, contour_length:
     reach2 = 9.0 * (range_sigma_m ** 2
                     + (corner_x * corner_x + corner_y * corner_y) * bearing_sigma_rad ** 2
                     ) / (sine * sine)
-    # Both meeting ends at once: rows [0, K) walk back from the ends of segments k, rows
+    # Both meeting ends at once: columns [0, K) walk back from the ends of segments k, columns
     # [K, 2 K) forward from the starts of segments j.
-    steps = np.arange(window)
-    position = np.empty((2 * k.size, window), dtype=np.intp)
-    np.subtract(stop[k, None] - 1, steps, out=position[:k.size])
-    np.add(start[j, None], steps, out=position[k.size:])
-    position %= contour_length
-    dx = x_m[position] - np.concatenate((corner_x, corner_x))[:, None]
-    dy = y_m[position] - np.concatenate((corner_y, corner_y))[:, None]
-    # The run from the end is the first return outside (a last column that is never inside).
-    inside = np.zeros((2 * k.size, window + 1), dtype=bool)
-    np.less(dx * dx + dy * dy, np.concatenate((reach2, reach2))[:, None], out=inside[:, :window])
-    run = inside.argmin(axis=1)
+    position = _end_windows(stop[k] - 1, start[j], window)
+    dx = x_m.take(position, mode='wrap') - np.concatenate((corner_x, corner_x))
+    dy = y_m.take(position, mode='wrap') - np.concatenate((corner_y, corner_y))
+    # The run from the end is the first return outside (a last row that is never inside).
+    inside = np.zeros((window + 1, 2 * k.size), dtype=bool)
+    np.less(dx * dx + dy * dy, np.concatenate((reach2, reach2)), out=inside[:window])
+    run = inside.argmin(axis=0)
     room = np.maximum(stop - start - min_returns, 0)
     meets_previous = np.concatenate((meets[-1:], meets[:-1]))
     allowance = np.where(meets & meets_previous, room // 2, room)
     stop, start = stop.copy(), start.copy()
     stop[k] -= np.minimum(run[:k.size], allowance[k])
     start[j] += np.minimum(run[k.size:], allowance[j])
-    # A segment that crosses the end of the contour may now start past it: back to [0, n).
-    wrapped = np.where(start >= contour_length, contour_length, 0)
-    return SegmentRanges(start - wrapped, stop - wrapped, segments.chain)
+    return _within_contour(start, stop, segments.chain, contour_length)
+
+
+def trim_offset_ends(segments: SegmentRanges, contour_length: int, x_m: np.ndarray,
+                     y_m: np.ndarray, angle_rad: np.ndarray, radius_m: np.ndarray,
+                     range_sigma_m: float, bearing_sigma_rad: float, min_returns: int,
+                     threshold_sigmas: float, window: int = 8) -> SegmentRanges:
+    """
+    Cut off the returns at segment ends that lie off the segment's line together.
+
+    IEPF leaves a run of returns from another surface at a segment's end when the run stays
+    within its threshold of the chord: a box beside a wall, met at a shallow angle, whose
+    returns then join the wall in some scans and not in others, and move its line by more than
+    its covariance says. Each return's residual from the line over its noise is
+    z = (x cos(angle) + y sin(angle) - radius) / sqrt(range_sigma^2 + (rho bearing_sigma)^2),
+    and the last k returns at an end sum to Z_k, which on one line is normal with a variance of
+    at most k (the noise is an upper bound of the scatter across the line). An end is cut after
+    the k that maximises |Z_k| / sqrt(k), when that maximum exceeds ``threshold_sigmas``. Each
+    end cuts at most half of the returns a segment has beyond ``min_returns``, so that the rule
+    does not depend on the beam order.
+
+    :param segments: segments sorted by start position (positions modulo contour_length)
+    :param contour_length: number of returns n
+    :param x_m: x of the returns in position order, shape (n,), m
+    :param y_m: y of the returns in position order, shape (n,), m
+    :param angle_rad: normal angle of each segment's line, shape (S,), rad
+    :param radius_m: radius of each segment's line, shape (S,), m
+    :param range_sigma_m: range noise std, m
+    :param bearing_sigma_rad: bearing noise std, rad
+    :param min_returns: never cut a segment below this many returns
+    :param threshold_sigmas: cut where max_k |Z_k| / sqrt(k) exceeds this
+    :param window: most returns examined (and cut) at each end
+    :return: the trimmed segments
+    """
+    count = len(segments)
+    if not count:
+        return segments
+    start, stop = segments.start, segments.stop
+    # Columns [0, S) walk back from the segments' ends, columns [S, 2 S) forward from their
+    # starts; row k - 1 is the k-th return from the end.
+    position = _end_windows(stop - 1, start, window)
+    x, y = x_m.take(position, mode='wrap'), y_m.take(position, mode='wrap')
+    angle = np.concatenate((angle_rad, angle_rad))
+    residual = x * np.cos(angle) + y * np.sin(angle)
+    residual -= np.concatenate((radius_m, radius_m))
+    if bearing_sigma_rad > 0.0:
+        residual /= np.sqrt(range_sigma_m ** 2 + (x * x + y * y) * bearing_sigma_rad ** 2)
+    else:
+        residual /= range_sigma_m
+    # Z_k down each column as one small matrix product (a cumsum costs five times as much);
+    # the score is Z_k^2 / k, zero where a cut would leave too few returns.
+    total = np.dot(_lower_ones(window), residual)
+    score = total * total
+    returns = np.arange(1, window + 1)[:, None]
+    score /= returns
+    room = (stop - start - min_returns) // 2
+    score *= returns <= np.concatenate((room, room))
+    # NaN scores (a NaN line, never kept by the pipeline) compare False: no cut.
+    over = score > threshold_sigmas * threshold_sigmas
+    if not over.any():
+        return segments
+    cut = (score.argmax(axis=0) + 1) * over.any(axis=0)
+    return _within_contour(start + cut[count:], stop - cut[:count], segments.chain,
+                           contour_length)
+
+
+@functools.lru_cache(maxsize=4)
+def _lower_ones(size: int) -> np.ndarray:
+    """Return the lower-triangular (size, size) matrix of ones: its product cumulates rows."""
+    ones = np.tri(size)
+    ones.flags.writeable = False
+    return ones
+
+
+def _end_windows(last: np.ndarray, first: np.ndarray, window: int) -> np.ndarray:
+    """
+    Return the positions of the returns within ``window`` of segment ends, from the end inwards.
+
+    :param last: last position of some segments, shape (A,)
+    :param first: first position of some segments, shape (B,)
+    :param window: returns per end
+    :return: shape (window, A + B): columns [0, A) walk back from ``last``, columns [A, A + B)
+        forward from ``first``; positions are not wrapped (gather with ``take(mode='wrap')``)
+    """
+    steps = np.arange(window)[:, None]
+    position = np.empty((window, last.size + first.size), dtype=np.intp)
+    np.subtract(last, steps, out=position[:, :last.size])
+    np.add(first, steps, out=position[:, last.size:])
+    return position
+
+
+def _within_contour(start: np.ndarray, stop: np.ndarray, chain: np.ndarray,
+                    contour_length: int) -> SegmentRanges:
+    """Return trimmed segments; one that crosses the contour's end may start past it: to [0, n)."""
+    wrapped = (start >= contour_length) * contour_length
+    return SegmentRanges(start - wrapped, stop - wrapped, chain)

@@ -96,6 +96,10 @@ FEATURE_PARAMETERS = (
     ParameterSpec('merge_chi2', _DEFAULTS.merge_chi2,
                   'Merge neighbouring segments below this chi2 (2 dof) of their line '
                   'difference; 0 disables merging', (0.0, 1e6), 'merge_chi2'),
+    ParameterSpec('end_offset_sigmas', _DEFAULTS.end_offset_sigmas,
+                  'Cut the last k returns of a segment end when their residuals sum to more '
+                  'than this many sigmas times sqrt(k) (another surface); 0 disables',
+                  (0.0, 1e3), 'end_offset_sigmas'),
     ParameterSpec('min_segment_points', _DEFAULTS.min_segment_points,
                   'Drop segments with fewer returns', (3, 100000), 'min_segment_points'),
     ParameterSpec('min_segment_length_m', _DEFAULTS.min_segment_length_m,

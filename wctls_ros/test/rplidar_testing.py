@@ -21,19 +21,65 @@ def true_ranges(bearings_rad):
     return cast_rays(WALLS, np.zeros(2), np.asarray(bearings_rad, dtype=float))
 
 
-def range_band(low_rad, high_rad, steps=17):
+def _cross(a, b):
+    """Return the z component of the cross product of 2-D vectors (last axis)."""
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def _critical_bearings(walls):
     """
-    Return the scene's smallest and largest range over bearing intervals.
+    Return the bearings at which the range, as a function of bearing, can have a local extreme.
+
+    Between wall ends and wall crossings the nearest wall stays the same, and the range along one
+    wall falls only up to the foot of its perpendicular and rises after it. So over any bearing
+    interval the range is extreme at the interval's ends, at a wall end (a corner's kink, or an
+    occlusion edge, approached from either side), at a crossing or at a perpendicular's foot.
+
+    :param walls: wall segments in the laser frame, shape (K, 4), m
+    :return: bearings, rad
+    """
+    start, edge = walls[:, :2], walls[:, 2:] - walls[:, :2]
+    foot = -np.einsum('ij,ij->i', start, edge) / np.einsum('ij,ij->i', edge, edge)
+    feet = start + np.clip(foot, 0.0, 1.0)[:, None] * edge
+    denominator = _cross(edge[:, None], edge[None])
+    between = start[None] - start[:, None]
+    with np.errstate(divide='ignore', invalid='ignore'):
+        along = _cross(between, edge[None]) / denominator
+        other = _cross(between, edge[:, None]) / denominator
+    first, second = np.nonzero((along >= 0.0) & (along <= 1.0) & (other >= 0.0) & (other <= 1.0))
+    crossings = start[first] + along[first, second, None] * edge[first]
+    ends = walls.reshape(-1, 2)
+    points = np.concatenate([ends, feet, crossings])
+    bearings = np.arctan2(points[:, 1], points[:, 0])
+    # An occlusion edge is a jump: take the range just before and just after it too.
+    return np.concatenate([bearings, bearings - 1e-9, bearings + 1e-9])
+
+
+_CRITICAL_BEARINGS = _critical_bearings(WALLS)
+_CRITICAL_RANGES = true_ranges(_CRITICAL_BEARINGS)
+
+
+def range_band(low_rad, high_rad):
+    """
+    Return the scene's smallest and largest range over bearing intervals, exactly.
+
+    Sampling an interval at a few bearings is not enough: a wall corner pointing at the sensor
+    is a sharp minimum of the range between two samples. The walls being straight, the extremes
+    lie at the interval's ends or at one of the scene's critical bearings inside it.
 
     :param low_rad: interval starts, rad
-    :param high_rad: interval ends, rad
-    :param steps: bearings sampled per interval
+    :param high_rad: interval ends (at most a turn above the starts), rad
     :return: (lowest, highest) range per interval, m
     """
-    fractions = np.linspace(0.0, 1.0, steps)
-    bearings = np.asarray(low_rad)[:, None] + np.outer(np.asarray(high_rad) - low_rad, fractions)
-    ranges = true_ranges(bearings.ravel()).reshape(bearings.shape)
-    return ranges.min(axis=1), ranges.max(axis=1)
+    low_rad, high_rad = np.broadcast_arrays(np.asarray(low_rad, float),
+                                            np.asarray(high_rad, float))
+    ends = true_ranges(np.stack([low_rad, high_rad], axis=-1).ravel()).reshape(-1, 2)
+    inside = (np.mod(_CRITICAL_BEARINGS - low_rad.reshape(-1, 1), 2.0 * np.pi)
+              <= (high_rad - low_rad).reshape(-1, 1))
+    lowest = np.where(inside, _CRITICAL_RANGES, np.inf).min(axis=1)
+    highest = np.where(inside, _CRITICAL_RANGES, -np.inf).max(axis=1)
+    return (np.minimum(ends.min(axis=1), lowest).reshape(low_rad.shape),
+            np.maximum(ends.max(axis=1), highest).reshape(low_rad.shape))
 
 
 def start_emulator(directory, *options):

@@ -3,15 +3,45 @@
 
 """Shared fixtures: a private ROS domain per test session and a per-test rclpy context."""
 
+import fcntl
 import os
 import pathlib
+import tempfile
 import time
 
 import pytest
 
+# Test sessions take their ROS domain ids from here, one each.
+_SESSION_DOMAINS = range(100, 200)
+_held_domain = []
+
+
+def _free_domain_id() -> int:
+    """
+    Return a domain id no other test session on this machine holds, and hold it.
+
+    Each id has a lock file; the session keeps the lock of its id until it exits (the kernel
+    drops it then, even after a crash). Chosen by the process id alone, two concurrent sessions
+    shared an id about one time in a hundred and received each other's scans.
+    """
+    for offset in range(len(_SESSION_DOMAINS)):
+        domain = _SESSION_DOMAINS[(os.getpid() + offset) % len(_SESSION_DOMAINS)]
+        lock = open(pathlib.Path(tempfile.gettempdir()) / f'wctls_ros_test_domain_{domain}.lock',
+                    'w')
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            lock.close()
+            continue
+        _held_domain.append(lock)
+        return domain
+    return _SESSION_DOMAINS[os.getpid() % len(_SESSION_DOMAINS)]
+
+
 # Keep this session's DDS traffic away from anything else running on the machine (a demo, another
 # test run); subprocesses started by the tests inherit the variable.
-os.environ.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
+if 'ROS_DOMAIN_ID' not in os.environ:
+    os.environ['ROS_DOMAIN_ID'] = str(_free_domain_id())
 
 # Real recordings shared by every checkout at ../shared/data (tests skip when absent).
 SHARED_DATA = pathlib.Path(os.environ.get(

@@ -4,7 +4,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bin=install/wctls_ros/lib/wctls_ros
-data=${WCTLS_DATA_DIR:-../shared/data}
+data=data
 docs=docs/results
 work=out/results
 rm -rf "$work" && mkdir -p "$work" "$docs"
@@ -40,5 +40,5 @@ for bag in sick_lms111_static sick_lms1xx_static; do
   fi
 done
 # The reports quote the command with the machine's paths: keep only the repository-relative part.
-sed -i "s#$(pwd)/##g; s#$data/#../shared/data/#g" "$docs"/*/report.md
+sed -i "s#$(pwd)/##g" "$docs"/*/report.md
 echo "results in $docs"

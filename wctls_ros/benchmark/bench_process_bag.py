@@ -6,7 +6,7 @@
 Benchmark process_bag: scans per second on the real office bag, and memory on a long bag.
 
 1. Throughput: the 360-scan Hokuyo URG-04LX office bag (ROS 2 mcap, 681 beams) from
-   ../shared/data, processed in this process (no start-up cost) with one method (wctls) and with
+   data/, processed in this process (no start-up cost) with one method (wctls) and with
    all four; median of a few runs, markers on (the defaults).
 2. Memory: a 10,000-scan bag (the office scans over and over, 0.1 s apart) processed by
    process_bag in a process of its own; its peak resident memory is compared with that of the
@@ -27,9 +27,7 @@ from wctls_ros.bags.params_file import load_parameters
 from wctls_ros.bags.process_bag import process
 from wctls_ros.core import METHODS
 
-DATA = pathlib.Path(os.environ.get(
-    'WCTLS_DATA_DIR', pathlib.Path(__file__).resolve().parents[2].parent / 'shared' / 'data'))
-OFFICE = DATA / 'urg04lx_office'
+OFFICE = pathlib.Path(__file__).resolve().parents[2] / 'data' / 'urg04lx_office'
 
 
 def throughput(bag, methods, runs, workdir):
@@ -72,9 +70,6 @@ def main():
     """Print the figures."""
     runs = int(sys.argv[1]) if len(sys.argv) > 1 else 3
     long_count = int(sys.argv[2]) if len(sys.argv) > 2 else 10000
-    if not OFFICE.is_dir():
-        print(f'bench_process_bag: skipped, {OFFICE} is absent')
-        return
     with tempfile.TemporaryDirectory() as folder:
         workdir = pathlib.Path(folder)
         print(f'process_bag on {OFFICE.name} (ROS 2 mcap, Hokuyo URG-04LX, 681 beams), '

@@ -43,9 +43,9 @@ def _free_domain_id() -> int:
 if 'ROS_DOMAIN_ID' not in os.environ:
     os.environ['ROS_DOMAIN_ID'] = str(_free_domain_id())
 
-# Real recordings shared by every checkout at ../shared/data (tests skip when absent).
-SHARED_DATA = pathlib.Path(os.environ.get(
-    'WCTLS_DATA_DIR', pathlib.Path(__file__).resolve().parents[2].parent / 'shared' / 'data'))
+# The real recordings, with their licenses, in the repository's data/ folder. Tests that use them
+# never skip: a checkout without them fails.
+REAL_DATA = pathlib.Path(__file__).resolve().parents[2] / 'data'
 
 
 @pytest.fixture(scope='module')

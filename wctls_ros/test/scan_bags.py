@@ -5,7 +5,7 @@
 
 import shutil
 
-from conftest import SHARED_DATA
+from conftest import REAL_DATA
 import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
 from scans import room_scan_message
@@ -15,7 +15,7 @@ START_NS = 1_700_000_000_000_000_000
 PERIOD_NS = 100_000_000
 # Header stamps lag the log times (as a driver's do), so tests can tell them apart.
 STAMP_LAG_NS = 3_000_000
-# The recordings in ../shared/data: (bag path, scans); tests skip the ones that are absent.
+# The recordings in data/: (bag path, scans).
 REAL_BAGS = [
     ('urg04lx_office', 360),
     ('sick_lms111_static', 175),
@@ -94,6 +94,7 @@ def truncated_copy(source_bag, target, fraction=0.6):
 
 
 def real_bag(name):
-    """Return the path of a recording in ../shared/data, or None when absent."""
-    path = SHARED_DATA / name
-    return path if path.exists() else None
+    """Return the path of a recording in data/ (fails when it is missing: nothing skips)."""
+    path = REAL_DATA / name
+    assert path.exists(), f'{path} is missing from the repository'
+    return path

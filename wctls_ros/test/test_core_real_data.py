@@ -15,14 +15,12 @@ independent per-beam model can represent. The calibration tool of the evaluation
 that term; here the test pins down the measured gap so that a change in the propagation shows.
 """
 
-from conftest import SHARED_DATA
+from conftest import REAL_DATA
 import numpy as np
 import pytest
 from wctls_ros.core import extract_features, FeatureConfig, nees
 
-LMS111 = SHARED_DATA / 'sick_lms111_static'
-
-pytestmark = pytest.mark.skipif(not LMS111.is_dir(), reason=f'{LMS111} is absent')
+LMS111 = REAL_DATA / 'sick_lms111_static'
 
 
 @pytest.fixture(scope='module')

@@ -14,7 +14,7 @@ bundled plans have many such corners; see docs/results.)
 
 import math
 
-from conftest import SHARED_DATA
+from conftest import REAL_DATA
 import numpy as np
 import pytest
 from wctls_ros.evaluation import (check_still, evaluate_scans, fit_noise, node_yaml,
@@ -171,12 +171,11 @@ def test_calibration_recovers_the_simulated_noise():
     assert 'scaled by 1.30' in node_yaml(fit.noise, 1.3)
 
 
-LMS111 = SHARED_DATA / 'sick_lms111_static'
-LMS1XX = SHARED_DATA / 'sick_lms1xx_static'
-OFFICE = SHARED_DATA / 'urg04lx_office'
+LMS111 = REAL_DATA / 'sick_lms111_static'
+LMS1XX = REAL_DATA / 'sick_lms1xx_static'
+OFFICE = REAL_DATA / 'urg04lx_office'
 
 
-@pytest.mark.skipif(not LMS111.is_dir(), reason=f'{LMS111} is absent')
 def test_real_lms111_calibration_and_nees():
     from wctls_ros.evaluation import load_scans
     from wctls_ros.evaluation.evaluate_cli import calibrate
@@ -191,7 +190,6 @@ def test_real_lms111_calibration_and_nees():
     assert scale == pytest.approx(math.sqrt(nees_full / 2.0))
 
 
-@pytest.mark.skipif(not LMS1XX.is_dir(), reason=f'{LMS1XX} is absent')
 def test_real_lms1xx_scatter_exceeds_every_fitted_term():
     from wctls_ros.evaluation import load_scans
     scans = load_scans(LMS1XX)
@@ -206,7 +204,6 @@ def test_real_lms1xx_scatter_exceeds_every_fitted_term():
     assert 3.0 < evaluation.pooled_nees('wtls') < 20.0
 
 
-@pytest.mark.skipif(not OFFICE.is_dir(), reason=f'{OFFICE} is absent')
 def test_real_hand_moved_office_recording_is_refused():
     from wctls_ros.evaluation import load_scans, MovingSensorError, require_still
     with pytest.raises(MovingSensorError, match='moved'):

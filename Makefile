@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+#
 # Every target sets itself up from nothing: a venv with the ROS 2 Jazzy wheels, the CMake path fix,
 # a colcon build of both packages. Stamps make a re-run with nothing changed cost almost nothing.
 SHELL := /bin/bash

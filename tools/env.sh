@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+#
 # Source this from the repository root after `make build` to use the workspace in a shell:
 #   source tools/env.sh
 # It activates the venv holding the ROS 2 Jazzy wheels and overlays the colcon install space,

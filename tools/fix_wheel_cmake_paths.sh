@@ -1,4 +1,7 @@
 #!/usr/bin/env bash
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+#
 # The ROS 2 wheels' CMake export files name include directories of the machine that built them
 # (/opt/python/cp311-cp311/...). CMake refuses imported targets with non-existent paths, so point
 # them at this venv's Python and numpy headers. Idempotent; touches files inside the venv only.

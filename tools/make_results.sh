@@ -1,4 +1,7 @@
 #!/usr/bin/env bash
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+#
 # Regenerate docs/results (issue 8): the paper's analysis on simulated environments A and B and
 # on the real static SICK recordings. Run through `make results` (needs the built workspace).
 set -euo pipefail

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """Install the wctls_ros ament_python package (colcon build runs this)."""
 
 from glob import glob

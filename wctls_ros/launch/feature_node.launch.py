@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """Launch feature_node with its parameter file: ros2 launch wctls_ros feature_node.launch.py."""
 
 from launch import LaunchDescription

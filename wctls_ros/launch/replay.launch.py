@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """Replay a bag into feature_node: ros2 launch wctls_ros replay.launch.py bag:=<bag folder>."""
 
 from launch import LaunchDescription

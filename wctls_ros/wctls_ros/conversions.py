@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 Messages in and out of the core: LaserScan checks, Features to wctls_msgs and RViz markers.
 

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 feature_node: LaserScan in; corners, line segments and RViz markers out, once per scan.
 

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """The Jazzy ``main()`` every wctls_ros node shares: start, spin, and end cleanly."""
 
 import rclpy

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """Figures of scans and features with matplotlib (Agg backend: no display needed)."""
 
 import math

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 Reading LaserScans from bags and writing bags, with the ``rosbags`` library (no ROS install).
 

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 feature_node's parameters from a ROS 2 parameter file, checked as the node checks them.
 

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 process_bag: LaserScans of a bag in; corners, lines and markers out, with no middleware.
 

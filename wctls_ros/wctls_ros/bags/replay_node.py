@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 bag_replay: plays the LaserScans of a ROS 1 or ROS 2 bag on ``scan`` at the recorded timing.
 

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 The estimation core of wctls_ros: plain numpy, no ROS imports.
 

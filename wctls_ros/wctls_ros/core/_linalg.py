@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """Closed-form batched 2x2 linear algebra that yields NaN/inf instead of raising."""
 
 import numpy as np

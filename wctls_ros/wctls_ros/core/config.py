@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """The validated configuration of the feature pipeline."""
 
 from dataclasses import asdict, dataclass, fields

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 Corners: intersections of adjacent lines with their jointly propagated (x, y, yaw) covariance.
 

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """LaserScan geometry to Cartesian points, with REP-117 filtering of invalid returns."""
 
 from dataclasses import dataclass

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """Uncertainty helpers: covariance ellipses, confidence scaling and NEES."""
 
 from dataclasses import dataclass

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 The paper's evaluation on repeated scans from a still sensor, and what the paper lacks.
 

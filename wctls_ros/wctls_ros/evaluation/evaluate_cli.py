@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 ``evaluate`` and ``calibrate``: the paper's analysis and the noise calibration on a bag.
 

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 Repeated scans from a still sensor: loading them from a bag, and refusing a sensor that moved.
 

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 ``simulate``: write a ROS 2 bag of RPLIDAR S1-like scans of a floor plan.
 

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 SLAMTEC RPLIDAR S1 support: a pure byte-protocol codec, transports, a driver and an emulator.
 

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 The RPLIDAR session on a background thread: handshake, scanning, turn assembly and recovery.
 

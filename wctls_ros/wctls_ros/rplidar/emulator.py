@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 ``s1_emulator``: an RPLIDAR S1 speaking the real byte protocol on a pseudo-terminal and TCP.
 

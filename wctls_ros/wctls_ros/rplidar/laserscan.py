@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 A turn as sllidar_ros2 publishes it: the LaserScan geometry, ranges and intensities (pure).
 

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 The RPLIDAR S1 byte protocol: requests, answers and the two scan stream formats (pure, no I/O).
 

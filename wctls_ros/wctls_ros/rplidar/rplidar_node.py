@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 ``rplidar_node``: the RPLIDAR S1 as a ROS 2 node, with sllidar_ros2's parameters and conventions.
 

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 Byte links to an RPLIDAR: a serial port (pyserial) or a TCP socket.
 

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """
 Turn assembly: decoded samples in, complete 360-degree turns with honest timing out (pure).
 

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """2D floor plans: walls as polylines and boxes, loaded from YAML, with their true corners."""
 
 from dataclasses import dataclass

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """Exact 2D ray casting against wall segments (numpy only)."""
 
 import numpy as np

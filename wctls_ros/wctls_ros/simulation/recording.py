@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """Repeated scans of a floor plan from a still (or moving) sensor, as one array (numpy only)."""
 
 from dataclasses import dataclass

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """An RPLIDAR S1-like scan simulator with a documented, seeded noise model."""
 
 from dataclasses import dataclass

@@ -1,3 +1,6 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
 """Which true corners of a floor plan a sensor can see well enough to extract (numpy only)."""
 
 import numpy as np

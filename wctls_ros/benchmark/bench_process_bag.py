@@ -23,9 +23,9 @@ import tempfile
 import time
 
 from wctls_ros.bags import BagWriter, read_scans
-from wctls_ros.bags.params_file import load_parameters
 from wctls_ros.bags.process_bag import process
 from wctls_ros.core import METHODS
+from wctls_ros.params import load_parameters
 
 OFFICE = pathlib.Path(__file__).resolve().parents[2] / 'data' / 'urg04lx_office'
 

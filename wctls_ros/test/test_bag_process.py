@@ -19,9 +19,9 @@ from scan_bags import (real_bag, REAL_BAGS, truncated_copy,  # noqa: E402
                        write_wide_invalid_bag)
 from test_feature_node import installed_executable  # noqa: E402
 from wctls_ros.bags import read_scans  # noqa: E402
-from wctls_ros.bags.params_file import load_parameters  # noqa: E402
 from wctls_ros.bags.process_bag import CSV_COLUMNS, main, process  # noqa: E402
 from wctls_ros.core import METHODS  # noqa: E402
+from wctls_ros.params import load_parameters  # noqa: E402
 
 CORNERS = 'wctls_msgs/msg/CornerArray'
 LINES = 'wctls_msgs/msg/LineSegmentArray'

@@ -23,7 +23,8 @@ from sensor_msgs.msg import LaserScan  # noqa: E402
 from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 from wctls_msgs.msg import CornerArray, LineSegmentArray  # noqa: E402
 from wctls_ros.core import nees  # noqa: E402
-from wctls_ros.feature_node import FeatureNode, PARAMETERS  # noqa: E402
+from wctls_ros.feature_node import FeatureNode  # noqa: E402
+from wctls_ros.params import FEATURE_NODE  # noqa: E402
 import yaml  # noqa: E402
 
 PACKAGE = pathlib.Path(__file__).resolve().parents[1]
@@ -125,7 +126,7 @@ def test_parameter_changes_take_effect_on_the_next_scan(ros_context, executor):
 
 @pytest.mark.parametrize('name,value,reason', [
     ('method', 'tls', 'method must be one of'),
-    ('range_min_m', 2000.0, 'range_min_m'),
+    ('breakpoint_lambda_deg', 90.0, 'breakpoint_lambda_deg = 90.0 is outside its range (0, 90)'),
     ('iepf_threshold_m', -1.0, 'iepf_threshold_m'),
 ])
 def test_invalid_parameter_changes_are_refused_with_the_reason(ros_context, executor, name,
@@ -178,7 +179,7 @@ def test_a_burst_of_malformed_scans_then_a_good_one(ros_context, executor):
 def test_config_file_holds_every_parameter_at_its_default():
     config = yaml.safe_load((PACKAGE / 'config' / 'feature_node.yaml').read_text())
     values = config['feature_node']['ros__parameters']
-    assert values == pytest.approx({spec.name: spec.default for spec in PARAMETERS})
+    assert values == pytest.approx({spec.name: spec.default for spec in FEATURE_NODE})
 
 
 def installed_executable(name):
@@ -231,7 +232,7 @@ def test_readme_lists_every_parameter_with_its_default():
         cells = [c.strip() for c in line.strip().strip('|').split('|')]
         if len(cells) == 3 and cells[0].startswith('`') and cells[0].endswith('`'):
             rows[cells[0].strip('`')] = cells[1]
-    for spec in PARAMETERS:
+    for spec in FEATURE_NODE:
         assert spec.name in rows, f'README does not list {spec.name}'
         expected = str(spec.default).lower() if isinstance(spec.default, bool) else spec.default
         assert rows[spec.name] == str(expected), spec.name

@@ -19,8 +19,9 @@ from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from rplidar_testing import range_band, start_emulator, true_ranges  # noqa: E402
 from sensor_msgs.msg import LaserScan  # noqa: E402
 from std_srvs.srv import Empty  # noqa: E402
+from wctls_ros.params import RPLIDAR_NODE  # noqa: E402
 from wctls_ros.rplidar.driver import DriverState  # noqa: E402
-from wctls_ros.rplidar.rplidar_node import PARAMETERS, RplidarNode  # noqa: E402
+from wctls_ros.rplidar.rplidar_node import RplidarNode  # noqa: E402
 import yaml  # noqa: E402
 
 PACKAGE_DIR = pathlib.Path(__file__).resolve().parents[1]
@@ -265,7 +266,7 @@ def test_a_health_warning_is_reported_and_scanning_goes_on(executor, ros_context
 def test_config_file_sets_every_parameter(executor, ros_context, tmp_path):
     config = yaml.safe_load((PACKAGE_DIR / 'config' / 'rplidar_s1.yaml').read_text())
     values = config['rplidar_node']['ros__parameters']
-    assert set(values) == set(PARAMETERS)
+    assert set(values) == {parameter.name for parameter in RPLIDAR_NODE}
     values['serial_port'] = str(tmp_path / 'absent')       # nothing to connect to: it retries
     node, _ = start(executor, ros_context, **values)
     for name, value in values.items():

@@ -8,7 +8,6 @@ Everything here is message plumbing shared by the feature node and the offline b
 estimation itself lives in :mod:`wctls_ros.core`.
 """
 
-from dataclasses import dataclass
 import math
 
 from geometry_msgs.msg import Point, Pose, PoseWithCovariance, Quaternion, Vector3
@@ -18,28 +17,12 @@ from visualization_msgs.msg import Marker, MarkerArray
 from wctls_msgs.msg import Corner, CornerArray, LineSegment, LineSegmentArray
 
 from .core import CornerSet, ellipse, extract_features, FeatureConfig, Features, SegmentSet
+from .params import MarkerStyle
 
 # Rows/columns of (x, y, yaw) in a geometry_msgs 6x6 pose covariance (x, y, z, roll, pitch, yaw).
 _POSE_INDEX = np.array([0, 1, 5])
 # Height of the flat cylinders that draw covariance ellipses, m.
 _ELLIPSE_THICKNESS_M = 0.005
-
-
-@dataclass(frozen=True)
-class MarkerStyle:
-    """
-    How features are drawn in RViz / Foxglove.
-
-    :ivar ellipse_sigma: draw the k-sigma ellipse of each corner's position (1 = one sigma)
-    :ivar ellipse_scale: extra magnification of the ellipses for visibility (the paper uses 10)
-    :ivar line_width_m: width of the segment lines, m
-    :ivar corner_size_m: diameter of the corner spheres and height of their id labels, m
-    """
-
-    ellipse_sigma: float = 1.0
-    ellipse_scale: float = 10.0
-    line_width_m: float = 0.02
-    corner_size_m: float = 0.06
 
 
 def scan_problems(scan) -> list:

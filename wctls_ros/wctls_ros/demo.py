@@ -27,9 +27,8 @@ from typing import Dict, List
 import numpy as np
 
 from .bags import BagWriter
-from .bags.params_file import load_parameters
 from .core import nees
-from .feature_node import settings_from_parameters
+from .params import feature_settings, load_parameters
 from .simulation import full_turn_bearings, load_floor_plan, S1_BEAMS_PER_TURN
 from .simulation.visibility import visible_corners
 
@@ -283,7 +282,7 @@ def main(argv=None) -> int:
     os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 100)))
     tty = out.resolve() / 'ttyS1'
     parameters = {**MODEL_PARAMETERS, 'method': args.method}
-    config = settings_from_parameters(
+    config = feature_settings(
         load_parameters(_config_file() / 'feature_node.yaml', overrides=parameters))[0]
     processes = Processes(out / 'logs')
     interrupted = False

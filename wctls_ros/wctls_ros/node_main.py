@@ -1,11 +1,50 @@
 # Copyright 2026 wctls_ros maintainers
 # SPDX-License-Identifier: Apache-2.0
 
-"""The Jazzy ``main()`` every wctls_ros node shares: start, spin, and end cleanly."""
+"""The Jazzy ``main()`` every wctls_ros node shares, and its parameter declarations."""
 
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+
+
+def parameter_descriptor(parameter) -> ParameterDescriptor:
+    """
+    Return the ROS descriptor of a schema row: description, range, read-only, choices.
+
+    The descriptor's range is the closure of the parameter's limits (ROS ranges include both
+    ends); an excluded end is refused by the settings' own validation, with its reason.
+
+    :param parameter: a :class:`wctls_ros.params.Parameter`
+    :return: the descriptor
+    """
+    descriptor = ParameterDescriptor(name=parameter.name, description=parameter.description,
+                                     read_only=parameter.read_only)
+    if parameter.choices:
+        descriptor.additional_constraints = 'one of: ' + ', '.join(parameter.choices)
+    limits = parameter.limits
+    if limits is not None and isinstance(parameter.default, int):
+        descriptor.integer_range = [IntegerRange(from_value=limits.low, to_value=limits.high,
+                                                 step=1)]
+    elif limits is not None:
+        descriptor.floating_point_range = [FloatingPointRange(
+            from_value=float(limits.low), to_value=float(limits.high), step=0.0)]
+    return descriptor
+
+
+def declare_parameters(node, schema) -> dict:
+    """
+    Declare a node's parameters from its schema and return their values.
+
+    :param node: the rclpy node
+    :param schema: its rows (e.g. :data:`wctls_ros.params.FEATURE_NODE`)
+    :return: name -> value (the default, a parameter file's or a command line's)
+    :raises rclpy.exceptions.ParameterException: on a value of the wrong type or range
+    """
+    return {parameter.name: node.declare_parameter(parameter.name, parameter.default,
+                                                   parameter_descriptor(parameter)).value
+            for parameter in schema}
 
 
 def spin_forever(executor, node) -> int:

@@ -30,10 +30,9 @@ from typing import Optional
 
 
 from .bag_io import bag_info, BagError, BagWriter, choose_scan_topic, read_scans
-from .params_file import ConfigError, load_parameters
 from ..conversions import corner_array, line_segment_array, marker_array, scan_features
 from ..core import CornerSet, METHODS
-from ..feature_node import settings_from_parameters
+from ..params import ConfigError, feature_settings, load_parameters
 
 ALL = 'all'
 CSV_NAME = 'corners.csv'
@@ -150,7 +149,7 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
     """
     from tqdm import tqdm
     started = time.perf_counter()
-    config, style, publish_markers = settings_from_parameters(parameters)
+    config, style, publish_markers = feature_settings(parameters)
     methods = tuple(methods or (config.method,))
     configs = {m: config.replace(method=m) for m in methods}
     topics = output_topics(methods)
@@ -261,7 +260,7 @@ def main(argv=None) -> int:
         overrides = {} if args.method in (None, ALL) else {'method': args.method}
         parameters = load_parameters(args.config, overrides=overrides)
         try:
-            settings_from_parameters(parameters)
+            feature_settings(parameters)
         except ValueError as error:
             raise ConfigError(str(error)) from error
         summary = process(args.bag, args.output or default_output(args.bag), parameters,

@@ -26,8 +26,8 @@ from rosgraph_msgs.msg import Clock as ClockMessage
 from sensor_msgs.msg import LaserScan
 
 from .bag_io import bag_info, BagError, choose_scan_topic, read_scans
-from ..feature_node import ParameterSpec
-from ..node_main import run_node
+from ..node_main import declare_parameters, run_node
+from ..params import BAG_REPLAY
 
 SCAN_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                       reliability=ReliabilityPolicy.RELIABLE)
@@ -41,36 +41,13 @@ WAIT_POLL_S = 0.1
 DELIVERY_TIMEOUT_S = 2.0
 _NS = 1_000_000_000
 
-PARAMETERS = (
-    ParameterSpec('bag', '', 'ROS 2 bag folder (or its .mcap / .db3 file) or ROS 1 .bag file '
-                  'to play (required)'),
-    ParameterSpec('topic', '', "LaserScan topic in the bag; empty: the bag's only LaserScan "
-                  'topic'),
-    ParameterSpec('rate', 1.0, 'Playback speed: bag seconds per wall-clock second '
-                  '(changeable while playing)', (0.01, 100.0)),
-    ParameterSpec('start_offset_s', 0.0, 'Start playing this far after the start of the bag, s',
-                  (0.0, 1e7)),
-    ParameterSpec('loop', False, 'Start again at the end of the bag (changeable while '
-                  'playing)'),
-    ParameterSpec('publish_clock', False, 'Publish the bag time on /clock '
-                  '(rosgraph_msgs/Clock) for nodes with use_sim_time'),
-    ParameterSpec('clock_rate_hz', 40.0, 'How often /clock is published, Hz', (1.0, 1000.0)),
-    ParameterSpec('wait_for_subscribers', 0, 'Start playing once this many subscribers match '
-                  'scan (0: start at once)', (0, 1000)),
-)
-# Parameters that take effect while playing; the others are read once at start-up.
-RUNTIME_PARAMETERS = ('rate', 'loop')
-
 
 class BagReplay(Node):
     """Publish the LaserScans of a bag on ``scan`` at their recorded timing."""
 
     def __init__(self, **kwargs):
         super().__init__('bag_replay', **kwargs)
-        for spec in PARAMETERS:
-            descriptor = spec.descriptor()
-            descriptor.read_only = spec.name not in RUNTIME_PARAMETERS
-            self.declare_parameter(spec.name, spec.default, descriptor)
+        declare_parameters(self, BAG_REPLAY)
         value = self._value
         self._bag = value('bag')
         if not self._bag:

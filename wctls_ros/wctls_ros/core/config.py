@@ -1,12 +1,63 @@
 # Copyright 2026 wctls_ros maintainers
 # SPDX-License-Identifier: Apache-2.0
 
-"""The validated configuration of the feature pipeline."""
+"""
+The validated configuration of the feature pipeline.
 
-from dataclasses import asdict, dataclass, fields
+Each field of :class:`FeatureConfig` carries its meaning and its allowed interval as field
+metadata (:func:`field_limits`, :func:`field_description`): the validation here, the ROS
+parameters of feature_node, the parameter-file checks of the offline tools and the documented
+parameter table are all derived from it (see :mod:`wctls_ros.params`), so each limit is stated
+once.
+"""
+
+from dataclasses import asdict, dataclass, field, fields
 import math
+from typing import NamedTuple, Optional
 
 METHODS = ('utls', 'wtls', 'wctls', 'ml')
+
+
+class Limits(NamedTuple):
+    """
+    The interval a numeric setting must lie in.
+
+    :ivar low: lower end
+    :ivar high: upper end
+    :ivar low_open: the lower end itself is not allowed
+    :ivar high_open: the upper end itself is not allowed
+    """
+
+    low: float
+    high: float
+    low_open: bool = False
+    high_open: bool = False
+
+    def holds(self, value) -> bool:
+        """
+        Return whether a number lies in the interval.
+
+        :param value: the number
+        :return: True when allowed
+        """
+        above = value > self.low or (not self.low_open and value == self.low)
+        below = value < self.high or (not self.high_open and value == self.high)
+        return above and below
+
+    def describe(self, scale: float = 1.0) -> str:
+        """
+        Return the interval in the usual notation, e.g. '(0, 10]'.
+
+        :param scale: factor applied to both ends (a unit conversion)
+        :return: the text
+        """
+        return (f'{"(" if self.low_open else "["}{self.low * scale:g}, {self.high * scale:g}'
+                f'{")" if self.high_open else "]"}')
+
+
+def _setting(default, description: str, limits: Optional[Limits] = None):
+    """Declare a FeatureConfig field with its description and (for numbers) its limits."""
+    return field(default=default, metadata={'description': description, 'limits': limits})
 
 
 @dataclass(frozen=True)
@@ -15,46 +66,53 @@ class FeatureConfig:
     Every knob of :func:`~wctls_ros.core.extract_features`, validated on construction.
 
     Defaults follow the paper: WCTLS, the RPLIDAR S1 datasheet figures (5 cm range accuracy,
-    0.391 deg angular resolution) as noise, and a 40 mm IEPF threshold.
-
-    :ivar method: line fit whose covariance is propagated: 'utls', 'wtls', 'wctls' or 'ml'
-    :ivar range_sigma_m: std of the range noise, m (> 0)
-    :ivar bearing_sigma_rad: std of the bearing noise, rad (>= 0)
-    :ivar common_range_sigma_m: std of a range offset shared by every return of one scan, m
-        (>= 0; some sensors drift as a whole, e.g. the SICK LMS111 by about 1 mm)
-    :ivar range_min_m: drop returns closer than this (on top of the scan's own range_min), m
-    :ivar range_max_m: drop returns farther than this (on top of the scan's range_max), m
-    :ivar breakpoint_lambda_rad: the adaptive breakpoint rule's worst incidence angle lambda: a
-        neighbour farther than r sin(dphi) / sin(lambda - dphi) + 3 sigma (sigma of a return's
-        position from both noise terms) starts a new chain
-    :ivar iepf_threshold_m: split a chain where a point lies farther than this from the chord
-    :ivar merge_chi2: merge adjacent segments whose line difference has a Mahalanobis distance
-        (squared, 2 dof) below this; 0 disables merging (13.8 = 99.9 % for the same line)
-    :ivar end_offset_sigmas: cut the returns at a segment's end that lie off its line together
-        (another surface met at a shallow angle, within the IEPF threshold of the chord): the
-        last k returns go when their residuals, each in sigmas of its noise, sum to more than
-        this times sqrt(k); 0 disables
-    :ivar min_segment_points: drop segments with fewer valid returns
-    :ivar min_segment_length_m: drop segments shorter than this, m
-    :ivar min_corner_angle_rad: no corner between lines closer to parallel than this, rad
-    :ivar max_corner_gap_m: no corner when the intersection lies farther than this from either
-        segment's facing end point (a virtual intersection across an occlusion), m
+    0.391 deg angular resolution) as noise, and a 40 mm IEPF threshold. Each field's meaning,
+    unit and allowed interval are in its metadata (:func:`field_description`,
+    :func:`field_limits`).
     """
 
-    method: str = 'wctls'
-    range_sigma_m: float = 0.05
-    bearing_sigma_rad: float = math.radians(0.391)
-    common_range_sigma_m: float = 0.0
-    range_min_m: float = 0.0
-    range_max_m: float = math.inf
-    breakpoint_lambda_rad: float = math.radians(10.0)
-    iepf_threshold_m: float = 0.04
-    merge_chi2: float = 13.8
-    end_offset_sigmas: float = 4.0
-    min_segment_points: int = 8
-    min_segment_length_m: float = 0.15
-    min_corner_angle_rad: float = math.radians(30.0)
-    max_corner_gap_m: float = 0.3
+    method: str = _setting(
+        'wctls', 'line fit whose covariance is propagated: ' + ' | '.join(METHODS))
+    range_sigma_m: float = _setting(
+        0.05, 'std of the range noise, m (RPLIDAR S1 datasheet: 0.05)',
+        Limits(0.0, 10.0, low_open=True))
+    bearing_sigma_rad: float = _setting(
+        math.radians(0.391), 'std of the bearing noise, {unit} (RPLIDAR S1 datasheet: 0.391 deg)',
+        Limits(0.0, math.radians(10.0)))
+    common_range_sigma_m: float = _setting(
+        0.0, 'std of a range offset shared by every return of one scan, m (some sensors drift '
+        'as a whole, e.g. the SICK LMS111 by about 1 mm; calibrate measures it)',
+        Limits(0.0, 1.0))
+    range_min_m: float = _setting(
+        0.0, 'ignore returns closer than this (besides the scan range_min), m',
+        Limits(0.0, math.inf, high_open=True))
+    range_max_m: float = _setting(
+        math.inf, 'ignore returns farther than this (besides the scan range_max), m',
+        Limits(0.0, math.inf, low_open=True))
+    breakpoint_lambda_rad: float = _setting(
+        math.radians(10.0), 'adaptive breakpoint rule (Borges and Aldon): worst incidence '
+        'angle of one surface, {unit}; a neighbour farther than r sin(dphi) / sin(lambda - dphi) '
+        '+ 3 sigma starts a new chain', Limits(0.0, math.pi / 2, low_open=True, high_open=True))
+    iepf_threshold_m: float = _setting(
+        0.04, 'Iterative End Point Fit split distance, m (paper: 0.04)',
+        Limits(0.0, 10.0, low_open=True))
+    merge_chi2: float = _setting(
+        13.8, 'merge neighbouring segments below this chi2 (2 dof) of their line difference '
+        '(13.8: 99.9 % for the same line); 0 disables merging', Limits(0.0, 1e6))
+    end_offset_sigmas: float = _setting(
+        4.0, 'cut the last k returns of a segment end when their residuals, each in sigmas of '
+        'its noise, sum to more than this times sqrt(k) (another surface met at a shallow '
+        'angle); 0 disables', Limits(0.0, 1e3))
+    min_segment_points: int = _setting(
+        8, 'drop segments with fewer returns', Limits(3, 100000))
+    min_segment_length_m: float = _setting(
+        0.15, 'drop segments shorter than this, m', Limits(0.0, 100.0))
+    min_corner_angle_rad: float = _setting(
+        math.radians(30.0), 'no corner between walls closer to parallel than this, {unit}',
+        Limits(0.0, math.pi / 2, low_open=True))
+    max_corner_gap_m: float = _setting(
+        0.3, 'no corner farther than this from either wall end (a virtual intersection '
+        'across an occlusion), m', Limits(0.0, 100.0, low_open=True))
 
     def __post_init__(self):
         problems = list(validation_errors(self))
@@ -75,6 +133,31 @@ class FeatureConfig:
         return FeatureConfig(**{**asdict(self), **changes})
 
 
+def field_description(name: str, angle_unit: str = 'rad') -> str:
+    """
+    Return the meaning and unit of a FeatureConfig field.
+
+    :param name: the field name
+    :param angle_unit: the unit to name for an angle ('rad', as the field holds it, or 'deg'
+        for a parameter that states it in degrees)
+    :return: the description
+    """
+    return _FIELDS[name].metadata['description'].replace('{unit}', angle_unit)
+
+
+def field_limits(name: str) -> Optional[Limits]:
+    """
+    Return the interval a numeric FeatureConfig field must lie in (None for the method).
+
+    :param name: the field name
+    :return: the limits
+    """
+    return _FIELDS[name].metadata['limits']
+
+
+_FIELDS = {f.name: f for f in fields(FeatureConfig)}
+
+
 def _is_number(value):
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
@@ -88,33 +171,17 @@ def validation_errors(config: FeatureConfig):
     """
     if config.method not in METHODS:
         yield f'method must be one of {METHODS}, got {config.method!r}'
-    ranges = {  # field: (low, high, low inclusive, high inclusive)
-        'range_sigma_m': (0.0, 10.0, False, True),
-        'bearing_sigma_rad': (0.0, 0.2, True, True),
-        'common_range_sigma_m': (0.0, 1.0, True, True),
-        'range_min_m': (0.0, math.inf, True, False),
-        'range_max_m': (0.0, math.inf, False, True),
-        'breakpoint_lambda_rad': (0.0, math.pi / 2, False, False),
-        'iepf_threshold_m': (0.0, 10.0, False, True),
-        'merge_chi2': (0.0, 1e6, True, True),
-        'end_offset_sigmas': (0.0, 1e3, True, True),
-        'min_segment_length_m': (0.0, 100.0, True, True),
-        'min_corner_angle_rad': (0.0, math.pi / 2, False, True),
-        'max_corner_gap_m': (0.0, 100.0, False, True),
-    }
-    for name, (low, high, low_ok, high_ok) in ranges.items():
-        value = getattr(config, name)
-        if not _is_number(value) or math.isnan(value):
-            yield f'{name} must be a number, got {value!r}'
+    for name, setting in _FIELDS.items():
+        limits, value = setting.metadata['limits'], getattr(config, name)
+        if limits is None:
             continue
-        above = value > low or (low_ok and value == low)
-        below = value < high or (high_ok and value == high)
-        if not (above and below):
-            yield (f'{name} must be in {"[" if low_ok else "("}{low:g}, {high:g}'
-                   f'{"]" if high_ok else ")"}, got {value:g}')
-    points = config.min_segment_points
-    if not isinstance(points, int) or isinstance(points, bool) or not 3 <= points <= 100000:
-        yield f'min_segment_points must be an integer in [3, 100000], got {points!r}'
+        if isinstance(setting.default, int) and (not isinstance(value, int)
+                                                 or isinstance(value, bool)):
+            yield f'{name} must be an integer, got {value!r}'
+        elif not _is_number(value) or math.isnan(value):
+            yield f'{name} must be a number, got {value!r}'
+        elif not limits.holds(value):
+            yield f'{name} must be in {limits.describe()}, got {value:g}'
     if (_is_number(config.range_min_m) and _is_number(config.range_max_m)
             and not config.range_min_m < config.range_max_m):
         yield (f'range_min_m ({config.range_min_m:g}) must be below range_max_m '

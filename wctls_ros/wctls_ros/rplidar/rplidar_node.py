@@ -20,7 +20,6 @@ import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -29,7 +28,8 @@ from std_srvs.srv import Empty
 
 from .driver import DriverConfig, DriverState, RplidarDriver
 from .laserscan import compensation_multiple, RANGE_MIN_M, turn_to_scan
-from ..node_main import run_node
+from ..node_main import declare_parameters, run_node
+from ..params import RPLIDAR_NODE
 
 SCAN_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                       reliability=ReliabilityPolicy.RELIABLE)
@@ -43,39 +43,6 @@ _LEVELS = {DriverState.SCANNING: DiagnosticStatus.OK,
            DriverState.CLOSED: DiagnosticStatus.STALE}
 
 
-def _range(low, high, integer=False):
-    """Return the descriptor field for a numeric range."""
-    if integer:
-        return {'integer_range': [IntegerRange(from_value=low, to_value=high, step=1)]}
-    return {'floating_point_range': [FloatingPointRange(from_value=low, to_value=high, step=0.0)]}
-
-
-# name: (default, description, range); all read-only (restart the node to change them).
-PARAMETERS = {
-    'channel_type': ('serial', "link to the device: 'serial' or 'tcp'", {}),
-    'serial_port': ('/dev/ttyUSB0', 'serial device of the S1 (a udev symlink such as '
-                    '/dev/rplidar is steadier)', {}),
-    'serial_baudrate': (256000, 'serial bits per second; the S1 needs 256000', _range(
-        9600, 4000000, integer=True)),
-    'tcp_ip': ('192.168.0.7', "device address when channel_type is 'tcp'", {}),
-    'tcp_port': (20108, "device TCP port when channel_type is 'tcp'", _range(
-        1, 65535, integer=True)),
-    'frame_id': ('laser', 'frame of the scans (x toward the raw 180 deg side, as sllidar_ros2)',
-                 {}),
-    'inverted': (False, 'the sensor is mounted upside down (mirror the beam order)', {}),
-    'angle_compensate': (True, 'bin each turn into 360*k fixed beams (k from the sample rate); '
-                         'false publishes every sample, with a varying beam count', {}),
-    'scan_mode': ('', "scan mode name, e.g. 'DenseBoost' or 'Standard'; '' = the device's "
-                  'typical mode', {}),
-    'scan_frequency': (10.0, 'rotation frequency requested from the motor, Hz (sets the '
-                       'angle_compensate bin count as in sllidar_ros2)', _range(5.0, 20.0)),
-    'data_timeout': (1.0, 'seconds without scan data (or with only garbage) before the '
-                     'session is restarted', _range(0.1, 10.0)),
-    'health_reset_attempts': (3, 'RESETs tried on a device health error before giving up',
-                              _range(0, 10, integer=True)),
-}
-
-
 class RplidarNode(Node):
     """
     The RPLIDAR driver node.
@@ -86,11 +53,7 @@ class RplidarNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('rplidar_node', **kwargs)
-        values = {}
-        for name, (default, description, constraint) in PARAMETERS.items():
-            descriptor = ParameterDescriptor(description=description, read_only=True,
-                                             **constraint)
-            values[name] = self.declare_parameter(name, default, descriptor).value
+        values = declare_parameters(self, RPLIDAR_NODE)
         self._frame_id = values['frame_id']
         self._inverted = values['inverted']
         self._angle_compensate = values['angle_compensate']

@@ -1,0 +1,356 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""
+The one parameter schema of wctls_ros: every node's parameters, and the checks of their files.
+
+Each parameter is a :class:`Parameter` row (name, type by its default, default, range,
+description, read-only or not). The nodes declare theirs from here (with ranges as ROS
+descriptors, :func:`wctls_ros.node_main.declare_parameters`), the offline tools read and check
+parameter files with :func:`load_parameters` exactly as the node would accept them, and the
+documented parameter tables are printed by ``python -m wctls_ros.params``. feature_node's
+pipeline parameters are derived from :class:`~wctls_ros.core.FeatureConfig` itself (its fields'
+descriptions and limits), so a limit is stated once. Pure Python: no rclpy import.
+"""
+
+from dataclasses import dataclass, fields
+import math
+import pathlib
+import sys
+from typing import Callable, Dict, NamedTuple, Optional, Tuple, Union
+
+import yaml
+
+from .core import FeatureConfig, METHODS
+from .core.config import field_description, field_limits, Limits
+
+Value = Union[bool, int, float, str]
+# Parameters every node has (or that rclpy adds) which a parameter file may set for any node.
+_COMMON = ('use_sim_time',)
+_COMMON_PREFIXES = ('qos_overrides.',)
+
+
+class ConfigError(ValueError):
+    """A parameter file or value that the node would refuse, with the reason."""
+
+
+def _same(value):
+    return value
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """
+    One ROS parameter: its type (that of the default), default, range and meaning.
+
+    :ivar name: the ROS parameter name
+    :ivar default: the default value; its Python type is the parameter's type
+    :ivar description: what it means, with its unit
+    :ivar limits: the allowed interval for numbers (the ROS descriptor range is its closure),
+        None for strings and booleans
+    :ivar choices: the allowed values of a string (empty: any)
+    :ivar read_only: fixed at start-up (restart the node to change it)
+    :ivar setting: the settings field it fills (a FeatureConfig or MarkerStyle field), if any
+    :ivar to_setting: converts the parameter's value to that field's unit (e.g. deg to rad)
+    """
+
+    name: str
+    default: Value
+    description: str
+    limits: Optional[Limits] = None
+    choices: Tuple[str, ...] = ()
+    read_only: bool = False
+    setting: Optional[str] = None
+    to_setting: Callable = _same
+
+    @property
+    def type_name(self) -> str:
+        """
+        Return the ROS type of the parameter.
+
+        :return: 'bool', 'integer', 'double' or 'string'
+        """
+        kinds = {bool: 'bool', int: 'integer', float: 'double', str: 'string'}
+        return kinds[type(self.default)]
+
+    def check(self, value) -> Value:
+        """
+        Return a value as this parameter's type, refusing what rclpy would refuse.
+
+        :param value: a value from a parameter file or a command line
+        :return: the value (an integer given for a double becomes a float)
+        :raises ConfigError: on a wrong type, a value outside the range, an unknown choice
+        """
+        default = self.default
+        if isinstance(default, bool):
+            ok = isinstance(value, bool)
+        elif isinstance(default, int):
+            ok = isinstance(value, int) and not isinstance(value, bool)
+        elif isinstance(default, float):
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+            value = float(value) if ok else value
+        else:
+            ok = isinstance(value, str)
+        if not ok:
+            raise ConfigError(f'{self.name} must be of type {self.type_name}, got {value!r}')
+        if self.limits is not None and not self.limits.holds(value):
+            raise ConfigError(f'{self.name} = {value!r} is outside its range '
+                              f'{self.limits.describe()}')
+        if self.choices and value not in self.choices:
+            raise ConfigError(f'{self.name} must be one of {self.choices}, got {value!r}')
+        return value
+
+
+def _feature_parameter(name: str) -> Parameter:
+    """
+    Return the ROS parameter of a FeatureConfig field: angles in deg (``*_rad`` -> ``*_deg``).
+
+    :param name: the field name
+    :return: the parameter
+    """
+    default, limits = getattr(FeatureConfig(), name), field_limits(name)
+    if name.endswith('_rad'):
+        description = field_description(name, angle_unit='deg')
+        degrees = math.degrees
+        return Parameter(name[:-len('_rad')] + '_deg', round(degrees(default), 6),
+                         description[0].upper() + description[1:],
+                         limits._replace(low=degrees(limits.low), high=degrees(limits.high)),
+                         setting=name, to_setting=math.radians)
+    description = field_description(name)
+    return Parameter(name, default, description[0].upper() + description[1:], limits,
+                     METHODS if name == 'method' else (), setting=name)
+
+
+@dataclass(frozen=True)
+class MarkerStyle:
+    """
+    How features are drawn in RViz / Foxglove.
+
+    :ivar ellipse_sigma: draw the k-sigma ellipse of each corner's position (1 = one sigma)
+    :ivar ellipse_scale: extra magnification of the ellipses for visibility (the paper uses 10)
+    :ivar line_width_m: width of the segment lines, m
+    :ivar corner_size_m: diameter of the corner spheres and height of their id labels, m
+    """
+
+    ellipse_sigma: float = 1.0
+    ellipse_scale: float = 10.0
+    line_width_m: float = 0.02
+    corner_size_m: float = 0.06
+
+
+_STYLE = MarkerStyle()
+FEATURE_NODE = tuple(_feature_parameter(f.name) for f in fields(FeatureConfig)) + (
+    Parameter('publish_markers', True, 'Publish visualization_msgs/MarkerArray on markers'),
+    Parameter('marker_ellipse_sigma', _STYLE.ellipse_sigma,
+              'Draw the k-sigma covariance ellipse of each corner', Limits(0.1, 10.0),
+              setting='ellipse_sigma'),
+    Parameter('marker_ellipse_scale', _STYLE.ellipse_scale,
+              'Extra magnification of the drawn ellipses (the paper draws them x10)',
+              Limits(0.1, 1000.0), setting='ellipse_scale'),
+    Parameter('marker_line_width_m', _STYLE.line_width_m, 'Width of the segment lines, m',
+              Limits(1e-4, 1.0), setting='line_width_m'),
+)
+
+RPLIDAR_NODE = tuple(Parameter(*row, read_only=True) for row in (
+    ('channel_type', 'serial', "Link to the device: 'serial' or 'tcp'", None,
+     ('serial', 'tcp')),
+    ('serial_port', '/dev/ttyUSB0', 'Serial device of the S1 (a udev symlink such as '
+     '/dev/rplidar is steadier)'),
+    ('serial_baudrate', 256000, 'Serial bits per second; the S1 needs 256000',
+     Limits(9600, 4000000)),
+    ('tcp_ip', '192.168.0.7', "Device address when channel_type is 'tcp'"),
+    ('tcp_port', 20108, "Device TCP port when channel_type is 'tcp'", Limits(1, 65535)),
+    ('frame_id', 'laser', 'Frame of the scans (x toward the raw 180 deg side, as '
+     'sllidar_ros2)'),
+    ('inverted', False, 'The sensor is mounted upside down (mirror the beam order)'),
+    ('angle_compensate', True, 'Bin each turn into 360*k fixed beams (k from the sample '
+     'rate); false publishes every sample, with a varying beam count'),
+    ('scan_mode', '', "Scan mode name, e.g. 'DenseBoost' or 'Standard'; '' = the device's "
+     'typical mode'),
+    ('scan_frequency', 10.0, 'Rotation frequency requested from the motor, Hz (sets the '
+     'angle_compensate bin count as in sllidar_ros2)', Limits(5.0, 20.0)),
+    ('data_timeout', 1.0, 'Seconds without scan data (or with only garbage) before the '
+     'session is restarted', Limits(0.1, 10.0)),
+    ('health_reset_attempts', 3, 'RESETs tried on a device health error before giving up',
+     Limits(0, 10)),
+))
+
+BAG_REPLAY = (
+    Parameter('bag', '', 'ROS 2 bag folder (or its .mcap / .db3 file) or ROS 1 .bag file to '
+              'play (required)', read_only=True),
+    Parameter('topic', '', "LaserScan topic in the bag; empty: the bag's only LaserScan topic",
+              read_only=True),
+    Parameter('rate', 1.0, 'Playback speed: bag seconds per wall-clock second (changeable '
+              'while playing)', Limits(0.01, 100.0)),
+    Parameter('start_offset_s', 0.0, 'Start playing this far after the start of the bag, s',
+              Limits(0.0, 1e7), read_only=True),
+    Parameter('loop', False, 'Start again at the end of the bag (changeable while playing)'),
+    Parameter('publish_clock', False, 'Publish the bag time on /clock (rosgraph_msgs/Clock) '
+              'for nodes with use_sim_time', read_only=True),
+    Parameter('clock_rate_hz', 40.0, 'How often /clock is published, Hz', Limits(1.0, 1000.0),
+              read_only=True),
+    Parameter('wait_for_subscribers', 0, 'Start playing once this many subscribers match scan '
+              '(0: start at once)', Limits(0, 1000), read_only=True),
+)
+
+SCHEMAS = {'feature_node': FEATURE_NODE, 'rplidar_node': RPLIDAR_NODE,
+           'bag_replay': BAG_REPLAY}
+
+
+class FeatureSettings(NamedTuple):
+    """
+    What feature_node's parameters configure.
+
+    :ivar config: the pipeline configuration
+    :ivar style: how the markers are drawn
+    :ivar publish_markers: whether markers are published
+    """
+
+    config: FeatureConfig
+    style: MarkerStyle
+    publish_markers: bool
+
+
+def defaults(schema) -> Dict[str, Value]:
+    """
+    Return the default value of every parameter of a schema.
+
+    :param schema: e.g. FEATURE_NODE
+    :return: name -> default
+    """
+    return {parameter.name: parameter.default for parameter in schema}
+
+
+def feature_settings(values: Dict[str, Value]) -> FeatureSettings:
+    """
+    Build feature_node's validated settings from its parameter values.
+
+    :param values: name -> value for every parameter of FEATURE_NODE
+    :return: the settings
+    :raises ValueError: with every reason when the values make no valid configuration
+    """
+    config, style, problems = {}, {}, []
+    for parameter in FEATURE_NODE:
+        try:
+            value = parameter.check(values[parameter.name])
+        except ConfigError as error:           # stated in the parameter's own name and unit
+            problems.append(str(error))
+            continue
+        if parameter.setting is not None:
+            target = config if parameter.setting in FeatureConfig.__dataclass_fields__ else style
+            target[parameter.setting] = parameter.to_setting(value)
+    if problems:
+        raise ConfigError('; '.join(problems))
+    return FeatureSettings(FeatureConfig(**config), MarkerStyle(**style),
+                           bool(values['publish_markers']))
+
+
+def _flatten(parameters: dict, prefix: str = '') -> dict:
+    """Turn nested parameter mappings into dotted names, as rcl does for parameter files."""
+    flat = {}
+    for name, value in parameters.items():
+        if isinstance(value, dict):
+            flat.update(_flatten(value, f'{prefix}{name}.'))
+        else:
+            flat[f'{prefix}{name}'] = value
+    return flat
+
+
+def _sections(document: dict, node_name: str) -> list:
+    """Return the ros__parameters mappings that apply to the node, wildcards first."""
+    wildcards, own = [], []
+    for key, section in document.items():
+        key = str(key)
+        name = key.rstrip('/').rsplit('/', 1)[-1]
+        if key in ('/**', '**'):
+            target = wildcards
+        elif name == node_name:
+            target = own
+        else:
+            continue
+        if not isinstance(section, dict) or not isinstance(section.get('ros__parameters'), dict):
+            raise ConfigError(f'section {key!r} has no ros__parameters mapping')
+        target.append(section['ros__parameters'])
+    return wildcards + own
+
+
+def load_parameters(path, node_name: str = 'feature_node',
+                    overrides: Optional[dict] = None) -> Dict[str, Value]:
+    """
+    Read a node's parameter values from a ROS 2 parameter file, over the defaults.
+
+    The file is the one ``--ros-args --params-file`` takes: the node's section (or ``/**``)
+    and its ``ros__parameters``. A file is accepted exactly when the node would accept it
+    (names, types, ranges); feature_node's rules between values are checked by
+    :func:`feature_settings`.
+
+    :param path: the parameter file (None: defaults only)
+    :param node_name: the node whose section and schema apply (a key of SCHEMAS)
+    :param overrides: values applied after the file (e.g. from a command line)
+    :return: name -> value for every parameter of the node
+    :raises ConfigError: for an unreadable file, an unknown name, a wrong type or range
+    """
+    schema = {parameter.name: parameter for parameter in SCHEMAS[node_name]}
+    given = {}
+    if path is not None:
+        path = pathlib.Path(path)
+        try:
+            document = yaml.safe_load(path.read_text())
+        except (OSError, UnicodeDecodeError, yaml.YAMLError) as error:
+            raise ConfigError(f'cannot read the parameter file {path}: '
+                              f'{str(error).splitlines()[0]}') from error
+        if not isinstance(document, dict):
+            raise ConfigError(f'{path} is not a ROS 2 parameter file (a mapping of node names)')
+        sections = _sections(document, node_name)
+        if not sections:
+            raise ConfigError(f'{path} has no parameters for {node_name} (expected a '
+                              f"'{node_name}:' or '/**:' section with ros__parameters)")
+        for section in sections:
+            given.update(_flatten(section))
+    given.update(overrides or {})
+    unknown = sorted(name for name in given if name not in schema and name not in _COMMON
+                     and not name.startswith(_COMMON_PREFIXES))
+    if unknown:
+        raise ConfigError(f'unknown {node_name} parameters {unknown}; known: {sorted(schema)}')
+    values = defaults(schema.values())
+    values.update({name: schema[name].check(value) for name, value in given.items()
+                   if name in schema})
+    return values
+
+
+def markdown_table(schema) -> str:
+    """
+    Return a schema as the Markdown table the documentation shows.
+
+    :param schema: e.g. FEATURE_NODE
+    :return: the table, one row per parameter
+    """
+    rows = ['| parameter | type | default | range | meaning |', '|---|---|---|---|---|']
+    for parameter in schema:
+        default = repr(parameter.default) if isinstance(parameter.default, str) else (
+            str(parameter.default).lower() if isinstance(parameter.default, bool)
+            else f'{parameter.default:g}')
+        allowed = (parameter.limits.describe() if parameter.limits is not None
+                   else ' \\| '.join(parameter.choices))
+        read_only = ' (read-only)' if parameter.read_only else ''
+        meaning = parameter.description.replace('|', '\\|')
+        rows.append(f'| `{parameter.name}` | {parameter.type_name} | {default} | {allowed} | '
+                    f'{meaning}{read_only} |')
+    return '\n'.join(rows)
+
+
+def main(argv=None) -> int:
+    """
+    Print the parameter tables of every node as Markdown (for the documentation).
+
+    :param argv: node names to print (default: all)
+    :return: exit status 0
+    """
+    names = (sys.argv[1:] if argv is None else argv) or list(SCHEMAS)
+    for name in names:
+        print(f'### {name}\n\n{markdown_table(SCHEMAS[name])}\n')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

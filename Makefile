@@ -42,8 +42,10 @@ $(DEPS_STAMP): $(REQUIREMENTS) tools/fix_wheel_cmake_paths.sh tools/pip_install.
 	PYTHON=$(PYTHON) tools/pip_install.sh $(VENV) $(addprefix -r ,$(REQUIREMENTS))
 	tools/fix_wheel_cmake_paths.sh $(VENV)
 	@# The venv is the underlay prefix of the ROS wheels (tools/env.sh sets its environment);
-	@# colcon warns on a prefix without a local_setup file.
-	@echo '# The ROS 2 wheels prefix; tools/env.sh sets its environment.' > $(VENV)/local_setup.sh
+	@# colcon warns on a prefix without local_setup files, and install/setup.* source them.
+	@for shell in sh bash zsh; do \
+	  echo '# The ROS 2 wheels prefix: tools/env.sh sets its environment.' \
+	    > $(VENV)/local_setup.$$shell; done
 	touch $@
 
 $(OLDEST_NUMPY_STAMP): requirements/python.txt requirements/test.txt tools/pip_install.sh

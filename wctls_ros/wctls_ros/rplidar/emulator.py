@@ -109,6 +109,8 @@ class Scene:
         self._noise = noise
         self._rng = rng
         self._start_s = time.monotonic()
+        # Without walkers the scene never changes: build it once.
+        self._still = None if plan.walkers else plan.scene(pose)
 
     def distances_mm(self, raw_angle_deg: np.ndarray) -> np.ndarray:
         """
@@ -118,7 +120,8 @@ class Scene:
         :return: distances, mm (float); 0 where nothing returns
         """
         bearings = math.pi - np.radians(raw_angle_deg)
-        scene = self._plan.scene(self._pose, time.monotonic() - self._start_s)
+        scene = (self._plan.scene(self._pose, time.monotonic() - self._start_s)
+                 if self._still is None else self._still)
         ranges = simulate_scan(scene, bearings, self._noise, self._rng)
         return np.where(np.isfinite(ranges), ranges * 1000.0, 0.0)
 

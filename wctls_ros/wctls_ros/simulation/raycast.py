@@ -10,7 +10,6 @@ import numpy as np
 # Rays grazing a wall at less than this |sin(angle)| do not hit it (their hit point is
 # ill-conditioned and a real beam would not return from such a surface).
 _GRAZING_SIN = 1e-9
-_NO_CIRCLES = np.zeros((0, 3))
 
 
 @dataclass(frozen=True)
@@ -41,7 +40,39 @@ def cast_rays(walls_m: np.ndarray, origin_m: np.ndarray, bearings_rad: np.ndarra
     :param chunk: rays handled per vectorised block (bounds memory to chunk * K)
     :return: ranges, shape (N,), m; ``inf`` where a ray hits nothing
     """
-    return ray_hits(walls_m, _NO_CIRCLES, origin_m, bearings_rad, chunk).range_m
+    walls, origin, bearings = _inputs(walls_m, origin_m, bearings_rad)
+    ranges = np.full(bearings.shape, np.inf)
+    if walls.size == 0:
+        return ranges
+    for lo in range(0, bearings.size, chunk):
+        ranges[lo:lo + chunk] = _wall_distances(walls, origin, bearings[lo:lo + chunk])[0].min(
+            axis=1)
+    return ranges
+
+
+def _inputs(walls_m, origin_m, bearings_rad):
+    """Return the walls (K, 4), the origin (2,) and the bearings (N,) as float arrays."""
+    return (np.asarray(walls_m, dtype=float).reshape(-1, 4),
+            np.asarray(origin_m, dtype=float).reshape(2),
+            np.asarray(bearings_rad, dtype=float).ravel())
+
+
+def _wall_distances(walls: np.ndarray, origin: np.ndarray, bearings: np.ndarray):
+    """Return each ray's distance to each wall (inf: missed) and the hit's fraction along it."""
+    start = walls[:, :2] - origin                      # (K, 2), wall start relative to origin
+    edge = walls[:, 2:] - walls[:, :2]                 # (K, 2)
+    edge_length = np.hypot(edge[:, 0], edge[:, 1])
+    dx = np.cos(bearings)[:, None]                     # (n, 1)
+    dy = np.sin(bearings)[:, None]
+    denom = dx * edge[:, 1] - dy * edge[:, 0]          # cross(d, e), (n, K)
+    t_num = start[:, 0] * edge[:, 1] - start[:, 1] * edge[:, 0]   # cross(p, e), (K,)
+    s_num = start[:, 0] * dy - start[:, 1] * dx        # cross(p, d), (n, K)
+    valid = np.abs(denom) > _GRAZING_SIN * edge_length
+    with np.errstate(divide='ignore', invalid='ignore'):
+        t = t_num / denom
+        s = s_num / denom
+    hit = valid & (t > 0.0) & (s >= 0.0) & (s <= 1.0)
+    return np.where(hit, t, np.inf), s
 
 
 def ray_hits(walls_m: np.ndarray, circles_m: np.ndarray, origin_m: np.ndarray,
@@ -58,32 +89,20 @@ def ray_hits(walls_m: np.ndarray, circles_m: np.ndarray, origin_m: np.ndarray,
     :param chunk: rays handled per vectorised block (bounds memory to chunk * (K + C))
     :return: the hits
     """
-    walls = np.asarray(walls_m, dtype=float).reshape(-1, 4)
+    walls, origin, bearings = _inputs(walls_m, origin_m, bearings_rad)
     circles = np.asarray(circles_m, dtype=float).reshape(-1, 3)
-    bearings = np.asarray(bearings_rad, dtype=float).ravel()
-    origin = np.asarray(origin_m, dtype=float).reshape(2)
     ranges = np.full(bearings.shape, np.inf)
     surface = np.full(bearings.shape, -1, dtype=np.intp)
     along = np.full(bearings.shape, np.nan)
     if bearings.size == 0 or walls.size + circles.size == 0:
         return RayHits(ranges, surface, along)
-    start = walls[:, :2] - origin                      # (K, 2), wall start relative to origin
-    edge = walls[:, 2:] - walls[:, :2]                 # (K, 2)
-    edge_length = np.hypot(edge[:, 0], edge[:, 1])
     centre = circles[:, :2] - origin                   # (C, 2)
     for lo in range(0, bearings.size, chunk):
-        dx = np.cos(bearings[lo:lo + chunk])[:, None]  # (n, 1)
-        dy = np.sin(bearings[lo:lo + chunk])[:, None]
-        denom = dx * edge[:, 1] - dy * edge[:, 0]      # cross(d, e), (n, K)
-        t_num = start[:, 0] * edge[:, 1] - start[:, 1] * edge[:, 0]   # cross(p, e), (K,)
-        s_num = start[:, 0] * dy - start[:, 1] * dx    # cross(p, d), (n, K)
-        valid = np.abs(denom) > _GRAZING_SIN * edge_length
-        with np.errstate(divide='ignore', invalid='ignore'):
-            t = t_num / denom
-            s = s_num / denom
-        hit = valid & (t > 0.0) & (s >= 0.0) & (s <= 1.0)
-        distance = np.hstack([np.where(hit, t, np.inf), _circle_distances(centre, circles[:, 2],
-                                                                          dx, dy)])
+        part = bearings[lo:lo + chunk]
+        distance, s = _wall_distances(walls, origin, part)
+        if len(circles):
+            distance = np.hstack([distance, _circle_distances(
+                centre, circles[:, 2], np.cos(part)[:, None], np.sin(part)[:, None])])
         rows = np.arange(distance.shape[0])
         first = np.argmin(distance, axis=1)
         ranges[lo:lo + chunk] = distance[rows, first]

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from .raycast import ray_hits
+from .raycast import cast_rays, ray_hits
 from .scene import Scene
 
 S1_BEAMS_PER_TURN = 1080          # sllidar_ros2's angle-compensated DenseBoost output at 10 Hz
@@ -196,6 +196,11 @@ def _footprint_ranges(scene: Scene, bearings: np.ndarray, divergence_rad: float)
     :return: (ranges (N,) m, +inf without echo; surface index (N,) as in RayHits)
     """
     count = FOOTPRINT_RAYS if divergence_rad > 0.0 else 1
+    if (count == 1 and not len(scene.circles_m) and not np.any(scene.surfaces.dropout)
+            and not scene.surfaces.shaped):
+        # Plain walls and an ideal ray (the emulator's every capsule): no hit details needed.
+        return (cast_rays(scene.walls_m, np.zeros(2), bearings),
+                np.full(bearings.shape, -1, dtype=np.intp))
     offsets = divergence_rad * ((np.arange(count) + 0.5) / count - 0.5)
     rays = (bearings[:, None] + offsets).ravel()
     hits = ray_hits(scene.walls_m, scene.circles_m, np.zeros(2), rays)

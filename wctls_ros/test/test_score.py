@@ -14,6 +14,7 @@ import math
 import subprocess
 import sys
 
+from conftest import REAL_DATA
 import numpy as np
 import pytest
 from wctls_ros.evaluation import (load_truth, match_detections, ScanCorners, score_detections,
@@ -245,3 +246,31 @@ def test_the_command_runs_without_ros_and_documents_its_defaults(cluttered_bag):
     from wctls_ros.evaluation.score_cli import parser
     text = parser().format_help()
     assert '(default: utls,wtls,wctls,ml)' in text and '(default: 0.9)' in text
+
+
+LABELS = REAL_DATA / 'labels'
+
+
+@pytest.mark.parametrize('name', ['sick_lms111_static', 'sick_lms1xx_static', 'urg04lx_office'])
+def test_hand_labels_are_the_intersections_of_their_listed_walls(name):
+    import yaml
+    from wctls_ros.evaluation import load_scans
+    from wctls_ros.evaluation.truth import corner_from_beams, median_scan
+    path = LABELS / f'{name}.yaml'
+    truth = load_truth(path)
+    document = yaml.safe_load(path.read_text())
+    scans = load_scans(path.parent / document['recording'])
+    first, last = truth.covered(len(scans))
+    ranges = median_scan(scans.ranges[first:last + 1], scans.valid()[first:last + 1])
+    for corner, xy in zip(document['corners'], truth.xy_m[0]):
+        np.testing.assert_allclose(corner_from_beams(ranges, scans.bearings, corner['walls']),
+                                   xy, atol=1e-4)
+    # Every corner the labeller saw: the current extractor finds it in nearly every scan.
+    from wctls_ros.core import FeatureConfig
+    table = score_scans(StaticScans(scans.ranges[first:last + 1], scans.angle_min,
+                                    scans.angle_increment, scans.range_min, scans.range_max,
+                                    scans.stamps_ns[first:last + 1]),
+                        {'wtls': FeatureConfig(method='wtls')},
+                        truth.select(first, last - first + 1), static=False)
+    rates = [c.rate for c in table.methods[0].corner_rates if c.visible_scans]
+    assert rates and min(rates) >= 0.9, rates

@@ -23,16 +23,16 @@ from .scans import (check_still, load_json_scans, load_scans, MovingSensorError,
                     require_still, StaticScans, StillnessCheck)
 from .score import (match_detections, MethodScore, RecurringCorner, score_detections,
                     score_scans, ScoreTable, TrueCornerRate, write_score)
-from .truth import (load_truth, Truth, truth_from_dict, truth_from_recording, truth_to_yaml,
-                    TruthError)
+from .truth import (corner_from_beams, load_truth, median_scan, Truth, TRUTH_FILE,
+                    truth_from_dict, truth_from_recording, truth_to_yaml, TruthError)
 
 __all__ = [
     'CornerStats', 'Evaluation', 'MethodScore', 'MovingSensorError', 'NoiseFit',
     'NoiseParameters', 'PAPER_METHODS', 'PROPAGATIONS', 'RecurringCorner', 'ScanCorners',
-    'ScoreTable', 'StaticScans', 'StillnessCheck', 'TrueCornerRate', 'Truth', 'TruthError',
-    'assign', 'associate', 'check_still', 'corner_stats', 'corners_per_scan', 'evaluate_scans',
-    'fit_noise', 'load_json_scans', 'load_scans', 'load_truth', 'match_detections',
-    'node_yaml', 'require_still', 'run_methods', 'scan_corners', 'score_detections',
-    'score_scans', 'truth_from_dict', 'truth_from_recording', 'truth_to_yaml', 'write_report',
-    'write_score',
+    'ScoreTable', 'StaticScans', 'StillnessCheck', 'TRUTH_FILE', 'TrueCornerRate', 'Truth',
+    'TruthError', 'assign', 'associate', 'check_still', 'corner_from_beams', 'corner_stats',
+    'corners_per_scan', 'evaluate_scans', 'fit_noise', 'load_json_scans', 'load_scans',
+    'load_truth', 'match_detections', 'median_scan', 'node_yaml', 'require_still',
+    'run_methods', 'scan_corners', 'score_detections', 'score_scans', 'truth_from_dict',
+    'truth_from_recording', 'truth_to_yaml', 'write_report', 'write_score',
 ]

@@ -26,8 +26,7 @@ from typing import Dict, Optional
 
 from .scans import check_still, load_json_scans, load_scans, StaticScans
 from .score import markdown_table, RECURRING_PRESENCE, score_scans, write_score
-from .simulate_cli import TRUTH_FILE
-from .truth import load_truth, Truth
+from .truth import load_truth, Truth, TRUTH_FILE
 from ..core import FeatureConfig, METHODS
 
 
@@ -69,6 +68,10 @@ def parser() -> argparse.ArgumentParser:
                    help='score only these scans (0-based, inclusive); default: all, or the '
                    'ones the labels cover')
     p.add_argument('--topic', default=None, help="LaserScan topic (default: the bag's only one)")
+    p.add_argument('--still', choices=('auto', 'yes', 'no'), default='auto',
+                   help='measure recurrence: when the stillness check passes (auto), or treat '
+                   'the scans as still or not whatever it says, e.g. for a hand-held sensor '
+                   'that drifts by a centimetre (default: %(default)s)')
     p.add_argument('--min-presence', type=float, default=RECURRING_PRESENCE,
                    help='a corner recurs when found in at least this share of the scans '
                    '(default: %(default)s)')
@@ -171,14 +174,15 @@ def run(args, argv) -> int:
             raise UserError(f'the labels cover scans {truth_first}-{truth_last}, not '
                             f'{first}-{last}')
         truth = truth.select(first, len(scans))
-    still = check_still(scans)
-    if truth is None and not still.still:
+    check = check_still(scans)
+    still = {'auto': check.still, 'yes': True, 'no': False}[args.still]
+    if truth is None and not still:
         raise UserError(f'{args.bag}: nothing to score: no truth (--labels, or {TRUTH_FILE} '
                         'beside the scans) and the sensor or scene is not still '
-                        f'({100 * still.drifted_fraction:.0f} % of the steady beams drifted; '
-                        'recurrence needs a static recording)')
+                        f'({100 * check.drifted_fraction:.0f} % of the steady beams drifted; '
+                        'recurrence needs a static recording: --still yes to insist)')
     started = time.monotonic()
-    table = score_scans(scans, settings, truth, still.still, args.min_presence)
+    table = score_scans(scans, settings, truth, still, args.min_presence)
     elapsed = time.monotonic() - started
     config = settings[methods[0]]
     notes = [f'scans {first}-{last} of {args.bag} ({len(scans)} scans, '
@@ -190,8 +194,11 @@ def run(args, argv) -> int:
              'truth: ' + ('none' if truth is None else
                           f'{args.labels or pathlib.Path(args.bag) / TRUTH_FILE} '
                           f'({len(truth.ids)} corners)'),
-             'recurrence: ' + ('measured (still)' if still.still else
-                               'not measured: the sensor or scene moved'),
+             f'stillness check: {100 * check.drifted_fraction:.0f} % of '
+             f'{check.steady_beams} steady beams drifted, median '
+             f'{1e3 * check.median_drift_m:.1f} mm ({"still" if check.still else "moved"}); '
+             + ('recurrence measured' if still else 'recurrence not measured')
+             + (f' (--still {args.still})' if args.still != 'auto' else ''),
              f'scored in {elapsed:.1f} s']
     print('\n'.join(f'# {note}' for note in notes))
     print(markdown_table(table))

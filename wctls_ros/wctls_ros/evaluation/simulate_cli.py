@@ -24,11 +24,9 @@ import sys
 
 import numpy as np
 
-from .truth import truth_from_recording, truth_to_yaml
+from .truth import TRUTH_FILE, truth_from_recording, truth_to_yaml
 from ..simulation import (BUNDLED_PLANS, load_floor_plan, NO_RETURN_VALUES, NoiseModel,
                           S1_BEAMS_PER_TURN, SCAN_PERIOD_S, SENSOR_MODELS, simulate_recording)
-
-TRUTH_FILE = 'truth.yaml'
 
 START_NS = 1_700_000_000 * 10 ** 9         # a fixed start stamp keeps seeded bags identical
 

@@ -8,6 +8,7 @@ One small YAML format serves both, in the sensor frame (m)::
 
     frame_id: laser
     description: free text
+    recording: urg04lx_office      # optional: what the labels belong to (a note)
     scans: [0, 24]                 # optional: the scans (first, last; inclusive) it covers
     corners:                       # the same corners in every scan (a still sensor)
       - {id: 0, x_m: 1.2345, y_m: -0.5, kind: inside}     # more keys are notes, kept in the file
@@ -23,6 +24,11 @@ or, when the corners move from scan to scan (a moving sensor, separate single sc
 
 ``kind`` is 'inside' (concave seen from the free space, like a room's corner) or 'outside'
 (convex, like a box's). An id names the same physical corner in every scan.
+
+Hand labels are made from the median scan of a still interval: the labeller picks the beams of
+each of a corner's two walls (``walls: [[[first, last], ...], [[first, last], ...]]`` beside the
+corner, beam ranges inclusive) and :func:`corner_from_beams` intersects straight lines fitted to
+them (data/labels/README.md describes the procedure; tools/label_corners.py draws and fits).
 """
 
 from dataclasses import dataclass
@@ -35,6 +41,8 @@ import yaml
 
 from ..simulation import CORNER_KINDS
 
+# The truth simulate writes into a bag folder, and where score looks for it.
+TRUTH_FILE = 'truth.yaml'
 # Bounds on a truth file: labels are small; a simulation's is a few hundred kB.
 _MAX_BYTES = 50_000_000
 _MAX_CORNERS = 10_000
@@ -186,7 +194,8 @@ def truth_from_dict(document, source: str = 'truth') -> Truth:
     :return: the truth
     :raises TruthError: on a malformed file, with where and why
     """
-    known = ('frame_id', 'description', 'scans', 'corners', 'visible', 'per_scan')
+    known = ('frame_id', 'description', 'recording', 'scans', 'corners', 'visible',
+             'per_scan')
     if not isinstance(document, dict):
         _fail(source, 'expected a mapping with frame_id and corners (or per_scan)')
     unknown = sorted(str(k) for k in document if k not in known)
@@ -308,3 +317,49 @@ def truth_from_recording(recording, frame_id: str = 'laser', description: str = 
         visible = visible[:1]
     return Truth(ids, tuple(recording.corner_kinds), xy, visible, frame_id,
                  description=description)
+
+
+def median_scan(ranges: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """
+    Return the median of each beam's valid ranges over repeated scans.
+
+    :param ranges: shape (T, N), m
+    :param valid: which ranges are returns, shape (T, N)
+    :return: shape (N,), m; NaN for a beam that never returned
+    """
+    present = valid.any(axis=0)
+    median = np.full(ranges.shape[1], np.nan)
+    median[present] = np.nanmedian(np.where(valid, ranges, np.nan)[:, present], axis=0)
+    return median
+
+
+def corner_from_beams(ranges: np.ndarray, bearings: np.ndarray, walls) -> np.ndarray:
+    """
+    Return where two walls meet, from straight lines fitted to hand-chosen beams of a scan.
+
+    Each wall's line is the total least squares line through its returns (the principal axis
+    of their scatter); the corner is the two lines' intersection.
+
+    :param ranges: one scan's ranges, shape (N,), m (NaN or inf beams are skipped)
+    :param bearings: the beams' bearings, shape (N,), rad
+    :param walls: two walls, each a list of [first, last] beam ranges (inclusive)
+    :return: the corner, shape (2,), m, in the scan's frame
+    :raises ValueError: for walls with fewer than 2 returns, or parallel walls
+    """
+    if len(walls) != 2:
+        raise ValueError(f'a corner needs 2 walls, got {len(walls)}')
+    normals, offsets = [], []
+    for wall in walls:
+        beams = np.concatenate([np.arange(first, last + 1) for first, last in wall])
+        beams = beams[np.isfinite(ranges[beams])]
+        if len(beams) < 2:
+            raise ValueError(f'wall {wall} has fewer than 2 returns')
+        points = ranges[beams, None] * np.column_stack([np.cos(bearings[beams]),
+                                                        np.sin(bearings[beams])])
+        centre = points.mean(axis=0)
+        normal = np.linalg.svd(points - centre)[2][1]          # the least-spread direction
+        normals.append(normal)
+        offsets.append(normal @ centre)
+    if abs(np.linalg.det(np.array(normals))) < 1e-6:
+        raise ValueError(f'walls {walls} are parallel: they meet nowhere')
+    return np.linalg.solve(np.array(normals), np.array(offsets))

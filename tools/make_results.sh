@@ -3,7 +3,8 @@
 # SPDX-License-Identifier: Apache-2.0
 #
 # Regenerate docs/results (issue 8): the paper's analysis on simulated environments A and B and
-# on the real static SICK recordings. Run through `make results` (needs the built workspace).
+# on the real static SICK recordings; then docs/results/score (issue 13, make_score_results.sh).
+# Run through `make results` (needs the built workspace).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bin=install/wctls_ros/lib/wctls_ros
@@ -44,4 +45,6 @@ for bag in sick_lms111_static sick_lms1xx_static; do
 done
 # The reports quote the command with the machine's paths: keep only the repository-relative part.
 sed -i "s#$(pwd)/##g" "$docs"/*/report.md
+# The yardstick (issue 13): score every method on simulated and hand-labelled real recordings.
+tools/make_score_results.sh
 echo "results in $docs"

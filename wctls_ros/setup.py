@@ -37,6 +37,7 @@ setup(
             'process_bag = wctls_ros.bags.process_bag:main',
             'rplidar_node = wctls_ros.rplidar.rplidar_node:main',
             's1_emulator = wctls_ros.rplidar.emulator:main',
+            'score = wctls_ros.evaluation.score_cli:main',
             'simulate = wctls_ros.evaluation.simulate_cli:main',
         ],
     },

@@ -114,13 +114,20 @@ def run_methods(scans: StaticScans, noise: NoiseParameters, methods: Sequence[st
     :param base: the pipeline's other settings (defaults: the paper's)
     :return: method -> one ScanCorners per scan
     """
-    out = {}
-    for method in methods:
-        config = feature_config(noise, method, base)
-        out[method] = [scan_corners(ranges, scans.angle_min, scans.angle_increment,
-                                    scans.range_min, scans.range_max, config)[1]
-                       for ranges in scans.ranges]
-    return out
+    return {method: corners_per_scan(scans, feature_config(noise, method, base))
+            for method in methods}
+
+
+def corners_per_scan(scans: StaticScans, config: FeatureConfig) -> List[ScanCorners]:
+    """
+    Extract every scan's corners with one configuration.
+
+    :param scans: the scans
+    :param config: the pipeline configuration (method and noise model)
+    :return: one ScanCorners per scan
+    """
+    return [scan_corners(ranges, scans.angle_min, scans.angle_increment, scans.range_min,
+                         scans.range_max, config)[1] for ranges in scans.ranges]
 
 
 def _gate(covariance: np.ndarray) -> float:
@@ -225,7 +232,8 @@ def corner_stats(xy: np.ndarray, covariance: np.ndarray) -> CornerStats:
     error = xy - mean
     empirical = error.T @ error / (count - 1)
     propagated = covariance.mean(axis=0)
-    ratio = math.sqrt(max(np.linalg.det(propagated), 0.0) / np.linalg.det(empirical))
+    with np.errstate(divide='ignore'):          # a corner that never moved: ratio inf
+        ratio = math.sqrt(max(np.linalg.det(propagated), 0.0) / np.linalg.det(empirical))
     return CornerStats(count, mean, empirical, propagated, ratio,
                        float(np.mean(nees(error, covariance))))
 

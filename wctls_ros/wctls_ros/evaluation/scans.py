@@ -9,7 +9,10 @@ Pure numpy: the bag is read through :mod:`wctls_ros.bags`, and the scans are hel
 """
 
 from dataclasses import dataclass
+import json
 import math
+import pathlib
+import re
 from typing import Optional
 import warnings
 
@@ -102,6 +105,47 @@ def load_scans(path, topic: Optional[str] = None, limit: Optional[int] = None) -
         raise ValueError(f'{path} holds no scans')
     return StaticScans(np.array(ranges), geometry[1], geometry[2], geometry[3], geometry[4],
                        np.array(stamps, dtype=np.int64), str(path))
+
+
+def load_json_scans(path) -> StaticScans:
+    """
+    Read single scans saved as JSON ``{"ranges": [...], "bearings": [...]}`` (m, rad).
+
+    That is how laser_line_extraction's test scans (``data/lms111_building``) are stored. A
+    folder gives all its ``*.json`` files in natural name order (scan_2 before scan_10), one scan
+    each; they must share one beam layout with evenly spaced bearings.
+
+    :param path: a JSON file or a folder of them
+    :return: the scans (range limits 0 and +inf: a 0 range is no return)
+    :raises ValueError: on an unreadable file, a malformed scan or different beam layouts
+    """
+    path = pathlib.Path(path)
+    files = (sorted(path.glob('*.json'), key=lambda p: [int(part) if part.isdigit() else part
+                                                        for part in re.split(r'(\d+)', p.name)])
+             if path.is_dir() else [path])
+    if not files:
+        raise ValueError(f'{path} holds no JSON scans')
+    ranges, layout = [], None
+    for file in files:
+        try:
+            document = json.loads(file.read_text())
+            scan_ranges = np.asarray(document['ranges'], dtype=float).reshape(-1)
+            bearings = np.asarray(document['bearings'], dtype=float).reshape(-1)
+        except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as error:
+            raise ValueError(f'{file}: not a JSON scan with ranges and bearings ({error})') \
+                from error
+        steps = np.diff(bearings)
+        if (len(bearings) != len(scan_ranges) or len(bearings) < 2 or not np.all(
+                np.isfinite(bearings)) or np.ptp(steps) > 1e-6 * abs(steps[0]) or steps[0] == 0):
+            raise ValueError(f'{file}: ranges and bearings must match, with evenly spaced '
+                             'bearings')
+        this = (len(bearings), round(float(bearings[0]), 9), round(float(steps.mean()), 12))
+        if layout is not None and this != layout:
+            raise ValueError(f'{file}: its beam layout {this} differs from {layout}')
+        layout = this
+        ranges.append(scan_ranges)
+    return StaticScans(np.array(ranges), layout[1], layout[2], 0.0, math.inf,
+                       np.arange(len(ranges), dtype=np.int64), str(path))
 
 
 @dataclass(frozen=True)

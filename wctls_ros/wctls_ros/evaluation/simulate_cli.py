@@ -2,24 +2,31 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-``simulate``: write a ROS 2 bag of RPLIDAR S1-like scans of a floor plan.
+``simulate``: write a ROS 2 bag of RPLIDAR S1-like scans of a floor plan, and its truth.
 
-Example::
+Examples::
 
     simulate environment_a out/env_a --scans 100 --range-sigma 0.05 --bearing-sigma-deg 0.391
+    simulate environment_b_cluttered out/env_b --sensor s1_like
+    simulate environment_a out/env_a_veils --sensor 1cm --beam-divergence-deg 0.4
 
 The scans have sllidar_ros2's geometry (1080 beams, -pi..pi, increment 2 pi / 1079, +inf for
-no return, range_min 0.05 m, range_max 40 m, frame 'laser', stamps at 10 Hz) on ``/scan``.
+no return, range_min 0.05 m, range_max 40 m, frame 'laser', stamps at 10 Hz) on ``/scan``. The
+bag folder also gets ``truth.yaml``: the plan's true corners in the sensor frame, their kinds
+and which of them each scan can see (the format of :mod:`.truth`; ``score`` reads it).
 """
 
 import argparse
+import dataclasses
 import math
+import pathlib
 import sys
 
 import numpy as np
 
-from ..simulation import (load_floor_plan, NoiseModel, S1_BEAMS_PER_TURN, SCAN_PERIOD_S,
-                          simulate_recording)
+from .truth import TRUTH_FILE, truth_from_recording, truth_to_yaml
+from ..simulation import (BUNDLED_PLANS, load_floor_plan, NO_RETURN_VALUES, NoiseModel,
+                          S1_BEAMS_PER_TURN, SCAN_PERIOD_S, SENSOR_MODELS, simulate_recording)
 
 START_NS = 1_700_000_000 * 10 ** 9         # a fixed start stamp keeps seeded bags identical
 
@@ -52,7 +59,7 @@ def write_simulated_bag(path, plan_name: str, noise: NoiseModel, count: int, see
                         velocity=(0.0, 0.0, 0.0), pose=None, topic: str = '/scan',
                         beams: int = S1_BEAMS_PER_TURN):
     """
-    Simulate scans of a floor plan and write them to an mcap bag.
+    Simulate scans of a floor plan and write them to an mcap bag, with truth.yaml inside.
 
     :param path: the bag to create (must not exist)
     :param plan_name: a bundled plan name or a YAML path
@@ -74,6 +81,12 @@ def write_simulated_bag(path, plan_name: str, noise: NoiseModel, count: int, see
             stamp = START_NS + int(round(t * SCAN_PERIOD_S * 1e9))
             bag.write(topic, stamp, laser_scan(ranges, recording.angle_min,
                                                recording.angle_increment, stamp, noise))
+    description = (f'{count} scans of {plan.name} (seed {seed}), sensor model {noise}, '
+                   f'first pose {tuple(float(v) for v in recording.poses[0])}, velocity '
+                   f'{tuple(velocity)}')
+    truth = truth_from_recording(recording, 'laser', description)
+    (pathlib.Path(path) / TRUTH_FILE).write_text(truth_to_yaml(
+        truth, 'True corners of the simulated scans beside this file (wctls_ros simulate).'))
     return recording
 
 
@@ -86,18 +99,32 @@ def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog='simulate', description='Write a ROS 2 mcap bag of simulated RPLIDAR S1 scans of '
         'a floor plan (noise model: wctls_ros.simulation.NoiseModel).')
-    p.add_argument('plan', help="bundled plan ('environment_a', 'environment_b') or YAML path")
+    p.add_argument('plan', help=f"bundled plan ({', '.join(BUNDLED_PLANS)}) or YAML path")
     p.add_argument('out', help='bag folder to create')
     p.add_argument('--scans', type=int, default=100, help='number of scans (10 Hz)')
     p.add_argument('--seed', type=int, default=0, help='random seed')
-    p.add_argument('--range-sigma', type=float, default=0.05, help='range noise std, m')
-    p.add_argument('--bearing-sigma-deg', type=float, default=0.391,
+    p.add_argument('--sensor', choices=sorted(SENSOR_MODELS), default='datasheet',
+                   help='sensor model preset, refined by the options below (datasheet: 5 cm, '
+                   '0.391 deg; 1cm: 1 cm, 0.05 deg; s1_like: 2 cm, 0.05 deg + 1/3 deg bins, '
+                   '0.4 deg divergence, 1 %% dropouts, 1 mm common offset; see '
+                   'docs/results/score.md) (default: %(default)s)')
+    p.add_argument('--range-sigma', type=float, default=None, help='range noise std, m')
+    p.add_argument('--bearing-sigma-deg', type=float, default=None,
                    help='bearing noise std, deg')
-    p.add_argument('--range-sigma-per-m', type=float, default=0.0,
+    p.add_argument('--range-sigma-per-m', type=float, default=None,
                    help='range noise std growing with range, m per m')
-    p.add_argument('--common-range-sigma', type=float, default=0.0,
+    p.add_argument('--common-range-sigma', type=float, default=None,
                    help='std of a per-scan range offset shared by all beams, m')
-    p.add_argument('--dropout', type=float, default=0.0, help='probability of a lost return')
+    p.add_argument('--dropout', type=float, default=None, help='probability of a lost return')
+    p.add_argument('--beam-divergence-deg', type=float, default=None,
+                   help='full angle of the beam footprint, deg: mixed pixels at range '
+                   'discontinuities (0: an ideal ray)')
+    p.add_argument('--bearing-quantum-deg', type=float, default=None,
+                   help="publish bearings in bins this wide, deg (sllidar's angle_compensate: "
+                   '1/3 = 0.3333; 0: exact)')
+    p.add_argument('--no-return', choices=NO_RETURN_VALUES, default=None,
+                   help='how a beam without a return is written: inf (REP-117), zero, or max '
+                   '(the maximum range)')
     p.add_argument('--velocity', type=float, nargs=3, default=(0.0, 0.0, 0.0),
                    metavar=('VX', 'VY', 'WZ'),
                    help='move the sensor (m/s, m/s, rad/s in plan axes): a bag that '
@@ -106,6 +133,30 @@ def parser() -> argparse.ArgumentParser:
                    help="sensor pose in plan coordinates (default: the plan's)")
     p.add_argument('--topic', default='/scan', help='LaserScan topic')
     return p
+
+
+def sensor_model(args) -> NoiseModel:
+    """
+    Return the sensor model of the command line: the preset with the options given over it.
+
+    :param args: the parsed arguments
+    :return: the model
+    :raises ValueError: on values the model refuses
+    """
+    given = {'range_sigma_m': args.range_sigma,
+             'bearing_sigma_rad': _radians(args.bearing_sigma_deg),
+             'range_sigma_per_m': args.range_sigma_per_m,
+             'common_range_offset_sigma_m': args.common_range_sigma,
+             'dropout_probability': args.dropout,
+             'beam_divergence_rad': _radians(args.beam_divergence_deg),
+             'bearing_quantum_rad': _radians(args.bearing_quantum_deg),
+             'no_return': args.no_return}
+    return dataclasses.replace(SENSOR_MODELS[args.sensor],
+                               **{k: v for k, v in given.items() if v is not None})
+
+
+def _radians(degrees):
+    return None if degrees is None else math.radians(degrees)
 
 
 def main(argv=None) -> int:
@@ -118,11 +169,7 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     from ..bags import BagError
     try:
-        noise = NoiseModel(range_sigma_m=args.range_sigma,
-                           bearing_sigma_rad=math.radians(args.bearing_sigma_deg),
-                           range_sigma_per_m=args.range_sigma_per_m,
-                           common_range_offset_sigma_m=args.common_range_sigma,
-                           dropout_probability=args.dropout)
+        noise = sensor_model(args)
         pose = None if args.pose is None else (args.pose[0], args.pose[1],
                                                math.radians(args.pose[2]))
         write_simulated_bag(args.out, args.plan, noise, args.scans, args.seed,

@@ -44,7 +44,7 @@ from .protocol import (AnswerType, CAPSULE_SIZE, Command, CONF_COMMANDS_FIRMWARE
                        FULL_TURN_Q6, HealthStatus, MODE_CONF_TYPES, NODE_SIZE, ProtocolError,
                        RequestParser, ResponseDescriptor, SampleRate, SAMPLES_PER_CAPSULE,
                        ScanMode, SendMode)
-from ..simulation import load_floor_plan, NOISELESS, NoiseModel, simulate_ranges
+from ..simulation import FloorPlan, load_floor_plan, NOISELESS, NoiseModel, simulate_scan
 
 MODES = (ScanMode(0, 'Standard', 244.0, 40.0, AnswerType.MEASUREMENT),
          ScanMode(1, 'DenseBoost', 108.0, 40.0, AnswerType.DENSE_CAPSULE))
@@ -93,17 +93,24 @@ class Faults:
 
 class Scene:
     """
-    Ranges of a floor plan seen from a pose, with the simulator's noise model.
+    Ranges of a floor plan seen from a pose, with the simulator's sensor model.
 
-    :param walls_m: walls in the laser (REP-103) frame, shape (K, 4)
-    :param noise: the noise model
+    Walkers in the plan move in real time from the moment the scene is made.
+
+    :param plan: the floor plan
+    :param pose: sensor pose in the plan (x m, y m, yaw rad); None: the plan's own
+    :param noise: the sensor model
     :param rng: random generator
     """
 
-    def __init__(self, walls_m: np.ndarray, noise: NoiseModel, rng: np.random.Generator):
-        self._walls = walls_m
+    def __init__(self, plan: FloorPlan, pose, noise: NoiseModel, rng: np.random.Generator):
+        self._plan = plan
+        self._pose = pose
         self._noise = noise
         self._rng = rng
+        self._start_s = time.monotonic()
+        # Without walkers the scene never changes: build it once.
+        self._still = None if plan.walkers else plan.scene(pose)
 
     def distances_mm(self, raw_angle_deg: np.ndarray) -> np.ndarray:
         """
@@ -113,7 +120,9 @@ class Scene:
         :return: distances, mm (float); 0 where nothing returns
         """
         bearings = math.pi - np.radians(raw_angle_deg)
-        ranges = simulate_ranges(self._walls, bearings, self._noise, self._rng)
+        scene = (self._plan.scene(self._pose, time.monotonic() - self._start_s)
+                 if self._still is None else self._still)
+        ranges = simulate_scan(scene, bearings, self._noise, self._rng)
         return np.where(np.isfinite(ranges), ranges * 1000.0, 0.0)
 
 
@@ -583,8 +592,8 @@ def _parse_args(argv):
     parser.add_argument('--tcp-host', default='127.0.0.1',
                         help='address to listen on (default: %(default)s)')
     parser.add_argument('--floor-plan', default='environment_a',
-                        help='bundled plan name (environment_a, environment_b) or a YAML path '
-                             '(default: %(default)s)')
+                        help='bundled plan name (environment_a, environment_b, their '
+                             '_cluttered variants) or a YAML path (default: %(default)s)')
     parser.add_argument('--pose', type=float, nargs=3, metavar=('X', 'Y', 'YAW_DEG'),
                         help="sensor pose in the plan, m and degrees (default: the plan's own)")
     parser.add_argument('--range-sigma', type=float, default=NoiseModel.range_sigma_m,
@@ -617,7 +626,6 @@ def main(argv=None):
     major, minor = (int(part) for part in args.firmware.split('.'))
     plan = load_floor_plan(args.floor_plan)
     pose = None if args.pose is None else (args.pose[0], args.pose[1], math.radians(args.pose[2]))
-    walls, _ = plan.in_sensor_frame(pose)
     noise = NOISELESS if args.noiseless else NoiseModel(
         range_sigma_m=args.range_sigma, bearing_sigma_rad=math.radians(args.bearing_sigma_deg))
     faults = Faults(corrupt_rate=args.corrupt_rate, drop_rate=args.drop_rate,
@@ -626,7 +634,7 @@ def main(argv=None):
     if args.silent_after is not None:
         faults.silent_from_s = time.monotonic() + args.silent_after
         faults.silent_until_s = faults.silent_from_s + args.silent_for
-    scene = Scene(walls, noise, np.random.default_rng(args.seed))
+    scene = Scene(plan, pose, noise, np.random.default_rng(args.seed))
     tcp = None if args.tcp_port is None else (args.tcp_host, args.tcp_port)
     emulator = Emulator(scene, faults, (major, minor), args.seed, args.link, tcp)
     signal.signal(signal.SIGTERM, lambda *_: emulator.commands.put('quit'))

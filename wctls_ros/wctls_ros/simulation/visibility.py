@@ -5,7 +5,7 @@
 
 import numpy as np
 
-from .raycast import cast_rays
+from .raycast import ray_hits
 
 # A noiseless return lies on the wall it hit to within this distance, m.
 _ON_WALL_M = 1e-6
@@ -19,7 +19,9 @@ _MIN_TURN_SIN = 0.5
 
 def visible_corners(walls_m: np.ndarray, corners_m: np.ndarray, bearings_rad: np.ndarray,
                     min_points: int = 8, min_length_m: float = 0.15, max_gap_m: float = 0.1,
-                    max_range_m: float = 40.0, min_incidence_cos: float = 0.17) -> np.ndarray:
+                    max_range_m: float = 40.0, min_incidence_cos: float = 0.17, *,
+                    circles_m: np.ndarray = None, silent: np.ndarray = None,
+                    wall_of: np.ndarray = None) -> np.ndarray:
     """
     Return which true corners a sensor at the origin sees with both of their walls.
 
@@ -27,8 +29,10 @@ def visible_corners(walls_m: np.ndarray, corners_m: np.ndarray, bearings_rad: np
     that meet there gets at least ``min_points`` noiseless returns spanning ``min_length_m`` at
     an incidence no more grazing than ``arccos(min_incidence_cos)`` (80 degrees by default) in
     one run from the corner (no shadow between), the nearest within ``max_gap_m`` of it. A
-    corner formed by a free-standing edge (one wall hidden) is not visible. This is the ground
-    truth an extractor can be held to: what it could possibly find.
+    corner formed by a free-standing edge (one wall hidden) is not visible. Cylinders (clutter,
+    walkers' legs) block rays; silent pieces (dark, glass) return nothing; collinear pieces of one
+    wall count together. This is the ground truth an extractor can be held to: what it could
+    possibly find.
 
     :param walls_m: wall segments in the sensor frame, shape (K, 4), m
     :param corners_m: true corners in the sensor frame, shape (M, 2), m
@@ -38,12 +42,16 @@ def visible_corners(walls_m: np.ndarray, corners_m: np.ndarray, bearings_rad: np
     :param max_gap_m: largest distance from the corner to the nearest return on each wall, m
     :param max_range_m: the sensor's largest range, m
     :param min_incidence_cos: smallest cosine between a beam and the wall normal that counts
+    :param circles_m: cylinders that block rays, shape (C, 3): x, y, radius in m (default none)
+    :param silent: which wall pieces return nothing, shape (K,) (default none)
+    :param wall_of: the straight wall each piece belongs to, shape (K,) (default: its own)
     :return: boolean, shape (M,)
     """
     walls = np.asarray(walls_m, dtype=float).reshape(-1, 4)
     corners = np.asarray(corners_m, dtype=float).reshape(-1, 2)
     bearings = np.asarray(bearings_rad, dtype=float).ravel()
-    ranges = cast_rays(walls, np.zeros(2), bearings)
+    circles = np.zeros((0, 3)) if circles_m is None else np.asarray(circles_m, dtype=float)
+    ranges = ray_hits(walls, circles, np.zeros(2), bearings).range_m
     hit = np.isfinite(ranges) & (ranges <= max_range_m)
     direction = np.column_stack([np.cos(bearings[hit]), np.sin(bearings[hit])])
     points = ranges[hit, None] * direction
@@ -56,9 +64,14 @@ def visible_corners(walls_m: np.ndarray, corners_m: np.ndarray, bearings_rad: np
     on_wall = (across < _ON_WALL_M) & (along >= -1e-9) & (along <= 1.0 + 1e-9)
     incidence_ok = np.abs(direction @ normal.T) >= min_incidence_cos
     usable = on_wall & incidence_ok                                    # (P, K)
+    if silent is not None:
+        usable &= ~np.asarray(silent, dtype=bool)
+
+    group = np.arange(len(walls)) if wall_of is None else np.asarray(wall_of)
 
     corner_range = np.hypot(corners[:, 0], corners[:, 1])
-    towards = cast_rays(walls, np.zeros(2), np.arctan2(corners[:, 1], corners[:, 0]))
+    towards = ray_hits(walls, circles, np.zeros(2), np.arctan2(corners[:, 1], corners[:, 0])
+                       ).range_m
     unoccluded = (towards >= corner_range - _UNOCCLUDED_M) & (corner_range <= max_range_m)
     visible = np.zeros(len(corners), dtype=bool)
     for m in np.flatnonzero(unoccluded):
@@ -69,13 +82,14 @@ def visible_corners(walls_m: np.ndarray, corners_m: np.ndarray, bearings_rad: np
         through = np.hypot(*(relative - t[:, None] * edge).T) < _UNOCCLUDED_M
         distance = np.hypot(*(points - corners[m]).T)
         seen = []
-        for k in np.flatnonzero(through):
+        for wall in np.unique(group[through]):
             # The run of returns on this wall that starts at the corner (up to a shadow).
-            run = np.sort(distance[usable[:, k]])
+            run = np.sort(distance[usable[:, group == wall].any(axis=1)])
             if not run.size or run[0] > max_gap_m:
                 continue
             run = run[:np.argmax(np.append(np.diff(run), np.inf) > _SHADOW_M) + 1]
             if run.size >= min_points and run[-1] - run[0] >= min_length_m:
+                k = np.flatnonzero(through & (group == wall))[0]
                 seen.append(np.arctan2(edge[k, 1], edge[k, 0]))
         turns = np.abs(np.sin(np.subtract.outer(seen, seen)))
         visible[m] = bool((turns > _MIN_TURN_SIN).any())

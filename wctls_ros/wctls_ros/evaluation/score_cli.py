@@ -1,0 +1,232 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""
+``score``: precision, recall and NEES against truth, recurrence on static recordings, per method.
+
+Examples::
+
+    score out/env_a_cluttered                             # truth.yaml from simulate, inside
+    score data/sick_lms111_static --labels data/labels/sick_lms111_static.yaml --out out/lms111
+    score data/urg04lx_office --labels data/labels/urg04lx_office.yaml    # scans 0-24 (labels)
+    score data/lms111_building --labels data/labels/lms111_building.yaml  # 6 JSON scans
+    score out/env_b --config my_feature_node.yaml --methods wtls --scans 0-49
+
+Offline: reads the bag with rosbags and never starts ROS. Exit status 0, or 2 with one line
+``score: error: ...`` on a bad path, bag, label file, configuration or option.
+"""
+
+import argparse
+import math
+import pathlib
+import shlex
+import sys
+import time
+from typing import Dict, Optional
+
+from .scans import check_still, load_json_scans, load_scans, StaticScans
+from .score import markdown_table, RECURRING_PRESENCE, score_scans, write_score
+from .truth import load_truth, Truth, TRUTH_FILE
+from ..core import FeatureConfig, METHODS
+
+
+class UserError(ValueError):
+    """Something the user gave that the score cannot use, with the reason."""
+
+
+def parser() -> argparse.ArgumentParser:
+    """
+    Return the command-line parser.
+
+    :return: the parser
+    """
+    p = argparse.ArgumentParser(
+        prog='score',
+        description='Score the corners of every method on a recording: precision, recall and '
+        "NEES against true corners (a simulation's truth.yaml beside the bag, or hand labels), "
+        'and on a static recording the recurrence of corners and their NEES against their '
+        'mean. Prints a Markdown table; with --out also writes table.md, table.csv, '
+        'corners.csv and score.png. Semantics: wctls_ros.evaluation.score.')
+    p.add_argument('bag', help='ROS 2 (mcap/sqlite3) or ROS 1 bag, a JSON scan '
+                   '{ranges, bearings}, or a folder of JSON scans')
+    p.add_argument('--labels', default=None,
+                   help=f'true corners (YAML, wctls_ros.evaluation.truth); default: '
+                   f'{TRUTH_FILE} inside the bag folder when there is one')
+    p.add_argument('--methods', default=','.join(METHODS),
+                   help='comma-separated methods among ' + ', '.join(METHODS)
+                   + ' (default: %(default)s)')
+    p.add_argument('--config', default=None,
+                   help='feature_node parameter YAML (as for --params-file); default: the '
+                   "node's defaults (5 cm, 0.391 deg)")
+    p.add_argument('--range-sigma', type=float, default=None,
+                   help='range noise std of the covariances, m (overrides --config)')
+    p.add_argument('--bearing-sigma-deg', type=float, default=None,
+                   help='bearing noise std of the covariances, deg (overrides --config)')
+    p.add_argument('--common-range-sigma', type=float, default=None,
+                   help='per-scan common range offset std, m (overrides --config)')
+    p.add_argument('--scans', default=None, metavar='FIRST-LAST',
+                   help='score only these scans (0-based, inclusive); default: all, or the '
+                   'ones the labels cover')
+    p.add_argument('--topic', default=None, help="LaserScan topic (default: the bag's only one)")
+    p.add_argument('--still', choices=('auto', 'yes', 'no'), default='auto',
+                   help='measure recurrence: when the stillness check passes (auto), or treat '
+                   'the scans as still or not whatever it says, e.g. for a hand-held sensor '
+                   'that drifts by a centimetre (default: %(default)s)')
+    p.add_argument('--min-presence', type=float, default=RECURRING_PRESENCE,
+                   help='a corner recurs when found in at least this share of the scans '
+                   '(default: %(default)s)')
+    p.add_argument('--out', default=None, help='folder for table.md, table.csv, corners.csv, '
+                   'score.png (default: print only)')
+    p.add_argument('--title', default=None, help='report title (default: the bag name)')
+    return p
+
+
+def node_config(path) -> FeatureConfig:
+    """
+    Return the pipeline settings of a feature_node parameter file, checked as the node does.
+
+    The node's parameter schema is imported here and only here (it is moving to the pure module
+    wctls_ros.params; until then reading a file loads the node module, and with it rclpy).
+
+    :param path: the YAML file
+    :return: the configuration
+    :raises ValueError: when the node would refuse the file
+    """
+    from ..bags.params_file import load_parameters
+    from ..feature_node import settings_from_parameters
+    return settings_from_parameters(load_parameters(path))[0]
+
+
+def configs(args, methods) -> Dict[str, FeatureConfig]:
+    """
+    Return the configuration of every method: the file's (or defaults) with the sigmas given.
+
+    :param args: the parsed arguments
+    :param methods: the methods
+    :return: method -> configuration
+    :raises ValueError: on values the pipeline refuses
+    """
+    base = node_config(args.config) if args.config else FeatureConfig()
+    given = {'range_sigma_m': args.range_sigma,
+             'bearing_sigma_rad': (None if args.bearing_sigma_deg is None
+                                   else math.radians(args.bearing_sigma_deg)),
+             'common_range_sigma_m': args.common_range_sigma}
+    base = base.replace(**{k: v for k, v in given.items() if v is not None})
+    return {method: base.replace(method=method) for method in methods}
+
+
+def _scan_range(text: Optional[str], truth: Optional[Truth]):
+    """Return (first, last or None) of the scans to score."""
+    if text is None:
+        return (truth.first_scan, truth.last_scan) if truth is not None else (0, None)
+    first, dash, last = text.partition('-')
+    if not (first.isdigit() and dash and last.isdigit() and int(first) <= int(last)):
+        raise UserError(f'--scans wants FIRST-LAST, e.g. 0-24; got {text!r}')
+    return int(first), int(last)
+
+
+def load_recording(path, topic: Optional[str]) -> StaticScans:
+    """
+    Read the scans of a bag, a JSON scan or a folder of JSON scans.
+
+    :param path: the recording
+    :param topic: the LaserScan topic of a bag (None: its only one)
+    :return: the scans
+    """
+    path = pathlib.Path(path)
+    if not path.exists():
+        raise UserError(f'{path}: no such bag or scan file')
+    if path.suffix == '.json' or (path.is_dir() and any(path.glob('*.json'))
+                                  and not any(path.glob('metadata.yaml'))):
+        return load_json_scans(path)
+    return load_scans(path, topic)
+
+
+def _truth(args) -> Optional[Truth]:
+    """Return the labels given, or the truth inside the bag folder, or None."""
+    if args.labels is not None:
+        return load_truth(args.labels)
+    inside = pathlib.Path(args.bag) / TRUTH_FILE
+    return load_truth(inside) if inside.is_file() else None
+
+
+def run(args, argv) -> int:
+    """Load, score, print and write; raise on what the user gave wrong."""
+    methods = [m.strip() for m in args.methods.split(',') if m.strip()]
+    unknown = sorted(set(methods) - set(METHODS))
+    if unknown or not methods:
+        raise UserError(f'unknown methods {unknown}; choose among {", ".join(METHODS)}')
+    if not 0.0 < args.min_presence <= 1.0:
+        raise UserError(f'--min-presence must be in (0, 1], got {args.min_presence}')
+    settings = configs(args, methods)
+    truth = _truth(args)
+    first, last = _scan_range(args.scans, truth)
+    recording = load_recording(args.bag, args.topic)
+    last = len(recording) - 1 if last is None else last
+    if last >= len(recording):
+        raise UserError(f'scans {first}-{last} asked for, {args.bag} has {len(recording)}')
+    scans = StaticScans(recording.ranges[first:last + 1], recording.angle_min,
+                        recording.angle_increment, recording.range_min, recording.range_max,
+                        recording.stamps_ns[first:last + 1], recording.source)
+    if truth is not None:
+        truth_first, truth_last = truth.covered(len(recording))
+        if not truth_first <= first <= last <= truth_last:
+            raise UserError(f'the labels cover scans {truth_first}-{truth_last}, not '
+                            f'{first}-{last}')
+        truth = truth.select(first, len(scans))
+    check = check_still(scans)
+    still = {'auto': check.still, 'yes': True, 'no': False}[args.still]
+    if truth is None and not still:
+        raise UserError(f'{args.bag}: nothing to score: no truth (--labels, or {TRUTH_FILE} '
+                        'beside the scans) and the sensor or scene is not still '
+                        f'({100 * check.drifted_fraction:.0f} % of the steady beams drifted; '
+                        'recurrence needs a static recording: --still yes to insist)')
+    started = time.monotonic()
+    table = score_scans(scans, settings, truth, still, args.min_presence)
+    elapsed = time.monotonic() - started
+    config = settings[methods[0]]
+    notes = [f'scans {first}-{last} of {args.bag} ({len(scans)} scans, '
+             f'{scans.ranges.shape[1]} beams)',
+             f'covariance model: range {1e3 * config.range_sigma_m:.2f} mm, bearing '
+             f'{math.degrees(config.bearing_sigma_rad):.3f} deg, common-mode '
+             f'{1e3 * config.common_range_sigma_m:.2f} mm'
+             + (f' (from {args.config})' if args.config else ''),
+             'truth: ' + ('none' if truth is None else
+                          f'{args.labels or pathlib.Path(args.bag) / TRUTH_FILE} '
+                          f'({len(truth.ids)} corners)'),
+             f'stillness check: {100 * check.drifted_fraction:.0f} % of '
+             f'{check.steady_beams} steady beams drifted, median '
+             f'{1e3 * check.median_drift_m:.1f} mm ({"still" if check.still else "moved"}); '
+             + ('recurrence measured' if still else 'recurrence not measured')
+             + (f' (--still {args.still})' if args.still != 'auto' else ''),
+             f'scored in {elapsed:.1f} s']
+    print('\n'.join(f'# {note}' for note in notes))
+    print(markdown_table(table))
+    if args.out is not None:
+        command = 'score ' + ' '.join(shlex.quote(a) for a in
+                                      (sys.argv[1:] if argv is None else argv))
+        path = write_score(table, args.out, args.title or pathlib.Path(args.bag).name, command,
+                           notes)
+        print(f'score: wrote {path}')
+    return 0
+
+
+def main(argv=None) -> int:
+    """
+    Run ``score``.
+
+    :param argv: arguments (default: sys.argv[1:])
+    :return: exit status: 0, or 2 on a user error (one line on stderr)
+    """
+    args = parser().parse_args(argv)
+    from ..bags import BagError
+    try:
+        return run(args, argv)
+    except (BagError, OSError, ValueError) as error:
+        message = str(error).splitlines()[0] if str(error) else type(error).__name__
+        print(f'score: error: {message}', file=sys.stderr)
+        return 2
+
+
+if __name__ == '__main__':
+    sys.exit(main())

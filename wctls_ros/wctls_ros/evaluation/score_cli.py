@@ -28,6 +28,7 @@ from .scans import check_still, load_json_scans, load_scans, StaticScans
 from .score import markdown_table, RECURRING_PRESENCE, score_scans, write_score
 from .truth import load_truth, Truth, TRUTH_FILE
 from ..core import FeatureConfig, METHODS
+from ..params import feature_settings, load_parameters
 
 
 class UserError(ValueError):
@@ -85,16 +86,11 @@ def node_config(path) -> FeatureConfig:
     """
     Return the pipeline settings of a feature_node parameter file, checked as the node does.
 
-    The node's parameter schema is imported here and only here (it is moving to the pure module
-    wctls_ros.params; until then reading a file loads the node module, and with it rclpy).
-
     :param path: the YAML file
     :return: the configuration
     :raises ValueError: when the node would refuse the file
     """
-    from ..bags.params_file import load_parameters
-    from ..feature_node import settings_from_parameters
-    return settings_from_parameters(load_parameters(path))[0]
+    return feature_settings(load_parameters(path)).config
 
 
 def configs(args, methods) -> Dict[str, FeatureConfig]:

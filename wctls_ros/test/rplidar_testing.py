@@ -4,7 +4,7 @@
 """Helpers shared by the RPLIDAR tests: the emulator and its scene's true ranges."""
 
 import numpy as np
-from wctls_ros.rplidar.emulator import EmulatorProcess
+from wctls_ros.rplidar.emulator.process import EmulatorProcess
 from wctls_ros.simulation import cast_rays, load_floor_plan
 
 # The emulator's default scene: the bundled plan seen from its own sensor pose.

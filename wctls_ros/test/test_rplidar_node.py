@@ -5,6 +5,7 @@
 
 import math
 import pathlib
+import threading
 import time
 
 from conftest import spin_until
@@ -20,7 +21,7 @@ from rplidar_testing import range_band, start_emulator, true_ranges  # noqa: E40
 from sensor_msgs.msg import LaserScan  # noqa: E402
 from std_srvs.srv import Empty  # noqa: E402
 from wctls_ros.params import RPLIDAR_NODE  # noqa: E402
-from wctls_ros.rplidar.driver import DriverState  # noqa: E402
+from wctls_ros.rplidar.driver import DriverConfig, DriverState, RplidarDriver  # noqa: E402
 from wctls_ros.rplidar.rplidar_node import RplidarNode  # noqa: E402
 import yaml  # noqa: E402
 
@@ -254,6 +255,34 @@ def test_a_lasting_health_error_gives_up_clearly_until_start_motor(executor, ros
     device.command('health ok')
     listener.call(executor, 'start_motor')
     collect(executor, listener, 1, timeout_s=4.0)
+
+
+def test_a_start_motor_that_lands_as_the_driver_gives_up_is_not_lost(own_emulator):
+    device = own_emulator('--health', 'error', '--health-error-resets', '99')
+    turns, requested = [], []
+    driver = RplidarDriver(DriverConfig(serial_port=device.link, health_reset_attempts=0),
+                           lambda turn, mode: turns.append(turn), rclpy.logging.get_logger('race'))
+
+    def start_motor_as_the_driver_gives_up(frame, event, arg):
+        # On the reader thread, as it enters _give_up after a failure: the health clears and a
+        # start_motor request (normally from the service thread) lands right then, between the
+        # failure and the driver's reaction to it: the interleaving that lost it.
+        if event == 'call' and frame.f_code.co_name == '_give_up' and not requested:
+            requested.append(device.command('health ok'))
+            driver.set_motor(True)
+
+    threading.settrace(start_motor_as_the_driver_gives_up)
+    try:
+        driver.start()
+    finally:
+        threading.settrace(None)
+    try:
+        deadline = time.monotonic() + 6.0
+        while not turns and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert requested and turns, driver.status()
+    finally:
+        driver.close()
 
 
 def test_a_health_warning_is_reported_and_scanning_goes_on(executor, ros_context, own_emulator):

@@ -161,7 +161,12 @@ class RplidarDriver:
         self._log = logger
         self._link_factory = link_factory
         self._closing = threading.Event()
+        # The service threads and the reader both change the motor request: under this lock,
+        # with a count of the requests so a failing session can tell whether one came after it
+        # began (and must be honoured) or not.
+        self._motor_lock = threading.Lock()
         self._motor_on = True
+        self._motor_requests = 0
         self._lock = threading.Lock()
         self._status = DriverStatus()
         self._thread = threading.Thread(target=self._run, name='rplidar_reader', daemon=True)
@@ -187,7 +192,9 @@ class RplidarDriver:
 
         :param running: True to scan, False to stop scanning and idle the motor
         """
-        self._motor_on = running
+        with self._motor_lock:
+            self._motor_on = running
+            self._motor_requests += 1
 
     def status(self) -> DriverStatus:
         """
@@ -229,10 +236,12 @@ class RplidarDriver:
                 continue
             backoff_s = BACKOFF_FIRST_S
             self._update(link=link.name)
+            with self._motor_lock:
+                requests = self._motor_requests
             try:
                 self._serve(link)
             except GiveUp as error:
-                self._give_up(str(error))
+                self._give_up(str(error), requests)
             except (LinkError, DeviceError, ProtocolError) as error:
                 self._update(state=DriverState.CONNECTING, message=str(error), add_reconnects=1)
                 self._log.warning(f'{error}; reconnecting', throttle_duration_sec=LOG_THROTTLE_S)
@@ -245,9 +254,20 @@ class RplidarDriver:
             finally:
                 link.close()
 
-    def _give_up(self, reason: str):
-        """Report a failure retrying cannot fix; wait until the motor is requested again."""
-        self._motor_on = False
+    def _give_up(self, reason: str, requests_before: int):
+        """
+        Report a failure retrying cannot fix; wait until the motor is requested again.
+
+        A start_motor that arrived after the failing session began is not swallowed: the driver
+        tries once more instead of waiting.
+        """
+        with self._motor_lock:
+            requested_since = self._motor_requests != requests_before
+            if not requested_since:
+                self._motor_on = False
+        if requested_since and self._motor_on:
+            self._log.warning(f'{reason}; start_motor was requested meanwhile: retrying')
+            return
         self._update(state=DriverState.FAILED, message=reason)
         self._log.error(f'{reason} (call the start_motor service to retry)')
         while not self._closing.is_set() and not self._motor_on:

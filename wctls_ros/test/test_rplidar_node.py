@@ -290,6 +290,11 @@ def test_a_health_warning_is_reported_and_scanning_goes_on(executor, ros_context
     node, listener = start(executor, ros_context, serial_port=device.link)
     collect(executor, listener, 1)
     assert node.driver.status().health.status == 1 and node.driver.status().resets == 0
+    first = len(listener.diagnostics)
+    assert spin_until(executor, lambda: len(listener.diagnostics) > first, 2.0)
+    report = listener.diagnostics[-1]
+    assert report.level == DiagnosticStatus.WARN and 'health warning' in report.message
+    collect(executor, listener, 1)
 
 
 def test_config_file_sets_every_parameter(executor, ros_context, tmp_path):

@@ -28,6 +28,7 @@ from std_srvs.srv import Empty
 
 from .driver import DriverConfig, DriverState, RplidarDriver
 from .laserscan import compensation_multiple, RANGE_MIN_M, turn_to_scan
+from .protocol import HealthStatus
 from ..node_main import declare_parameters, run_node
 from ..params import RPLIDAR_NODE
 
@@ -138,6 +139,11 @@ class RplidarNode(Node):
         message = status.message
         if status.state == DriverState.SCANNING and rate_hz == 0.0:
             level, message = DiagnosticStatus.WARN, f'{message}, but no complete turn lately'
+        if status.health is not None and status.health.status == HealthStatus.WARNING:
+            # The S1 scans on with a warning, but it is a warning: never report it as OK.
+            level = max(level, DiagnosticStatus.WARN)
+            message = (f'{message}; the device reports a health warning (code '
+                       f'0x{status.health.error_code:04X})')
         values = {
             'state': status.state.value,
             'link': status.link,

@@ -3,12 +3,19 @@
 
 """Helpers shared by the RPLIDAR tests: the emulator and its scene's true ranges."""
 
+import math
+
 import numpy as np
+from wctls_ros.rplidar.emulator.device import Faults, S1Device
 from wctls_ros.rplidar.emulator.process import EmulatorProcess
-from wctls_ros.simulation import cast_rays, load_floor_plan
+from wctls_ros.rplidar.protocol import encode_express_scan
+from wctls_ros.s1_emulator import SimulatedScene
+from wctls_ros.simulation import cast_rays, load_floor_plan, NOISELESS, NoiseModel
 
 # The emulator's default scene: the bundled plan seen from its own sensor pose.
 WALLS, _ = load_floor_plan('environment_a').in_sensor_frame()
+# The emulator turns 995/64 degrees per DenseBoost capsule of 40 samples of 108 us: 100.03 ms.
+EMULATOR_TURN_S = 360.0 * 64 / 995 * 40 * 108e-6
 
 
 def true_ranges(bearings_rad):
@@ -80,6 +87,39 @@ def range_band(low_rad, high_rad):
     highest = np.where(inside, _CRITICAL_RANGES, -np.inf).max(axis=1)
     return (np.minimum(ends.min(axis=1), lowest).reshape(low_rad.shape),
             np.maximum(ends.max(axis=1), highest).reshape(low_rad.shape))
+
+
+def compensated_beam_bands():
+    """
+    Return the scene's range band of each beam of a 1080-beam (DenseBoost) compensated scan.
+
+    Beam i is bin b = 1079 - i, holding the last sample with raw angle in [(b - 2) / 3,
+    (b + 1) / 3) degrees; its laser bearing is pi - raw.
+
+    :return: (lowest, highest) range per beam, m
+    """
+    raw_bin = 1079 - np.arange(1080)
+    return range_band(math.pi - np.radians((raw_bin + 1) / 3),
+                      math.pi - np.radians((raw_bin - 2) / 3))
+
+
+def denseboost_stream(plan='environment_a', seconds=3.0, noisy=False, seed=0):
+    """
+    Return the bytes an emulated S1 streams in DenseBoost, without waiting for them.
+
+    :param plan: bundled floor plan
+    :param seconds: stream length, s
+    :param noisy: the S1's datasheet noise, else exact ranges
+    :param seed: random seed
+    :return: the capsules' bytes (after the scan descriptor)
+    """
+    walls, _ = load_floor_plan(plan).in_sensor_frame()
+    rng = np.random.default_rng(seed)
+    scene = SimulatedScene(walls, NoiseModel() if noisy else NOISELESS, rng)
+    device = S1Device(scene, Faults(), (1, 28), rng)
+    device.receive(encode_express_scan(1), 0.0)
+    # The device keeps at most 0.5 s of frames due: ask in steps.
+    return b''.join(device.stream(t) for t in np.arange(0.1, seconds + 0.05, 0.1))
 
 
 def start_emulator(directory, *options):

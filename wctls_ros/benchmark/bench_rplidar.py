@@ -16,7 +16,6 @@ wrong by more than 10 cm, and the CPU.
 Usage: python bench_rplidar.py [seconds per run] (default 10).
 """
 
-import math
 import pathlib
 import sys
 import tempfile
@@ -33,24 +32,16 @@ from wctls_ros.rplidar.rplidar_node import RplidarNode
 
 # The emulator harness and the scene oracle are the tests' own.
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'test'))
-from rplidar_testing import range_band, start_emulator  # noqa: E402, I100
+from rplidar_testing import (compensated_beam_bands, EMULATOR_TURN_S,  # noqa: E402, I100
+                             start_emulator)
 
 WARM_UP_S = 1.5
-# The emulator turns 995/64 degrees per capsule of 40 samples of 108 us: a 100.03 ms turn.
-EMULATOR_PERIOD_S = 360.0 * 64 / 995 * 40 * 108e-6
 FAULTS = (('clean', ()), ('1% corrupted', ('--corrupt-rate', '0.01')),
           ('5% corrupted', ('--corrupt-rate', '0.05')), ('1% dropped', ('--drop-rate', '0.01')),
           ('5% dropped', ('--drop-rate', '0.05')))
 GOOD_TOLERANCE_M = 0.01
 WRONG_M = 0.1
 GOOD_TURN_SHARE = 0.8
-
-
-def _compensated_bands():
-    """Return the scene's range band of each of the 1080 DenseBoost beams, m (see the tests)."""
-    raw_bin = 1079 - np.arange(1080)
-    return range_band(math.pi - np.radians((raw_bin + 1) / 3),
-                      math.pi - np.radians((raw_bin - 2) / 3))
 
 
 def measure(link, seconds, scan_mode):
@@ -94,7 +85,7 @@ def measure(link, seconds, scan_mode):
 def beam_figures(scans, wall_s, bands):
     """Score the published 1080-beam scans against the scene; return the figures."""
     low, high = bands
-    streamed = wall_s / EMULATOR_PERIOD_S
+    streamed = wall_s / EMULATOR_TURN_S
     ranges = np.array(scans).reshape(-1, 1080)
     filled = np.isfinite(ranges)
     good = filled & (ranges >= low - GOOD_TOLERANCE_M) & (ranges <= high + GOOD_TOLERANCE_M)
@@ -109,7 +100,7 @@ def beam_figures(scans, wall_s, bands):
 
 def main():
     seconds = float(sys.argv[1]) if len(sys.argv) > 1 else 10.0
-    bands = _compensated_bands()
+    bands = compensated_beam_bands()
     with tempfile.TemporaryDirectory() as directory:
         directory = pathlib.Path(directory)
         link = str(directory / 'ttyS1')

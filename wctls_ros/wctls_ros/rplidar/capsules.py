@@ -95,6 +95,7 @@ _DAMAGED_SHARE = 0.5
 _DAMAGE_WEIGHT = 1.0 / 32.0
 
 _K = np.arange(SAMPLES_PER_CAPSULE)
+_FRACTIONS = _K / SAMPLES_PER_CAPSULE
 _DISTANCE_OFFSETS = 4 + 2 * _K
 
 
@@ -198,13 +199,16 @@ class DenseCapsuleDecoder:
             self._slot += count
             pos = end
         frames = self._frame(raw, regions)
-        if frames:
-            after = regions[-1][2]
-            self._judge_angles(frames, int(raw[after + 2]) | int(raw[after + 3]) << 8)
-            self._check_distances(frames)
         self._buffer = buffer[pos:]
         self._offset += pos
-        return self._samples(frames)
+        if not frames:
+            return Samples.concat([])
+        after = regions[-1][2]
+        self._judge_angles(frames, int(raw[after + 2]) | int(raw[after + 3]) << 8)
+        placed = np.array([f.start_q8 is not None and f.sweep_q8 is not None for f in frames])
+        self._counts['lost_frames'] += int(np.count_nonzero(~placed))
+        distances = self._check_distances(frames, placed)
+        return self._samples([f for f, ok in zip(frames, placed) if ok], distances[placed])
 
     def _regain_sync(self, pos: int, header: int) -> int:
         """Skip to a header found byte by byte; count the capsules the gap held as lost."""
@@ -298,8 +302,12 @@ class DenseCapsuleDecoder:
             self._counts['replaced_angles'] += frame.replaced
             frame.suspect |= frame.replaced or self._damage > _DAMAGED_SHARE
 
-    def _check_distances(self, frames: list):
-        """Measure the noise on intact capsules; reject implausible distances (step 4)."""
+    def _check_distances(self, frames: list, placed: np.ndarray) -> np.ndarray:
+        """
+        Measure the range noise; reject implausible distances (step 4).
+
+        :return: the capsules' distances, shape (capsules, 40), mm; 0 where rejected
+        """
         distances = np.array([f.distances for f in frames], np.float64)
         readable = np.array([f.readable for f in frames])
         suspect = np.array([f.suspect for f in frames])
@@ -311,10 +319,8 @@ class DenseCapsuleDecoder:
             step_rad = math.radians(self._angles.sweep_deg() / SAMPLES_PER_CAPSULE)
             keep[suspect] &= (distances[suspect] == 0) | _supported(
                 distances[suspect], keep[suspect], self._sigma_mm, step_rad)
-        decoded = np.array([f.start_q8 is not None and f.sweep_q8 is not None for f in frames])
-        self._counts['rejected_samples'] += int(np.count_nonzero(~keep[decoded]))
-        for frame, kept in zip(frames, keep):
-            frame.distances = np.where(kept, frame.distances, 0)
+        self._counts['rejected_samples'] += int(np.count_nonzero(~keep[placed]))
+        return np.where(keep, distances, 0.0)
 
     def _measure_noise(self, distances: np.ndarray):
         """Update the range noise scale from the second differences within capsules."""
@@ -330,31 +336,29 @@ class DenseCapsuleDecoder:
         self._sigma_mm = max(_SIGMA_FLOOR_MM, _MAD_TO_SIGMA * float(np.median(window)))
         self._measured = True
 
-    def _samples(self, frames: list) -> Samples:
-        """Lay out the decoded capsules' samples; count the capsules that cannot be placed."""
-        placed = [f for f in frames if f.start_q8 is not None and f.sweep_q8 is not None]
-        self._counts['lost_frames'] += len(frames) - len(placed)
-        if not placed:
+    def _samples(self, frames: list, distances: np.ndarray) -> Samples:
+        """Lay out the placed capsules' samples."""
+        count = len(frames)
+        if not count:
             return Samples.concat([])
-        starts = np.array([f.start_q8 for f in placed], np.float64)
-        sweeps = np.array([f.sweep_q8 for f in placed], np.float64)
-        angle = np.mod((starts[:, None] + sweeps[:, None] * _K / SAMPLES_PER_CAPSULE)
-                       .reshape(-1) / 256.0, 360.0)
-        distance = np.concatenate([f.distances for f in placed]).astype(np.float64)
+        starts = np.array([f.start_q8 for f in frames], np.float64)
+        sweeps = np.array([f.sweep_q8 for f in frames], np.float64)
+        angle = np.mod((starts[:, None] + sweeps[:, None] * _FRACTIONS).reshape(-1) / 256.0,
+                       360.0)
+        distance = distances.reshape(-1)
         previous = np.concatenate([[-np.inf if self._last_angle is None else self._last_angle],
                                    angle[:-1]])
         self._last_angle = angle[-1]
         self._counts['samples'] += angle.size
-        frame_end = np.repeat([f.end for f in placed], SAMPLES_PER_CAPSULE)
-        slot = (np.repeat([f.slot for f in placed], SAMPLES_PER_CAPSULE) * SAMPLES_PER_CAPSULE
-                + np.tile(_K, len(placed)))
+        k = np.tile(_K, count)
         return Samples(angle_deg=angle,
                        distance_mm=distance,
                        quality=np.where(distance > 0, DENSE_RETURN_QUALITY, 0).astype(np.uint8),
                        start=angle < previous,
-                       frame_end=frame_end,
-                       samples_after=np.tile(SAMPLES_PER_CAPSULE - 1 - _K, len(placed)),
-                       slot=slot)
+                       frame_end=np.repeat([f.end for f in frames], SAMPLES_PER_CAPSULE),
+                       samples_after=SAMPLES_PER_CAPSULE - 1 - k,
+                       slot=np.repeat([f.slot for f in frames], SAMPLES_PER_CAPSULE)
+                       * SAMPLES_PER_CAPSULE + k)
 
 
 class _AngleTrack:

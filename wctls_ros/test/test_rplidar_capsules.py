@@ -179,6 +179,17 @@ def test_an_out_of_sequence_start_angle_is_replaced_by_the_predicted_one():
     assert counts.replaced_angles == 1 and counts.damaged_frames == 1
 
 
+def test_capsules_lost_without_a_trace_in_the_bytes_are_counted_from_the_start_angles():
+    data, starts, distances = smooth_capsules(12)
+    raw = np.frombuffer(data, np.uint8)
+    samples, counts = decode(np.delete(raw, np.arange(5 * 84, 8 * 84)).tobytes())
+    assert np.unique(samples.slot // 40).tolist() == [0, 1, 2, 3, 4, 8, 9, 10]
+    np.testing.assert_allclose(samples.angle_deg, ((starts[:, None] + STEP_Q6 * np.arange(40)
+                                                    / 40) / 64.0 % 360.0).ravel()[samples.slot],
+                               atol=1e-9)
+    assert counts.lost_frames == 3 and counts.frames == 11 and counts.replaced_angles == 0
+
+
 def test_a_distance_beyond_the_range_is_rejected_even_when_the_checksum_passes():
     data, _, distances = smooth_capsules(3)
     distances[1, 7] = 56000                                # what a checksum collision let by

@@ -43,7 +43,9 @@ checksum, in four steps:
 On an undamaged stream the output is exactly the SDK's, and nothing is rejected.
 """
 
+from dataclasses import dataclass
 import math
+from typing import Optional
 
 import numpy as np
 
@@ -293,14 +295,27 @@ class DenseCapsuleDecoder:
 
     def _judge_angles(self, frames: list, next_field: int):
         """Place each capsule's samples in angle, in stream order (step 3)."""
-        successors = [(f.slot, f.angle_field, f.clean) for f in frames[1:]]
-        successors.append((frames[-1].slot + 1, next_field, False))
-        for frame, successor in zip(frames, successors):
+        slip = 0
+        for i, frame in enumerate(frames):
             self._damage += _DAMAGE_WEIGHT * ((not frame.clean) - self._damage)
-            frame.start_q8, frame.sweep_q8, frame.replaced = self._angles.place(
-                frame.slot, frame.angle_field, frame.clean, *successor)
+            after = frames[i + 1] if i + 1 < len(frames) else None
+            frame.slot += slip
+            placement = self._angles.place(
+                frame.slot, frame.angle_field, frame.clean,
+                after.slot + slip if after else frame.slot + 1,
+                after.angle_field if after else next_field, after.clean if after else False)
+            if placement.slip:
+                # Whole capsules the stream lost without a trace in its bytes (or that a
+                # resync counted wrongly): the start angles tell how many.
+                slip += placement.slip
+                frame.slot += placement.slip
+                self._counts['frames'] += max(placement.slip, 0)
+                self._counts['lost_frames'] += max(placement.slip, 0)
+            frame.start_q8, frame.sweep_q8 = placement.start_q8, placement.sweep_q8
+            frame.replaced = placement.replaced
             self._counts['replaced_angles'] += frame.replaced
             frame.suspect |= frame.replaced or self._damage > _DAMAGED_SHARE
+        self._slot += slip
 
     def _check_distances(self, frames: list, placed: np.ndarray) -> np.ndarray:
         """
@@ -361,6 +376,23 @@ class DenseCapsuleDecoder:
                        * SAMPLES_PER_CAPSULE + k)
 
 
+@dataclass(frozen=True)
+class Placement:
+    """
+    A capsule's place in angle, as :class:`_AngleTrack` decides it.
+
+    :ivar start_q8: start angle, 1/256 degree; None when the capsule cannot be placed
+    :ivar sweep_q8: angle its 40 samples span, 1/256 degree; None when it cannot be placed
+    :ivar replaced: the start angle is the predicted one, not the received one
+    :ivar slip: capsules the stream lost unseen before this one (negative: counted too many)
+    """
+
+    start_q8: Optional[int]
+    sweep_q8: Optional[float]
+    replaced: bool
+    slip: int
+
+
 class _AngleTrack:
     """
     The start angles of the capsules in sequence: which to believe and what to predict.
@@ -390,8 +422,7 @@ class _AngleTrack:
         :param next_slot: the successor's index
         :param next_field: the successor's start angle field
         :param next_clean: the successor's checksum passed (False when not known yet)
-        :return: ``(start, sweep, replaced)`` in 1/256 degree; start or sweep None when the
-            capsule cannot be placed; replaced when the start is the predicted one
+        :return: the :class:`Placement`
         """
         if clean and field & 0x8000:
             # The device (re)started its stream here, as the SDK takes the S flag.
@@ -404,6 +435,11 @@ class _AngleTrack:
         predicted, gap = self._predict(slot)
         matches = (observed is not None and predicted is not None
                    and abs(_wrap_q8(observed - predicted)) <= tolerance)
+        slip = 0 if matches or predicted is None or observed is None else self._slip(
+            observed - predicted, gap, self._starts_run(slot, observed, ahead, clean, tolerance),
+            tolerance)
+        if slip:
+            slot, predicted, matches = slot + slip, observed, True
         # Against a recent believed angle only the prediction counts; a run of two angles could
         # be two damaged ones that happen to agree.
         run = (not matches and (predicted is None or gap > _FRESH_GAP)
@@ -415,7 +451,7 @@ class _AngleTrack:
         elif predicted is not None:
             start, replaced = predicted, True
         else:
-            return None, None, False
+            return Placement(None, None, False, 0)
         if not matches and not run:
             self._misses += 1
             if self._misses >= _RESTART_AFTER:
@@ -425,11 +461,29 @@ class _AngleTrack:
             (following - start) % FULL_TURN_Q8)
         if step is not None and (abs(step - self._sweep) <= self._tolerance(next_clean)
                                  if self._sweep is not None else 0 < step <= self._max_sweep_q8):
-            return start, step, replaced
+            return Placement(start, step, replaced, slip)
         if next_clean and next_field & 0x8000:
-            return start, None, replaced      # before a restart: dropped, as by the SDK
+            return Placement(start, None, replaced, slip)   # before a restart: dropped (SDK)
         # The next start angle is damaged or far: sweep as the capsules before.
-        return start, self._sweep, replaced
+        return Placement(start, self._sweep, replaced, slip)
+
+    def _slip(self, beyond_q8: int, gap: int, runs_on: bool, tolerance: float) -> int:
+        """
+        Tell how many capsules the stream lost unseen, from a start angle ahead of prediction.
+
+        :param beyond_q8: the observed start angle minus the predicted one, 1/256 degree
+        :param gap: capsules since the last believed start angle
+        :param runs_on: the successor's start angle follows on at the sweep
+        :param tolerance: how far the angle may lie from a whole number of sweeps
+        :return: capsules lost (negative: counted too many), 0 when it does not look like that
+        """
+        if not runs_on:
+            return 0
+        beyond = _wrap_q8(beyond_q8)
+        lost = round(beyond / self._sweep)
+        if lost == 0 or gap + lost < 1 or abs(beyond - lost * self._sweep) > tolerance:
+            return 0
+        return lost
 
     def _tolerance(self, clean: bool) -> float:
         """Return how far a start angle may lie from its prediction, 1/256 degree."""

@@ -4,6 +4,8 @@
 """Helpers shared by the RPLIDAR tests: the emulator and its scene's true ranges."""
 
 import math
+import re
+import time
 
 import numpy as np
 from wctls_ros.rplidar.emulator.device import Faults, S1Device
@@ -101,6 +103,46 @@ def compensated_beam_bands():
     raw_bin = 1079 - np.arange(1080)
     return range_band(math.pi - np.radians((raw_bin + 1) / 3),
                       math.pi - np.radians((raw_bin - 2) / 3))
+
+
+def ros_minus_monotonic_s():
+    """
+    Return ROS (system) time minus monotonic time, from the closest pair of readings.
+
+    :return: s
+    """
+    pairs = []
+    for _ in range(5):
+        before, now, after = time.monotonic(), time.time(), time.monotonic()
+        pairs.append((after - before, now - 0.5 * (before + after)))
+    return min(pairs)[1]
+
+
+def first_sample_times(clock_reply, stamps, first_angles_deg):
+    """
+    Return when the emulator measured each scan's first sample, on the ROS clock.
+
+    The sample is the one at the scan's first raw angle nearest in time to the scan's stamp
+    (within half a turn: stamps a whole number of turns off cannot be told apart this way).
+
+    :param clock_reply: the emulator's answer to ``clock``
+    :param stamps: the scans' header stamps, s
+    :param first_angles_deg: the scans' first raw angles, degrees
+    :return: the true measurement times, s (the end of the sample, as the driver reckons)
+    """
+    start_s, sample_us, first_deg, step_deg = (
+        float(x) for x in re.findall(r'[-+0-9.]+(?:e[-+]?\d+)?', clock_reply))
+    sample_s = sample_us * 1e-6
+    offset_s = ros_minus_monotonic_s()
+    half_turn = int(180.0 / step_deg)
+    times = []
+    for stamp, angle in zip(stamps, first_angles_deg):
+        nearest = round((stamp - offset_s - start_s) / sample_s) - 1
+        candidates = nearest + np.arange(-half_turn, half_turn + 1)
+        error = (first_deg + candidates * step_deg - angle + 180.0) % 360.0 - 180.0
+        sample = candidates[np.argmin(np.abs(error))]
+        times.append(start_s + (sample + 1) * sample_s + offset_s)
+    return np.array(times)
 
 
 def denseboost_stream(plan='environment_a', seconds=3.0, noisy=False, seed=0):

@@ -18,7 +18,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402,
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from rplidar_testing import (compensated_beam_bands, EMULATOR_TURN_S,  # noqa: E402
-                             start_emulator, true_ranges)
+                             first_sample_times, start_emulator, true_ranges)
 from sensor_msgs.msg import LaserScan  # noqa: E402
 from std_srvs.srv import Empty  # noqa: E402
 from wctls_ros.params import RPLIDAR_NODE  # noqa: E402
@@ -105,11 +105,26 @@ def test_ranges_match_the_scene_at_every_sample_angle(executor, ros_context, emu
         assert set(scan.intensities) == {47.0}
         assert scan.scan_time == pytest.approx(0.1, rel=0.01)
         assert scan.time_increment == pytest.approx(us_per_sample, rel=0.01)
-    # Honest timing: consecutive stamps one rotation apart, each a turn before its arrival.
+
+
+@pytest.mark.parametrize('mode', ['DenseBoost', 'Standard'])
+def test_stamps_are_first_sample_times_on_the_devices_sample_clock(executor, ros_context,
+                                                                   emulator, mode):
+    node, listener = start(executor, ros_context, serial_port=emulator.link,
+                           angle_compensate=False, scan_mode=mode)
+    collect(executor, listener, 10)          # the driver's clock settles within a second
+    scans = collect(executor, listener, 6)
+    received = np.array([at for _, at in listener.scans[-6:]])
     stamps = np.array([s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec for s in scans])
-    np.testing.assert_allclose(np.diff(stamps), scans[0].scan_time, atol=1e-3)
-    age = np.array([received for _, received in listener.scans[-5:]]) - stamps
-    assert ((age > scans[0].scan_time) & (age < scans[0].scan_time + 0.05)).all()
+    # The emulator's truth: when it measured the sample at each scan's first raw angle (pi -
+    # angle_max). Wall-clock receive times, which a loaded machine delays, only bound it.
+    truth = first_sample_times(emulator.command('clock'), stamps,
+                               math.degrees(math.pi) - np.degrees([s.angle_max for s in scans]))
+    np.testing.assert_allclose(stamps - truth, 0.0, atol=1e-3)
+    # Consecutive turns are their samples apart on the device's clock, and each turn's first
+    # sample was measured at least a turn before its scan arrived.
+    np.testing.assert_allclose(np.diff(stamps), np.diff(truth), atol=1e-3)
+    assert (received - stamps > scans[0].scan_time).all()
 
 
 def test_angle_compensation_bins_a_turn_into_1080_beams_within_a_bin_of_the_scene(

@@ -12,7 +12,8 @@ sllidar_ros2's angle = pi - theta sees the plan in REP-103 orientation.
 Faults for testing recovery: ``--corrupt-rate`` / ``--drop-rate`` (per streamed byte),
 ``--silent-after``/``--silent-for``, ``--health warning|error``. Lines on standard input control it
 live: ``unplug``, ``replug``, ``silent SECONDS``, ``health ok|warning|error [RESETS]``,
-``corrupt RATE``, ``drop RATE``, ``quit``; each is acknowledged on standard output.
+``corrupt RATE``, ``drop RATE``, ``clock`` (the true timing of the samples streamed), ``quit``;
+each is acknowledged on standard output.
 
 Exit status: 0 after ``quit`` or SIGTERM, 2 on a user error (one line on standard error,
 ``s1_emulator: error: ...``), 130 on Ctrl-C.
@@ -112,8 +113,8 @@ def _parse_args(argv):
         description='An RPLIDAR S1 speaking the real byte protocol on a pseudo-terminal (and '
                     'TCP), streaming a simulated floor plan in real time.',
         epilog='Lines on standard input control it while it runs: unplug, replug, silent SECONDS, '
-               'health ok|warning|error [RESETS], corrupt RATE, drop RATE, quit. Exit status: 0 '
-               'after quit or SIGTERM, 2 on a user error, 130 on Ctrl-C.')
+               'health ok|warning|error [RESETS], corrupt RATE, drop RATE, clock, quit. Exit '
+               'status: 0 after quit or SIGTERM, 2 on a user error, 130 on Ctrl-C.')
     probability = _bounded(float, 0.0, 1.0)
     parser.add_argument('--link', help='symlink to point at the pseudo-terminal, e.g. /tmp/ttyS1 '
                                        '(default: none, only the pty path is printed)')

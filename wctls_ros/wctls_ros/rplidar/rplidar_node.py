@@ -20,9 +20,9 @@ import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.time import Time
 from sensor_msgs.msg import LaserScan
 from std_srvs.srv import Empty
 
@@ -103,8 +103,8 @@ class RplidarNode(Node):
                             compensation_multiple(mode.us_per_sample, self._scan_frequency_hz))
         msg = LaserScan()
         msg.header.frame_id = self._frame_id
-        age = Duration(nanoseconds=int((time.monotonic() - turn.first_sample_s) * 1e9))
-        msg.header.stamp = (self.get_clock().now() - age).to_msg()
+        msg.header.stamp = Time(nanoseconds=_ros_minus_monotonic_ns(self.get_clock())
+                                + int(turn.first_sample_s * 1e9)).to_msg()
         msg.angle_min = scan.angle_min
         msg.angle_max = scan.angle_max
         msg.angle_increment = scan.angle_increment
@@ -196,6 +196,24 @@ class RplidarNode(Node):
                          else status.link),
             values=[KeyValue(key=k, value=v) for k, v in values.items()])]
         self._diagnostics_pub.publish(array_msg)
+
+
+def _ros_minus_monotonic_ns(clock) -> int:
+    """
+    Return the ROS clock minus the monotonic clock, from the closest of three pairs of readings.
+
+    A reading interrupted between the two clocks (a loaded machine) would shift every stamp.
+
+    :param clock: the node's ROS clock
+    :return: ns
+    """
+    pairs = []
+    for _ in range(3):
+        before = time.monotonic_ns()
+        now = clock.now().nanoseconds
+        after = time.monotonic_ns()
+        pairs.append((after - before, now - (before + after) // 2))
+    return min(pairs)[1]
 
 
 def _share(part: int, whole: int) -> float:

@@ -84,6 +84,26 @@ class Faults:
         return self.silent_from_s <= now_s < self.silent_until_s
 
 
+@dataclass(frozen=True)
+class StreamClock:
+    """
+    When and where the device measures the samples of the stream it is sending.
+
+    Sample n (counted from the stream's first) is measured until ``start_s + (n + 1) *
+    sample_s`` at raw angle ``first_angle_deg + n * step_deg`` (modulo 360).
+
+    :ivar start_s: monotonic time at which the stream started, s
+    :ivar sample_s: time per sample, s
+    :ivar first_angle_deg: raw angle of the first sample, degrees
+    :ivar step_deg: angle between consecutive samples, degrees
+    """
+
+    start_s: float
+    sample_s: float
+    first_angle_deg: float
+    step_deg: float
+
+
 class S1Device:
     """
     One emulated S1 behind one link: answers requests and produces the scan stream.
@@ -179,10 +199,10 @@ class S1Device:
         self._mode = mode
         self._start_s = now_s
         self._sent = 0
-        samples_per_frame = (SAMPLES_PER_CAPSULE if mode.answer_type == AnswerType.DENSE_CAPSULE
-                             else 1)
-        self._frame_size = CAPSULE_SIZE if samples_per_frame > 1 else NODE_SIZE
-        self._frame_s = samples_per_frame * mode.us_per_sample * 1e-6
+        self._samples_per_frame = (SAMPLES_PER_CAPSULE
+                                   if mode.answer_type == AnswerType.DENSE_CAPSULE else 1)
+        self._frame_size = CAPSULE_SIZE if self._samples_per_frame > 1 else NODE_SIZE
+        self._frame_s = self._samples_per_frame * mode.us_per_sample * 1e-6
         rpm = self._rpm or DEFAULT_RPM
         # Whole 1/64 degrees per frame keep every sample on one exact, uniform angle grid.
         self._step_q6 = round(rpm / 60.0 * FULL_TURN_Q6 * self._frame_s)
@@ -193,6 +213,18 @@ class S1Device:
         if self._mode is not None:
             self._phase_q6 = int((self._phase_q6 + self._sent * self._step_q6) % FULL_TURN_Q6)
         self._mode = None
+
+    def clock(self) -> Optional[StreamClock]:
+        """
+        Return the sample clock of the stream being sent (the truth for timing tests).
+
+        :return: the clock, or None when not streaming
+        """
+        if self._mode is None:
+            return None
+        samples = self._samples_per_frame
+        return StreamClock(self._start_s, self._frame_s / samples, self._phase_q6 / 64.0,
+                           self._step_q6 / samples / 64.0)
 
     def next_frame_in(self, now_s: float) -> float:
         """

@@ -6,8 +6,10 @@ Emulated S1 devices served on a pseudo-terminal and TCP, with live control comma
 
 One device answers on the pseudo-terminal (reachable through a symlink, like a udev name) and
 one more per TCP client. Control lines (``unplug``, ``replug``, ``silent SECONDS``,
-``health ok|warning|error [RESETS]``, ``corrupt RATE``, ``drop RATE``, ``quit``) are queued on
-:attr:`Emulator.commands` and each is acknowledged with one line on standard output.
+``health ok|warning|error [RESETS]``, ``corrupt RATE``, ``drop RATE``, ``clock`` (the pty
+device's sample clock: when and at what angle each sample of its stream is measured),
+``quit``) are queued on :attr:`Emulator.commands` and each is acknowledged with one line on
+standard output.
 """
 
 import os
@@ -211,8 +213,15 @@ class Emulator:
         if verb in ('corrupt', 'drop'):
             setattr(self._faults, f'{verb}_rate', float(args[0]))
             return f'{verb} rate {float(args[0]):g}'
+        if verb == 'clock':
+            clock = self._pty_device.clock()
+            if clock is None:
+                return 'clock idle'
+            return (f'clock start {clock.start_s:.9f} s, {clock.sample_s * 1e6:.6f} us per '
+                    f'sample, first at {clock.first_angle_deg:.9f} deg, '
+                    f'{clock.step_deg:.9f} deg per sample')
         raise ValueError('unknown command (unplug, replug, silent S, health STATUS [RESETS], '
-                         'corrupt RATE, drop RATE, quit)')
+                         'corrupt RATE, drop RATE, clock, quit)')
 
     def close(self):
         """Close everything (and remove the link)."""

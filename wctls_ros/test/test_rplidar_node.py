@@ -194,11 +194,11 @@ def test_old_firmware_falls_back_to_the_standard_mode_from_get_samplerate(
     np.testing.assert_allclose(scan.ranges, true_ranges(bearings(scan)), atol=1e-3)
 
 
-@pytest.mark.parametrize('fault, rate, turn_share, beam_share', [
-    ('--corrupt-rate', '0.05', 0.8, 0.8), ('--corrupt-rate', '0.01', 0.95, 0.95),
-    ('--drop-rate', '0.01', 0.95, 0.95), ('--drop-rate', '0.05', 0.8, 0.8)])
+@pytest.mark.parametrize('fault, rate, turn_share, beam_share, wrong_share', [
+    ('--corrupt-rate', '0.05', 0.8, 0.8, 2.5e-3), ('--corrupt-rate', '0.01', 0.95, 0.95, 5e-4),
+    ('--drop-rate', '0.01', 0.95, 0.95, 5e-4), ('--drop-rate', '0.05', 0.8, 0.8, 2.5e-3)])
 def test_a_damaged_link_still_publishes_turns_with_their_beams_right(
-        executor, ros_context, own_emulator, fault, rate, turn_share, beam_share):
+        executor, ros_context, own_emulator, fault, rate, turn_share, beam_share, wrong_share):
     device = own_emulator(fault, rate)
     node, listener = start(executor, ros_context, serial_port=device.link)
     collect(executor, listener, 1)
@@ -217,7 +217,9 @@ def test_a_damaged_link_still_publishes_turns_with_their_beams_right(
     assert good_turns >= turn_share * streamed, (
         f'{good_turns:.1f} turns with {100 * beam_share:g} % of the beams right of '
         f'{streamed:.1f} streamed ({published} published)')
-    assert wrong.sum() <= 1e-3 * wrong.size, f'{wrong.sum()} beams wrong by more than 10 cm'
+    # Damage the plausibility check cannot see (two neighbouring samples damaged alike) or a
+    # misplaced sample where one lost both its bytes: a few in ten thousand at 5 %.
+    assert wrong.sum() <= wrong_share * wrong.size, f'{wrong.sum()} beams more than 10 cm off'
     status = node.driver.status()
     assert status.stream.damaged_frames > 0 and status.reconnects == 0
     # /diagnostics reports the damage as rates, at WARN.

@@ -24,8 +24,9 @@ checksum, in four steps:
    its bytes, its place among smooth neighbours cannot be told: the samples up to the previous
    lost byte may land one sample step, 0.39 degrees, off.)
 3. Angles. Start angles advance by one capsule's sweep: a start angle is believed when it lies
-   within 1/8 degree of the one predicted from the last believed capsule (1/8 of a sweep for a
-   capsule whose checksum passed), or, without a recent prediction, when it and its successor's
+   within 1/8 degree of the one predicted from the last believed capsule (1/8 of a sweep, for
+   the motor's speed, for a capsule whose checksum passed on a line not otherwise damaged), or,
+   without a recent prediction, when it and its successor's
    advance like the capsules before. Otherwise the predicted angle is used (counted as
    replaced); with nothing to predict from, the capsule is lost. Sample k lies at
    ``start + k * sweep / 40`` as in the SDK, the sweep from the next start angle when it is in
@@ -298,12 +299,15 @@ class DenseCapsuleDecoder:
         slip = 0
         for i, frame in enumerate(frames):
             self._damage += _DAMAGE_WEIGHT * ((not frame.clean) - self._damage)
+            damaged_line = self._damage > _DAMAGED_SHARE
             after = frames[i + 1] if i + 1 < len(frames) else None
             frame.slot += slip
+            # On a damaged line a passing checksum does not vouch for a start angle either.
             placement = self._angles.place(
-                frame.slot, frame.angle_field, frame.clean,
+                frame.slot, frame.angle_field, frame.clean and not damaged_line,
                 after.slot + slip if after else frame.slot + 1,
-                after.angle_field if after else next_field, after.clean if after else False)
+                after.angle_field if after else next_field,
+                bool(after) and after.clean and not damaged_line)
             if placement.slip:
                 # Whole capsules the stream lost without a trace in its bytes (or that a
                 # resync counted wrongly): the start angles tell how many.
@@ -314,7 +318,7 @@ class DenseCapsuleDecoder:
             frame.start_q8, frame.sweep_q8 = placement.start_q8, placement.sweep_q8
             frame.replaced = placement.replaced
             self._counts['replaced_angles'] += frame.replaced
-            frame.suspect |= frame.replaced or self._damage > _DAMAGED_SHARE
+            frame.suspect |= frame.replaced or damaged_line
         self._slot += slip
 
     def _check_distances(self, frames: list, placed: np.ndarray) -> np.ndarray:
@@ -418,10 +422,10 @@ class _AngleTrack:
 
         :param slot: the capsule's index in the stream
         :param field: its start angle field (bit 15: S)
-        :param clean: its checksum passed
+        :param clean: its checksum passed on a line not otherwise damaged
         :param next_slot: the successor's index
         :param next_field: the successor's start angle field
-        :param next_clean: the successor's checksum passed (False when not known yet)
+        :param next_clean: the same of the successor (False when not known yet)
         :return: the :class:`Placement`
         """
         if clean and field & 0x8000:

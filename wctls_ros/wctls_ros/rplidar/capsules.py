@@ -151,10 +151,7 @@ class DenseCapsuleDecoder:
         self._angles = _AngleTrack(self._max_sweep_q8)
         self._last_angle = None
         self._damage = 0.0
-        self._second_differences = []
-        self._unmeasured = 0
-        self._measured = False
-        self._sigma_mm = _SIGMA_PRIOR_MM
+        self._noise = _RangeNoise()
         self._counts = dict.fromkeys(StreamCounts.__dataclass_fields__, 0)
 
     @property
@@ -255,7 +252,7 @@ class DenseCapsuleDecoder:
         shifts = [count * CAPSULE_SIZE - (end - pos) for pos, count, end, _ in regions]
         aligned = self._aligned(raw, [region for region, shift in zip(regions, shifts)
                                       if not shift])
-        noise_mm = min(_SIGMAS * math.sqrt(2.0) * self._sigma_mm, _JUMP_MM / 2.0)
+        noise_mm = min(_SIGMAS * math.sqrt(2.0) * self._noise.sigma_mm, _JUMP_MM / 2.0)
         realigned = _realign(raw, [r for r, shift in zip(regions, shifts) if shift],
                              [shift for shift in shifts if shift], self._max_mm, noise_mm)
         frames = []
@@ -330,30 +327,14 @@ class DenseCapsuleDecoder:
         distances = np.array([f.distances for f in frames], np.float64)
         readable = np.array([f.readable for f in frames])
         suspect = np.array([f.suspect for f in frames])
-        # A damaged sample spoils three second differences: while fewer than half are, their
-        # median is the range noise's.
-        self._measure_noise(np.where(readable, distances, 0.0))
+        self._noise.update(np.where(readable, distances, 0.0))
         keep = readable & (distances <= self._max_mm)
         if suspect.any():
             step_rad = math.radians(self._angles.sweep_deg() / SAMPLES_PER_CAPSULE)
             keep[suspect] &= (distances[suspect] == 0) | _supported(
-                distances[suspect], keep[suspect], self._sigma_mm, step_rad)
+                distances[suspect], keep[suspect], self._noise.sigma_mm, step_rad)
         self._counts['rejected_samples'] += int(np.count_nonzero(~keep[placed]))
         return np.where(keep, distances, 0.0)
-
-    def _measure_noise(self, distances: np.ndarray):
-        """Update the range noise scale from the second differences within capsules."""
-        second = distances[:, :-2] - 2.0 * distances[:, 1:-1] + distances[:, 2:]
-        returns = (distances[:, :-2] > 0) & (distances[:, 1:-1] > 0) & (distances[:, 2:] > 0)
-        self._second_differences.append(np.abs(second[returns]))
-        self._unmeasured += int(np.count_nonzero(returns))
-        if self._unmeasured < (_SIGMA_WINDOW // 4 if self._measured else SAMPLES_PER_CAPSULE):
-            return
-        # A quarter of the window is new (a capsule's worth at first): take the median.
-        window = np.concatenate(self._second_differences)[-_SIGMA_WINDOW:]
-        self._second_differences, self._unmeasured = [window], 0
-        self._sigma_mm = max(_SIGMA_FLOOR_MM, _MAD_TO_SIGMA * float(np.median(window)))
-        self._measured = True
 
     def _samples(self, frames: list, distances: np.ndarray) -> Samples:
         """Lay out the placed capsules' samples."""
@@ -378,6 +359,38 @@ class DenseCapsuleDecoder:
                        samples_after=SAMPLES_PER_CAPSULE - 1 - k,
                        slot=np.repeat([f.slot for f in frames], SAMPLES_PER_CAPSULE)
                        * SAMPLES_PER_CAPSULE + k)
+
+
+class _RangeNoise:
+    """
+    The range noise scale, from the median second difference along capsules.
+
+    A damaged sample spoils three second differences: while fewer than half are, their median
+    is the noise's. Until a capsule's worth is measured, the S1's datasheet accuracy.
+    """
+
+    def __init__(self):
+        self.sigma_mm = _SIGMA_PRIOR_MM
+        self._window = []
+        self._unmeasured = 0
+        self._measured = False
+
+    def update(self, distances: np.ndarray):
+        """
+        Take the distances of more capsules.
+
+        :param distances: shape (capsules, 40), mm; 0 where there is no (readable) return
+        """
+        second = distances[:, :-2] - 2.0 * distances[:, 1:-1] + distances[:, 2:]
+        returns = (distances[:, :-2] > 0) & (distances[:, 1:-1] > 0) & (distances[:, 2:] > 0)
+        self._window.append(np.abs(second[returns]))
+        self._unmeasured += int(np.count_nonzero(returns))
+        if self._unmeasured < (_SIGMA_WINDOW // 4 if self._measured else SAMPLES_PER_CAPSULE):
+            return
+        # A quarter of the window is new (a capsule's worth at first): take the median.
+        window = np.concatenate(self._window)[-_SIGMA_WINDOW:]
+        self._window, self._unmeasured, self._measured = [window], 0, True
+        self.sigma_mm = max(_SIGMA_FLOOR_MM, _MAD_TO_SIGMA * float(np.median(window)))
 
 
 @dataclass(frozen=True)

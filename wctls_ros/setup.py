@@ -36,7 +36,7 @@ setup(
             'demo = wctls_ros.demo:main',
             'process_bag = wctls_ros.bags.process_bag:main',
             'rplidar_node = wctls_ros.rplidar.rplidar_node:main',
-            's1_emulator = wctls_ros.rplidar.emulator:main',
+            's1_emulator = wctls_ros.s1_emulator:main',
             'score = wctls_ros.evaluation.score_cli:main',
             'simulate = wctls_ros.evaluation.simulate_cli:main',
         ],

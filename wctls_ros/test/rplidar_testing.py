@@ -3,12 +3,21 @@
 
 """Helpers shared by the RPLIDAR tests: the emulator and its scene's true ranges."""
 
+import math
+import re
+import time
+
 import numpy as np
-from wctls_ros.rplidar.emulator import EmulatorProcess
-from wctls_ros.simulation import cast_rays, load_floor_plan
+from wctls_ros.rplidar.emulator.device import Faults, S1Device
+from wctls_ros.rplidar.emulator.process import EmulatorProcess
+from wctls_ros.rplidar.protocol import encode_express_scan
+from wctls_ros.s1_emulator import SimulatedScene
+from wctls_ros.simulation import cast_rays, load_floor_plan, NOISELESS, NoiseModel
 
 # The emulator's default scene: the bundled plan seen from its own sensor pose.
 WALLS, _ = load_floor_plan('environment_a').in_sensor_frame()
+# The emulator turns 995/64 degrees per DenseBoost capsule of 40 samples of 108 us: 100.03 ms.
+EMULATOR_TURN_S = 360.0 * 64 / 995 * 40 * 108e-6
 
 
 def true_ranges(bearings_rad):
@@ -80,6 +89,78 @@ def range_band(low_rad, high_rad):
     highest = np.where(inside, _CRITICAL_RANGES, -np.inf).max(axis=1)
     return (np.minimum(ends.min(axis=1), lowest).reshape(low_rad.shape),
             np.maximum(ends.max(axis=1), highest).reshape(low_rad.shape))
+
+
+def compensated_beam_bands():
+    """
+    Return the scene's range band of each beam of a 1080-beam (DenseBoost) compensated scan.
+
+    Beam i is bin b = 1079 - i, holding the last sample with raw angle in [(b - 2) / 3,
+    (b + 1) / 3) degrees; its laser bearing is pi - raw.
+
+    :return: (lowest, highest) range per beam, m
+    """
+    raw_bin = 1079 - np.arange(1080)
+    return range_band(math.pi - np.radians((raw_bin + 1) / 3),
+                      math.pi - np.radians((raw_bin - 2) / 3))
+
+
+def ros_minus_monotonic_s():
+    """
+    Return ROS (system) time minus monotonic time, from the closest pair of readings.
+
+    :return: s
+    """
+    pairs = []
+    for _ in range(5):
+        before, now, after = time.monotonic(), time.time(), time.monotonic()
+        pairs.append((after - before, now - 0.5 * (before + after)))
+    return min(pairs)[1]
+
+
+def first_sample_times(clock_reply, stamps, first_angles_deg):
+    """
+    Return when the emulator measured each scan's first sample, on the ROS clock.
+
+    The sample is the one at the scan's first raw angle nearest in time to the scan's stamp
+    (within half a turn: stamps a whole number of turns off cannot be told apart this way).
+
+    :param clock_reply: the emulator's answer to ``clock``
+    :param stamps: the scans' header stamps, s
+    :param first_angles_deg: the scans' first raw angles, degrees
+    :return: the true measurement times, s (the end of the sample, as the driver reckons)
+    """
+    start_s, sample_us, first_deg, step_deg = (
+        float(x) for x in re.findall(r'[-+0-9.]+(?:e[-+]?\d+)?', clock_reply))
+    sample_s = sample_us * 1e-6
+    offset_s = ros_minus_monotonic_s()
+    half_turn = int(180.0 / step_deg)
+    times = []
+    for stamp, angle in zip(stamps, first_angles_deg):
+        nearest = round((stamp - offset_s - start_s) / sample_s) - 1
+        candidates = nearest + np.arange(-half_turn, half_turn + 1)
+        error = (first_deg + candidates * step_deg - angle + 180.0) % 360.0 - 180.0
+        sample = candidates[np.argmin(np.abs(error))]
+        times.append(start_s + (sample + 1) * sample_s + offset_s)
+    return np.array(times)
+
+
+def denseboost_stream(plan='environment_a', seconds=3.0, noisy=False, seed=0):
+    """
+    Return the bytes an emulated S1 streams in DenseBoost, without waiting for them.
+
+    :param plan: bundled floor plan
+    :param seconds: stream length, s
+    :param noisy: the S1's datasheet noise, else exact ranges
+    :param seed: random seed
+    :return: the capsules' bytes (after the scan descriptor)
+    """
+    rng = np.random.default_rng(seed)
+    scene = SimulatedScene(load_floor_plan(plan), None, NoiseModel() if noisy else NOISELESS, rng)
+    device = S1Device(scene, Faults(), (1, 28), rng)
+    device.receive(encode_express_scan(1), 0.0)
+    # The device keeps at most 0.5 s of frames due: ask in steps.
+    return b''.join(device.stream(t) for t in np.arange(0.1, seconds + 0.05, 0.1))
 
 
 def start_emulator(directory, *options):

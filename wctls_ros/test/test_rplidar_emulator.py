@@ -6,6 +6,8 @@
 import json
 import math
 import os
+import re
+import signal
 import socket
 import subprocess
 import sys
@@ -153,3 +155,88 @@ def test_the_official_sdk_reads_the_emulator_end_to_end(emulator):
         bearing = math.pi - angles
         low, high = range_band(bearing - math.radians(1 / 64 + 90 / 16384), bearing)
         assert ((ranges >= low - 6e-4) & (ranges <= high + 6e-4)).all()
+
+
+def run_cli(*args, timeout_s=20.0):
+    """Run the installed s1_emulator as a user would; return the finished process."""
+    from test_feature_node import installed_executable
+    return subprocess.run([str(installed_executable('s1_emulator')), *map(str, args)],
+                          capture_output=True, text=True, timeout=timeout_s,
+                          stdin=subprocess.DEVNULL)
+
+
+def test_help_shows_every_default():
+    result = run_cli('--help')
+    assert result.returncode == 0 and not result.stderr
+    options = result.stdout.split('options:')[1].split('Lines on standard input')[0]
+    # One entry per option: its flags, then its help, possibly wrapped over several lines.
+    entries = [' '.join(entry.split()) for entry in re.split(r'\n  (?=-)', options) if entry]
+    assert len(entries) == 17
+    for entry in entries[1:]:                                     # all but -h/--help
+        assert '(default:' in entry, entry
+    assert '(default: environment_a)' in result.stdout and '(default: 1.28;' in result.stdout
+
+
+@pytest.fixture
+def port_in_use():
+    """Yield a TCP port some other socket listens on."""
+    with socket.create_server(('127.0.0.1', 0)) as server:
+        yield server.getsockname()[1]
+
+
+@pytest.mark.parametrize('make_args, says', [
+    (lambda tmp, port: ['--floor-plan', tmp / 'absent.yaml'], '--floor-plan'),
+    (lambda tmp, port: ['--floor-plan', tmp], '--floor-plan'),
+    (lambda tmp, port: ['--floor-plan', write(tmp / 'bad.yaml', 'walls: [')],
+     'not a valid floor plan'),
+    (lambda tmp, port: ['--floor-plan', write(tmp / 'empty.yaml', 'name: x')],
+     'not a valid floor plan'),
+    (lambda tmp, port: ['--link', tmp / 'no' / 'such' / 'tty'], 'no such directory'),
+    (lambda tmp, port: ['--link', write(tmp / 'precious.txt', 'keep me')], 'not a symlink'),
+    (lambda tmp, port: ['--tcp-port', port], '--tcp-port'),
+    (lambda tmp, port: ['--tcp-port', '70000'], '--tcp-port'),
+    (lambda tmp, port: ['--firmware', 'one'], '--firmware'),
+    (lambda tmp, port: ['--corrupt-rate', '1.5'], '--corrupt-rate'),
+    (lambda tmp, port: ['--health', 'bad'], '--health'),
+])
+def test_a_user_error_is_one_line_and_status_2_without_a_traceback(
+        tmp_path, port_in_use, make_args, says):
+    result = run_cli(*make_args(tmp_path, port_in_use))
+    assert result.returncode == 2, result.stderr
+    assert result.stdout == '' and result.stderr.count('\n') == 1, result.stderr
+    assert result.stderr.startswith('s1_emulator: error: ') and says in result.stderr
+    precious = tmp_path / 'precious.txt'
+    assert not precious.exists() or precious.read_text() == 'keep me'
+    assert not list(tmp_path.glob('*.[0-9]*')), 'a temporary link was left behind'
+
+
+def write(path, text):
+    """Write ``text`` to ``path``; return the path."""
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize('stop, status', [('quit', 0), (signal.SIGTERM, 0),
+                                          (signal.SIGINT, 130)])
+def test_exit_status_after_quit_sigterm_and_ctrl_c(tmp_path, stop, status):
+    from test_feature_node import installed_executable
+    link = tmp_path / 'ttyS1'
+    process = subprocess.Popen([str(installed_executable('s1_emulator')), '--link', str(link)],
+                               stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    try:
+        while not process.stdout.readline().startswith('ready:'):
+            assert process.poll() is None, process.stderr.read()
+        assert link.is_symlink()
+        if stop == 'quit':
+            process.stdin.write('quit\n')
+            process.stdin.flush()
+        else:
+            process.send_signal(stop)
+        assert process.wait(timeout=10) == status
+        assert 'Traceback' not in process.stderr.read()
+        assert not link.exists() and not link.is_symlink()
+    finally:
+        if process.poll() is None:
+            process.kill()
+        process.communicate()

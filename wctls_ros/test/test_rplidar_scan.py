@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from wctls_ros.rplidar.laserscan import compensation_multiple, turn_to_scan
 from wctls_ros.rplidar.protocol import Samples
-from wctls_ros.rplidar.turns import Turn, TurnAssembler
+from wctls_ros.rplidar.turns import SampleClock, Turn, TurnAssembler
 
 
 def sllidar_reference(angle_deg, dist_mm, quality, angle_compensate, inverted, multiple):
@@ -168,3 +168,22 @@ def test_a_turn_that_never_ends_is_dropped_not_grown():
     angles = np.linspace(10.0, 20.0, 3000)
     assert assembler.push(stream(angles), np.zeros(3000)) == []
     assert assembler.dropped_turns >= 1
+
+
+@pytest.mark.parametrize('rate_error', [0.0, 0.005, -0.005])
+def test_the_sample_clock_holds_through_late_reads_and_follows_the_devices_rate(rate_error):
+    rng = np.random.default_rng(4)
+    nominal_s = 108e-6
+    clock = SampleClock(nominal_s)
+    true_s = nominal_s * (1.0 + rate_error)
+    # 15 s of reads every 50 ms, each of 12 capsules; the reads are 0-30 ms late (a loaded
+    # reader), 1 in 10 prompt.
+    for read in range(300):
+        slots = read * 480 + np.arange(480)
+        late = rng.uniform(0.0, 0.03) if read % 10 else rng.uniform(0.0, 2e-4)
+        clock.add(slots, 5.0 + (slots + 1) * true_s + late)
+        if read > 20:
+            # Stamps exact to the late reads' noise: a prompt read within the last 2 s holds.
+            assert clock.time_s(slots[0]) - (5.0 + (slots[0] + 1) * true_s) == pytest.approx(
+                0.0, abs=3e-4 if read > 220 or not rate_error else 0.011)
+    assert clock.period_s == pytest.approx(true_s, rel=1e-4)

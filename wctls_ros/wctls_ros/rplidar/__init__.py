@@ -5,6 +5,7 @@
 SLAMTEC RPLIDAR S1 support: a pure byte-protocol codec, transports, a driver and an emulator.
 
 ``protocol`` (bytes in, values out), ``turns`` and ``laserscan`` are pure and numpy only;
-``transport`` and ``driver`` do the I/O; ``rplidar_node`` is the ROS 2 node and ``emulator`` the
-``s1_emulator`` executable.
+``transport`` and ``driver`` do the I/O; ``rplidar_node`` is the ROS 2 node; ``emulator`` is an
+emulated S1 (device, server, child-process harness) that :mod:`wctls_ros.s1_emulator` runs on a
+simulated scene.
 """

@@ -24,11 +24,12 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from .capsules import DenseCapsuleDecoder
 from .protocol import (AnswerType, Command, CONF_COMMANDS_FIRMWARE, ConfType, decode_conf_value,
-                       DenseCapsuleDecoder, DESCRIPTOR_SIZE, DeviceHealth, DeviceInfo,
-                       encode_conf_request, encode_express_scan, encode_motor_speed,
-                       encode_request, find_descriptor, HealthStatus, ProtocolError, SampleRate,
-                       ScanMode, SendMode, StandardNodeDecoder)
+                       DESCRIPTOR_SIZE, DeviceHealth, DeviceInfo, encode_conf_request,
+                       encode_express_scan, encode_motor_speed, encode_request, find_descriptor,
+                       HealthStatus, ProtocolError, SampleRate, ScanMode, SendMode,
+                       StandardNodeDecoder, StreamCounts)
 from .transport import drain, LinkError, SerialLink, TcpLink
 from .turns import TurnAssembler
 
@@ -104,8 +105,11 @@ class DriverStatus:
     :ivar health: the last health answer
     :ivar mode: the scan mode streaming (or last streamed)
     :ivar turns: turns handed to the callback
-    :ivar checksum_errors: capsules dropped for a wrong checksum
-    :ivar discarded_bytes: bytes skipped while resynchronising or flushing
+    :ivar dropped_turns: turns not handed over: without a usable angle step or a turn boundary
+        in sight, or whose publishing failed
+    :ivar stream: what the scan stream decoders met, summed over sessions (frames, damage,
+        repairs, losses, rejected samples)
+    :ivar flushed_bytes: stale bytes discarded before a session or while the motor is stopped
     :ivar reconnects: sessions that ended in an error
     :ivar resets: RESETs sent after health errors
     """
@@ -117,8 +121,9 @@ class DriverStatus:
     health: Optional[DeviceHealth] = None
     mode: Optional[ScanMode] = None
     turns: int = 0
-    checksum_errors: int = 0
-    discarded_bytes: int = 0
+    dropped_turns: int = 0
+    stream: StreamCounts = StreamCounts()
+    flushed_bytes: int = 0
     reconnects: int = 0
     resets: int = 0
 
@@ -161,7 +166,12 @@ class RplidarDriver:
         self._log = logger
         self._link_factory = link_factory
         self._closing = threading.Event()
+        # The service threads and the reader both change the motor request: under this lock,
+        # with a count of the requests so a failing session can tell whether one came after it
+        # began (and must be honoured) or not.
+        self._motor_lock = threading.Lock()
         self._motor_on = True
+        self._motor_requests = 0
         self._lock = threading.Lock()
         self._status = DriverStatus()
         self._thread = threading.Thread(target=self._run, name='rplidar_reader', daemon=True)
@@ -187,7 +197,9 @@ class RplidarDriver:
 
         :param running: True to scan, False to stop scanning and idle the motor
         """
-        self._motor_on = running
+        with self._motor_lock:
+            self._motor_on = running
+            self._motor_requests += 1
 
     def status(self) -> DriverStatus:
         """
@@ -229,10 +241,12 @@ class RplidarDriver:
                 continue
             backoff_s = BACKOFF_FIRST_S
             self._update(link=link.name)
+            with self._motor_lock:
+                requests = self._motor_requests
             try:
                 self._serve(link)
             except GiveUp as error:
-                self._give_up(str(error))
+                self._give_up(str(error), requests)
             except (LinkError, DeviceError, ProtocolError) as error:
                 self._update(state=DriverState.CONNECTING, message=str(error), add_reconnects=1)
                 self._log.warning(f'{error}; reconnecting', throttle_duration_sec=LOG_THROTTLE_S)
@@ -245,9 +259,20 @@ class RplidarDriver:
             finally:
                 link.close()
 
-    def _give_up(self, reason: str):
-        """Report a failure retrying cannot fix; wait until the motor is requested again."""
-        self._motor_on = False
+    def _give_up(self, reason: str, requests_before: int):
+        """
+        Report a failure retrying cannot fix; wait until the motor is requested again.
+
+        A start_motor that arrived after the failing session began is not swallowed: the driver
+        tries once more instead of waiting.
+        """
+        with self._motor_lock:
+            requested_since = self._motor_requests != requests_before
+            if not requested_since:
+                self._motor_on = False
+        if requested_since and self._motor_on:
+            self._log.warning(f'{reason}; start_motor was requested meanwhile: retrying')
+            return
         self._update(state=DriverState.FAILED, message=reason)
         self._log.error(f'{reason} (call the start_motor service to retry)')
         while not self._closing.is_set() and not self._motor_on:
@@ -285,7 +310,7 @@ class RplidarDriver:
         """Stop any scan in progress and discard the bytes still arriving."""
         link.write(encode_request(Command.STOP))
         self._closing.wait(0.002)
-        self._update(add_discarded_bytes=drain(link, quiet_s=0.02, limit_s=0.5))
+        self._update(add_flushed_bytes=drain(link, quiet_s=0.02, limit_s=0.5))
 
     def _reset(self, link, health: DeviceHealth, attempt: int):
         """Send RESET after a health error and wait for the device to come back."""
@@ -375,7 +400,7 @@ class RplidarDriver:
         link.write(encode_motor_speed(0))
         self._update(state=DriverState.MOTOR_STOPPED, message='motor stopped on request')
         while not self._closing.is_set() and not self._motor_on:
-            self._update(add_discarded_bytes=len(link.read(STREAM_READ_TIMEOUT_S)))
+            self._update(add_flushed_bytes=len(link.read(STREAM_READ_TIMEOUT_S)))
 
     def _scan(self, link, device: DeviceInfo, mode: ScanMode):
         """Start ``mode`` and stream turns until closing or a motor stop request."""
@@ -384,7 +409,7 @@ class RplidarDriver:
             request, decoder = encode_request(Command.SCAN), StandardNodeDecoder()
         else:
             request = encode_express_scan(mode.mode_id)
-            decoder = DenseCapsuleDecoder(mode.us_per_sample, bridge_lost_successors=True)
+            decoder = DenseCapsuleDecoder(mode.us_per_sample, mode.max_distance_m)
         descriptor, data = self._request(link, request, mode.answer_type,
                                          f'{mode.name} scan descriptor')
         if descriptor.send_mode != SendMode.MULTIPLE or descriptor.length != decoder.FRAME_SIZE:
@@ -400,10 +425,11 @@ class RplidarDriver:
         """Decode the stream into turns until closing or a motor stop request."""
         offsets, times, pending = [], [], []
         stream_end = 0
-        seen = (0, 0)
+        earlier = self.status().stream
+        seen = (StreamCounts(), 0)
         frame_s = decoder.SAMPLES_PER_FRAME * mode.us_per_sample * 1e-6
         now = time.monotonic()
-        last_bytes_s = last_samples_s = next_decode_s = now
+        last_bytes_s = last_samples_s = next_decode_s = warn_s = now
         while not self._closing.is_set() and self._motor_on:
             if data:
                 stream_end += len(data)
@@ -422,15 +448,21 @@ class RplidarDriver:
                     chunk = np.minimum(np.searchsorted(offsets, samples.frame_end), len(times) - 1)
                     for turn in assembler.push(samples, np.asarray(times)[chunk]):
                         self._hand_over(turn, mode)
-                errors = (decoder.checksum_errors, decoder.discarded_bytes)
-                if errors != seen:
-                    self._update(add_checksum_errors=errors[0] - seen[0],
-                                 add_discarded_bytes=errors[1] - seen[1])
-                    self._log.warning(f'corrupted stream: {decoder.checksum_errors} checksum '
-                                      f'errors, {decoder.discarded_bytes} bytes skipped in this '
-                                      'session (check the cable and the USB power)',
-                                      throttle_duration_sec=LOG_THROTTLE_S)
-                    seen = errors
+                counts = (decoder.counts, assembler.dropped_turns)
+                if counts != seen:
+                    self._update(stream=earlier + counts[0],
+                                 add_dropped_turns=counts[1] - seen[1])
+                    damage = counts[0].damaged_frames + counts[0].resyncs
+                    # Throttled here: an rclpy log call inspects the caller's source even when
+                    # its own throttle then drops the message, at 0.3 ms a call.
+                    if damage > seen[0].damaged_frames + seen[0].resyncs and now >= warn_s:
+                        warn_s = now + LOG_THROTTLE_S
+                        self._log.warning(
+                            f'damaged stream: {counts[0].damaged_frames} of '
+                            f'{counts[0].frames} frames damaged, {counts[0].resyncs} resyncs, '
+                            f'{counts[0].rejected_samples} samples rejected in this session '
+                            '(check the cable and the USB power)')
+                    seen = counts
                 eta_s = assembler.turn_end_eta_s()
             if eta_s is not None:
                 self._closing.wait(max(min(now + STREAM_READ_PERIOD_S,
@@ -452,5 +484,6 @@ class RplidarDriver:
         except Exception as error:  # the callback must not end the reader
             self._log.error(f'publishing a turn failed: {type(error).__name__}: {error}',
                             throttle_duration_sec=LOG_THROTTLE_S)
+            self._update(add_dropped_turns=1)
             return
         self._update(add_turns=1)

@@ -7,15 +7,16 @@ The RPLIDAR S1 byte protocol: requests, answers and the two scan stream formats 
 Everything is little-endian. A request is ``A5 cmd`` or, for cmd >= 0x80,
 ``A5 cmd size payload checksum`` (XOR of every preceding byte). An answer starts with a 7-byte
 descriptor ``A5 5A u32(length | send_mode << 30) type``. Scan answers are endless streams of
-5-byte standard nodes (type 0x81) or 84-byte dense capsules (type 0x85); the incremental
-decoders below take arbitrary chunks and resynchronise on garbage exactly as SLAMTEC's SDK does:
-byte-wise sync/check bits for nodes, sync nibbles plus a checksum for capsules.
+5-byte standard nodes (type 0x81) or 84-byte dense capsules (type 0x85). The incremental
+node decoder below takes arbitrary chunks and resynchronises on garbage exactly as SLAMTEC's SDK
+does (byte-wise sync and check bits); the capsule decoder, which recovers far more of a damaged
+stream than the SDK, is :mod:`wctls_ros.rplidar.capsules`.
 
 Angles are the device's raw angles in degrees, clockwise seen from above, 0 = device front;
 distances are in millimetres with 0 meaning no return.
 """
 
-from dataclasses import astuple, dataclass
+from dataclasses import astuple, dataclass, fields
 import enum
 import functools
 import operator
@@ -556,11 +557,6 @@ def encode_standard_nodes(angle_q6: np.ndarray, distance_q2: np.ndarray, quality
     return nodes.tobytes()
 
 
-def _xor_rows(rows: np.ndarray) -> np.ndarray:
-    """Return the XOR of each row of a 2-D uint8 array."""
-    return np.bitwise_xor.reduce(rows, axis=1)
-
-
 def encode_dense_capsules(start_q6: np.ndarray, distance_mm: np.ndarray,
                           start_flag: np.ndarray) -> bytes:
     """
@@ -576,41 +572,80 @@ def encode_dense_capsules(start_q6: np.ndarray, distance_mm: np.ndarray,
     capsules['start_angle'] = np.asarray(start_q6, np.uint16) | flags
     capsules['distance_mm'] = distance_mm
     raw = capsules.view(np.uint8).reshape(len(flags), CAPSULE_SIZE)
-    sums = _xor_rows(raw[:, 2:])
+    sums = np.bitwise_xor.reduce(raw[:, 2:], axis=1)
     capsules['sync1'] = 0xA0 | (sums & 0x0F)
     capsules['sync2'] = 0x50 | (sums >> 4)
     return capsules.tobytes()
 
 
-def _byte_table(predicate) -> bytes:
-    """Tabulate a vectorised predicate over all 256 byte values (1 = true)."""
-    return bytes(predicate(np.arange(256, dtype=np.uint8)).astype(np.uint8))
+def _byte_table(predicate) -> np.ndarray:
+    """Tabulate a vectorised predicate over all 256 byte values."""
+    return predicate(np.arange(256, dtype=np.uint8))
 
 
-class _FrameStreamDecoder:
+@dataclass(frozen=True)
+class StreamCounts:
     """
-    Incremental decoder of fixed-size frames with the SDK's byte-wise resynchronisation.
+    What a scan stream decoder has met so far.
 
-    The SDK checks byte 0 of a frame (skip it when wrong), then byte 1 (skip both when wrong),
-    then collects the rest. Aligned frames are checked and decoded vectorised; only garbage takes
-    the byte loop. Subclasses give the two header predicates and the frame decoding.
-
-    :ivar frames: frames decoded
-    :ivar discarded_bytes: bytes skipped while resynchronising
-    :ivar checksum_errors: frames dropped for a wrong checksum
+    :ivar frames: frames (nodes or capsules) received, decoded or not
+    :ivar damaged_frames: capsules that failed their checksum or lost or gained bytes
+    :ivar realigned_frames: capsules whose samples were found again after lost or gained bytes
+    :ivar lost_frames: frames that yielded no samples
+    :ivar resyncs: times sync was lost and searched for byte by byte
+    :ivar discarded_bytes: bytes skipped while searching
+    :ivar samples: samples decoded
+    :ivar rejected_samples: decoded samples published as no return: implausible distances and
+        those a lost byte made unreadable
+    :ivar replaced_angles: capsules whose start angle was out of sequence (the predicted one
+        was used)
     """
 
-    FRAME_SIZE = 0
+    frames: int = 0
+    damaged_frames: int = 0
+    realigned_frames: int = 0
+    lost_frames: int = 0
+    resyncs: int = 0
+    discarded_bytes: int = 0
+    samples: int = 0
+    rejected_samples: int = 0
+    replaced_angles: int = 0
+
+    def __add__(self, other: 'StreamCounts') -> 'StreamCounts':
+        return StreamCounts(*(getattr(self, f) + getattr(other, f) for f in _COUNT_FIELDS))
+
+    def __sub__(self, other: 'StreamCounts') -> 'StreamCounts':
+        return StreamCounts(*(getattr(self, f) - getattr(other, f) for f in _COUNT_FIELDS))
+
+
+_COUNT_FIELDS = tuple(f.name for f in fields(StreamCounts))
+
+
+class StandardNodeDecoder:
+    """
+    Incremental decoder of 5-byte standard nodes (answer type 0x81), resynchronising as the SDK.
+
+    byte 0: bit 0 S, bit 1 must equal not S, bits 2-7 quality; byte 1 bit 0 check bit = 1;
+    u16 at 1-2 >> 1 = angle in 1/64 degree; u16 at 3-4 = distance in 1/4 mm. The SDK checks
+    byte 0 of a node (skips it when wrong), then byte 1 (skips both when wrong), then takes the
+    rest. Aligned nodes are checked and decoded vectorised; only garbage takes the byte loop.
+    """
+
+    FRAME_SIZE = NODE_SIZE
     SAMPLES_PER_FRAME = 1
-    _HEADER_OK = (b'', b'')
+    _FIRST_OK = _byte_table(lambda b: ((b >> 1) ^ b) & 1 == 1)
+    _SECOND_OK = _byte_table(lambda b: b & 1 == 1)
 
     def __init__(self):
         self._pending = b''
         self._offset = 0
-        self._header_ok = tuple(np.frombuffer(t, np.uint8).astype(bool) for t in self._HEADER_OK)
-        self.frames = 0
-        self.discarded_bytes = 0
-        self.checksum_errors = 0
+        self._frames = self._resyncs = self._discarded = 0
+
+    @property
+    def counts(self) -> StreamCounts:
+        """Return what the decoder has met so far."""
+        return StreamCounts(frames=self._frames, samples=self._frames, resyncs=self._resyncs,
+                            discarded_bytes=self._discarded)
 
     def feed(self, data: bytes) -> Samples:
         """
@@ -620,72 +655,41 @@ class _FrameStreamDecoder:
         :return: the samples decoded, in stream order
         """
         buffer = self._pending + bytes(data)
-        size = self.FRAME_SIZE
         parts = []
         pos = 0
-        while len(buffer) - pos >= size:
-            count = (len(buffer) - pos) // size
-            raw = np.frombuffer(buffer, np.uint8, count * size, pos).reshape(count, size)
-            header_bad = ~(self._header_ok[0][raw[:, 0]] & self._header_ok[1][raw[:, 1]])
-            bad = np.flatnonzero(header_bad | self._payload_bad(raw))
+        while len(buffer) - pos >= NODE_SIZE:
+            count = (len(buffer) - pos) // NODE_SIZE
+            raw = np.frombuffer(buffer, np.uint8, count * NODE_SIZE, pos).reshape(count, NODE_SIZE)
+            bad = np.flatnonzero(~(self._FIRST_OK[raw[:, 0]] & self._SECOND_OK[raw[:, 1]]))
             good = count if bad.size == 0 else int(bad[0])
             if good:
-                ends = self._offset + pos + size * np.arange(1, good + 1, dtype=np.int64)
+                ends = self._offset + pos + NODE_SIZE * np.arange(1, good + 1, dtype=np.int64)
                 parts.append(self._decode(raw[:good], ends))
-                self.frames += good
-                pos += good * size
+                self._frames += good
+                pos += good * NODE_SIZE
             if good == count:
                 break
-            parts.append(self._desync())
-            if header_bad[good]:
-                resynced = self._resync(buffer, pos)
-                self.discarded_bytes += resynced - pos
-                pos = resynced
-            else:
-                self.checksum_errors += 1
-                self.discarded_bytes += size
-                pos += size
+            resynced = self._resync(buffer, pos)
+            self._resyncs += 1
+            self._discarded += resynced - pos
+            pos = resynced
         self._pending = buffer[pos:]
         self._offset += pos
         return Samples.concat(parts)
 
     def _resync(self, buffer: bytes, pos: int) -> int:
-        """Skip bytes as the SDK does until a frame header may start; return that position."""
-        first_ok, second_ok = self._HEADER_OK
+        """Skip bytes as the SDK does until a node may start; return that position."""
         while pos < len(buffer):
-            if not first_ok[buffer[pos]]:
+            if not self._FIRST_OK[buffer[pos]]:
                 pos += 1
-            elif pos + 1 == len(buffer) or second_ok[buffer[pos + 1]]:
+            elif pos + 1 == len(buffer) or self._SECOND_OK[buffer[pos + 1]]:
                 return pos
             else:
                 pos += 2
         return pos
 
-    def _payload_bad(self, raw: np.ndarray) -> np.ndarray:
-        """Return which header-aligned frames fail the payload check (none by default)."""
-        return np.zeros(len(raw), dtype=bool)
-
-    def _desync(self) -> Samples:
-        """React to skipped bytes; return samples this releases (none by default)."""
-        return Samples.concat([])
-
-    def _decode(self, raw: np.ndarray, ends: np.ndarray) -> Samples:
-        raise NotImplementedError
-
-
-class StandardNodeDecoder(_FrameStreamDecoder):
-    """
-    Decoder of 5-byte standard nodes (answer type 0x81).
-
-    byte 0: bit 0 S, bit 1 must equal not S, bits 2-7 quality; byte 1 bit 0 check bit = 1;
-    u16 at 1-2 >> 1 = angle in 1/64 degree; u16 at 3-4 = distance in 1/4 mm.
-    """
-
-    FRAME_SIZE = NODE_SIZE
-    _HEADER_OK = (_byte_table(lambda b: ((b >> 1) ^ b) & 1 == 1),
-                  _byte_table(lambda b: b & 1 == 1))
-
-    def _decode(self, raw: np.ndarray, ends: np.ndarray) -> Samples:
+    @staticmethod
+    def _decode(raw: np.ndarray, ends: np.ndarray) -> Samples:
         nodes = raw.reshape(-1).view(_NODE_DTYPE)
         sync_quality = nodes['sync_quality']
         return Samples(angle_deg=(nodes['angle_check'] >> 1) / 64.0,
@@ -695,89 +699,3 @@ class StandardNodeDecoder(_FrameStreamDecoder):
                        frame_end=ends,
                        samples_after=np.zeros(len(ends), np.int64),
                        slot=ends // NODE_SIZE - 1)
-
-
-class DenseCapsuleDecoder(_FrameStreamDecoder):
-    """
-    Decoder of 84-byte dense capsules (answer type 0x85, the S1's DenseBoost).
-
-    A capsule is decoded when the next one arrives: with ``diff`` the start angle difference
-    (+360 degrees on a wrap), sample k in 0..39 lies at ``start + k * diff / 40``. As in the SDK a
-    capsule is dropped when ``diff`` exceeds the largest plausible sweep or when the next capsule
-    carries the S flag (a stream restart). The SDK also drops it when bytes after it had to be
-    skipped (a corrupted successor): with ``bridge_lost_successors`` such a capsule is decoded
-    with the last measured ``diff`` instead, which more than doubles the samples kept on a link
-    that corrupts 1% of the bytes; without it the output is exactly the SDK's.
-
-    :param us_per_sample: the scan mode's microseconds per sample (sets the sweep limit)
-    :param bridge_lost_successors: decode a capsule whose successor was lost, with the last diff
-    """
-
-    FRAME_SIZE = CAPSULE_SIZE
-    SAMPLES_PER_FRAME = SAMPLES_PER_CAPSULE
-    _HEADER_OK = (_byte_table(lambda b: b >> 4 == 0xA), _byte_table(lambda b: b >> 4 == 0x5))
-    _OFFSETS = np.arange(SAMPLES_PER_CAPSULE) / SAMPLES_PER_CAPSULE
-
-    def __init__(self, us_per_sample: float, bridge_lost_successors: bool = False):
-        super().__init__()
-        # The SDK's integer formula: the sweep of 40 samples at 100 Hz, in whole degrees.
-        self._max_diff_q8 = (360 * 100 * SAMPLES_PER_CAPSULE
-                             // (1000000 // max(int(us_per_sample), 1))) << 8
-        self._bridge = bridge_lost_successors
-        self._previous = None    # (start_q8, distances (40,), frame end) of the cached capsule
-        self._last_diff_q8 = None
-        self._last_angle = None
-        self.bridged = 0
-
-    def _payload_bad(self, raw: np.ndarray) -> np.ndarray:
-        received = (raw[:, 0] & 0x0F) | (raw[:, 1] << 4)
-        return received != _xor_rows(raw[:, 2:])
-
-    def _desync(self) -> Samples:
-        previous, self._previous = self._previous, None
-        if not (self._bridge and previous is not None and self._last_diff_q8 is not None):
-            return Samples.concat([])
-        self.bridged += 1
-        start, distances, end = previous
-        return self._samples(np.array([start]), np.array([self._last_diff_q8]), distances[None],
-                             np.array([end]))
-
-    def _decode(self, raw: np.ndarray, ends: np.ndarray) -> Samples:
-        capsules = raw.reshape(-1).view(_CAPSULE_DTYPE)
-        start_field = capsules['start_angle']
-        starts = (start_field & 0x7FFF).astype(np.int64) << 2
-        restarts = (start_field >> 15).astype(bool)
-        distances = capsules['distance_mm']
-        if self._previous is not None:
-            starts = np.concatenate([[self._previous[0]], starts])
-            distances = np.concatenate([self._previous[1][None], distances])
-            ends = np.concatenate([[self._previous[2]], ends])
-            restarts = np.concatenate([[False], restarts])
-        self._previous = (starts[-1], distances[-1], ends[-1])
-        diff = starts[1:] - starts[:-1]
-        diff[diff < 0] += FULL_TURN_Q6 << 2
-        keep = ~restarts[1:] & (diff <= self._max_diff_q8)
-        if keep.any():
-            self._last_diff_q8 = diff[keep][-1]
-        return self._samples(starts[:-1][keep], diff[keep], distances[:-1][keep],
-                             ends[:-1][keep])
-
-    def _samples(self, starts_q8: np.ndarray, diffs_q8: np.ndarray, distances: np.ndarray,
-                 ends: np.ndarray) -> Samples:
-        """Lay out the samples of capsules given their start angles and sweeps."""
-        angles_q8 = starts_q8[:, None] + diffs_q8[:, None] * self._OFFSETS
-        angle = np.mod(angles_q8.reshape(-1) / 256.0, 360.0)
-        distance = distances.reshape(-1).astype(np.float64)
-        previous = np.concatenate([[-np.inf if self._last_angle is None else self._last_angle],
-                                   angle[:-1]])
-        if angle.size:
-            self._last_angle = angle[-1]
-        frame_end = np.repeat(ends, SAMPLES_PER_CAPSULE)
-        position = np.arange(frame_end.size) % SAMPLES_PER_CAPSULE
-        return Samples(angle_deg=angle,
-                       distance_mm=distance,
-                       quality=np.where(distance > 0, DENSE_RETURN_QUALITY, 0).astype(np.uint8),
-                       start=angle < previous,
-                       frame_end=frame_end,
-                       samples_after=SAMPLES_PER_CAPSULE - 1 - position,
-                       slot=(frame_end // CAPSULE_SIZE - 1) * SAMPLES_PER_CAPSULE + position)

@@ -20,20 +20,23 @@ import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.time import Time
 from sensor_msgs.msg import LaserScan
 from std_srvs.srv import Empty
 
 from .driver import DriverConfig, DriverState, RplidarDriver
 from .laserscan import compensation_multiple, RANGE_MIN_M, turn_to_scan
+from .protocol import HealthStatus, StreamCounts
 from ..node_main import declare_parameters, run_node
 from ..params import RPLIDAR_NODE
 
 SCAN_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                       reliability=ReliabilityPolicy.RELIABLE)
 DIAGNOSTICS_PERIOD_S = 1.0
+# A report period with this share of frames damaged or lost, or of samples rejected, is WARN.
+DAMAGED_LINK_SHARE = 0.01
 _LATENCY_WINDOW = 1000
 _LEVELS = {DriverState.SCANNING: DiagnosticStatus.OK,
            DriverState.MOTOR_STOPPED: DiagnosticStatus.OK,
@@ -66,7 +69,7 @@ class RplidarNode(Node):
             health_reset_attempts=values['health_reset_attempts'])
         self._latency_lock = threading.Lock()
         self._latencies_s = []
-        self._turns_at_last_report = (0, time.monotonic())
+        self._last_report = (0, StreamCounts(), time.monotonic())
         self._scan_pub = self.create_publisher(LaserScan, 'scan', SCAN_QOS)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_service(Empty, 'start_motor', self._start_motor)
@@ -100,8 +103,8 @@ class RplidarNode(Node):
                             compensation_multiple(mode.us_per_sample, self._scan_frequency_hz))
         msg = LaserScan()
         msg.header.frame_id = self._frame_id
-        age = Duration(nanoseconds=int((time.monotonic() - turn.first_sample_s) * 1e9))
-        msg.header.stamp = (self.get_clock().now() - age).to_msg()
+        msg.header.stamp = Time(nanoseconds=_ros_minus_monotonic_ns(self.get_clock())
+                                + int(turn.first_sample_s * 1e9)).to_msg()
         msg.angle_min = scan.angle_min
         msg.angle_max = scan.angle_max
         msg.angle_increment = scan.angle_increment
@@ -130,21 +133,49 @@ class RplidarNode(Node):
     def _publish_diagnostics(self):
         status = self._driver.status()
         now = time.monotonic()
-        turns, since = self._turns_at_last_report
+        turns, stream, since = self._last_report
         rate_hz = (status.turns - turns) / max(now - since, 1e-9)
-        self._turns_at_last_report = (status.turns, now)
+        recent = status.stream - stream
+        self._last_report = (status.turns, status.stream, now)
         latencies = self.publish_latencies_s()[-100:]
         level = _LEVELS[status.state]
         message = status.message
         if status.state == DriverState.SCANNING and rate_hz == 0.0:
             level, message = DiagnosticStatus.WARN, f'{message}, but no complete turn lately'
+        if status.health is not None and status.health.status == HealthStatus.WARNING:
+            # The S1 scans on with a warning, but it is a warning: never report it as OK.
+            level = max(level, DiagnosticStatus.WARN)
+            message = (f'{message}; the device reports a health warning (code '
+                       f'0x{status.health.error_code:04X})')
+        damaged = _share(recent.damaged_frames + recent.lost_frames, recent.frames)
+        rejected = _share(recent.rejected_samples, recent.samples)
+        if recent.resyncs or max(damaged, rejected) >= DAMAGED_LINK_SHARE:
+            level = max(level, DiagnosticStatus.WARN)
+            message = (f'{message}; damaged link: {100 * damaged:.1f} % of the frames damaged '
+                       f'or lost, {100 * rejected:.1f} % of the samples rejected, '
+                       f'{recent.resyncs} resyncs in the last {DIAGNOSTICS_PERIOD_S:g} s '
+                       '(check the cable and the USB power)')
         values = {
             'state': status.state.value,
             'link': status.link,
             'scan rate (Hz)': f'{rate_hz:.2f}',
             'turns published': str(status.turns),
-            'checksum errors': str(status.checksum_errors),
-            'bytes discarded': str(status.discarded_bytes),
+            'turns dropped': str(status.dropped_turns),
+            # Rates over the last report period, then totals since the start.
+            'frames damaged or lost (%)': f'{100 * damaged:.2f}',
+            'frames realigned (%)': f'{100 * _share(recent.realigned_frames, recent.frames):.2f}',
+            'samples rejected (%)': f'{100 * rejected:.2f}',
+            'start angles replaced (%)': (
+                f'{100 * _share(recent.replaced_angles, recent.frames):.2f}'),
+            'resyncs': str(status.stream.resyncs),
+            'frames': str(status.stream.frames),
+            'frames damaged': str(status.stream.damaged_frames),
+            'frames realigned': str(status.stream.realigned_frames),
+            'frames lost': str(status.stream.lost_frames),
+            'samples': str(status.stream.samples),
+            'samples rejected': str(status.stream.rejected_samples),
+            'start angles replaced': str(status.stream.replaced_angles),
+            'bytes discarded': str(status.stream.discarded_bytes + status.flushed_bytes),
             'reconnects': str(status.reconnects),
             'health resets': str(status.resets),
             'publish latency median (ms)': (f'{1e3 * statistics.median(latencies):.2f}'
@@ -165,6 +196,29 @@ class RplidarNode(Node):
                          else status.link),
             values=[KeyValue(key=k, value=v) for k, v in values.items()])]
         self._diagnostics_pub.publish(array_msg)
+
+
+def _ros_minus_monotonic_ns(clock) -> int:
+    """
+    Return the ROS clock minus the monotonic clock, from the closest of three pairs of readings.
+
+    A reading interrupted between the two clocks (a loaded machine) would shift every stamp.
+
+    :param clock: the node's ROS clock
+    :return: ns
+    """
+    pairs = []
+    for _ in range(3):
+        before = time.monotonic_ns()
+        now = clock.now().nanoseconds
+        after = time.monotonic_ns()
+        pairs.append((after - before, now - (before + after) // 2))
+    return min(pairs)[1]
+
+
+def _share(part: int, whole: int) -> float:
+    """Return part / whole, 0 for an empty whole."""
+    return part / whole if whole else 0.0
 
 
 def main(args=None) -> int:

@@ -12,14 +12,14 @@ untouched by timing jitter) also count the wraps between them: a gap in the stre
 turn (a damaged link) cannot merge two turns either. The first, partial turn after a (re)start
 is dropped.
 
-Timing uses the device's own sample clock: with ``us`` the mode's microseconds per sample and
+Timing uses the device's own sample clock (:class:`SampleClock`): a turn's first sample is
+stamped by its place in the stream, so consecutive turns lie exactly their samples apart and
+reader-thread delays, which a loaded machine makes long, do not leak into the stamps. With
 ``step`` the median angle between consecutive samples, the rotation period is
-``360 / step * us``. Each sample's measurement time is bounded above by its frame's receive time
-minus the link's transmission time and the samples measured after it in that frame; the turn's
-first-sample time is the tightest of these bounds carried back along the turn at the measured
-rotation rate, so reader-thread delays do not leak into the stamp.
+``360 / step`` sample periods.
 """
 
+import collections
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,6 +27,68 @@ import numpy as np
 from .protocol import Samples
 
 _MISSED_START_DROP_DEG = 270.0
+
+
+class SampleClock:
+    """
+    The device's sample clock, read on the host's monotonic clock.
+
+    The sample in stream slot n is measured (until) ``origin + n * period``. A sample's frame
+    arrives after it was measured, by at least the link's transmission time and the samples
+    measured after it in the frame, so each receive time bounds the origin from above. The
+    origin is the lowest bound of the last ``WINDOW_S``: a few promptly read frames pin it down
+    however late the others were read, and it follows a restart of the device's clock after at
+    most that long. The period starts at the mode's nominal one and follows the device's own
+    rate (its crystal is not the host's) from the lowest bounds ``SPAN_S`` apart.
+
+    :param sample_s: the scan mode's nominal sample period, s
+    """
+
+    WINDOW_S = 2.0
+    SPAN_S = 10.0
+    MAX_RATE_ERROR = 0.02
+
+    def __init__(self, sample_s: float):
+        self._nominal_s = sample_s
+        self.period_s = sample_s
+        # The tightest bound of each batch of samples: (slot, bound, s).
+        self._bounds = collections.deque()
+
+    def add(self, slots: np.ndarray, bounds_s: np.ndarray):
+        """
+        Take the upper bounds of the measurement times of a batch of samples.
+
+        :param slots: the samples' stream slots
+        :param bounds_s: their measurement time bounds, monotonic clock, s
+        """
+        tightest = int(np.argmin(bounds_s - slots * self.period_s))
+        self._bounds.append((int(slots[tightest]), float(bounds_s[tightest])))
+        while self._bounds[-1][1] - self._bounds[0][1] > self.SPAN_S:
+            self._bounds.popleft()
+        slots, bounds_s = np.array(self._bounds).T
+        if bounds_s[-1] - bounds_s[0] < 0.5 * self.SPAN_S:
+            return
+        # The lowest bounds of the first and the last second of the span give the device's rate
+        # (lowest as seen at the rate estimated so far, which a second of drift would bias).
+        offsets = bounds_s - slots * self.period_s
+        early = np.flatnonzero(bounds_s < bounds_s[0] + 1.0)
+        late = np.flatnonzero(bounds_s > bounds_s[-1] - 1.0)
+        first, last = early[np.argmin(offsets[early])], late[np.argmin(offsets[late])]
+        rate = (bounds_s[last] - bounds_s[first]) / (slots[last] - slots[first])
+        self.period_s = float(np.clip(rate, self._nominal_s * (1.0 - self.MAX_RATE_ERROR),
+                                      self._nominal_s * (1.0 + self.MAX_RATE_ERROR)))
+
+    def time_s(self, slot: int) -> float:
+        """
+        Return when the sample in a slot was measured.
+
+        :param slot: the sample's stream slot (after at least one :meth:`add`)
+        :return: monotonic time, s
+        """
+        slots, bounds_s = np.array(self._bounds).T
+        recent = bounds_s >= bounds_s[-1] - self.WINDOW_S
+        return float(np.min(bounds_s[recent] - slots[recent] * self.period_s)
+                     + slot * self.period_s)
 
 
 @dataclass(frozen=True)
@@ -62,6 +124,7 @@ class TurnAssembler:
     def __init__(self, us_per_sample: float, frame_transmission_s: float,
                  max_samples: int = 8192):
         self._sample_s = us_per_sample * 1e-6
+        self._clock = SampleClock(self._sample_s)
         self._transmission_s = frame_transmission_s
         self._max_samples = max_samples
         self._parts = []
@@ -106,7 +169,8 @@ class TurnAssembler:
             boundary |= wraps >= 1.0 + (drop > 0.0)
         self._last_angle = angle[-1]
         self._last_slot = samples.slot[-1]
-        columns = (angle, samples.distance_mm, samples.quality, measured_s, received_s)
+        self._clock.add(samples.slot, measured_s)
+        columns = (angle, samples.distance_mm, samples.quality, samples.slot, received_s)
         turns = []
         begin = 0
         for cut in np.flatnonzero(boundary):
@@ -134,16 +198,15 @@ class TurnAssembler:
         self._parts, self._size, self._complete = [], 0, True
         if not complete or not parts:
             return None
-        angle, distance, quality, measured_s, received_s = (
-            np.concatenate(c) for c in zip(*parts))
+        angle, distance, quality, slot, received_s = (np.concatenate(c) for c in zip(*parts))
         steps = np.diff(angle)
         steps = steps[steps > 0.0]
         if not steps.size:
             self.dropped_turns += 1
             return None
         self._step_deg = step_deg = float(np.median(steps))
-        period_s = 360.0 / step_deg * self._sample_s
-        first_sample_s = float(np.min(measured_s - (angle - angle[0]) / step_deg * self._sample_s))
+        period_s = 360.0 / step_deg * self._clock.period_s
+        first_sample_s = self._clock.time_s(int(slot[0]))
         self._turn_end_s = first_sample_s + (2.0 - angle[0] / 360.0) * period_s
         return Turn(angle_deg=angle, distance_mm=distance, quality=quality,
                     first_sample_s=first_sample_s, period_s=period_s,

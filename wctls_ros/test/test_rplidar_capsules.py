@@ -1,0 +1,221 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""The dense capsule stream: the SDK's output on intact streams, far more of a damaged one."""
+
+import struct
+
+import numpy as np
+import pytest
+from rplidar_testing import denseboost_stream
+from test_rplidar_protocol import damaged, feed_in_chunks
+from wctls_ros.rplidar.capsules import DenseCapsuleDecoder
+from wctls_ros.rplidar.protocol import encode_dense_capsules, Samples
+
+STEP_Q6 = 995                    # the emulator's capsule sweep at 10 Hz, 1/64 degree
+
+
+def sdk_capsule_reference(data, us_per_sample=108):
+    """Port of the SDK's UnpackerHandler_DenseCapsuleNode::onData, one byte at a time."""
+    out, buffer, previous = [], [], None
+    limit_q8 = (360 * 100 * 40 // (1000000 // us_per_sample)) << 8
+    for byte in data:
+        if len(buffer) == 0 and byte >> 4 != 0xA:
+            previous = None
+            continue
+        if len(buffer) == 1 and byte >> 4 != 0x5:
+            buffer, previous = [], None
+            continue
+        buffer.append(byte)
+        if len(buffer) < 84:
+            continue
+        capsule, buffer = bytes(buffer), []
+        checksum = 0
+        for value in capsule[2:]:
+            checksum ^= value
+        if checksum != (capsule[0] & 0xF) | ((capsule[1] << 4) & 0xFF):
+            previous = None
+            continue
+        start_field, *distances = struct.unpack('<41H', capsule[2:])
+        if start_field & 0x8000:
+            previous = None
+        start_q8 = (start_field & 0x7FFF) << 2
+        if previous is not None:
+            diff = start_q8 - previous[0] + ((360 << 8) if previous[0] > start_q8 else 0)
+            if diff <= limit_q8:
+                out += [(((previous[0] + k * diff / 40) / 256) % 360, previous[1][k])
+                        for k in range(40)]
+        previous = (start_q8, distances)
+    return out
+
+
+def decode(data, rng=None):
+    """Decode a whole stream (in random chunks when given a generator); return samples, counts."""
+    decoder = DenseCapsuleDecoder(108)
+    if rng is None:
+        return decoder.feed(data), decoder.counts
+    return Samples.concat(feed_in_chunks(decoder, data, rng)), decoder.counts
+
+
+def smooth_capsules(count, first_q6=0):
+    """Return capsules of a smooth wall, their start angles and distances (mm)."""
+    starts = (first_q6 + STEP_Q6 * np.arange(count)) % 23040
+    distances = np.rint(2000 + 300 * np.sin(np.arange(count * 40) / 60.0)).reshape(count, 40)
+    return encode_dense_capsules(starts, distances, np.arange(count) == 0), starts, distances
+
+
+def test_dense_capsules_decode_at_interpolated_angles_across_the_wrap():
+    starts_q6 = np.array([22000, 22995, 950, 1945])       # 995 q6 apart, wrapping after 360 deg
+    distances = np.arange(160).reshape(4, 40) + 500
+    samples, _ = decode(encode_dense_capsules(starts_q6, distances, [True, False, False, False]))
+    # Three capsules decode (the last waits for its successor), each at start + k * 995 / 40.
+    expected = (starts_q6[:3, None] + 995 * np.arange(40) / 40) / 64.0 % 360.0
+    np.testing.assert_allclose(samples.angle_deg, expected.ravel(), atol=1e-12)
+    np.testing.assert_array_equal(samples.distance_mm, distances[:3].ravel())
+    assert set(samples.quality.tolist()) == {47}
+    assert samples.frame_end.tolist() == np.repeat([84, 168, 252], 40).tolist()
+    assert samples.samples_after.tolist()[:41] == list(range(39, -1, -1)) + [39]
+    assert samples.slot.tolist() == list(range(120))
+    # The turn starts at the first sample past 360 degrees, and only there.
+    assert np.flatnonzero(samples.start).tolist() == [int(np.argmin(expected.ravel()))]
+
+
+def test_dense_capsules_far_apart_or_restarted_are_dropped_as_by_the_sdk():
+    decoder = DenseCapsuleDecoder(108)
+    # 160 deg between starts exceeds the SDK's 155-degree limit at 108 us/sample.
+    far = encode_dense_capsules([0, 160 * 64, 160 * 64 + 995], np.ones((3, 40)), [0, 0, 0])
+    assert len(decoder.feed(far)) == 40
+    restart = encode_dense_capsules([2000, 2995], np.ones((2, 40)), [True, False])
+    assert len(decoder.feed(restart)) == 40        # the capsule before the S flag is dropped
+
+
+@pytest.mark.parametrize('plan', ['environment_a', 'environment_b'])
+def test_an_intact_stream_decodes_as_the_sdk_does_and_nothing_is_rejected(plan):
+    data = denseboost_stream(plan, seconds=5.0, noisy=True)
+    samples, counts = decode(data, np.random.default_rng(1))
+    reference = sdk_capsule_reference(data)
+    assert len(samples) == len(reference) > 5 * 9000
+    np.testing.assert_allclose(np.c_[samples.angle_deg, samples.distance_mm],
+                               np.array(reference), atol=1e-9)
+    assert counts.frames == len(data) // 84 - 1 and counts.samples == len(samples)
+    assert (counts.damaged_frames, counts.lost_frames, counts.rejected_samples,
+            counts.replaced_angles, counts.resyncs, counts.discarded_bytes) == (0,) * 6
+
+
+@pytest.mark.parametrize('plan', ['environment_a', 'environment_b'])
+def test_checked_as_on_a_damaged_link_real_geometry_is_rarely_rejected(plan):
+    # Every checksum nibble damaged, nothing else: each capsule fails its checksum, so every
+    # real sample goes through the plausibility check, and each rejection is real geometry
+    # lost (thin panels seen end on, noisy edges). Beams are filled by neighbouring samples.
+    intact = denseboost_stream(plan, seconds=5.0, noisy=True)
+    data = np.frombuffer(intact, np.uint8).copy()
+    data[::84] ^= 0x01
+    samples, counts = decode(data.tobytes())
+    # The first capsule, damaged with nothing before it, has no believable start angle.
+    reference = np.array(sdk_capsule_reference(intact))[40:]
+    assert counts.damaged_frames == counts.frames and counts.lost_frames == 1
+    assert counts.replaced_angles == 0 and counts.rejected_samples <= 0.015 * counts.samples
+    kept = samples.distance_mm > 0
+    np.testing.assert_allclose(samples.angle_deg, reference[:, 0], atol=1e-9)
+    np.testing.assert_array_equal(samples.distance_mm[kept], reference[kept, 1])
+
+
+@pytest.mark.parametrize('corrupt, drop, right_share', [(0.01, 0.0, 0.96), (0.05, 0.0, 0.85),
+                                                        (0.0, 0.01, 0.96), (0.0, 0.05, 0.78),
+                                                        (0.02, 0.02, 0.87)])
+def test_a_damaged_stream_keeps_most_samples_right_and_almost_none_wrong(corrupt, drop,
+                                                                         right_share):
+    intact = denseboost_stream(seconds=5.0)
+    truth, _ = decode(intact)
+    by_slot = dict(zip(truth.slot.tolist(), zip(truth.angle_deg, truth.distance_mm)))
+    rng = np.random.default_rng(3)
+    data = damaged(intact, rng, corrupt=corrupt, drop=drop)
+    samples, counts = decode(data, rng)
+    true_angle, true_distance = np.array([by_slot.get(n, (np.nan, np.nan))
+                                          for n in samples.slot.tolist()]).T
+    # Right: the true distance within 1/8 of a sample step (0.05 degree) of its angle. Wrong:
+    # more than 10 cm off, or half a sample step.
+    angle_error = np.abs((samples.angle_deg - true_angle + 180.0) % 360.0 - 180.0)
+    filled = samples.distance_mm > 0
+    right = filled & (angle_error < 0.05) & (samples.distance_mm == true_distance)
+    wrong = filled & ~((angle_error < 0.2) & (np.abs(samples.distance_mm - true_distance) <= 100))
+    assert right.sum() >= right_share * len(truth) > len(sdk_capsule_reference(data))
+    assert wrong.sum() <= 0.002 * len(truth), f'{wrong.sum()} samples wrong'
+    assert counts.damaged_frames > 0 and counts.rejected_samples > 0
+
+
+def test_a_capsule_that_lost_bytes_is_realigned_sample_by_sample():
+    data, starts, distances = smooth_capsules(4)
+    raw = np.frombuffer(data, np.uint8)
+    # Capsule 1 loses the high byte of sample 10 and the low byte of sample 25. (Were a sample
+    # to lose both bytes, its place among smooth neighbours could not be told.)
+    lost = 84 + 4 + np.array([2 * 10 + 1, 2 * 25])
+    samples, counts = decode(np.delete(raw, lost).tobytes())
+    assert counts.realigned_frames == 1 and counts.rejected_samples == 2
+    np.testing.assert_array_equal(samples.slot, np.arange(120))
+    expected = distances[:3].ravel().astype(float)
+    expected[[50, 65]] = 0                                 # the samples the bytes took
+    np.testing.assert_array_equal(samples.distance_mm, expected)
+    np.testing.assert_allclose(samples.angle_deg, ((starts[:3, None] + STEP_Q6 * np.arange(40)
+                                                    / 40) / 64.0 % 360.0).ravel(), atol=1e-9)
+
+
+def test_a_lost_header_byte_loses_no_capsule():
+    data, _, distances = smooth_capsules(5)
+    raw = np.frombuffer(data, np.uint8)
+    samples, counts = decode(np.delete(raw, 2 * 84 + 1).tobytes())   # capsule 2's sync byte
+    np.testing.assert_array_equal(samples.distance_mm, distances[:4].ravel())
+    assert counts.realigned_frames == 2 and counts.rejected_samples == 0
+
+
+def test_an_out_of_sequence_start_angle_is_replaced_by_the_predicted_one():
+    data, starts, distances = smooth_capsules(6)
+    raw = np.frombuffer(data, np.uint8).copy()
+    raw[3 * 84 + 3] ^= 0x21                                # capsule 3's start angle
+    samples, counts = decode(raw.tobytes())
+    np.testing.assert_allclose(samples.angle_deg, ((starts[:5, None] + STEP_Q6 * np.arange(40)
+                                                    / 40) / 64.0 % 360.0).ravel(), atol=1e-9)
+    np.testing.assert_array_equal(samples.distance_mm, distances[:5].ravel())
+    assert counts.replaced_angles == 1 and counts.damaged_frames == 1
+
+
+def test_capsules_lost_without_a_trace_in_the_bytes_are_counted_from_the_start_angles():
+    data, starts, distances = smooth_capsules(12)
+    raw = np.frombuffer(data, np.uint8)
+    samples, counts = decode(np.delete(raw, np.arange(5 * 84, 8 * 84)).tobytes())
+    assert np.unique(samples.slot // 40).tolist() == [0, 1, 2, 3, 4, 8, 9, 10]
+    np.testing.assert_allclose(samples.angle_deg, ((starts[:, None] + STEP_Q6 * np.arange(40)
+                                                    / 40) / 64.0 % 360.0).ravel()[samples.slot],
+                               atol=1e-9)
+    assert counts.lost_frames == 3 and counts.frames == 11 and counts.replaced_angles == 0
+
+
+def test_a_distance_beyond_the_range_is_rejected_even_when_the_checksum_passes():
+    data, _, distances = smooth_capsules(3)
+    distances[1, 7] = 56000                                # what a checksum collision let by
+    data = encode_dense_capsules((STEP_Q6 * np.arange(3)), distances, [True, False, False])
+    samples, counts = decode(data)
+    assert samples.distance_mm[47] == 0 and counts.rejected_samples == 1
+    assert counts.damaged_frames == 0
+
+
+def test_a_corrupted_capsule_keeps_its_samples_and_every_sample_its_stream_position():
+    data, _, distances = smooth_capsules(6)
+    raw = np.frombuffer(data, np.uint8).copy()
+    raw[2 * 84 + 10] ^= 0x40                               # capsule 2, sample 3: 64 mm off
+    samples, counts = decode(raw.tobytes())
+    assert samples.slot.tolist() == list(range(200))
+    expected = distances[:5].ravel().astype(float)
+    expected[83] = 0
+    np.testing.assert_array_equal(samples.distance_mm, expected)
+    assert counts.damaged_frames == 1 and counts.rejected_samples == 1
+
+
+def test_pure_garbage_yields_nothing_and_is_counted():
+    rng = np.random.default_rng(9)
+    garbage = rng.integers(0, 256, 20000, np.uint8).tobytes()
+    samples, counts = decode(garbage, rng)
+    assert len(samples) == len(sdk_capsule_reference(garbage)) == 0
+    # Random sync nibbles an 84-byte step apart frame some garbage, which no start angle places.
+    assert counts.samples == 0 and counts.lost_frames == counts.frames
+    assert counts.discarded_bytes + 84 * counts.frames > 19000

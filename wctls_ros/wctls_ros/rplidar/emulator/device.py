@@ -1,0 +1,295 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""
+The emulated S1 itself: requests in, answers and the timed scan stream out (no I/O).
+
+It answers like a real S1 (model 0x61, firmware 1.28, hardware 18; modes 0 Standard, 244 us,
+answer 0x81 and 1 DenseBoost, 108 us, answer 0x85, typical 1; no answer to RESET, then about
+1.5 s of silence; requests other than STOP, RESET and MOTOR_SPEED are ignored while streaming)
+and streams what a :class:`Scene` shows in real time: every frame is due when its last byte would
+arrive over a 256000-baud line after its samples were measured. Dense capsule distances are
+whole millimetres and standard node distances quarter millimetres.
+
+:class:`Faults` (shared with the server's control commands) corrupts or drops streamed bytes,
+silences the device and sets the health it reports.
+"""
+
+from dataclasses import dataclass
+import math
+from typing import Optional, Protocol
+
+import numpy as np
+
+from ..protocol import (AnswerType, CAPSULE_SIZE, Command, CONF_COMMANDS_FIRMWARE, ConfType,
+                        decode_conf_request, DeviceHealth, DeviceInfo, encode_answer,
+                        encode_conf_value, encode_dense_capsules, encode_standard_nodes,
+                        FULL_TURN_Q6, HealthStatus, MODE_CONF_TYPES, NODE_SIZE, ProtocolError,
+                        RequestParser, ResponseDescriptor, SampleRate, SAMPLES_PER_CAPSULE,
+                        ScanMode, SendMode)
+
+MODES = (ScanMode(0, 'Standard', 244.0, 40.0, AnswerType.MEASUREMENT),
+         ScanMode(1, 'DenseBoost', 108.0, 40.0, AnswerType.DENSE_CAPSULE))
+TYPICAL_MODE = 1
+MODEL_S1M1 = 0x61
+HARDWARE = 18
+SERIAL_NUMBER = b'WCTLS-S1-EMULATR'
+DEFAULT_RPM = 600
+SERIAL_BAUD = 256000
+RESET_SILENCE_S = 1.5
+HEALTH_ERROR_CODE = 0x0001
+MAX_NODE_DISTANCE_Q2 = 0xFFFF
+_CATCH_UP_LIMIT_S = 0.5
+
+
+class Scene(Protocol):
+    """What the device sees: anything with this method (the CLI's is a simulated floor plan)."""
+
+    def distances_mm(self, raw_angle_deg: np.ndarray) -> np.ndarray:
+        """
+        Return the measured distance at each raw clockwise angle.
+
+        :param raw_angle_deg: device angles, degrees clockwise from the front
+        :return: distances, mm (float); 0 where nothing returns
+        """
+
+
+@dataclass
+class Faults:
+    """
+    Fault injection settings (mutable: stdin commands change them).
+
+    :ivar corrupt_rate: probability that a streamed byte is replaced by another value
+    :ivar drop_rate: probability that a streamed byte is left out
+    :ivar silent_from_s: monotonic time from which the device neither answers nor streams
+    :ivar silent_until_s: monotonic time at which it speaks again
+    :ivar health: :class:`HealthStatus` reported by GET_HEALTH
+    :ivar resets_to_clear: RESETs still needed before an error health clears
+    """
+
+    corrupt_rate: float = 0.0
+    drop_rate: float = 0.0
+    silent_from_s: float = 0.0
+    silent_until_s: float = 0.0
+    health: int = HealthStatus.OK
+    resets_to_clear: int = 1
+
+    def silent(self, now_s: float) -> bool:
+        """
+        Tell whether the device is silent.
+
+        :param now_s: monotonic time, s
+        :return: True while neither answering nor streaming
+        """
+        return self.silent_from_s <= now_s < self.silent_until_s
+
+
+@dataclass(frozen=True)
+class StreamClock:
+    """
+    When and where the device measures the samples of the stream it is sending.
+
+    Sample n (counted from the stream's first) is measured until ``start_s + (n + 1) *
+    sample_s`` at raw angle ``first_angle_deg + n * step_deg`` (modulo 360).
+
+    :ivar start_s: monotonic time at which the stream started, s
+    :ivar sample_s: time per sample, s
+    :ivar first_angle_deg: raw angle of the first sample, degrees
+    :ivar step_deg: angle between consecutive samples, degrees
+    """
+
+    start_s: float
+    sample_s: float
+    first_angle_deg: float
+    step_deg: float
+
+
+class S1Device:
+    """
+    One emulated S1 behind one link: answers requests and produces the scan stream.
+
+    :param scene: what the device sees
+    :param faults: shared fault settings
+    :param firmware: (major, minor)
+    :param rng: random generator (rotation phase, faults)
+    """
+
+    def __init__(self, scene: Scene, faults: Faults, firmware: tuple, rng: np.random.Generator):
+        self._scene = scene
+        self._faults = faults
+        self._firmware = firmware
+        self._rng = rng
+        self._parser = RequestParser()
+        self._rpm = DEFAULT_RPM
+        self._mode: Optional[ScanMode] = None
+        self._booting_until_s = 0.0
+        self._phase_q6 = int(rng.integers(FULL_TURN_Q6))
+
+    def receive(self, data: bytes, now_s: float) -> bytes:
+        """
+        Take received bytes; return the answers to the requests they complete.
+
+        :param data: bytes from the host
+        :param now_s: monotonic time, s
+        :return: answer bytes (may be empty)
+        """
+        answers = b''
+        for request in self._parser.feed(data):
+            if now_s < self._booting_until_s or self._faults.silent(now_s):
+                continue
+            answers += self._answer(request.command, request.payload, now_s)
+        return answers
+
+    def _answer(self, command: int, payload: bytes, now_s: float) -> bytes:
+        """Return the answer to one request (and change state)."""
+        if command == Command.STOP:
+            self._stop()
+        elif command == Command.RESET:
+            self._stop()
+            self._booting_until_s = now_s + RESET_SILENCE_S
+            self._faults.resets_to_clear -= 1
+            if self._faults.resets_to_clear <= 0 and self._faults.health == HealthStatus.ERROR:
+                self._faults.health = HealthStatus.OK
+        elif command == Command.MOTOR_SPEED and len(payload) == 2:
+            self._rpm = int.from_bytes(payload, 'little')
+            if self._rpm == 0:
+                self._stop()
+        elif self._mode is not None:
+            return b''      # busy streaming: only STOP, RESET and MOTOR_SPEED are heard
+        elif command in (Command.SCAN, Command.FORCE_SCAN):
+            return self._start(MODES[0], now_s)
+        elif command == Command.EXPRESS_SCAN and payload and payload[0] < len(MODES):
+            return self._start(MODES[payload[0]], now_s)
+        elif command == Command.GET_INFO:
+            return encode_answer(AnswerType.DEVICE_INFO, DeviceInfo(
+                MODEL_S1M1, self._firmware[1], self._firmware[0], HARDWARE,
+                SERIAL_NUMBER).encode())
+        elif command == Command.GET_HEALTH:
+            code = 0 if self._faults.health == HealthStatus.OK else HEALTH_ERROR_CODE
+            return encode_answer(AnswerType.DEVICE_HEALTH,
+                                 DeviceHealth(self._faults.health, code).encode())
+        elif command == Command.GET_SAMPLERATE:
+            return encode_answer(AnswerType.SAMPLE_RATE, SampleRate(
+                int(MODES[0].us_per_sample), int(MODES[1].us_per_sample)).encode())
+        elif command == Command.GET_LIDAR_CONF and self._firmware >= CONF_COMMANDS_FIRMWARE:
+            return self._conf_answer(payload)
+        return b''
+
+    def _conf_answer(self, payload: bytes) -> bytes:
+        """Answer GET_LIDAR_CONF (unknown entries: the type echo alone)."""
+        try:
+            conf_type, mode_id = decode_conf_request(payload)
+        except ProtocolError:
+            return b''
+        if conf_type in MODE_CONF_TYPES:
+            if mode_id is None or mode_id >= len(MODES):
+                return encode_answer(AnswerType.LIDAR_CONF, encode_conf_value(conf_type, None))
+            mode = MODES[mode_id]
+            value = {ConfType.US_PER_SAMPLE: mode.us_per_sample,
+                     ConfType.MAX_DISTANCE: mode.max_distance_m,
+                     ConfType.ANSWER_TYPE: mode.answer_type,
+                     ConfType.MODE_NAME: mode.name}[conf_type]
+        else:
+            value = {ConfType.MODE_COUNT: len(MODES), ConfType.TYPICAL_MODE: TYPICAL_MODE,
+                     ConfType.DESIRED_ROTATION: (DEFAULT_RPM, 0)}.get(conf_type)
+        return encode_answer(AnswerType.LIDAR_CONF, encode_conf_value(conf_type, value))
+
+    def _start(self, mode: ScanMode, now_s: float) -> bytes:
+        """Start streaming a mode; return its descriptor."""
+        self._mode = mode
+        self._start_s = now_s
+        self._sent = 0
+        self._samples_per_frame = (SAMPLES_PER_CAPSULE
+                                   if mode.answer_type == AnswerType.DENSE_CAPSULE else 1)
+        self._frame_size = CAPSULE_SIZE if self._samples_per_frame > 1 else NODE_SIZE
+        self._frame_s = self._samples_per_frame * mode.us_per_sample * 1e-6
+        rpm = self._rpm or DEFAULT_RPM
+        # Whole 1/64 degrees per frame keep every sample on one exact, uniform angle grid.
+        self._step_q6 = round(rpm / 60.0 * FULL_TURN_Q6 * self._frame_s)
+        self._previous_angle_q6 = None
+        return ResponseDescriptor(self._frame_size, SendMode.MULTIPLE, mode.answer_type).encode()
+
+    def _stop(self):
+        if self._mode is not None:
+            self._phase_q6 = int((self._phase_q6 + self._sent * self._step_q6) % FULL_TURN_Q6)
+        self._mode = None
+
+    def clock(self) -> Optional[StreamClock]:
+        """
+        Return the sample clock of the stream being sent (the truth for timing tests).
+
+        :return: the clock, or None when not streaming
+        """
+        if self._mode is None:
+            return None
+        samples = self._samples_per_frame
+        return StreamClock(self._start_s, self._frame_s / samples, self._phase_q6 / 64.0,
+                           self._step_q6 / samples / 64.0)
+
+    def next_frame_in(self, now_s: float) -> float:
+        """
+        Return how long until the next frame is due.
+
+        :param now_s: monotonic time, s
+        :return: seconds (inf when not streaming)
+        """
+        if self._mode is None:
+            return math.inf
+        return max(self._due_s(self._sent) - now_s, 0.0)
+
+    def _due_s(self, frame: int) -> float:
+        """When frame ``frame``'s last byte arrives at the host."""
+        return (self._start_s + (frame + 1) * self._frame_s
+                + self._frame_size * 10.0 / SERIAL_BAUD)
+
+    def stream(self, now_s: float) -> bytes:
+        """
+        Return the stream bytes due by ``now_s`` (with faults applied).
+
+        :param now_s: monotonic time, s
+        :return: bytes to send
+        """
+        if self._mode is None:
+            return b''
+        due = int((now_s - self._due_s(0)) // self._frame_s) + 1
+        first = max(self._sent, due - int(_CATCH_UP_LIMIT_S / self._frame_s))
+        if due <= first:
+            return b''
+        frames = np.arange(first, due)
+        self._sent = due
+        if self._faults.silent(now_s):
+            return b''
+        start_q6 = (self._phase_q6 + frames * self._step_q6) % FULL_TURN_Q6
+        if self._mode.answer_type == AnswerType.DENSE_CAPSULE:
+            data = self._capsules(frames, start_q6)
+        else:
+            data = self._nodes(start_q6)
+        return self._inject_faults(data)
+
+    def _capsules(self, frames: np.ndarray, start_q6: np.ndarray) -> bytes:
+        """Encode dense capsules: sample k of capsule i at start_i + k * step / 40."""
+        offsets = np.arange(SAMPLES_PER_CAPSULE) / SAMPLES_PER_CAPSULE
+        angles = (start_q6[:, None] + self._step_q6 * offsets) / 64.0 % 360.0
+        distances = np.rint(self._scene.distances_mm(angles.reshape(-1)))
+        distances[distances > 0xFFFF] = 0
+        return encode_dense_capsules(start_q6, distances.reshape(angles.shape),
+                                     frames == 0)
+
+    def _nodes(self, angle_q6: np.ndarray) -> bytes:
+        """Encode standard nodes, S set on the first node of each turn."""
+        previous = np.concatenate([[angle_q6[0] if self._previous_angle_q6 is None
+                                    else self._previous_angle_q6], angle_q6[:-1]])
+        self._previous_angle_q6 = angle_q6[-1]
+        distance_q2 = np.rint(self._scene.distances_mm(angle_q6 / 64.0) * 4.0)
+        distance_q2[distance_q2 > MAX_NODE_DISTANCE_Q2] = 0
+        quality = np.where(distance_q2 > 0, 47, 0)
+        return encode_standard_nodes(angle_q6, distance_q2, quality, angle_q6 < previous)
+
+    def _inject_faults(self, data: bytes) -> bytes:
+        """Corrupt and drop streamed bytes at the configured rates."""
+        if not (self._faults.corrupt_rate or self._faults.drop_rate):
+            return data
+        raw = np.frombuffer(data, np.uint8).copy()
+        corrupt = self._rng.random(raw.size) < self._faults.corrupt_rate
+        raw[corrupt] ^= self._rng.integers(1, 256, int(corrupt.sum()), dtype=np.uint8)
+        return raw[self._rng.random(raw.size) >= self._faults.drop_rate].tobytes()

@@ -1,0 +1,232 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""
+Emulated S1 devices served on a pseudo-terminal and TCP, with live control commands.
+
+One device answers on the pseudo-terminal (reachable through a symlink, like a udev name) and
+one more per TCP client. Control lines (``unplug``, ``replug``, ``silent SECONDS``,
+``health ok|warning|error [RESETS]``, ``corrupt RATE``, ``drop RATE``, ``clock`` (the pty
+device's sample clock: when and at what angle each sample of its stream is measured),
+``quit``) are queued on :attr:`Emulator.commands` and each is acknowledged with one line on
+standard output.
+"""
+
+import os
+import pty
+import queue
+import select
+import socket
+import time
+import tty
+from typing import Optional
+
+import numpy as np
+
+from .device import Faults, S1Device, Scene
+from ..protocol import HealthStatus
+
+_POLL_S = 0.001
+
+
+class PtyPort:
+    """
+    The emulator's end of a pseudo-terminal, optionally reachable through a symlink.
+
+    The emulator keeps the terminal's other end open too, so a client closing it is not an
+    error, and sets it raw like a serial line. ``unplug`` closes both ends (the client's reads
+    fail, as when a USB adapter is pulled); ``plug`` opens a new terminal behind the same link.
+
+    :param link: symlink path to (re)point at the terminal, or None
+    """
+
+    def __init__(self, link: Optional[str]):
+        self._link = link
+        self.fd = None
+        self.plug()
+
+    def plug(self) -> str:
+        """
+        Open a new pseudo-terminal (and point the link at it).
+
+        :return: the terminal's device path
+        :raises OSError: when the link cannot be made (the terminal is closed again)
+        """
+        self.fd, self._client_fd = pty.openpty()
+        tty.setraw(self._client_fd)
+        os.set_blocking(self.fd, False)
+        self.path = os.ttyname(self._client_fd)
+        if self._link:
+            temporary = f'{self._link}.{os.getpid()}'
+            try:
+                os.symlink(self.path, temporary)
+                os.replace(temporary, self._link)
+            except OSError:
+                if os.path.islink(temporary):
+                    os.unlink(temporary)
+                self._close_terminal()
+                raise
+        return self.path
+
+    def unplug(self):
+        """Close the terminal and remove the link."""
+        if self.fd is None:
+            return
+        if self._link and os.path.islink(self._link):
+            os.unlink(self._link)
+        self._close_terminal()
+
+    def _close_terminal(self):
+        os.close(self.fd)
+        os.close(self._client_fd)
+        self.fd = None
+
+    def write(self, data: bytes):
+        """
+        Write without blocking; like a serial line, what does not fit is lost.
+
+        :param data: bytes to send
+        """
+        try:
+            os.write(self.fd, data)
+        except BlockingIOError:
+            pass
+
+
+class Emulator:
+    """
+    Serves S1 devices on a pseudo-terminal and, optionally, on a TCP listening socket.
+
+    :param scene: what the devices see
+    :param faults: shared fault settings
+    :param firmware: (major, minor)
+    :param seed: random seed
+    :param pty_port: the pseudo-terminal (closed by :meth:`close`)
+    :param listener: a listening TCP socket, or None (closed by :meth:`close`)
+    """
+
+    def __init__(self, scene: Scene, faults: Faults, firmware: tuple, seed: int,
+                 pty_port: PtyPort, listener: Optional[socket.socket] = None):
+        self._scene = scene
+        self._faults = faults
+        self._firmware = firmware
+        self._rng = np.random.default_rng(seed)
+        self.pty = pty_port
+        self._pty_device = self._new_device()
+        self._listener = listener
+        self._clients = {}
+        self.commands = queue.Queue()
+
+    def _new_device(self) -> S1Device:
+        return S1Device(self._scene, self._faults, self._firmware, self._rng)
+
+    def run(self):
+        """Serve until a ``quit`` command (or a signal)."""
+        while self._handle_commands():
+            now = time.monotonic()
+            devices = [self._pty_device] + list(self._clients.values())
+            timeout = min([_POLL_S * 50] + [d.next_frame_in(now) for d in devices])
+            readable = [s for s in [self.pty.fd, self._listener, *self._clients] if s is not None]
+            ready, _, _ = select.select(readable, [], [], max(timeout, _POLL_S))
+            now = time.monotonic()
+            for source in ready:
+                self._receive(source, now)
+            if self.pty.fd is not None:
+                self.pty.write(self._pty_device.stream(now))
+            for client, device in list(self._clients.items()):
+                self._send(client, device.stream(now))
+
+    def _receive(self, source, now_s: float):
+        """Handle a readable pty, listener or client."""
+        if source is self._listener:
+            client, _ = self._listener.accept()
+            client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            client.settimeout(1.0)
+            self._clients[client] = self._new_device()
+            return
+        if source == self.pty.fd:
+            try:
+                data = os.read(source, 4096)
+            except (BlockingIOError, OSError):
+                return
+            self.pty.write(self._pty_device.receive(data, now_s))
+            return
+        try:
+            data = source.recv(4096)
+        except OSError:
+            data = b''
+        if not data:
+            self._drop_client(source)
+            return
+        self._send(source, self._clients[source].receive(data, now_s))
+
+    def _send(self, client: socket.socket, data: bytes):
+        if not data:
+            return
+        try:
+            client.sendall(data)
+        except OSError:
+            self._drop_client(client)
+
+    def _drop_client(self, client: socket.socket):
+        self._clients.pop(client, None)
+        client.close()
+
+    def _handle_commands(self) -> bool:
+        """Apply queued control commands; return False on ``quit``."""
+        while True:
+            try:
+                words = self.commands.get_nowait().split()
+            except queue.Empty:
+                return True
+            if not words:
+                continue
+            verb, args = words[0], words[1:]
+            try:
+                reply = self._command(verb, args)
+            except (ValueError, IndexError, KeyError) as error:
+                reply = f'error: {verb} {" ".join(args)}: {error}'
+            if reply is None:
+                return False
+            print(reply, flush=True)
+
+    def _command(self, verb: str, args: list) -> Optional[str]:
+        """Apply one command; return the acknowledgement (None on quit)."""
+        if verb == 'quit':
+            return None
+        if verb == 'unplug':
+            self.pty.unplug()
+            return 'unplugged'
+        if verb == 'replug':
+            if self.pty.fd is None:
+                self.pty.plug()
+                self._pty_device = self._new_device()
+            return f'replugged {self.pty.path}'
+        if verb == 'silent':
+            self._faults.silent_from_s = time.monotonic()
+            self._faults.silent_until_s = self._faults.silent_from_s + float(args[0])
+            return f'silent for {float(args[0]):g} s'
+        if verb == 'health':
+            self._faults.health = HealthStatus[args[0].upper()]
+            self._faults.resets_to_clear = int(args[1]) if len(args) > 1 else 1
+            return f'health {args[0]}'
+        if verb in ('corrupt', 'drop'):
+            setattr(self._faults, f'{verb}_rate', float(args[0]))
+            return f'{verb} rate {float(args[0]):g}'
+        if verb == 'clock':
+            clock = self._pty_device.clock()
+            if clock is None:
+                return 'clock idle'
+            return (f'clock start {clock.start_s:.9f} s, {clock.sample_s * 1e6:.6f} us per '
+                    f'sample, first at {clock.first_angle_deg:.9f} deg, '
+                    f'{clock.step_deg:.9f} deg per sample')
+        raise ValueError('unknown command (unplug, replug, silent S, health STATUS [RESETS], '
+                         'corrupt RATE, drop RATE, clock, quit)')
+
+    def close(self):
+        """Close everything (and remove the link)."""
+        self.pty.unplug()
+        for client in list(self._clients):
+            self._drop_client(client)
+        if self._listener is not None:
+            self._listener.close()

@@ -1,0 +1,257 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""
+``s1_emulator``: an RPLIDAR S1 on a pseudo-terminal (and TCP) that sees a simulated floor plan.
+
+The device, its server and its faults are :mod:`wctls_ros.rplidar.emulator`; this executable
+builds the scene from :mod:`wctls_ros.simulation` and injects it. A sample at raw (clockwise)
+angle theta is the range along the laser-frame bearing pi - theta, so a driver publishing
+sllidar_ros2's angle = pi - theta sees the plan in REP-103 orientation.
+
+Faults for testing recovery: ``--corrupt-rate`` / ``--drop-rate`` (per streamed byte),
+``--silent-after``/``--silent-for``, ``--health warning|error``. Lines on standard input control it
+live: ``unplug``, ``replug``, ``silent SECONDS``, ``health ok|warning|error [RESETS]``,
+``corrupt RATE``, ``drop RATE``, ``clock`` (the true timing of the samples streamed), ``quit``;
+each is acknowledged on standard output.
+
+Exit status: 0 after ``quit`` or SIGTERM, 2 on a user error (one line on standard error,
+``s1_emulator: error: ...``), 130 on Ctrl-C.
+"""
+
+import argparse
+import math
+import os
+import queue
+import signal
+import socket
+import sys
+import threading
+import time
+
+import numpy as np
+import yaml
+
+from .rplidar.emulator.device import Faults
+from .rplidar.emulator.server import Emulator, PtyPort
+from .rplidar.protocol import HealthStatus
+from .simulation import (BUNDLED_PLANS, FloorPlan, load_floor_plan, NOISELESS, NoiseModel,
+                         simulate_scan)
+
+PROG = 's1_emulator'
+EXIT_USER_ERROR = 2
+EXIT_INTERRUPTED = 130
+
+
+class UserError(Exception):
+    """A command line the emulator cannot run with; the message says what to change."""
+
+
+class SimulatedScene:
+    """
+    Ranges of a floor plan seen from a pose, with the simulator's sensor model.
+
+    Walkers in the plan move in real time from the moment the scene is made.
+
+    :param plan: the floor plan
+    :param pose: sensor pose in the plan (x m, y m, yaw rad); None: the plan's own
+    :param noise: the sensor model
+    :param rng: random generator
+    """
+
+    def __init__(self, plan: FloorPlan, pose, noise: NoiseModel, rng: np.random.Generator):
+        self._plan = plan
+        self._pose = pose
+        self._noise = noise
+        self._rng = rng
+        self._start_s = time.monotonic()
+        # Without walkers the scene never changes: build it once.
+        self._still = None if plan.walkers else plan.scene(pose)
+
+    def distances_mm(self, raw_angle_deg: np.ndarray) -> np.ndarray:
+        """
+        Return the measured distance at each raw clockwise angle.
+
+        :param raw_angle_deg: device angles, degrees clockwise from the front
+        :return: distances, mm (float); 0 where nothing returns
+        """
+        bearings = math.pi - np.radians(raw_angle_deg)
+        scene = (self._plan.scene(self._pose, time.monotonic() - self._start_s)
+                 if self._still is None else self._still)
+        ranges = simulate_scan(scene, bearings, self._noise, self._rng)
+        return np.where(np.isfinite(ranges), ranges * 1000.0, 0.0)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with the exit convention: a usage error is one line and status 2."""
+
+    def error(self, message):
+        """
+        Report a command-line error in one line and exit with status 2.
+
+        :param message: what is wrong
+        """
+        self.exit(EXIT_USER_ERROR, f'{self.prog}: error: {message} (see {self.prog} --help)\n')
+
+
+def _firmware(text: str) -> tuple:
+    """Parse ``MAJOR.MINOR`` into (major, minor)."""
+    major, dot, minor = text.partition('.')
+    if not (dot and major.isdigit() and minor.isdigit() and int(major) < 256
+            and int(minor) < 256):
+        raise argparse.ArgumentTypeError(f'expected MAJOR.MINOR (0-255 each), got {text!r}')
+    return int(major), int(minor)
+
+
+def _bounded(kind, low, high=math.inf):
+    """Return an argparse type: ``kind`` values within [low, high]."""
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
+        if not low <= value <= high:
+            span = f'at least {low}' if high == math.inf else f'from {low} to {high}'
+            raise argparse.ArgumentTypeError(f'must be {span}, got {text}')
+        return value
+    return parse
+
+
+def _parse_args(argv):
+    parser = _Parser(
+        prog=PROG,
+        description='An RPLIDAR S1 speaking the real byte protocol on a pseudo-terminal (and '
+                    'TCP), streaming a simulated floor plan in real time.',
+        epilog='Lines on standard input control it while it runs: unplug, replug, silent SECONDS, '
+               'health ok|warning|error [RESETS], corrupt RATE, drop RATE, clock, quit. Exit '
+               'status: 0 after quit or SIGTERM, 2 on a user error, 130 on Ctrl-C.')
+    probability = _bounded(float, 0.0, 1.0)
+    parser.add_argument('--link', help='symlink to point at the pseudo-terminal, e.g. /tmp/ttyS1 '
+                                       '(default: none, only the pty path is printed)')
+    parser.add_argument('--tcp-port', type=_bounded(int, 0, 65535),
+                        help='also serve on this TCP port (0 = any free port; S1 TCP: 20108) '
+                             '(default: no TCP)')
+    parser.add_argument('--tcp-host', default='127.0.0.1',
+                        help='address to listen on (default: %(default)s)')
+    parser.add_argument('--floor-plan', default='environment_a',
+                        help=f'bundled plan name ({", ".join(BUNDLED_PLANS)}) or a YAML path '
+                             '(default: %(default)s)')
+    parser.add_argument('--pose', type=float, nargs=3, metavar=('X', 'Y', 'YAW_DEG'),
+                        help="sensor pose in the plan, m and degrees (default: the plan's own)")
+    parser.add_argument('--range-sigma', type=_bounded(float, 0.0),
+                        default=NoiseModel.range_sigma_m,
+                        help='range noise std, m (default: %(default)s)')
+    parser.add_argument('--bearing-sigma-deg', type=_bounded(float, 0.0),
+                        default=math.degrees(NoiseModel.bearing_sigma_rad),
+                        help='bearing noise std, degrees (default: %(default).3f)')
+    parser.add_argument('--noiseless', action='store_true',
+                        help='exact ranges, no noise (default: off)')
+    parser.add_argument('--seed', type=int, default=0, help='random seed (default: %(default)s)')
+    parser.add_argument('--firmware', type=_firmware, default='1.28',
+                        help='firmware version MAJOR.MINOR (default: %(default)s; before 1.24 '
+                             'there is no GET_LIDAR_CONF)')
+    parser.add_argument('--corrupt-rate', type=probability, default=0.0,
+                        help='probability that a streamed byte is corrupted (default: '
+                             '%(default)s)')
+    parser.add_argument('--drop-rate', type=probability, default=0.0,
+                        help='probability that a streamed byte is dropped (default: %(default)s)')
+    parser.add_argument('--silent-after', type=_bounded(float, 0.0),
+                        help='go silent after this many seconds (default: never)')
+    parser.add_argument('--silent-for', type=_bounded(float, 0.0), default=3.0,
+                        help='silence duration, s (default: %(default)s)')
+    parser.add_argument('--health', choices=['ok', 'warning', 'error'], default='ok',
+                        help='health status to report (default: %(default)s)')
+    parser.add_argument('--health-error-resets', type=_bounded(int, 0), default=1,
+                        help='RESETs that clear a health error (default: %(default)s)')
+    return parser.parse_args(argv)
+
+
+def _scene(args) -> tuple:
+    """Build the simulated scene; return it and the plan's name."""
+    try:
+        plan = load_floor_plan(args.floor_plan)
+    except OSError as error:
+        raise UserError(f'--floor-plan: {error.strerror or error}'
+                        + (f': {error.filename}' if error.filename else '')) from None
+    except (yaml.YAMLError, ValueError, KeyError, TypeError, IndexError) as error:
+        raise UserError(f'--floor-plan {args.floor_plan}: not a valid floor plan '
+                        f'({type(error).__name__}: {" ".join(str(error).split())})') from None
+    pose = None if args.pose is None else (args.pose[0], args.pose[1], math.radians(args.pose[2]))
+    noise = NOISELESS if args.noiseless else NoiseModel(
+        range_sigma_m=args.range_sigma, bearing_sigma_rad=math.radians(args.bearing_sigma_deg))
+    return SimulatedScene(plan, pose, noise, np.random.default_rng(args.seed)), plan.name
+
+
+def _check_link(link: str):
+    """Refuse a ``--link`` path that would replace something other than an old symlink."""
+    if os.path.lexists(link) and not os.path.islink(link):
+        raise UserError(f'--link {link}: exists and is not a symlink; give a new path')
+    if not os.path.isdir(os.path.dirname(os.path.abspath(link))):
+        raise UserError(f'--link {link}: no such directory')
+
+
+def _read_stdin_commands(commands: queue.Queue):
+    """Forward standard input lines to the command queue (until EOF)."""
+    for line in sys.stdin:
+        commands.put(line)
+
+
+def _serve(args):
+    """Start the emulator, announce it on standard output and serve until ``quit``."""
+    scene, plan_name = _scene(args)
+    faults = Faults(corrupt_rate=args.corrupt_rate, drop_rate=args.drop_rate,
+                    health=HealthStatus[args.health.upper()],
+                    resets_to_clear=args.health_error_resets)
+    if args.silent_after is not None:
+        faults.silent_from_s = time.monotonic() + args.silent_after
+        faults.silent_until_s = faults.silent_from_s + args.silent_for
+    if args.link:
+        _check_link(args.link)
+    try:
+        pty_port = PtyPort(args.link)
+    except OSError as error:
+        raise UserError(f'--link {args.link}: {error.strerror or error}') from None
+    listener = None
+    if args.tcp_port is not None:
+        try:
+            listener = socket.create_server((args.tcp_host, args.tcp_port))
+        except OSError as error:
+            pty_port.unplug()
+            raise UserError(f'--tcp-host/--tcp-port {args.tcp_host}:{args.tcp_port}: '
+                            f'{error.strerror or error}') from None
+    emulator = Emulator(scene, faults, args.firmware, args.seed, pty_port, listener)
+    try:
+        signal.signal(signal.SIGTERM, lambda *_: emulator.commands.put('quit'))
+        print(f'pty {emulator.pty.path}', flush=True)
+        if args.link:
+            print(f'link {args.link}', flush=True)
+        if listener is not None:
+            host, port = listener.getsockname()[:2]
+            print(f'tcp {host}:{port}', flush=True)
+        print(f'ready: RPLIDAR S1 emulator, floor plan {plan_name}', flush=True)
+        threading.Thread(target=_read_stdin_commands, args=(emulator.commands,),
+                         daemon=True).start()
+        emulator.run()
+    finally:
+        emulator.close()
+
+
+def main(argv=None) -> int:
+    """
+    Run the emulator until ``quit`` on standard input, SIGTERM or Ctrl-C.
+
+    :param argv: command-line arguments (default: ``sys.argv[1:]``)
+    :return: exit status: 0 after quit or SIGTERM, 2 on a user error, 130 on Ctrl-C
+    """
+    try:
+        _serve(_parse_args(argv))
+    except UserError as error:
+        print(f'{PROG}: error: {error}', file=sys.stderr)
+        return EXIT_USER_ERROR
+    except KeyboardInterrupt:
+        return EXIT_INTERRUPTED
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

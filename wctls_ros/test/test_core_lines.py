@@ -111,7 +111,7 @@ def corner_of(fits, scale=(1.0, 1.0)):
     line = fits.line * k
     cov = fits.line_covariance * (k * k)[:, :, None]
     ends = np.array([[5.0, 5.0], [5.0, 5.0]])
-    found = find_corners(line, cov, ends, ends, [0], [1], 0.1, 1e9)
+    found = find_corners(line, cov, ends, ends, [0], [1], 0.1)
     return found
 
 
@@ -142,7 +142,7 @@ def test_joint_corner_covariance_matches_finite_differences():
     ends = np.full((2, 2), 5.0)
 
     def corner_state(line):
-        found = find_corners(line, fits.line_covariance, ends, ends, [0], [1], 0.1, 1e9)
+        found = find_corners(line, fits.line_covariance, ends, ends, [0], [1], 0.1)
         return np.array([*found.xy_m[0], found.yaw_rad[0]])
     jac = np.zeros((3, 6))
     for j in range(6):
@@ -188,7 +188,7 @@ def test_monte_carlo_corner_covariance_is_calibrated(corner, first, second, coun
         fits = fit_lines(method, returns, RANGE_SIGMA, BEARING_SIGMA)
         ends = np.full((2 * trials, 2), 1e3)
         found = find_corners(fits.line, fits.line_covariance, ends, ends,
-                             np.arange(0, 2 * trials, 2), np.arange(1, 2 * trials, 2), 0.1, 1e9)
+                             np.arange(0, 2 * trials, 2), np.arange(1, 2 * trials, 2), 0.1)
         assert len(found) == trials
         error = found.xy_m - np.asarray(corner)
         covariance = found.covariance[:, :2, :2]
@@ -247,9 +247,9 @@ def test_common_range_offset_is_propagated_with_its_correlation(method):
     fits = fit_lines(method, returns, 0.001, 1e-9)
     ends = np.full((2 * trials, 2), 1e3)
     pairs = (np.arange(0, 2 * trials, 2), np.arange(1, 2 * trials, 2))
-    with_common = find_corners(fits.line, fits.line_covariance, ends, ends, *pairs, 0.1, 1e9,
+    with_common = find_corners(fits.line, fits.line_covariance, ends, ends, *pairs, 0.1,
                                fits.line_offset_jacobian, sigmas[2])
-    without = find_corners(fits.line, fits.line_covariance, ends, ends, *pairs, 0.1, 1e9)
+    without = find_corners(fits.line, fits.line_covariance, ends, ends, *pairs, 0.1)
     error = with_common.xy_m - corner
     assert 1.8 <= nees(error, with_common.covariance[:, :2, :2]).mean() <= 2.2
     assert nees(error, without.covariance[:, :2, :2]).mean() > 10.0

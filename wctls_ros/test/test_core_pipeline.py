@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from wctls_ros.core import (extract_features, FeatureConfig, fit_lines, nees, scan_to_points,
                             ScanError, segment_returns)
-from wctls_ros.core.segmentation import (iterative_end_point_fit, pass_budget, SegmentRanges,
-                                         trim_ambiguous_ends)
+from wctls_ros.core.segmentation import (breakpoints, iterative_end_point_fit, pass_budget,
+                                         SegmentRanges, trim_ambiguous_ends)
 from wctls_ros.simulation import (floor_plan_from_dict, full_turn_bearings, NOISELESS,
                                   NoiseModel, simulate_ranges)
 from wctls_ros.simulation.adversarial import peeling_wall
@@ -371,25 +371,73 @@ def test_scaling_both_sigmas_by_k_scales_covariances_by_k_squared(seed, k, metho
                                rtol=1e-8)
 
 
+def breaks_of(ranges, increment=math.radians(0.5), max_missing_beams=3):
+    """Return the breakpoints of a scan centred on the x axis, 1 cm noise model."""
+    bearing_min = -(len(ranges) // 2) * increment
+    return breakpoints(scan_to_points(ranges, bearing_min, increment), 0.01, 0.0,
+                       math.radians(10), max_missing_beams)
+
+
 def test_breakpoints_follow_the_adaptive_rule():
-    from wctls_ros.core.segmentation import breakpoints
     increment = math.radians(0.5)
     bearings = np.arange(-40, 41) * increment
     wall = 2.0 / np.cos(bearings)                      # a wall 2 m ahead, seen head-on
-    points = scan_to_points(wall, bearings[0], increment)
-    assert np.flatnonzero(breakpoints(points, 0.01, 0.0, math.radians(10))).tolist() == [0]
+    assert np.flatnonzero(breaks_of(wall).separated).tolist() == [0]
     # A 25 cm step back in depth behind beam 50 is an occlusion edge.
     stepped = wall.copy()
     stepped[50:] += 0.25
-    points = scan_to_points(stepped, bearings[0], increment)
-    assert np.flatnonzero(breakpoints(points, 0.01, 0.0, math.radians(10))).tolist() == [0, 50]
+    assert np.flatnonzero(breaks_of(stepped).separated).tolist() == [0, 50]
     # Missing beams on the same wall widen the allowance ... up to lambda.
     for missing, separated in ((8, False), (25, True)):
         gappy = wall.copy()
         gappy[30:30 + missing] = math.nan
-        points = scan_to_points(gappy, bearings[0], increment)
-        breaks = np.flatnonzero(breakpoints(points, 0.01, 0.0, math.radians(10)))
+        breaks = np.flatnonzero(breaks_of(gappy, max_missing_beams=100).separated)
         assert (breaks.tolist() == [0, 30]) == separated, (missing, breaks)
+
+
+def test_only_breaks_that_noise_explains_may_be_crossed_by_merging():
+    increment = math.radians(0.5)
+    bearings = np.arange(-40, 41) * increment
+    wall = 2.0 / np.cos(bearings)
+    # A 15 cm step back: beyond the allowance of a wall seen head-on at 2 m (10.6 cm) plus
+    # 3 sigma, within 5 sqrt(2) sigma: noise can do that.
+    noisy = wall.copy()
+    noisy[50:] += 0.15
+    breaks = breaks_of(noisy)
+    assert breaks.separated[50] and breaks.joinable[50]
+    # A 25 cm step is a discontinuity; the scan's own first return never joins its last.
+    stepped = wall.copy()
+    stepped[50:] += 0.25
+    breaks = breaks_of(stepped)
+    assert breaks.separated[50] and not breaks.joinable[50] and not breaks.joinable[0]
+    # Missing beams: more than max_missing_beams of them always separate, and are never
+    # crossed, even where the allowance of the breakpoint rule alone would keep the returns on
+    # one chain.
+    for missing, separated in ((3, False), (4, True)):
+        gappy = wall.copy()
+        gappy[50 - missing:50] = math.nan
+        breaks = breaks_of(gappy)
+        at = int(np.searchsorted(np.flatnonzero(np.isfinite(gappy)), 50))
+        assert (breaks.separated[at], breaks.joinable[at]) == (separated, False), missing
+
+
+def test_merging_never_joins_collinear_walls_across_a_discontinuity():
+    # Two collinear pieces of wall, 4 m ahead, seen with a 7 m deep gap between them (a door
+    # to a long corridor): two segments, not one phantom wall across the door.
+    increment = math.radians(0.5)
+    bearings = np.arange(-60, 61) * increment
+    ranges = 4.0 / np.cos(bearings)
+    ranges[55:66] = 11.0 / np.cos(bearings[55:66])
+    config = SMALL_NOISE_CONFIG
+    features = extract_features(ranges, bearings[0], increment, config)
+    near = [s for s in features.segments if s.radius_m < 5.0]
+    assert len(near) == 2
+    # With the corridor invisible (no returns), 11 missing beams: still two segments, but one
+    # wall when the gap is within merge_max_missing_beams.
+    ranges[55:66] = math.nan
+    assert len(extract_features(ranges, bearings[0], increment, config).segments) == 2
+    ranges[58:63] = 4.0 / np.cos(bearings[58:63])
+    assert len(extract_features(ranges, bearings[0], increment, config).segments) == 1
 
 
 @pytest.mark.parametrize('yaw', [0.0, 0.7, -2.0, math.pi])

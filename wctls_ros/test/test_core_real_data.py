@@ -61,16 +61,27 @@ def test_range_noise_estimated_from_the_data(range_sigma):
     assert 0.006 < range_sigma < 0.010      # the LMS111's ~8 mm
 
 
+NEAR_CORNER = np.array([-0.05, -0.68])       # behind a small object, hand-labelled "hidden"
+
+
 @pytest.mark.parametrize('method', ['utls', 'wtls', 'wctls', 'ml'])
-def test_the_box_corners_are_found_in_every_scan(scans, range_sigma, method):
+def test_the_box_corner_in_view_is_found_in_every_scan_the_hidden_one_in_none(scans,
+                                                                              range_sigma,
+                                                                              method):
     config = FeatureConfig(method=method, range_sigma_m=range_sigma, bearing_sigma_rad=0.0)
     reference, tracks = corner_tracks(scans, config)
     far_corner = int(np.argmax(reference[:, 0]))       # the box corner at (1.34, 0.93) m
     assert np.allclose(reference[far_corner], [1.34, 0.93], atol=0.02)
     assert len(tracks[far_corner]) == len(scans)
-    # The near corner joins a wall that passes 5 cm from the sensor (beams at 5-25 degrees
-    # incidence): it is missed in at most 3 of 175 scans.
-    assert all(len(track) >= len(scans) - 3 for track in tracks)
+    # The near corner joins a wall that passes 5 cm from the sensor to one behind a small
+    # object whose returns, 5-38 mm in front of the first wall, stand between its end and the
+    # corner: an occluded end, not a corner end. Before the corner end rule it was reported
+    # in 172 of 175 scans, at times with the object's returns in the wall.
+    features = [extract_features(np.asarray(s.ranges), s.angle_min, s.angle_increment, config,
+                                 s.range_min, s.range_max) for s in scans]
+    near = sum(bool(len(f.corners)) and np.hypot(*(f.corners.xy_m - NEAR_CORNER).T).min() < 0.05
+               for f in features)
+    assert near <= 3
 
 
 def test_propagated_covariance_against_real_scatter(scans, range_sigma):
@@ -91,48 +102,27 @@ def test_propagated_covariance_against_real_scatter(scans, range_sigma):
     assert 1.6 < median_nees < 3.0
 
 
-def near_corner(scans, config):
-    """Return the near corner of every scan (position, covariance) and its first wall's end."""
-    xy, covariance, wall_end = [], [], []
+def near_wall_end(scans, config):
+    """Return the last beam of the wall that ends at the object beside the near corner."""
+    ends = []
     for s in scans:
         f = extract_features(np.asarray(s.ranges), s.angle_min, s.angle_increment, config,
                              s.range_min, s.range_max)
-        k = int(np.argmin(np.hypot(*(f.corners.xy_m - [-0.05, -0.68]).T)))
-        xy.append(f.corners.xy_m[k])
-        covariance.append(f.corners.covariance[k, :2, :2])
-        wall_end.append(f.segments.last_index[f.corners.first_segment[k]])
-    return np.array(xy), np.array(covariance), np.array(wall_end)
-
-
-def mean_nees(xy, covariance):
-    return float(np.mean(nees(xy - xy.mean(axis=0), covariance)))
+        k = int(np.argmin(np.hypot(*(f.segments.end_xy_m - NEAR_CORNER).T)))
+        ends.append(f.segments.last_index[k])
+    return np.array(ends)
 
 
 def test_an_object_beside_the_near_corner_no_longer_joins_the_wall(scans, range_sigma):
     # A small object stands between the near wall's end and the corner: its 8 returns (beams
     # 78-85) lie 5-38 mm off the wall, inside the 40 mm IEPF threshold. Without the end offset
-    # cut the wall takes all of them in some scans, and the UTLS corner jumps between the two
-    # groups of scans far beyond its covariance, which describes the noise of a fixed set of
-    # returns, not that switch: within each group it is calibrated. (ML jumps twice as far.)
+    # cut the wall takes all of them in some scans (in 49 of 175, measured); with the cut (the
+    # default) it never reaches the object's far end.
     config = FeatureConfig(method='utls', range_sigma_m=range_sigma, bearing_sigma_rad=0.0,
                            end_offset_sigmas=0.0)
-    xy, covariance, wall_end = near_corner(scans, config)
-    groups = (wall_end >= 83, wall_end < 83)
-    shift = np.hypot(*(xy[groups[0]].mean(axis=0) - xy[groups[1]].mean(axis=0)))
-    within = [mean_nees(xy[g], covariance[g]) for g in groups]
-    uncut = mean_nees(xy, covariance)
-    # With the cut (the default), the wall never reaches the object's far end.
-    cut_xy, cut_covariance, cut_wall_end = near_corner(
-        scans, config.replace(end_offset_sigmas=FeatureConfig().end_offset_sigmas))
-    cut = mean_nees(cut_xy, cut_covariance)
-    print(f'UTLS: {groups[0].sum()} of {len(scans)} scans with the object in the wall, '
-          f'corner shift {shift * 1e3:.1f} mm, NEES {uncut:.1f} overall, within '
-          f'{within[0]:.2f} / {within[1]:.2f}; with the cut: wall ends at beam '
-          f'{cut_wall_end.min()}-{cut_wall_end.max()}, NEES {cut:.1f}')
-    # Measured: 49 scans, shift 19 mm, NEES 112 overall, 1.6 / 2.8 within; with the cut the
-    # wall ends at beams 75-81 and the NEES is 14.5 (the object's first returns, within the
-    # noise of the wall, still join it in some scans).
-    assert all(g.sum() >= 20 for g in groups)
-    assert shift > 0.015 and uncut > 20.0
-    assert all(1.0 < value < 3.5 for value in within)
-    assert cut_wall_end.max() < 83 and cut < uncut / 4.0
+    uncut = near_wall_end(scans, config)
+    cut = near_wall_end(scans, config.replace(end_offset_sigmas=FeatureConfig().end_offset_sigmas))
+    print(f'without the cut the wall ends at beam 83 or later in {np.sum(uncut >= 83)} scans; '
+          f'with it at beams {cut.min()}-{cut.max()}')
+    assert np.sum(uncut >= 83) >= 20
+    assert cut.max() < 83

@@ -125,7 +125,8 @@ def test_merging_across_touching_chains_makes_them_one_chain():
     sums = piece_sums(moment_terms(x, y), segments)
     merged, (angle, radius, _), cut_short = merge_collinear(
         sums.pieces(segments), False, sums.edges.size - 1,
-        lambda pieces: moment_fit(sums.over(pieces), 0.01, 0.0), 13.8, 10)
+        lambda pieces: moment_fit(sums.over(pieces), 0.01, 0.0), 13.8, 10,
+        np.ones(sums.edges.size - 1, dtype=bool))
     assert not cut_short
     merged = sums.positions(merged)
     assert merged.start.tolist() == [0, 80] and merged.stop.tolist() == [80, 100]

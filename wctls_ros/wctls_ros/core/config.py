@@ -103,6 +103,10 @@ class FeatureConfig:
     merge_chi2: float = _setting(
         13.8, 'merge neighbouring segments below this chi2 (2 dof) of their line difference '
         '(13.8: 99.9 % for the same line); 0 disables merging', Limits(0.0, 1e6))
+    merge_max_missing_beams: int = _setting(
+        3, 'more invalid beams than this between two returns separate them, and merging never '
+        'crosses such a gap (nor a range jump beyond what noise explains): collinear surfaces '
+        'across a dark or open gap are not one wall', Limits(0, 100000))
     end_offset_sigmas: float = _setting(
         4.0, 'cut the last k returns of a segment end when their residuals, each in sigmas of '
         'its noise, sum to more than this times sqrt(k) (another surface met at a shallow '
@@ -114,9 +118,17 @@ class FeatureConfig:
     min_corner_angle_rad: float = _setting(
         math.radians(30.0), 'no corner between walls closer to parallel than this, {unit}',
         Limits(0.0, math.pi / 2, low_open=True))
-    max_corner_gap_m: float = _setting(
-        0.3, 'no corner farther than this from either wall end (a virtual intersection '
-        'across an occlusion), m', Limits(0.0, 100.0, low_open=True))
+    min_wall_beam_angle_rad: float = _setting(
+        math.radians(5.0), 'a segment within this angle of the beam to its middle is not a '
+        'wall (mixed pixels strung along the beams at an edge, grazing veils), {unit}',
+        Limits(0.0, math.pi / 2, high_open=True))
+    corner_end_sigmas: float = _setting(
+        3.0, 'a corner needs both walls to end at it: its bearing between their facing ends, '
+        'and every return between them on one of the two lines, within this many standard '
+        'deviations (plus corner_end_floor_m); a nearer return there is an occluder, a farther '
+        'one a gap where the walls do not meet', Limits(0.0, 100.0, low_open=True))
+    corner_end_floor_m: float = _setting(
+        0.01, 'the smallest tolerance of the corner end test, m', Limits(0.0, 1.0))
 
     def __post_init__(self):
         problems = list(validation_errors(self))

@@ -112,15 +112,14 @@ def intersect(line_a: np.ndarray, cov_a: np.ndarray, line_b: np.ndarray,
 
 def find_corners(line: np.ndarray, line_covariance: np.ndarray,
                  start_xy_m: np.ndarray, end_xy_m: np.ndarray, first: np.ndarray,
-                 second: np.ndarray, min_angle_rad: float, max_gap_m: float,
+                 second: np.ndarray, min_angle_rad: float,
                  line_offset_jacobian: np.ndarray = None,
                  common_range_sigma_m: float = 0.0) -> CornerSet:
     """
-    Intersect the given pairs of segments and keep the real corners.
+    Intersect the given pairs of segments that are not close to parallel.
 
-    A pair is rejected when its lines are closer to parallel than ``min_angle_rad`` or when the
-    intersection lies farther than ``max_gap_m`` from the first segment's end point or from the
-    second segment's start point (a virtual intersection, e.g. across an occlusion).
+    A pair is rejected when its lines are closer to parallel than ``min_angle_rad``; whether
+    both walls really end at the intersection is :func:`walls_end_at_corners`' question.
 
     :param line: (a, b, c) of every segment in the method's form, shape (S, 3)
     :param line_covariance: covariance of (a, b, c), shape (S, 3, 3)
@@ -129,7 +128,6 @@ def find_corners(line: np.ndarray, line_covariance: np.ndarray,
     :param first: earlier segment of each candidate pair, shape (k,)
     :param second: later segment of each candidate pair, shape (k,)
     :param min_angle_rad: smallest angle between the two walls, rad
-    :param max_gap_m: largest distance from the corner to either facing end point, m
     :param line_offset_jacobian: d(a, b, c) / d(range offset common to the scan), (S, 3), per m
     :param common_range_sigma_m: std of that common offset, m: it moves both lines together, so
         its part of the corner covariance is sigma^2 j j^T with j = J_1 g_1 + J_2 g_2
@@ -150,9 +148,7 @@ def find_corners(line: np.ndarray, line_covariance: np.ndarray,
         sine = abs(normal_x[0] * normal_y[1] - normal_y[0] * normal_x[1])
         from_start_x, from_start_y = x - start[0], y - start[1]
         from_end_x, from_end_y = x - end[0], y - end[1]
-        gap = np.maximum(np.hypot(from_end_x, from_end_y)[0],
-                         np.hypot(from_start_x, from_start_y)[1])
-        kept = ((sine >= math.sin(min_angle_rad)) & (gap <= max_gap_m)).nonzero()[0]
+        kept = (sine >= math.sin(min_angle_rad)).nonzero()[0]
 
         # Unit vectors from the corner along each wall, towards the middle of its returns: the
         # wall direction (-normal_y, normal_x), reversed when that middle lies behind it. They
@@ -197,4 +193,135 @@ def find_corners(line: np.ndarray, line_covariance: np.ndarray,
             upper += common[_UPPER_ROW] * common[_UPPER_COLUMN]
     covariance = upper.take(kept, 1).T.take(_UPPER_TO_FULL, 1).reshape(-1, 3, 3)
     return CornerSet(np.array([x[0], y[0]]).T.take(kept, 0), yaw[kept], covariance,
-                     opening[kept], walls[0][kept], walls[1][kept])
+                     opening[kept], walls[0][kept], walls[1][kept],
+                     np.ones((kept.size, 2), dtype=bool))
+
+
+def _wrapped(angle: np.ndarray) -> np.ndarray:
+    """Return angles wrapped to [-pi, pi)."""
+    return np.remainder(angle + np.pi, 2.0 * np.pi) - np.pi
+
+
+def walls_end_at_corners(corners: CornerSet, wall_angle_rad: np.ndarray,
+                         wall_radius_m: np.ndarray, wall_middle_m: np.ndarray,
+                         x_m: np.ndarray, y_m: np.ndarray, last_position: np.ndarray,
+                         first_position: np.ndarray, step_rad: float, range_sigma_m: float,
+                         bearing_sigma_rad: float, sigmas: float, floor_m: float, window: int,
+                         max_missing_beams: int, run_sigmas: float):
+    """
+    Tell which corners both walls end at, and at which the end was seen.
+
+    A corner is the point where two walls end; adjacent segments whose lines merely intersect
+    near their ends (across an occlusion, a gap, a T-junction seen from the side where one wall
+    goes on) are not corners. The returns between the first wall's last return and the second
+    wall's first one (left out of both segments) are sorted by where they lie: on one of the
+    two lines (within ``sigmas`` standard deviations of a return's position noise plus
+    ``floor_m``), around the corner (where both lines are within the noise of each other, and
+    a beam's footprint on both walls returns a range in between: an inside corner looks
+    rounded), in front of both lines (an occluder) or elsewhere. Each wall reaches as far
+    towards the corner as its returns do, also beyond something in front of it (e.g. a leg),
+    unless those returns lie in front of its line together (their residuals over the noise sum
+    to more than ``run_sigmas`` times the square root of their number, the test of
+    :func:`trim_offset_ends`): an object before the wall's end.
+    The corner is rejected when
+
+    - a wall's line carries returns past the corner: the wall goes on, it does not end there;
+    - anything lies between the two reaches: an occluder at the corner, or a view through a
+      gap where the walls do not meet;
+    - a wall's reach stops short of the corner by more than ``sigmas`` standard deviations of
+      the corner's position along that wall, plus ``floor_m``, plus ``1 + max_missing_beams``
+      beams' spacing on the wall: the corner is an extrapolation across an unseen stretch.
+
+    A wall's end is seen when its reach is within one beam's spacing of that bound.
+
+    :param corners: candidate corners
+    :param wall_angle_rad: normal angle of every segment's line, shape (S,), rad
+    :param wall_radius_m: radius of every segment's line, shape (S,), m
+    :param wall_middle_m: middle of every segment, shape (S, 2), m (tells its side of a corner)
+    :param x_m: x of the returns in position order, shape (n,), m
+    :param y_m: y of the returns in position order, shape (n,), m
+    :param last_position: position of every segment's last return, shape (S,)
+    :param first_position: position of every segment's first return, shape (S,)
+    :param step_rad: bearing step between beams, rad
+    :param range_sigma_m: range noise std, m
+    :param bearing_sigma_rad: bearing noise std, rad
+    :param sigmas: tolerance in standard deviations
+    :param floor_m: tolerance floor, m
+    :param window: most returns between the two walls (more: not adjacent)
+    :param max_missing_beams: most beams without a return between a corner and a wall's reach
+    :param run_sigmas: largest sum of normalised residuals (in front) over sqrt(count) of the
+        returns a wall claims beyond its segment (0: no such test)
+    :return: (corners both walls end at, shape (C,); whether each wall's end was seen, shape
+        (C, 2), column 0 the first wall)
+    """
+    count = len(x_m)
+    walls = np.stack([corners.first_segment, corners.second_segment])        # (2, C)
+    after_first, before_second = last_position[walls[0]], first_position[walls[1]]
+    between = (before_second - after_first - 1) % count
+    # Column 0 is the first wall's facing end, the last column the second's; between them the
+    # returns that belong to neither segment (absent where there are fewer).
+    steps = np.arange(window + 2)
+    position = after_first[:, None] + steps
+    position[:, -1] = before_second
+    present = (steps <= between[:, None]) | (steps == window + 1)
+    x, y = x_m.take(position, mode='wrap'), y_m.take(position, mode='wrap')
+    corner = corners.xy_m.T[:, :, None]                                     # (2, C, 1)
+    corner_range = np.hypot(*corners.xy_m.T)
+    noise = np.sqrt(range_sigma_m ** 2 + (x * x + y * y) * bearing_sigma_rad ** 2)
+    line_tolerance = sigmas * noise + floor_m
+    # Per wall: its unit normal and the unit direction from the corner into the wall.
+    normal = np.stack([np.cos(wall_angle_rad[walls]), np.sin(wall_angle_rad[walls])])
+    inward = np.stack([-normal[1], normal[0]])                              # (2, 2, C)
+    towards_middle = ((wall_middle_m[walls].transpose(2, 0, 1) - corner[:, None, :, 0])
+                      * inward).sum(axis=0)
+    inward *= np.copysign(1.0, towards_middle)
+    # Each return's offset in front of each line (towards the sensor) and along each wall.
+    offset = x * normal[0, :, :, None] + y * normal[1, :, :, None]
+    in_front = wall_radius_m[walls][:, :, None] - offset                   # (2, C, W)
+    along = ((x - corner[0]) * inward[0, :, :, None]
+             + (y - corner[1]) * inward[1, :, :, None])                     # (2, C, W)
+    on_line = present & (np.abs(in_front) <= line_tolerance)
+    occluder = present & (in_front > line_tolerance).all(axis=0)
+    # The corner's std along each wall, and how far apart the wall's returns are there.
+    along_sigma = np.sqrt(np.einsum('kic,cij,kjc->kc', inward, corners.covariance[:, :2, :2],
+                                    inward))
+    incidence = np.abs((normal * corners.xy_m.T[:, None, :]).sum(axis=0)) / corner_range
+    spacing = corner_range * step_rad / np.maximum(incidence, 1e-3)
+    tolerance = sigmas * along_sigma + floor_m                              # (2, C)
+    # Returns this close to the corner belong to either wall (the lines are within the noise
+    # of each other there, and within a beam a footprint on both walls returns a range in
+    # between).
+    sine = np.abs(normal[0, 0] * normal[1, 1] - normal[1, 0] * normal[0, 1])
+    corner_noise = np.sqrt(range_sigma_m ** 2 + (corner_range * bearing_sigma_rad) ** 2)
+    zone = (sigmas * np.hypot(corner_noise, along_sigma.max(axis=0)) / sine + floor_m
+            + spacing.min(axis=0))
+    at_corner = present & (np.hypot(x - corner[0], y - corner[1]) <= zone[:, None])
+    # Returns away from the corner that a wall claims beyond its segment (past something in
+    # front of it) must not lie in front of its line together, by the test of
+    # trim_offset_ends: a run of returns each within the noise of the line but all nearer is
+    # an object standing before the wall. (All farther is the wall itself, a few mm off
+    # straight.)
+    claimed = on_line & (along >= -tolerance[:, :, None]) & ~at_corner
+    claimed[:, :, 0] = claimed[:, :, -1] = False
+    run = claimed.sum(axis=2)
+    together = np.where(claimed, in_front / noise, 0.0).sum(axis=2) / np.sqrt(np.maximum(run, 1))
+    if run_sigmas > 0.0:
+        claimed &= (together > run_sigmas)[:, :, None]
+        on_line &= ~claimed
+    here = at_corner | (on_line & (along >= -tolerance[:, :, None]))        # (2, C, W)
+    goes_on = (~at_corner & on_line & ~on_line[::-1]
+               & (along < -tolerance[:, :, None])).any(axis=(0, 2))
+    first_reach = np.where(here[0], steps, -1).max(axis=1)
+    second_reach = np.where(here[1], steps, window + 2).min(axis=1)
+    # Before the first wall's reach only occluders may interrupt it (and after the second's).
+    interrupts = present & ~here[0] & ~here[1]
+    blocked = ((interrupts & ~occluder & (steps < first_reach[:, None]))
+               | (interrupts & ~occluder & (steps > second_reach[:, None]))
+               | (interrupts & (steps > first_reach[:, None])
+                  & (steps < second_reach[:, None]))).any(axis=1)
+    # How far each wall's own returns stop short of the corner, beyond the tolerance, in beams.
+    gap = np.where(on_line & here, np.maximum(along, 0.0), np.inf).min(axis=2)
+    short = np.maximum(gap - tolerance, 0.0) / spacing
+    keep = ((between <= window) & here[0, :, 0] & here[1, :, -1] & ~goes_on & ~blocked
+            & (short <= 1.0 + max_missing_beams).all(axis=0))
+    return keep, (short <= 1.0).T

@@ -34,6 +34,10 @@ class Segment:
     :ivar last_index: beam index of the last return (smaller than first_index on a segment
         that crosses the seam of a full turn)
     :ivar num_points: number of returns fitted
+    :ivar residual_chi2_dof: sum of the squared residuals from the line, each over the
+        variance of the return across the line, per degree of freedom (num_points - 2): about 1
+        when the wall is straight and the noise model right, above it when the wall bows or the
+        noise is larger than modelled
     """
 
     angle_rad: float
@@ -47,6 +51,7 @@ class Segment:
     first_index: int
     last_index: int
     num_points: int
+    residual_chi2_dof: float
 
 
 @dataclass(frozen=True)
@@ -61,6 +66,9 @@ class Corner:
     :ivar opening_angle_rad: angle between the walls through the open side, rad in (0, 2 pi)
     :ivar first_segment: index of the earlier segment in the same Features
     :ivar second_segment: index of the later segment
+    :ivar first_end_seen: a return of the first wall lies within a beam of the corner (else the
+        corner sits in a run of beams without returns, e.g. a dark corner)
+    :ivar second_end_seen: the same for the second wall
     """
 
     x_m: float
@@ -70,6 +78,8 @@ class Corner:
     opening_angle_rad: float
     first_segment: int
     second_segment: int
+    first_end_seen: bool
+    second_end_seen: bool
 
     @property
     def position_covariance(self) -> np.ndarray:
@@ -93,8 +103,9 @@ class SegmentSet(_Rows):
     """
     The segments of one scan as arrays, one row per segment (fields as in :class:`Segment`).
 
-    Shapes: angle_rad, radius_m, first_index, last_index, num_points (S,); covariance (S, 2, 2);
-    line, line_offset_jacobian (S, 3); line_covariance (S, 3, 3); start_xy_m, end_xy_m (S, 2).
+    Shapes: angle_rad, radius_m, first_index, last_index, num_points, residual_chi2_dof (S,);
+    covariance (S, 2, 2); line, line_offset_jacobian (S, 3); line_covariance (S, 3, 3);
+    start_xy_m, end_xy_m (S, 2).
     """
 
     angle_rad: np.ndarray
@@ -108,6 +119,7 @@ class SegmentSet(_Rows):
     first_index: np.ndarray
     last_index: np.ndarray
     num_points: np.ndarray
+    residual_chi2_dof: np.ndarray
 
     def __len__(self):
         return len(self.angle_rad)
@@ -115,9 +127,9 @@ class SegmentSet(_Rows):
     def __getitem__(self, i: int) -> Segment:
         return Segment(float(self.angle_rad[i]), float(self.radius_m[i]), self.covariance[i],
                        self.line[i], self.line_covariance[i], self.line_offset_jacobian[i],
-                       self.start_xy_m[i],
-                       self.end_xy_m[i], int(self.first_index[i]), int(self.last_index[i]),
-                       int(self.num_points[i]))
+                       self.start_xy_m[i], self.end_xy_m[i], int(self.first_index[i]),
+                       int(self.last_index[i]), int(self.num_points[i]),
+                       float(self.residual_chi2_dof[i]))
 
     @staticmethod
     def empty() -> 'SegmentSet':
@@ -128,8 +140,8 @@ class SegmentSet(_Rows):
         """
         return SegmentSet(np.zeros(0), np.zeros(0), np.zeros((0, 2, 2)), np.zeros((0, 3)),
                           np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros((0, 2)),
-                          np.zeros((0, 2)),
-                          np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0, np.intp))
+                          np.zeros((0, 2)), np.zeros(0, np.intp), np.zeros(0, np.intp),
+                          np.zeros(0, np.intp), np.zeros(0))
 
 
 @dataclass(frozen=True)
@@ -138,7 +150,7 @@ class CornerSet(_Rows):
     The corners of one scan as arrays, one row per corner (fields as in :class:`Corner`).
 
     Shapes: xy_m (C, 2); yaw_rad, opening_angle_rad, first_segment, second_segment (C,);
-    covariance (C, 3, 3) over (x, y, yaw).
+    covariance (C, 3, 3) over (x, y, yaw); end_seen (C, 2), column 0 the first wall.
     """
 
     xy_m: np.ndarray
@@ -147,6 +159,7 @@ class CornerSet(_Rows):
     opening_angle_rad: np.ndarray
     first_segment: np.ndarray
     second_segment: np.ndarray
+    end_seen: np.ndarray
 
     def __len__(self):
         return len(self.yaw_rad)
@@ -154,7 +167,19 @@ class CornerSet(_Rows):
     def __getitem__(self, i: int) -> Corner:
         return Corner(float(self.xy_m[i, 0]), float(self.xy_m[i, 1]), float(self.yaw_rad[i]),
                       self.covariance[i], float(self.opening_angle_rad[i]),
-                      int(self.first_segment[i]), int(self.second_segment[i]))
+                      int(self.first_segment[i]), int(self.second_segment[i]),
+                      bool(self.end_seen[i, 0]), bool(self.end_seen[i, 1]))
+
+    def select(self, keep: np.ndarray) -> 'CornerSet':
+        """
+        Return the corners where ``keep`` selects (a boolean or index array).
+
+        :param keep: selection over the corners
+        :return: the selected corners
+        """
+        return CornerSet(self.xy_m[keep], self.yaw_rad[keep], self.covariance[keep],
+                         self.opening_angle_rad[keep], self.first_segment[keep],
+                         self.second_segment[keep], self.end_seen[keep])
 
     @staticmethod
     def empty() -> 'CornerSet':
@@ -164,7 +189,7 @@ class CornerSet(_Rows):
         :return: the empty set
         """
         return CornerSet(np.zeros((0, 2)), np.zeros(0), np.zeros((0, 3, 3)), np.zeros(0),
-                         np.zeros(0, np.intp), np.zeros(0, np.intp))
+                         np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros((0, 2), bool))
 
 
 @dataclass(frozen=True)

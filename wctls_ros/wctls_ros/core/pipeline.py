@@ -3,21 +3,28 @@
 
 """The per-scan pipeline of the paper's Algorithm 1: returns -> segments -> lines -> corners."""
 
+from dataclasses import dataclass
 import math
 
 import numpy as np
 
 from .config import FeatureConfig
-from .corners import find_corners
+from .corners import find_corners, walls_end_at_corners
 from .features import CornerSet, Features, SegmentSet
-from .lines import fit_lines, LineFits, segment_returns
-from .scan import scan_to_points
-from .scan import ScanError
-from .segmentation import (breakpoints, chains, iterative_end_point_fit, merge_collinear,
-                           moment_fit, moment_terms, pass_budget, piece_sums, SegmentRanges,
-                           trim_ambiguous_ends, trim_offset_ends)
+from .lines import fit_lines, LineFits, segment_returns, SegmentReturns
+from .scan import scan_to_points, ScanError, ScanPoints
+from .segmentation import (breakpoints, Breaks, Chains, chains, iterative_end_point_fit,
+                           merge_collinear, moment_fit, moment_terms, pass_budget, piece_sums,
+                           SegmentRanges, trim_ambiguous_ends, trim_offset_ends)
 
 _DEFAULT_CONFIG = FeatureConfig()
+# Most returns between two walls that meet at a corner: the ones both trims leave out (8 at each
+# end), the IEPF split return, and pieces of a wall too short to be segments, cut off by
+# something in front of it (a leg). More, and something else stands between the walls.
+_CORNER_WINDOW = 40
+# A corner may sit one beam without a return beyond a wall's last return (a dropout there),
+# reported with that wall's end not seen; farther, it is an extrapolation, not a corner.
+_CORNER_MISSING_BEAMS = 1
 
 
 def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
@@ -60,24 +67,76 @@ def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float
     points = scan_to_points(ranges_m, angle_min_rad, angle_increment_rad,
                             max(range_min_m, config.range_min_m),
                             min(range_max_m, config.range_max_m))
-    n = len(points)
-    if n < config.min_segment_points:
+    if len(points) < config.min_segment_points:
         return Features(config.method, SegmentSet.empty(), CornerSet.empty())
-    separated = breakpoints(points, config.range_sigma_m, config.bearing_sigma_rad,
-                            config.breakpoint_lambda_rad)
-    contour = chains(points, separated)
-    # Returns in circular order; a merged segment may run past position n on a full turn, so
-    # gathers wrap around.
-    order = contour.order
-    rho, theta = points.range_m[order], points.bearing_rad[order]
-    x, y = points.x_m[order], points.y_m[order]
-
-    # Every pass of IEPF and of merging is O(n): a bounded number of them bounds the work.
-    budget = pass_budget(n)
-    segments, unsplit = iterative_end_point_fit(x, y, contour.start, contour.stop,
-                                                contour.chain, config.iepf_threshold_m, budget)
+    contour = _Contour.of(points, config)
+    segments, angle, radius, work_limited = _segment(contour, config)
     if not len(segments):
-        return Features(config.method, SegmentSet.empty(), CornerSet.empty(), unsplit)
+        return Features(config.method, SegmentSet.empty(), CornerSet.empty(), work_limited)
+    walls, positions = _fit_walls(contour, segments, angle, radius, config)
+    if not len(walls):
+        return Features(config.method, SegmentSet.empty(), CornerSet.empty(), work_limited)
+    return Features(config.method, walls, _corners(contour, walls, positions, config),
+                    work_limited)
+
+
+@dataclass(frozen=True)
+class _Contour:
+    """
+    The scan's valid returns in circular order (a full turn starts at a breakpoint).
+
+    :ivar points: the returns in beam order
+    :ivar breaks: where the breakpoint rule separates neighbours (beam order)
+    :ivar chains: the runs between breakpoints, and the circular order
+    :ivar rho: ranges in circular order, m
+    :ivar theta: bearings in circular order, rad
+    :ivar x: x in circular order, m
+    :ivar y: y in circular order, m
+    """
+
+    points: ScanPoints
+    breaks: Breaks
+    chains: Chains
+    rho: np.ndarray
+    theta: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+
+    @staticmethod
+    def of(points: ScanPoints, config: FeatureConfig) -> '_Contour':
+        """Cut the returns into chains at breakpoints (Borges and Aldon) and order them."""
+        breaks = breakpoints(points, config.range_sigma_m, config.bearing_sigma_rad,
+                             config.breakpoint_lambda_rad, config.merge_max_missing_beams)
+        runs = chains(points, breaks.separated)
+        order = runs.order
+        return _Contour(points, breaks, runs, points.range_m[order], points.bearing_rad[order],
+                        points.x_m[order], points.y_m[order])
+
+    def __len__(self):
+        return len(self.x)
+
+
+def _segment(contour: _Contour, config: FeatureConfig):
+    """
+    Split the chains into straight segments, merge collinear neighbours, trim their ends.
+
+    Steps: Iterative End Point Fit, merging of statistically collinear neighbours (never
+    across a discontinuity), the size rules (min_segment_points, min_segment_length_m), then
+    leaving out the returns where two segments meet that fit both lines and runs at the ends
+    that lie off the line together. Every pass of IEPF and of merging is O(n): a bounded
+    number of them (:func:`~.segmentation.pass_budget`) bounds the work on any scan.
+
+    :return: (segments in scan order, the merge fit's angle (S,) and radius (S,) in circular
+        order before sorting, whether the work bound stopped splitting or merging early);
+        positions are the contour's (circular order)
+    """
+    n, x, y = len(contour), contour.x, contour.y
+    budget = pass_budget(n)
+    runs = contour.chains
+    segments, unsplit = iterative_end_point_fit(x, y, runs.start, runs.stop, runs.chain,
+                                                config.iepf_threshold_m, budget)
+    if not len(segments):
+        return segments, None, None, unsplit
     # Sums over the pieces between segment ends make the segmentation's line fits O(1) per
     # segment, merged or not: merging works on piece ranges.
     sums = piece_sums(moment_terms(x, y), segments)
@@ -85,65 +144,120 @@ def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float
     def quick(pieces: SegmentRanges):
         return moment_fit(sums.over(pieces), config.range_sigma_m, config.bearing_sigma_rad)
 
+    joinable = contour.breaks.joinable[runs.order][sums.edges[:-1]]   # before each piece
     pieces, (angle, radius, _), unmerged = merge_collinear(
-        sums.pieces(segments), points.full_turn, sums.edges.size - 1, quick, config.merge_chi2,
-        budget)
-    work_limited = unsplit or unmerged
+        sums.pieces(segments), contour.points.full_turn, sums.edges.size - 1, quick,
+        config.merge_chi2, budget, joinable)
     segments = sums.positions(pieces)
-
-    # Keep segments with enough returns and end returns far enough apart; then leave out the
-    # returns where two kept segments meet that fit both lines, and runs at the ends that lie
-    # off the line together; then put them in scan order.
     first, last = segments.start, (segments.stop - 1) % n
     dx, dy = x[last] - x[first], y[last] - y[first]
     keep = ((segments.stop - first >= config.min_segment_points)
             & (dx * dx + dy * dy >= config.min_segment_length_m ** 2))
-    if not keep.any():
-        return Features(config.method, SegmentSet.empty(), CornerSet.empty(), work_limited)
     segments, angle, radius = segments.select(keep), angle[keep], radius[keep]
-    segments = trim_ambiguous_ends(segments, points.full_turn, n, x, y, angle, radius,
-                                   config.range_sigma_m, config.bearing_sigma_rad,
-                                   config.min_segment_points)
-    if config.end_offset_sigmas > 0.0:
-        segments = trim_offset_ends(segments, n, x, y, angle, radius, config.range_sigma_m,
-                                    config.bearing_sigma_rad, config.min_segment_points,
-                                    config.end_offset_sigmas)
+    if len(segments):
+        segments = trim_ambiguous_ends(segments, contour.points.full_turn, n, x, y, angle,
+                                       radius, config.range_sigma_m, config.bearing_sigma_rad,
+                                       config.min_segment_points)
+        if config.end_offset_sigmas > 0.0:
+            segments = trim_offset_ends(segments, n, x, y, angle, radius, config.range_sigma_m,
+                                        config.bearing_sigma_rad, config.min_segment_points,
+                                        config.end_offset_sigmas)
+    return segments, angle, radius, unsplit or unmerged
+
+
+def _fit_walls(contour: _Contour, segments: SegmentRanges, angle: np.ndarray,
+               radius: np.ndarray, config: FeatureConfig):
+    """
+    Fit every segment with the configured method and keep the ones that are walls.
+
+    A segment is left out when its fit is degenerate (non-finite, or a covariance that is not
+    positive definite) or when it lies within min_wall_beam_angle of the beam to its middle:
+    returns strung along the beams are mixed pixels or grazing veils, not a wall.
+
+    :return: (the walls in scan order, their first and last positions in the contour (2, S))
+    """
+    n, points, order = len(contour), contour.points, contour.chains.order
     first_index = points.index[order[segments.start]]
-    by_scan = np.argsort(first_index, kind='stable')
-    segments, first_index = segments.select(by_scan), first_index[by_scan]
+    segments = segments.select(np.argsort(first_index, kind='stable'))
     counts = segments.stop - segments.start
     offsets = np.cumsum(counts) - counts
     position = np.arange(offsets[-1] + counts[-1]) + np.repeat(segments.start - offsets, counts)
-    fits = fit_lines(config.method,
-                     segment_returns(rho.take(position, mode='wrap'),
-                                     theta.take(position, mode='wrap'), offsets, counts,
-                                     x.take(position, mode='wrap'),
-                                     y.take(position, mode='wrap')),
-                     config.range_sigma_m, config.bearing_sigma_rad)
-    usable = _finite_and_positive(fits)
-    if not usable.any():
-        return Features(config.method, SegmentSet.empty(), CornerSet.empty(), work_limited)
-    if not usable.all():
-        segments, counts, fits = segments.select(usable), counts[usable], fits.select(usable)
-        first_index = first_index[usable]
+    returns = segment_returns(contour.rho.take(position, mode='wrap'),
+                              contour.theta.take(position, mode='wrap'), offsets, counts,
+                              contour.x.take(position, mode='wrap'),
+                              contour.y.take(position, mode='wrap'))
+    fits = fit_lines(config.method, returns, config.range_sigma_m, config.bearing_sigma_rad)
     last = (segments.stop - 1) % n
-    start_xy, end_xy = _project(x, y, segments.start, last, fits)
+    start_xy, end_xy = _project(contour.x, contour.y, segments.start, last, fits)
+    middle = 0.5 * (start_xy + end_xy)
+    along_beam = np.abs(np.cos(np.arctan2(middle[:, 1], middle[:, 0]) - fits.angle_rad))
+    usable = _finite_and_positive(fits) & (along_beam >= math.sin(config.min_wall_beam_angle_rad))
+    fits, segments, counts = fits.select(usable), segments.select(usable), counts[usable]
+    start_xy, end_xy, last = start_xy[usable], end_xy[usable], last[usable]
+    chi2_dof = _residual_chi2_dof(returns, fits, usable, config)
     common = config.common_range_sigma_m * fits.normal_offset_jacobian
-    segment_set = SegmentSet(
+    walls = SegmentSet(
         fits.angle_rad, fits.radius_m,
         fits.normal_covariance + common[:, :, None] * common[:, None, :], fits.line,
         fits.line_covariance, fits.line_offset_jacobian, start_xy, end_xy,
-        first_index, points.index[order[last]], counts)
+        points.index[order[segments.start]], points.index[order[last]], counts, chi2_dof)
+    return walls, np.stack([segments.start, last])
 
-    count = len(segment_set)
+
+def _residual_chi2_dof(returns: SegmentReturns, fits: LineFits, usable: np.ndarray,
+                       config: FeatureConfig) -> np.ndarray:
+    """
+    Return each kept fit's residual chi2 per degree of freedom.
+
+    The residual of return i from the line (angle, radius) is d_i = rho_i cos(theta_i - angle)
+    - radius, whose variance under the noise model is range_sigma^2 cos^2(theta_i - angle) +
+    bearing_sigma^2 rho_i^2 sin^2(theta_i - angle) (docs/derivation.md#maximum-likelihood).
+
+    :return: shape (S,) for the kept fits (usable selects them among the segments of returns)
+    """
+    kept = usable.nonzero()[0]
+    angle = np.repeat(fits.angle_rad, returns.counts[kept])
+    radius = np.repeat(fits.radius_m, returns.counts[kept])
+    member = np.repeat(usable, returns.counts)
+    rho, theta = returns.rho[member], returns.theta[member]
+    incidence = theta - angle
+    residual = rho * np.cos(incidence) - radius
+    variance = ((config.range_sigma_m * np.cos(incidence)) ** 2
+                + (config.bearing_sigma_rad * rho * np.sin(incidence)) ** 2)
+    counts = returns.counts[kept]
+    if not len(kept):
+        return np.zeros(0)
+    chi2 = np.add.reduceat(residual * residual / variance, np.cumsum(counts) - counts)
+    return chi2 / np.maximum(counts - 2, 1)
+
+
+def _corners(contour: _Contour, walls: SegmentSet, positions: np.ndarray,
+             config: FeatureConfig) -> CornerSet:
+    """
+    Intersect neighbouring walls (across the seam on a full turn) and keep the real corners.
+
+    A pair makes a corner when its walls are not close to parallel (min_corner_angle) and both
+    end at the intersection (:func:`~.corners.walls_end_at_corners`).
+    """
+    count = len(walls)
     first = np.arange(count - 1)
-    if points.full_turn and count >= 3:
-        first = np.arange(count)               # the last segment meets the first at the seam
-    corners = find_corners(fits.line, fits.line_covariance, segment_set.start_xy_m,
-                           segment_set.end_xy_m, first, (first + 1) % max(count, 1),
-                           config.min_corner_angle_rad, config.max_corner_gap_m,
-                           fits.line_offset_jacobian, config.common_range_sigma_m)
-    return Features(config.method, segment_set, corners, work_limited)
+    if contour.points.full_turn and count >= 3:
+        first = np.arange(count)               # the last wall meets the first at the seam
+    candidates = find_corners(walls.line, walls.line_covariance, walls.start_xy_m,
+                              walls.end_xy_m, first, (first + 1) % max(count, 1),
+                              config.min_corner_angle_rad, walls.line_offset_jacobian,
+                              config.common_range_sigma_m)
+    if not len(candidates):
+        return candidates
+    keep, seen = walls_end_at_corners(
+        candidates, walls.angle_rad, walls.radius_m, 0.5 * (walls.start_xy_m + walls.end_xy_m),
+        contour.x, contour.y, positions[1], positions[0],
+        abs(contour.points.angle_increment_rad), config.range_sigma_m, config.bearing_sigma_rad,
+        config.corner_end_sigmas, config.corner_end_floor_m, _CORNER_WINDOW,
+        _CORNER_MISSING_BEAMS, config.end_offset_sigmas)
+    kept = candidates.select(keep)
+    return CornerSet(kept.xy_m, kept.yaw_rad, kept.covariance, kept.opening_angle_rad,
+                     kept.first_segment, kept.second_segment, seen[keep])
 
 
 def _project(x_m: np.ndarray, y_m: np.ndarray, first: np.ndarray, last: np.ndarray,

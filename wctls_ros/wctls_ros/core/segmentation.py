@@ -14,7 +14,7 @@ position ranges [start, stop) into that order; on a full turn a segment may run 
 from dataclasses import dataclass
 import functools
 import math
-from typing import Callable, Tuple
+from typing import Callable, NamedTuple, Tuple
 
 import numpy as np
 
@@ -215,8 +215,30 @@ def piece_sums(values: np.ndarray, segments: SegmentRanges) -> PieceSums:
     return PieceSums(edges, prefix)
 
 
+# A break between two returns one surface could have given is one the noise made: their
+# distance exceeds the surface's allowance by at most this many sigma of the difference of two
+# returns (a pair on one surface goes beyond it with probability 6e-7). Beyond it, the break is
+# a discontinuity, which merging never crosses.
+_JOINABLE_SIGMAS = 5.0 * math.sqrt(2.0)
+
+
+class Breaks(NamedTuple):
+    """
+    Where neighbouring returns are separated, and which separations merging may cross.
+
+    :ivar separated: return i starts a new chain, shape (n,) (entry 0 refers to the seam between
+        the last and the first return of a full turn, and is True otherwise)
+    :ivar joinable: of those, the separations noise can explain: at most ``max_missing_beams``
+        invalid beams between the two returns, and a distance within 5 sqrt(2) sigma of what
+        one surface allows; shape (n,)
+    """
+
+    separated: np.ndarray
+    joinable: np.ndarray
+
+
 def breakpoints(points: ScanPoints, range_sigma_m: float, bearing_sigma_rad: float,
-                lambda_rad: float) -> np.ndarray:
+                lambda_rad: float, max_missing_beams: int) -> Breaks:
     """
     Mark where the adaptive breakpoint rule of Borges and Aldon separates neighbouring returns.
 
@@ -224,19 +246,24 @@ def breakpoints(points: ScanPoints, range_sigma_m: float, bearing_sigma_rad: flo
     ``r sin(dphi) / sin(lambda - dphi) + 3 sqrt(range_sigma^2 + (r bearing_sigma)^2)``
     (r the smaller of the two ranges, dphi their bearing difference, so that missing beams widen
     the allowance; the last term is 3 sigma of a return's position noise, where Borges and Aldon
-    have the range noise alone), or when ``dphi >= lambda``. The rule is symmetric, so reversing
-    the beam order changes nothing.
+    have the range noise alone), when ``dphi >= lambda``, or when more than
+    ``max_missing_beams`` beams between them have no valid return (nothing is known of what
+    lies there: two collinear surfaces either side of a dark or open gap are not one wall). The
+    rule is symmetric, so reversing the beam order changes nothing. With 3 sigma, noise alone
+    separates one pair of returns in a few hundred on a wall, so a separation is joinable
+    (merging may restore it) unless it is a gap or the distance exceeds the allowance by more
+    than 5 sqrt(2) sigma: a discontinuity (an occlusion, a range jump).
 
     :param points: the scan's valid returns
     :param range_sigma_m: range noise std, m
     :param bearing_sigma_rad: bearing noise std, rad
     :param lambda_rad: worst incidence angle still treated as one surface, rad
-    :return: boolean, shape (n,): True where return i starts a new chain (entry 0 refers to the
-        seam between the last and the first return of a full turn, and is True otherwise)
+    :param max_missing_beams: most invalid beams between two returns of one chain
+    :return: the separations
     """
     n = len(points)
     if n == 0:
-        return np.zeros(0, dtype=bool)
+        return Breaks(np.zeros(0, dtype=bool), np.zeros(0, dtype=bool))
     x, y, rho, index = points.x_m, points.y_m, points.range_m, points.index
     # Each return against its predecessor; entry 0 against the last return, across the seam.
     beams = np.empty(n)
@@ -260,11 +287,17 @@ def breakpoints(points: ScanPoints, range_sigma_m: float, bearing_sigma_rad: flo
         with np.errstate(divide='ignore', invalid='ignore'):
             reach[wider] = np.where(dphi < lambda_rad,
                                     np.sin(dphi) / np.sin(lambda_rad - dphi), -1.0)
-    allowed = r * reach + 3.0 * np.sqrt(range_sigma_m ** 2 + (r * bearing_sigma_rad) ** 2)
-    separated = (reach < 0.0) | (dx * dx + dy * dy > allowed * allowed)
+    surface = r * reach
+    noise = np.sqrt(range_sigma_m ** 2 + (r * bearing_sigma_rad) ** 2)
+    distance = np.sqrt(dx * dx + dy * dy)
+    missing = beams - 1.0                       # fractional across the seam of a full turn
+    gap = missing >= max_missing_beams + 0.5
+    separated = (reach < 0.0) | gap | (distance > surface + 3.0 * noise)
+    joinable = (separated & (reach >= 0.0) & ~gap
+                & (distance <= surface + _JOINABLE_SIGMAS * noise))
     if not points.full_turn or n == 1:
-        separated[0] = True
-    return separated
+        separated[0], joinable[0] = True, False
+    return Breaks(separated, joinable)
 
 
 def chains(points: ScanPoints, separated: np.ndarray) -> Chains:
@@ -276,7 +309,7 @@ def chains(points: ScanPoints, separated: np.ndarray) -> Chains:
     chain: a choice that depends neither on where the scan's seam lies nor on the beam order.
 
     :param points: the scan's valid returns
-    :param separated: output of :func:`breakpoints`
+    :param separated: where returns start a new chain (:attr:`Breaks.separated`)
     :return: the chains
     """
     n = len(points)
@@ -358,13 +391,14 @@ def iterative_end_point_fit(x_m: np.ndarray, y_m: np.ndarray, start: np.ndarray,
 
 def merge_collinear(segments: SegmentRanges, circular: bool, contour_length: int,
                     fit: Callable[[SegmentRanges], tuple], chi2_threshold: float,
-                    max_passes: int) -> Tuple[SegmentRanges, tuple, bool]:
+                    max_passes: int, joinable: np.ndarray) -> Tuple[SegmentRanges, tuple, bool]:
     """
     Merge neighbouring segments that are statistically the same line.
 
     Neighbours are consecutive segments on one chain, or on two chains that touch (no return
-    between them: the breakpoint between them may be noise, e.g. a bearing error at grazing
-    incidence; a real occlusion never puts the same line on both sides). Each pass fits every
+    between them) across a break that noise can explain (``joinable``: e.g. a bearing error at
+    grazing incidence); never across a discontinuity or a long run of missing beams, where two
+    surfaces that happen to be collinear would make a phantom wall. Each pass fits every
     segment, computes for each neighbouring pair the squared Mahalanobis distance of the
     difference of their (angle, radius) under the sum of the two covariances (independent
     returns), and merges the pairs below ``chi2_threshold``, lowest first, each segment at most
@@ -379,6 +413,8 @@ def merge_collinear(segments: SegmentRanges, circular: bool, contour_length: int
     :param fit: returns (angle (S,) rad, radius (S,) m, covariance (S, 2, 2)) of segments
     :param chi2_threshold: merge below this squared Mahalanobis distance (0: never merge)
     :param max_passes: the most merging passes
+    :param joinable: per position, whether a merge may cross the break before it, shape
+        (contour_length,)
     :return: the merged segments, their fit (the last pass's, so not computed twice), and
         whether merging stopped because the passes ran out
     """
@@ -393,7 +429,8 @@ def merge_collinear(segments: SegmentRanges, circular: bool, contour_length: int
         # A merged segment must not wrap onto itself around a closed contour.
         merged_stop = stop[second]
         merged_stop[-1] += contour_length
-        pair_ok = (((chain == chain[second]) | (stop % contour_length == start[second]))
+        touching = (stop % contour_length == start[second]) & joinable[start[second]]
+        pair_ok = (((chain == chain[second]) | touching)
                    & (merged_stop - start <= contour_length))
         if not circular or count < 3:
             pair_ok[-1] = False                     # the last segment has no successor

@@ -113,7 +113,7 @@ def scan_corners(ranges: np.ndarray, angle_min: float, angle_increment: float,
     first, second = corners.first_segment, corners.second_segment
     # The same corners again (no rejection: they passed already) from diagonal line covariances.
     diagonal = find_corners(segments.line, segments.line_covariance * np.eye(3),
-                            segments.start_xy_m, segments.end_xy_m, first, second, 0.0, np.inf,
+                            segments.start_xy_m, segments.end_xy_m, first, second, 0.0,
                             segments.line_offset_jacobian, config.common_range_sigma_m)
     return features, ScanCorners(corners.xy_m.copy(), corners.covariance[:, :2, :2],
                                  diagonal.covariance[:, :2, :2], np.column_stack([first, second]))

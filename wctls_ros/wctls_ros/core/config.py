@@ -100,6 +100,10 @@ class FeatureConfig:
     iepf_threshold_m: float = _setting(
         0.04, 'Iterative End Point Fit split distance, m (paper: 0.04)',
         Limits(0.0, 10.0, low_open=True))
+    iepf_noise_sigmas: float = _setting(
+        4.0, 'the IEPF split distance is at least this many sigma of a return\'s position '
+        'noise (under 4 sigma, the noise of a straight wall splits it in many scans); 0 keeps '
+        'iepf_threshold_m alone', Limits(0.0, 100.0))
     merge_chi2: float = _setting(
         13.8, 'merge neighbouring segments below this chi2 (2 dof) of their line difference '
         '(13.8: 99.9 % for the same line); 0 disables merging', Limits(0.0, 1e6))

@@ -311,14 +311,17 @@ def walls_end_at_corners(corners: CornerSet, wall_angle_rad: np.ndarray,
     here = at_corner | (on_line & (along >= -tolerance[:, :, None]))        # (2, C, W)
     goes_on = (~at_corner & on_line & ~on_line[::-1]
                & (along < -tolerance[:, :, None])).any(axis=(0, 2))
-    first_reach = np.where(here[0], steps, -1).max(axis=1)
-    second_reach = np.where(here[1], steps, window + 2).min(axis=1)
-    # Before the first wall's reach only occluders may interrupt it (and after the second's).
+    # Each wall's anchor: its last own return short of the corner zone (the facing end if
+    # none). Beyond something in front of a wall its own returns may go on; around the corner
+    # itself nothing may interrupt the run from one wall to the other.
+    own = on_line & (along >= -tolerance[:, :, None]) & ~at_corner
+    first_anchor = np.where(own[0], steps, 0).max(axis=1)
+    second_anchor = np.where(own[1], steps, window + 1).min(axis=1)
     interrupts = present & ~here[0] & ~here[1]
-    blocked = ((interrupts & ~occluder & (steps < first_reach[:, None]))
-               | (interrupts & ~occluder & (steps > second_reach[:, None]))
-               | (interrupts & (steps > first_reach[:, None])
-                  & (steps < second_reach[:, None]))).any(axis=1)
+    before_first = steps < first_anchor[:, None]
+    after_second = steps > second_anchor[:, None]
+    blocked = ((interrupts & ~occluder & (before_first | after_second))
+               | (interrupts & ~before_first & ~after_second)).any(axis=1)
     # How far each wall's own returns stop short of the corner, beyond the tolerance, in beams.
     gap = np.where(on_line & here, np.maximum(along, 0.0), np.inf).min(axis=2)
     short = np.maximum(gap - tolerance, 0.0) / spacing

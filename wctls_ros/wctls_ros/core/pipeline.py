@@ -133,8 +133,15 @@ def _segment(contour: _Contour, config: FeatureConfig):
     n, x, y = len(contour), contour.x, contour.y
     budget = pass_budget(n)
     runs = contour.chains
+    # The paper's split distance, but never within iepf_noise_sigmas of a return's noise: a
+    # threshold of 2 sigma splits a straight wall at its noise in most scans.
+    threshold = config.iepf_threshold_m
+    if config.iepf_noise_sigmas > 0.0:
+        noise = np.sqrt(config.range_sigma_m ** 2
+                        + (contour.rho * config.bearing_sigma_rad) ** 2)
+        threshold = np.maximum(threshold, config.iepf_noise_sigmas * noise)
     segments, unsplit = iterative_end_point_fit(x, y, runs.start, runs.stop, runs.chain,
-                                                config.iepf_threshold_m, budget)
+                                                threshold, budget)
     if not len(segments):
         return segments, None, None, unsplit
     # Sums over the pieces between segment ends make the segmentation's line fits O(1) per

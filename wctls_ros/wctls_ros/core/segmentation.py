@@ -330,14 +330,15 @@ def chains(points: ScanPoints, separated: np.ndarray) -> Chains:
 
 
 def iterative_end_point_fit(x_m: np.ndarray, y_m: np.ndarray, start: np.ndarray,
-                            stop: np.ndarray, chain: np.ndarray, threshold_m: float,
+                            stop: np.ndarray, chain: np.ndarray, threshold_m,
                             max_levels: int) -> Tuple[SegmentRanges, bool]:
     """
     Split runs of returns where a return lies farther than a threshold from the run's chord.
 
     All runs are processed together, one split level per pass, as a partition of the positions
     into pieces (a boundary mask): each pass measures every return against its piece's chord
-    and cuts the pieces whose farthest return is beyond the threshold. The return at a split is
+    and cuts the pieces whose farthest return is beyond the threshold (farthest in units of
+    each return's own threshold, when they differ). The return at a split is
     the one nearest the corner and belongs to neither side (it would otherwise be shared, or
     bias one wall); merging restores it when the two sides turn out to be one line. After
     ``max_levels`` passes the pieces that would still split are not straight and are left out
@@ -348,7 +349,8 @@ def iterative_end_point_fit(x_m: np.ndarray, y_m: np.ndarray, start: np.ndarray,
     :param start: first position of each run, sorted, shape (K,)
     :param stop: one past the last position of each run, shape (K,) (runs do not overlap)
     :param chain: the chain of each run, shape (K,)
-    :param threshold_m: the IEPF split distance, m
+    :param threshold_m: the IEPF split distance, m: one for all returns, or per return, shape
+        (m,)
     :param max_levels: the most split passes
     :return: the straight pieces with at least MIN_FIT_RETURNS returns (fewer can be neither
         fitted nor split), sorted by start position; and whether pieces were left out because
@@ -357,7 +359,8 @@ def iterative_end_point_fit(x_m: np.ndarray, y_m: np.ndarray, start: np.ndarray,
     count = x_m.size
     boundary = np.zeros(count + 1, dtype=bool)
     boundary[start] = boundary[stop] = boundary[0] = boundary[count] = True
-    threshold2 = threshold_m * threshold_m
+    # Distances are compared in units of each return's threshold.
+    inv_threshold = 1.0 / np.broadcast_to(np.asarray(threshold_m, dtype=float), (count,))
     for level in range(max_levels + 1):
         edges = boundary.nonzero()[0]
         first, last = edges[:-1], edges[1:] - 1
@@ -369,10 +372,11 @@ def iterative_end_point_fit(x_m: np.ndarray, y_m: np.ndarray, start: np.ndarray,
         cross -= np.repeat(dy, counts) * x_m
         cross += np.repeat(x0 * y1 - y0 * x1, counts)
         np.abs(cross, out=cross)
+        cross *= inv_threshold
         farthest = np.maximum.reduceat(cross, first)
         chord2 = dx * dx + dy * dy
         # A chord too short to have a direction never splits (it would at distance 0).
-        split = (farthest * farthest > threshold2 * chord2) & (chord2 > _MIN_CHORD_M ** 2)
+        split = (farthest * farthest > chord2) & (chord2 > _MIN_CHORD_M ** 2)
         if not split.any():
             break
         if level == max_levels:                  # out of passes: drop what is not straight

@@ -14,8 +14,7 @@ import math
 import numpy as np
 import pytest
 from wctls_ros.core import extract_features, FeatureConfig
-from wctls_ros.simulation import (floor_plan_from_dict, full_turn_bearings, NOISELESS,
-                                  NoiseModel, simulate_recording, simulate_scan)
+from wctls_ros.simulation import floor_plan_from_dict, NoiseModel, simulate_recording
 
 ONE_CM = NoiseModel(range_sigma_m=0.01, bearing_sigma_rad=math.radians(0.05))
 ONE_CM_CONFIG = FeatureConfig(range_sigma_m=0.01, bearing_sigma_rad=math.radians(0.05))

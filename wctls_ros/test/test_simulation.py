@@ -347,7 +347,8 @@ def _length_on(walls, wall):
 @pytest.mark.parametrize('name', ['environment_a', 'environment_b'])
 def test_cluttered_variants_are_the_same_rooms_with_more_in_them(name):
     base, cluttered = load_floor_plan(name), load_floor_plan(f'{name}_cluttered')
-    np.testing.assert_array_equal(cluttered.corners_m, base.corners_m)
+    # Corners where a wall meets a bowed or rough one in its middle sit on its surface.
+    np.testing.assert_allclose(cluttered.corners_m, base.corners_m, atol=0.006)
     assert cluttered.corner_kinds == base.corner_kinds and len(cluttered.walkers) == 1
     assert len(cluttered.cylinders_m) >= 4 and (cluttered.surfaces.dropout == 1.0).any()
     assert cluttered.surfaces.shaped and cluttered.sensor_pose == base.sensor_pose
@@ -357,6 +358,19 @@ def test_cluttered_variants_are_the_same_rooms_with_more_in_them(name):
         assert _length_on(cluttered.walls_m, wall) == pytest.approx(_length_on(base.walls_m,
                                                                                wall))
     assert set(BUNDLED_PLANS) >= {f'{name}_cluttered'}
+
+
+def test_a_corner_in_the_middle_of_a_bowed_wall_lies_on_its_surface():
+    # A 4 m wall along y = 0 bowed by 1 cm towards +y (its left normal, from x = 0 to 4), and a
+    # cabinet against it from x = 1 to 1.4: its corners on the wall sit on the bowed surface,
+    # 4 s (1 - s) 1 cm off the straight line at s = 1/4 and 0.35 along.
+    plan = floor_plan_from_dict({
+        'name': 'bowed', 'polylines': [{'closed': False, 'points': [[0.0, 0.0], [4.0, 0.0]]}],
+        'boxes': [{'center': [1.2, 0.5], 'size': [0.4, 1.0]}],
+        'surfaces': [{'from': [0.0, 0.0], 'to': [4.0, 0.0], 'bow_m': 0.01}]})
+    on_wall = plan.corners_m[np.abs(plan.corners_m[:, 1]) < 0.02]
+    np.testing.assert_allclose(on_wall[np.argsort(on_wall[:, 0])],
+                               [[1.0, 0.0075], [1.4, 0.0091]], atol=1e-9)
 
 
 def test_the_s1_like_model_makes_veils_dropouts_and_binned_bearings():

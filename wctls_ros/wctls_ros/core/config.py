@@ -101,7 +101,7 @@ class FeatureConfig:
         0.04, 'Iterative End Point Fit split distance, m (paper: 0.04)',
         Limits(0.0, 10.0, low_open=True))
     iepf_noise_sigmas: float = _setting(
-        4.0, 'the IEPF split distance is at least this many sigma of a return\'s position '
+        4.0, "the IEPF split distance is at least this many sigma of a return's position "
         'noise (under 4 sigma, the noise of a straight wall splits it in many scans); 0 keeps '
         'iepf_threshold_m alone', Limits(0.0, 100.0))
     merge_chi2: float = _setting(
@@ -115,6 +115,14 @@ class FeatureConfig:
         4.0, 'cut the last k returns of a segment end when their residuals, each in sigmas of '
         'its noise, sum to more than this times sqrt(k) (another surface met at a shallow '
         'angle); 0 disables', Limits(0.0, 1e3))
+    residual_scaling: bool = _setting(
+        True, "scale each line's covariance by its residual chi2 per degree of freedom when "
+        'above 1 (an a-posteriori variance factor: a wall rougher, or returns noisier, than '
+        'the noise model are reported less precise)')
+    wall_flatness_sigma_m: float = _setting(
+        0.0, 'each end of a wall may lie this far off its fitted line (walls straight only to '
+        "a few mm): added to every line's covariance, it does not shrink with the number of "
+        'returns; 0: walls are straight, m', Limits(0.0, 1.0))
     min_segment_points: int = _setting(
         8, 'drop segments with fewer returns', Limits(3, 100000))
     min_segment_length_m: float = _setting(

@@ -381,7 +381,7 @@ def line_angle_radius(line: np.ndarray):
         return np.arctan2(sign * b, sign * a), -sign * c / np.hypot(a, b)
 
 
-def _normal_jacobian(line: np.ndarray) -> np.ndarray:
+def normal_jacobian(line: np.ndarray) -> np.ndarray:
     """Return d(angle, radius) / d(a, b, c) of implicit lines, shape (S, 2, 3)."""
     a, b, c = line.T
     n2 = a * a + b * b
@@ -403,7 +403,7 @@ def normal_form(line: np.ndarray, line_covariance: np.ndarray):
     :param line_covariance: shape (S, 3, 3)
     :return: (angle (S,) rad, radius (S,) m, covariance of (angle, radius) (S, 2, 2))
     """
-    jac = _normal_jacobian(line)
+    jac = normal_jacobian(line)
     return (*line_angle_radius(line), jac @ line_covariance @ jac.transpose(0, 2, 1))
 
 

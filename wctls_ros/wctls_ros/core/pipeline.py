@@ -3,7 +3,7 @@
 
 """The per-scan pipeline of the paper's Algorithm 1: returns -> segments -> lines -> corners."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 
 import numpy as np
@@ -11,7 +11,8 @@ import numpy as np
 from .config import FeatureConfig
 from .corners import find_corners, walls_end_at_corners
 from .features import CornerSet, Features, SegmentSet
-from .lines import fit_lines, LineFits, segment_returns, SegmentReturns
+from .lines import fit_lines, LineFits, normal_jacobian, segment_returns, SegmentReturns
+from .model_error import flatness_covariance, line_from_normal_jacobian, residual_factor
 from .scan import scan_to_points, ScanError, ScanPoints
 from .segmentation import (breakpoints, Breaks, Chains, chains, iterative_end_point_fit,
                            merge_collinear, moment_fit, moment_terms, pass_budget, piece_sums,
@@ -76,7 +77,11 @@ def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float
     walls, positions = _fit_walls(contour, segments, angle, radius, config)
     if not len(walls):
         return Features(config.method, SegmentSet.empty(), CornerSet.empty(), work_limited)
-    return Features(config.method, walls, _corners(contour, walls, positions, config),
+    # Which pairs are corners is decided on the sensor noise alone; the published covariances
+    # add the model error (a rougher wall is less precise, not more of a corner).
+    corners = _corners(contour, walls, positions, config)
+    walls = _with_model_error(walls, config)
+    return Features(config.method, walls, _corner_covariances(walls, corners, config),
                     work_limited)
 
 
@@ -201,14 +206,46 @@ def _fit_walls(contour: _Contour, segments: SegmentRanges, angle: np.ndarray,
     usable = _finite_and_positive(fits) & (along_beam >= math.sin(config.min_wall_beam_angle_rad))
     fits, segments, counts = fits.select(usable), segments.select(usable), counts[usable]
     start_xy, end_xy, last = start_xy[usable], end_xy[usable], last[usable]
-    chi2_dof = _residual_chi2_dof(returns, fits, usable, config)
-    common = config.common_range_sigma_m * fits.normal_offset_jacobian
     walls = SegmentSet(
-        fits.angle_rad, fits.radius_m,
-        fits.normal_covariance + common[:, :, None] * common[:, None, :], fits.line,
+        fits.angle_rad, fits.radius_m, fits.normal_covariance, fits.line,
         fits.line_covariance, fits.line_offset_jacobian, start_xy, end_xy,
-        points.index[order[segments.start]], points.index[order[last]], counts, chi2_dof)
+        points.index[order[segments.start]], points.index[order[last]], counts,
+        _residual_chi2_dof(returns, fits, usable, config))
     return walls, np.stack([segments.start, last])
+
+
+def _with_model_error(walls: SegmentSet, config: FeatureConfig) -> SegmentSet:
+    """
+    Return the walls with the model error in their line covariances (:mod:`.model_error`).
+
+    The (angle, radius) covariance gets the common-mode range offset too, which corners
+    propagate separately through the line offset Jacobian (its effect on two walls is
+    correlated).
+    """
+    normal = walls.covariance
+    if config.residual_scaling:
+        normal = normal * residual_factor(walls.residual_chi2_dof, walls.num_points)[:, None, None]
+    if config.wall_flatness_sigma_m > 0.0:
+        normal = normal + flatness_covariance(walls.angle_rad, walls.start_xy_m, walls.end_xy_m,
+                                              config.wall_flatness_sigma_m)
+    jacobian = line_from_normal_jacobian(walls.line, walls.angle_rad)
+    line_covariance = walls.line_covariance + jacobian @ (normal - walls.covariance) @ (
+        jacobian.transpose(0, 2, 1))
+    offset = config.common_range_sigma_m * np.einsum('sij,sj->si', normal_jacobian(walls.line),
+                                                     walls.line_offset_jacobian)
+    return replace(walls, covariance=normal + offset[:, :, None] * offset[:, None, :],
+                   line_covariance=line_covariance)
+
+
+def _corner_covariances(walls: SegmentSet, corners: CornerSet,
+                        config: FeatureConfig) -> CornerSet:
+    """Return the corners with covariances propagated from the walls' (model error included)."""
+    if not len(corners):
+        return corners
+    again = find_corners(walls.line, walls.line_covariance, walls.start_xy_m, walls.end_xy_m,
+                         corners.first_segment, corners.second_segment, 0.0,
+                         walls.line_offset_jacobian, config.common_range_sigma_m)
+    return replace(corners, covariance=again.covariance)
 
 
 def _residual_chi2_dof(returns: SegmentReturns, fits: LineFits, usable: np.ndarray,

@@ -23,7 +23,8 @@ def peeling_wall(beams: int, wall_m: float = 2.0, behind_m=(0.045, 0.12),
     return farthest from the chord of any run then sits next to the run's end, so an
     Iterative End Point Fit that splits at the farthest return peels two returns per level and
     needs beams / 2 levels. The default gaps stay within the breakpoint rule's allowance of a
-    5 cm range noise, so the whole scan is one chain.
+    5 cm range noise, so the whole scan is one chain, and exceed the paper's fixed 4 cm split
+    distance; a split distance of 4 sigma of that noise sees them as noise.
 
     :param beams: number of beams, >= 2
     :param wall_m: distance of the wall from the sensor, m

@@ -438,13 +438,41 @@ def floor_plan_from_dict(spec: dict, folder: Optional[pathlib.Path] = None) -> F
         name=name,
         description=str(spec.get('description', '')).strip(),
         walls_m=pieces,
-        corners_m=corners[keep],
+        corners_m=_on_surfaces(corners[keep], pieces, surfaces),
         sensor_pose=sensor_pose,
         corner_kinds=tuple(k for k, kept in zip(kinds, keep) if kept),
         surfaces=surfaces,
         cylinders_m=cylinders,
         walkers=_walkers(spec.get('walkers', []), name),
     )
+
+
+def _on_surfaces(corners: np.ndarray, pieces: np.ndarray, surfaces: Surfaces) -> np.ndarray:
+    """
+    Move each corner inside a bowed or rough wall piece onto that piece's surface.
+
+    Another wall meeting a bowed wall in the middle (a panel, a cabinet) meets its surface,
+    not the straight line between its ends: the true corner is there.
+
+    :param corners: corners on the straight walls, shape (M, 2), m
+    :param pieces: wall pieces, shape (K, 4), m
+    :param surfaces: their surfaces
+    :return: the corners where the walls really meet, shape (M, 2), m
+    """
+    if not surfaces.shaped or not len(corners):
+        return corners
+    start, edge = pieces[:, :2], pieces[:, 2:] - pieces[:, :2]
+    length = np.hypot(edge[:, 0], edge[:, 1])
+    relative = corners[:, None, :] - start[None]
+    along = np.einsum('mki,ki->mk', relative, edge) / length ** 2
+    across = (edge[:, 0] * relative[..., 1] - edge[:, 1] * relative[..., 0]) / length
+    shaped = (surfaces.bow_m != 0.0) | (surfaces.amplitude_m != 0.0).any(axis=1)
+    inside = (np.abs(across) < _ON_WALL_M) & (along > 1e-9) & (along < 1.0 - 1e-9) & shaped
+    moved = corners.copy()
+    for m, k in zip(*np.nonzero(inside)):
+        shift = surfaces.displacement_m(np.array([k]), along[m, k:k + 1], length[k:k + 1])[0]
+        moved[m] += shift * np.array([-edge[k, 1], edge[k, 0]]) / length[k]
+    return moved
 
 
 def _plan_text(name_or_path: str, folder: Optional[pathlib.Path] = None):

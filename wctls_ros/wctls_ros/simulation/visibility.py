@@ -9,8 +9,10 @@ from .raycast import ray_hits
 
 # A noiseless return lies on the wall it hit to within this distance, m.
 _ON_WALL_M = 1e-6
-# A corner is not occluded when the ray towards it ends this close to it, m.
-_UNOCCLUDED_M = 1e-3
+# A corner is not occluded when the ray towards it ends this close to it, and a wall passes
+# through it when its straight line passes this close, m (a corner on a bowed or rough wall lies
+# on the wall's surface, a few mm off its straight line).
+_UNOCCLUDED_M = 1e-2
 # Returns on one wall farther apart than this are split by a shadow, m.
 _SHADOW_M = 0.5
 # Two seen walls form a corner when they turn by more than 30 degrees.

@@ -30,7 +30,7 @@ def flatness_covariance(angle_rad: np.ndarray, start_xy_m: np.ndarray, end_xy_m:
     line moves by d_0 = (d_1 + d_2) / 2 at the middle of the segment and turns by
     d_angle = (d_2 - d_1) / L: Var(d_0) = sigma^2 / 2, Var(angle) = 2 sigma^2 / L^2, and
     radius = m . n (m the middle, n the unit normal) moves by d_0 + (m . t) d_angle with
-    t = (-sin angle, cos angle) (docs/derivation.md#model-error, (D17)).
+    t = (-sin angle, cos angle) (docs/derivation.md#model-error, (D18)).
 
     :param angle_rad: normal angles, shape (S,), rad
     :param start_xy_m: first end of each wall, shape (S, 2), m
@@ -71,11 +71,12 @@ def line_from_normal_jacobian(line: np.ndarray, angle_rad: np.ndarray) -> np.nda
 
 def residual_factor(chi2_dof: np.ndarray, returns: np.ndarray) -> np.ndarray:
     """
-    Return the a-posteriori variance factor of each fit (docs/derivation.md#model-error, (D18)).
+    Return the a-posteriori variance factor of each fit (docs/derivation.md#model-error, (D17)).
 
     On a straight wall under the right noise model chi2 / dof has mean 1 and standard
     deviation sqrt(2 / dof), dof = returns - 2; the factor counts only the excess beyond that
-    one standard deviation, so that clean walls keep their covariance (on average within 1 %).
+    one standard deviation, so that clean walls keep their covariance (its mean is 1.07 at
+    8 returns, 1.02 at 50).
 
     :param chi2_dof: residual chi2 per degree of freedom, shape (S,)
     :param returns: returns of each fit, shape (S,)

@@ -160,12 +160,44 @@ def test_bad_inputs_give_exit_2_one_line_and_write_nothing(tmp_path, capsys):
         assert err.startswith('process_bag: error: ') and reason in err, (argv, err)
         assert len(err.splitlines()) == 1 and out == ''
         assert list(out_dir.iterdir()) == []        # no output, no staging folder left
-    # An existing output is kept unless --force.
-    (out_dir / 'result').mkdir()
-    status, _, err = run([inputs / 'scans', '-o', out_dir / 'result'], capsys)
-    assert status == 2 and 'exists' in err
-    status, _, err = run([inputs / 'scans', '-o', out_dir / 'result', '--force'], capsys)
-    assert status == 0 and read_output(out_dir / 'result')[1]['/corners'] == 4
+
+
+def test_force_replaces_only_an_output_of_process_bag_that_holds_nothing_else(tmp_path, capsys):
+    write_scan_bag(tmp_path / 'scans', count=4)
+    output = tmp_path / 'result'
+    assert run([tmp_path / 'scans', '-o', output], capsys)[0] == 0
+    status, _, err = run([tmp_path / 'scans', '-o', output], capsys)
+    assert status == 2 and err.splitlines() == [
+        f'process_bag: error: {output} exists: refusing to overwrite it (--force replaces an '
+        'earlier output of process_bag)']
+    status, _, err = run([tmp_path / 'scans', '-o', output, '--force', '-m', 'ml'], capsys)
+    assert status == 0, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['result', 'scans']
+    assert {row['method'] for row in csv.DictReader(open(output / 'corners.csv'))} == {'ml'}
+
+    def refused(argv, reason):
+        before = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob('*'))
+        status, out, err = run(argv + ['--force'], capsys)
+        assert status == 2 and out == '', err
+        assert err.startswith('process_bag: error: ') and reason in err, err
+        assert len(err.splitlines()) == 1
+        assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob('*')) == before
+
+    # A user's folder, a user's file, and an output with a user's document added: kept.
+    (tmp_path / 'documents').mkdir()
+    (tmp_path / 'documents' / 'thesis.tex').write_text('years of work')
+    refused([tmp_path / 'scans', '-o', tmp_path / 'documents'], 'not an output of process_bag')
+    (tmp_path / 'notes.txt').write_text('notes')
+    refused([tmp_path / 'scans', '-o', tmp_path / 'notes.txt'], 'not an output of process_bag')
+    (output / 'analysis.ipynb').write_text('{}')
+    refused([tmp_path / 'scans', '-o', output],
+            'holds files process_bag did not write (analysis.ipynb)')
+    (output / 'analysis.ipynb').unlink()
+    # An output folder that holds the input: the folder of the bag, or the bag of an output.
+    refused([tmp_path / 'scans', '-o', tmp_path], 'holds the input bag')
+    refused([output / 'result.mcap', '-o', output], 'holds the input bag')
+    refused([tmp_path / 'scans', '-o', tmp_path / 'scans'], 'holds the input bag')
+    assert read_output(output)[1]['/corners'] == 4
 
 
 def test_installed_command_has_help_and_fails_cleanly(tmp_path):

@@ -37,6 +37,9 @@ from ..params import ConfigError, feature_settings, load_parameters
 ALL = 'all'
 CSV_NAME = 'corners.csv'
 JSON_NAME = 'corners.json'
+# Every output folder holds this file, which lists the files process_bag wrote there: --force
+# replaces a folder only when it holds this file and nothing else than the files it lists.
+MARKER_NAME = '.process_bag'
 CSV_COLUMNS = ('scan', 'stamp', 'frame_id', 'method', 'index', 'x_m', 'y_m', 'yaw_rad',
                'var_x_m2', 'cov_xy_m2', 'cov_x_yaw_m_rad', 'var_y_m2', 'cov_y_yaw_m_rad',
                'var_yaw_rad2', 'opening_angle_rad', 'first_line', 'second_line')
@@ -101,6 +104,35 @@ def _corner_rows(corners: CornerSet):
                'first_line': int(corner.first_segment), 'second_line': int(corner.second_segment)}
 
 
+def _refuse_to_replace(output: pathlib.Path, bag, force: bool) -> None:
+    """
+    Refuse an output that exists, unless --force may replace it: a folder process_bag wrote.
+
+    :param output: the output folder
+    :param bag: the input bag
+    :param force: --force was given
+    :raises BagError: with the reason, when the output must not be written
+    """
+    target, source = output.resolve(), pathlib.Path(bag).resolve()
+    if source == target or target in source.parents:
+        raise BagError(f'the output {output} holds the input bag {bag}: choose another --output')
+    if not output.exists() and not output.is_symlink():
+        return
+    if not force:
+        raise BagError(f'{output} exists: refusing to overwrite it (--force replaces an '
+                       'earlier output of process_bag)')
+    marker = output / MARKER_NAME
+    try:
+        written = set(json.loads(marker.read_text())['files'])
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        raise BagError(f'--force refused: {output} is not an output of process_bag (no readable '
+                       f'{MARKER_NAME}): remove it yourself or choose another --output') from error
+    others = sorted(path.name for path in output.iterdir() if path.name not in written)
+    if others:
+        raise BagError(f'--force refused: {output} holds files process_bag did not write '
+                       f'({", ".join(others)}): remove them or choose another --output')
+
+
 class _CornerTables:
     """Streams corners.csv and corners.json (an array written one scan at a time)."""
 
@@ -142,9 +174,11 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
     :param methods: the methods to run (None: the ``method`` parameter)
     :param topic: the LaserScan topic (None: the bag's only one)
     :param progress: show a progress bar (None: on a terminal only, after a second)
-    :param overwrite: replace an existing output once the new one is complete
+    :param overwrite: replace an existing output once the new one is complete, if it is an
+        output of process_bag with nothing added (its marker file says what it wrote)
     :return: counts and timing
-    :raises BagError: for a missing, unreadable or damaged bag, or one without LaserScans
+    :raises BagError: for a missing, unreadable or damaged bag, or one without LaserScans, or
+        an output that exists (without ``overwrite``, or that process_bag did not write)
     :raises ValueError: for parameters that make no valid configuration
     """
     from tqdm import tqdm
@@ -156,11 +190,13 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
     info = bag_info(bag)
     topic = choose_scan_topic(bag, topic, info)
     output = pathlib.Path(output)
-    if output.resolve() == pathlib.Path(bag).resolve():
-        raise BagError(f'the output {output} is the input bag')
+    _refuse_to_replace(output, bag, overwrite)
     summary = Summary(output, topic, corners=dict.fromkeys(methods, 0),
                       segments=dict.fromkeys(methods, 0))
     with BagWriter(output, overwrite=overwrite) as writer:
+        writer.sidecar(MARKER_NAME).write_text(json.dumps({
+            'written_by': 'process_bag of wctls_ros',
+            'files': [MARKER_NAME, f'{output.name}.mcap', 'metadata.yaml', CSV_NAME, JSON_NAME]}))
         tables = _CornerTables(writer, {'bag': str(bag), 'topic': topic, 'methods': methods,
                                         'parameters': parameters})
         bar = tqdm(total=info.topics[topic][1], unit='scan', desc=pathlib.Path(bag).name,
@@ -230,7 +266,8 @@ def parser() -> argparse.ArgumentParser:
                      help='feature_node parameter file (YAML, as for --ros-args --params-file)')
     cli.add_argument('-t', '--topic', help='LaserScan topic (default: the only one in the bag)')
     cli.add_argument('-f', '--force', action='store_true',
-                     help='replace an existing output (once the new one is complete)')
+                     help='replace an existing output once the new one is complete; only an '
+                          f'output of process_bag (its {MARKER_NAME} file) with no file added')
     cli.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
                      help='show a progress bar (default: on a terminal, for runs over 1 s)')
     return cli

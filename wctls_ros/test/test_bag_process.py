@@ -5,6 +5,8 @@
 
 import csv
 import json
+import resource
+import signal
 import subprocess
 import tracemalloc
 
@@ -236,3 +238,45 @@ def test_memory_does_not_grow_with_the_length_of_the_bag(tmp_path):
     long = peak_memory(tmp_path / 'long', tmp_path / 'long_out', parameters)
     # Holding the 200 extra scans would take 16 MB; streaming keeps the peak where it was.
     assert long < short + 2_000_000, (short, long)
+
+
+def run_with_file_size_limit(argv, limit_bytes, **kwargs):
+    """Run the installed process_bag with RLIMIT_FSIZE: a write past it fails with EFBIG."""
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)    # the write fails instead of killing
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
+    return subprocess.run([str(installed_executable('process_bag'))] + [str(a) for a in argv],
+                          capture_output=True, text=True, timeout=120, preexec_fn=limit,
+                          **kwargs)
+
+
+def test_a_failing_write_gives_exit_2_one_line_and_leaves_nothing(tmp_path):
+    bag = real_bag('sick_lms1xx_static')
+    complete = tmp_path / 'complete'
+    result = run_with_file_size_limit([bag, '-o', complete], resource.RLIM_INFINITY)
+    assert result.returncode == 0, result.stderr
+    sizes = sorted(path.stat().st_size for path in complete.iterdir())
+    mcap_size = (complete / 'complete.mcap').stat().st_size
+    assert mcap_size == sizes[-1]
+    # Each limit stops a different write first: the marker file, the tables, a chunk of the
+    # mcap file, and its summary section written when the bag is closed.
+    for limit_bytes in (sizes[0] // 2, sizes[-2] // 2, mcap_size // 2, mcap_size - 16):
+        out = tmp_path / f'limit_{limit_bytes}'
+        out.mkdir()
+        result = run_with_file_size_limit([bag, '-o', out / 'result'], limit_bytes)
+        assert result.returncode == 2, (limit_bytes, result.stderr)
+        assert result.stderr.splitlines() == [
+            f'process_bag: error: cannot write {out / "result"}: File too large'], limit_bytes
+        assert result.stdout == '' and list(out.iterdir()) == []
+
+
+def test_a_summary_that_cannot_be_printed_is_one_line_and_exit_2(tmp_path):
+    with open('/dev/full', 'w') as full:      # every write: ENOSPC, as on a full disk
+        result = subprocess.run(
+            [str(installed_executable('process_bag')), str(real_bag('sick_lms1xx_static')),
+             '-o', str(tmp_path / 'out')], stdout=full, stderr=subprocess.PIPE, text=True,
+            timeout=120)
+    assert result.returncode == 2
+    assert result.stderr.splitlines() == [
+        'process_bag: error: cannot print the summary (No space left on device); the output '
+        f'{tmp_path / "out"} is complete']

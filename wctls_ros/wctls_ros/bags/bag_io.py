@@ -12,6 +12,7 @@ error never leaves half a bag behind.
 """
 
 import array
+import contextlib
 from dataclasses import dataclass
 import functools
 import pathlib
@@ -250,7 +251,9 @@ class BagWriter:
     """
     Write a ROS 2 bag of rclpy messages; the bag appears only when closed without error.
 
-    Use as a context manager::
+    An OSError while the bag is open (a write to the bag or to a side file that meets a full
+    disk or a file-size limit) or while it is closed leaves nothing and becomes a BagError that
+    names the bag. Use as a context manager::
 
         with BagWriter('out/run') as bag:
             bag.write('/scan', timestamp_ns, scan_msg)
@@ -332,7 +335,12 @@ class BagWriter:
                     self.path.rename(self._staging / '.replaced')
                 (self._staging / self.path.name).rename(self.path)
             else:
-                self._writer.abort()
+                with contextlib.suppress(OSError):   # flushing what is thrown away may fail too
+                    self._writer.abort()
+        except OSError as error:
+            value = error
         finally:
             shutil.rmtree(self._staging, ignore_errors=True)
+        if isinstance(value, OSError):
+            raise BagError(f'cannot write {self.path}: {value.strerror or value}') from value
         return False

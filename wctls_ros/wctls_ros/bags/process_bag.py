@@ -19,10 +19,12 @@ Memory stays constant however long the bag is, and the output appears only when 
 """
 
 import argparse
+import contextlib
 import csv
 from dataclasses import dataclass, field
 import json
 import math
+import os
 import pathlib
 import sys
 import time
@@ -137,13 +139,21 @@ class _CornerTables:
     """Streams corners.csv and corners.json (an array written one scan at a time)."""
 
     def __init__(self, bag_writer: BagWriter, header: dict):
-        self._csv_file = bag_writer.sidecar(CSV_NAME).open('w', newline='')
-        self._csv = csv.DictWriter(self._csv_file, CSV_COLUMNS)
-        self._csv.writeheader()
-        self._json = bag_writer.sidecar(JSON_NAME).open('w')
-        head = json.dumps(header, indent=1)
-        self._json.write(head[:head.rindex('}')].rstrip() + ',\n "scans": [')
+        self._paths = bag_writer.sidecar(CSV_NAME), bag_writer.sidecar(JSON_NAME)
+        self._header = header
         self._first = True
+
+    def __enter__(self) -> '_CornerTables':
+        csv_path, json_path = self._paths
+        with contextlib.ExitStack() as files:
+            self._csv = csv.DictWriter(files.enter_context(csv_path.open('w', newline='')),
+                                       CSV_COLUMNS)
+            self._json = files.enter_context(json_path.open('w'))
+            self._files = files.pop_all()
+        self._csv.writeheader()
+        head = json.dumps(self._header, indent=1)
+        self._json.write(head[:head.rindex('}')].rstrip() + ',\n "scans": [')
+        return self
 
     def add(self, index: int, log_time_ns: int, header, problems: list, features: dict):
         """Append one scan's corners for every method."""
@@ -156,11 +166,14 @@ class _CornerTables:
         self._json.write(('\n  ' if self._first else ',\n  ') + json.dumps(entry))
         self._first = False
 
-    def close(self):
-        """Finish both files."""
-        self._json.write('\n ]\n}\n')
-        self._json.close()
-        self._csv_file.close()
+    def __exit__(self, kind, value, traceback):
+        if kind is None:
+            self._json.write('\n ]\n}\n')
+            self._files.close()
+        else:
+            with contextlib.suppress(OSError):  # the files are thrown away; flushing may fail
+                self._files.close()
+        return False
 
 
 def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = None,
@@ -202,7 +215,7 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
         bar = tqdm(total=info.topics[topic][1], unit='scan', desc=pathlib.Path(bag).name,
                    disable=None if progress is None else not progress, delay=PROGRESS_DELAY_S,
                    file=sys.stderr)
-        try:
+        with tables, contextlib.closing(bar):
             for index, record in enumerate(read_scans(bag, topic)):
                 scan = record.laser_scan()
                 time_ns = record.timestamp_ns
@@ -222,9 +235,6 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
                 summary.scans += 1
                 summary.malformed += bool(problems)
                 bar.update()
-        finally:
-            bar.close()
-            tables.close()
     summary.seconds = time.perf_counter() - started
     return summary
 
@@ -309,7 +319,14 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print('process_bag: interrupted; nothing written', file=sys.stderr)
         return 130
-    print(_report(summary))
+    try:
+        print(_report(summary), flush=True)
+    except OSError as error:
+        # Python flushes stdout again at exit: give it a file that takes the rest quietly.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        print(f'process_bag: error: cannot print the summary ({error.strerror}); the output '
+              f'{summary.output} is complete', file=sys.stderr)
+        return 2
     return 0
 
 

@@ -5,9 +5,11 @@
 
 import csv
 import json
+import os
 import resource
 import signal
 import subprocess
+import time
 import tracemalloc
 
 import pytest
@@ -17,8 +19,8 @@ pytest.importorskip('rclpy')
 from rosbags.highlevel import AnyReader  # noqa: E402
 from rosbags.typesys import get_typestore, Stores  # noqa: E402
 from scan_bags import (real_bag, REAL_BAGS, truncated_copy,  # noqa: E402
-                       write_bag_with_bad_message, write_scan_bag, write_string_bag,
-                       write_wide_invalid_bag)
+                       write_bag_with_bad_message, write_empty_scan_bag, write_scan_bag,
+                       write_string_bag, write_wide_invalid_bag)
 from test_feature_node import installed_executable  # noqa: E402
 from wctls_ros.bags import read_scans  # noqa: E402
 from wctls_ros.bags.process_bag import CSV_COLUMNS, main, process  # noqa: E402
@@ -280,3 +282,103 @@ def test_a_summary_that_cannot_be_printed_is_one_line_and_exit_2(tmp_path):
     assert result.stderr.splitlines() == [
         'process_bag: error: cannot print the summary (No space left on device); the output '
         f'{tmp_path / "out"} is complete']
+
+
+def run_installed(argv, **kwargs):
+    """Run the installed process_bag; a hang fails the test instead of stopping it."""
+    return subprocess.run([str(installed_executable('process_bag'))] + [str(a) for a in argv],
+                          capture_output=True, text=True, timeout=60, **kwargs)
+
+
+def test_fifos_and_empty_scan_topics_are_refused_at_once(tmp_path):
+    os.mkfifo(tmp_path / 'fifo.bag')
+    write_scan_bag(tmp_path / 'fifo_storage', count=2)
+    storage = tmp_path / 'fifo_storage' / 'fifo_storage.mcap'
+    storage.unlink()
+    os.mkfifo(storage)
+    write_scan_bag(tmp_path / 'fifo_metadata', count=2)
+    (tmp_path / 'fifo_metadata' / 'metadata.yaml').unlink()
+    os.mkfifo(tmp_path / 'fifo_metadata' / 'metadata.yaml')
+    write_empty_scan_bag(tmp_path / 'empty')
+    cases = [
+        (tmp_path / 'fifo.bag', f'{tmp_path / "fifo.bag"} is not a regular file or a folder'),
+        (tmp_path / 'fifo_storage', f'{storage} is not a regular file'),
+        (tmp_path / 'fifo_metadata', 'metadata.yaml is not a regular file'),
+        (tmp_path / 'empty', f'{tmp_path / "empty"}: its LaserScan topic /scan holds no '
+                             'messages'),
+    ]
+    for bag, reason in cases:
+        result = run_installed([bag, '-o', tmp_path / 'out'])
+        assert result.returncode == 2, result.stderr
+        assert result.stderr.splitlines() == [f'process_bag: error: {reason}'] or (
+            len(result.stderr.splitlines()) == 1 and reason in result.stderr), result.stderr
+        assert not (tmp_path / 'out').exists()
+
+
+def test_bad_arguments_are_one_line_and_help_states_defaults_and_exit_statuses():
+    result = run_installed(['bag', '--method', 'tls'])
+    assert result.returncode == 2 and len(result.stderr.splitlines()) == 1
+    assert result.stderr.startswith('process_bag: error: argument -m/--method: invalid choice')
+    usage = ' '.join(run_installed(['--help']).stdout.split())
+    for text in ('default: <bag name>_features', "default: none, feature_node's defaults",
+                 'default: the only one', '0 done', '2 a user error', '130 stopped by SIGINT',
+                 '143 by SIGTERM'):
+        assert text in usage, text
+
+
+def wait_for_staging(folder, known=(), timeout_s=60.0):
+    """Return a new staging folder of a run writing in ``folder`` (not one of ``known``)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        staging = [p for p in folder.iterdir()
+                   if p.name.startswith('.partial-') and p not in known]
+        if staging:
+            return staging[0]
+        time.sleep(0.005)
+    raise AssertionError(f'no run started writing in {folder}')
+
+
+def start_and_stop_in_the_middle(bag, output, known=()):
+    """Start process_bag and stop (SIGSTOP) it while it writes; return it and its staging."""
+    process = subprocess.Popen([str(installed_executable('process_bag')), str(bag), '-o',
+                                str(output)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True)
+    staging = wait_for_staging(output.parent, known)
+    process.send_signal(signal.SIGSTOP)
+    return process, staging
+
+
+@pytest.mark.parametrize('number,status', [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_sigint_and_sigterm_stop_a_run_and_leave_nothing(number, status, tmp_path):
+    out = tmp_path / 'out'
+    out.mkdir()
+    process, _ = start_and_stop_in_the_middle(real_bag('ros1/urg04lx_office.bag'),
+                                              out / 'result')
+    process.send_signal(number)
+    process.send_signal(signal.SIGCONT)      # the signal is delivered as it runs on
+    stdout, stderr = process.communicate(timeout=60)
+    assert process.returncode == status and stdout == ''
+    assert stderr.splitlines() == [
+        f'process_bag: interrupted by {signal.Signals(number).name}; nothing written']
+    assert list(out.iterdir()) == []
+
+
+def test_what_a_killed_run_left_is_removed_by_the_next_but_never_a_live_runs(tmp_path):
+    out = tmp_path / 'out'
+    out.mkdir()
+    bag = real_bag('ros1/urg04lx_office.bag')
+    killed, left = start_and_stop_in_the_middle(bag, out / 'killed')
+    killed.kill()
+    killed.wait(timeout=10)
+    assert (left / 'killed').is_dir()
+    # The next run removes it; the run after that leaves the first (stopped, alive) alone.
+    live, live_staging = start_and_stop_in_the_middle(bag, out / 'live', [left])
+    assert not left.exists()
+    result = run_installed([real_bag('sick_lms1xx_static'), '-o', out / 'next'])
+    assert result.returncode == 0, result.stderr
+    assert live_staging.is_dir()
+    live.send_signal(signal.SIGCONT)
+    _, stderr = live.communicate(timeout=60)
+    assert live.returncode == 0, stderr
+    assert sorted(p.name for p in out.iterdir()) == ['live', 'next']
+    assert read_output(out / 'live')[1]['/corners'] == 360

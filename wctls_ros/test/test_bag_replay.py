@@ -3,6 +3,7 @@
 
 """bag_replay with the real rclpy: bags played through the real feature_node, timing, /clock."""
 
+import os
 import pathlib
 import subprocess
 import time
@@ -16,8 +17,8 @@ from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
-from scan_bags import (PERIOD_NS, real_bag, REAL_BAGS, START_NS, write_scan_bag,  # noqa: E402
-                       write_string_bag)
+from scan_bags import (PERIOD_NS, real_bag, REAL_BAGS, START_NS,  # noqa: E402
+                       write_empty_scan_bag, write_scan_bag, write_string_bag)
 from scans import NODE_PARAMETERS  # noqa: E402
 from sensor_msgs.msg import LaserScan  # noqa: E402
 from test_feature_node import installed_executable  # noqa: E402
@@ -188,3 +189,18 @@ def test_installed_replay_exits_1_with_a_clear_message_and_no_traceback(argument
     output = result.stdout + result.stderr
     assert result.returncode == 1, output
     assert reason in output and 'Traceback' not in output
+
+
+def test_installed_replay_refuses_a_fifo_and_an_empty_scan_topic_in_one_fatal_line(tmp_path):
+    executable = installed_executable('bag_replay')
+    os.mkfifo(tmp_path / 'fifo.bag')
+    write_empty_scan_bag(tmp_path / 'empty')
+    cases = [(tmp_path / 'fifo.bag', 'is not a regular file or a folder'),
+             (tmp_path / 'empty', 'its LaserScan topic /scan holds no messages')]
+    for bag, reason in cases:
+        # A timeout, not a hang, if the FIFO is opened.
+        result = subprocess.run([str(executable), '--ros-args', '-p', f'bag:={bag}'],
+                                capture_output=True, text=True, timeout=30)
+        lines = (result.stdout + result.stderr).splitlines()
+        assert result.returncode == 1 and len(lines) == 1, lines
+        assert '[FATAL]' in lines[0] and reason in lines[0]

@@ -7,15 +7,19 @@ Reading LaserScans from bags and writing bags, with the ``rosbags`` library (no 
 Reads ROS 2 bags (sqlite3 and mcap) and ROS 1 bags. Writes ROS 2 bags (mcap by default) whose
 messages are serialised by rclpy itself, so every type rclpy knows (including wctls_msgs) can be
 stored; the message definitions come from a rosbags typestore with wctls_msgs registered from
-its .msg files. A bag is written to a temporary folder and renamed into place when complete: an
-error never leaves half a bag behind.
+its .msg files. A bag is written to a staging folder beside it and renamed into place when
+complete: an error or a signal never leaves half a bag behind, and the staging folder of a
+killed writer (SIGKILL) is removed by the next writer in the same folder.
 """
 
 import array
 import contextlib
 from dataclasses import dataclass
+import fcntl
 import functools
+import os
 import pathlib
+import re
 import shutil
 import tempfile
 from typing import Iterator, Optional
@@ -29,6 +33,10 @@ LASER_SCAN = 'sensor_msgs/msg/LaserScan'
 MESSAGE_PACKAGE = 'wctls_msgs'
 # Files that hold a ROS 2 bag's messages when its metadata.yaml is missing (recorder killed).
 _STORAGE_SUFFIXES = ('.mcap', '.db3')
+# A bag is written in a staging folder beside it, named after the writing process and locked
+# (flock) by it: one whose process is gone and whose lock is free was left by a killed run.
+_STAGING_PREFIX = '.partial-'
+_STAGING_NAME = re.compile(r'\.partial-(\d+)-[a-z0-9_]+')
 
 
 class BagError(RuntimeError):
@@ -133,12 +141,27 @@ class BagInfo:
 
 
 def _resolve(path) -> pathlib.Path:
-    """Return the path to open: a ROS 2 folder without metadata.yaml opens its one storage file."""
+    """
+    Return the path to open: a ROS 2 folder without metadata.yaml opens its one storage file.
+
+    Only regular files are opened: reading a FIFO (or a device) would wait forever.
+    """
     path = pathlib.Path(path)
     if not path.exists():
         raise BagError(f'no bag at {path}')
-    if path.is_dir() and not (path / 'metadata.yaml').exists():
-        files = sorted(p for p in path.iterdir() if p.suffix in _STORAGE_SUFFIXES)
+    if not path.is_dir():
+        if not path.is_file():
+            raise BagError(f'{path} is not a regular file or a folder (a FIFO, device or '
+                           'socket): not a bag')
+        return path
+    parts = sorted(p for p in path.iterdir()
+                   if p.suffix in _STORAGE_SUFFIXES or p.name == 'metadata.yaml')
+    for part in parts:
+        if not part.is_file():
+            raise BagError(f'{part} is not a regular file (a FIFO, device, socket or folder): '
+                           f'{path} is not a readable bag')
+    if not (path / 'metadata.yaml').exists():
+        files = [p for p in parts if p.suffix in _STORAGE_SUFFIXES]
         if len(files) != 1:
             raise BagError(f'{path} is a folder without metadata.yaml and with '
                            f'{len(files)} .mcap/.db3 files: not a ROS 2 bag')
@@ -197,7 +220,8 @@ def choose_scan_topic(path, topic: Optional[str] = None, info: Optional[BagInfo]
     :param topic: the requested topic, or None (or '') to find it
     :param info: the bag's summary when already read (saves opening the bag again)
     :return: the topic
-    :raises BagError: when the bag has no LaserScan, several without a choice, or not ``topic``
+    :raises BagError: when the bag has no LaserScan, several without a choice, not ``topic``, or
+        a LaserScan topic without messages
     """
     info = info or bag_info(path)
     topics = info.scan_topics()
@@ -207,13 +231,16 @@ def choose_scan_topic(path, topic: Optional[str] = None, info: Optional[BagInfo]
                 raise BagError(f'{path}: topic {topic} carries {info.topics[topic][0]}, not '
                                f'{LASER_SCAN}; LaserScan topics: {sorted(topics)}')
             raise BagError(f'{path} has no LaserScan topic {topic!r}; it has {sorted(topics)}')
-        return topic
-    if not topics:
+    elif not topics:
         found = ', '.join(f'{name} ({kind})' for name, (kind, _) in sorted(info.topics.items()))
         raise BagError(f'{path} holds no {LASER_SCAN} messages (topics: {found or "none"})')
-    if len(topics) > 1:
+    elif len(topics) > 1:
         raise BagError(f'{path} has several LaserScan topics {sorted(topics)}: choose one')
-    return next(iter(topics))
+    else:
+        topic = next(iter(topics))
+    if topics[topic] == 0:
+        raise BagError(f'{path}: its LaserScan topic {topic} holds no messages')
+    return topic
 
 
 def read_scans(path, topic: Optional[str] = None,
@@ -247,6 +274,60 @@ def read_scans(path, topic: Optional[str] = None,
         reader.close()
 
 
+def _lock_folder(path: pathlib.Path) -> Optional[int]:
+    """Take the exclusive lock of a folder without waiting; return its descriptor, or None."""
+    try:
+        descriptor = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(descriptor)
+        return None
+    return descriptor
+
+
+def _process_exists(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:     # another user's process
+        return True
+    return True
+
+
+def remove_stale_staging(folder) -> list:
+    """
+    Remove what killed writers (SIGKILL, a crash, a power cut) left in a folder.
+
+    A staging folder is stale when the process named in it is gone and nothing holds its lock;
+    the folder of a live writer is never touched.
+
+    :param folder: the folder where bags are written
+    :return: the staging folders removed
+    """
+    removed = []
+    try:
+        candidates = [p for p in pathlib.Path(folder).iterdir()
+                      if p.name.startswith(_STAGING_PREFIX)]
+    except OSError:             # not listable: nothing we could clean
+        return removed
+    for path in candidates:
+        match = _STAGING_NAME.fullmatch(path.name)
+        if match is None or _process_exists(int(match[1])):
+            continue
+        lock = _lock_folder(path)
+        if lock is not None:
+            try:
+                shutil.rmtree(path, ignore_errors=True)
+                removed.append(path)
+            finally:
+                os.close(lock)
+    return removed
+
+
 class BagWriter:
     """
     Write a ROS 2 bag of rclpy messages; the bag appears only when closed without error.
@@ -277,6 +358,7 @@ class BagWriter:
             raise BagError(f'{self.path} exists: refusing to overwrite it')
         self._plugin = plugins[storage]
         self._staging = None
+        self._lock = None
         self._writer = None
         self._connections = {}
         self._serialize = None
@@ -286,16 +368,25 @@ class BagWriter:
         self._serialize = serialize_message
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._staging = pathlib.Path(tempfile.mkdtemp(prefix='.partial-',
-                                                          dir=self.path.parent))
+            remove_stale_staging(self.path.parent)
+            self._staging = pathlib.Path(tempfile.mkdtemp(
+                prefix=f'{_STAGING_PREFIX}{os.getpid()}-', dir=self.path.parent))
+            self._lock = _lock_folder(self._staging)
             self._writer = Writer(self._staging / self.path.name, version=9,
                                   storage_plugin=self._plugin)
             self._writer.open()
         except Exception as error:  # noqa: B902 - rosbags and the file system raise many types
-            if self._staging is not None:
-                shutil.rmtree(self._staging, ignore_errors=True)
+            self._remove_staging()
             raise BagError(f'cannot write {self.path}: {error}') from error
         return self
+
+    def _remove_staging(self) -> None:
+        """Remove the staging folder, then release its lock."""
+        if self._staging is not None:
+            shutil.rmtree(self._staging, ignore_errors=True)
+        if self._lock is not None:
+            os.close(self._lock)
+        self._staging = self._lock = None
 
     def write(self, topic: str, timestamp_ns: int, message) -> None:
         """
@@ -340,7 +431,7 @@ class BagWriter:
         except OSError as error:
             value = error
         finally:
-            shutil.rmtree(self._staging, ignore_errors=True)
+            self._remove_staging()
         if isinstance(value, OSError):
             raise BagError(f'cannot write {self.path}: {value.strerror or value}') from value
         return False

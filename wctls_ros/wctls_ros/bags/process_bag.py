@@ -26,9 +26,10 @@ import json
 import math
 import os
 import pathlib
+import signal
 import sys
 import time
-from typing import Optional
+from typing import Callable, Optional
 
 
 from .bag_io import bag_info, BagError, BagWriter, choose_scan_topic, read_scans
@@ -49,6 +50,51 @@ CSV_COLUMNS = ('scan', 'stamp', 'frame_id', 'method', 'index', 'x_m', 'y_m', 'ya
 _TRIANGLE = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 # A progress bar appears only on runs longer than this, s.
 PROGRESS_DELAY_S = 1.0
+
+
+class Interrupted(Exception):
+    """A run stopped by a signal (nothing of it is left)."""
+
+    def __init__(self, signal_number: int):
+        super().__init__(f'interrupted by {signal.Signals(signal_number).name}')
+        self.signal_number = signal_number
+
+
+class StopSignals:
+    """
+    While active, SIGINT and SIGTERM only ask the run to stop, which it does between two scans.
+
+    A signal never lands inside a write, the cleanup or the rename that completes the output:
+    the run ends either complete or with nothing left. Use as a context manager, and call
+    :meth:`check` where stopping is safe.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self):
+        self.received = None
+        self._previous = {}
+
+    def _note(self, number, frame):
+        self.received = self.received or number
+
+    def __enter__(self) -> 'StopSignals':
+        self._previous = {number: signal.signal(number, self._note) for number in self.SIGNALS}
+        return self
+
+    def __exit__(self, kind, value, traceback):
+        for number, handler in self._previous.items():
+            signal.signal(number, handler)
+        return False
+
+    def check(self) -> None:
+        """
+        Raise :class:`Interrupted` when a signal has asked the run to stop.
+
+        :raises Interrupted: after SIGINT or SIGTERM
+        """
+        if self.received is not None:
+            raise Interrupted(self.received)
 
 
 @dataclass
@@ -177,7 +223,8 @@ class _CornerTables:
 
 
 def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = None,
-            progress: Optional[bool] = None, overwrite: bool = False) -> Summary:
+            progress: Optional[bool] = None, overwrite: bool = False,
+            after_scan: Optional[Callable[[], None]] = None) -> Summary:
     """
     Extract features from every scan of a bag into an output bag with corner tables.
 
@@ -189,6 +236,8 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
     :param progress: show a progress bar (None: on a terminal only, after a second)
     :param overwrite: replace an existing output once the new one is complete, if it is an
         output of process_bag with nothing added (its marker file says what it wrote)
+    :param after_scan: called after each scan; whatever it raises (e.g. :class:`Interrupted`)
+        ends the run and leaves nothing
     :return: counts and timing
     :raises BagError: for a missing, unreadable or damaged bag, or one without LaserScans, or
         an output that exists (without ``overwrite``, or that process_bag did not write)
@@ -235,6 +284,8 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
                 summary.scans += 1
                 summary.malformed += bool(problems)
                 bar.update()
+                if after_scan is not None:
+                    after_scan()
     summary.seconds = time.perf_counter() - started
     return summary
 
@@ -251,19 +302,29 @@ def default_output(bag) -> pathlib.Path:
     return pathlib.Path(f'{name}_features')
 
 
+class _OneLineErrors(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (the usage is in --help)."""
+
+    def error(self, message):
+        """Exit 2 with ``process_bag: error: <message>``."""
+        self.exit(2, f'{self.prog}: error: {message} (see --help)\n')
+
+
 def parser() -> argparse.ArgumentParser:
     """
     Build the command line interface.
 
     :return: the argument parser
     """
-    cli = argparse.ArgumentParser(
+    cli = _OneLineErrors(
         prog='process_bag',
         description='Extract corners and line segments with covariances from the LaserScans '
                     'of a ROS 1 or ROS 2 bag, without ROS middleware. Writes an mcap ROS 2 bag '
                     '(open it in Foxglove) with the scans, corners, lines and markers, plus '
                     f'{CSV_NAME} and {JSON_NAME} inside the bag folder.',
-        epilog='Exit status: 0 done, 2 bad arguments, bag or configuration (nothing written).')
+        epilog='Exit status: 0 done; 2 a user error (bad argument, path, bag, parameter file, '
+               'unwritable output), with one line on stderr and nothing written; 130 stopped by '
+               'SIGINT (Ctrl-C), 143 by SIGTERM, with nothing written.')
     cli.add_argument('bag', help='ROS 2 bag folder (or its .mcap / .db3 file) or ROS 1 .bag')
     cli.add_argument('-o', '--output', type=pathlib.Path,
                      help='output bag folder (default: <bag name>_features in the current '
@@ -273,7 +334,8 @@ def parser() -> argparse.ArgumentParser:
                           'own topics (/corners/<method>, ...); default: the method of the '
                           'config file, else wctls')
     cli.add_argument('-c', '--config', type=pathlib.Path,
-                     help='feature_node parameter file (YAML, as for --ros-args --params-file)')
+                     help='feature_node parameter file (YAML, as for --ros-args --params-file; '
+                          "default: none, feature_node's defaults)")
     cli.add_argument('-t', '--topic', help='LaserScan topic (default: the only one in the bag)')
     cli.add_argument('-f', '--force', action='store_true',
                      help='replace an existing output once the new one is complete; only an '
@@ -300,25 +362,27 @@ def main(argv=None) -> int:
     Run the command line tool.
 
     :param argv: arguments (None: sys.argv[1:])
-    :return: exit status: 0 done, 2 user error (bad arguments, bag or configuration)
+    :return: exit status: 0 done, 2 user error (nothing written), 128 + the signal number when
+        stopped by SIGINT or SIGTERM (nothing written)
     """
-    args = parser().parse_args(argv)
-    try:
-        overrides = {} if args.method in (None, ALL) else {'method': args.method}
-        parameters = load_parameters(args.config, overrides=overrides)
+    with StopSignals() as stop:
+        args = parser().parse_args(argv)
         try:
-            feature_settings(parameters)
-        except ValueError as error:
-            raise ConfigError(str(error)) from error
-        summary = process(args.bag, args.output or default_output(args.bag), parameters,
-                          METHODS if args.method == ALL else None, args.topic, args.progress,
-                          args.force)
-    except (BagError, ConfigError) as error:
-        print(f'process_bag: error: {error}', file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print('process_bag: interrupted; nothing written', file=sys.stderr)
-        return 130
+            overrides = {} if args.method in (None, ALL) else {'method': args.method}
+            parameters = load_parameters(args.config, overrides=overrides)
+            try:
+                feature_settings(parameters)
+            except ValueError as error:
+                raise ConfigError(str(error)) from error
+            summary = process(args.bag, args.output or default_output(args.bag), parameters,
+                              METHODS if args.method == ALL else None, args.topic,
+                              args.progress, args.force, stop.check)
+        except (BagError, ConfigError) as error:
+            print(f'process_bag: error: {error}', file=sys.stderr)
+            return 2
+        except Interrupted as interruption:
+            print(f'process_bag: {interruption}; nothing written', file=sys.stderr)
+            return 128 + interruption.signal_number
     try:
         print(_report(summary), flush=True)
     except OSError as error:

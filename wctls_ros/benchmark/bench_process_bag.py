@@ -22,8 +22,9 @@ import sys
 import tempfile
 import time
 
-from wctls_ros.bags import BagWriter, read_scans
+from wctls_ros.bags import BagWriter, read_scans, typestore
 from wctls_ros.bags.process_bag import process
+from wctls_ros.conversions import laser_scan, MessageTypes
 from wctls_ros.core import METHODS
 from wctls_ros.params import load_parameters
 
@@ -44,7 +45,8 @@ def throughput(bag, methods, runs, workdir):
 
 def write_long_bag(source, path, count):
     """Write `count` scans of `source` over and over, 0.1 s apart, with matching stamps."""
-    scans = [record.laser_scan() for record in read_scans(source)]
+    types = MessageTypes.from_typestore(typestore())
+    scans = [laser_scan(record.scan, types) for record in read_scans(source)]
     start_ns = 1_700_000_000_000_000_000
     with BagWriter(path) as bag:
         for index in range(count):

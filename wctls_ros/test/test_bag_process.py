@@ -4,14 +4,17 @@
 """process_bag: output bags that rosbags reads back, corner tables, clear errors, all-or-none."""
 
 import csv
+import dataclasses
 import json
 import os
 import resource
 import signal
 import subprocess
+import sys
 import time
 import tracemalloc
 
+import numpy as np
 import pytest
 
 pytest.importorskip('rclpy')
@@ -22,10 +25,10 @@ from scan_bags import (real_bag, REAL_BAGS, truncated_copy,  # noqa: E402
                        write_bag_with_bad_message, write_empty_scan_bag, write_scan_bag,
                        write_string_bag, write_wide_invalid_bag)
 from test_feature_node import installed_executable  # noqa: E402
-from wctls_ros.bags import read_scans  # noqa: E402
+from wctls_ros.bags import read_scans, typestore  # noqa: E402
 from wctls_ros.bags.process_bag import CSV_COLUMNS, main, process  # noqa: E402
 from wctls_ros.core import METHODS  # noqa: E402
-from wctls_ros.params import load_parameters  # noqa: E402
+from wctls_ros.params import feature_settings, load_parameters  # noqa: E402
 
 CORNERS = 'wctls_msgs/msg/CornerArray'
 LINES = 'wctls_msgs/msg/LineSegmentArray'
@@ -382,3 +385,56 @@ def test_what_a_killed_run_left_is_removed_by_the_next_but_never_a_live_runs(tmp
     assert live.returncode == 0, stderr
     assert sorted(p.name for p in out.iterdir()) == ['live', 'next']
     assert read_output(out / 'live')[1]['/corners'] == 360
+
+
+def plain(message):
+    """Return a deserialised rosbags message as nested dicts and lists (comparable with ==)."""
+    if dataclasses.is_dataclass(message):
+        return {f.name: plain(getattr(message, f.name)) for f in dataclasses.fields(message)}
+    if isinstance(message, np.ndarray):
+        return message.tolist()
+    if isinstance(message, (list, tuple)):
+        return [plain(item) for item in message]
+    return message
+
+
+def test_the_output_bag_holds_what_feature_node_publishes(tmp_path):
+    """Each message equals the node's (rclpy's codec path, serialised by rclpy) field by field."""
+    from rclpy.serialization import serialize_message
+    from wctls_ros.conversions import (corner_array, laser_scan, line_segment_array,
+                                       marker_array, scan_features)
+    bag = real_bag('urg04lx_office')
+    parameters = load_parameters(None)
+    config, style, _ = feature_settings(parameters)
+    process(bag, tmp_path / 'out', parameters, progress=False)
+    written = {}
+    with AnyReader([tmp_path / 'out'], default_typestore=get_typestore(Stores.EMPTY)) as reader:
+        for connection, _, raw in reader.messages():
+            written.setdefault(connection.topic, []).append(
+                plain(reader.deserialize(raw, connection.msgtype)))
+    store = typestore()
+    compared = 0
+    for index, record in enumerate(read_scans(bag)):
+        scan = laser_scan(record.scan)            # as feature_node receives it
+        features, _ = scan_features(scan, config)
+        for topic, message, kind in (
+                ('/scan', scan, SCAN), ('/corners', corner_array(features, scan.header), CORNERS),
+                ('/lines', line_segment_array(features, scan.header), LINES),
+                ('/markers', marker_array(features, scan.header, style), MARKERS)):
+            published = plain(store.deserialize_cdr(serialize_message(message), kind))
+            assert written[topic][index] == published, (topic, index)
+            compared += 1
+    assert compared == 4 * 360
+
+
+def test_process_bag_imports_neither_rclpy_nor_any_message_package(tmp_path):
+    code = ('import sys; from wctls_ros.bags import process_bag; '
+            f'status = process_bag.main([{str(real_bag("sick_lms1xx_static"))!r}, "-m", "all", '
+            f'"-o", {str(tmp_path / "out")!r}]); '
+            'print(status, sorted(m for m in sys.modules if m.split(".")[0] in '
+            '("rclpy", "rcl_interfaces", "builtin_interfaces", "rosidl_runtime_py") '
+            'or m.split(".")[0].endswith("_msgs")))')
+    result = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                            timeout=120)
+    assert result.stdout.splitlines()[-1] == '0 []', result.stdout + result.stderr
+    assert read_output(tmp_path / 'out')[1]['/corners/ml'] == 89

@@ -4,15 +4,14 @@
 """
 Reading LaserScans from bags and writing bags, with the ``rosbags`` library (no ROS install).
 
-Reads ROS 2 bags (sqlite3 and mcap) and ROS 1 bags. Writes ROS 2 bags (mcap by default) whose
-messages are serialised by rclpy itself, so every type rclpy knows (including wctls_msgs) can be
-stored; the message definitions come from a rosbags typestore with wctls_msgs registered from
-its .msg files. A bag is written to a staging folder beside it and renamed into place when
-complete: an error or a signal never leaves half a bag behind, and the staging folder of a
-killed writer (SIGKILL) is removed by the next writer in the same folder.
+Reads ROS 2 bags (sqlite3 and mcap) and ROS 1 bags. Writes ROS 2 bags (mcap by default) of
+rosbags messages (serialised by rosbags: no ROS install needed) or of rclpy messages (serialised
+by rclpy, imported only then); the message definitions come from a rosbags typestore with
+wctls_msgs registered from its .msg files. A bag is written to a staging folder beside it and
+renamed into place when complete: an error or a signal never leaves half a bag behind, and the
+staging folder of a killed writer (SIGKILL) is removed by the next writer in the same folder.
 """
 
-import array
 import contextlib
 from dataclasses import dataclass
 import fcntl
@@ -24,7 +23,6 @@ import shutil
 import tempfile
 from typing import Iterator, Optional
 
-import numpy as np
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import get_types_from_msg, get_typestore, Stores
@@ -72,13 +70,6 @@ def _message_directory() -> pathlib.Path:
                    'workspace (install/setup.bash) first')
 
 
-def _float32_array(values) -> array.array:
-    """Return float32 values as the array.array that rclpy messages take without copying."""
-    out = array.array('f')
-    out.frombytes(np.ascontiguousarray(values, dtype=np.float32).tobytes())
-    return out
-
-
 @dataclass(frozen=True)
 class ScanRecord:
     """
@@ -86,32 +77,13 @@ class ScanRecord:
 
     :ivar timestamp_ns: the bag's log time of the message, ns
     :ivar topic: topic it was recorded on
-    :ivar scan: the message (fields of sensor_msgs/LaserScan: header, angle_min, ranges, ...)
+    :ivar scan: the message as rosbags read it (ROS 1 or ROS 2 fields of sensor_msgs/LaserScan;
+        :func:`wctls_ros.conversions.laser_scan` copies it into an rclpy or rosbags ROS 2 one)
     """
 
     timestamp_ns: int
     topic: str
     scan: object
-
-    def laser_scan(self):
-        """
-        Return the scan as an rclpy sensor_msgs/LaserScan with the recorded header.
-
-        :return: a ``sensor_msgs.msg.LaserScan`` (a ROS 1 header's seq is dropped)
-        """
-        from builtin_interfaces.msg import Time
-        from sensor_msgs.msg import LaserScan
-        from std_msgs.msg import Header
-        scan = self.scan
-        stamp = scan.header.stamp
-        return LaserScan(
-            header=Header(stamp=Time(sec=int(stamp.sec), nanosec=int(stamp.nanosec)),
-                          frame_id=str(scan.header.frame_id)),
-            angle_min=float(scan.angle_min), angle_max=float(scan.angle_max),
-            angle_increment=float(scan.angle_increment),
-            time_increment=float(scan.time_increment), scan_time=float(scan.scan_time),
-            range_min=float(scan.range_min), range_max=float(scan.range_max),
-            ranges=_float32_array(scan.ranges), intensities=_float32_array(scan.intensities))
 
 
 @dataclass(frozen=True)
@@ -330,7 +302,7 @@ def remove_stale_staging(folder) -> list:
 
 class BagWriter:
     """
-    Write a ROS 2 bag of rclpy messages; the bag appears only when closed without error.
+    Write a ROS 2 bag of rosbags or rclpy messages; the bag appears only when closed without error.
 
     An OSError while the bag is open (a write to the bag or to a side file that meets a full
     disk or a file-size limit) or while it is closed leaves nothing and becomes a BagError that
@@ -361,11 +333,8 @@ class BagWriter:
         self._lock = None
         self._writer = None
         self._connections = {}
-        self._serialize = None
 
     def __enter__(self) -> 'BagWriter':
-        from rclpy.serialization import serialize_message
-        self._serialize = serialize_message
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             remove_stale_staging(self.path.parent)
@@ -390,19 +359,36 @@ class BagWriter:
 
     def write(self, topic: str, timestamp_ns: int, message) -> None:
         """
-        Append one message (serialised by rclpy) on a topic.
+        Append one message on a topic: a rosbags message or an rclpy one.
 
         :param topic: the topic; its type is taken from the first message written on it
         :param timestamp_ns: log time, ns
-        :param message: an rclpy message instance
+        :param message: a rosbags message (serialised by rosbags) or an rclpy message
+            (serialised by rclpy)
+        """
+        msgtype = getattr(message, '__msgtype__', None)
+        if msgtype is None:         # rclpy: the module is <package>.msg._<name>
+            from rclpy.serialization import serialize_message
+            msgtype = f'{type(message).__module__.split(".")[0]}/msg/{type(message).__name__}'
+            data = serialize_message(message)
+        else:
+            data = typestore().serialize_cdr(message, msgtype)
+        self.write_serialized(topic, msgtype, timestamp_ns, data)
+
+    def write_serialized(self, topic: str, msgtype: str, timestamp_ns: int, data) -> None:
+        """
+        Append one message already serialised (CDR) on a topic.
+
+        :param topic: the topic; its type is taken from the first message written on it
+        :param msgtype: the message type, e.g. 'wctls_msgs/msg/CornerArray'
+        :param timestamp_ns: log time, ns
+        :param data: the serialised message
         """
         connection = self._connections.get(topic)
         if connection is None:
-            module = type(message).__module__.split('.')[0]
-            msgtype = f'{module}/msg/{type(message).__name__}'
             connection = self._writer.add_connection(topic, msgtype, typestore=typestore())
             self._connections[topic] = connection
-        self._writer.write(connection, int(timestamp_ns), self._serialize(message))
+        self._writer.write(connection, int(timestamp_ns), data)
 
     def sidecar(self, name: str) -> pathlib.Path:
         """

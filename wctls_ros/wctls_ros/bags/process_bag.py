@@ -5,7 +5,8 @@
 process_bag: LaserScans of a bag in; corners, lines and markers out, with no middleware.
 
 Reads a ROS 2 (sqlite3, mcap) or ROS 1 bag one scan at a time, runs feature_node's pipeline on
-every scan with the same parameters (a feature_node YAML file) and writes:
+every scan with the same parameters (a feature_node YAML file) and writes, with rosbags alone
+(neither rclpy nor any ROS message package is imported):
 
 - an mcap ROS 2 bag (Foxglove and ``ros2 bag play`` open it) with the original scans on their
   topic and, per scan, a wctls_msgs/CornerArray on ``/corners``, a wctls_msgs/LineSegmentArray
@@ -32,8 +33,9 @@ import time
 from typing import Callable, Optional
 
 
-from .bag_io import bag_info, BagError, BagWriter, choose_scan_topic, read_scans
-from ..conversions import corner_array, line_segment_array, marker_array, scan_features
+from .bag_io import bag_info, BagError, BagWriter, choose_scan_topic, read_scans, typestore
+from ..conversions import (corner_array, laser_scan, line_segment_array, marker_array,
+                           MessageTypes, scan_features)
 from ..core import CornerSet, METHODS
 from ..params import ConfigError, feature_settings, load_parameters
 
@@ -249,6 +251,7 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
     methods = tuple(methods or (config.method,))
     configs = {m: config.replace(method=m) for m in methods}
     topics = output_topics(methods)
+    types = MessageTypes.from_typestore(typestore())
     info = bag_info(bag)
     topic = choose_scan_topic(bag, topic, info)
     output = pathlib.Path(output)
@@ -266,18 +269,19 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
                    file=sys.stderr)
         with tables, contextlib.closing(bar):
             for index, record in enumerate(read_scans(bag, topic)):
-                scan = record.laser_scan()
+                scan = laser_scan(record.scan, types)
                 time_ns = record.timestamp_ns
                 writer.write(topic, time_ns, scan)
                 results, problems = {}, []
                 for method, (corners, lines, markers) in topics.items():
                     features, problems = scan_features(scan, configs[method])
                     results[method] = features
-                    writer.write(corners, time_ns, corner_array(features, scan.header))
-                    writer.write(lines, time_ns, line_segment_array(features, scan.header))
+                    writer.write(corners, time_ns, corner_array(features, scan.header, types))
+                    writer.write(lines, time_ns,
+                                 line_segment_array(features, scan.header, types))
                     if publish_markers:
                         writer.write(markers, time_ns,
-                                     marker_array(features, scan.header, style))
+                                     marker_array(features, scan.header, style, types))
                     summary.corners[method] += len(features.corners)
                     summary.segments[method] += len(features.segments)
                 tables.add(index, time_ns, scan.header, problems, results)

@@ -272,55 +272,67 @@ def _unused_marker_fields(types: MessageTypes) -> dict:
 
 
 def marker_array(features: Features, header, style: MarkerStyle = MarkerStyle(),
-                 types: Optional[MessageTypes] = None):
+                 types: Optional[MessageTypes] = None, text_ids: bool = True):
     """
     Draw one scan's features: segments, corners with ids, and covariance ellipses.
 
-    The array starts with a DELETEALL marker, so features of earlier scans never linger.
+    The array starts with a DELETEALL marker, so features of earlier scans never linger. All
+    segments are one LINE_LIST, all corners one SPHERE_LIST; each corner's k-sigma covariance
+    ellipse is one flat CYLINDER scaled to its axes and turned to its orientation (as RViz draws
+    covariances) and, with ``text_ids``, its index one TEXT_VIEW_FACING marker. Markers of one
+    array may share sub-messages (colours, scales): change a copy, not them.
 
     :param features: output of ``extract_features``
     :param header: the scan's header, a ``types.Header`` (shared, not copied)
     :param style: sizes and the ellipse scale
     :param types: the message classes to build with (None: rclpy's)
+    :param text_ids: label each corner with its index
     :return: the markers
     """
     types = types or rclpy_types()
-    Marker = types.Marker
+    Marker, Point, Pose, Vector3 = types.Marker, types.Point, types.Pose, types.Vector3
     unused = _unused_marker_fields(types)
+    upright = types.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
 
-    def marker(namespace, marker_id, marker_type, color, scale, position=(0.0, 0.0, 0.0),
-               yaw=0.0, points=(), text='', action=Marker.ADD):
+    def marker(namespace, marker_id, marker_type, color, scale, position,
+               orientation=upright, points=(), text='', action=Marker.ADD):
         return Marker(header=header, ns=namespace, id=marker_id, type=marker_type,
-                      action=action,
-                      pose=types.Pose(position=_point(types, *position),
-                                      orientation=_quaternion_from_yaw(types, yaw)),
-                      scale=types.Vector3(x=scale[0], y=scale[1], z=scale[2]),
-                      color=types.ColorRGBA(r=color[0], g=color[1], b=color[2], a=color[3]),
-                      points=list(points), text=text, **unused)
+                      action=action, pose=Pose(position=position, orientation=orientation),
+                      scale=scale, color=color, points=list(points), text=text, **unused)
 
-    markers = [marker('', 0, Marker.ARROW, (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
-                      action=Marker.DELETEALL)]
+    def color(r, g, b, a):
+        return types.ColorRGBA(r=r, g=g, b=b, a=a)
+
+    origin = Point(x=0.0, y=0.0, z=0.0)
+    markers = [marker('', 0, Marker.ARROW, color(0.0, 0.0, 0.0, 0.0),
+                      Vector3(x=0.0, y=0.0, z=0.0), origin, action=Marker.DELETEALL)]
     segments, corners = features.segments, features.corners
     if len(segments):
         ends = np.stack([segments.start_xy_m, segments.end_xy_m], 1).reshape(-1, 2).tolist()
-        markers.append(marker('segments', 0, Marker.LINE_LIST, (0.1, 0.5, 1.0, 1.0),
-                              (style.line_width_m, 0.0, 0.0),
-                              points=[_point(types, x, y) for x, y in ends]))
-    if len(corners):
-        size = style.corner_size_m
-        markers.append(marker('corners', 0, Marker.SPHERE_LIST, (1.0, 0.2, 0.2, 1.0),
-                              (size, size, size),
-                              points=[_point(types, x, y) for x, y in corners.xy_m.tolist()]))
-        shape = ellipse(corners.covariance[:, :2, :2])
-        scale = 2.0 * style.ellipse_sigma * style.ellipse_scale
-        for i, ((x, y), major, minor, orientation) in enumerate(zip(
-                corners.xy_m.tolist(), shape.semi_major.tolist(), shape.semi_minor.tolist(),
-                shape.orientation_rad.tolist())):
-            markers.append(marker('corner_ids', i, Marker.TEXT_VIEW_FACING,
-                                  (1.0, 1.0, 1.0, 1.0), (0.0, 0.0, 2.0 * size),
-                                  (x, y, 2.0 * size), text=str(i)))
-            # A flat elliptic cylinder: one marker per ellipse, no outline points to send.
-            markers.append(marker('ellipses', i, Marker.CYLINDER, (1.0, 0.6, 0.0, 0.5),
-                                  (scale * major, scale * minor, _ELLIPSE_THICKNESS_M),
-                                  (x, y, 0.0), orientation))
+        markers.append(marker('segments', 0, Marker.LINE_LIST, color(0.1, 0.5, 1.0, 1.0),
+                              Vector3(x=style.line_width_m, y=0.0, z=0.0), origin,
+                              points=[Point(x=x, y=y, z=0.0) for x, y in ends]))
+    if not len(corners):
+        return types.MarkerArray(markers=markers)
+    size = style.corner_size_m
+    markers.append(marker('corners', 0, Marker.SPHERE_LIST, color(1.0, 0.2, 0.2, 1.0),
+                          Vector3(x=size, y=size, z=size), origin,
+                          points=[Point(x=x, y=y, z=0.0) for x, y in corners.xy_m.tolist()]))
+    shape = ellipse(corners.covariance[:, :2, :2])
+    diameter = 2.0 * style.ellipse_sigma * style.ellipse_scale
+    half_turn = 0.5 * shape.orientation_rad
+    rows = np.column_stack([corners.xy_m, diameter * shape.semi_major,
+                            diameter * shape.semi_minor, np.sin(half_turn),
+                            np.cos(half_turn)]).tolist()
+    label_color, label_scale = color(1.0, 1.0, 1.0, 1.0), Vector3(x=0.0, y=0.0, z=2.0 * size)
+    ellipse_color = color(1.0, 0.6, 0.0, 0.5)
+    for i, (x, y, major_axis, minor_axis, qz, qw) in enumerate(rows):
+        if text_ids:
+            markers.append(marker('corner_ids', i, Marker.TEXT_VIEW_FACING, label_color,
+                                  label_scale, Point(x=x, y=y, z=2.0 * size), text=str(i)))
+        # A flat elliptic cylinder: one marker per ellipse, no outline points to send.
+        markers.append(marker('ellipses', i, Marker.CYLINDER, ellipse_color,
+                              Vector3(x=major_axis, y=minor_axis, z=_ELLIPSE_THICKNESS_M),
+                              Point(x=x, y=y, z=0.0),
+                              types.Quaternion(x=0.0, y=0.0, z=qz, w=qw)))
     return types.MarkerArray(markers=markers)

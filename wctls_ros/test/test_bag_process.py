@@ -7,6 +7,7 @@ import csv
 import dataclasses
 import json
 import os
+import pathlib
 import resource
 import signal
 import subprocess
@@ -229,7 +230,7 @@ def test_installed_command_has_help_and_fails_cleanly(tmp_path):
 def peak_memory(path, output, parameters):
     tracemalloc.start()
     try:
-        process(path, output, parameters, progress=False)
+        process(path, output, parameters)
         return tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
@@ -406,7 +407,7 @@ def test_the_output_bag_holds_what_feature_node_publishes(tmp_path):
     bag = real_bag('urg04lx_office')
     parameters = load_parameters(None)
     config, style, _ = feature_settings(parameters)
-    process(bag, tmp_path / 'out', parameters, progress=False)
+    process(bag, tmp_path / 'out', parameters)
     written = {}
     with AnyReader([tmp_path / 'out'], default_typestore=get_typestore(Stores.EMPTY)) as reader:
         for connection, _, raw in reader.messages():
@@ -438,3 +439,109 @@ def test_process_bag_imports_neither_rclpy_nor_any_message_package(tmp_path):
                             timeout=120)
     assert result.stdout.splitlines()[-1] == '0 []', result.stdout + result.stderr
     assert read_output(tmp_path / 'out')[1]['/corners/ml'] == 89
+
+
+def raw_messages(path):
+    """Return topic -> the serialised messages of a bag, in order."""
+    messages = {}
+    with AnyReader([path], default_typestore=get_typestore(Stores.EMPTY)) as reader:
+        for connection, timestamp, raw in reader.messages():
+            messages.setdefault(connection.topic, []).append((timestamp, bytes(raw)))
+    return messages
+
+
+def test_worker_processes_write_exactly_what_one_process_writes(tmp_path, capsys):
+    bag = real_bag('ros1/urg04lx_office.bag')
+    for jobs in (1, 2):
+        status, out, err = run([bag, '-o', tmp_path / f'jobs{jobs}', '-m', 'all', '-j', jobs],
+                               capsys)
+        assert status == 0, err
+    assert raw_messages(tmp_path / 'jobs1') == raw_messages(tmp_path / 'jobs2')
+    for name in ('corners.csv', 'corners.json'):
+        assert (tmp_path / 'jobs1' / name).read_text() == (tmp_path / 'jobs2' / name).read_text()
+
+
+def test_several_bags_give_one_table_and_a_damaged_one_is_skipped_in_one_line(tmp_path, capsys):
+    inputs = tmp_path / 'inputs'
+    inputs.mkdir()
+    write_scan_bag(inputs / 'first', count=40)
+    write_bag_with_bad_message(inputs / 'damaged', count=60, bad_index=50)
+    write_scan_bag(inputs / 'last', count=30)
+    bags = [inputs / 'first', inputs / 'damaged', inputs / 'last']
+    # Problems found before anything is written: one line each, nothing written.
+    status, out, err = run(bags + [inputs / 'missing', inputs / 'first', '-d', tmp_path / 'out'],
+                           capsys)
+    assert status == 2 and out == ''
+    twice = (f'process_bag: error: {inputs / "first"}: its output '
+             f'{tmp_path / "out" / "first_features"} would be written twice: give the bags '
+             'different names')
+    assert err.splitlines() == [twice, f'process_bag: error: no bag at {inputs / "missing"}',
+                                twice]
+    assert not (tmp_path / 'out').exists()
+    status, _, err = run(bags + ['-o', tmp_path / 'out'], capsys)
+    assert status == 2 and err.splitlines() == [
+        'process_bag: error: --output names the output of one bag; 3 bags were given: use '
+        '--output-dir']
+    # Damage found midway: that bag is skipped with one line, the others are written.
+    status, out, err = run(bags + ['-d', tmp_path / 'out', '-j', '2'], capsys)
+    assert status == 2
+    assert err.splitlines() == [f'process_bag: error: {inputs / "damaged"} is damaged after 50 '
+                                'messages of /scan: ' + err.split(' of /scan: ')[1].strip()]
+    written = sorted(p.name for p in (tmp_path / 'out').iterdir())
+    assert written == ['first_features', 'last_features']
+    assert read_output(tmp_path / 'out' / 'last_features')[1]['/corners'] == 30
+    table = [line.split() for line in out.splitlines()]
+    assert table[0] == ['bag', 'scans', 'corners', 'wctls', 'seconds', 'scans/s', 'output']
+    for row, name, scans in ((table[1], 'first', 40), (table[3], 'last', 30)):
+        with open(tmp_path / 'out' / f'{name}_features' / 'corners.csv') as rows:
+            corners = len(rows.readlines()) - 1
+        assert row[:3] == [str(inputs / name), str(scans), str(corners)]
+        assert row[-1] == str(tmp_path / 'out' / f'{name}_features')
+    assert table[2] == [str(inputs / 'damaged'), 'failed', '(see', 'above)']
+    assert table[4][:2] == ['all', '70'] and table[4][-2:] == ['2', 'written']
+
+
+def process_ids_of_children(pid):
+    """Return the ids of the processes whose parent is ``pid``."""
+    children = []
+    for stat in pathlib.Path('/proc').glob('[0-9]*/stat'):
+        try:
+            fields = stat.read_text().rsplit(')', 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            children.append(int(stat.parent.name))
+    return children
+
+
+def wait_until_gone(pids, timeout_s=10.0):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        alive = [pid for pid in pids if pathlib.Path(f'/proc/{pid}').exists()
+                 and 'Z' not in pathlib.Path(f'/proc/{pid}/stat').read_text().split()[2]]
+        if not alive:
+            return []
+        time.sleep(0.05)
+    return alive
+
+
+@pytest.mark.parametrize('number', [signal.SIGTERM, signal.SIGKILL])
+def test_stopping_a_run_with_workers_leaves_no_process_behind(number, tmp_path):
+    out = tmp_path / 'out'
+    out.mkdir()
+    process = subprocess.Popen([str(installed_executable('process_bag')),
+                                str(real_bag('ros1/urg04lx_office.bag')), '-o', str(out / 'r'),
+                                '-m', 'all', '-j', '2'], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    wait_for_staging(out)
+    deadline = time.monotonic() + 30
+    while len(workers := process_ids_of_children(process.pid)) < 2:
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    process.send_signal(number)
+    _, stderr = process.communicate(timeout=60)
+    assert wait_until_gone(workers) == []
+    if number == signal.SIGTERM:
+        assert process.returncode == 143, stderr
+        assert stderr.splitlines() == ['process_bag: interrupted by SIGTERM; nothing written']
+        assert list(out.iterdir()) == []

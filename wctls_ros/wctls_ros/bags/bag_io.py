@@ -152,6 +152,17 @@ def _open(path) -> AnyReader:
     return reader
 
 
+def _summary(reader: AnyReader) -> BagInfo:
+    """Summarise an open bag."""
+    topics = {}
+    for connection in reader.connections:
+        kind, count = topics.get(connection.topic, (connection.msgtype, 0))
+        topics[connection.topic] = (kind, count + connection.msgcount)
+    empty = not reader.message_count
+    return BagInfo(pathlib.Path(reader.paths[0]), topics,
+                   0 if empty else reader.start_time, 0 if empty else reader.end_time - 1)
+
+
 def bag_info(path) -> BagInfo:
     """
     Summarise a bag: its topics with types and counts, and its time span.
@@ -162,13 +173,7 @@ def bag_info(path) -> BagInfo:
     """
     reader = _open(path)
     try:
-        topics = {}
-        for connection in reader.connections:
-            kind, count = topics.get(connection.topic, (connection.msgtype, 0))
-            topics[connection.topic] = (kind, count + connection.msgcount)
-        empty = not reader.message_count
-        return BagInfo(pathlib.Path(reader.paths[0]), topics,
-                       0 if empty else reader.start_time, 0 if empty else reader.end_time - 1)
+        return _summary(reader)
     finally:
         reader.close()
 
@@ -226,10 +231,10 @@ def read_scans(path, topic: Optional[str] = None,
     :return: iterator of records
     :raises BagError: on a missing, corrupt or truncated bag, or no LaserScan topic
     """
-    topic = choose_scan_topic(path, topic)
     reader = _open(path)
     count = 0
     try:
+        topic = choose_scan_topic(path, topic, _summary(reader))
         connections = [c for c in reader.connections if c.topic == topic]
         try:
             for connection, timestamp, raw in reader.messages(connections=connections,

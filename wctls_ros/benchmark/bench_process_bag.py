@@ -25,6 +25,7 @@ import argparse
 import json
 import os
 import pathlib
+import resource
 import statistics
 import subprocess
 import sys
@@ -46,9 +47,16 @@ def measure(methods: str, jobs: int, output: pathlib.Path) -> None:
     chosen = METHODS if methods == 'all' else (methods,)
     options = {'jobs': jobs} if jobs > 1 else {}        # a baseline may not know --jobs
     process(WARM_UP, output / 'warm-up', parameters, chosen, **options)
-    started = time.perf_counter()
+    cpu, started = cpu_seconds(), time.perf_counter()
     summary = process(OFFICE, output / 'office', parameters, chosen, **options)
-    print(json.dumps(summary.scans / (time.perf_counter() - started)))
+    wall = time.perf_counter() - started
+    print(json.dumps([summary.scans / wall, 1000.0 * (cpu_seconds() - cpu) / summary.scans]))
+
+
+def cpu_seconds() -> float:
+    """Return the CPU time of this process and of its ended worker processes, s."""
+    usages = [resource.getrusage(who) for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)]
+    return sum(usage.ru_utime + usage.ru_stime for usage in usages)
 
 
 def in_tree(tree: pathlib.Path, command: list) -> list:
@@ -57,8 +65,8 @@ def in_tree(tree: pathlib.Path, command: list) -> list:
     return ['bash', '-c', f'source {tree}/tools/env.sh && exec {quoted}']
 
 
-def throughput(tree: pathlib.Path, methods: str, jobs: int, workdir: pathlib.Path) -> float:
-    """Run :func:`measure` in a fresh process of a tree; return its scans per second."""
+def throughput(tree: pathlib.Path, methods: str, jobs: int, workdir: pathlib.Path) -> list:
+    """Run :func:`measure` in a fresh process of a tree; return [scans/s, CPU ms per scan]."""
     with tempfile.TemporaryDirectory(dir=workdir) as output:
         result = subprocess.run(in_tree(tree, [sys.executable, __file__, '--measure', methods,
                                                str(jobs), output]),
@@ -122,15 +130,19 @@ def main():
                 rates[case].append(throughput(tree, methods, jobs, workdir))
         print(f'process_bag on {OFFICE.name} (360 scans, ROS 2 mcap, Hokuyo URG-04LX, 681 '
               f'beams), markers on, in-process after a warm-up; median of {args.rounds} '
-              f'alternating rounds on {os.cpu_count()} CPUs:')
+              f'alternating rounds on {os.cpu_count()} CPUs (CPU: all processes of the run):')
+        base = {methods: [rate for rate, _ in rates[case]] for case in cases
+                for label, _, methods, _ in [case] if label == 'baseline'}
         for case in cases:
             label, tree, methods, jobs = case
-            median = statistics.median(rates[case])
-            base = rates.get(('baseline', args.baseline, methods, 1))
-            ratio = f'{median / statistics.median(base):5.2f}x baseline' if base else ''
+            speeds = [rate for rate, _ in rates[case]]
+            cpu = statistics.median(ms for _, ms in rates[case])
+            median = statistics.median(speeds)
+            ratio = (f'{median / statistics.median(base[methods]):5.2f}x baseline'
+                     if methods in base else '')
             print(f'  {label:9s} {"method wctls" if methods == "wctls" else "all four":12s} '
-                  f'--jobs {jobs}  {median:6.0f} scans/s  (min {min(rates[case]):4.0f}, '
-                  f'max {max(rates[case]):4.0f})  {ratio}')
+                  f'--jobs {jobs}  {median:6.0f} scans/s (min {min(speeds):4.0f}, max '
+                  f'{max(speeds):4.0f}), CPU {cpu:5.2f} ms/scan  {ratio}')
 
         bags = [workdir / 'first', workdir / 'second']
         for bag in bags:

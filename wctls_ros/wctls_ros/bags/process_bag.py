@@ -238,6 +238,10 @@ class ScanWork:
         self.topics = output_topics(self.methods)
         self.store = typestore()
         self.types = MessageTypes.from_typestore(self.store)
+        # rosbags makes each type's (de)serialiser at its first use: make them now, before
+        # worker processes are forked, so that each does not make its own.
+        for name in (LASER_SCAN, CORNER_ARRAY, LINE_SEGMENT_ARRAY, MARKER_ARRAY):
+            self.store.get_msgdef(name)
 
     def serialize(self, message) -> bytes:
         """

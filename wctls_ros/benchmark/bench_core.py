@@ -9,7 +9,10 @@ Prints median and p99 time per scan (one core) for 1080-beam scans and 4x denser
 every method, and the mean number of segments and corners. Then, for wctls, how the time grows
 with the beam count from 270 to 8640 beams: the exponent between each doubling (1 is linear; below
 1 is slower growth than N, let alone N log N) and a least-squares split of the time into a fixed
-per-scan cost and a cost per beam. Usage: python bench_core.py [scans]
+per-scan cost and a cost per beam. Last, the worst case: a crafted scan (a wall whose every
+other return lies a growing few cm behind it, which made IEPF quadratic before its pass bound)
+next to a room scan of as many beams, with the default noise model (5 cm, which makes the crafted
+wall one chain), 1080 to 100 000 beams. Usage: python bench_core.py [scans]
 """
 
 import os
@@ -25,9 +28,11 @@ import numpy as np  # noqa: E402
 from wctls_ros.core import extract_features, FeatureConfig, METHODS  # noqa: E402
 from wctls_ros.simulation import (full_turn_bearings, load_floor_plan, NoiseModel,  # noqa: E402
                                   simulate_ranges)
+from wctls_ros.simulation.adversarial import peeling_wall  # noqa: E402
 
 RANGE_NOISE_M = 0.01
 SWEEP_BEAMS = (270, 540, 1080, 2160, 4320, 8640)
+WORST_CASE_BEAMS = (1080, 4320, 16000, 64000, 100000)
 
 
 def scans(beams, count, seed=1):
@@ -81,6 +86,27 @@ def main():
         print(f'{beams:>6} {medians[-1]:>10.3f} {exponent:>9} {segments:>9.1f} {corners:>8.1f}')
     per_beam_ms, fixed_ms = np.polyfit(SWEEP_BEAMS, medians, 1)
     print(f'least squares: {fixed_ms * 1e3:.0f} us per scan + {per_beam_ms * 1e6:.0f} ns per beam')
+    worst_case(max(count // 50, 5))
+
+
+def worst_case(repeats):
+    """Print the crafted scan's time next to a room scan's, the default configuration."""
+    print(f'worst case: crafted scan vs room scan, default configuration, min of {repeats} runs')
+    print(f'{"beams":>6} {"crafted ms":>11} {"room ms":>8} {"ratio":>6} {"work bound hit":>15}')
+    config = FeatureConfig()
+    for beams in WORST_CASE_BEAMS:
+        crafted = peeling_wall(beams)
+        angle_min, increment, (room,) = scans(beams, 1)
+        crafted_s, room_s = [], []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            features = extract_features(*crafted, config)
+            crafted_s.append(time.perf_counter() - start)
+            start = time.perf_counter()
+            extract_features(room, angle_min, increment, config)
+            room_s.append(time.perf_counter() - start)
+        print(f'{beams:>6} {min(crafted_s) * 1e3:>11.2f} {min(room_s) * 1e3:>8.2f} '
+              f'{min(crafted_s) / min(room_s):>6.2f} {str(features.work_limited):>15}')
 
 
 if __name__ == '__main__':

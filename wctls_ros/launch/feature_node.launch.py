@@ -5,28 +5,20 @@
 
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
-from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
-from launch_ros.actions import Node
-from launch_ros.substitutions import FindPackageShare
+from launch.substitutions import LaunchConfiguration
+from wctls_ros.launching import config_file, node, optional_argument
 
 
 def generate_launch_description():
     """Return the launch description: arguments params_file, scan_topic, method, use_sim_time."""
     return LaunchDescription([
-        DeclareLaunchArgument(
-            'params_file', description='feature_node parameter file',
-            default_value=PathJoinSubstitution(
-                [FindPackageShare('wctls_ros'), 'config', 'feature_node.yaml'])),
+        DeclareLaunchArgument('params_file', default_value=config_file('feature_node.yaml'),
+                              description='feature_node parameter file'),
         DeclareLaunchArgument('scan_topic', default_value='scan',
                               description='LaserScan topic to read'),
-        DeclareLaunchArgument('method', default_value='wctls',
-                              description='line fit: utls | wtls | wctls | ml'),
-        DeclareLaunchArgument('use_sim_time', default_value='false',
-                              description='use /clock (true when replaying a bag with --clock)'),
-        Node(package='wctls_ros', executable='feature_node', name='feature_node',
-             output='screen',
-             parameters=[LaunchConfiguration('params_file'),
-                         {'method': LaunchConfiguration('method'),
-                          'use_sim_time': LaunchConfiguration('use_sim_time')}],
+        optional_argument('method', 'line fit: utls | wtls | wctls | ml'),
+        optional_argument('use_sim_time', 'use /clock, e.g. when a bag is replayed with it'),
+        node('feature_node', LaunchConfiguration('params_file'),
+             arguments=[('method', 'method'), ('use_sim_time', 'use_sim_time')],
              remappings=[('scan', LaunchConfiguration('scan_topic'))]),
     ])

@@ -4,19 +4,16 @@
 """Replay a bag into feature_node: ros2 launch wctls_ros replay.launch.py bag:=<bag folder>."""
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription, Shutdown
-from launch.launch_description_sources import PythonLaunchDescriptionSource
-from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
-from launch_ros.actions import Node
-from launch_ros.parameter_descriptions import ParameterValue
-from launch_ros.substitutions import FindPackageShare
+from launch.actions import DeclareLaunchArgument, Shutdown
+from launch.substitutions import LaunchConfiguration
+from wctls_ros.launching import config_file, node, optional_argument
 
 
 def generate_launch_description():
     """
     Return the launch description: bag_replay, and feature_node on the bag's clock.
 
-    Arguments: bag, rate, loop; and feature_node.launch.py's method and params_file.
+    Arguments: bag, rate, loop (bag_replay's); method and params_file (feature_node's).
     """
     return LaunchDescription([
         DeclareLaunchArgument('bag', description='ROS 2 bag folder (or .mcap / .db3) or ROS 1 '
@@ -25,18 +22,16 @@ def generate_launch_description():
                               description='playback speed (bag seconds per wall second)'),
         DeclareLaunchArgument('loop', default_value='false',
                               description='start again at the end of the bag'),
+        DeclareLaunchArgument('params_file', default_value=config_file('feature_node.yaml'),
+                              description='feature_node parameter file'),
+        optional_argument('method', 'feature_node line fit: utls | wtls | wctls | ml'),
         # Publishes the scans on /scan and the bag time on /clock; starts once feature_node
         # has subscribed, so no scan is lost; at the end of the bag everything stops.
-        Node(package='wctls_ros', executable='bag_replay', name='bag_replay', output='screen',
-             on_exit=Shutdown(reason='end of the bag'),
-             parameters=[{'bag': LaunchConfiguration('bag'),
-                          'rate': ParameterValue(LaunchConfiguration('rate'), value_type=float),
-                          'loop': ParameterValue(LaunchConfiguration('loop'), value_type=bool),
-                          'publish_clock': True,
-                          'wait_for_subscribers': 1}]),
-        # feature_node with its parameter file and method (arguments params_file, method).
-        IncludeLaunchDescription(
-            PythonLaunchDescriptionSource(PathJoinSubstitution(
-                [FindPackageShare('wctls_ros'), 'launch', 'feature_node.launch.py'])),
-            launch_arguments={'use_sim_time': 'true'}.items()),
+        node('bag_replay', config_file('bag_replay.yaml'),
+             arguments=[('bag', 'bag'), ('rate', 'rate'), ('loop', 'loop')],
+             fixed={'publish_clock': True, 'wait_for_subscribers': 1},
+             on_exit=Shutdown(reason='end of the bag')),
+        # feature_node runs on the bag's clock, whatever its parameter file says.
+        node('feature_node', LaunchConfiguration('params_file'), arguments=[('method', 'method')],
+             fixed={'use_sim_time': True}),
     ])

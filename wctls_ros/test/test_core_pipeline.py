@@ -4,15 +4,18 @@
 """The per-scan pipeline: scan conversion, segmentation, corners, hostile input, properties."""
 
 import math
+import time
 
 from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 from wctls_ros.core import (extract_features, FeatureConfig, fit_lines, nees, scan_to_points,
                             ScanError, segment_returns)
-from wctls_ros.core.segmentation import SegmentRanges, trim_ambiguous_ends
+from wctls_ros.core.segmentation import (iterative_end_point_fit, pass_budget, SegmentRanges,
+                                         trim_ambiguous_ends)
 from wctls_ros.simulation import (floor_plan_from_dict, full_turn_bearings, NOISELESS,
                                   NoiseModel, simulate_ranges)
+from wctls_ros.simulation.adversarial import peeling_wall
 
 ROOM = {'name': 'room', 'polylines': [
     {'closed': True, 'points': [[0.0, 0.0], [4.5, 0.0], [4.5, 2.5], [0.0, 2.5]]}],
@@ -209,6 +212,90 @@ def test_invalid_configuration_is_refused_with_the_reason(changes, message):
 def test_unknown_configuration_field_is_refused():
     with pytest.raises(ValueError, match='iepf_treshold'):
         FeatureConfig().replace(iepf_treshold=0.1)
+
+
+# --- bounded work on crafted scans ---------------------------------------------------------------
+
+def levels_of_textbook_iepf(x, y, threshold):
+    """Return the split depth an unbounded recursive IEPF reaches (iteratively, no recursion)."""
+    deepest, pending = 0, [(0, len(x), 0)]
+    while pending:
+        start, stop, depth = pending.pop()
+        deepest = max(deepest, depth)
+        if stop - start < 3:
+            continue
+        dx, dy = x[stop - 1] - x[start], y[stop - 1] - y[start]
+        distance = np.abs(dx * (y[start:stop] - y[start]) - dy * (x[start:stop] - x[start]))
+        cut = start + int(np.argmax(distance))
+        if distance.max() > threshold * math.hypot(dx, dy):
+            pending += [(start, cut, depth + 1), (cut + 1, stop, depth + 1)]
+    return deepest
+
+
+def test_a_peeling_wall_would_need_a_level_per_two_returns_and_gets_the_budget():
+    ranges, angle_min, increment = peeling_wall(2000)
+    x = ranges * np.cos(angle_min + increment * np.arange(2000))
+    y = ranges * np.sin(angle_min + increment * np.arange(2000))
+    # The crafted scan really is the worst case: unbounded, IEPF would split ~1000 times deep.
+    assert levels_of_textbook_iepf(x, y, 0.04) > 900 > pass_budget(2000) == 30
+    segments, cut_short = iterative_end_point_fit(x, y, np.array([0]), np.array([2000]),
+                                                  np.array([0]), 0.04, pass_budget(2000))
+    assert cut_short
+    # What is left is straight: every kept piece lies within the threshold of its chord.
+    for start, stop in zip(segments.start, segments.stop):
+        assert levels_of_textbook_iepf(x[start:stop], y[start:stop], 0.04) == 0
+
+
+@pytest.mark.parametrize('beams', [1000, 8000])
+def test_a_crafted_scan_is_flagged_and_gives_no_features_from_its_zigzag(beams):
+    features = extract_features(*peeling_wall(beams))
+    assert features.work_limited
+    assert len(features.corners) == 0
+    assert not extract_features(*room_scan()[:3], SMALL_NOISE_CONFIG).work_limited
+
+
+def test_a_crafted_scan_costs_about_what_a_room_scan_of_as_many_beams_costs():
+    # With the default (5 cm) noise model the crafted wall is one chain. Unbounded, its
+    # 32000-beam scan took 30 s against 10 ms for a room scan (3000x); bounded, 0.7x. A ratio
+    # measured in one run holds on a slow or loaded machine; 25x is the bound.
+    beams = 32000
+    crafted = peeling_wall(beams)
+    room = room_scan(beams=beams)[:3]
+    timings = {'crafted': [], 'room': []}
+    for _ in range(3):
+        for name, scan in (('crafted', crafted), ('room', room)):
+            started = time.perf_counter()
+            extract_features(*scan)
+            timings[name].append(time.perf_counter() - started)
+    assert min(timings['crafted']) < 25 * min(timings['room']), timings
+
+
+def test_the_bearing_cache_keeps_a_bounded_number_of_bytes():
+    # Cached by entries, 12 geometries of a million beams held 12 x 16 MB.
+    import tracemalloc
+    ranges = np.full(1_000_000, 2.0)
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        for k in range(12):
+            scan_to_points(ranges, -1.0 + 1e-3 * k, 1e-6)
+        grown = tracemalloc.get_traced_memory()[0] - before
+    finally:
+        tracemalloc.stop()
+    assert grown <= 8 * 2 ** 20 + 2 ** 20
+    # A geometry seen again is not computed again.
+    small = np.full(1080, 2.0)
+    first = scan_to_points(small, -math.pi, 2 * math.pi / 1079)
+    second = scan_to_points(small, -math.pi, 2 * math.pi / 1079)
+    assert np.array_equal(first.x_m, second.x_m)
+
+
+def test_scans_with_more_beams_than_max_beams_are_refused():
+    ranges, angle_min, increment, _ = room_scan(beams=1080)
+    assert len(extract_features(ranges, angle_min, increment,
+                                FeatureConfig(max_beams=1080)).segments)
+    with pytest.raises(ScanError, match='1080 beams are more than max_beams \\(1079\\)'):
+        extract_features(ranges, angle_min, increment, FeatureConfig(max_beams=1079))
 
 
 # --- properties ---------------------------------------------------------------------------------

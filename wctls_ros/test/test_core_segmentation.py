@@ -9,7 +9,7 @@ from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 from wctls_ros.core.segmentation import (iterative_end_point_fit, merge_collinear, moment_fit,
-                                         moment_terms, piece_sums, SegmentRanges,
+                                         moment_terms, pass_budget, piece_sums, SegmentRanges,
                                          trim_offset_ends)
 
 
@@ -45,7 +45,9 @@ def test_batched_iepf_equals_the_recursive_textbook_version(seed, corners, noise
     x, y = xy[:, 0].copy(), xy[:, 1].copy()
     cuts = np.unique(rng.integers(0, len(x), runs - 1))
     start, stop = np.concatenate([[0], cuts]), np.concatenate([cuts, [len(x)]])
-    found = iterative_end_point_fit(x, y, start, stop, np.arange(len(start)), 0.04)
+    found, cut_short = iterative_end_point_fit(x, y, start, stop, np.arange(len(start)), 0.04,
+                                               pass_budget(len(x)))
+    assert not cut_short
     expected = [piece for s, e in zip(start, stop)
                 for piece in recursive_end_point_fit(x, y, s, e, 0.04) if piece[1] - piece[0] >= 3]
     assert list(zip(found.start.tolist(), found.stop.tolist())) == expected
@@ -58,8 +60,8 @@ def test_iepf_splits_at_the_first_of_equally_far_returns():
     ridge_x = np.array([0.0, 1.0, 2.0, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0, 7.0])
     ridge_y = np.array([0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
     x, y = np.concatenate([ridge_x, ridge_x + 10]), np.concatenate([ridge_y, ridge_y])
-    found = iterative_end_point_fit(x, y, np.array([0, 10]), np.array([10, 20]),
-                                    np.array([0, 1]), 0.04)
+    found, _ = iterative_end_point_fit(x, y, np.array([0, 10]), np.array([10, 20]),
+                                       np.array([0, 1]), 0.04, pass_budget(len(x)))
     expected = [piece for s, e in ((0, 10), (10, 20))
                 for piece in recursive_end_point_fit(x, y, s, e, 0.04) if piece[1] - piece[0] >= 3]
     assert list(zip(found.start.tolist(), found.stop.tolist())) == expected == [
@@ -121,9 +123,10 @@ def test_merging_across_touching_chains_makes_them_one_chain():
     segments = SegmentRanges(np.array([0, 20, 40, 60, 80]), np.array([20, 40, 60, 80, 100]),
                              np.array([0, 1, 1, 2, 3]))
     sums = piece_sums(moment_terms(x, y), segments)
-    merged, (angle, radius, _) = merge_collinear(
+    merged, (angle, radius, _), cut_short = merge_collinear(
         sums.pieces(segments), False, sums.edges.size - 1,
-        lambda pieces: moment_fit(sums.over(pieces), 0.01, 0.0), 13.8)
+        lambda pieces: moment_fit(sums.over(pieces), 0.01, 0.0), 13.8, 10)
+    assert not cut_short
     merged = sums.positions(merged)
     assert merged.start.tolist() == [0, 80] and merged.stop.tolist() == [80, 100]
     assert merged.chain[0] != merged.chain[1]

@@ -5,8 +5,9 @@
 The launch files parse, declare documented arguments and start what exists.
 
 launch / launch_ros are not on PyPI, so CI cannot run them: these tests read them as Python
-syntax trees and check every executable, parameter file and included launch file they name
-against the package (and build the launch descriptions when launch_ros is importable).
+syntax trees and check every executable, parameter file and argument they name against the
+package; where launch_ros is importable they also build the launch descriptions, list their
+arguments as ``--show-args`` does, and run feature_node.launch.py against a user's file.
 """
 
 import ast
@@ -22,10 +23,16 @@ CONSOLE_SCRIPTS = set(re.findall(r"'(\w+) = wctls_ros[\w.]*:\w+'",
                                  (PACKAGE / 'setup.py').read_text()))
 EXPECTED_ARGUMENTS = {
     'feature_node.launch.py': {'params_file', 'scan_topic', 'method', 'use_sim_time'},
-    'replay.launch.py': {'bag', 'rate', 'loop'},
-    'rplidar_s1.launch.py': {'serial_port', 'params_file', 'method', 'feature_params_file',
-                             'with_feature_node'},
+    'replay.launch.py': {'bag', 'rate', 'loop', 'params_file', 'method'},
+    'rplidar_s1.launch.py': {'serial_port', 'channel_type', 'tcp_ip', 'frame_id', 'params_file',
+                             'method', 'feature_params_file', 'with_feature_node'},
 }
+# Launch arguments that set a parameter which the node's parameter file also sets: passed only
+# when given, so that a user's file is never silently overridden by a launch default.
+FILE_PARAMETERS = {'method', 'use_sim_time', 'serial_port', 'channel_type', 'tcp_ip',
+                   'frame_id'}
+launch_ros_missing = pytest.mark.skipif(importlib.util.find_spec('launch_ros') is None,
+                                        reason='launch_ros is not installed (not on PyPI)')
 
 
 def calls(path, name):
@@ -43,37 +50,97 @@ def test_every_launch_file_is_checked():
     assert {p.name for p in LAUNCH_FILES} == set(EXPECTED_ARGUMENTS)
 
 
-@pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda p: p.name)
-def test_declares_its_documented_arguments(path):
-    declared = calls(path, 'DeclareLaunchArgument')
-    names = set()
-    for call in declared:
-        name = call.args[0]
-        names |= {name.value} if isinstance(name, ast.Constant) else set()
+def declared_arguments(path):
+    """Return {name: default} of the arguments a launch file declares (None: no default)."""
+    declared = {}
+    for call in calls(path, 'DeclareLaunchArgument'):
         assert keyword(call, 'description') is not None, f'{path.name}: undocumented argument'
-    # Arguments declared from a table of (name, default, description) tuples count too.
+        default = keyword(call, 'default_value')
+        declared[call.args[0].value] = (default.value if isinstance(default, ast.Constant)
+                                        else None if default is None else 'a substitution')
+    for call in calls(path, 'optional_argument'):
+        if isinstance(call.args[0], ast.Constant):
+            declared[call.args[0].value] = ''
+    # Arguments declared from a table of (name, description) tuples count too.
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.Assign) and isinstance(node.value, ast.Tuple):
-            names |= {ast.literal_eval(e)[0] for e in node.value.elts
-                      if isinstance(e, ast.Tuple) and len(e.elts) == 3}
-    assert EXPECTED_ARGUMENTS[path.name] <= names
+            declared |= {ast.literal_eval(e)[0]: '' for e in node.value.elts
+                         if isinstance(e, ast.Tuple) and len(e.elts) == 2}
+    return declared
+
+
+@pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda p: p.name)
+def test_declares_its_documented_arguments(path):
+    assert set(declared_arguments(path)) == EXPECTED_ARGUMENTS[path.name]
+
+
+@pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda p: p.name)
+def test_arguments_that_a_parameter_file_sets_are_passed_only_when_given(path):
+    declared = declared_arguments(path)
+    for name in FILE_PARAMETERS & set(declared):
+        assert declared[name] == '', f'{path.name}: {name} has a default that overrides the file'
 
 
 @pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda p: p.name)
 def test_starts_installed_executables_with_existing_files(path):
-    for node in calls(path, 'Node'):
-        assert keyword(node, 'package').value == 'wctls_ros'
-        assert keyword(node, 'executable').value in CONSOLE_SCRIPTS
-    for join in calls(path, 'PathJoinSubstitution'):
-        parts = [e.value for e in join.args[0].elts if isinstance(e, ast.Constant)]
-        assert (PACKAGE.joinpath(*parts)).is_file(), f'{path.name} names missing {parts}'
+    started = calls(path, 'node')
+    assert started
+    for call in started:
+        assert call.args[0].value in CONSOLE_SCRIPTS
+    for call in calls(path, 'config_file'):
+        assert (PACKAGE / 'config' / call.args[0].value).is_file(), call.args[0].value
 
 
-@pytest.mark.skipif(importlib.util.find_spec('launch_ros') is None,
-                    reason='launch_ros is not installed (not on PyPI)')
+@launch_ros_missing
 @pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda p: p.name)
-def test_builds_a_launch_description(path):
+def test_builds_a_launch_description_that_shows_only_its_own_arguments(path):
     spec = importlib.util.spec_from_file_location(path.stem.replace('.', '_'), path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    assert module.generate_launch_description().entities
+    description = module.generate_launch_description()
+    # What `ros2 launch ... --show-args` lists: included files' arguments used to leak in.
+    shown = {argument.name for argument in description.get_launch_arguments()}
+    assert shown == EXPECTED_ARGUMENTS[path.name]
+
+
+@launch_ros_missing
+@pytest.mark.parametrize('arguments,method', [({}, 'ml'), ({'method': 'utls'}, 'utls')])
+def test_a_users_parameter_file_wins_unless_the_argument_is_given(tmp_path, arguments,
+                                                                  method):
+    import threading
+
+    from launch import LaunchDescription, LaunchService
+    from launch.actions import IncludeLaunchDescription
+    from launch.launch_description_sources import PythonLaunchDescriptionSource
+    import rclpy
+    from rcl_interfaces.srv import GetParameters
+    user_file = tmp_path / 'user.yaml'
+    user_file.write_text('feature_node:\n  ros__parameters:\n    method: ml\n')
+    service = LaunchService()
+    service.include_launch_description(LaunchDescription([IncludeLaunchDescription(
+        PythonLaunchDescriptionSource(str(PACKAGE / 'launch' / 'feature_node.launch.py')),
+        launch_arguments={'params_file': str(user_file), **arguments}.items())]))
+    answer = []
+
+    def ask_the_node():
+        # The launch service must run in the main thread; the question is asked from this one.
+        context = rclpy.context.Context()
+        rclpy.init(context=context)
+        try:
+            client_node = rclpy.create_node('launch_test_client', context=context)
+            client = client_node.create_client(GetParameters, '/feature_node/get_parameters')
+            if client.wait_for_service(timeout_sec=20.0):
+                future = client.call_async(GetParameters.Request(names=['method']))
+                executor = rclpy.executors.SingleThreadedExecutor(context=context)
+                executor.add_node(client_node)
+                executor.spin_until_future_complete(future, timeout_sec=10.0)
+                answer.append(future.result().values[0].string_value)
+        finally:
+            rclpy.try_shutdown(context=context)
+            service.shutdown()                      # thread-safe
+
+    asker = threading.Thread(target=ask_the_node)
+    asker.start()
+    service.run()
+    asker.join()
+    assert answer == [method]

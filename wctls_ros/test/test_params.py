@@ -5,6 +5,7 @@
 
 import dataclasses
 import math
+import pathlib
 import subprocess
 import sys
 
@@ -13,6 +14,7 @@ import pytest
 from wctls_ros.core import FeatureConfig
 from wctls_ros.params import (BAG_REPLAY, ConfigError, FEATURE_NODE, feature_settings,
                               load_parameters, markdown_table, RPLIDAR_NODE, SCHEMAS)
+import yaml
 
 BY_NAME = {parameter.name: parameter for parameter in FEATURE_NODE}
 
@@ -179,3 +181,13 @@ def test_the_schema_and_the_parameter_files_never_import_rclpy():
     result = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
                             check=True)
     assert result.stdout.strip() == '[]'
+
+
+@pytest.mark.parametrize('node_name,file_name', [('feature_node', 'feature_node.yaml'),
+                                                 ('rplidar_node', 'rplidar_s1.yaml'),
+                                                 ('bag_replay', 'bag_replay.yaml')])
+def test_each_shipped_parameter_file_sets_every_parameter_at_its_default(node_name, file_name):
+    path = pathlib.Path(__file__).resolve().parents[1] / 'config' / file_name
+    written = yaml.safe_load(path.read_text())[node_name]['ros__parameters']
+    assert set(written) == {parameter.name for parameter in SCHEMAS[node_name]}
+    assert load_parameters(path, node_name) == pytest.approx(load_parameters(None, node_name))

@@ -4,17 +4,23 @@
 """
 feature_node: LaserScan in; corners, line segments and RViz markers out, once per scan.
 
-Subscribes ``scan`` (sensor_msgs/LaserScan, sensor-data QoS, so reliable and best-effort
+Subscribes ``scan`` (sensor_msgs/LaserScan, best effort, so reliable and best-effort
 publishers both reach it) and publishes ``corners`` (wctls_msgs/CornerArray), ``lines``
 (wctls_msgs/LineSegmentArray) and ``markers`` (visualization_msgs/MarkerArray), each with the
 scan's header. Topic names are relative, so they follow the node's namespace and remappings.
+The input queue holds one scan: a node that falls behind processes the newest scan and counts
+the ones it skipped, in a throttled warning and on ``/diagnostics`` (1 Hz).
 """
 
+from dataclasses import dataclass, field
+import statistics
 import sys
+import time
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import MarkerArray
 from wctls_msgs.msg import CornerArray, LineSegmentArray
@@ -26,6 +32,32 @@ from .params import FEATURE_NODE, feature_settings
 
 # A throttled warning repeats at most this often, s.
 WARN_PERIOD_S = 5.0
+DIAGNOSTICS_PERIOD_S = 1.0
+# The sensor-data profile with a queue of one scan: when extraction falls behind, DDS keeps the
+# newest scan only, and the node never works through a backlog of stale ones.
+SCAN_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                      reliability=ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+@dataclass
+class ScanCounters:
+    """
+    What happened to the scans, since start-up and since the last diagnostics report.
+
+    :ivar processed: scans turned into features and published
+    :ivar skipped: scans overwritten in the one-scan queue before they could be processed
+        (gaps in the publisher's sequence numbers; a count for one publisher on ``scan``)
+    :ivar malformed: scans dropped because they cannot be interpreted (published empty)
+    :ivar work_limited: scans on which the per-scan work bound stopped splitting early
+    :ivar seconds: extraction and publishing time of each scan since the last report, s
+    """
+
+    processed: int = 0
+    skipped: int = 0
+    malformed: int = 0
+    work_limited: int = 0
+    seconds: list = field(default_factory=list)
 
 
 class FeatureNode(Node):
@@ -39,7 +71,12 @@ class FeatureNode(Node):
         self._corners = self.create_publisher(CornerArray, 'corners', 10)
         self._lines = self.create_publisher(LineSegmentArray, 'lines', 10)
         self._markers = self.create_publisher(MarkerArray, 'markers', 10)
-        self.create_subscription(LaserScan, 'scan', self._on_scan, qos_profile_sensor_data)
+        self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._total, self._recent = ScanCounters(), ScanCounters()
+        self._last_sequence = None
+        self._frame_id = ''
+        self.create_subscription(LaserScan, 'scan', self._on_scan, SCAN_QOS)
+        self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
         self.get_logger().info(f'extracting features with {self._config.method} from '
                                f'{self.resolve_topic_name("scan")}')
 
@@ -54,20 +91,55 @@ class FeatureNode(Node):
         self._config, self._style, self._publish_markers = settings
         return SetParametersResult(successful=True)
 
+    @property
+    def counters(self) -> ScanCounters:
+        """Give the scan counts since start-up (also on /diagnostics)."""
+        return self._total
+
+    def _count(self, name: str, amount: int = 1):
+        for counters in (self._total, self._recent):
+            setattr(counters, name, getattr(counters, name) + amount)
+
+    def _count_skipped(self, info: dict):
+        """Count the scans the one-scan queue dropped: gaps in the publication sequence."""
+        sequence = info.get('publication_sequence_number')
+        if sequence is None:
+            return
+        if self._last_sequence is not None and sequence > self._last_sequence + 1:
+            skipped = sequence - self._last_sequence - 1
+            self._count('skipped', skipped)
+            last = self._recent.seconds[-1:] or [0.0]
+            self.get_logger().warning(
+                f'falling behind: {self._total.skipped} scans skipped so far (the last took '
+                f'{1e3 * last[0]:.1f} ms); the newest scan is processed, never a backlog',
+                throttle_duration_sec=WARN_PERIOD_S)
+        self._last_sequence = sequence
+
     def _extract(self, scan: LaserScan) -> Features:
         features, problems = scan_features(scan, self._config)
         if problems:
+            self._count('malformed')
             self.get_logger().warning(
                 f'dropping a scan from {scan.header.frame_id!r}: ' + '; '.join(problems),
                 throttle_duration_sec=WARN_PERIOD_S)
+        if features.work_limited:
+            self._count('work_limited')
+            self.get_logger().warning(
+                f'a scan from {scan.header.frame_id!r} needed more splitting than the per-scan '
+                'work bound allows; its returns that are still not straight were left out',
+                throttle_duration_sec=WARN_PERIOD_S)
         return features
 
-    def _on_scan(self, scan: LaserScan):
+    def _on_scan(self, scan: LaserScan, info: dict):
+        started = time.perf_counter()
+        self._count_skipped(info)
+        self._frame_id = scan.header.frame_id
         try:
             features = self._extract(scan)
         except Exception as error:  # noqa: B902 - a bad scan must never stop the node
             self.get_logger().error(f'feature extraction failed: {error!r}',
                                     throttle_duration_sec=WARN_PERIOD_S)
+            self._count('malformed')
             features = Features(self._config.method, SegmentSet.empty(), CornerSet.empty())
         try:
             self._corners.publish(corner_array(features, scan.header))
@@ -79,6 +151,40 @@ class FeatureNode(Node):
         except Exception:  # noqa: B902 - only a shutdown (Ctrl-C mid-callback) is expected here
             if self.context.ok():
                 raise
+            return
+        self._count('processed')
+        self._recent.seconds.append(time.perf_counter() - started)
+
+    def _publish_diagnostics(self):
+        recent, self._recent = self._recent, ScanCounters()
+        level, message = DiagnosticStatus.OK, 'extracting features'
+        if recent.skipped or recent.malformed or recent.work_limited:
+            level = DiagnosticStatus.WARN
+            message = ', '.join(f'{count} scans {what}' for count, what in (
+                (recent.skipped, 'skipped (falling behind)'),
+                (recent.malformed, 'dropped (malformed)'),
+                (recent.work_limited, 'over the work bound')) if count)
+        elif not recent.processed:
+            message = 'no scans'
+        seconds = recent.seconds or [0.0]
+        values = {
+            'scan topic': self.resolve_topic_name('scan'),
+            'method': self._config.method,
+            'scans processed (last period)': recent.processed,
+            'scans processed': self._total.processed,
+            'scans skipped (falling behind)': self._total.skipped,
+            'scans dropped (malformed)': self._total.malformed,
+            'scans over the work bound': self._total.work_limited,
+            'processing time median (ms)': f'{1e3 * statistics.median(seconds):.2f}',
+            'processing time max (ms)': f'{1e3 * max(seconds):.2f}',
+        }
+        status = DiagnosticStatus(
+            level=level, name=f'{self.get_fully_qualified_name()}: features',
+            message=message, hardware_id=self._frame_id,
+            values=[KeyValue(key=key, value=str(value)) for key, value in values.items()])
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self._diagnostics.publish(array)
 
 
 def main(args=None) -> int:

@@ -83,6 +83,10 @@ class FeatureConfig:
         0.0, 'std of a range offset shared by every return of one scan, m (some sensors drift '
         'as a whole, e.g. the SICK LMS111 by about 1 mm; calibrate measures it)',
         Limits(0.0, 1.0))
+    max_beams: int = _setting(
+        100000, 'refuse scans with more beams than this (a ScanError: the node drops the scan '
+        'with a warning); the work per scan grows as n log n, about 10 ms per 10 000 beams',
+        Limits(1, 10 ** 7))
     range_min_m: float = _setting(
         0.0, 'ignore returns closer than this (besides the scan range_min), m',
         Limits(0.0, math.inf, high_open=True))

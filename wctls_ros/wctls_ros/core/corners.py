@@ -4,6 +4,8 @@
 """
 Corners: intersections of adjacent lines with their jointly propagated (x, y, yaw) covariance.
 
+Derived in docs/derivation.md#corners ((D11)-(D14)) and #common-mode-range-offset ((D15)-(D16)).
+
 For lines L_k = (a_k, b_k, c_k) with covariances C_k (from disjoint returns, so independent), the
 corner z = -A^-1 (c_1, c_2), A = [[a_1, b_1], [a_2, b_2]] (the paper's eqs. (24)-(25)), has
 dz/dL_k = -A^-1 e_k h^T with h = (x, y, 1). The yaw of the bisector moves with each wall's

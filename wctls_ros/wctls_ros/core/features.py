@@ -175,8 +175,13 @@ class Features:
     :ivar method: the line fit used: 'utls', 'wtls', 'wctls' or 'ml'
     :ivar segments: the segments, in scan order
     :ivar corners: the corners, in scan order; their segment indices point into ``segments``
+    :ivar work_limited: the per-scan work bound stopped splitting or merging early: returns
+        that were still not straight after the allowed passes are left out, or neighbouring
+        segments stayed apart (a scan no real scene gives; see
+        :func:`wctls_ros.core.segmentation.pass_budget`)
     """
 
     method: str
     segments: SegmentSet
     corners: CornerSet
+    work_limited: bool = False

@@ -11,7 +11,7 @@ return with std ``range_sigma`` (m) and ``bearing_sigma`` (rad), and every covar
     C = sum_i [ range_sigma^2 (dphi/drho_i)(dphi/drho_i)^T
                 + bearing_sigma^2 (dphi/dtheta_i)(dphi/dtheta_i)^T ]
 
-with the analytic Jacobians of ``../shared/spec/math.md`` (the paper's eqs. (6)-(23) with its
+with the analytic Jacobians derived in ``docs/derivation.md`` (the paper's eqs. (6)-(23) with its
 typos corrected). Each method returns the line in its own implicit form a x + b y + c = 0, the
 3x3 covariance of (a, b, c) and the shift of (a, b, c) per metre of a range offset common to every
 return of the scan (d(a, b, c)/d offset = sum_i d(a, b, c)/d rho_i), which lets a common-mode
@@ -355,7 +355,8 @@ def wctls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
     Weighted conformal fit of eqs. (16)-(23): the normalised line from the point Q.
 
     Q is the weighted least-squares solution of x_Q x - y_Q y = 1 with the WTLS weights, and C_Q
-    its exact first-order covariance (math.md; the paper never defines C_Q).
+    its exact first-order covariance (docs/derivation.md#wctls, (D9); the paper never defines
+    C_Q).
 
     :param returns: the segments' returns
     :param range_sigma: range noise std, m

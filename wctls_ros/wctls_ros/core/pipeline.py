@@ -12,8 +12,9 @@ from .corners import find_corners
 from .features import CornerSet, Features, SegmentSet
 from .lines import fit_lines, LineFits, segment_returns
 from .scan import scan_to_points
+from .scan import ScanError
 from .segmentation import (breakpoints, chains, iterative_end_point_fit, merge_collinear,
-                           moment_fit, moment_terms, piece_sums, SegmentRanges,
+                           moment_fit, moment_terms, pass_budget, piece_sums, SegmentRanges,
                            trim_ambiguous_ends, trim_offset_ends)
 
 _DEFAULT_CONFIG = FeatureConfig()
@@ -40,7 +41,8 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
     :param range_min_m: the scan's own range_min (LaserScan.range_min), m
     :param range_max_m: the scan's own range_max (LaserScan.range_max), m
     :return: the segments and corners, in scan order
-    :raises wctls_ros.core.ScanError: when the scan geometry makes no sense (a ValueError)
+    :raises wctls_ros.core.ScanError: when the scan geometry makes no sense, or the scan has
+        more than ``config.max_beams`` beams (a ValueError)
     """
     # Degenerate pieces (parallel lines, returns in one spot) give inf or NaN along the way;
     # every such segment or corner is dropped before it reaches the result.
@@ -52,6 +54,9 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
 def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
                       config: FeatureConfig, range_min_m: float, range_max_m: float) -> Features:
     """Run :func:`extract_features` with floating-point warnings already silenced."""
+    if np.size(ranges_m) > config.max_beams:
+        raise ScanError(f'{np.size(ranges_m)} beams are more than max_beams '
+                        f'({config.max_beams})')
     points = scan_to_points(ranges_m, angle_min_rad, angle_increment_rad,
                             max(range_min_m, config.range_min_m),
                             min(range_max_m, config.range_max_m))
@@ -67,10 +72,12 @@ def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float
     rho, theta = points.range_m[order], points.bearing_rad[order]
     x, y = points.x_m[order], points.y_m[order]
 
-    segments = iterative_end_point_fit(x, y, contour.start, contour.stop, contour.chain,
-                                       config.iepf_threshold_m)
+    # Every pass of IEPF and of merging is O(n): a bounded number of them bounds the work.
+    budget = pass_budget(n)
+    segments, unsplit = iterative_end_point_fit(x, y, contour.start, contour.stop,
+                                                contour.chain, config.iepf_threshold_m, budget)
     if not len(segments):
-        return Features(config.method, SegmentSet.empty(), CornerSet.empty())
+        return Features(config.method, SegmentSet.empty(), CornerSet.empty(), unsplit)
     # Sums over the pieces between segment ends make the segmentation's line fits O(1) per
     # segment, merged or not: merging works on piece ranges.
     sums = piece_sums(moment_terms(x, y), segments)
@@ -78,8 +85,10 @@ def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float
     def quick(pieces: SegmentRanges):
         return moment_fit(sums.over(pieces), config.range_sigma_m, config.bearing_sigma_rad)
 
-    pieces, (angle, radius, _) = merge_collinear(sums.pieces(segments), points.full_turn,
-                                                 sums.edges.size - 1, quick, config.merge_chi2)
+    pieces, (angle, radius, _), unmerged = merge_collinear(
+        sums.pieces(segments), points.full_turn, sums.edges.size - 1, quick, config.merge_chi2,
+        budget)
+    work_limited = unsplit or unmerged
     segments = sums.positions(pieces)
 
     # Keep segments with enough returns and end returns far enough apart; then leave out the
@@ -90,7 +99,7 @@ def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float
     keep = ((segments.stop - first >= config.min_segment_points)
             & (dx * dx + dy * dy >= config.min_segment_length_m ** 2))
     if not keep.any():
-        return Features(config.method, SegmentSet.empty(), CornerSet.empty())
+        return Features(config.method, SegmentSet.empty(), CornerSet.empty(), work_limited)
     segments, angle, radius = segments.select(keep), angle[keep], radius[keep]
     segments = trim_ambiguous_ends(segments, points.full_turn, n, x, y, angle, radius,
                                    config.range_sigma_m, config.bearing_sigma_rad,
@@ -113,7 +122,7 @@ def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float
                      config.range_sigma_m, config.bearing_sigma_rad)
     usable = _finite_and_positive(fits)
     if not usable.any():
-        return Features(config.method, SegmentSet.empty(), CornerSet.empty())
+        return Features(config.method, SegmentSet.empty(), CornerSet.empty(), work_limited)
     if not usable.all():
         segments, counts, fits = segments.select(usable), counts[usable], fits.select(usable)
         first_index = first_index[usable]
@@ -134,7 +143,7 @@ def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float
                            segment_set.end_xy_m, first, (first + 1) % max(count, 1),
                            config.min_corner_angle_rad, config.max_corner_gap_m,
                            fits.line_offset_jacobian, config.common_range_sigma_m)
-    return Features(config.method, segment_set, corners)
+    return Features(config.method, segment_set, corners, work_limited)
 
 
 def _project(x_m: np.ndarray, y_m: np.ndarray, first: np.ndarray, last: np.ndarray,

@@ -3,10 +3,11 @@
 
 """LaserScan geometry to Cartesian points, with REP-117 filtering of invalid returns."""
 
+from collections import OrderedDict
 from dataclasses import dataclass
-import functools
 import math
 import sys
+import threading
 
 import numpy as np
 
@@ -53,17 +54,49 @@ class ScanPoints:
         return len(self.index)
 
 
-@functools.lru_cache(maxsize=16)
-def _beam_directions(angle_min_rad: float, angle_increment_rad: float, beam_count: int):
+class _DirectionCache:
     """
-    Return cos and sin of every beam's bearing, cached: a sensor's geometry rarely changes.
+    cos and sin of the beams of the latest scan geometries, bounded by bytes, not entries.
 
-    :return: (cos, sin), each shape (beam_count,), read-only
+    A sensor's geometry rarely changes, so the bearings' trigonometry is worth keeping; but a
+    geometry of a million beams holds 16 MB, and a publisher that changes the geometry every
+    scan must not grow the node's memory. The least recently used geometries go first; one too
+    large for the whole budget is computed and not kept.
     """
-    bearing = angle_min_rad + np.arange(beam_count) * angle_increment_rad
-    cos, sin = np.cos(bearing), np.sin(bearing)
-    cos.flags.writeable = sin.flags.writeable = False
-    return cos, sin
+
+    def __init__(self, max_bytes: int):
+        self.max_bytes = max_bytes
+        self.bytes = 0
+        self._entries = OrderedDict()
+        self._lock = threading.Lock()          # user scripts may extract from several threads
+
+    def directions(self, angle_min_rad: float, angle_increment_rad: float, beam_count: int):
+        """
+        Return cos and sin of every beam's bearing.
+
+        :return: (cos, sin), each shape (beam_count,), read-only
+        """
+        key = (angle_min_rad, angle_increment_rad, beam_count)
+        with self._lock:
+            if key in self._entries:
+                self._entries.move_to_end(key)
+                return self._entries[key]
+        bearing = angle_min_rad + np.arange(beam_count) * angle_increment_rad
+        cos, sin = np.cos(bearing), np.sin(bearing)
+        cos.flags.writeable = sin.flags.writeable = False
+        size = cos.nbytes + sin.nbytes
+        with self._lock:
+            if size <= self.max_bytes and key not in self._entries:
+                self._entries[key] = cos, sin
+                self.bytes += size
+                while self.bytes > self.max_bytes:
+                    old_cos, old_sin = self._entries.popitem(last=False)[1]
+                    self.bytes -= old_cos.nbytes + old_sin.nbytes
+        return cos, sin
+
+
+# 8 MB: hundreds of geometries of a few thousand beams, or the latest few of 100 000.
+_BEAM_DIRECTIONS = _DirectionCache(8 * 2 ** 20)
 
 
 def scan_to_points(ranges_m, angle_min_rad: float, angle_increment_rad: float,
@@ -101,7 +134,8 @@ def scan_to_points(ranges_m, angle_min_rad: float, angle_increment_rad: float,
     lower = (ranges >= range_min_m) if range_min_m > 0.0 else (ranges > 0.0)
     index = (lower & (ranges <= min(range_max_m, sys.float_info.max))).nonzero()[0]
     range_m = ranges[index]
-    cos, sin = _beam_directions(float(angle_min_rad), float(angle_increment_rad), beam_count)
+    cos, sin = _BEAM_DIRECTIONS.directions(float(angle_min_rad), float(angle_increment_rad),
+                                           beam_count)
     return ScanPoints(index, range_m, angle_min_rad + index * angle_increment_rad,
                       range_m * cos[index], range_m * sin[index], bool(full_turn), beam_count,
                       float(angle_increment_rad))

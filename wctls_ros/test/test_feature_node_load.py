@@ -1,0 +1,128 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""feature_node under load, as its own process: crafted scans, bursts, the one-scan queue."""
+
+import subprocess
+import time
+
+from conftest import spin_until
+import numpy as np
+import pytest
+
+pytest.importorskip('rclpy')
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402, I100
+from rclpy.node import Node  # noqa: E402
+from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
+from scans import room_scan_message  # noqa: E402
+from sensor_msgs.msg import LaserScan  # noqa: E402
+from test_feature_node import installed_executable  # noqa: E402
+from wctls_msgs.msg import CornerArray  # noqa: E402
+from wctls_ros.simulation.adversarial import peeling_wall  # noqa: E402
+
+
+class NodeProcess:
+    """The installed feature_node in a process of its own, and a peer that talks to it."""
+
+    def __init__(self, context, executor, *arguments):
+        self.process = subprocess.Popen(
+            [str(installed_executable('feature_node')), '--ros-args', *arguments],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        self.peer = Node('peer', context=context)
+        executor.add_node(self.peer)
+        self.executor = executor
+        self.scans = self.peer.create_publisher(
+            LaserScan, 'scan', QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        self.corners = []                       # (arrival time, CornerArray)
+        self.peer.create_subscription(
+            CornerArray, 'corners', lambda msg: self.corners.append((time.monotonic(), msg)),
+            100)
+        self.diagnostics = []
+        self.peer.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
+        assert spin_until(executor, lambda: self.scans.get_subscription_count() > 0, 20.0)
+
+    def _on_diagnostics(self, message):
+        self.diagnostics += [{value.key: value.value for value in status.values} | {
+            'level': status.level, 'message': status.message} for status in message.status
+            if 'feature_node' in status.name]
+
+    def stamps(self):
+        return [message.header.stamp.sec for _, message in self.corners]
+
+    def stop(self):
+        self.process.terminate()
+        output, _ = self.process.communicate(timeout=10)
+        assert self.process.returncode == 0, output
+        return output
+
+
+def scan_message(ranges, angle_min, increment, sec):
+    scan = LaserScan(angle_min=angle_min, angle_max=angle_min + (len(ranges) - 1) * increment,
+                     angle_increment=increment, range_min=0.05, range_max=40.0,
+                     ranges=np.asarray(ranges, dtype=np.float32))
+    scan.header.frame_id = 'laser'
+    scan.header.stamp.sec = sec
+    return scan
+
+
+def test_a_crafted_scan_does_not_blind_the_node(ros_context, executor):
+    # Before the work bound, this 64000-beam scan (256 kB) left the node blind for 90 s while
+    # scans kept coming at 10 Hz. The default (5 cm) noise model makes its zigzag one chain.
+    node = NodeProcess(ros_context, executor)
+    try:
+        crafted = scan_message(*peeling_wall(64000), sec=1)
+        sent = time.monotonic()
+        node.scans.publish(crafted)
+        sec = 2
+        while time.monotonic() - sent < 5.0 and not any(s >= 2 for s in node.stamps()):
+            node.scans.publish(room_scan_message(stamp=(sec, 0)))
+            sec += 1
+            spin_until(node.executor, lambda: False, timeout_s=0.1)
+        answered = [(arrival, message) for arrival, message in node.corners
+                    if message.header.stamp.sec >= 2]
+        assert answered, f'no answer within 5 s of the crafted scan: {node.stamps()}'
+        assert answered[0][0] - sent < 2.0
+        assert all(len(message.corners) == 0 for _, message in node.corners
+                   if message.header.stamp.sec == 1)
+    finally:
+        node.stop()
+
+
+def test_a_node_that_falls_behind_processes_the_newest_scan_and_counts_the_rest(
+        ros_context, executor):
+    node = NodeProcess(ros_context, executor, '-p', 'range_sigma_m:=0.01',
+                       '-p', 'bearing_sigma_deg:=0.05')
+
+    def report_of(processed):
+        """Wait for the diagnostics report that counts this many processed scans."""
+        def arrived():
+            return any(r['scans processed'] == str(processed) for r in node.diagnostics)
+        assert spin_until(node.executor, arrived, 5.0), node.diagnostics[-1:]
+        return next(r for r in node.diagnostics if r['scans processed'] == str(processed))
+
+    try:
+        # Skips are counted from the first scan received (the publisher's sequence numbers say
+        # nothing about what it sent before the node listened): warm up, then take a baseline.
+        warm_up = room_scan_message(stamp=(1, 0))
+        assert spin_until(node.executor, lambda: node.stamps() or node.scans.publish(warm_up))
+        spin_until(node.executor, lambda: False, timeout_s=0.5)
+        before = report_of(len(node.stamps()))
+        # 39 scans of 60000 beams at once: each takes the node far longer than it takes to send.
+        heavy = [room_scan_message(beams=60000, stamp=(sec, 0)) for sec in range(2, 41)]
+        for scan in heavy:
+            node.scans.publish(scan)
+        assert spin_until(node.executor, lambda: 40 in node.stamps(), 20.0), node.stamps()
+        burst = [s for s in node.stamps() if s > 1]
+        assert 2 <= len(burst) < 20, burst               # the queue held the newest scan only
+        assert burst == sorted(burst)
+        after = report_of(len(node.stamps()))
+        processed = int(after['scans processed']) - int(before['scans processed'])
+        skipped = (int(after['scans skipped (falling behind)'])
+                   - int(before['scans skipped (falling behind)']))
+        assert (processed, processed + skipped) == (len(burst), 39)
+        assert any(r['level'] == DiagnosticStatus.WARN for r in node.diagnostics)
+        assert 'falling behind' in node.stop()
+    except BaseException:
+        node.process.kill()
+        raise

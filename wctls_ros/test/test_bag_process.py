@@ -331,12 +331,13 @@ def test_bad_arguments_are_one_line_and_help_states_defaults_and_exit_statuses()
 
 
 def wait_for_staging(folder, known=(), timeout_s=60.0):
-    """Return a new staging folder of a run writing in ``folder`` (not one of ``known``)."""
+    """Return a new staging folder in ``folder`` (not one of ``known``) once it has a file."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         staging = [p for p in folder.iterdir()
                    if p.name.startswith('.partial-') and p not in known]
-        if staging:
+        # Ready when the bag inside has its tables: the run is then in its loop of scans.
+        if staging and any(staging[0].glob('*/corners.csv')):
             return staging[0]
         time.sleep(0.005)
     raise AssertionError(f'no run started writing in {folder}')

@@ -5,20 +5,22 @@
 """
 Benchmark process_bag: scans per second, --jobs over several bags, memory on a long bag.
 
-Compares this tree with a baseline (another checkout of wctls_ros, built, e.g. an older commit
+Compares this tree with baselines (other checkouts of wctls_ros, built, e.g. an older commit
 unpacked with ``git archive <commit> | tar -x -C /tmp/old`` and ``make build`` there) in one
-run, the two measured alternately so that a busy machine slows both alike:
+run, all measured alternately so that a busy machine slows them alike:
 
 1. Throughput: the 360-scan Hokuyo URG-04LX office bag (ROS 2 mcap, 681 beams) from data/,
    processed by ``process()`` in a process of its own after a warm-up (no start-up cost), one
    method (wctls) and all four, markers on (the defaults); this tree with one job and with
-   two worker processes. Median of the rounds, and the ratio to the baseline's median.
+   two worker processes. Median of the rounds, and the ratios to the baselines' medians;
+   and how fast two CPU-bound processes run at once on this (shared) machine, which bounds
+   what a second worker process can add.
 2. Several bags: the installed command on two 1,500-scan bags (the office scans over and
    over), ``--jobs 1`` against ``--jobs 2``, wall time including start-up.
 3. Memory: peak resident memory of the command on the 360-scan bag and on a 10,000-scan one;
    equal peaks mean the bag is streamed, not held.
 
-Usage: python bench_process_bag.py [--baseline TREE] [--rounds N] [--long-scans N]
+Usage: python bench_process_bag.py [--baseline TREE]... [--rounds N] [--long-scans N]
 """
 
 import argparse
@@ -101,11 +103,22 @@ def run_command(tree: pathlib.Path, arguments: list) -> tuple:
     return usage.ru_maxrss / 1024.0, time.perf_counter() - started
 
 
+def parallel_efficiency() -> float:
+    """Return how fast two CPU-bound processes run at once, each, against one alone (1: ideal)."""
+    loop = [sys.executable, '-c', 'import time; t = time.perf_counter(); '
+            'x = sum(range(3 * 10**7)); print(time.perf_counter() - t)']
+    alone = float(subprocess.run(loop, capture_output=True, text=True, check=True).stdout)
+    pair = [subprocess.Popen(loop, stdout=subprocess.PIPE, text=True) for _ in range(2)]
+    together = max(float(process.communicate()[0]) for process in pair)
+    return alone / together
+
+
 def main():
     """Print the figures."""
     cli = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    cli.add_argument('--baseline', type=pathlib.Path,
-                     help='a built wctls_ros tree to compare with (default: none)')
+    cli.add_argument('--baseline', type=pathlib.Path, action='append', default=[],
+                     help='a built wctls_ros tree to compare with (repeat for several; '
+                          'default: none)')
     cli.add_argument('--rounds', type=int, default=5, help='alternating rounds (default: 5)')
     cli.add_argument('--long-scans', type=int, default=10000,
                      help='scans of the long bag for the memory figure; 0 skips it '
@@ -116,33 +129,35 @@ def main():
     if args.measure:
         methods, jobs, output = args.measure
         return measure(methods, int(jobs), pathlib.Path(output))
-    this = REPOSITORY
-    trees = [('baseline', args.baseline)] if args.baseline else []
-    cases = [(label, tree, methods, 1) for label, tree in trees for methods in ('wctls', 'all')]
-    cases += [('this tree', this, methods, jobs) for jobs in (1, 2)
-              for methods in ('wctls', 'all')]
+    trees = [(tree.resolve().name, tree) for tree in args.baseline]
+    trees.append(('this tree', REPOSITORY))
+    cases = [(label, tree, methods, jobs) for label, tree in trees
+             for jobs in ((1,) if tree != REPOSITORY else (1, 2)) for methods in ('wctls', 'all')]
     with tempfile.TemporaryDirectory() as folder:
         workdir = pathlib.Path(folder)
+        efficiency = [parallel_efficiency()]
         rates = {case: [] for case in cases}
         for _ in range(args.rounds):
             for case in cases:
                 label, tree, methods, jobs = case
                 rates[case].append(throughput(tree, methods, jobs, workdir))
+        efficiency.append(parallel_efficiency())
         print(f'process_bag on {OFFICE.name} (360 scans, ROS 2 mcap, Hokuyo URG-04LX, 681 '
               f'beams), markers on, in-process after a warm-up; median of {args.rounds} '
               f'alternating rounds on {os.cpu_count()} CPUs (CPU: all processes of the run):')
-        base = {methods: [rate for rate, _ in rates[case]] for case in cases
-                for label, _, methods, _ in [case] if label == 'baseline'}
+        medians = {case: statistics.median(rate for rate, _ in rates[case]) for case in cases}
         for case in cases:
             label, tree, methods, jobs = case
             speeds = [rate for rate, _ in rates[case]]
             cpu = statistics.median(ms for _, ms in rates[case])
-            median = statistics.median(speeds)
-            ratio = (f'{median / statistics.median(base[methods]):5.2f}x baseline'
-                     if methods in base else '')
-            print(f'  {label:9s} {"method wctls" if methods == "wctls" else "all four":12s} '
-                  f'--jobs {jobs}  {median:6.0f} scans/s (min {min(speeds):4.0f}, max '
-                  f'{max(speeds):4.0f}), CPU {cpu:5.2f} ms/scan  {ratio}')
+            ratios = ', '.join(f'{medians[case] / medians[(base, base_tree, methods, 1)]:.2f}x '
+                               f'{base}' for base, base_tree in trees[:-1])
+            print(f'  {label:10s} {"method wctls" if methods == "wctls" else "all four":12s} '
+                  f'--jobs {jobs}  {medians[case]:5.0f} scans/s ({min(speeds):4.0f}-'
+                  f'{max(speeds):4.0f}), CPU {cpu:5.2f} ms/scan  {ratios}')
+        print('  two CPU-bound processes at once ran at '
+              + ' and '.join(f'{100 * e:.0f} %' for e in efficiency)
+              + ' of the speed of one alone (before and after): what a second process can add')
 
         bags = [workdir / 'first', workdir / 'second']
         for bag in bags:
@@ -151,7 +166,7 @@ def main():
         for round_number in range(args.rounds):
             for jobs in times:
                 out = workdir / f'jobs{jobs}-{round_number}'
-                times[jobs].append(run_command(this, [str(b) for b in bags] + [
+                times[jobs].append(run_command(REPOSITORY, [str(b) for b in bags] + [
                     '-d', str(out), '-j', str(jobs)])[1])
         one, two = statistics.median(times[1]), statistics.median(times[2])
         print(f'this tree, two 1500-scan office bags, whole command (start-up included), '
@@ -162,12 +177,12 @@ def main():
             return None
         write_long_bag(workdir / 'long', args.long_scans)
         print('peak resident memory of the command (default --jobs), short bag and long bag:')
-        for label, tree in trees + [('this tree', this)]:
+        for label, tree in trees:
             short_mb, short_s = run_command(tree, [str(OFFICE), '-o',
                                                    str(workdir / f'{label}-short')])
             long_mb, long_s = run_command(tree, [str(workdir / 'long'), '-o',
                                                  str(workdir / f'{label}-long')])
-            print(f'  {label:9s}    360 scans: {short_mb:6.1f} MB in {short_s:5.1f} s; '
+            print(f'  {label:10s}   360 scans: {short_mb:6.1f} MB in {short_s:5.1f} s; '
                   f'{args.long_scans} scans: {long_mb:6.1f} MB in {long_s:5.1f} s')
     return None
 

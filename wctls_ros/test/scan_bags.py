@@ -72,6 +72,16 @@ def write_bag_with_bad_message(path, count=6, bad_index=3):
             bag.write(connection, log_ns, data)
 
 
+def write_empty_scan_bag(path):
+    """Write a bag with a LaserScan topic that holds no messages (and a String topic that does)."""
+    store = typestore()
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as bag:
+        bag.add_connection('/scan', 'sensor_msgs/msg/LaserScan', typestore=store)
+        chatter = bag.add_connection('/chatter', 'std_msgs/msg/String', typestore=store)
+        text = store.types['std_msgs/msg/String'](data='the scan topic stays empty')
+        bag.write(chatter, START_NS, store.serialize_cdr(text, 'std_msgs/msg/String'))
+
+
 def write_string_bag(path):
     """Write a bag with only a std_msgs/String topic."""
     from std_msgs.msg import String

@@ -12,6 +12,7 @@ from scan_bags import (real_bag, REAL_BAGS, START_NS, truncated_copy,  # noqa: E
 from std_msgs.msg import String  # noqa: E402
 from wctls_ros.bags import (bag_info, BagError, BagWriter, choose_scan_topic,  # noqa: E402
                             read_scans)
+from wctls_ros.conversions import laser_scan  # noqa: E402
 
 
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
@@ -22,7 +23,7 @@ def test_written_scans_read_back_with_header_log_time_and_rclpy_conversion(tmp_p
     assert info.start_ns == START_NS and info.end_ns == START_NS + 3 * 100_000_000
     records = list(read_scans(tmp_path / 'bag'))
     assert [r.timestamp_ns for r in records] == [START_NS + i * 100_000_000 for i in range(4)]
-    message = records[1].laser_scan()
+    message = laser_scan(records[1].scan)
     assert (message.header.stamp.sec, message.header.stamp.nanosec) == stamps[1]
     assert message.header.frame_id == 'laser' and len(message.ranges) == 1080
     assert list(message.ranges) == pytest.approx(records[1].scan.ranges.tolist())

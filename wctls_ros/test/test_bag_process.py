@@ -4,10 +4,18 @@
 """process_bag: output bags that rosbags reads back, corner tables, clear errors, all-or-none."""
 
 import csv
+import dataclasses
 import json
+import os
+import pathlib
+import resource
+import signal
 import subprocess
+import sys
+import time
 import tracemalloc
 
+import numpy as np
 import pytest
 
 pytest.importorskip('rclpy')
@@ -15,13 +23,13 @@ pytest.importorskip('rclpy')
 from rosbags.highlevel import AnyReader  # noqa: E402
 from rosbags.typesys import get_typestore, Stores  # noqa: E402
 from scan_bags import (real_bag, REAL_BAGS, truncated_copy,  # noqa: E402
-                       write_bag_with_bad_message, write_scan_bag, write_string_bag,
-                       write_wide_invalid_bag)
+                       write_bag_with_bad_message, write_empty_scan_bag, write_scan_bag,
+                       write_string_bag, write_wide_invalid_bag)
 from test_feature_node import installed_executable  # noqa: E402
-from wctls_ros.bags import read_scans  # noqa: E402
+from wctls_ros.bags import read_scans, typestore  # noqa: E402
 from wctls_ros.bags.process_bag import CSV_COLUMNS, main, process  # noqa: E402
 from wctls_ros.core import METHODS  # noqa: E402
-from wctls_ros.params import load_parameters  # noqa: E402
+from wctls_ros.params import feature_settings, load_parameters  # noqa: E402
 
 CORNERS = 'wctls_msgs/msg/CornerArray'
 LINES = 'wctls_msgs/msg/LineSegmentArray'
@@ -160,12 +168,44 @@ def test_bad_inputs_give_exit_2_one_line_and_write_nothing(tmp_path, capsys):
         assert err.startswith('process_bag: error: ') and reason in err, (argv, err)
         assert len(err.splitlines()) == 1 and out == ''
         assert list(out_dir.iterdir()) == []        # no output, no staging folder left
-    # An existing output is kept unless --force.
-    (out_dir / 'result').mkdir()
-    status, _, err = run([inputs / 'scans', '-o', out_dir / 'result'], capsys)
-    assert status == 2 and 'exists' in err
-    status, _, err = run([inputs / 'scans', '-o', out_dir / 'result', '--force'], capsys)
-    assert status == 0 and read_output(out_dir / 'result')[1]['/corners'] == 4
+
+
+def test_force_replaces_only_an_output_of_process_bag_that_holds_nothing_else(tmp_path, capsys):
+    write_scan_bag(tmp_path / 'scans', count=4)
+    output = tmp_path / 'result'
+    assert run([tmp_path / 'scans', '-o', output], capsys)[0] == 0
+    status, _, err = run([tmp_path / 'scans', '-o', output], capsys)
+    assert status == 2 and err.splitlines() == [
+        f'process_bag: error: {output} exists: refusing to overwrite it (--force replaces an '
+        'earlier output of process_bag)']
+    status, _, err = run([tmp_path / 'scans', '-o', output, '--force', '-m', 'ml'], capsys)
+    assert status == 0, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['result', 'scans']
+    assert {row['method'] for row in csv.DictReader(open(output / 'corners.csv'))} == {'ml'}
+
+    def refused(argv, reason):
+        before = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob('*'))
+        status, out, err = run(argv + ['--force'], capsys)
+        assert status == 2 and out == '', err
+        assert err.startswith('process_bag: error: ') and reason in err, err
+        assert len(err.splitlines()) == 1
+        assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob('*')) == before
+
+    # A user's folder, a user's file, and an output with a user's document added: kept.
+    (tmp_path / 'documents').mkdir()
+    (tmp_path / 'documents' / 'thesis.tex').write_text('years of work')
+    refused([tmp_path / 'scans', '-o', tmp_path / 'documents'], 'not an output of process_bag')
+    (tmp_path / 'notes.txt').write_text('notes')
+    refused([tmp_path / 'scans', '-o', tmp_path / 'notes.txt'], 'not an output of process_bag')
+    (output / 'analysis.ipynb').write_text('{}')
+    refused([tmp_path / 'scans', '-o', output],
+            'holds files process_bag did not write (analysis.ipynb)')
+    (output / 'analysis.ipynb').unlink()
+    # An output folder that holds the input: the folder of the bag, or the bag of an output.
+    refused([tmp_path / 'scans', '-o', tmp_path], 'holds the input bag')
+    refused([output / 'result.mcap', '-o', output], 'holds the input bag')
+    refused([tmp_path / 'scans', '-o', tmp_path / 'scans'], 'holds the input bag')
+    assert read_output(output)[1]['/corners'] == 4
 
 
 def test_installed_command_has_help_and_fails_cleanly(tmp_path):
@@ -190,7 +230,7 @@ def test_installed_command_has_help_and_fails_cleanly(tmp_path):
 def peak_memory(path, output, parameters):
     tracemalloc.start()
     try:
-        process(path, output, parameters, progress=False)
+        process(path, output, parameters)
         return tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
@@ -204,3 +244,305 @@ def test_memory_does_not_grow_with_the_length_of_the_bag(tmp_path):
     long = peak_memory(tmp_path / 'long', tmp_path / 'long_out', parameters)
     # Holding the 200 extra scans would take 16 MB; streaming keeps the peak where it was.
     assert long < short + 2_000_000, (short, long)
+
+
+def run_with_file_size_limit(argv, limit_bytes, **kwargs):
+    """Run the installed process_bag with RLIMIT_FSIZE: a write past it fails with EFBIG."""
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)    # the write fails instead of killing
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
+    return subprocess.run([str(installed_executable('process_bag'))] + [str(a) for a in argv],
+                          capture_output=True, text=True, timeout=120, preexec_fn=limit,
+                          **kwargs)
+
+
+def test_a_failing_write_gives_exit_2_one_line_and_leaves_nothing(tmp_path):
+    bag = real_bag('sick_lms1xx_static')
+    complete = tmp_path / 'complete'
+    result = run_with_file_size_limit([bag, '-o', complete], resource.RLIM_INFINITY)
+    assert result.returncode == 0, result.stderr
+    sizes = sorted(path.stat().st_size for path in complete.iterdir())
+    mcap_size = (complete / 'complete.mcap').stat().st_size
+    assert mcap_size == sizes[-1]
+    # Each limit stops a different write first: the marker file, the tables, a chunk of the
+    # mcap file, and its summary section written when the bag is closed.
+    for limit_bytes in (sizes[0] // 2, sizes[-2] // 2, mcap_size // 2, mcap_size - 16):
+        out = tmp_path / f'limit_{limit_bytes}'
+        out.mkdir()
+        result = run_with_file_size_limit([bag, '-o', out / 'result'], limit_bytes)
+        assert result.returncode == 2, (limit_bytes, result.stderr)
+        assert result.stderr.splitlines() == [
+            f'process_bag: error: cannot write {out / "result"}: File too large'], limit_bytes
+        assert result.stdout == '' and list(out.iterdir()) == []
+
+
+def test_a_summary_that_cannot_be_printed_is_one_line_and_exit_2(tmp_path):
+    with open('/dev/full', 'w') as full:      # every write: ENOSPC, as on a full disk
+        result = subprocess.run(
+            [str(installed_executable('process_bag')), str(real_bag('sick_lms1xx_static')),
+             '-o', str(tmp_path / 'out')], stdout=full, stderr=subprocess.PIPE, text=True,
+            timeout=120)
+    assert result.returncode == 2
+    assert result.stderr.splitlines() == [
+        'process_bag: error: cannot print the summary (No space left on device); the output '
+        f'{tmp_path / "out"} is complete']
+
+
+def run_installed(argv, **kwargs):
+    """Run the installed process_bag; a hang fails the test instead of stopping it."""
+    return subprocess.run([str(installed_executable('process_bag'))] + [str(a) for a in argv],
+                          capture_output=True, text=True, timeout=60, **kwargs)
+
+
+def test_fifos_and_empty_scan_topics_are_refused_at_once(tmp_path):
+    os.mkfifo(tmp_path / 'fifo.bag')
+    write_scan_bag(tmp_path / 'fifo_storage', count=2)
+    storage = tmp_path / 'fifo_storage' / 'fifo_storage.mcap'
+    storage.unlink()
+    os.mkfifo(storage)
+    write_scan_bag(tmp_path / 'fifo_metadata', count=2)
+    (tmp_path / 'fifo_metadata' / 'metadata.yaml').unlink()
+    os.mkfifo(tmp_path / 'fifo_metadata' / 'metadata.yaml')
+    write_empty_scan_bag(tmp_path / 'empty')
+    cases = [
+        (tmp_path / 'fifo.bag', f'{tmp_path / "fifo.bag"} is not a regular file or a folder'),
+        (tmp_path / 'fifo_storage', f'{storage} is not a regular file'),
+        (tmp_path / 'fifo_metadata', 'metadata.yaml is not a regular file'),
+        (tmp_path / 'empty', f'{tmp_path / "empty"}: its LaserScan topic /scan holds no '
+                             'messages'),
+    ]
+    for bag, reason in cases:
+        result = run_installed([bag, '-o', tmp_path / 'out'])
+        assert result.returncode == 2, result.stderr
+        assert result.stderr.splitlines() == [f'process_bag: error: {reason}'] or (
+            len(result.stderr.splitlines()) == 1 and reason in result.stderr), result.stderr
+        assert not (tmp_path / 'out').exists()
+
+
+def test_bad_arguments_are_one_line_and_help_states_defaults_and_exit_statuses():
+    result = run_installed(['bag', '--method', 'tls'])
+    assert result.returncode == 2 and len(result.stderr.splitlines()) == 1
+    assert result.stderr.startswith('process_bag: error: argument -m/--method: invalid choice')
+    usage = ' '.join(run_installed(['--help']).stdout.split())
+    for text in ('default: <bag name>_features', "default: none, feature_node's defaults",
+                 'default: the only one', '0 done', '2 a user error', '130 stopped by SIGINT',
+                 '143 by SIGTERM'):
+        assert text in usage, text
+
+
+def wait_for_staging(folder, known=(), timeout_s=60.0):
+    """Return a new staging folder in ``folder`` (not one of ``known``) once it has a file."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        staging = [p for p in folder.iterdir()
+                   if p.name.startswith('.partial-') and p not in known]
+        # Ready when the bag inside has its tables: the run is then in its loop of scans.
+        if staging and any(staging[0].glob('*/corners.csv')):
+            return staging[0]
+        time.sleep(0.005)
+    raise AssertionError(f'no run started writing in {folder}')
+
+
+def start_and_stop_in_the_middle(bag, output, known=()):
+    """Start process_bag and stop (SIGSTOP) it while it writes; return it and its staging."""
+    process = subprocess.Popen([str(installed_executable('process_bag')), str(bag), '-o',
+                                str(output)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True)
+    staging = wait_for_staging(output.parent, known)
+    process.send_signal(signal.SIGSTOP)
+    return process, staging
+
+
+@pytest.mark.parametrize('number,status', [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_sigint_and_sigterm_stop_a_run_and_leave_nothing(number, status, tmp_path):
+    out = tmp_path / 'out'
+    out.mkdir()
+    process, _ = start_and_stop_in_the_middle(real_bag('ros1/urg04lx_office.bag'),
+                                              out / 'result')
+    process.send_signal(number)
+    process.send_signal(signal.SIGCONT)      # the signal is delivered as it runs on
+    stdout, stderr = process.communicate(timeout=60)
+    assert process.returncode == status and stdout == ''
+    assert stderr.splitlines() == [
+        f'process_bag: interrupted by {signal.Signals(number).name}; nothing written']
+    assert list(out.iterdir()) == []
+
+
+def test_what_a_killed_run_left_is_removed_by_the_next_but_never_a_live_runs(tmp_path):
+    out = tmp_path / 'out'
+    out.mkdir()
+    bag = real_bag('ros1/urg04lx_office.bag')
+    killed, left = start_and_stop_in_the_middle(bag, out / 'killed')
+    killed.kill()
+    killed.wait(timeout=10)
+    assert (left / 'killed').is_dir()
+    # The next run removes it; the run after that leaves the first (stopped, alive) alone.
+    live, live_staging = start_and_stop_in_the_middle(bag, out / 'live', [left])
+    assert not left.exists()
+    result = run_installed([real_bag('sick_lms1xx_static'), '-o', out / 'next'])
+    assert result.returncode == 0, result.stderr
+    assert live_staging.is_dir()
+    live.send_signal(signal.SIGCONT)
+    _, stderr = live.communicate(timeout=60)
+    assert live.returncode == 0, stderr
+    assert sorted(p.name for p in out.iterdir()) == ['live', 'next']
+    assert read_output(out / 'live')[1]['/corners'] == 360
+
+
+def plain(message):
+    """Return a deserialised rosbags message as nested dicts and lists (comparable with ==)."""
+    if dataclasses.is_dataclass(message):
+        return {f.name: plain(getattr(message, f.name)) for f in dataclasses.fields(message)}
+    if isinstance(message, np.ndarray):
+        return message.tolist()
+    if isinstance(message, (list, tuple)):
+        return [plain(item) for item in message]
+    return message
+
+
+def test_the_output_bag_holds_what_feature_node_publishes(tmp_path):
+    """Each message equals the node's (rclpy's codec path, serialised by rclpy) field by field."""
+    from rclpy.serialization import serialize_message
+    from wctls_ros.conversions import (corner_array, laser_scan, line_segment_array,
+                                       marker_array, scan_features)
+    bag = real_bag('urg04lx_office')
+    parameters = load_parameters(None)
+    config, style, _ = feature_settings(parameters)
+    process(bag, tmp_path / 'out', parameters)
+    written = {}
+    with AnyReader([tmp_path / 'out'], default_typestore=get_typestore(Stores.EMPTY)) as reader:
+        for connection, _, raw in reader.messages():
+            written.setdefault(connection.topic, []).append(
+                plain(reader.deserialize(raw, connection.msgtype)))
+    store = typestore()
+    compared = 0
+    for index, record in enumerate(read_scans(bag)):
+        scan = laser_scan(record.scan)            # as feature_node receives it
+        features, _ = scan_features(scan, config)
+        for topic, message, kind in (
+                ('/scan', scan, SCAN), ('/corners', corner_array(features, scan.header), CORNERS),
+                ('/lines', line_segment_array(features, scan.header), LINES),
+                ('/markers', marker_array(features, scan.header, style), MARKERS)):
+            published = plain(store.deserialize_cdr(serialize_message(message), kind))
+            assert written[topic][index] == published, (topic, index)
+            compared += 1
+    assert compared == 4 * 360
+
+
+def test_process_bag_imports_neither_rclpy_nor_any_message_package(tmp_path):
+    code = ('import sys; from wctls_ros.bags import process_bag; '
+            f'status = process_bag.main([{str(real_bag("sick_lms1xx_static"))!r}, "-m", "all", '
+            f'"-o", {str(tmp_path / "out")!r}]); '
+            'print(status, sorted(m for m in sys.modules if m.split(".")[0] in '
+            '("rclpy", "rcl_interfaces", "builtin_interfaces", "rosidl_runtime_py") '
+            'or m.split(".")[0].endswith("_msgs")))')
+    result = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                            timeout=120)
+    assert result.stdout.splitlines()[-1] == '0 []', result.stdout + result.stderr
+    assert read_output(tmp_path / 'out')[1]['/corners/ml'] == 89
+
+
+def raw_messages(path):
+    """Return topic -> the serialised messages of a bag, in order."""
+    messages = {}
+    with AnyReader([path], default_typestore=get_typestore(Stores.EMPTY)) as reader:
+        for connection, timestamp, raw in reader.messages():
+            messages.setdefault(connection.topic, []).append((timestamp, bytes(raw)))
+    return messages
+
+
+def test_worker_processes_write_exactly_what_one_process_writes(tmp_path, capsys):
+    bag = real_bag('ros1/urg04lx_office.bag')
+    for jobs in (1, 2):
+        status, out, err = run([bag, '-o', tmp_path / f'jobs{jobs}', '-m', 'all', '-j', jobs],
+                               capsys)
+        assert status == 0, err
+    assert raw_messages(tmp_path / 'jobs1') == raw_messages(tmp_path / 'jobs2')
+    for name in ('corners.csv', 'corners.json'):
+        assert (tmp_path / 'jobs1' / name).read_text() == (tmp_path / 'jobs2' / name).read_text()
+
+
+def test_several_bags_give_one_table_and_a_damaged_one_is_skipped_in_one_line(tmp_path, capsys):
+    inputs = tmp_path / 'inputs'
+    inputs.mkdir()
+    write_scan_bag(inputs / 'first', count=40)
+    write_bag_with_bad_message(inputs / 'damaged', count=60, bad_index=50)
+    write_scan_bag(inputs / 'last', count=30)
+    bags = [inputs / 'first', inputs / 'damaged', inputs / 'last']
+    # Problems found before anything is written: one line each, nothing written.
+    status, out, err = run(bags + [inputs / 'missing', inputs / 'first', '-d', tmp_path / 'out'],
+                           capsys)
+    assert status == 2 and out == ''
+    twice = (f'process_bag: error: {inputs / "first"}: its output '
+             f'{tmp_path / "out" / "first_features"} would be written twice: give the bags '
+             'different names')
+    assert err.splitlines() == [twice, f'process_bag: error: no bag at {inputs / "missing"}',
+                                twice]
+    assert not (tmp_path / 'out').exists()
+    status, _, err = run(bags + ['-o', tmp_path / 'out'], capsys)
+    assert status == 2 and err.splitlines() == [
+        'process_bag: error: --output names the output of one bag; 3 bags were given: use '
+        '--output-dir']
+    # Damage found midway: that bag is skipped with one line, the others are written.
+    status, out, err = run(bags + ['-d', tmp_path / 'out', '-j', '2'], capsys)
+    assert status == 2
+    assert err.splitlines() == [f'process_bag: error: {inputs / "damaged"} is damaged after 50 '
+                                'messages of /scan: ' + err.split(' of /scan: ')[1].strip()]
+    written = sorted(p.name for p in (tmp_path / 'out').iterdir())
+    assert written == ['first_features', 'last_features']
+    assert read_output(tmp_path / 'out' / 'last_features')[1]['/corners'] == 30
+    table = [line.split() for line in out.splitlines()]
+    assert table[0] == ['bag', 'scans', 'corners', 'wctls', 'seconds', 'scans/s', 'output']
+    for row, name, scans in ((table[1], 'first', 40), (table[3], 'last', 30)):
+        with open(tmp_path / 'out' / f'{name}_features' / 'corners.csv') as rows:
+            corners = len(rows.readlines()) - 1
+        assert row[:3] == [str(inputs / name), str(scans), str(corners)]
+        assert row[-1] == str(tmp_path / 'out' / f'{name}_features')
+    assert table[2] == [str(inputs / 'damaged'), 'failed', '(see', 'above)']
+    assert table[4][:2] == ['all', '70'] and table[4][-2:] == ['2', 'written']
+
+
+def process_ids_of_children(pid):
+    """Return the ids of the processes whose parent is ``pid``."""
+    children = []
+    for stat in pathlib.Path('/proc').glob('[0-9]*/stat'):
+        try:
+            fields = stat.read_text().rsplit(')', 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            children.append(int(stat.parent.name))
+    return children
+
+
+def wait_until_gone(pids, timeout_s=10.0):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        alive = [pid for pid in pids if pathlib.Path(f'/proc/{pid}').exists()
+                 and 'Z' not in pathlib.Path(f'/proc/{pid}/stat').read_text().split()[2]]
+        if not alive:
+            return []
+        time.sleep(0.05)
+    return alive
+
+
+@pytest.mark.parametrize('number', [signal.SIGTERM, signal.SIGKILL])
+def test_stopping_a_run_with_workers_leaves_no_process_behind(number, tmp_path):
+    out = tmp_path / 'out'
+    out.mkdir()
+    process = subprocess.Popen([str(installed_executable('process_bag')),
+                                str(real_bag('ros1/urg04lx_office.bag')), '-o', str(out / 'r'),
+                                '-m', 'all', '-j', '2'], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    wait_for_staging(out)
+    deadline = time.monotonic() + 30
+    while len(workers := process_ids_of_children(process.pid)) < 2:
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    process.send_signal(number)
+    _, stderr = process.communicate(timeout=60)
+    assert wait_until_gone(workers) == []
+    if number == signal.SIGTERM:
+        assert process.returncode == 143, stderr
+        assert stderr.splitlines() == ['process_bag: interrupted by SIGTERM; nothing written']
+        assert list(out.iterdir()) == []

@@ -3,6 +3,7 @@
 
 """bag_replay with the real rclpy: bags played through the real feature_node, timing, /clock."""
 
+import os
 import pathlib
 import statistics
 import subprocess
@@ -17,8 +18,8 @@ from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
-from scan_bags import (PERIOD_NS, real_bag, REAL_BAGS, START_NS, write_scan_bag,  # noqa: E402
-                       write_string_bag)
+from scan_bags import (PERIOD_NS, real_bag, REAL_BAGS, START_NS,  # noqa: E402
+                       write_empty_scan_bag, write_scan_bag, write_string_bag)
 from scans import NODE_PARAMETERS  # noqa: E402
 from sensor_msgs.msg import LaserScan  # noqa: E402
 from test_feature_node import installed_executable  # noqa: E402
@@ -136,20 +137,23 @@ def test_real_bags_give_a_corner_array_per_scan_with_the_original_stamps(name, c
                   rate=period_s / 0.05, start_offset_s=(start_ns - bag_info(path).start_ns) / 1e9,
                   wait_for_subscribers=2)
     counters = graph.feature.counters
-    assert spin_until(executor, lambda: graph.replay.done.done()
-                      and len(graph.corners) == counters.processed, 40.0)
-    spin_until(executor, lambda: False, 0.2)
+
+    def every_scan_accounted_for():
+        """Whether each published scan gave a CornerArray, was skipped, or came before any."""
+        if not (graph.replay.done.done() and graph.corners):
+            return False
+        # A scan the node had no time for is counted as skipped (of scans logged at the same
+        # instant it sees the newest only), from the first scan received on: those before it,
+        # overwritten in the one-scan queue, are neither seen nor counted.
+        unseen = stamps.index(stamp_of(graph.corners[0]))
+        return (len(graph.corners) == counters.processed
+                == len(stamps) - unseen - counters.skipped)
+
+    assert spin_until(executor, every_scan_accounted_for, 40.0)
     assert graph.replay.done.result() == 0
     # Every CornerArray carries its scan's original stamp, in order.
     received = [stamp_of(m) for m in graph.corners]
     assert len(stamps) >= 40 and received == [s for s in stamps if s in set(received)]
-    # A scan the node had no time for is counted as skipped: of scans logged at the same
-    # instant (the SICK bags have some) the node sees the newest only. Skips count from the
-    # first scan received, so scans before it (lost while DDS was still matching, or logged in
-    # the same instant as the next) are the only ones neither processed nor counted.
-    before_first = stamps.index(received[0])
-    assert counters.processed + counters.skipped + before_first == len(stamps), (
-        counters, before_first, len(stamps))
     assert sum(len(m.corners) for m in graph.corners) > len(received)
 
 
@@ -177,20 +181,24 @@ def test_installed_replay_feeds_a_sim_time_feature_node_and_exits_0(tmp_path, ro
     executable = installed_executable('bag_replay')
     stamps = write_scan_bag(tmp_path / 'bag', count=6)
     graph = Graph(ros_context, executor, {'use_sim_time': True})
+    counters = graph.feature.counters
     process = subprocess.Popen(
         [str(executable), '--ros-args', '-p', f'bag:={tmp_path / "bag"}', '-p', 'rate:=2.0',
          '-p', 'publish_clock:=true', '-p', 'wait_for_subscribers:=2'],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
+        # feature_node keeps one scan in its queue: on a busy machine it may skip one, and
+        # counts it.
         assert spin_until(executor, lambda: process.poll() is not None
-                          and len(graph.corners) >= 6, timeout_s=30.0)
+                          and len(graph.corners) == 6 - counters.skipped, timeout_s=30.0)
     finally:
         if process.poll() is None:
             process.terminate()
         output, _ = process.communicate(timeout=10)
     assert process.returncode == 0, output
     assert 'end of the bag: published 6 scans' in output
-    assert [stamp_of(m) for m in graph.corners] == stamps
+    received = [stamp_of(m) for m in graph.corners]
+    assert len(received) >= 3 and received == [s for s in stamps if s in set(received)]
     # The feature node runs on the bag's clock.
     now = graph.feature.get_clock().now().nanoseconds
     assert START_NS <= now <= START_NS + 6 * PERIOD_NS
@@ -208,3 +216,18 @@ def test_installed_replay_exits_1_with_a_clear_message_and_no_traceback(argument
     output = result.stdout + result.stderr
     assert result.returncode == 1, output
     assert reason in output and 'Traceback' not in output
+
+
+def test_installed_replay_refuses_a_fifo_and_an_empty_scan_topic_in_one_fatal_line(tmp_path):
+    executable = installed_executable('bag_replay')
+    os.mkfifo(tmp_path / 'fifo.bag')
+    write_empty_scan_bag(tmp_path / 'empty')
+    cases = [(tmp_path / 'fifo.bag', 'is not a regular file or a folder'),
+             (tmp_path / 'empty', 'its LaserScan topic /scan holds no messages')]
+    for bag, reason in cases:
+        # A timeout, not a hang, if the FIFO is opened.
+        result = subprocess.run([str(executable), '--ros-args', '-p', f'bag:={bag}'],
+                                capture_output=True, text=True, timeout=30)
+        lines = (result.stdout + result.stderr).splitlines()
+        assert result.returncode == 1 and len(lines) == 1, lines
+        assert '[FATAL]' in lines[0] and reason in lines[0]

@@ -2,27 +2,110 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-Messages in and out of the core: LaserScan checks, Features to wctls_msgs and RViz markers.
+The codec between the core and ROS messages: LaserScan checks, Features to wctls_msgs and markers.
 
-Everything here is message plumbing shared by the feature node and the offline bag tools; the
-estimation itself lives in :mod:`wctls_ros.core`.
+Pure: it builds message objects and never publishes or writes. One code path serves the live
+node, which builds rclpy messages, and the offline bag tools, which build rosbags messages (from
+a typestore, serialised by rosbags): every builder takes the :class:`MessageTypes` to build
+with (rclpy's by default). Importing this module imports neither rclpy nor any message package.
 """
 
+import array
+import functools
+import importlib
 import math
+from typing import Callable, Dict, Optional
 
-from geometry_msgs.msg import Point, Pose, PoseWithCovariance, Quaternion, Vector3
 import numpy as np
-from std_msgs.msg import ColorRGBA
-from visualization_msgs.msg import Marker, MarkerArray
-from wctls_msgs.msg import Corner, CornerArray, LineSegment, LineSegmentArray
 
 from .core import CornerSet, ellipse, extract_features, FeatureConfig, Features, SegmentSet
 from .params import MarkerStyle
 
+# The message types the codec reads and builds.
+MESSAGE_TYPES = (
+    'builtin_interfaces/msg/Duration', 'builtin_interfaces/msg/Time',
+    'geometry_msgs/msg/Point', 'geometry_msgs/msg/Pose', 'geometry_msgs/msg/PoseWithCovariance',
+    'geometry_msgs/msg/Quaternion', 'geometry_msgs/msg/Vector3',
+    'sensor_msgs/msg/CompressedImage', 'sensor_msgs/msg/LaserScan',
+    'std_msgs/msg/ColorRGBA', 'std_msgs/msg/Header',
+    'visualization_msgs/msg/Marker', 'visualization_msgs/msg/MarkerArray',
+    'visualization_msgs/msg/MeshFile',
+    'wctls_msgs/msg/Corner', 'wctls_msgs/msg/CornerArray', 'wctls_msgs/msg/LineSegment',
+    'wctls_msgs/msg/LineSegmentArray',
+)
 # Rows/columns of (x, y, yaw) in a geometry_msgs 6x6 pose covariance (x, y, z, roll, pitch, yaw).
 _POSE_INDEX = np.array([0, 1, 5])
 # Height of the flat cylinders that draw covariance ellipses, m.
 _ELLIPSE_THICKNESS_M = 0.005
+
+
+def _float32_array_for_rclpy(values) -> array.array:
+    """Return float32 values as the array.array that rclpy messages take without copying."""
+    out = array.array('f')
+    out.frombytes(np.ascontiguousarray(values, dtype=np.float32).tobytes())
+    return out
+
+
+def _float32_array_for_rosbags(values) -> np.ndarray:
+    """Return float32 values as the numpy array that rosbags serialises."""
+    return np.asarray(values, dtype=np.float32)
+
+
+class MessageTypes:
+    """
+    The message classes the codec builds with, by type name (``types.Corner``, ...).
+
+    Made from rclpy's message packages (:meth:`from_rclpy`, for nodes) or from a rosbags
+    typestore (:meth:`from_typestore`, for bags); both take the same field values, except that
+    a float32 sequence is held as :attr:`float32_array` makes it.
+
+    :ivar float32_array: turns a float32 sequence into what the message classes hold
+    """
+
+    def __init__(self, classes: Dict[str, type], float32_array: Callable):
+        """
+        Name the classes.
+
+        :param classes: ROS type name (one of MESSAGE_TYPES) -> class
+        :param float32_array: turns a float32 sequence into what the classes hold
+        """
+        for name, kind in classes.items():
+            setattr(self, name.rsplit('/', 1)[1], kind)
+        self.float32_array = float32_array
+
+    @classmethod
+    def from_rclpy(cls) -> 'MessageTypes':
+        """
+        Return the classes of rclpy's message packages (imported now).
+
+        :return: the types
+        """
+        classes = {}
+        for name in MESSAGE_TYPES:
+            package, _, kind = name.split('/')
+            classes[name] = getattr(importlib.import_module(f'{package}.msg'), kind)
+        return cls(classes, _float32_array_for_rclpy)
+
+    @classmethod
+    def from_typestore(cls, store) -> 'MessageTypes':
+        """
+        Return the classes of a rosbags typestore (which must know wctls_msgs).
+
+        :param store: a rosbags Typestore
+        :return: the types
+        """
+        return cls({name: store.types[name] for name in MESSAGE_TYPES},
+                   _float32_array_for_rosbags)
+
+
+@functools.lru_cache(maxsize=1)
+def rclpy_types() -> MessageTypes:
+    """
+    Return the rclpy message classes (imported at the first call).
+
+    :return: the types
+    """
+    return MessageTypes.from_rclpy()
 
 
 def scan_problems(scan) -> list:
@@ -76,8 +159,44 @@ def scan_features(scan, config: FeatureConfig):
     return Features(config.method, SegmentSet.empty(), CornerSet.empty()), problems
 
 
-def _quaternion_from_yaw(yaw: float) -> Quaternion:
-    return Quaternion(x=0.0, y=0.0, z=math.sin(0.5 * yaw), w=math.cos(0.5 * yaw))
+def copy_header(source, types: Optional[MessageTypes] = None):
+    """
+    Copy a header (rclpy, rosbags, ROS 1 or ROS 2) into a ``types.Header``.
+
+    :param source: the header to copy (a ROS 1 header's seq is dropped)
+    :param types: the message classes to build with (None: rclpy's)
+    :return: the header
+    """
+    types = types or rclpy_types()
+    stamp = source.stamp
+    return types.Header(stamp=types.Time(sec=int(stamp.sec), nanosec=int(stamp.nanosec)),
+                        frame_id=str(source.frame_id))
+
+
+def laser_scan(scan, types: Optional[MessageTypes] = None):
+    """
+    Copy a LaserScan (rclpy, rosbags, ROS 1 or ROS 2) into a ``types.LaserScan``.
+
+    :param scan: the scan to copy
+    :param types: the message classes to build with (None: rclpy's)
+    :return: the scan, with the same header (a ROS 1 header's seq is dropped)
+    """
+    types = types or rclpy_types()
+    return types.LaserScan(
+        header=copy_header(scan.header, types), angle_min=float(scan.angle_min),
+        angle_max=float(scan.angle_max), angle_increment=float(scan.angle_increment),
+        time_increment=float(scan.time_increment), scan_time=float(scan.scan_time),
+        range_min=float(scan.range_min), range_max=float(scan.range_max),
+        ranges=types.float32_array(scan.ranges),
+        intensities=types.float32_array(scan.intensities))
+
+
+def _point(types: MessageTypes, x: float, y: float, z: float = 0.0):
+    return types.Point(x=x, y=y, z=z)
+
+
+def _quaternion_from_yaw(types: MessageTypes, yaw: float):
+    return types.Quaternion(x=0.0, y=0.0, z=math.sin(0.5 * yaw), w=math.cos(0.5 * yaw))
 
 
 def pose_covariances(covariance_xy_yaw: np.ndarray) -> np.ndarray:
@@ -92,94 +211,127 @@ def pose_covariances(covariance_xy_yaw: np.ndarray) -> np.ndarray:
     return full.reshape(-1, 36)
 
 
-def corner_array(features: Features, header) -> CornerArray:
+def corner_array(features: Features, header, types: Optional[MessageTypes] = None):
     """
     Convert the corners of one scan to a CornerArray.
 
     :param features: output of ``extract_features``
-    :param header: the scan's header (copied)
+    :param header: the scan's header, a ``types.Header`` (shared, not copied)
+    :param types: the message classes to build with (None: rclpy's)
     :return: the message
     """
+    types = types or rclpy_types()
     corners = features.corners
     covariances = pose_covariances(corners.covariance)
     messages = [
-        Corner(pose=PoseWithCovariance(pose=Pose(position=Point(x=x, y=y, z=0.0),
-                                                 orientation=_quaternion_from_yaw(yaw)),
-                                       covariance=covariance),
-               first_line=first, second_line=second, opening_angle=opening)
+        types.Corner(pose=types.PoseWithCovariance(
+            pose=types.Pose(position=_point(types, x, y),
+                            orientation=_quaternion_from_yaw(types, yaw)),
+            covariance=covariance),
+            first_line=first, second_line=second, opening_angle=opening)
         for (x, y), yaw, covariance, opening, first, second in zip(
             corners.xy_m.tolist(), corners.yaw_rad.tolist(), covariances,
             corners.opening_angle_rad.tolist(), corners.first_segment.tolist(),
             corners.second_segment.tolist())]
-    return CornerArray(header=header, method=features.method, corners=messages)
+    return types.CornerArray(header=header, method=features.method, corners=messages)
 
 
-def line_segment_array(features: Features, header) -> LineSegmentArray:
+def line_segment_array(features: Features, header, types: Optional[MessageTypes] = None):
     """
     Convert the segments of one scan to a LineSegmentArray.
 
     :param features: output of ``extract_features``
-    :param header: the scan's header (copied)
+    :param header: the scan's header, a ``types.Header`` (shared, not copied)
+    :param types: the message classes to build with (None: rclpy's)
     :return: the message
     """
+    types = types or rclpy_types()
     s = features.segments
     messages = [
-        LineSegment(angle=angle, radius=radius, covariance=covariance,
-                    start=Point(x=start[0], y=start[1], z=0.0),
-                    end=Point(x=end[0], y=end[1], z=0.0),
-                    first_index=first, last_index=last, num_points=count)
+        types.LineSegment(angle=angle, radius=radius, covariance=covariance,
+                          start=_point(types, *start), end=_point(types, *end),
+                          first_index=first, last_index=last, num_points=count)
         for angle, radius, covariance, start, end, first, last, count in zip(
-            s.angle_rad.tolist(), s.radius_m.tolist(), s.covariance.reshape(-1, 4),
+            s.angle_rad.tolist(), s.radius_m.tolist(),
+            np.ascontiguousarray(s.covariance, dtype=float).reshape(-1, 4),
             s.start_xy_m.tolist(), s.end_xy_m.tolist(), s.first_index.tolist(),
             s.last_index.tolist(), s.num_points.tolist())]
-    return LineSegmentArray(header=header, method=features.method, segments=messages)
+    return types.LineSegmentArray(header=header, method=features.method, segments=messages)
 
 
-def _marker(header, namespace, marker_id, marker_type, color, scale, position=(0.0, 0.0, 0.0),
-            **fields) -> Marker:
-    pose = Pose(position=Point(x=position[0], y=position[1], z=position[2]),
-                orientation=Quaternion(w=1.0))
-    return Marker(header=header, ns=namespace, id=marker_id, type=marker_type,
-                  action=Marker.ADD, pose=pose,
-                  scale=Vector3(x=scale[0], y=scale[1], z=scale[2]),
-                  color=ColorRGBA(r=color[0], g=color[1], b=color[2], a=color[3]), **fields)
+def _unused_marker_fields(types: MessageTypes) -> dict:
+    """Return the Marker fields we never use, at their defaults (rosbags needs every field)."""
+    no_bytes = np.zeros(0, np.uint8)
+    no_header = types.Header(stamp=types.Time(sec=0, nanosec=0), frame_id='')
+    return {'lifetime': types.Duration(sec=0, nanosec=0), 'frame_locked': False, 'colors': [],
+            'texture_resource': '',
+            'texture': types.CompressedImage(header=no_header, format='', data=no_bytes),
+            'uv_coordinates': [], 'mesh_resource': '',
+            'mesh_file': types.MeshFile(filename='', data=no_bytes),
+            'mesh_use_embedded_materials': False}
 
 
-def marker_array(features: Features, header, style: MarkerStyle = MarkerStyle()) -> MarkerArray:
+def marker_array(features: Features, header, style: MarkerStyle = MarkerStyle(),
+                 types: Optional[MessageTypes] = None):
     """
     Draw one scan's features: segments, corners with ids, and covariance ellipses.
 
-    The array starts with a DELETEALL marker, so features of earlier scans never linger.
+    The array starts with a DELETEALL marker, so features of earlier scans never linger. All
+    segments are one LINE_LIST, all corners one SPHERE_LIST; each corner's k-sigma covariance
+    ellipse is one flat CYLINDER scaled to its axes and turned to its orientation (as RViz draws
+    covariances) and, with ``style.text_ids``, its index one TEXT_VIEW_FACING marker. Markers
+    of one array may share sub-messages (colours, scales): change a copy, not them.
 
     :param features: output of ``extract_features``
-    :param header: the scan's header (copied)
-    :param style: sizes and the ellipse scale
+    :param header: the scan's header, a ``types.Header`` (shared, not copied)
+    :param style: sizes, the ellipse scale, whether corners get id labels
+    :param types: the message classes to build with (None: rclpy's)
     :return: the markers
     """
-    markers = [Marker(header=header, action=Marker.DELETEALL)]
+    types = types or rclpy_types()
+    Marker, Point, Pose, Vector3 = types.Marker, types.Point, types.Pose, types.Vector3
+    unused = _unused_marker_fields(types)
+    upright = types.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
+
+    def marker(namespace, marker_id, marker_type, color, scale, position,
+               orientation=upright, points=(), text='', action=Marker.ADD):
+        return Marker(header=header, ns=namespace, id=marker_id, type=marker_type,
+                      action=action, pose=Pose(position=position, orientation=orientation),
+                      scale=scale, color=color, points=list(points), text=text, **unused)
+
+    def color(r, g, b, a):
+        return types.ColorRGBA(r=r, g=g, b=b, a=a)
+
+    origin = Point(x=0.0, y=0.0, z=0.0)
+    markers = [marker('', 0, Marker.ARROW, color(0.0, 0.0, 0.0, 0.0),
+                      Vector3(x=0.0, y=0.0, z=0.0), origin, action=Marker.DELETEALL)]
     segments, corners = features.segments, features.corners
     if len(segments):
         ends = np.stack([segments.start_xy_m, segments.end_xy_m], 1).reshape(-1, 2).tolist()
-        markers.append(_marker(header, 'segments', 0, Marker.LINE_LIST, (0.1, 0.5, 1.0, 1.0),
-                               (style.line_width_m, 0.0, 0.0),
-                               points=[Point(x=x, y=y, z=0.0) for x, y in ends]))
-    if len(corners):
-        size = style.corner_size_m
-        markers.append(_marker(header, 'corners', 0, Marker.SPHERE_LIST, (1.0, 0.2, 0.2, 1.0),
-                               (size, size, size),
-                               points=[Point(x=x, y=y, z=0.0) for x, y in corners.xy_m.tolist()]))
-        shape = ellipse(corners.covariance[:, :2, :2])
-        scale = 2.0 * style.ellipse_sigma * style.ellipse_scale
-        for i, ((x, y), major, minor, orientation) in enumerate(zip(
-                corners.xy_m.tolist(), shape.semi_major.tolist(), shape.semi_minor.tolist(),
-                shape.orientation_rad.tolist())):
-            markers.append(_marker(header, 'corner_ids', i, Marker.TEXT_VIEW_FACING,
-                                   (1.0, 1.0, 1.0, 1.0), (0.0, 0.0, 2.0 * size),
-                                   (x, y, 2.0 * size), text=str(i)))
-            # A flat elliptic cylinder: one marker per ellipse, no outline points to send.
-            ellipse_marker = _marker(header, 'ellipses', i, Marker.CYLINDER, (1.0, 0.6, 0.0, 0.5),
-                                     (scale * major, scale * minor, _ELLIPSE_THICKNESS_M),
-                                     (x, y, 0.0))
-            ellipse_marker.pose.orientation = _quaternion_from_yaw(orientation)
-            markers.append(ellipse_marker)
-    return MarkerArray(markers=markers)
+        markers.append(marker('segments', 0, Marker.LINE_LIST, color(0.1, 0.5, 1.0, 1.0),
+                              Vector3(x=style.line_width_m, y=0.0, z=0.0), origin,
+                              points=[Point(x=x, y=y, z=0.0) for x, y in ends]))
+    if not len(corners):
+        return types.MarkerArray(markers=markers)
+    size = style.corner_size_m
+    markers.append(marker('corners', 0, Marker.SPHERE_LIST, color(1.0, 0.2, 0.2, 1.0),
+                          Vector3(x=size, y=size, z=size), origin,
+                          points=[Point(x=x, y=y, z=0.0) for x, y in corners.xy_m.tolist()]))
+    shape = ellipse(corners.covariance[:, :2, :2])
+    diameter = 2.0 * style.ellipse_sigma * style.ellipse_scale
+    half_turn = 0.5 * shape.orientation_rad
+    rows = np.column_stack([corners.xy_m, diameter * shape.semi_major,
+                            diameter * shape.semi_minor, np.sin(half_turn),
+                            np.cos(half_turn)]).tolist()
+    label_color, label_scale = color(1.0, 1.0, 1.0, 1.0), Vector3(x=0.0, y=0.0, z=2.0 * size)
+    ellipse_color = color(1.0, 0.6, 0.0, 0.5)
+    for i, (x, y, major_axis, minor_axis, qz, qw) in enumerate(rows):
+        if style.text_ids:
+            markers.append(marker('corner_ids', i, Marker.TEXT_VIEW_FACING, label_color,
+                                  label_scale, Point(x=x, y=y, z=2.0 * size), text=str(i)))
+        # A flat elliptic cylinder: one marker per ellipse, no outline points to send.
+        markers.append(marker('ellipses', i, Marker.CYLINDER, ellipse_color,
+                              Vector3(x=major_axis, y=minor_axis, z=_ELLIPSE_THICKNESS_M),
+                              Point(x=x, y=y, z=0.0),
+                              types.Quaternion(x=0.0, y=0.0, z=qz, w=qw)))
+    return types.MarkerArray(markers=markers)

@@ -3,10 +3,20 @@
 
 """The Jazzy ``main()`` every wctls_ros node shares, and its parameter declarations."""
 
+import re
+
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation
+from rclpy.utilities import remove_ros_args
+
+# What rclpy.init raises for bad ROS arguments (an unreadable --params-file, a bad remap rule,
+# an unknown --ros-args option) or environment (ROS_DOMAIN_ID).
+_INIT_ERRORS = (rclpy_implementation.RCLError, rclpy_implementation.UnknownROSArgsError)
+# rcl appends where in its C sources an error was found: of no use to the user.
+_SOURCE_LOCATION = re.compile(r', at \S+:\d+')
 
 
 def parameter_descriptor(parameter) -> ParameterDescriptor:
@@ -64,8 +74,9 @@ def run_node(name: str, make_node, spin=spin_forever, config_errors=(ValueError,
     """
     Run a node the way ros2/demos do on Jazzy, and turn its ending into an exit status.
 
-    A bad configuration (``config_errors``, or a parameter of the wrong type or out of range)
-    is one fatal log line and status 1, never a traceback. Ctrl-C and SIGTERM are a clean
+    A bad configuration (bad ROS arguments such as a missing ``--params-file``,
+    ``config_errors``, or a parameter of the wrong type or out of range) is one fatal log line
+    and status 1, never a traceback. Ctrl-C and SIGTERM are a clean
     end: they shut the context down from a signal handler, so whatever runs at that moment (the
     executor's wait set, a publish) may fail with an RCLError instead of raising
     ExternalShutdownException; with the context gone, that is a shutdown, not an error.
@@ -77,7 +88,17 @@ def run_node(name: str, make_node, spin=spin_forever, config_errors=(ValueError,
     :param args: command-line arguments for rclpy.init (default: sys.argv)
     :return: exit status: 0 on a clean end, 1 on a bad configuration
     """
-    rclpy.init(args=args)
+    logger = rclpy.logging.get_logger(name)
+    try:
+        # Parsed once before rclpy.init, which would log an extra rcl line before raising.
+        remove_ros_args(args)
+        rclpy.init(args=args)
+    except _INIT_ERRORS as error:
+        reason = _SOURCE_LOCATION.sub('', str(error))
+        if isinstance(error, rclpy_implementation.UnknownROSArgsError):
+            reason = f'unknown ROS arguments {reason}'
+        logger.fatal(f'cannot start: {reason}')
+        return 1
     node = None
     try:
         # Made before the (slower) node, so a signal during start-up rarely meets it half-built.
@@ -88,7 +109,7 @@ def run_node(name: str, make_node, spin=spin_forever, config_errors=(ValueError,
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ParameterException, *config_errors) as error:
-        rclpy.logging.get_logger(name).fatal(str(error))
+        logger.fatal(str(error))
         return 1
     except Exception:  # noqa: B902 - a failure caused by the shutdown itself is no error
         if rclpy.ok():

@@ -130,12 +130,14 @@ class MarkerStyle:
     :ivar ellipse_scale: extra magnification of the ellipses for visibility (the paper uses 10)
     :ivar line_width_m: width of the segment lines, m
     :ivar corner_size_m: diameter of the corner spheres and height of their id labels, m
+    :ivar text_ids: label each corner with its index (a text marker per corner)
     """
 
     ellipse_sigma: float = 1.0
     ellipse_scale: float = 10.0
     line_width_m: float = 0.02
     corner_size_m: float = 0.06
+    text_ids: bool = True
 
 
 _STYLE = MarkerStyle()
@@ -149,6 +151,9 @@ FEATURE_NODE = tuple(_feature_parameter(f.name) for f in fields(FeatureConfig)) 
               Limits(0.1, 1000.0), setting='ellipse_scale'),
     Parameter('marker_line_width_m', _STYLE.line_width_m, 'Width of the segment lines, m',
               Limits(1e-4, 1.0), setting='line_width_m'),
+    Parameter('marker_text_ids', _STYLE.text_ids,
+              'Label each corner with its index (one text marker per corner; off saves most of '
+              'the markers)', setting='text_ids'),
 )
 
 RPLIDAR_NODE = tuple(Parameter(*row, read_only=True) for row in (

@@ -4,22 +4,25 @@
 """
 Reading LaserScans from bags and writing bags, with the ``rosbags`` library (no ROS install).
 
-Reads ROS 2 bags (sqlite3 and mcap) and ROS 1 bags. Writes ROS 2 bags (mcap by default) whose
-messages are serialised by rclpy itself, so every type rclpy knows (including wctls_msgs) can be
-stored; the message definitions come from a rosbags typestore with wctls_msgs registered from
-its .msg files. A bag is written to a temporary folder and renamed into place when complete: an
-error never leaves half a bag behind.
+Reads ROS 2 bags (sqlite3 and mcap) and ROS 1 bags. Writes ROS 2 bags (mcap by default) of
+rosbags messages (serialised by rosbags: no ROS install needed) or of rclpy messages (serialised
+by rclpy, imported only then); the message definitions come from a rosbags typestore with
+wctls_msgs registered from its .msg files. A bag is written to a staging folder beside it and
+renamed into place when complete: an error or a signal never leaves half a bag behind, and the
+staging folder of a killed writer (SIGKILL) is removed by the next writer in the same folder.
 """
 
-import array
+import contextlib
 from dataclasses import dataclass
+import fcntl
 import functools
+import os
 import pathlib
+import re
 import shutil
 import tempfile
 from typing import Iterator, Optional
 
-import numpy as np
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import get_types_from_msg, get_typestore, Stores
@@ -28,6 +31,10 @@ LASER_SCAN = 'sensor_msgs/msg/LaserScan'
 MESSAGE_PACKAGE = 'wctls_msgs'
 # Files that hold a ROS 2 bag's messages when its metadata.yaml is missing (recorder killed).
 _STORAGE_SUFFIXES = ('.mcap', '.db3')
+# A bag is written in a staging folder beside it, named after the writing process and locked
+# (flock) by it: one whose process is gone and whose lock is free was left by a killed run.
+_STAGING_PREFIX = '.partial-'
+_STAGING_NAME = re.compile(r'\.partial-(\d+)-[a-z0-9_]+')
 
 
 class BagError(RuntimeError):
@@ -63,13 +70,6 @@ def _message_directory() -> pathlib.Path:
                    'workspace (install/setup.bash) first')
 
 
-def _float32_array(values) -> array.array:
-    """Return float32 values as the array.array that rclpy messages take without copying."""
-    out = array.array('f')
-    out.frombytes(np.ascontiguousarray(values, dtype=np.float32).tobytes())
-    return out
-
-
 @dataclass(frozen=True)
 class ScanRecord:
     """
@@ -77,32 +77,13 @@ class ScanRecord:
 
     :ivar timestamp_ns: the bag's log time of the message, ns
     :ivar topic: topic it was recorded on
-    :ivar scan: the message (fields of sensor_msgs/LaserScan: header, angle_min, ranges, ...)
+    :ivar scan: the message as rosbags read it (ROS 1 or ROS 2 fields of sensor_msgs/LaserScan;
+        :func:`wctls_ros.conversions.laser_scan` copies it into an rclpy or rosbags ROS 2 one)
     """
 
     timestamp_ns: int
     topic: str
     scan: object
-
-    def laser_scan(self):
-        """
-        Return the scan as an rclpy sensor_msgs/LaserScan with the recorded header.
-
-        :return: a ``sensor_msgs.msg.LaserScan`` (a ROS 1 header's seq is dropped)
-        """
-        from builtin_interfaces.msg import Time
-        from sensor_msgs.msg import LaserScan
-        from std_msgs.msg import Header
-        scan = self.scan
-        stamp = scan.header.stamp
-        return LaserScan(
-            header=Header(stamp=Time(sec=int(stamp.sec), nanosec=int(stamp.nanosec)),
-                          frame_id=str(scan.header.frame_id)),
-            angle_min=float(scan.angle_min), angle_max=float(scan.angle_max),
-            angle_increment=float(scan.angle_increment),
-            time_increment=float(scan.time_increment), scan_time=float(scan.scan_time),
-            range_min=float(scan.range_min), range_max=float(scan.range_max),
-            ranges=_float32_array(scan.ranges), intensities=_float32_array(scan.intensities))
 
 
 @dataclass(frozen=True)
@@ -132,12 +113,27 @@ class BagInfo:
 
 
 def _resolve(path) -> pathlib.Path:
-    """Return the path to open: a ROS 2 folder without metadata.yaml opens its one storage file."""
+    """
+    Return the path to open: a ROS 2 folder without metadata.yaml opens its one storage file.
+
+    Only regular files are opened: reading a FIFO (or a device) would wait forever.
+    """
     path = pathlib.Path(path)
     if not path.exists():
         raise BagError(f'no bag at {path}')
-    if path.is_dir() and not (path / 'metadata.yaml').exists():
-        files = sorted(p for p in path.iterdir() if p.suffix in _STORAGE_SUFFIXES)
+    if not path.is_dir():
+        if not path.is_file():
+            raise BagError(f'{path} is not a regular file or a folder (a FIFO, device or '
+                           'socket): not a bag')
+        return path
+    parts = sorted(p for p in path.iterdir()
+                   if p.suffix in _STORAGE_SUFFIXES or p.name == 'metadata.yaml')
+    for part in parts:
+        if not part.is_file():
+            raise BagError(f'{part} is not a regular file (a FIFO, device, socket or folder): '
+                           f'{path} is not a readable bag')
+    if not (path / 'metadata.yaml').exists():
+        files = [p for p in parts if p.suffix in _STORAGE_SUFFIXES]
         if len(files) != 1:
             raise BagError(f'{path} is a folder without metadata.yaml and with '
                            f'{len(files)} .mcap/.db3 files: not a ROS 2 bag')
@@ -156,6 +152,17 @@ def _open(path) -> AnyReader:
     return reader
 
 
+def _summary(reader: AnyReader) -> BagInfo:
+    """Summarise an open bag."""
+    topics = {}
+    for connection in reader.connections:
+        kind, count = topics.get(connection.topic, (connection.msgtype, 0))
+        topics[connection.topic] = (kind, count + connection.msgcount)
+    empty = not reader.message_count
+    return BagInfo(pathlib.Path(reader.paths[0]), topics,
+                   0 if empty else reader.start_time, 0 if empty else reader.end_time - 1)
+
+
 def bag_info(path) -> BagInfo:
     """
     Summarise a bag: its topics with types and counts, and its time span.
@@ -166,13 +173,7 @@ def bag_info(path) -> BagInfo:
     """
     reader = _open(path)
     try:
-        topics = {}
-        for connection in reader.connections:
-            kind, count = topics.get(connection.topic, (connection.msgtype, 0))
-            topics[connection.topic] = (kind, count + connection.msgcount)
-        empty = not reader.message_count
-        return BagInfo(pathlib.Path(reader.paths[0]), topics,
-                       0 if empty else reader.start_time, 0 if empty else reader.end_time - 1)
+        return _summary(reader)
     finally:
         reader.close()
 
@@ -196,7 +197,8 @@ def choose_scan_topic(path, topic: Optional[str] = None, info: Optional[BagInfo]
     :param topic: the requested topic, or None (or '') to find it
     :param info: the bag's summary when already read (saves opening the bag again)
     :return: the topic
-    :raises BagError: when the bag has no LaserScan, several without a choice, or not ``topic``
+    :raises BagError: when the bag has no LaserScan, several without a choice, not ``topic``, or
+        a LaserScan topic without messages
     """
     info = info or bag_info(path)
     topics = info.scan_topics()
@@ -206,13 +208,16 @@ def choose_scan_topic(path, topic: Optional[str] = None, info: Optional[BagInfo]
                 raise BagError(f'{path}: topic {topic} carries {info.topics[topic][0]}, not '
                                f'{LASER_SCAN}; LaserScan topics: {sorted(topics)}')
             raise BagError(f'{path} has no LaserScan topic {topic!r}; it has {sorted(topics)}')
-        return topic
-    if not topics:
+    elif not topics:
         found = ', '.join(f'{name} ({kind})' for name, (kind, _) in sorted(info.topics.items()))
         raise BagError(f'{path} holds no {LASER_SCAN} messages (topics: {found or "none"})')
-    if len(topics) > 1:
+    elif len(topics) > 1:
         raise BagError(f'{path} has several LaserScan topics {sorted(topics)}: choose one')
-    return next(iter(topics))
+    else:
+        topic = next(iter(topics))
+    if topics[topic] == 0:
+        raise BagError(f'{path}: its LaserScan topic {topic} holds no messages')
+    return topic
 
 
 def read_scans(path, topic: Optional[str] = None,
@@ -226,10 +231,10 @@ def read_scans(path, topic: Optional[str] = None,
     :return: iterator of records
     :raises BagError: on a missing, corrupt or truncated bag, or no LaserScan topic
     """
-    topic = choose_scan_topic(path, topic)
     reader = _open(path)
     count = 0
     try:
+        topic = choose_scan_topic(path, topic, _summary(reader))
         connections = [c for c in reader.connections if c.topic == topic]
         try:
             for connection, timestamp, raw in reader.messages(connections=connections,
@@ -246,11 +251,67 @@ def read_scans(path, topic: Optional[str] = None,
         reader.close()
 
 
+def _lock_folder(path: pathlib.Path) -> Optional[int]:
+    """Take the exclusive lock of a folder without waiting; return its descriptor, or None."""
+    try:
+        descriptor = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(descriptor)
+        return None
+    return descriptor
+
+
+def _process_exists(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:     # another user's process
+        return True
+    return True
+
+
+def remove_stale_staging(folder) -> list:
+    """
+    Remove what killed writers (SIGKILL, a crash, a power cut) left in a folder.
+
+    A staging folder is stale when the process named in it is gone and nothing holds its lock;
+    the folder of a live writer is never touched.
+
+    :param folder: the folder where bags are written
+    :return: the staging folders removed
+    """
+    removed = []
+    try:
+        candidates = [p for p in pathlib.Path(folder).iterdir()
+                      if p.name.startswith(_STAGING_PREFIX)]
+    except OSError:             # not listable: nothing we could clean
+        return removed
+    for path in candidates:
+        match = _STAGING_NAME.fullmatch(path.name)
+        if match is None or _process_exists(int(match[1])):
+            continue
+        lock = _lock_folder(path)
+        if lock is not None:
+            try:
+                shutil.rmtree(path, ignore_errors=True)
+                removed.append(path)
+            finally:
+                os.close(lock)
+    return removed
+
+
 class BagWriter:
     """
-    Write a ROS 2 bag of rclpy messages; the bag appears only when closed without error.
+    Write a ROS 2 bag of rosbags or rclpy messages; the bag appears only when closed without error.
 
-    Use as a context manager::
+    An OSError while the bag is open (a write to the bag or to a side file that meets a full
+    disk or a file-size limit) or while it is closed leaves nothing and becomes a BagError that
+    names the bag. Use as a context manager::
 
         with BagWriter('out/run') as bag:
             bag.write('/scan', timestamp_ns, scan_msg)
@@ -274,41 +335,65 @@ class BagWriter:
             raise BagError(f'{self.path} exists: refusing to overwrite it')
         self._plugin = plugins[storage]
         self._staging = None
+        self._lock = None
         self._writer = None
         self._connections = {}
-        self._serialize = None
 
     def __enter__(self) -> 'BagWriter':
-        from rclpy.serialization import serialize_message
-        self._serialize = serialize_message
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._staging = pathlib.Path(tempfile.mkdtemp(prefix='.partial-',
-                                                          dir=self.path.parent))
+            remove_stale_staging(self.path.parent)
+            self._staging = pathlib.Path(tempfile.mkdtemp(
+                prefix=f'{_STAGING_PREFIX}{os.getpid()}-', dir=self.path.parent))
+            self._lock = _lock_folder(self._staging)
             self._writer = Writer(self._staging / self.path.name, version=9,
                                   storage_plugin=self._plugin)
             self._writer.open()
         except Exception as error:  # noqa: B902 - rosbags and the file system raise many types
-            if self._staging is not None:
-                shutil.rmtree(self._staging, ignore_errors=True)
+            self._remove_staging()
             raise BagError(f'cannot write {self.path}: {error}') from error
         return self
 
+    def _remove_staging(self) -> None:
+        """Remove the staging folder, then release its lock."""
+        if self._staging is not None:
+            shutil.rmtree(self._staging, ignore_errors=True)
+        if self._lock is not None:
+            os.close(self._lock)
+        self._staging = self._lock = None
+
     def write(self, topic: str, timestamp_ns: int, message) -> None:
         """
-        Append one message (serialised by rclpy) on a topic.
+        Append one message on a topic: a rosbags message or an rclpy one.
 
         :param topic: the topic; its type is taken from the first message written on it
         :param timestamp_ns: log time, ns
-        :param message: an rclpy message instance
+        :param message: a rosbags message (serialised by rosbags) or an rclpy message
+            (serialised by rclpy)
+        """
+        msgtype = getattr(message, '__msgtype__', None)
+        if msgtype is None:         # rclpy: the module is <package>.msg._<name>
+            from rclpy.serialization import serialize_message
+            msgtype = f'{type(message).__module__.split(".")[0]}/msg/{type(message).__name__}'
+            data = serialize_message(message)
+        else:
+            data = typestore().serialize_cdr(message, msgtype)
+        self.write_serialized(topic, msgtype, timestamp_ns, data)
+
+    def write_serialized(self, topic: str, msgtype: str, timestamp_ns: int, data) -> None:
+        """
+        Append one message already serialised (CDR) on a topic.
+
+        :param topic: the topic; its type is taken from the first message written on it
+        :param msgtype: the message type, e.g. 'wctls_msgs/msg/CornerArray'
+        :param timestamp_ns: log time, ns
+        :param data: the serialised message
         """
         connection = self._connections.get(topic)
         if connection is None:
-            module = type(message).__module__.split('.')[0]
-            msgtype = f'{module}/msg/{type(message).__name__}'
             connection = self._writer.add_connection(topic, msgtype, typestore=typestore())
             self._connections[topic] = connection
-        self._writer.write(connection, int(timestamp_ns), self._serialize(message))
+        self._writer.write(connection, int(timestamp_ns), data)
 
     def sidecar(self, name: str) -> pathlib.Path:
         """
@@ -332,7 +417,12 @@ class BagWriter:
                     self.path.rename(self._staging / '.replaced')
                 (self._staging / self.path.name).rename(self.path)
             else:
-                self._writer.abort()
+                with contextlib.suppress(OSError):   # flushing what is thrown away may fail too
+                    self._writer.abort()
+        except OSError as error:
+            value = error
         finally:
-            shutil.rmtree(self._staging, ignore_errors=True)
+            self._remove_staging()
+        if isinstance(value, OSError):
+            raise BagError(f'cannot write {self.path}: {value.strerror or value}') from value
         return False

@@ -5,7 +5,8 @@
 process_bag: LaserScans of a bag in; corners, lines and markers out, with no middleware.
 
 Reads a ROS 2 (sqlite3, mcap) or ROS 1 bag one scan at a time, runs feature_node's pipeline on
-every scan with the same parameters (a feature_node YAML file) and writes:
+every scan with the same parameters (a feature_node YAML file) and writes, with rosbags alone
+(neither rclpy nor any ROS message package is imported):
 
 - an mcap ROS 2 bag (Foxglove and ``ros2 bag play`` open it) with the original scans on their
   topic and, per scan, a wctls_msgs/CornerArray on ``/corners``, a wctls_msgs/LineSegmentArray
@@ -19,31 +20,100 @@ Memory stays constant however long the bag is, and the output appears only when 
 """
 
 import argparse
+import collections
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+import contextlib
 import csv
+import ctypes
 from dataclasses import dataclass, field
+import io
+import itertools
 import json
 import math
+import multiprocessing
+import os
 import pathlib
+import signal
 import sys
 import time
-from typing import Optional
+from typing import Callable, NamedTuple, Optional
 
+import numpy as np
 
-from .bag_io import bag_info, BagError, BagWriter, choose_scan_topic, read_scans
-from ..conversions import corner_array, line_segment_array, marker_array, scan_features
+from .bag_io import (bag_info, BagError, BagWriter, choose_scan_topic, LASER_SCAN, read_scans,
+                     typestore)
+from ..conversions import (corner_array, laser_scan, line_segment_array, marker_array,
+                           MessageTypes, scan_features)
 from ..core import CornerSet, METHODS
 from ..params import ConfigError, feature_settings, load_parameters
 
 ALL = 'all'
 CSV_NAME = 'corners.csv'
 JSON_NAME = 'corners.json'
+# Every output folder holds this file, which lists the files process_bag wrote there: --force
+# replaces a folder only when it holds this file and nothing else than the files it lists.
+MARKER_NAME = '.process_bag'
 CSV_COLUMNS = ('scan', 'stamp', 'frame_id', 'method', 'index', 'x_m', 'y_m', 'yaw_rad',
                'var_x_m2', 'cov_xy_m2', 'cov_x_yaw_m_rad', 'var_y_m2', 'cov_y_yaw_m_rad',
                'var_yaw_rad2', 'opening_angle_rad', 'first_line', 'second_line')
-# Upper triangle of the (x, y, yaw) covariance, in the order of the CSV columns.
-_TRIANGLE = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+# Upper triangle of the (x, y, yaw) covariance, in the order of the CSV columns: rows, columns.
+_TRIANGLE = (np.array([0, 0, 0, 1, 1, 2]), np.array([0, 1, 2, 1, 2, 2]))
+CORNER_ARRAY = 'wctls_msgs/msg/CornerArray'
+LINE_SEGMENT_ARRAY = 'wctls_msgs/msg/LineSegmentArray'
+MARKER_ARRAY = 'visualization_msgs/msg/MarkerArray'
+# Scans sent to a worker process at once: enough to make the hand-over cost nothing, few enough
+# to keep every worker busy to the end of a bag.
+BATCH_SCANS = 16
+# prctl option: the signal a process gets when its parent dies (linux/prctl.h).
+_PR_SET_PDEATHSIG = 1
 # A progress bar appears only on runs longer than this, s.
 PROGRESS_DELAY_S = 1.0
+
+
+class Interrupted(Exception):
+    """A run stopped by a signal (nothing of it is left)."""
+
+    def __init__(self, signal_number: int):
+        super().__init__(f'interrupted by {signal.Signals(signal_number).name}')
+        self.signal_number = signal_number
+
+
+class StopSignals:
+    """
+    While active, SIGINT and SIGTERM only ask the run to stop, which it does between two scans.
+
+    A signal never lands inside a write, the cleanup or the rename that completes the output:
+    the run ends either complete or with nothing left. Use as a context manager, and call
+    :meth:`check` where stopping is safe.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self):
+        self.received = None
+        self._previous = {}
+
+    def _note(self, number, frame):
+        self.received = self.received or number
+
+    def __enter__(self) -> 'StopSignals':
+        self._previous = {number: signal.signal(number, self._note) for number in self.SIGNALS}
+        return self
+
+    def __exit__(self, kind, value, traceback):
+        for number, handler in self._previous.items():
+            signal.signal(number, handler)
+        return False
+
+    def check(self) -> None:
+        """
+        Raise :class:`Interrupted` when a signal has asked the run to stop.
+
+        :raises Interrupted: after SIGINT or SIGTERM
+        """
+        if self.received is not None:
+            raise Interrupted(self.received)
 
 
 @dataclass
@@ -51,6 +121,7 @@ class Summary:
     """
     What one run wrote.
 
+    :ivar bag: the bag read
     :ivar output: the output bag folder
     :ivar topic: the LaserScan topic read
     :ivar scans: scans read and written
@@ -60,6 +131,7 @@ class Summary:
     :ivar seconds: wall time of the run, s
     """
 
+    bag: pathlib.Path
     output: pathlib.Path
     topic: str
     scans: int = 0
@@ -81,58 +153,243 @@ def output_topics(methods) -> dict:
     return {m: (f'/corners/{m}', f'/lines/{m}', f'/markers/{m}') for m in methods}
 
 
-def _stamp(header) -> str:
-    return f'{header.stamp.sec}.{header.stamp.nanosec:09d}'
+def _refuse_to_replace(output: pathlib.Path, bags, force: bool) -> None:
+    """
+    Refuse an output that exists, unless --force may replace it: a folder process_bag wrote.
+
+    :param output: the output folder
+    :param bags: the input bags (of this run: none may be or lie in the output)
+    :param force: --force was given
+    :raises BagError: with the reason, when the output must not be written
+    """
+    target = output.resolve()
+    for bag in bags:
+        source = pathlib.Path(bag).resolve()
+        if source == target or target in source.parents:
+            raise BagError(f'the output {output} holds the input bag {bag}: choose another '
+                           '--output')
+    if not output.exists() and not output.is_symlink():
+        return
+    if not force:
+        raise BagError(f'{output} exists: refusing to overwrite it (--force replaces an '
+                       'earlier output of process_bag)')
+    marker = output / MARKER_NAME
+    try:
+        written = set(json.loads(marker.read_text())['files'])
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        raise BagError(f'--force refused: {output} is not an output of process_bag (no readable '
+                       f'{MARKER_NAME}): remove it yourself or choose another --output') from error
+    others = sorted(path.name for path in output.iterdir() if path.name not in written)
+    if others:
+        raise BagError(f'--force refused: {output} holds files process_bag did not write '
+                       f'({", ".join(others)}): remove them or choose another --output')
 
 
-def _finite(value: float):
-    return value if math.isfinite(value) else None
+class ScanOutput(NamedTuple):
+    """
+    What one scan becomes, ready to be written.
+
+    :ivar messages: (topic, message type, serialised message) for every method's outputs
+    :ivar csv_rows: its rows of corners.csv, as CSV text
+    :ivar json_entry: its entry of corners.json, as JSON text
+    :ivar corners: method -> corners found
+    :ivar segments: method -> segments found
+    :ivar malformed: whether the scan was unusable (written with no features)
+    """
+
+    messages: list
+    csv_rows: str
+    json_entry: str
+    corners: dict
+    segments: dict
+    malformed: bool
 
 
-def _corner_rows(corners: CornerSet):
-    """Yield one dict per corner: position, yaw, covariance terms, opening angle, lines."""
-    for i, corner in enumerate(corners):
-        cov = corner.covariance
-        yield {'index': i, 'x_m': float(corner.x_m), 'y_m': float(corner.y_m),
-               'yaw_rad': float(corner.yaw_rad),
-               **{name: _finite(float(cov[r, c])) for name, (r, c) in
-                  zip(CSV_COLUMNS[8:14], _TRIANGLE)},
-               'opening_angle_rad': float(corner.opening_angle_rad),
-               'first_line': int(corner.first_segment), 'second_line': int(corner.second_segment)}
+def _corner_rows(corners: CornerSet) -> list:
+    """Return one list per corner, in the order of CSV_COLUMNS[4:] (non-finite terms: None)."""
+    triangle = corners.covariance[:, _TRIANGLE[0], _TRIANGLE[1]]
+    values = np.column_stack([corners.xy_m, corners.yaw_rad, triangle,
+                              corners.opening_angle_rad]).tolist()
+    if not np.isfinite(triangle).all():     # JSON has no NaN or infinity
+        values = [[v if math.isfinite(v) else None for v in row] for row in values]
+    return [[index, *row, first, second] for index, row, first, second in zip(
+        range(len(values)), values, corners.first_segment.tolist(),
+        corners.second_segment.tolist())]
+
+
+class ScanWork:
+    """
+    Turns one scan into its output: features by every method, messages, table rows.
+
+    Made once per run; called here, or in worker processes that inherit it (``--jobs``).
+    """
+
+    def __init__(self, parameters: dict, methods=None):
+        """
+        Prepare the work.
+
+        :param parameters: feature_node parameter values (see :func:`load_parameters`)
+        :param methods: the methods to run (None: the ``method`` parameter)
+        :raises ValueError: for parameters that make no valid configuration
+        """
+        config, self.style, self.publish_markers = feature_settings(parameters)
+        self.methods = tuple(methods or (config.method,))
+        self.configs = {m: config.replace(method=m) for m in self.methods}
+        self.topics = output_topics(self.methods)
+        self.store = typestore()
+        self.types = MessageTypes.from_typestore(self.store)
+        # rosbags makes each type's (de)serialiser at its first use: make them now, before
+        # worker processes are forked, so that each does not make its own.
+        for name in (LASER_SCAN, CORNER_ARRAY, LINE_SEGMENT_ARRAY, MARKER_ARRAY):
+            self.store.get_msgdef(name)
+
+    def serialize(self, message) -> bytes:
+        """
+        Serialise a message built with :attr:`types` (CDR, by rosbags).
+
+        :param message: the message
+        :return: its bytes
+        """
+        return bytes(self.store.serialize_cdr(message, message.__msgtype__))
+
+    def __call__(self, index: int, log_time_ns: int, scan) -> ScanOutput:
+        """
+        Extract and convert the features of one scan by every method.
+
+        :param index: the scan's number in the bag (from 0)
+        :param log_time_ns: its log time, ns
+        :param scan: the scan, a LaserScan of :attr:`types`
+        :return: the output
+        """
+        header, types, serialize = scan.header, self.types, self.serialize
+        stamp = f'{header.stamp.sec}.{header.stamp.nanosec:09d}'
+        messages, csv_rows, corners_of, corners, segments = [], [], {}, {}, {}
+        problems = []
+        for method, (corners_topic, lines_topic, markers_topic) in self.topics.items():
+            features, problems = scan_features(scan, self.configs[method])
+            messages.append((corners_topic, CORNER_ARRAY,
+                             serialize(corner_array(features, header, types))))
+            messages.append((lines_topic, LINE_SEGMENT_ARRAY,
+                             serialize(line_segment_array(features, header, types))))
+            if self.publish_markers:
+                messages.append((markers_topic, MARKER_ARRAY, serialize(
+                    marker_array(features, header, self.style, types))))
+            rows = _corner_rows(features.corners)
+            csv_rows.extend([index, stamp, header.frame_id, method, *row] for row in rows)
+            corners_of[method] = [dict(zip(CSV_COLUMNS[4:], row)) for row in rows]
+            corners[method], segments[method] = len(features.corners), len(features.segments)
+        table = io.StringIO()
+        csv.writer(table).writerows(csv_rows)
+        entry = json.dumps({'scan': index, 'stamp': stamp, 'frame_id': header.frame_id,
+                            'log_time_ns': log_time_ns, 'problems': problems,
+                            'corners': corners_of})
+        return ScanOutput(messages, table.getvalue(), entry, corners, segments, bool(problems))
+
+
+# The work of a worker process, inherited from the process that started it.
+_WORK: Optional[ScanWork] = None
+
+
+def _start_worker(work: ScanWork) -> None:
+    """Set up a worker process: its work, and no signals of its own (its parent stops it)."""
+    global _WORK
+    _WORK = work
+    for number in StopSignals.SIGNALS:
+        signal.signal(number, signal.SIG_IGN)
+    with contextlib.suppress(OSError, AttributeError):   # die with the parent, even by SIGKILL
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+
+
+def _work_on(batch: list) -> list:
+    """Run the work of this worker process on (index, log time, serialised scan) triples."""
+    return [_WORK(index, log_time_ns, _WORK.store.deserialize_cdr(data, LASER_SCAN))
+            for index, log_time_ns, data in batch]
+
+
+def _batches(iterable, size: int):
+    """Yield lists of up to ``size`` items."""
+    iterator = iter(iterable)
+    while batch := list(itertools.islice(iterator, size)):
+        yield batch
+
+
+def _outputs(work: ScanWork, records, jobs: int):
+    """
+    Yield batches of (log time, serialised scan, ScanOutput) in bag order.
+
+    With one job everything runs here, a scan at a time; with more, batches of scans go to
+    ``jobs`` worker processes, at most two batches per worker in flight (memory stays flat).
+    """
+    if jobs <= 1:
+        for index, record in enumerate(records):
+            scan = laser_scan(record.scan, work.types)
+            yield [(record.timestamp_ns, work.serialize(scan),
+                    work(index, record.timestamp_ns, scan))]
+        return
+    # Forked, the workers inherit the work and start at once; they die with this process.
+    pool = ProcessPoolExecutor(jobs, multiprocessing.get_context('fork'), _start_worker, (work,))
+    try:
+        pending = collections.deque()
+        for batch in _batches(enumerate(records), BATCH_SCANS):
+            scans = [(index, record.timestamp_ns,
+                      work.serialize(laser_scan(record.scan, work.types)))
+                     for index, record in batch]
+            pending.append((scans, pool.submit(_work_on, scans)))
+            if len(pending) >= 2 * jobs:
+                yield _collect(*pending.popleft())
+        while pending:
+            yield _collect(*pending.popleft())
+    finally:
+        pool.shutdown(cancel_futures=True)
+
+
+def _collect(scans: list, future) -> list:
+    try:
+        outputs = future.result()
+    except BrokenProcessPool as error:
+        raise BagError(f'a worker process died ({error}): out of memory?') from error
+    return [(log_time_ns, data, output)
+            for (_, log_time_ns, data), output in zip(scans, outputs)]
 
 
 class _CornerTables:
     """Streams corners.csv and corners.json (an array written one scan at a time)."""
 
     def __init__(self, bag_writer: BagWriter, header: dict):
-        self._csv_file = bag_writer.sidecar(CSV_NAME).open('w', newline='')
-        self._csv = csv.DictWriter(self._csv_file, CSV_COLUMNS)
-        self._csv.writeheader()
-        self._json = bag_writer.sidecar(JSON_NAME).open('w')
-        head = json.dumps(header, indent=1)
-        self._json.write(head[:head.rindex('}')].rstrip() + ',\n "scans": [')
+        self._paths = bag_writer.sidecar(CSV_NAME), bag_writer.sidecar(JSON_NAME)
+        self._header = header
         self._first = True
 
-    def add(self, index: int, log_time_ns: int, header, problems: list, features: dict):
-        """Append one scan's corners for every method."""
-        common = {'scan': index, 'stamp': _stamp(header), 'frame_id': header.frame_id}
-        entry = {**common, 'log_time_ns': log_time_ns, 'problems': problems, 'corners': {}}
-        for method, result in features.items():
-            rows = list(_corner_rows(result.corners))
-            self._csv.writerows({**common, 'method': method, **row} for row in rows)
-            entry['corners'][method] = rows
-        self._json.write(('\n  ' if self._first else ',\n  ') + json.dumps(entry))
+    def __enter__(self) -> '_CornerTables':
+        csv_path, json_path = self._paths
+        with contextlib.ExitStack() as files:
+            self._csv = files.enter_context(csv_path.open('w', newline=''))
+            self._json = files.enter_context(json_path.open('w'))
+            self._files = files.pop_all()
+        csv.writer(self._csv).writerow(CSV_COLUMNS)
+        head = json.dumps(self._header, indent=1)
+        self._json.write(head[:head.rindex('}')].rstrip() + ',\n "scans": [')
+        return self
+
+    def add(self, output: ScanOutput) -> None:
+        """Append one scan's rows and entry."""
+        self._csv.write(output.csv_rows)
+        self._json.write(('\n  ' if self._first else ',\n  ') + output.json_entry)
         self._first = False
 
-    def close(self):
-        """Finish both files."""
-        self._json.write('\n ]\n}\n')
-        self._json.close()
-        self._csv_file.close()
+    def __exit__(self, kind, value, traceback):
+        if kind is None:
+            self._json.write('\n ]\n}\n')
+            self._files.close()
+        else:
+            with contextlib.suppress(OSError):  # the files are thrown away; flushing may fail
+                self._files.close()
+        return False
 
 
 def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = None,
-            progress: Optional[bool] = None, overwrite: bool = False) -> Summary:
+            overwrite: bool = False, after_scans: Optional[Callable[[int], None]] = None,
+            jobs: int = 1) -> Summary:
     """
     Extract features from every scan of a bag into an output bag with corner tables.
 
@@ -141,68 +398,86 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
     :param parameters: feature_node parameter values (see :func:`load_parameters`)
     :param methods: the methods to run (None: the ``method`` parameter)
     :param topic: the LaserScan topic (None: the bag's only one)
-    :param progress: show a progress bar (None: on a terminal only, after a second)
-    :param overwrite: replace an existing output once the new one is complete
+    :param overwrite: replace an existing output once the new one is complete, if it is an
+        output of process_bag with nothing added (its marker file says what it wrote)
+    :param after_scans: called with the number of scans just written, after each scan (or
+        batch of scans); whatever it raises (e.g. :class:`Interrupted`) ends the run and
+        leaves nothing
+    :param jobs: processes that extract features (1: this one alone)
     :return: counts and timing
-    :raises BagError: for a missing, unreadable or damaged bag, or one without LaserScans
+    :raises BagError: for a missing, unreadable or damaged bag, or one without LaserScans, or
+        an output that exists (without ``overwrite``, or that process_bag did not write)
     :raises ValueError: for parameters that make no valid configuration
     """
-    from tqdm import tqdm
     started = time.perf_counter()
-    config, style, publish_markers = feature_settings(parameters)
-    methods = tuple(methods or (config.method,))
-    configs = {m: config.replace(method=m) for m in methods}
-    topics = output_topics(methods)
+    work = ScanWork(parameters, methods)
     info = bag_info(bag)
     topic = choose_scan_topic(bag, topic, info)
     output = pathlib.Path(output)
-    if output.resolve() == pathlib.Path(bag).resolve():
-        raise BagError(f'the output {output} is the input bag')
-    summary = Summary(output, topic, corners=dict.fromkeys(methods, 0),
-                      segments=dict.fromkeys(methods, 0))
+    _refuse_to_replace(output, [bag], overwrite)
+    summary = Summary(pathlib.Path(bag), output, topic, corners=dict.fromkeys(work.methods, 0),
+                      segments=dict.fromkeys(work.methods, 0))
     with BagWriter(output, overwrite=overwrite) as writer:
-        tables = _CornerTables(writer, {'bag': str(bag), 'topic': topic, 'methods': methods,
-                                        'parameters': parameters})
-        bar = tqdm(total=info.topics[topic][1], unit='scan', desc=pathlib.Path(bag).name,
-                   disable=None if progress is None else not progress, delay=PROGRESS_DELAY_S,
-                   file=sys.stderr)
-        try:
-            for index, record in enumerate(read_scans(bag, topic)):
-                scan = record.laser_scan()
-                time_ns = record.timestamp_ns
-                writer.write(topic, time_ns, scan)
-                results, problems = {}, []
-                for method, (corners, lines, markers) in topics.items():
-                    features, problems = scan_features(scan, configs[method])
-                    results[method] = features
-                    writer.write(corners, time_ns, corner_array(features, scan.header))
-                    writer.write(lines, time_ns, line_segment_array(features, scan.header))
-                    if publish_markers:
-                        writer.write(markers, time_ns,
-                                     marker_array(features, scan.header, style))
-                    summary.corners[method] += len(features.corners)
-                    summary.segments[method] += len(features.segments)
-                tables.add(index, time_ns, scan.header, problems, results)
-                summary.scans += 1
-                summary.malformed += bool(problems)
-                bar.update()
-        finally:
-            bar.close()
-            tables.close()
+        writer.sidecar(MARKER_NAME).write_text(json.dumps({
+            'written_by': 'process_bag of wctls_ros',
+            'files': [MARKER_NAME, f'{output.name}.mcap', 'metadata.yaml', CSV_NAME, JSON_NAME]}))
+        tables = _CornerTables(writer, {'bag': str(bag), 'topic': topic,
+                                        'methods': work.methods, 'parameters': parameters})
+        # Closed on the way out, whatever ends the run: the worker processes stop at once.
+        batches = contextlib.closing(_outputs(work, read_scans(bag, topic), jobs))
+        with tables, batches as outputs:
+            for batch in outputs:
+                for log_time_ns, scan_data, scan_output in batch:
+                    writer.write_serialized(topic, LASER_SCAN, log_time_ns, scan_data)
+                    for message_topic, kind, data in scan_output.messages:
+                        writer.write_serialized(message_topic, kind, log_time_ns, data)
+                    tables.add(scan_output)
+                    for method in work.methods:
+                        summary.corners[method] += scan_output.corners[method]
+                        summary.segments[method] += scan_output.segments[method]
+                    summary.malformed += scan_output.malformed
+                summary.scans += len(batch)
+                if after_scans is not None:
+                    after_scans(len(batch))
     summary.seconds = time.perf_counter() - started
     return summary
 
 
-def default_output(bag) -> pathlib.Path:
+def default_output(bag, folder='.') -> pathlib.Path:
     """
-    Name the output of a bag when none is given: ``<bag name>_features`` here.
+    Name the output of a bag when none is given: ``<bag name>_features`` in a folder.
 
     :param bag: the input bag path
+    :param folder: where the outputs go
     :return: the output folder
     """
     path = pathlib.Path(bag)
     name = path.stem if path.suffix in ('.bag', '.mcap', '.db3') else path.name
-    return pathlib.Path(f'{name}_features')
+    return pathlib.Path(folder) / f'{name}_features'
+
+
+def usable_cpus() -> int:
+    """
+    Return how many CPUs this process may run on.
+
+    :return: the count
+    """
+    return len(os.sched_getaffinity(0))
+
+
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f'must be 1 or more, got {value}')
+    return value
+
+
+class _OneLineErrors(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (the usage is in --help)."""
+
+    def error(self, message):
+        """Exit 2 with ``process_bag: error: <message>``."""
+        self.exit(2, f'{self.prog}: error: {message} (see --help)\n')
 
 
 def parser() -> argparse.ArgumentParser:
@@ -211,29 +486,73 @@ def parser() -> argparse.ArgumentParser:
 
     :return: the argument parser
     """
-    cli = argparse.ArgumentParser(
+    cli = _OneLineErrors(
         prog='process_bag',
         description='Extract corners and line segments with covariances from the LaserScans '
-                    'of a ROS 1 or ROS 2 bag, without ROS middleware. Writes an mcap ROS 2 bag '
-                    '(open it in Foxglove) with the scans, corners, lines and markers, plus '
-                    f'{CSV_NAME} and {JSON_NAME} inside the bag folder.',
-        epilog='Exit status: 0 done, 2 bad arguments, bag or configuration (nothing written).')
-    cli.add_argument('bag', help='ROS 2 bag folder (or its .mcap / .db3 file) or ROS 1 .bag')
+                    'of ROS 1 or ROS 2 bags, without ROS middleware. Writes, per bag, an mcap '
+                    'ROS 2 bag (open it in Foxglove) with the scans, corners, lines and '
+                    f'markers, plus {CSV_NAME} and {JSON_NAME} inside the bag folder.',
+        epilog='Exit status: 0 done; 2 a user error (bad argument, path, bag, parameter file, '
+               'unwritable output), with one line on stderr and nothing written; 130 stopped by '
+               'SIGINT (Ctrl-C), 143 by SIGTERM, with nothing written. With several bags, each '
+               'output is complete or absent: a bag that turns out damaged midway is reported '
+               'in one line and skipped, and the status is 2.')
+    cli.add_argument('bags', nargs='+', metavar='bag',
+                     help='ROS 2 bag folder (or its .mcap / .db3 file) or ROS 1 .bag; several '
+                          'are processed one after the other')
     cli.add_argument('-o', '--output', type=pathlib.Path,
-                     help='output bag folder (default: <bag name>_features in the current '
-                          'folder); must not exist unless --force')
+                     help='output bag folder of a single bag (default: <bag name>_features in '
+                          '--output-dir); must not exist unless --force')
+    cli.add_argument('-d', '--output-dir', type=pathlib.Path, default=pathlib.Path('.'),
+                     help='folder for the outputs named <bag name>_features (default: the '
+                          'current folder)')
     cli.add_argument('-m', '--method', choices=METHODS + (ALL,),
                      help='line fit whose covariances are propagated, or all four on their '
                           'own topics (/corners/<method>, ...); default: the method of the '
                           'config file, else wctls')
     cli.add_argument('-c', '--config', type=pathlib.Path,
-                     help='feature_node parameter file (YAML, as for --ros-args --params-file)')
+                     help='feature_node parameter file (YAML, as for --ros-args --params-file; '
+                          "default: none, feature_node's defaults)")
     cli.add_argument('-t', '--topic', help='LaserScan topic (default: the only one in the bag)')
     cli.add_argument('-f', '--force', action='store_true',
-                     help='replace an existing output (once the new one is complete)')
+                     help='replace an existing output once the new one is complete; only an '
+                          f'output of process_bag (its {MARKER_NAME} file) with no file added')
+    cli.add_argument('-j', '--jobs', type=_positive, default=usable_cpus(),
+                     help='processes that extract features, each taking batches of scans '
+                          f'(default: the CPUs this process may use, {usable_cpus()} here)')
     cli.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
-                     help='show a progress bar (default: on a terminal, for runs over 1 s)')
+                     help='show one progress bar for all bags (default: on a terminal, for '
+                          'runs over 1 s)')
     return cli
+
+
+def _plan(args) -> list:
+    """
+    Pair every bag with its output and check both before anything is written.
+
+    :param args: the parsed command line
+    :return: (bag, output, scans) for each bag
+    :raises BagError: with one line per problem found
+    """
+    if args.output is not None and len(args.bags) > 1:
+        raise BagError(f'--output names the output of one bag; {len(args.bags)} bags were '
+                       'given: use --output-dir')
+    outputs = [args.output or default_output(bag, args.output_dir) for bag in args.bags]
+    runs, problems = [], []
+    for bag, output in zip(args.bags, outputs):
+        try:
+            if outputs.count(output) > 1:
+                raise BagError(f'{bag}: its output {output} would be written twice: give the '
+                               'bags different names')
+            info = bag_info(bag)
+            scans = info.topics[choose_scan_topic(bag, args.topic, info)][1]
+            _refuse_to_replace(pathlib.Path(output), args.bags, args.force)
+            runs.append((bag, output, scans))
+        except BagError as error:
+            problems.append(str(error))
+    if problems:
+        raise BagError('\n'.join(f'process_bag: error: {problem}' for problem in problems))
+    return runs
 
 
 def _report(summary: Summary) -> str:
@@ -248,32 +567,94 @@ def _report(summary: Summary) -> str:
     return '\n'.join(lines)
 
 
+def _table(results: list, methods, seconds: float) -> str:
+    """Tabulate several runs: (bag, Summary or None when it failed)."""
+    rows = [['bag', 'scans', *(f'corners {m}' for m in methods), 'seconds', 'scans/s',
+             'output']]
+    for bag, summary in results:
+        if summary is None:
+            rows.append([str(bag), '', *('' for _ in methods), '', '', 'failed (see above)'])
+            continue
+        rows.append([str(bag), str(summary.scans), *(str(summary.corners[m]) for m in methods),
+                     f'{summary.seconds:.1f}', f'{summary.scans / summary.seconds:.0f}',
+                     str(summary.output)])
+    scans = sum(summary.scans for _, summary in results if summary is not None)
+    rows.append(['all', str(scans), *('' for _ in methods), f'{seconds:.1f}',
+                 f'{scans / seconds:.0f}', f'{sum(s is not None for _, s in results)} written'])
+    widths = [max(len(row[column]) for row in rows) for column in range(len(rows[0]))]
+    return '\n'.join('  '.join(cell.ljust(width) for cell, width in zip(row, widths)).rstrip()
+                     for row in rows)
+
+
 def main(argv=None) -> int:
     """
     Run the command line tool.
 
     :param argv: arguments (None: sys.argv[1:])
-    :return: exit status: 0 done, 2 user error (bad arguments, bag or configuration)
+    :return: exit status: 0 done, 2 user error (one line per problem), 128 + the signal number
+        when stopped by SIGINT or SIGTERM (the output being written is not)
     """
-    args = parser().parse_args(argv)
-    try:
-        overrides = {} if args.method in (None, ALL) else {'method': args.method}
-        parameters = load_parameters(args.config, overrides=overrides)
+    from tqdm import tqdm
+    started = time.perf_counter()
+    with StopSignals() as stop:
+        args = parser().parse_args(argv)
+        methods = METHODS if args.method == ALL else None
+        results = []
         try:
-            feature_settings(parameters)
-        except ValueError as error:
-            raise ConfigError(str(error)) from error
-        summary = process(args.bag, args.output or default_output(args.bag), parameters,
-                          METHODS if args.method == ALL else None, args.topic, args.progress,
-                          args.force)
-    except (BagError, ConfigError) as error:
-        print(f'process_bag: error: {error}', file=sys.stderr)
+            overrides = {} if args.method in (None, ALL) else {'method': args.method}
+            parameters = load_parameters(args.config, overrides=overrides)
+            try:
+                feature_settings(parameters)
+            except ValueError as error:
+                raise ConfigError(f'process_bag: error: {error}') from error
+            runs = _plan(args)
+            tqdm.monitor_interval = 0       # no thread of its own: worker processes are forked
+            bar = tqdm(total=sum(scans for _, _, scans in runs), unit='scan', file=sys.stderr,
+                       disable=None if args.progress is None else not args.progress,
+                       delay=PROGRESS_DELAY_S)
+
+            def after_scans(count: int) -> None:
+                bar.update(count)
+                stop.check()
+
+            with contextlib.closing(bar):
+                for bag, output, _ in runs:
+                    bar.set_description(pathlib.Path(bag).name)
+                    try:
+                        results.append((bag, process(bag, output, parameters, methods,
+                                                     args.topic, args.force, after_scans,
+                                                     args.jobs)))
+                    except BagError as error:
+                        if len(runs) == 1:
+                            raise
+                        bar.write(f'process_bag: error: {error}', file=sys.stderr)
+                        results.append((bag, None))
+        except (BagError, ConfigError) as error:
+            text = str(error)
+            print(text if text.startswith('process_bag: ') else f'process_bag: error: {text}',
+                  file=sys.stderr)
+            return 2
+        except Interrupted as interruption:
+            kept = f'; {len(results)} earlier outputs are complete' if results else ''
+            print(f'process_bag: {interruption}; the output of {bag} is not written{kept}'
+                  if len(runs) > 1 else f'process_bag: {interruption}; nothing written',
+                  file=sys.stderr)
+            return 128 + interruption.signal_number
+    try:
+        if len(results) == 1:
+            print(_report(results[0][1]), flush=True)
+        else:
+            print(_table(results, methods or (parameters['method'],),
+                         time.perf_counter() - started), flush=True)
+    except OSError as error:
+        # Python flushes stdout again at exit: give it a file that takes the rest quietly.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        written = [str(summary.output) for _, summary in results if summary is not None]
+        print(f'process_bag: error: cannot print the summary ({error.strerror}); '
+              + (f'the output {written[0]} is complete' if len(written) == 1 else
+                 f'the outputs {", ".join(written)} are complete'), file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print('process_bag: interrupted; nothing written', file=sys.stderr)
-        return 130
-    print(_report(summary))
-    return 0
+    return 2 if any(summary is None for _, summary in results) else 0
 
 
 if __name__ == '__main__':

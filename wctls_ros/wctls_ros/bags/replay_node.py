@@ -26,6 +26,7 @@ from rosgraph_msgs.msg import Clock as ClockMessage
 from sensor_msgs.msg import LaserScan
 
 from .bag_io import bag_info, BagError, choose_scan_topic, read_scans
+from ..conversions import laser_scan
 from ..node_main import declare_parameters, run_node
 from ..params import BAG_REPLAY
 
@@ -177,7 +178,7 @@ class BagReplay(Node):
 
     def _publish(self, record) -> None:
         try:
-            message = record.laser_scan()
+            message = laser_scan(record.scan)
         except Exception as error:  # noqa: B902 - a bad message in a bag must not stop playback
             self.get_logger().warning(f'skipping a scan logged at {record.timestamp_ns} ns: '
                                       f'{error!r}', throttle_duration_sec=PROGRESS_PERIOD_S)

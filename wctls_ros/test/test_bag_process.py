@@ -37,17 +37,23 @@ MARKERS = 'visualization_msgs/msg/MarkerArray'
 SCAN = 'sensor_msgs/msg/LaserScan'
 
 
+def output_messages(path):
+    """Yield (topic, message) of an output bag, read with only the definitions stored in it."""
+    with AnyReader([path], default_typestore=get_typestore(Stores.EMPTY)) as reader:
+        for connection, _, raw in reader.messages():
+            yield connection.topic, reader.deserialize(raw, connection.msgtype)
+
+
 def read_output(path):
-    """Read an output bag with only the definitions stored in it (as Foxglove does)."""
+    """Read an output bag's topics, types, counts and stamps (as Foxglove would)."""
     counts, stamps = {}, {}
     with AnyReader([path], default_typestore=get_typestore(Stores.EMPTY)) as reader:
         types = {c.topic: c.msgtype for c in reader.connections}
-        for connection, _, raw in reader.messages():
-            message = reader.deserialize(raw, connection.msgtype)
-            counts[connection.topic] = counts.get(connection.topic, 0) + 1
-            if hasattr(message, 'header'):
-                stamp = message.header.stamp
-                stamps.setdefault(connection.topic, []).append((stamp.sec, stamp.nanosec))
+    for topic, message in output_messages(path):
+        counts[topic] = counts.get(topic, 0) + 1
+        if hasattr(message, 'header'):
+            stamp = message.header.stamp
+            stamps.setdefault(topic, []).append((stamp.sec, stamp.nanosec))
     return types, counts, stamps
 
 
@@ -72,6 +78,14 @@ def test_one_method_writes_scans_corners_lines_markers_and_tables(tmp_path, caps
     assert {row['method'] for row in rows} == {'ml'}
     assert rows[0]['stamp'] == f'{stamps[0][0]}.{stamps[0][1]:09d}'
     assert float(rows[0]['var_x_m2']) > 0 and float(rows[0]['var_yaw_rad2']) > 0
+    # Each corner's wall columns repeat that wall's entry of the scan's LineSegmentArray.
+    lines = next(m for topic, m in output_messages(tmp_path / 'out') if topic == '/lines')
+    for row in rows[:5]:
+        for side in ('first', 'second'):
+            wall = lines.segments[int(row[f'{side}_line'])]
+            assert int(row[f'{side}_line_points']) == wall.num_points
+            assert float(row[f'{side}_line_chi2_dof']) == pytest.approx(wall.residual_chi2_dof)
+            assert row[f'{side}_end_seen'] in ('True', 'False')
     document = json.loads((tmp_path / 'out' / 'corners.json').read_text())
     assert document['methods'] == ['ml'] and len(document['scans']) == 5
     first = document['scans'][0]['corners']['ml'][0]

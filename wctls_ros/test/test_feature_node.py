@@ -90,6 +90,15 @@ def test_room_corners_arrive_with_header_covariance_and_indices(ros_context, exe
         assert corner.first_line < len(lines.segments)
         assert corner.second_line < len(lines.segments)
         assert 0.0 < corner.opening_angle < 2 * math.pi
+        # What a front end gates on repeats the walls' own entries; a clean room corner's
+        # walls are seen to their ends and fit within the noise.
+        first, second = lines.segments[corner.first_line], lines.segments[corner.second_line]
+        assert (corner.first_line_points, corner.second_line_points) == (
+            first.num_points, second.num_points)
+        assert (corner.first_line_chi2_dof, corner.second_line_chi2_dof) == (
+            first.residual_chi2_dof, second.residual_chi2_dof)
+        assert 0.0 < corner.first_line_chi2_dof < 3.0 and 0.0 < corner.second_line_chi2_dof < 3.0
+        assert corner.first_end_seen and corner.second_end_seen
     for segment in lines.segments:
         assert segment.radius >= 0.0 and segment.num_points >= 8
         assert 0 <= segment.first_index < len(scan.ranges)

@@ -25,6 +25,9 @@ def _corner(index):
     corner.first_line = index
     corner.second_line = index + 1
     corner.opening_angle = 1.5 + index
+    corner.first_line_points, corner.second_line_points = 40 + index, 9
+    corner.first_line_chi2_dof, corner.second_line_chi2_dof = 0.9 + index, 4.5
+    corner.first_end_seen, corner.second_end_seen = True, bool(index)
     return corner
 
 
@@ -51,6 +54,8 @@ def test_corner_array_with_two_corners_round_trips(ros_context, executor):
     assert got == sent
     assert got.header.stamp.nanosec == 123456789
     assert [c.pose.covariance[35] for c in got.corners] == pytest.approx([0.036, 1.036])
+    assert [(c.second_line_chi2_dof, c.second_end_seen) for c in got.corners] == [
+        (4.5, False), (4.5, True)]
 
 
 def test_line_segment_array_round_trips(ros_context, executor):
@@ -60,7 +65,8 @@ def test_line_segment_array_round_trips(ros_context, executor):
     node.create_subscription(LineSegmentArray, 'lines', received.append, 10)
     publisher = node.create_publisher(LineSegmentArray, 'lines', 10)
     segment = LineSegment(angle=-2.0, radius=3.5, covariance=[1e-4, 2e-6, 2e-6, 4e-4],
-                          first_index=1070, last_index=12, num_points=22)
+                          first_index=1070, last_index=12, num_points=22,
+                          residual_chi2_dof=1.25)
     segment.start.x, segment.end.y = 1.0, -2.0
     sent = LineSegmentArray(method='ml', segments=[segment])
     sent.header.frame_id = 'laser'

@@ -221,18 +221,24 @@ def corner_array(features: Features, header, types: Optional[MessageTypes] = Non
     :return: the message
     """
     types = types or rclpy_types()
-    corners = features.corners
+    corners, segments = features.corners, features.segments
     covariances = pose_covariances(corners.covariance)
+    walls = np.stack([corners.first_segment, corners.second_segment], axis=1)
     messages = [
         types.Corner(pose=types.PoseWithCovariance(
             pose=types.Pose(position=_point(types, x, y),
                             orientation=_quaternion_from_yaw(types, yaw)),
             covariance=covariance),
-            first_line=first, second_line=second, opening_angle=opening)
-        for (x, y), yaw, covariance, opening, first, second in zip(
+            first_line=first, second_line=second, opening_angle=opening,
+            first_line_points=first_points, second_line_points=second_points,
+            first_line_chi2_dof=first_chi2, second_line_chi2_dof=second_chi2,
+            first_end_seen=first_seen, second_end_seen=second_seen)
+        for (x, y), yaw, covariance, opening, (first, second), (first_points, second_points),
+        (first_chi2, second_chi2), (first_seen, second_seen) in zip(
             corners.xy_m.tolist(), corners.yaw_rad.tolist(), covariances,
-            corners.opening_angle_rad.tolist(), corners.first_segment.tolist(),
-            corners.second_segment.tolist())]
+            corners.opening_angle_rad.tolist(), walls.tolist(),
+            segments.num_points[walls].tolist(), segments.residual_chi2_dof[walls].tolist(),
+            corners.end_seen.tolist())]
     return types.CornerArray(header=header, method=features.method, corners=messages)
 
 
@@ -250,12 +256,13 @@ def line_segment_array(features: Features, header, types: Optional[MessageTypes]
     messages = [
         types.LineSegment(angle=angle, radius=radius, covariance=covariance,
                           start=_point(types, *start), end=_point(types, *end),
-                          first_index=first, last_index=last, num_points=count)
-        for angle, radius, covariance, start, end, first, last, count in zip(
+                          first_index=first, last_index=last, num_points=count,
+                          residual_chi2_dof=chi2_dof)
+        for angle, radius, covariance, start, end, first, last, count, chi2_dof in zip(
             s.angle_rad.tolist(), s.radius_m.tolist(),
             np.ascontiguousarray(s.covariance, dtype=float).reshape(-1, 4),
             s.start_xy_m.tolist(), s.end_xy_m.tolist(), s.first_index.tolist(),
-            s.last_index.tolist(), s.num_points.tolist())]
+            s.last_index.tolist(), s.num_points.tolist(), s.residual_chi2_dof.tolist())]
     return types.LineSegmentArray(header=header, method=features.method, segments=messages)
 
 

@@ -45,7 +45,7 @@ from .bag_io import (bag_info, BagError, BagWriter, choose_scan_topic, LASER_SCA
                      typestore)
 from ..conversions import (corner_array, laser_scan, line_segment_array, marker_array,
                            MessageTypes, scan_features)
-from ..core import CornerSet, METHODS
+from ..core import CornerSet, METHODS, SegmentSet
 from ..params import ConfigError, feature_settings, load_parameters
 
 ALL = 'all'
@@ -56,7 +56,9 @@ JSON_NAME = 'corners.json'
 MARKER_NAME = '.process_bag'
 CSV_COLUMNS = ('scan', 'stamp', 'frame_id', 'method', 'index', 'x_m', 'y_m', 'yaw_rad',
                'var_x_m2', 'cov_xy_m2', 'cov_x_yaw_m_rad', 'var_y_m2', 'cov_y_yaw_m_rad',
-               'var_yaw_rad2', 'opening_angle_rad', 'first_line', 'second_line')
+               'var_yaw_rad2', 'opening_angle_rad', 'first_line', 'second_line',
+               'first_line_points', 'second_line_points', 'first_line_chi2_dof',
+               'second_line_chi2_dof', 'first_end_seen', 'second_end_seen')
 # Upper triangle of the (x, y, yaw) covariance, in the order of the CSV columns: rows, columns.
 _TRIANGLE = (np.array([0, 0, 0, 1, 1, 2]), np.array([0, 1, 2, 1, 2, 2]))
 CORNER_ARRAY = 'wctls_msgs/msg/CornerArray'
@@ -205,16 +207,18 @@ class ScanOutput(NamedTuple):
     malformed: bool
 
 
-def _corner_rows(corners: CornerSet) -> list:
+def _corner_rows(corners: CornerSet, segments: SegmentSet) -> list:
     """Return one list per corner, in the order of CSV_COLUMNS[4:] (non-finite terms: None)."""
     triangle = corners.covariance[:, _TRIANGLE[0], _TRIANGLE[1]]
+    walls = np.stack([corners.first_segment, corners.second_segment], axis=1)
     values = np.column_stack([corners.xy_m, corners.yaw_rad, triangle,
                               corners.opening_angle_rad]).tolist()
     if not np.isfinite(triangle).all():     # JSON has no NaN or infinity
         values = [[v if math.isfinite(v) else None for v in row] for row in values]
-    return [[index, *row, first, second] for index, row, first, second in zip(
-        range(len(values)), values, corners.first_segment.tolist(),
-        corners.second_segment.tolist())]
+    return [[index, *row, *wall, *points, *chi2_dof, *seen]
+            for index, row, wall, points, chi2_dof, seen in zip(
+                range(len(values)), values, walls.tolist(), segments.num_points[walls].tolist(),
+                segments.residual_chi2_dof[walls].tolist(), corners.end_seen.tolist())]
 
 
 class ScanWork:
@@ -274,7 +278,7 @@ class ScanWork:
             if self.publish_markers:
                 messages.append((markers_topic, MARKER_ARRAY, serialize(
                     marker_array(features, header, self.style, types))))
-            rows = _corner_rows(features.corners)
+            rows = _corner_rows(features.corners, features.segments)
             csv_rows.extend([index, stamp, header.frame_id, method, *row] for row in rows)
             corners_of[method] = [dict(zip(CSV_COLUMNS[4:], row)) for row in rows]
             corners[method], segments[method] = len(features.corners), len(features.segments)

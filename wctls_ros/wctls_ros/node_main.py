@@ -4,6 +4,8 @@
 """The Jazzy ``main()`` every wctls_ros node shares, and its parameter declarations."""
 
 import re
+import signal
+import threading
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 import rclpy
@@ -79,7 +81,8 @@ def run_node(name: str, make_node, spin=spin_forever, config_errors=(ValueError,
     and status 1, never a traceback. Ctrl-C and SIGTERM are a clean
     end: they shut the context down from a signal handler, so whatever runs at that moment (the
     executor's wait set, a publish) may fail with an RCLError instead of raising
-    ExternalShutdownException; with the context gone, that is a shutdown, not an error.
+    ExternalShutdownException; with the context gone, that is a shutdown, not an error. A
+    second Ctrl-C during the clean-up is ignored. Call it last: the process is ending.
 
     :param name: the logger name for start-up errors
     :param make_node: callable returning the node
@@ -115,7 +118,21 @@ def run_node(name: str, make_node, spin=spin_forever, config_errors=(ValueError,
         if rclpy.ok():
             raise
     finally:
+        _ignore_further_interrupts()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def _ignore_further_interrupts():
+    """
+    Ignore SIGINT from here on: the process is ending (in the main thread; others get none).
+
+    ``ros2 launch`` forwards a Ctrl-C that the terminal has already sent to the whole process
+    group, and users press it twice: a second one would interrupt ``destroy_node()`` with a
+    KeyboardInterrupt traceback, or kill the process as it exits (status -2). Clean-up takes
+    milliseconds; a hung one still ends on SIGTERM, which launch sends next.
+    """
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)

@@ -11,7 +11,8 @@ import pytest
 MSG_DIR = pathlib.Path(__file__).resolve().parents[1] / 'msg'
 MSG_FILES = sorted(MSG_DIR.glob('*.msg'))
 # A comment documents a unit when it names one of these (or says the field has none).
-UNIT_PATTERN = re.compile(r'\b(m|rad|m\^2|rad\^2|index|indices|number|count)\b|Indices|Number|Dimensionless')
+UNIT_PATTERN = re.compile(r'\b(m|rad|m\^2|rad\^2|index|indices|number|count)\b'
+                          r'|Indices|Number|Dimensionless')
 NUMERIC_TYPES = ('float32', 'float64', 'int32', 'uint32', 'geometry_msgs/Point',
                  'geometry_msgs/PoseWithCovariance')
 

@@ -38,9 +38,9 @@ run() {
   } >> "$summary"
 }
 
-# The S1-like sensor's own noise as the covariance model: 2 cm range; bearing 0.05 deg jitter
-# and the 1/3 deg bins (uniform: 0.096 deg std) together 0.108 deg; 1 mm common-mode offset.
-s1_model=(--range-sigma 0.02 --bearing-sigma-deg 0.108 --common-range-sigma 0.001)
+# The S1-like sensor's own noise is the rplidar_s1 preset's: 2 cm range; bearing 0.05 deg
+# jitter and the 1/3 deg bins (uniform: 0.096 deg std) together 0.108 deg; 1 mm common-mode.
+s1_model=(--sensor rplidar_s1)
 one_cm_model=(--range-sigma 0.01 --bearing-sigma-deg 0.05)
 for env in a b; do
   for plan in "environment_$env" "environment_${env}_cluttered"; do
@@ -61,12 +61,15 @@ done
 for bag in sick_lms111_static sick_lms1xx_static; do
   run "${bag}_calibrated_model" "data/$bag" --labels "data/labels/$bag.yaml" \
     --config "docs/results/${bag}_calibration.txt"
+  run "${bag}_sick_lms1xx_preset" "data/$bag" --labels "data/labels/$bag.yaml" \
+    --sensor sick_lms1xx
   run "${bag}_default_model" "data/$bag" --labels "data/labels/$bag.yaml"
 done
 # The hand-held office: calibrate refuses it (the sensor drifts ~1 cm in scans 0-24), so the
-# URG-04LX datasheet's 1 cm stands in for a fitted model; recurrence is measured anyway.
-run urg04lx_office_1cm_model data/urg04lx_office --labels data/labels/urg04lx_office.yaml \
-  --still yes --range-sigma 0.01 --bearing-sigma-deg 0
+# URG-04LX preset (the datasheet's 1 cm) stands in for a fitted model; recurrence is measured
+# anyway.
+run urg04lx_office_hokuyo_urg04lx_preset data/urg04lx_office \
+  --labels data/labels/urg04lx_office.yaml --still yes --sensor hokuyo_urg04lx
 run urg04lx_office_default_model data/urg04lx_office \
   --labels data/labels/urg04lx_office.yaml --still yes
 # One overview table: per case, each figure for utls / wtls / wctls / ml.

@@ -7,18 +7,26 @@ from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
 from wctls_ros.launching import config_file, node, optional_argument
+from wctls_ros.sensors import sensor_presets
 
 
 def generate_launch_description():
-    """Return the launch description: arguments params_file, scan_topic, method, use_sim_time."""
+    """
+    Return the launch description.
+
+    Arguments: params_file, scan_topic, sensor, method, use_sim_time.
+    """
     return LaunchDescription([
         DeclareLaunchArgument('params_file', default_value=config_file('feature_node.yaml'),
                               description='feature_node parameter file'),
         DeclareLaunchArgument('scan_topic', default_value='scan',
                               description='LaserScan topic to read'),
+        optional_argument('sensor', 'sensor preset of the noise model: ' + ' | '.join(
+            sensor_presets())),
         optional_argument('method', 'line fit: utls | wtls | wctls | ml'),
         optional_argument('use_sim_time', 'use /clock, e.g. when a bag is replayed with it'),
         node('feature_node', LaunchConfiguration('params_file'),
-             arguments=[('method', 'method'), ('use_sim_time', 'use_sim_time')],
+             arguments=[('sensor', 'sensor'), ('method', 'method'),
+                        ('use_sim_time', 'use_sim_time')],
              remappings=[('scan', LaunchConfiguration('scan_topic'))]),
     ])

@@ -5,7 +5,8 @@
 Start an RPLIDAR S1 and the feature node: ros2 launch wctls_ros rplidar_s1.launch.py.
 
 Arguments: serial_port, channel_type, tcp_ip, frame_id and params_file (the driver's; each of
-the first four overrides the file only when given); with_feature_node (default true), method
+the first four overrides the file only when given); with_feature_node (default true), sensor
+(default rplidar_s1: the S1's noise model, over the file's preset; '' keeps the file's), method
 and feature_params_file (feature_node's).
 """
 
@@ -14,6 +15,7 @@ from launch.actions import DeclareLaunchArgument
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from wctls_ros.launching import config_file, node, optional_argument
+from wctls_ros.sensors import sensor_presets
 
 # Driver parameters a launch argument of the same name overrides when given.
 DRIVER_ARGUMENTS = (
@@ -32,6 +34,9 @@ def generate_launch_description():
                               description='rplidar_node parameter file'),
         DeclareLaunchArgument('with_feature_node', default_value='true',
                               description='also start feature_node on the scans'),
+        DeclareLaunchArgument('sensor', default_value='rplidar_s1',
+                              description="feature_node sensor preset ('' keeps the parameter "
+                                          "file's): " + ' | '.join(sensor_presets())),
         optional_argument('method', 'feature_node line fit: utls | wtls | wctls | ml'),
         DeclareLaunchArgument('feature_params_file',
                               default_value=config_file('feature_node.yaml'),
@@ -39,6 +44,6 @@ def generate_launch_description():
         node('rplidar_node', LaunchConfiguration('params_file'),
              arguments=[(name, name) for name, _ in DRIVER_ARGUMENTS]),
         node('feature_node', LaunchConfiguration('feature_params_file'),
-             arguments=[('method', 'method')],
+             arguments=[('sensor', 'sensor'), ('method', 'method')],
              condition=IfCondition(LaunchConfiguration('with_feature_node'))),
     ])

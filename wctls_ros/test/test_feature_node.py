@@ -25,7 +25,6 @@ from wctls_msgs.msg import CornerArray, LineSegmentArray  # noqa: E402
 from wctls_ros.core import nees  # noqa: E402
 from wctls_ros.feature_node import FeatureNode  # noqa: E402
 from wctls_ros.params import FEATURE_NODE  # noqa: E402
-import yaml  # noqa: E402
 
 PACKAGE = pathlib.Path(__file__).resolve().parents[1]
 
@@ -183,12 +182,6 @@ def test_a_burst_of_malformed_scans_then_a_good_one(ros_context, executor):
         assert len(corners.corners) == len(lines.segments) == 0
     corners, _ = harness.exchange(good, count=len(bad) + 1)
     assert len(corners.corners) == 5
-
-
-def test_config_file_holds_every_parameter_at_its_default():
-    config = yaml.safe_load((PACKAGE / 'config' / 'feature_node.yaml').read_text())
-    values = config['feature_node']['ros__parameters']
-    assert values == pytest.approx({spec.name: spec.default for spec in FEATURE_NODE})
 
 
 def installed_executable(name):

@@ -14,15 +14,19 @@ import pytest
 from wctls_ros.core import FeatureConfig
 from wctls_ros.params import (BAG_REPLAY, ConfigError, FEATURE_NODE, feature_settings,
                               load_parameters, markdown_table, RPLIDAR_NODE, SCHEMAS)
+from wctls_ros.sensors import DEFAULT_SENSOR, PRESET_PARAMETERS, sensor_presets
 import yaml
 
 BY_NAME = {parameter.name: parameter for parameter in FEATURE_NODE}
 
 
 def test_every_pipeline_setting_is_a_parameter_with_the_core_default():
+    # ... except the noise model, whose default is the default sensor preset's (test_sensors).
     settings_of = {p.setting: p for p in FEATURE_NODE if p.setting}
     for field in dataclasses.fields(FeatureConfig):
         parameter = settings_of[field.name]
+        if parameter.name in PRESET_PARAMETERS:
+            continue
         core_default = getattr(FeatureConfig(), field.name)
         if isinstance(core_default, str):
             assert parameter.default == core_default
@@ -119,9 +123,14 @@ def test_settings_refuse_a_rule_between_two_values():
         feature_settings(values)
 
 
-def test_defaults_build_the_default_configuration():
+def test_defaults_build_the_default_configuration_with_the_default_sensor_model():
     config, style, publish_markers = feature_settings(load_parameters(None))
-    assert config == FeatureConfig() and publish_markers
+    generic = sensor_presets()[DEFAULT_SENSOR].parameters
+    assert config == FeatureConfig(
+        range_sigma_m=generic['range_sigma_m'], range_sigma_from_scan=generic[
+            'range_sigma_from_scan'], common_range_sigma_m=generic[
+            'common_range_sigma_m'], bearing_sigma_rad=math.radians(generic['bearing_sigma_deg']))
+    assert publish_markers
 
 
 def test_a_parameter_file_is_read_from_its_node_section_over_wildcards(tmp_path):
@@ -187,7 +196,13 @@ def test_the_schema_and_the_parameter_files_never_import_rclpy():
                                                  ('rplidar_node', 'rplidar_s1.yaml'),
                                                  ('bag_replay', 'bag_replay.yaml')])
 def test_each_shipped_parameter_file_sets_every_parameter_at_its_default(node_name, file_name):
+    # ... except the noise model, which the file leaves to its sensor preset (commented out).
     path = pathlib.Path(__file__).resolve().parents[1] / 'config' / file_name
     written = yaml.safe_load(path.read_text())[node_name]['ros__parameters']
-    assert set(written) == {parameter.name for parameter in SCHEMAS[node_name]}
+    names = {parameter.name for parameter in SCHEMAS[node_name]}
+    if node_name == 'feature_node':
+        names -= set(PRESET_PARAMETERS)
+        for name in PRESET_PARAMETERS:
+            assert f'# {name}: ' in path.read_text()
+    assert set(written) == names
     assert load_parameters(path, node_name) == pytest.approx(load_parameters(None, node_name))

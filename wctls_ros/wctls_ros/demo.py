@@ -32,16 +32,9 @@ from .params import feature_settings, load_parameters
 from .simulation import full_turn_bearings, load_floor_plan, S1_BEAMS_PER_TURN
 from .simulation.visibility import visible_corners
 
-# The emulated S1: 1 cm range noise and 0.05 deg bearing noise (a quieter unit than the
-# datasheet's 5 cm / 0.391 deg, which the paper's 4 cm IEPF threshold cannot segment).
-EMULATOR_RANGE_SIGMA_M = 0.01
-EMULATOR_BEARING_SIGMA_DEG = 0.05
-# feature_node's noise model is the emulator's. The driver runs with angle_compensate off, so
-# every sample is a beam at its own measured bearing (about 926 per turn, a different count
-# each turn): sllidar_ros2's 1/3 deg bins would repeat samples into neighbouring bins and shift
-# bearings by up to 0.2 deg, which no independent-noise model describes.
-MODEL_PARAMETERS = {'range_sigma_m': EMULATOR_RANGE_SIGMA_M,
-                    'bearing_sigma_deg': EMULATOR_BEARING_SIGMA_DEG}
+# What a user of an S1 runs (rplidar_s1.launch.py): the driver's defaults and feature_node with
+# the S1 preset; the emulator simulates the S1 as we expect a real one to look (s1_like).
+FEATURE_PARAMETERS = {'sensor': 'rplidar_s1'}
 # A found corner is the true one when it is this close, m.
 MATCH_RADIUS_M = 0.1
 STOP_TIMEOUT_S = 10.0
@@ -209,6 +202,9 @@ def summarise(seen: Recording, truth_xy: np.ndarray) -> List[tuple]:
         ('corners per scan (mean, min-max)',
          f'{counts.mean():.1f} ({counts.min()}-{counts.max()})' if counts.size else '-'),
         ('true corners in view', f'{len(truth_xy)}'),
+        (f'corners within {MATCH_RADIUS_M * 100:.0f} cm of a true one',
+         f'{len(errors)} of {counts.sum()} ({100 * len(errors) / counts.sum():.1f} %)'
+         if counts.sum() else '-'),
         ('mean corner sigma x, y (mm)',
          f'{1e3 * sigmas[:, 0].mean():.1f}, {1e3 * sigmas[:, 1].mean():.1f}'
          if sigmas.size else '-'),
@@ -281,7 +277,7 @@ def main(argv=None) -> int:
     # A private DDS domain keeps the demo from meeting (or disturbing) anything else running.
     os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 100)))
     tty = out.resolve() / 'ttyS1'
-    parameters = {**MODEL_PARAMETERS, 'method': args.method}
+    parameters = {**FEATURE_PARAMETERS, 'method': args.method}
     config = feature_settings(
         load_parameters(_config_file() / 'feature_node.yaml', overrides=parameters))[0]
     processes = Processes(out / 'logs')
@@ -289,14 +285,11 @@ def main(argv=None) -> int:
     seen = Recording()
     try:
         emulator = processes.start('s1_emulator', [
-            _executable('s1_emulator'), '--link', str(tty), '--floor-plan', args.floor_plan,
-            '--range-sigma', str(EMULATOR_RANGE_SIGMA_M),
-            '--bearing-sigma-deg', str(EMULATOR_BEARING_SIGMA_DEG)])
+            _executable('s1_emulator'), '--link', str(tty), '--floor-plan', args.floor_plan])
         _wait_for(tty, emulator, 20.0)
         processes.start('rplidar_node', [
             _executable('rplidar_node'), '--ros-args', '--params-file',
-            str(_config_file() / 'rplidar_s1.yaml'), '-p', f'serial_port:={tty}',
-            '-p', 'angle_compensate:=false'])
+            str(_config_file() / 'rplidar_s1.yaml'), '-p', f'serial_port:={tty}'])
         processes.start('feature_node', [
             _executable('feature_node'), '--ros-args', '--params-file',
             str(_config_file() / 'feature_node.yaml')]

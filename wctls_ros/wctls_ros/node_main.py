@@ -14,6 +14,8 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.utilities import remove_ros_args
 
+from .params import defaults, SENSOR
+
 # What rclpy.init raises for bad ROS arguments (an unreadable --params-file, a bad remap rule,
 # an unknown --ros-args option) or environment (ROS_DOMAIN_ID).
 _INIT_ERRORS = (rclpy_implementation.RCLError, rclpy_implementation.UnknownROSArgsError)
@@ -49,14 +51,25 @@ def declare_parameters(node, schema) -> dict:
     """
     Declare a node's parameters from its schema and return their values.
 
+    A ``sensor`` parameter (feature_node's) is declared first: its preset's values are the
+    defaults of the parameters it sets (:func:`wctls_ros.params.defaults`).
+
     :param node: the rclpy node
     :param schema: its rows (e.g. :data:`wctls_ros.params.FEATURE_NODE`)
     :return: name -> value (the default, a parameter file's or a command line's)
     :raises rclpy.exceptions.ParameterException: on a value of the wrong type or range
+    :raises wctls_ros.params.ConfigError: on an unknown sensor preset
     """
-    return {parameter.name: node.declare_parameter(parameter.name, parameter.default,
-                                                   parameter_descriptor(parameter)).value
-            for parameter in schema}
+    def declare(parameter, default):
+        return node.declare_parameter(parameter.name, default,
+                                      parameter_descriptor(parameter)).value
+
+    values = {parameter.name: declare(parameter, parameter.default)
+              for parameter in schema if parameter.name == SENSOR}
+    initial = defaults(schema, values.get(SENSOR))
+    values.update({parameter.name: declare(parameter, initial[parameter.name])
+                   for parameter in schema if parameter.name != SENSOR})
+    return values
 
 
 def spin_forever(executor, node) -> int:

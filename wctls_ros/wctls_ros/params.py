@@ -13,7 +13,7 @@ pipeline parameters are derived from :class:`~wctls_ros.core.FeatureConfig` itse
 descriptions and limits), so a limit is stated once. Pure Python: no rclpy import.
 """
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 import math
 import pathlib
 import sys
@@ -23,6 +23,7 @@ import yaml
 
 from .core import FeatureConfig, METHODS
 from .core.config import field_description, field_limits, Limits
+from .sensors import DEFAULT_SENSOR, PRESET_PARAMETERS, sensor_presets
 
 Value = Union[bool, int, float, str]
 # Parameters every node has (or that rclpy adds) which a parameter file may set for any node.
@@ -140,8 +141,22 @@ class MarkerStyle:
     text_ids: bool = True
 
 
+def _preset_parameter(parameter: Parameter) -> Parameter:
+    """Return a parameter a sensor preset sets, with the default preset's value as default."""
+    if parameter.name not in PRESET_PARAMETERS:
+        return parameter
+    return replace(parameter, default=sensor_presets()[DEFAULT_SENSOR].parameters[parameter.name],
+                   description=f"{parameter.description} (default: the sensor preset's)")
+
+
+SENSOR = 'sensor'
 _STYLE = MarkerStyle()
-FEATURE_NODE = tuple(_feature_parameter(f.name) for f in fields(FeatureConfig)) + (
+FEATURE_NODE = (
+    Parameter(SENSOR, DEFAULT_SENSOR, 'Sensor preset (config/sensors/<name>.yaml): its noise '
+              f'model is the default of {", ".join(PRESET_PARAMETERS)}, which a parameter file '
+              'or a command line may still set', choices=tuple(sensor_presets()),
+              read_only=True),
+) + tuple(_preset_parameter(_feature_parameter(f.name)) for f in fields(FeatureConfig)) + (
     Parameter('publish_markers', True, 'Publish visualization_msgs/MarkerArray on markers'),
     Parameter('marker_ellipse_sigma', _STYLE.ellipse_sigma,
               'Draw the k-sigma covariance ellipse of each corner', Limits(0.1, 10.0),
@@ -216,14 +231,24 @@ class FeatureSettings(NamedTuple):
     publish_markers: bool
 
 
-def defaults(schema) -> Dict[str, Value]:
+def defaults(schema, sensor: Optional[str] = None) -> Dict[str, Value]:
     """
     Return the default value of every parameter of a schema.
 
     :param schema: e.g. FEATURE_NODE
+    :param sensor: a sensor preset whose values are the defaults of the parameters it sets
+        (feature_node's); None: the schema's own defaults (those of DEFAULT_SENSOR)
     :return: name -> default
+    :raises ConfigError: on an unknown sensor
     """
-    return {parameter.name: parameter.default for parameter in schema}
+    values = {parameter.name: parameter.default for parameter in schema}
+    if sensor is not None:
+        presets = sensor_presets()
+        if sensor not in presets:
+            raise ConfigError(f'{SENSOR} must be one of {tuple(presets)}, got {sensor!r}')
+        values.update({name: value for name, value in presets[sensor].parameters.items()
+                       if name in values})
+    return values
 
 
 def feature_settings(values: Dict[str, Value]) -> FeatureSettings:
@@ -287,7 +312,8 @@ def load_parameters(path, node_name: str = 'feature_node',
     The file is the one ``--ros-args --params-file`` takes: the node's section (or ``/**``)
     and its ``ros__parameters``. A file is accepted exactly when the node would accept it
     (names, types, ranges); feature_node's rules between values are checked by
-    :func:`feature_settings`.
+    :func:`feature_settings`. A ``sensor`` preset sets the defaults of the parameters it
+    covers; the file and the overrides still set any of them.
 
     :param path: the parameter file (None: defaults only)
     :param node_name: the node whose section and schema apply (a key of SCHEMAS)
@@ -317,9 +343,10 @@ def load_parameters(path, node_name: str = 'feature_node',
                      and not name.startswith(_COMMON_PREFIXES))
     if unknown:
         raise ConfigError(f'unknown {node_name} parameters {unknown}; known: {sorted(schema)}')
-    values = defaults(schema.values())
-    values.update({name: schema[name].check(value) for name, value in given.items()
-                   if name in schema})
+    checked = {name: schema[name].check(value) for name, value in given.items()
+               if name in schema}
+    values = defaults(schema.values(), checked.get(SENSOR))
+    values.update(checked)
     return values
 
 

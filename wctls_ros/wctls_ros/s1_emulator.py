@@ -20,6 +20,7 @@ Exit status: 0 after ``quit`` or SIGTERM, 2 on a user error (one line on standar
 """
 
 import argparse
+from dataclasses import replace
 import math
 import os
 import queue
@@ -36,7 +37,7 @@ from .rplidar.emulator.device import Faults
 from .rplidar.emulator.server import Emulator, PtyPort
 from .rplidar.protocol import HealthStatus
 from .simulation import (BUNDLED_PLANS, FloorPlan, load_floor_plan, NOISELESS, NoiseModel,
-                         simulate_scan)
+                         SENSOR_MODELS, simulate_scan)
 
 PROG = 's1_emulator'
 EXIT_USER_ERROR = 2
@@ -138,12 +139,13 @@ def _parse_args(argv):
                              '(default: %(default)s)')
     parser.add_argument('--pose', type=float, nargs=3, metavar=('X', 'Y', 'YAW_DEG'),
                         help="sensor pose in the plan, m and degrees (default: the plan's own)")
+    parser.add_argument('--sensor', choices=tuple(SENSOR_MODELS), default='s1_like',
+                        help="the sensor's measurement model (simulate --sensor; the driver "
+                             'bins the samples itself, so no bins here) (default: %(default)s)')
     parser.add_argument('--range-sigma', type=_bounded(float, 0.0),
-                        default=NoiseModel.range_sigma_m,
-                        help='range noise std, m (default: %(default)s)')
+                        help="range noise std, m (default: the sensor model's)")
     parser.add_argument('--bearing-sigma-deg', type=_bounded(float, 0.0),
-                        default=math.degrees(NoiseModel.bearing_sigma_rad),
-                        help='bearing noise std, degrees (default: %(default).3f)')
+                        help="bearing noise std, degrees (default: the sensor model's)")
     parser.add_argument('--noiseless', action='store_true',
                         help='exact ranges, no noise (default: off)')
     parser.add_argument('--seed', type=int, default=0, help='random seed (default: %(default)s)')
@@ -177,8 +179,12 @@ def _scene(args) -> tuple:
         raise UserError(f'--floor-plan {args.floor_plan}: not a valid floor plan '
                         f'({type(error).__name__}: {" ".join(str(error).split())})') from None
     pose = None if args.pose is None else (args.pose[0], args.pose[1], math.radians(args.pose[2]))
-    noise = NOISELESS if args.noiseless else NoiseModel(
-        range_sigma_m=args.range_sigma, bearing_sigma_rad=math.radians(args.bearing_sigma_deg))
+    noise = replace(SENSOR_MODELS[args.sensor], bearing_quantum_rad=0.0)
+    if args.range_sigma is not None:
+        noise = replace(noise, range_sigma_m=args.range_sigma)
+    if args.bearing_sigma_deg is not None:
+        noise = replace(noise, bearing_sigma_rad=math.radians(args.bearing_sigma_deg))
+    noise = NOISELESS if args.noiseless else noise
     return SimulatedScene(plan, pose, noise, np.random.default_rng(args.seed)), plan.name
 
 

@@ -46,7 +46,8 @@ from .bag_io import (bag_info, BagError, BagWriter, choose_scan_topic, LASER_SCA
 from ..conversions import (corner_array, laser_scan, line_segment_array, marker_array,
                            MessageTypes, scan_features)
 from ..core import CornerSet, METHODS, SegmentSet
-from ..params import ConfigError, feature_settings, load_parameters
+from ..params import ConfigError, feature_settings, load_parameters, SENSOR
+from ..sensors import DEFAULT_SENSOR, sensor_presets
 
 ALL = 'all'
 CSV_NAME = 'corners.csv'
@@ -517,6 +518,9 @@ def parser() -> argparse.ArgumentParser:
     cli.add_argument('-c', '--config', type=pathlib.Path,
                      help='feature_node parameter file (YAML, as for --ros-args --params-file; '
                           "default: none, feature_node's defaults)")
+    cli.add_argument('-s', '--sensor', choices=tuple(sensor_presets()),
+                     help='sensor preset: its noise model, unless the config file sets the '
+                          f"sigmas (default: the config file's, else {DEFAULT_SENSOR})")
     cli.add_argument('-t', '--topic', help='LaserScan topic (default: the only one in the bag)')
     cli.add_argument('-f', '--force', action='store_true',
                      help='replace an existing output once the new one is complete; only an '
@@ -606,6 +610,8 @@ def main(argv=None) -> int:
         results = []
         try:
             overrides = {} if args.method in (None, ALL) else {'method': args.method}
+            if args.sensor is not None:
+                overrides[SENSOR] = args.sensor
             parameters = load_parameters(args.config, overrides=overrides)
             try:
                 feature_settings(parameters)

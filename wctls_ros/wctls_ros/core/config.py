@@ -66,7 +66,9 @@ class FeatureConfig:
     Every knob of :func:`~wctls_ros.core.extract_features`, validated on construction.
 
     Defaults follow the paper: WCTLS, the RPLIDAR S1 datasheet figures (5 cm range accuracy,
-    0.391 deg angular resolution) as noise, and a 40 mm IEPF threshold. Each field's meaning,
+    0.391 deg angular resolution) as noise, and a 40 mm IEPF threshold. feature_node and the
+    tools take their noise model from a sensor preset instead (:mod:`wctls_ros.sensors`), whose
+    default is measured to suit every recording we have. Each field's meaning,
     unit and allowed interval are in its metadata (:func:`field_description`,
     :func:`field_limits`).
     """
@@ -74,11 +76,14 @@ class FeatureConfig:
     method: str = _setting(
         'wctls', 'line fit whose covariance is propagated: ' + ' | '.join(METHODS))
     range_sigma_m: float = _setting(
-        0.05, 'std of the range noise, m (RPLIDAR S1 datasheet: 0.05)',
+        0.05, 'std of the range noise of one return, m',
         Limits(0.0, 10.0, low_open=True))
     bearing_sigma_rad: float = _setting(
-        math.radians(0.391), 'std of the bearing noise, {unit} (RPLIDAR S1 datasheet: 0.391 deg)',
+        math.radians(0.391), 'std of the bearing noise of one return, {unit}',
         Limits(0.0, math.radians(10.0)))
+    range_sigma_from_scan: bool = _setting(
+        False, 'estimate the range noise of each scan from the scan itself (the second '
+        'differences of neighbouring ranges); range_sigma_m is then its floor')
     common_range_sigma_m: float = _setting(
         0.0, 'std of a range offset shared by every return of one scan, m (some sensors drift '
         'as a whole, e.g. the SICK LMS111 by about 1 mm; calibrate measures it)',

@@ -13,6 +13,7 @@ from .corners import find_corners, walls_end_at_corners
 from .features import CornerSet, Features, SegmentSet
 from .lines import fit_lines, LineFits, normal_jacobian, segment_returns, SegmentReturns
 from .model_error import flatness_covariance, line_from_normal_jacobian, residual_factor
+from .noise import scan_range_sigma
 from .scan import scan_to_points, ScanError, ScanPoints
 from .segmentation import (breakpoints, Breaks, Chains, chains, iterative_end_point_fit,
                            merge_collinear, moment_fit, moment_terms, pass_budget, piece_sums,
@@ -70,6 +71,9 @@ def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float
                             min(range_max_m, config.range_max_m))
     if len(points) < config.min_segment_points:
         return Features(config.method, SegmentSet.empty(), CornerSet.empty())
+    if config.range_sigma_from_scan:
+        config = replace(config, range_sigma_m=max(config.range_sigma_m,
+                                                   scan_range_sigma(points)))
     contour = _Contour.of(points, config)
     segments, angle, radius, work_limited = _segment(contour, config)
     if not len(segments):

@@ -28,7 +28,8 @@ from .scans import check_still, load_json_scans, load_scans, StaticScans
 from .score import markdown_table, RECURRING_PRESENCE, score_scans, write_score
 from .truth import load_truth, Truth, TRUTH_FILE
 from ..core import FeatureConfig, METHODS
-from ..params import feature_settings, load_parameters
+from ..params import feature_settings, load_parameters, SENSOR
+from ..sensors import DEFAULT_SENSOR, sensor_presets
 
 
 class UserError(ValueError):
@@ -58,7 +59,10 @@ def parser() -> argparse.ArgumentParser:
                    + ' (default: %(default)s)')
     p.add_argument('--config', default=None,
                    help='feature_node parameter YAML (as for --params-file); default: the '
-                   "node's defaults (5 cm, 0.391 deg)")
+                   "node's defaults")
+    p.add_argument('--sensor', default=None, choices=tuple(sensor_presets()),
+                   help='sensor preset whose noise model the covariances use, over the '
+                   f"config file's (default: the file's, else {DEFAULT_SENSOR})")
     p.add_argument('--range-sigma', type=float, default=None,
                    help='range noise std of the covariances, m (overrides --config)')
     p.add_argument('--bearing-sigma-deg', type=float, default=None,
@@ -82,15 +86,17 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
-def node_config(path) -> FeatureConfig:
+def node_config(path=None, sensor: Optional[str] = None) -> FeatureConfig:
     """
-    Return the pipeline settings of a feature_node parameter file, checked as the node does.
+    Return the pipeline settings feature_node would run with, checked as the node does.
 
-    :param path: the YAML file
+    :param path: a feature_node parameter file (None: the node's defaults)
+    :param sensor: a sensor preset, over the file's (None: the file's, else the default)
     :return: the configuration
-    :raises ValueError: when the node would refuse the file
+    :raises ValueError: when the node would refuse the file or the sensor
     """
-    return feature_settings(load_parameters(path)).config
+    overrides = {} if sensor is None else {SENSOR: sensor}
+    return feature_settings(load_parameters(path, overrides=overrides)).config
 
 
 def configs(args, methods) -> Dict[str, FeatureConfig]:
@@ -102,7 +108,7 @@ def configs(args, methods) -> Dict[str, FeatureConfig]:
     :return: method -> configuration
     :raises ValueError: on values the pipeline refuses
     """
-    base = node_config(args.config) if args.config else FeatureConfig()
+    base = node_config(args.config, args.sensor)
     given = {'range_sigma_m': args.range_sigma,
              'bearing_sigma_rad': (None if args.bearing_sigma_deg is None
                                    else math.radians(args.bearing_sigma_deg)),

@@ -9,6 +9,10 @@ reading it, and feature_node extracting corners, each as its own process like ``
 would; records ``scan``, ``corners``, ``lines`` and ``markers`` into an mcap bag; then prints a
 table (corners per scan, their sigmas, their error against the simulated truth, latency) and
 draws one scan. Every process it started is stopped at the end, also on Ctrl-C.
+
+Exit status: 0 done; 1 the live run failed (a process did not start or no features came; one
+line, the logs say why); 2 a user error (one line ``demo: error: ...``); 130 / 143 stopped by
+Ctrl-C / SIGTERM before the summary.
 """
 
 import argparse
@@ -27,7 +31,8 @@ from typing import Dict, List
 import numpy as np
 
 from .bags import BagWriter
-from .core import nees
+from .cli import bounded, Parser, USER_ERROR
+from .core import METHODS, nees
 from .params import feature_settings, load_parameters
 from .simulation import full_turn_bearings, load_floor_plan, S1_BEAMS_PER_TURN
 from .simulation.visibility import visible_corners
@@ -46,6 +51,7 @@ class Recording:
 
     scans: Dict[int, tuple] = field(default_factory=dict)    # stamp -> (receive time, msg)
     corners: List[tuple] = field(default_factory=list)       # (receive time, CornerArray)
+    stopped_by: int = 0                 # the signal that ended the recording early, if any
 
 
 def _executable(name: str) -> str:
@@ -111,7 +117,7 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
 
     :param bag_path: the bag folder to write
     :param seconds: how long to record once features flow, s
-    :return: what was seen, for the summary
+    :return: what was seen, for the summary (``stopped_by`` set on SIGINT or SIGTERM)
     """
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -127,7 +133,12 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
     # Ctrl-C or SIGTERM ends the recording between two spins. A KeyboardInterrupt raised at any
     # moment could cut a bag write short, or surface from inside rclpy's take as a RuntimeError.
     stop = threading.Event()
-    previous_handlers = {number: signal.signal(number, lambda *_: stop.set())
+
+    def on_signal(number, _):
+        seen.stopped_by = number
+        stop.set()
+
+    previous_handlers = {number: signal.signal(number, on_signal)
                          for number in (signal.SIGINT, signal.SIGTERM)}
     node = rclpy.create_node('demo_recorder', context=context)
     executor = SingleThreadedExecutor(context=context)
@@ -167,8 +178,6 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
-    if stop.is_set():
-        raise KeyboardInterrupt
     return seen
 
 
@@ -247,14 +256,21 @@ def draw(seen: Recording, config, truth_xy: np.ndarray, path: pathlib.Path) -> N
     plt.close(fig)
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog='demo', description=__doc__.strip().splitlines()[0])
-    p.add_argument('--seconds', type=float, default=20.0,
+def parser() -> argparse.ArgumentParser:
+    """
+    Return the command-line parser.
+
+    :return: the parser
+    """
+    p = Parser(prog='demo', description=__doc__.strip().splitlines()[0])
+    p.add_argument('--seconds', type=bounded(float, 1.0), default=20.0,
                    help='how long to record once features flow, s (default: %(default)s)')
     p.add_argument('--out', default='out/demo', help='output folder (default: %(default)s)')
     p.add_argument('--floor-plan', default='environment_a',
-                   help='emulated scene: environment_a, environment_b or a YAML file')
-    p.add_argument('--method', default='wctls', choices=('utls', 'wtls', 'wctls', 'ml'))
+                   help='emulated scene: environment_a, environment_b or a YAML file '
+                   '(default: %(default)s)')
+    p.add_argument('--method', default='wctls', choices=METHODS,
+                   help="feature_node's line fit (default: %(default)s)")
     return p
 
 
@@ -265,7 +281,12 @@ def main(argv=None) -> int:
     :param argv: arguments (default: sys.argv[1:])
     :return: exit status
     """
-    args = _parser().parse_args(argv)
+    args = parser().parse_args(argv)
+    try:
+        plan = load_floor_plan(args.floor_plan)
+    except (OSError, ValueError) as error:
+        print(f'demo: error: --floor-plan: {" ".join(str(error).split())}', file=sys.stderr)
+        return USER_ERROR
     out = pathlib.Path(args.out)
     for stale in ('bag', 'logs', 'scan.png', 'summary.md', 'ttyS1'):
         target = out / stale
@@ -281,7 +302,6 @@ def main(argv=None) -> int:
     config = feature_settings(
         load_parameters(_config_file() / 'feature_node.yaml', overrides=parameters))[0]
     processes = Processes(out / 'logs')
-    interrupted = False
     seen = Recording()
     try:
         emulator = processes.start('s1_emulator', [
@@ -299,13 +319,19 @@ def main(argv=None) -> int:
               flush=True)
         seen = record(out / 'bag', args.seconds)
     except KeyboardInterrupt:
-        interrupted = True
-        print('demo: interrupted; stopping everything', file=sys.stderr)
+        seen.stopped_by = signal.SIGINT
+    except RuntimeError as error:
+        print(f'demo: {error}', file=sys.stderr)
+        return 1
     finally:
+        if seen.stopped_by:
+            print('demo: interrupted; stopping everything', file=sys.stderr)
         processes.stop_all()
-    if interrupted or not seen.corners:
-        return 0 if interrupted else 1
-    plan = load_floor_plan(args.floor_plan)
+    if seen.stopped_by:
+        return 128 + seen.stopped_by
+    if not seen.corners:
+        print(f'demo: no corners recorded (see {out / "logs"})', file=sys.stderr)
+        return 1
     walls, corners = plan.in_sensor_frame()
     _, _, bearings = full_turn_bearings(S1_BEAMS_PER_TURN)
     truth = corners[visible_corners(walls, corners, bearings)]

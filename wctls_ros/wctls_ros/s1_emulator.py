@@ -33,6 +33,7 @@ import time
 import numpy as np
 import yaml
 
+from .cli import bounded, Parser, USER_ERROR, UserError
 from .rplidar.emulator.device import Faults
 from .rplidar.emulator.server import Emulator, PtyPort
 from .rplidar.protocol import HealthStatus
@@ -40,12 +41,7 @@ from .simulation import (BUNDLED_PLANS, FloorPlan, load_floor_plan, NOISELESS, N
                          SENSOR_MODELS, simulate_scan)
 
 PROG = 's1_emulator'
-EXIT_USER_ERROR = 2
 EXIT_INTERRUPTED = 130
-
-
-class UserError(Exception):
-    """A command line the emulator cannot run with; the message says what to change."""
 
 
 class SimulatedScene:
@@ -83,18 +79,6 @@ class SimulatedScene:
         return np.where(np.isfinite(ranges), ranges * 1000.0, 0.0)
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse with the exit convention: a usage error is one line and status 2."""
-
-    def error(self, message):
-        """
-        Report a command-line error in one line and exit with status 2.
-
-        :param message: what is wrong
-        """
-        self.exit(EXIT_USER_ERROR, f'{self.prog}: error: {message} (see {self.prog} --help)\n')
-
-
 def _firmware(text: str) -> tuple:
     """Parse ``MAJOR.MINOR`` into (major, minor)."""
     major, dot, minor = text.partition('.')
@@ -104,68 +88,59 @@ def _firmware(text: str) -> tuple:
     return int(major), int(minor)
 
 
-def _bounded(kind, low, high=math.inf):
-    """Return an argparse type: ``kind`` values within [low, high]."""
-    def parse(text: str):
-        try:
-            value = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
-        if not low <= value <= high:
-            span = f'at least {low}' if high == math.inf else f'from {low} to {high}'
-            raise argparse.ArgumentTypeError(f'must be {span}, got {text}')
-        return value
-    return parse
+def parser() -> argparse.ArgumentParser:
+    """
+    Return the command-line parser.
 
-
-def _parse_args(argv):
-    parser = _Parser(
+    :return: the parser
+    """
+    p = Parser(
         prog=PROG,
         description='An RPLIDAR S1 speaking the real byte protocol on a pseudo-terminal (and '
                     'TCP), streaming a simulated floor plan in real time.',
         epilog='Lines on standard input control it while it runs: unplug, replug, silent SECONDS, '
                'health ok|warning|error [RESETS], corrupt RATE, drop RATE, clock, quit. Exit '
                'status: 0 after quit or SIGTERM, 2 on a user error, 130 on Ctrl-C.')
-    probability = _bounded(float, 0.0, 1.0)
-    parser.add_argument('--link', help='symlink to point at the pseudo-terminal, e.g. /tmp/ttyS1 '
-                                       '(default: none, only the pty path is printed)')
-    parser.add_argument('--tcp-port', type=_bounded(int, 0, 65535),
-                        help='also serve on this TCP port (0 = any free port; S1 TCP: 20108) '
-                             '(default: no TCP)')
-    parser.add_argument('--tcp-host', default='127.0.0.1',
-                        help='address to listen on (default: %(default)s)')
-    parser.add_argument('--floor-plan', default='environment_a',
-                        help=f'bundled plan name ({", ".join(BUNDLED_PLANS)}) or a YAML path '
-                             '(default: %(default)s)')
-    parser.add_argument('--pose', type=float, nargs=3, metavar=('X', 'Y', 'YAW_DEG'),
-                        help="sensor pose in the plan, m and degrees (default: the plan's own)")
-    parser.add_argument('--sensor', choices=tuple(SENSOR_MODELS), default='s1_like',
-                        help="the sensor's measurement model (simulate --sensor; the driver "
-                             'bins the samples itself, so no bins here) (default: %(default)s)')
-    parser.add_argument('--range-sigma', type=_bounded(float, 0.0),
-                        help="range noise std, m (default: the sensor model's)")
-    parser.add_argument('--bearing-sigma-deg', type=_bounded(float, 0.0),
-                        help="bearing noise std, degrees (default: the sensor model's)")
-    parser.add_argument('--noiseless', action='store_true',
-                        help='exact ranges, no noise (default: off)')
-    parser.add_argument('--seed', type=int, default=0, help='random seed (default: %(default)s)')
-    parser.add_argument('--firmware', type=_firmware, default='1.28',
-                        help='firmware version MAJOR.MINOR (default: %(default)s; before 1.24 '
-                             'there is no GET_LIDAR_CONF)')
-    parser.add_argument('--corrupt-rate', type=probability, default=0.0,
-                        help='probability that a streamed byte is corrupted (default: '
-                             '%(default)s)')
-    parser.add_argument('--drop-rate', type=probability, default=0.0,
-                        help='probability that a streamed byte is dropped (default: %(default)s)')
-    parser.add_argument('--silent-after', type=_bounded(float, 0.0),
-                        help='go silent after this many seconds (default: never)')
-    parser.add_argument('--silent-for', type=_bounded(float, 0.0), default=3.0,
-                        help='silence duration, s (default: %(default)s)')
-    parser.add_argument('--health', choices=['ok', 'warning', 'error'], default='ok',
-                        help='health status to report (default: %(default)s)')
-    parser.add_argument('--health-error-resets', type=_bounded(int, 0), default=1,
-                        help='RESETs that clear a health error (default: %(default)s)')
-    return parser.parse_args(argv)
+    probability = bounded(float, 0.0, 1.0)
+    p.add_argument('--link', help='symlink to point at the pseudo-terminal, e.g. /tmp/ttyS1 '
+                                  '(default: none, only the pty path is printed)')
+    p.add_argument('--tcp-port', type=bounded(int, 0, 65535),
+                   help='also serve on this TCP port (0 = any free port; S1 TCP: 20108) '
+                        '(default: no TCP)')
+    p.add_argument('--tcp-host', default='127.0.0.1',
+                   help='address to listen on (default: %(default)s)')
+    p.add_argument('--floor-plan', default='environment_a',
+                   help=f'bundled plan name ({", ".join(BUNDLED_PLANS)}) or a YAML path '
+                        '(default: %(default)s)')
+    p.add_argument('--pose', type=float, nargs=3, metavar=('X', 'Y', 'YAW_DEG'),
+                   help="sensor pose in the plan, m and degrees (default: the plan's own)")
+    p.add_argument('--sensor', choices=tuple(SENSOR_MODELS), default='s1_like',
+                   help="the sensor's measurement model (simulate --sensor; the driver bins "
+                        'the samples itself, so no bins here) (default: %(default)s)')
+    p.add_argument('--range-sigma', type=bounded(float, 0.0),
+                   help="range noise std, m (default: the sensor model's)")
+    p.add_argument('--bearing-sigma-deg', type=bounded(float, 0.0),
+                   help="bearing noise std, degrees (default: the sensor model's)")
+    p.add_argument('--noiseless', action='store_true',
+                   help='exact ranges, no noise (default: off)')
+    p.add_argument('--seed', type=int, default=0, help='random seed (default: %(default)s)')
+    p.add_argument('--firmware', type=_firmware, default='1.28',
+                   help='firmware version MAJOR.MINOR (default: %(default)s; before 1.24 '
+                        'there is no GET_LIDAR_CONF)')
+    p.add_argument('--corrupt-rate', type=probability, default=0.0,
+                   help='probability that a streamed byte is corrupted (default: '
+                        '%(default)s)')
+    p.add_argument('--drop-rate', type=probability, default=0.0,
+                   help='probability that a streamed byte is dropped (default: %(default)s)')
+    p.add_argument('--silent-after', type=bounded(float, 0.0),
+                   help='go silent after this many seconds (default: never)')
+    p.add_argument('--silent-for', type=bounded(float, 0.0), default=3.0,
+                   help='silence duration, s (default: %(default)s)')
+    p.add_argument('--health', choices=['ok', 'warning', 'error'], default='ok',
+                   help='health status to report (default: %(default)s)')
+    p.add_argument('--health-error-resets', type=bounded(int, 0), default=1,
+                   help='RESETs that clear a health error (default: %(default)s)')
+    return p
 
 
 def _scene(args) -> tuple:
@@ -250,10 +225,10 @@ def main(argv=None) -> int:
     :return: exit status: 0 after quit or SIGTERM, 2 on a user error, 130 on Ctrl-C
     """
     try:
-        _serve(_parse_args(argv))
+        _serve(parser().parse_args(argv))
     except UserError as error:
         print(f'{PROG}: error: {error}', file=sys.stderr)
-        return EXIT_USER_ERROR
+        return USER_ERROR
     except KeyboardInterrupt:
         return EXIT_INTERRUPTED
     return 0

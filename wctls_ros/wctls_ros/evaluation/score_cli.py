@@ -27,13 +27,10 @@ from typing import Dict, Optional
 from .scans import check_still, load_json_scans, load_scans, StaticScans
 from .score import markdown_table, RECURRING_PRESENCE, score_scans, write_score
 from .truth import load_truth, Truth, TRUTH_FILE
+from ..cli import Parser, USER_ERROR, UserError
 from ..core import FeatureConfig, METHODS
 from ..params import feature_settings, load_parameters, SENSOR
 from ..sensors import DEFAULT_SENSOR, sensor_presets
-
-
-class UserError(ValueError):
-    """Something the user gave that the score cannot use, with the reason."""
 
 
 def parser() -> argparse.ArgumentParser:
@@ -42,7 +39,7 @@ def parser() -> argparse.ArgumentParser:
 
     :return: the parser
     """
-    p = argparse.ArgumentParser(
+    p = Parser(
         prog='score',
         description='Score the corners of every method on a recording: precision, recall and '
         "NEES against true corners (a simulation's truth.yaml beside the bag, or hand labels), "
@@ -64,11 +61,11 @@ def parser() -> argparse.ArgumentParser:
                    help='sensor preset whose noise model the covariances use, over the '
                    f"config file's (default: the file's, else {DEFAULT_SENSOR})")
     p.add_argument('--range-sigma', type=float, default=None,
-                   help='range noise std of the covariances, m (overrides --config)')
+                   help='range noise std of the covariances, m (default: that of --config)')
     p.add_argument('--bearing-sigma-deg', type=float, default=None,
-                   help='bearing noise std of the covariances, deg (overrides --config)')
+                   help='bearing noise std of the covariances, deg (default: that of --config)')
     p.add_argument('--common-range-sigma', type=float, default=None,
-                   help='per-scan common range offset std, m (overrides --config)')
+                   help='per-scan common range offset std, m (default: that of --config)')
     p.add_argument('--scans', default=None, metavar='FIRST-LAST',
                    help='score only these scans (0-based, inclusive); default: all, or the '
                    'ones the labels cover')
@@ -227,7 +224,7 @@ def main(argv=None) -> int:
     except (BagError, OSError, ValueError) as error:
         message = str(error).splitlines()[0] if str(error) else type(error).__name__
         print(f'score: error: {message}', file=sys.stderr)
-        return 2
+        return USER_ERROR
 
 
 if __name__ == '__main__':

@@ -1,0 +1,59 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""
+What the command-line tools share: one exit-status convention and one-line errors.
+
+Every offline tool (``simulate``, ``score``, ``s1_emulator``, ...) exits with
+
+- 0 when it did what was asked;
+- 2 on a user error: a bad option, path, bag, file or value. One line on standard error,
+  ``PROG: error: REASON``, no traceback, and nothing written;
+- 128 + N when stopped by signal N (130 for Ctrl-C, 143 for SIGTERM), with nothing half
+  written.
+
+docs/user_guide.md lists every tool's statuses. Pure Python: no rclpy import.
+"""
+
+import argparse
+import math
+
+USER_ERROR = 2
+
+
+class UserError(ValueError):
+    """Something the user gave that the tool cannot use; the message says what to change."""
+
+
+class Parser(argparse.ArgumentParser):
+    """An argparse parser whose usage errors follow the convention: one line, status 2."""
+
+    def error(self, message):
+        """
+        Report a command-line error in one line and exit with status 2.
+
+        :param message: what is wrong
+        """
+        self.exit(USER_ERROR, f'{self.prog}: error: {message} (see {self.prog} --help)\n')
+
+
+def bounded(kind, low, high=math.inf):
+    """
+    Return an argparse type: ``kind`` values within [low, high].
+
+    :param kind: int or float
+    :param low: the smallest value allowed
+    :param high: the largest value allowed
+    :return: the parsing function (raises argparse.ArgumentTypeError with the reason)
+    """
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            what = 'an integer' if kind is int else 'a number'
+            raise argparse.ArgumentTypeError(f'not {what}: {text!r}') from None
+        if not low <= value <= high:
+            span = f'at least {low}' if high == math.inf else f'from {low} to {high}'
+            raise argparse.ArgumentTypeError(f'must be {span}, got {text}')
+        return value
+    return parse

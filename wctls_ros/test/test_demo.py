@@ -40,7 +40,8 @@ def test_demo_records_a_bag_and_writes_the_table_and_the_figure(tmp_path):
     assert set(counts) == {'/scan', '/corners', '/lines', '/markers'}
     assert counts['/scan'] >= 25 and counts['/corners'] >= 25     # 10 Hz for 3 s
     assert (out / 'scan.png').stat().st_size > 10000
-    # The shipped S1 preset on the emulated S1: most corners are true, their covariance honest.
+    # The shipped default (generic preset) on the emulated S1: most corners are true, their
+    # covariance honest.
     rows = dict(line.strip('|').split('|')[:2] for line in
                 (out / 'summary.md').read_text().splitlines()[2:])
     rows = {name.strip(): value.strip() for name, value in rows.items()}

@@ -37,9 +37,9 @@ from .params import feature_settings, load_parameters
 from .simulation import full_turn_bearings, load_floor_plan, S1_BEAMS_PER_TURN
 from .simulation.visibility import visible_corners
 
-# What a user of an S1 runs (rplidar_s1.launch.py): the driver's defaults and feature_node with
-# the S1 preset; the emulator simulates the S1 as we expect a real one to look (s1_like).
-FEATURE_PARAMETERS = {'sensor': 'rplidar_s1'}
+# The driver and feature_node run with their shipped files and nothing else (feature_node with
+# the default sensor preset, generic: docs/sensors.md); the emulator simulates the S1 as we
+# expect a real one to look (its s1_like default).
 # A found corner is the true one when it is this close, m.
 MATCH_RADIUS_M = 0.1
 STOP_TIMEOUT_S = 10.0
@@ -298,7 +298,7 @@ def main(argv=None) -> int:
     # A private DDS domain keeps the demo from meeting (or disturbing) anything else running.
     os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 100)))
     tty = out.resolve() / 'ttyS1'
-    parameters = {**FEATURE_PARAMETERS, 'method': args.method}
+    parameters = {'method': args.method}
     config = feature_settings(
         load_parameters(_config_file() / 'feature_node.yaml', overrides=parameters))[0]
     processes = Processes(out / 'logs')

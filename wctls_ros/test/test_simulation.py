@@ -97,6 +97,24 @@ def test_a_corner_behind_an_obstacle_or_with_one_wall_hidden_is_not_visible():
     assert hidden.sum() == 3
 
 
+@pytest.mark.parametrize('shadow_centre_m, visible', [(1.835, False), (1.635, True)])
+def test_a_wall_seen_near_its_corner_only_beyond_a_shadow_does_not_make_the_corner_visible(
+        shadow_centre_m, visible):
+    # A leg 1.5 m out shadows about 0.17 m of the wall x = 3 below the corner (3, 2). Returns
+    # beyond the shadow are another piece of the wall: the corner counts as visible only when the
+    # piece next to it is long enough (0.08 m left of it: not; 0.28 m: yes).
+    walls, corners = floor_plan_from_dict(SQUARE).in_sensor_frame((0.0, 0.0, 0.0))
+    bearings = full_turn_bearings()[2]
+    leg = np.array([[1.5, 1.5 * shadow_centre_m / 3.0, 0.036]])
+    ranges = ray_hits(walls, leg, np.zeros(2), bearings).range_m
+    shadowed = np.flatnonzero((ranges < 2.0) & (bearings > 0.0) & (bearings < 1.0))
+    y_on_wall = 3.0 * np.tan(bearings[[shadowed[0] - 1, shadowed[-1] + 1]])
+    assert 0.15 < np.ptp(y_on_wall) < 0.2                    # the shadow the comment describes
+    corner = np.all(np.isclose(corners, [3.0, 2.0]), axis=1)
+    seen = visible_corners(walls, corners, bearings, circles_m=leg)
+    assert seen[corner].item() is visible and seen[~corner].all()
+
+
 def test_a_recording_moves_the_sensor_at_10_hz():
     plan = floor_plan_from_dict(SQUARE)
     recording = simulate_recording(plan, NOISELESS, 5, pose=(0.0, 0.0, 0.0),

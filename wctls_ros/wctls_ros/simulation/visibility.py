@@ -13,8 +13,6 @@ _ON_WALL_M = 1e-6
 # through it when its straight line passes this close, m (a corner on a bowed or rough wall lies
 # on the wall's surface, a few mm off its straight line).
 _UNOCCLUDED_M = 1e-2
-# Returns on one wall farther apart than this are split by a shadow, m.
-_SHADOW_M = 0.5
 # Two seen walls form a corner when they turn by more than 30 degrees.
 _MIN_TURN_SIN = 0.5
 
@@ -30,7 +28,10 @@ def visible_corners(walls_m: np.ndarray, corners_m: np.ndarray, bearings_rad: np
     A corner counts as visible when the ray towards it is not blocked, and each of the two walls
     that meet there gets at least ``min_points`` noiseless returns spanning ``min_length_m`` at
     an incidence no more grazing than ``arccos(min_incidence_cos)`` (80 degrees by default) in
-    one run from the corner (no shadow between), the nearest within ``max_gap_m`` of it. A
+    one run of neighbouring beams from the corner, the nearest within ``max_gap_m`` of it. The
+    run ends at the first beam that does not return usably from that wall: one shadowed by
+    something nearer, one on a silent piece, or one too grazing; returns beyond such a gap are
+    another piece of the wall, which an extractor sees as a separate segment. A
     corner formed by a free-standing edge (one wall hidden) is not visible. Cylinders (clutter,
     walkers' legs) block rays; silent pieces (dark, glass) return nothing; collinear pieces of one
     wall count together. This is the ground truth an extractor can be held to: what it could
@@ -55,19 +56,23 @@ def visible_corners(walls_m: np.ndarray, corners_m: np.ndarray, bearings_rad: np
     circles = np.zeros((0, 3)) if circles_m is None else np.asarray(circles_m, dtype=float)
     ranges = ray_hits(walls, circles, np.zeros(2), bearings).range_m
     hit = np.isfinite(ranges) & (ranges <= max_range_m)
-    direction = np.column_stack([np.cos(bearings[hit]), np.sin(bearings[hit])])
-    points = ranges[hit, None] * direction
+    direction = np.column_stack([np.cos(bearings), np.sin(bearings)])
+    points = np.full((bearings.size, 2), np.inf)                          # (N, 2), beam order
+    points[hit] = ranges[hit, None] * direction[hit]
     start, edge = walls[:, :2], walls[:, 2:] - walls[:, :2]
     length = np.hypot(edge[:, 0], edge[:, 1])
     normal = np.column_stack([-edge[:, 1], edge[:, 0]]) / length[:, None]
     # Which wall each return lies on (distance to the wall's line and within its extent).
-    along = np.einsum('pki,ki->pk', points[:, None, :] - start, edge) / length ** 2
-    across = np.abs(np.einsum('pki,ki->pk', points[:, None, :] - start, normal))
-    on_wall = (across < _ON_WALL_M) & (along >= -1e-9) & (along <= 1.0 + 1e-9)
+    with np.errstate(invalid='ignore'):
+        along = np.einsum('pki,ki->pk', points[:, None, :] - start, edge) / length ** 2
+        across = np.abs(np.einsum('pki,ki->pk', points[:, None, :] - start, normal))
+    on_wall = hit[:, None] & (across < _ON_WALL_M) & (along >= -1e-9) & (along <= 1.0 + 1e-9)
     incidence_ok = np.abs(direction @ normal.T) >= min_incidence_cos
-    usable = on_wall & incidence_ok                                    # (P, K)
+    usable = on_wall & incidence_ok                                    # (N, K)
     if silent is not None:
         usable &= ~np.asarray(silent, dtype=bool)
+    full_turn = bearings.size > 1 and abs(
+        (bearings[-1] - bearings[0]) * bearings.size / (bearings.size - 1)) >= 2.0 * np.pi - 1e-6
 
     group = np.arange(len(walls)) if wall_of is None else np.asarray(wall_of)
 
@@ -85,14 +90,35 @@ def visible_corners(walls_m: np.ndarray, corners_m: np.ndarray, bearings_rad: np
         distance = np.hypot(*(points - corners[m]).T)
         seen = []
         for wall in np.unique(group[through]):
-            # The run of returns on this wall that starts at the corner (up to a shadow).
-            run = np.sort(distance[usable[:, group == wall].any(axis=1)])
-            if not run.size or run[0] > max_gap_m:
-                continue
-            run = run[:np.argmax(np.append(np.diff(run), np.inf) > _SHADOW_M) + 1]
-            if run.size >= min_points and run[-1] - run[0] >= min_length_m:
+            run = _run_from_corner(usable[:, group == wall].any(axis=1), distance, full_turn)
+            if run.size and distance[run].min() <= max_gap_m and run.size >= min_points and (
+                    np.ptp(distance[run]) >= min_length_m):
                 k = np.flatnonzero(through & (group == wall))[0]
                 seen.append(np.arctan2(edge[k, 1], edge[k, 0]))
         turns = np.abs(np.sin(np.subtract.outer(seen, seen)))
         visible[m] = bool((turns > _MIN_TURN_SIN).any())
     return visible
+
+
+def _run_from_corner(on_wall: np.ndarray, distance_m: np.ndarray, full_turn: bool) -> np.ndarray:
+    """
+    Return the beams of the unbroken run of a wall's returns that starts nearest the corner.
+
+    :param on_wall: whether each beam returns usably from the wall, shape (N,), beam order
+    :param distance_m: each beam's return's distance from the corner, shape (N,), m (inf: none)
+    :param full_turn: the beams close a full turn (the last neighbours the first)
+    :return: beam indices of the run, shape (R,); empty when no beam returns from the wall
+    """
+    if not on_wall.any():
+        return np.zeros(0, dtype=int)
+    nearest = int(np.argmin(np.where(on_wall, distance_m, np.inf)))
+    count = on_wall.size
+    if full_turn and on_wall.all():
+        return np.arange(count)
+    beams = [nearest]
+    for step in (-1, 1):
+        index = nearest + step
+        while (full_turn or 0 <= index < count) and on_wall[index % count]:
+            beams.append(index % count)
+            index += step
+    return np.array(sorted(beams))

@@ -42,8 +42,8 @@ def test_demo_records_a_bag_and_writes_the_table_and_the_figure(tmp_path):
     assert (out / 'scan.png').stat().st_size > 10000
     # The shipped default (generic preset) on the emulated S1: most corners are true, their
     # covariance honest.
-    rows = dict(line.strip('|').split('|')[:2] for line in
-                (out / 'summary.md').read_text().splitlines()[2:])
+    table = (out / 'summary.md').read_text().split('\n\n')[0]
+    rows = dict(line.strip('|').split('|')[:2] for line in table.splitlines()[2:])
     rows = {name.strip(): value.strip() for name, value in rows.items()}
     matched = float(rows['corners within 10 cm of a true one'].split('(')[1].split()[0])
     assert matched > 90.0, rows
@@ -70,3 +70,32 @@ def test_ctrl_c_stops_every_process_and_exits_130(tmp_path):
     while leftovers(out) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not leftovers(out)
+
+
+def test_the_summary_explains_missing_corner_arrays_and_corners_beyond_those_in_view():
+    from types import SimpleNamespace
+    import numpy as np
+    from wctls_ros.demo import Recording, summarise
+
+    def corner_array(stamp_s, xy):
+        corners = [SimpleNamespace(pose=SimpleNamespace(
+            covariance=np.diag([1e-4, 1e-4, 0, 0, 0, 1e-3]).ravel(),
+            pose=SimpleNamespace(position=SimpleNamespace(x=x, y=y)))) for x, y in xy]
+        return (stamp_s * 10 ** 9 + 5_000_000, SimpleNamespace(
+            header=SimpleNamespace(stamp=SimpleNamespace(sec=stamp_s, nanosec=0)),
+            corners=corners))
+
+    in_view, hidden = np.array([[1.0, 0.0], [0.0, 1.0]]), np.array([[-1.0, 0.0]])
+    seen = Recording(scans={s * 10 ** 9: (s * 10 ** 9 + 1, None) for s in range(1, 7)})
+    # Scan 1 before the first answer, 4 skipped, 6 at the end; scan 3 has a corner at the
+    # hidden one and a false one besides the two in view.
+    seen.corners = [corner_array(2, [[1.0, 0.01], [0.0, 1.0]]),
+                    corner_array(3, [[1.0, 0.0], [0.0, 1.0], [-1.0, 0.02], [3.0, 3.0]]),
+                    corner_array(5, [[1.0, 0.0]])]
+    rows, notes = summarise(seen, in_view, hidden)
+    assert dict(rows)['corners per scan (mean, min-max)'] == '2.3 (1-4)'
+    assert notes[0].startswith('3 recorded scans have no CornerArray')
+    assert [int(part.split(';')[0].split(',')[0]) for part in notes[0].split(': ')[1:]] == [
+        1, 1, 1]                                     # before, at the end, skipped
+    assert 'more corners (4) than the 2 true corners in view. Of the 2 corners' in notes[1]
+    assert notes[1].endswith('thin evidence): 1; false: 1.')

@@ -24,6 +24,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import textwrap
 import threading
 import time
 from typing import Dict, List
@@ -181,15 +182,18 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
     return seen
 
 
-def summarise(seen: Recording, truth_xy: np.ndarray) -> List[tuple]:
+def summarise(seen: Recording, truth_xy: np.ndarray, hidden_xy: np.ndarray) -> tuple:
     """
-    Compute the demo's table from what was recorded.
+    Compute the demo's table from what was recorded, and the notes that explain its counts.
 
     :param seen: the recording
     :param truth_xy: the corners the sensor can see, in the laser frame, shape (M, 2), m
-    :return: rows (measure, value)
+    :param hidden_xy: the plan's other corners (the visibility rule says not seen), shape
+        (H, 2), m
+    :return: (rows (measure, value), notes: sentences)
     """
     counts, sigmas, errors, latency, age = [], [], [], [], []
+    near_hidden = 0
     for received, message in seen.corners:
         stamp = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
         counts.append(len(message.corners))
@@ -203,9 +207,11 @@ def summarise(seen: Recording, truth_xy: np.ndarray) -> List[tuple]:
             distance = np.hypot(*(truth_xy - xy).T) if len(truth_xy) else np.array([np.inf])
             if distance.min() < MATCH_RADIUS_M:
                 errors.append(float(nees(xy - truth_xy[distance.argmin()], covariance)))
+            elif len(hidden_xy) and np.hypot(*(hidden_xy - xy).T).min() < MATCH_RADIUS_M:
+                near_hidden += 1
     sigmas = np.array(sigmas).reshape(-1, 2)
     counts = np.array(counts)
-    return [
+    rows = [
         ('scans recorded', f'{len(seen.scans)}'),
         ('CornerArrays recorded', f'{len(seen.corners)}'),
         ('corners per scan (mean, min-max)',
@@ -224,6 +230,43 @@ def summarise(seen: Recording, truth_xy: np.ndarray) -> List[tuple]:
         ('age of the corners since the first beam (median ms)',
          f'{np.median(age):.0f}' if age else '-'),
     ]
+    return rows, _notes(seen, counts, len(truth_xy), len(errors), near_hidden)
+
+
+def _notes(seen: Recording, counts: np.ndarray, in_view: int, matched: int,
+           near_hidden: int) -> List[str]:
+    """
+    Explain the counts a reader of the table would ask about.
+
+    :param seen: the recording
+    :param counts: corners in each CornerArray, shape (A,)
+    :param in_view: true corners in view
+    :param matched: corners within the match radius of one in view
+    :param near_hidden: other corners within it of a true corner not in view
+    :return: sentences
+    """
+    notes = []
+    answered = {message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
+                for _, message in seen.corners}
+    unanswered = sorted(set(seen.scans) - answered)
+    if unanswered and answered:
+        before = sum(stamp < min(answered) for stamp in unanswered)
+        after = sum(stamp > max(answered) for stamp in unanswered)
+        skipped = len(unanswered) - before - after
+        notes.append(
+            f"{len(unanswered)} recorded scans have no CornerArray (before feature_node's "
+            f'first answer: {before}; at the end, their corners after the recording stopped: '
+            f'{after}; skipped while feature_node was behind: {skipped}, as its one-scan queue '
+            'keeps the newest and /diagnostics counts them).')
+    if counts.size and counts.max() > in_view:
+        notes.append(
+            f'Some scans have more corners ({counts.max()}) than the {in_view} true corners '
+            f'in view. Of the {counts.sum() - matched} corners not within '
+            f'{MATCH_RADIUS_M * 100:.0f} cm of one in view: at a true corner the visibility '
+            'rule counts as not in view (a wall seen by fewer than 8 returns or over less than '
+            f'15 cm, thin evidence): {near_hidden}; '
+            f'false: {counts.sum() - matched - near_hidden}.')
+    return notes
 
 
 def draw(seen: Recording, config, truth_xy: np.ndarray, path: pathlib.Path) -> None:
@@ -334,15 +377,17 @@ def main(argv=None) -> int:
         return 1
     walls, corners = plan.in_sensor_frame()
     _, _, bearings = full_turn_bearings(S1_BEAMS_PER_TURN)
-    truth = corners[visible_corners(walls, corners, bearings)]
-    rows = summarise(seen, truth)
+    in_view = visible_corners(walls, corners, bearings)
+    truth = corners[in_view]
+    rows, notes = summarise(seen, truth, corners[~in_view])
     width = max(len(name) for name, _ in rows)
     table = '\n'.join(f'{name:<{width}}  {value}' for name, value in rows)
     draw(seen, config, truth, out / 'scan.png')
     (out / 'summary.md').write_text(
         '| measure | value |\n|---|---|\n'
-        + '\n'.join(f'| {name} | {value} |' for name, value in rows) + '\n')
-    print(f'\n{table}\n')
+        + '\n'.join(f'| {name} | {value} |' for name, value in rows) + '\n'
+        + ''.join(f'\n- {note}' for note in notes) + ('\n' if notes else ''))
+    print(f'\n{table}\n' + ''.join(f'\n{textwrap.fill(note, 99)}\n' for note in notes))
     print(f'demo: wrote {out / "bag"} (mcap: open it in Foxglove), {out / "scan.png"} and '
           f'{out / "summary.md"}')
     return 0

@@ -179,16 +179,24 @@ OFFICE = REAL_DATA / 'urg04lx_office'
 
 def test_real_lms111_calibration_and_nees():
     from wctls_ros.evaluation import load_scans
-    from wctls_ros.evaluation.evaluate_cli import calibrate
+    from wctls_ros.evaluation.calibration import calibrate
+    from wctls_ros.evaluation.corner_check import corner_nees, pooled_nees
+    from wctls_ros.evaluation.samples import feature_config
     scans = load_scans(LMS111)
-    fit, nees_independent, nees_full, scale = calibrate(scans)
-    print(fit.noise.describe(), nees_independent, nees_full)
-    # Measured: range 7.8 mm, bearing 0.10 deg, common-mode 1.0 mm (lag-1 0.89); WTLS corner
-    # NEES 3.3 with the independent terms, 2.7 with the common-mode term.
+    result = calibrate(scans)
+    fit = result.fit
+    print(fit.noise.describe(), result.pooled(result.final))
+    # Measured: range 7.8 mm, bearing 0.10 deg, common-mode 1.0 mm (lag-1 0.89); WCTLS NEES of
+    # the stable corner 1.98 with the common-mode term, scale 1; 2.4 without it.
     assert 0.006 < fit.noise.range_sigma_m < 0.010
     assert 0.0005 < fit.noise.common_range_sigma_m < 0.002 and fit.offset_lag1 > 0.5
-    assert nees_full < nees_independent and 2.0 < nees_full < 3.2
-    assert scale == pytest.approx(math.sqrt(nees_full / 2.0))
+    assert sum(result.stable) == 1 and 1.0 <= result.scale < 1.1
+    assert 1.8 < result.pooled(result.final) < 2.2
+    independent = NoiseParameters(fit.noise.range_sigma_m, fit.noise.bearing_sigma_rad)
+    chosen = [c for c, stable in zip(result.corners, result.stable) if stable]
+    without_common = pooled_nees(corner_nees(
+        scans, feature_config(independent, result.config.method, result.config), chosen))
+    assert without_common > result.pooled(result.fitted) + 0.2
 
 
 def test_real_lms1xx_corner_scatter_is_explained_once_the_residuals_scale_the_lines():
@@ -215,10 +223,10 @@ def test_real_hand_moved_office_recording_is_refused():
 
 
 def test_calibrate_command_prints_the_node_parameters(room_bag, capsys):
-    from wctls_ros.evaluation.evaluate_cli import calibrate_main
+    from wctls_ros.evaluation.calibrate_cli import main as calibrate_main
     assert calibrate_main([str(room_bag)]) == 0
     out = capsys.readouterr().out
     assert 'feature_node:' in out and 'ros__parameters:' in out
     range_sigma = float(out.split('range_sigma_m:')[1].split()[0])
     assert 0.008 < range_sigma < 0.014                 # 10 mm simulated, scaled to NEES 2
-    assert calibrate_main([str(room_bag) + '_missing']) == 1
+    assert calibrate_main([str(room_bag) + '_missing']) == 2

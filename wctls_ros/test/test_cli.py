@@ -16,12 +16,8 @@ PARSERS = [
     ('wctls_ros.s1_emulator', 'parser'),
     ('wctls_ros.demo', 'parser'),
     ('wctls_ros.bags.process_bag', 'parser'),
-    pytest.param('wctls_ros.evaluation.evaluate_cli', 'evaluate_parser', marks=pytest.mark.xfail(
-        strict=True, reason='evaluate_cli.py is another change in progress: --methods, '
-        '--limit, --propagation, --min-presence, --out state no default yet')),
-    pytest.param('wctls_ros.evaluation.evaluate_cli', 'calibrate_parser', marks=pytest.mark.xfail(
-        strict=True, reason='evaluate_cli.py is another change in progress: --limit, --method '
-        'state no default yet')),
+    ('wctls_ros.evaluation.evaluate_cli', 'evaluate_parser'),
+    ('wctls_ros.evaluation.calibrate_cli', 'parser'),
 ]
 
 

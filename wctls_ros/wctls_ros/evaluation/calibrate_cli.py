@@ -146,10 +146,11 @@ def run(args) -> int:
               f'{finding.text}', file=sys.stderr)
     if calibration is not None and (not implausible or args.accept_implausible):
         notes = [f'{"IMPLAUSIBLE" if f.implausible else "warning"}: {f.text}' for f in findings]
-        print(node_yaml(calibration.fit.noise, calibration.scale, config, notes))
+        print(node_yaml(calibration.noise, calibration.final_config, notes))
         if args.write_preset:
             preset = pathlib.Path(args.write_preset)
-            preset.write_text(preset_yaml(calibration, str(args.bag), count))
+            refused = [f.text for f in findings if f.implausible]
+            preset.write_text(preset_yaml(calibration, str(args.bag), count, refused))
             print(f'calibrate: wrote the sensor preset {preset}', file=sys.stderr)
     if implausible and not args.accept_implausible:
         print('calibrate: refused: the model is implausible (reasons above); '
@@ -187,8 +188,8 @@ def _holdout(scans: StaticScans, config: FeatureConfig) -> List[Finding]:
             ((first, names[0]), (second, names[1])), ((second, names[1]), (first, names[0]))):
         calibration = calibrate(fit_on, config)
         validation = validate(check_on, calibration.final_config)
-        print(f'# holdout: fitted on {fit_name}: {calibration.noise.describe()} (scale '
-              f'{calibration.scale:.2f}); checked on {check_name}: it predicts '
+        print(f'# holdout: fitted on {fit_name}: {calibration.noise.describe()}, wall flatness '
+              f'{1e3 * calibration.flatness_m:.2f} mm; checked on {check_name}: it predicts '
               f"{validation.beam_ratio:.2f} times the beams' scatter")
         _print_corners(validation.corners, validation.stable, validation.nees,
                        {'NEES': validation.nees})
@@ -218,8 +219,9 @@ def _print_calibration(bag, scans: StaticScans, calibration: Calibration,
                     'final': calibration.final})
     stable = sum(calibration.stable)
     if stable:
-        print(f'# final: every fitted sigma x{calibration.scale:.2f}, which brings the pooled '
-              f'NEES of the {stable} stable corner{"s" if stable > 1 else ""} to '
+        print(f'# final: wall flatness {1e3 * calibration.flatness_m:.2f} mm (the scatter of the '
+              f'stable corners beyond the noise: x{calibration.excess:.2f} in std), which brings '
+              f'the pooled NEES of the {stable} stable corner{"s" if stable > 1 else ""} to '
               f'{calibration.pooled(calibration.final):.2f} (fitted: '
               f'{calibration.pooled(calibration.fitted):.2f}, before: '
               f'{calibration.pooled(calibration.before):.2f})')

@@ -23,19 +23,19 @@ straight walls (segments of the median scan, a few returns away from their ends)
   which changes its range in proportion to the incidence. A least-squares fit (non-negative,
   with outlying beams such as mixed pixels trimmed) gives both sigmas.
 
-The fit keeps each wall beam's measured scatter, so that any model (this one scaled, or a
-parameter file's) can be compared with what the beams show (:meth:`NoiseFit.beam_ratio`).
+The fit keeps each wall beam's measured scatter, so that any model (this one, or a parameter
+file's) can be compared with what the beams show (:meth:`NoiseFit.beam_ratio`).
 """
 
 from dataclasses import dataclass, replace
 import math
-from typing import List, Optional
+from typing import List, Optional, Sequence
 import warnings
 
 import numpy as np
 import yaml
 
-from .corner_check import (corner_nees, CornerNees, fit_scale, is_stable, pooled_nees,
+from .corner_check import (corner_nees, CornerNees, fit_flatness, is_stable, pooled_nees,
                            track_corners, TrackedCorner)
 from .samples import feature_config, NoiseParameters
 from .scans import StaticScans
@@ -55,15 +55,11 @@ CROSSING_Z = 5.0
 # A beam needs this share of its scans left after the rejection to count in the fit.
 _MIN_KEPT_SHARE = 0.5
 _MAD_TO_SIGMA = 1.4826
-# The factor on every fitted sigma that brings the stable corners' NEES to 2 only widens the
-# model: the beams measure the independent noise directly, and corners that scatter less than
-# it predicts show the sampling error of a NEES over a few strongly correlated scans (LMS111,
-# lag-1 correlation 0.89: the first half of its scans alone called for 0.65, a model below
-# the 7.8 mm its beams scatter, and NEES 3.2 on the second half; 2.8 without the factor).
-SCALE_BOUNDS = (1.0, 8.0)
-# A model is implausible when the stable corners call for a factor above this (they scatter
-# far more than the beams explain: something other than the sensor noise moves them)...
-SCALE_LIMIT = 2.0
+# The wall-flatness sigma (D18) fitted on the stable corners is sought up to this, m.
+FLATNESS_UPPER_M = 0.05
+# A model is implausible when the stable corners scatter more than this many times the std
+# the fitted noise predicts (something other than the sensor noise moves them)...
+EXCESS_LIMIT = 2.0
 # ... when its per-beam std is this far from the one the wall beams show (median over them)...
 BEAM_RATIO_LIMITS = (0.5, 2.0)
 # ... or when one stable corner's NEES exceeds this multiple of the median of the others'.
@@ -231,87 +227,70 @@ def _wall_beams(segments, bearings, median, margin: int):
     return np.concatenate(beams).astype(np.intp), np.concatenate(slope)
 
 
-def node_yaml(noise: NoiseParameters, effective_scale: float = 1.0,
-              config: FeatureConfig = None, comments=()) -> str:
+def node_yaml(noise: NoiseParameters, config: FeatureConfig = None, comments=()) -> str:
     """
     Return the feature_node parameter lines for a fitted noise model.
 
-    When the corners still scatter more (or less) than the fitted model predicts, the lines give
-    every sigma scaled by ``effective_scale`` (chosen so that the corner NEES comes out at 2)
-    and say so. The model-error settings the scale was fitted under (``residual_scaling``,
-    ``wall_flatness_sigma_m``) are written too: the scale holds for them only.
+    The model-error settings it was checked under (``residual_scaling``,
+    ``wall_flatness_sigma_m``, the latter fitted by :func:`calibrate`) are written too: the
+    corner NEES holds for them only. ``range_sigma_from_scan`` is off: the model is fixed.
 
     :param noise: the fitted model
-    :param effective_scale: factor on all three sigmas that absorbs what the model misses
-    :param config: the pipeline settings the model was checked under (default: the node's)
+    :param config: the pipeline settings the model was checked under (default: the paper's)
     :param comments: extra comment lines to append (without the leading '# ')
     :return: YAML text for a params file
     """
     config = FeatureConfig() if config is None else config
-    range_sigma = max(noise.range_sigma_m * effective_scale, 1e-4)
-    bearing_deg = math.degrees(noise.bearing_sigma_rad) * effective_scale
-    common = noise.common_range_sigma_m * effective_scale
     lines = ['feature_node:', '  ros__parameters:',
-             f'    range_sigma_m: {range_sigma:.4f}',
-             f'    bearing_sigma_deg: {bearing_deg:.4f}',
-             f'    common_range_sigma_m: {common:.5f}',
+             f'    range_sigma_m: {max(noise.range_sigma_m, 1e-4):.4f}',
+             f'    bearing_sigma_deg: {math.degrees(noise.bearing_sigma_rad):.4f}',
+             f'    common_range_sigma_m: {noise.common_range_sigma_m:.5f}',
              '    range_sigma_from_scan: false',
              f'    residual_scaling: {str(config.residual_scaling).lower()}',
-             f'    wall_flatness_sigma_m: {config.wall_flatness_sigma_m:g}']
-    if abs(effective_scale - 1.0) > 1e-9:
-        lines += [f'# fitted: {noise.describe()};',
-                  f'# every sigma above is scaled by {effective_scale:.2f} so that the corner '
-                  'NEES comes out at 2 on this recording.']
+             f'    wall_flatness_sigma_m: {config.wall_flatness_sigma_m:.5f}']
     lines += [f'# {line}' for line in comments]
     return '\n'.join(lines)
 
 
-def preset_yaml(calibration: 'Calibration', source: str, count: int) -> str:
+def preset_yaml(calibration: 'Calibration', source: str, count: int,
+                implausible: Sequence[str] = ()) -> str:
     """
     Return a sensor preset file (as ``config/sensors/*.yaml``) with a calibrated model.
+
+    A preset holds the sensor's noise; the wall flatness the corners called for belongs to the
+    scene, and is only named in the description.
 
     :param calibration: the calibration
     :param source: the recording it was fitted on, as the user named it
     :param count: how many scans of it
+    :param implausible: what found the model implausible (written anyway on request)
     :return: YAML text that :meth:`wctls_ros.sensors.SensorPreset.from_file` reads
     """
-    noise, fit, config = calibration.noise, calibration.fit, calibration.config
+    fit, config = calibration.fit, calibration.final_config
     measured = f'measured: calibrate on {source}, {count} scans'
-    scale = (f", every sigma x{calibration.scale:.2f} so that the stable corners' NEES is 2"
-             f' ({config.method}, residual scaling {"on" if config.residual_scaling else "off"})'
-             if calibration.scale > 1.0 else '')
     document = {
         'description': f'Calibrated on {source} ({count} scans of a still sensor); '
                        f'{sum(calibration.stable)} stable corner(s), pooled NEES '
-                       f'{calibration.pooled(calibration.final):.2f} there.',
+                       f'{calibration.pooled(calibration.final):.2f} there ({config.method}, '
+                       f'residual scaling {"on" if config.residual_scaling else "off"}, wall '
+                       f'flatness {1e3 * config.wall_flatness_sigma_m:.2f} mm: a property of '
+                       'that scene, not in this preset).'
+                       + ''.join(f' IMPLAUSIBLE: {text}.' for text in implausible),
         'parameters': {
             'range_sigma_from_scan': False,
-            'range_sigma_m': round(max(noise.range_sigma_m, 1e-4), 5),
-            'bearing_sigma_deg': round(math.degrees(noise.bearing_sigma_rad), 4),
-            'common_range_sigma_m': round(noise.common_range_sigma_m, 5)},
+            'range_sigma_m': round(max(fit.noise.range_sigma_m, 1e-4), 5),
+            'bearing_sigma_deg': round(math.degrees(fit.noise.bearing_sigma_rad), 4),
+            'common_range_sigma_m': round(fit.noise.common_range_sigma_m, 5)},
         'sources': {
             'range_sigma_from_scan': f'{measured}: a fixed model, fitted over all scans',
             'range_sigma_m': f'{measured}: {1e3 * fit.noise.range_sigma_m:.2f} mm from the '
-                             f'scatter of {fit.wall_beams} wall beams{scale}',
+                             f'scatter of {fit.wall_beams} wall beams',
             'bearing_sigma_deg': f'{measured}: {math.degrees(fit.noise.bearing_sigma_rad):.3f}'
-                                 f" deg from how the wall beams' scatter grows with incidence"
-                                 f'{scale}',
+                                 " deg from how the wall beams' scatter grows with incidence",
             'common_range_sigma_m': f'{measured}: {1e3 * fit.noise.common_range_sigma_m:.2f} '
                                     'mm per-scan offset common to the wall beams (lag-1 '
-                                    f'correlation {fit.offset_lag1:.2f}){scale}'}}
+                                    f'correlation {fit.offset_lag1:.2f})'}}
     return yaml.safe_dump(document, sort_keys=False, width=95)
-
-
-def scaled(noise: NoiseParameters, factor: float) -> NoiseParameters:
-    """
-    Return a noise model with every sigma multiplied by a factor.
-
-    :param noise: the model
-    :param factor: the factor
-    :return: the scaled model
-    """
-    return NoiseParameters(noise.range_sigma_m * factor, noise.bearing_sigma_rad * factor,
-                           noise.common_range_sigma_m * factor)
 
 
 def noise_of(config: FeatureConfig) -> NoiseParameters:
@@ -345,21 +324,21 @@ class Calibration:
 
     :ivar fit: the model fitted from the wall beams
     :ivar config: the pipeline settings it was fitted under (method, model-error terms)
-    :ivar scale: the factor on every fitted sigma that brings the stable corners' pooled NEES
-        to 2, at least 1 (1 without a stable corner, or when they scatter less than the model
-        predicts)
-    :ivar converged: whether that NEES came within 1 % of 2
+    :ivar flatness_m: the wall-flatness sigma (D18) that brings the stable corners' pooled
+        NEES down to 2 (that of ``config`` when they scatter no more than the model predicts,
+        or without a stable corner), m
+    :ivar converged: whether that NEES came within 1 % of 2 (or below 2 without a flatness)
     :ivar corners: the corners tracked across the scans
     :ivar stable: which of them are stable (only those check a model)
     :ivar before: each corner's NEES under the model before calibration
-    :ivar fitted: ... under the fitted model
-    :ivar final: ... under the fitted model scaled (the one printed)
+    :ivar fitted: ... under the fitted noise model, with the flatness of ``config``
+    :ivar final: ... under the final model: the fitted noise and the fitted flatness
     :ivar findings: what makes the model implausible, and warnings
     """
 
     fit: NoiseFit
     config: FeatureConfig
-    scale: float
+    flatness_m: float
     converged: bool
     corners: List[TrackedCorner]
     stable: List[bool]
@@ -371,20 +350,30 @@ class Calibration:
     @property
     def noise(self) -> NoiseParameters:
         """
-        Return the final model: the fitted sigmas times the scale.
+        Return the fitted noise model.
 
         :return: the model
         """
-        return scaled(self.fit.noise, self.scale)
+        return self.fit.noise
 
     @property
     def final_config(self) -> FeatureConfig:
         """
-        Return the pipeline settings with the final model.
+        Return the pipeline settings with the final model (noise and wall flatness).
 
         :return: the configuration
         """
-        return feature_config(self.noise, self.config.method, self.config)
+        return feature_config(self.noise, self.config.method, self.config).replace(
+            wall_flatness_sigma_m=self.flatness_m)
+
+    @property
+    def excess(self) -> float:
+        """
+        Return how many times the std the fitted noise predicts the stable corners scatter.
+
+        :return: sqrt(pooled NEES / 2) under the fitted noise (NaN without a stable corner)
+        """
+        return math.sqrt(self.pooled(self.fitted) / 2.0)
 
     @property
     def implausible(self) -> bool:
@@ -408,11 +397,15 @@ class Calibration:
 def calibrate(scans: StaticScans, config: Optional[FeatureConfig] = None,
               before: Optional[FeatureConfig] = None) -> Calibration:
     """
-    Fit the noise model, scale it on the stable corners and check it.
+    Fit the noise model on the wall beams, the wall flatness on the stable corners, and check.
 
-    The scale is fitted with the pipeline settings the node will run with, by default its
-    residual factor (D17) on: the NEES it brings to 2 is that of the covariances the node
-    publishes.
+    The beams measure the sensor's noise; what the stable corners scatter beyond it is the
+    scene's: walls straight only to a few mm (and what else moves a corner but not the beams).
+    That excess is fitted as the wall-flatness sigma (D18), never by changing the sensor's
+    sigmas: a model narrower than the beams' scatter, or wider on every wall because one corner
+    scattered, would not hold on another scene. It is fitted with the pipeline settings the
+    node will run with, by default its residual factor (D17) on: the NEES it brings to 2 is
+    that of the covariances the node publishes.
 
     :param scans: repeated scans from a still sensor (something may move through the scene)
     :param config: the pipeline settings (method, model-error terms; default: the paper's);
@@ -427,20 +420,20 @@ def calibrate(scans: StaticScans, config: Optional[FeatureConfig] = None,
     # larger of it and each scan's own estimate, a model nobody fitted.
     config = config.replace(range_sigma_from_scan=False)
     fit = fit_noise(scans, config)
-
-    def with_noise(noise):
-        return feature_config(noise, config.method, config)
-
-    corners = track_corners(scans, with_noise(fit.noise), fit.crossed)
-    fitted = corner_nees(scans, with_noise(fit.noise), corners)
+    model = feature_config(fit.noise, config.method, config)
+    corners = track_corners(scans, model, fit.crossed)
+    fitted = corner_nees(scans, model, corners)
     stable = [is_stable(c, r) for c, r in zip(corners, fitted)]
     chosen = [c for c, keep in zip(corners, stable) if keep]
-    scale, converged = 1.0, False
+    flatness, converged = config.wall_flatness_sigma_m, False
     if chosen:
-        scale, _, converged = fit_scale(lambda factor: pooled_nees(corner_nees(
-            scans, with_noise(scaled(fit.noise, factor)), chosen)), SCALE_BOUNDS)
-    final = corner_nees(scans, with_noise(scaled(fit.noise, scale)), corners)
-    calibration = Calibration(fit, config, scale, converged, corners, stable,
+        flatness, _, converged = fit_flatness(
+            lambda sigma: pooled_nees(corner_nees(
+                scans, model.replace(wall_flatness_sigma_m=sigma), chosen)),
+            config.wall_flatness_sigma_m,
+            pooled_nees([r for r, keep in zip(fitted, stable) if keep]), FLATNESS_UPPER_M)
+    final = corner_nees(scans, model.replace(wall_flatness_sigma_m=flatness), corners)
+    calibration = Calibration(fit, config, flatness, converged, corners, stable,
                               corner_nees(scans, before, corners), fitted, final, [])
     return replace(calibration, findings=_calibration_findings(calibration, len(scans)))
 
@@ -460,18 +453,17 @@ def _calibration_findings(calibration: Calibration, count: int) -> List[Finding]
     stable = [r for r, keep in zip(calibration.final, calibration.stable) if keep]
     if not stable:
         findings.append(Finding(False, 'no stable corner: the model is checked on the wall '
-                                'beams only, and its sigmas are not scaled'))
+                                'beams only, and no wall flatness is fitted'))
         return findings
-    scale = calibration.scale
-    if scale > SCALE_LIMIT:
-        findings.append(Finding(True, f'the stable corners scatter as if every sigma were '
-                                f'{scale:.2f} times the one the beams show (allowed up to '
-                                f'{SCALE_LIMIT:g}): something other than the sensor noise '
+    if calibration.excess > EXCESS_LIMIT:
+        findings.append(Finding(True, f'the stable corners scatter {calibration.excess:.2f} '
+                                'times the std the fitted noise predicts (allowed up to '
+                                f'{EXCESS_LIMIT:g}): something other than the sensor noise '
                                 'moves them'))
-    elif scale > SCALE_BOUNDS[0] and not calibration.converged:
-        findings.append(Finding(False, 'the scale search did not bring the corner NEES to 2 '
-                                f'(NEES {calibration.pooled(calibration.final):.2f} at scale '
-                                f'{scale:.2f})'))
+    elif not calibration.converged:
+        findings.append(Finding(False, 'the wall-flatness search did not bring the corner '
+                                f'NEES to 2 (NEES {calibration.pooled(calibration.final):.2f} '
+                                f'at {1e3 * calibration.flatness_m:.2f} mm)'))
     numbers = [k + 1 for k, keep in enumerate(calibration.stable) if keep]
     for n, result in zip(numbers, stable):
         others = [r.nees for r in stable if r is not result]

@@ -234,37 +234,47 @@ def pooled_nees(results: Sequence[CornerNees]) -> float:
     return sum(r.nees * r.used for r in usable) / count if count else math.nan
 
 
-def fit_scale(nees_at: Callable[[float], float], bounds: Tuple[float, float] = (0.125, 8.0),
-              tolerance: float = 0.01, evaluations: int = 12):
+def fit_flatness(nees_at: Callable[[float], float], lower_m: float, nees_at_lower: float,
+                 upper_m: float = 0.05, tolerance: float = 0.01,
+                 evaluations: int = 12) -> Tuple[float, float, bool]:
     """
-    Find the factor s on every sigma that brings a pooled NEES to 2.
+    Find the wall-flatness sigma (D18) that brings a pooled NEES down to 2.
 
-    The NEES falls as s grows: as 1 / s^2 while each line keeps the covariance of the noise
-    model, more slowly where the residual factor (D17) already widens a line (it shrinks as s
-    grows). Each step takes the s that 1 / s^2 would call for, within the bracket found so far
-    (the geometric middle of the bracket when that leaves it).
+    The NEES falls as the flatness sigma s grows, and the variance it adds grows as s^2: the
+    root is sought in s^2 by regula falsi with the Illinois step (the end that stays put has
+    its NEES halved towards 2), within [lower_m^2, upper_m^2].
 
-    :param nees_at: the pooled NEES with every sigma times s
-    :param bounds: the smallest and largest s tried
+    :param nees_at: the pooled NEES with a flatness sigma s, m
+    :param lower_m: the smallest s (the one already configured), m
+    :param nees_at_lower: the pooled NEES there (already measured)
+    :param upper_m: the largest s tried, m
     :param tolerance: stop when the NEES is within this share of 2
     :param evaluations: the most evaluations of nees_at
-    :return: (s, the NEES there, whether it is within the tolerance of 2)
+    :return: (s, m: lower_m when the NEES is at most 2 there; the NEES at s; whether it is
+        within the tolerance of 2, or at most 2 at lower_m)
     """
-    low, high = None, None
-    scale = 1.0
-    for _ in range(evaluations):
-        nees = nees_at(scale)
-        if not math.isfinite(nees) or abs(nees / 2.0 - 1.0) <= tolerance:
+    if not math.isfinite(nees_at_lower) or nees_at_lower <= 2.0 * (1.0 + tolerance):
+        return lower_m, nees_at_lower, math.isfinite(nees_at_lower)
+    low, high = (lower_m ** 2, nees_at_lower - 2.0), (upper_m ** 2, nees_at(upper_m) - 2.0)
+    if not math.isfinite(high[1]) or high[1] > 0.0:        # even the largest s is too little
+        return upper_m, high[1] + 2.0, False
+    best = high
+    side = 0
+    for _ in range(evaluations - 1):
+        variance = (low[0] * high[1] - high[0] * low[1]) / (high[1] - low[1])
+        excess = nees_at(math.sqrt(variance)) - 2.0
+        best = (variance, excess)
+        if not math.isfinite(excess) or abs(excess) <= 2.0 * tolerance:
             break
-        if nees > 2.0:
-            low = scale
+        if excess > 0.0:
+            low = best
+            if side == 1:
+                high = (high[0], high[1] / 2.0)
+            side = 1
         else:
-            high = scale
-        step = scale * math.sqrt(nees / 2.0)
-        if low is not None and high is not None and not low < step < high:
-            step = math.sqrt(low * high)
-        step = min(max(step, bounds[0]), bounds[1])
-        if step == scale:                   # at a bound, still on the same side of 2
-            break
-        scale = step
-    return scale, nees, math.isfinite(nees) and abs(nees / 2.0 - 1.0) <= tolerance
+            high = best
+            if side == -1:
+                low = (low[0], low[1] / 2.0)
+            side = -1
+    return (math.sqrt(best[0]), best[1] + 2.0,
+            math.isfinite(best[1]) and abs(best[1]) <= 2.0 * tolerance)

@@ -171,17 +171,6 @@ def test_a_shipped_preset_validates_on_its_recordings(capsys):
     assert out.count('validate the model of') == 2
 
 
-@pytest.mark.parametrize('args, says', [
-    ([], 'give a bag to calibrate on'),
-    (['--validate', 'nowhere_bag'], 'nowhere_bag: no such bag'),
-    (['--write-preset', 'x.yaml', '--validate', str(LMS111)], '--write-preset needs a bag'),
-])
-def test_calibrate_refuses_what_it_cannot_use_in_one_line(capsys, args, says):
-    assert main(args) == 2
-    err = capsys.readouterr().err
-    assert err.startswith('calibrate: error: ') and err.count('\n') == 1 and says in err
-
-
 def test_a_corner_whose_nees_dominates_makes_the_model_implausible(still_and_walked):
     from wctls_ros.evaluation.corner_check import CornerNees
     still = still_and_walked[0]

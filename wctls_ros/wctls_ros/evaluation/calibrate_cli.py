@@ -33,14 +33,12 @@ from .corner_check import CornerNees, TrackedCorner
 from .samples import NoiseParameters
 from .scans import load_scans, require_still, StaticScans
 from .score_cli import node_config
+from ..cli import bounded, Parser, USER_ERROR, UserError
 from ..core import FeatureConfig, METHODS
 from ..sensors import DEFAULT_SENSOR, sensor_presets
 
+# Beyond the shared convention (0, 2 a user error, :mod:`wctls_ros.cli`): a model refused.
 IMPLAUSIBLE_EXIT = 3
-
-
-class UserError(ValueError):
-    """Something the user gave that calibrate cannot use, with the reason."""
 
 
 def parser() -> argparse.ArgumentParser:
@@ -49,7 +47,7 @@ def parser() -> argparse.ArgumentParser:
 
     :return: the parser
     """
-    p = argparse.ArgumentParser(
+    p = Parser(
         prog='calibrate', description='Fit the range / bearing / common-mode noise of a sensor '
         'from a static recording (robust to people walking through it), check it on the '
         "stable corners' NEES, and print the feature_node parameters. With --validate, check "
@@ -61,8 +59,8 @@ def parser() -> argparse.ArgumentParser:
                    'the model on; without it, --validate checks the --params model only')
     p.add_argument('--topic', default=None,
                    help="LaserScan topic of every bag (default: each bag's only one)")
-    p.add_argument('--limit', type=int, default=None,
-                   help='use at most this many scans of each bag (default: all)')
+    p.add_argument('--limit', type=bounded(int, 6), default=None,
+                   help='use at most this many scans of each bag, at least 6 (default: all)')
     p.add_argument('--params', default=None, metavar='FILE',
                    help='feature_node parameter file (as for --params-file): the pipeline '
                    'settings to fit under and the model "before" (default: the node\'s '
@@ -104,7 +102,7 @@ def main(argv=None) -> int:
     except (BagError, OSError, ValueError) as error:
         message = str(error).splitlines()[0] if str(error) else type(error).__name__
         print(f'calibrate: error: {message}', file=sys.stderr)
-        return 2
+        return USER_ERROR
 
 
 def run(args) -> int:
@@ -115,8 +113,6 @@ def run(args) -> int:
         raise UserError('--holdout needs a bag to calibrate on')
     if args.bag is None and args.write_preset:
         raise UserError('--write-preset needs a bag to calibrate on')
-    if args.limit is not None and args.limit < 6:
-        raise UserError(f'--limit must be at least 6 (repeated scans), got {args.limit}')
     config = node_config(args.params, args.sensor)
     if args.method is not None:
         config = config.replace(method=args.method)

@@ -438,13 +438,20 @@ def calibrate(scans: StaticScans, config: Optional[FeatureConfig] = None,
     return replace(calibration, findings=_calibration_findings(calibration, len(scans)))
 
 
+def _crossing_findings(fit: NoiseFit, count: int, what: str) -> List[Finding]:
+    """Return the warning that returns were rejected as crossed, if any were."""
+    if not fit.crossed.any():
+        return []
+    return [Finding(False, f'something crossed the walls (a moving object, or an occluding edge '
+                    f'that flickers) in {fit.crossed_scans} of {count} scans: '
+                    f'{int(fit.crossed.sum())} returns, with their neighbours, left out of '
+                    f'{what}')]
+
+
 def _calibration_findings(calibration: Calibration, count: int) -> List[Finding]:
     """Return what makes a calibration implausible, and its warnings."""
-    fit, findings = calibration.fit, []
-    if fit.crossed.any():
-        findings.append(Finding(False, f'something crossed the walls in {fit.crossed_scans} of '
-                                f'{count} scans: {int(fit.crossed.sum())} returns (with their '
-                                'neighbours) left out of the fit and of the corner checks'))
+    fit = calibration.fit
+    findings = _crossing_findings(fit, count, 'the fit and the corner checks')
     ratio = fit.beam_ratio(fit.noise)
     if not BEAM_RATIO_LIMITS[0] <= ratio <= BEAM_RATIO_LIMITS[1]:
         findings.append(Finding(True, f'the fitted model predicts {ratio:.2f} times the range '
@@ -529,10 +536,7 @@ def validate(scans: StaticScans, config: FeatureConfig) -> Validation:
     nees = corner_nees(scans, config, corners)
     stable = [is_stable(c, r) for c, r in zip(corners, nees)]
     ratio = fit.beam_ratio(noise_of(config))
-    findings = []
-    if fit.crossed.any():
-        findings.append(Finding(False, f'something crossed the walls in {fit.crossed_scans} of '
-                                f'{len(scans)} scans: left out of the corner checks'))
+    findings = _crossing_findings(fit, len(scans), 'the corner checks')
     if not BEAM_RATIO_LIMITS[0] <= ratio <= BEAM_RATIO_LIMITS[1]:
         findings.append(Finding(True, f'the model predicts {ratio:.2f} times the range scatter '
                                 'the wall beams show (median over them; allowed '

@@ -31,7 +31,7 @@ setup(
     entry_points={
         'console_scripts': [
             'bag_replay = wctls_ros.bags.replay_node:main',
-            'calibrate = wctls_ros.evaluation.evaluate_cli:calibrate_main',
+            'calibrate = wctls_ros.evaluation.calibrate_cli:main',
             'evaluate = wctls_ros.evaluation.evaluate_cli:main',
             'feature_node = wctls_ros.feature_node:main',
             'demo = wctls_ros.demo:main',

@@ -16,12 +16,8 @@ PARSERS = [
     ('wctls_ros.s1_emulator', 'parser'),
     ('wctls_ros.demo', 'parser'),
     ('wctls_ros.bags.process_bag', 'parser'),
-    pytest.param('wctls_ros.evaluation.evaluate_cli', 'evaluate_parser', marks=pytest.mark.xfail(
-        strict=True, reason='evaluate_cli.py is another change in progress: --methods, '
-        '--limit, --propagation, --min-presence, --out state no default yet')),
-    pytest.param('wctls_ros.evaluation.evaluate_cli', 'calibrate_parser', marks=pytest.mark.xfail(
-        strict=True, reason='evaluate_cli.py is another change in progress: --limit, --method '
-        'state no default yet')),
+    ('wctls_ros.evaluation.evaluate_cli', 'evaluate_parser'),
+    ('wctls_ros.evaluation.calibrate_cli', 'parser'),
 ]
 
 
@@ -107,3 +103,15 @@ def test_demo_refuses_bad_arguments_before_starting_anything(tmp_path, args, say
     result = run('demo', '--out', tmp_path / 'demo', *args, cwd=tmp_path)
     assert_one_line_error(result, 'demo', says)
     assert not (tmp_path / 'demo').exists()
+
+
+@pytest.mark.parametrize('args, says', [
+    (['/nonexistent/bag'], '/nonexistent/bag: no such bag'),
+    (['/nonexistent/bag', '--limit', '3'], 'argument --limit: must be at least 6'),
+    (['--holdout'], 'give a bag to calibrate on'),
+    (['--validate', '/nonexistent/bag', '--write-preset', 'x.yaml'], '--write-preset needs a bag'),
+])
+def test_calibrate_refuses_what_it_cannot_use_in_one_line(tmp_path, args, says):
+    result = run('calibrate', *args, cwd=tmp_path)
+    assert_one_line_error(result, 'calibrate', says)
+    assert result.stdout == '' and list(tmp_path.iterdir()) == []

@@ -164,12 +164,11 @@ def test_calibration_recovers_the_simulated_noise():
     assert fit.noise.range_sigma_m == pytest.approx(0.012, rel=0.1)
     assert fit.noise.bearing_sigma_rad == pytest.approx(math.radians(0.2), rel=0.15)
     assert fit.noise.common_range_sigma_m == pytest.approx(0.003, rel=0.2)
-    text = node_yaml(fit.noise)
+    text = node_yaml(fit.noise, FeatureConfig(wall_flatness_sigma_m=0.002))
     assert f'range_sigma_m: {fit.noise.range_sigma_m:.4f}' in text
     assert f'bearing_sigma_deg: {math.degrees(fit.noise.bearing_sigma_rad):.4f}' in text
     assert f'common_range_sigma_m: {fit.noise.common_range_sigma_m:.5f}' in text
-    assert 'scaled' not in text
-    assert 'scaled by 1.30' in node_yaml(fit.noise, 1.3)
+    assert 'range_sigma_from_scan: false' in text and 'wall_flatness_sigma_m: 0.00200' in text
 
 
 LMS111 = REAL_DATA / 'sick_lms111_static'
@@ -179,16 +178,24 @@ OFFICE = REAL_DATA / 'urg04lx_office'
 
 def test_real_lms111_calibration_and_nees():
     from wctls_ros.evaluation import load_scans
-    from wctls_ros.evaluation.evaluate_cli import calibrate
+    from wctls_ros.evaluation.calibration import calibrate
+    from wctls_ros.evaluation.corner_check import corner_nees, pooled_nees
+    from wctls_ros.evaluation.samples import feature_config
     scans = load_scans(LMS111)
-    fit, nees_independent, nees_full, scale = calibrate(scans)
-    print(fit.noise.describe(), nees_independent, nees_full)
-    # Measured: range 7.8 mm, bearing 0.10 deg, common-mode 1.0 mm (lag-1 0.89); WTLS corner
-    # NEES 3.3 with the independent terms, 2.7 with the common-mode term.
+    result = calibrate(scans)
+    fit = result.fit
+    print(fit.noise.describe(), result.pooled(result.final))
+    # Measured: range 7.8 mm, bearing 0.10 deg, common-mode 1.0 mm (lag-1 0.89); WCTLS NEES of
+    # the stable corner 1.98 with the common-mode term, so no wall flatness; 2.5 without it.
     assert 0.006 < fit.noise.range_sigma_m < 0.010
     assert 0.0005 < fit.noise.common_range_sigma_m < 0.002 and fit.offset_lag1 > 0.5
-    assert nees_full < nees_independent and 2.0 < nees_full < 3.2
-    assert scale == pytest.approx(math.sqrt(nees_full / 2.0))
+    assert sum(result.stable) == 1 and result.flatness_m < 5e-4
+    assert 1.8 < result.pooled(result.final) < 2.2
+    independent = NoiseParameters(fit.noise.range_sigma_m, fit.noise.bearing_sigma_rad)
+    chosen = [c for c, stable in zip(result.corners, result.stable) if stable]
+    without_common = pooled_nees(corner_nees(
+        scans, feature_config(independent, result.config.method, result.config), chosen))
+    assert without_common > result.pooled(result.fitted) + 0.2
 
 
 def test_real_lms1xx_corner_scatter_is_explained_once_the_residuals_scale_the_lines():
@@ -215,10 +222,10 @@ def test_real_hand_moved_office_recording_is_refused():
 
 
 def test_calibrate_command_prints_the_node_parameters(room_bag, capsys):
-    from wctls_ros.evaluation.evaluate_cli import calibrate_main
+    from wctls_ros.evaluation.calibrate_cli import main as calibrate_main
     assert calibrate_main([str(room_bag)]) == 0
     out = capsys.readouterr().out
     assert 'feature_node:' in out and 'ros__parameters:' in out
     range_sigma = float(out.split('range_sigma_m:')[1].split()[0])
-    assert 0.008 < range_sigma < 0.014                 # 10 mm simulated, scaled to NEES 2
-    assert calibrate_main([str(room_bag) + '_missing']) == 1
+    assert 0.008 < range_sigma < 0.012                 # 10 mm simulated
+    assert calibrate_main([str(room_bag) + '_missing']) == 2

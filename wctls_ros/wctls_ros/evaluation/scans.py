@@ -64,6 +64,18 @@ class StaticScans:
         """
         return self.angle_min + self.angle_increment * np.arange(self.ranges.shape[1])
 
+    def part(self, first: int, stop: int) -> 'StaticScans':
+        """
+        Return the scans first to stop - 1.
+
+        :param first: index of the first scan kept
+        :param stop: index after the last scan kept
+        :return: the scans, with the same geometry and source
+        """
+        return StaticScans(self.ranges[first:stop], self.angle_min, self.angle_increment,
+                           self.range_min, self.range_max, self.stamps_ns[first:stop],
+                           self.source)
+
     def valid(self) -> np.ndarray:
         """
         Return which ranges are usable returns (finite, within the scans' limits, not 0).

@@ -25,7 +25,7 @@ OLDEST_NUMPY_STAMP := $(OLDEST_NUMPY_VENV)/.deps.stamp
 NUMPY_ONLY_TESTS := $(addprefix wctls_ros/test/,test_core_lines.py test_core_pipeline.py \
                       test_core_segmentation.py test_rplidar_scan.py test_simulation.py)
 
-.PHONY: help deps build demo test lint bench results clean
+.PHONY: help deps build demo test lint bench results docs clean
 
 help:
 	@echo 'make demo   set up, then run the S1 emulator, driver and feature node live for ~20 s'
@@ -34,6 +34,7 @@ help:
 	@echo 'make lint   only the ament-style lint (flake8 with ament rules, pep257)'
 	@echo 'make bench  run the benchmarks and print their figures'
 	@echo 'make results  regenerate docs/results (evaluation of simulated and real static scans)'
+	@echo 'make docs   regenerate the parameter tables of docs/user_guide.md from the schema'
 	@echo 'make clean  remove the build, the install space and the outputs (keeps .venv)'
 
 deps: $(DEPS_STAMP)
@@ -78,6 +79,9 @@ bench: $(BUILD_STAMP)
 
 results: $(BUILD_STAMP)
 	$(WITH_ENV) tools/make_results.sh
+
+docs: $(BUILD_STAMP)
+	$(WITH_ENV) python -m wctls_ros.params --write docs/user_guide.md
 
 clean:
 	rm -rf build install log out

@@ -24,7 +24,6 @@ from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 from wctls_msgs.msg import CornerArray, LineSegmentArray  # noqa: E402
 from wctls_ros.core import nees  # noqa: E402
 from wctls_ros.feature_node import FeatureNode  # noqa: E402
-from wctls_ros.params import FEATURE_NODE  # noqa: E402
 
 PACKAGE = pathlib.Path(__file__).resolve().parents[1]
 
@@ -223,21 +222,6 @@ def test_installed_executable_refuses_an_invalid_configuration():
         capture_output=True, text=True, timeout=30)
     assert result.returncode == 1
     assert 'range_min_m (5) must be below range_max_m (4)' in result.stdout + result.stderr
-
-
-def test_readme_lists_every_parameter_with_its_default():
-    readme = PACKAGE.parent / 'README.md'
-    if not readme.is_file():
-        pytest.skip('README.md is not beside the package (installed elsewhere)')
-    rows = {}
-    for line in readme.read_text().splitlines():
-        cells = [c.strip() for c in line.strip().strip('|').split('|')]
-        if len(cells) == 3 and cells[0].startswith('`') and cells[0].endswith('`'):
-            rows[cells[0].strip('`')] = cells[1]
-    for spec in FEATURE_NODE:
-        assert spec.name in rows, f'README does not list {spec.name}'
-        expected = str(spec.default).lower() if isinstance(spec.default, bool) else spec.default
-        assert rows[spec.name] == str(expected), spec.name
 
 
 def test_installed_executable_refuses_a_parameter_of_the_wrong_type_in_one_line():

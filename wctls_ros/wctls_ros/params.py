@@ -8,14 +8,17 @@ Each parameter is a :class:`Parameter` row (name, type by its default, default, 
 description, read-only or not). The nodes declare theirs from here (with ranges as ROS
 descriptors, :func:`wctls_ros.node_main.declare_parameters`), the offline tools read and check
 parameter files with :func:`load_parameters` exactly as the node would accept them, and the
-documented parameter tables are printed by ``python -m wctls_ros.params``. feature_node's
-pipeline parameters are derived from :class:`~wctls_ros.core.FeatureConfig` itself (its fields'
-descriptions and limits), so a limit is stated once. Pure Python: no rclpy import.
+documented parameter tables are printed by ``python -m wctls_ros.params`` (``--write
+docs/user_guide.md`` regenerates them there). feature_node's pipeline parameters are derived
+from :class:`~wctls_ros.core.FeatureConfig` itself (its fields' descriptions and limits), so a
+limit is stated once. Pure Python: no rclpy import.
 """
 
+import argparse
 from dataclasses import dataclass, fields, replace
 import math
 import pathlib
+import re
 import sys
 from typing import Callable, Dict, NamedTuple, Optional, Tuple, Union
 
@@ -371,16 +374,71 @@ def markdown_table(schema) -> str:
     return '\n'.join(rows)
 
 
+def _table_block(name: str) -> re.Pattern:
+    """Return the pattern of a node's table block in a document, markers included."""
+    return re.compile(rf'^(<!-- params:{name} -->\n).*?^(<!-- /params:{name} -->)$',
+                      re.DOTALL | re.MULTILINE)
+
+
+def with_tables(document: str) -> str:
+    """
+    Return a document with every node's parameter table regenerated from the schema.
+
+    Each node's table stands between the lines ``<!-- params:NODE -->`` and
+    ``<!-- /params:NODE -->``; whatever is between them is replaced by :func:`markdown_table`.
+
+    :param document: the Markdown text (e.g. docs/user_guide.md)
+    :return: the text with the tables of today's schema
+    :raises ConfigError: when a node of SCHEMAS has no such block, or more than one
+    """
+    for name, schema in SCHEMAS.items():
+        document, count = _table_block(name).subn(
+            lambda block: f'{block[1]}\n{markdown_table(schema)}\n\n{block[2]}', document)
+        if count != 1:
+            raise ConfigError(f'{count} blocks for {name}; expected one, between the lines '
+                              f"'<!-- params:{name} -->' and '<!-- /params:{name} -->'")
+    return document
+
+
 def main(argv=None) -> int:
     """
-    Print the parameter tables of every node as Markdown (for the documentation).
+    Print the parameter tables as Markdown, or write or check them in a document.
 
-    :param argv: node names to print (default: all)
-    :return: exit status 0
+    :param argv: arguments (default: sys.argv[1:])
+    :return: exit status: 0; 1 when ``--check`` finds a stale table; 2 on a user error
     """
-    names = (sys.argv[1:] if argv is None else argv) or list(SCHEMAS)
-    for name in names:
-        print(f'### {name}\n\n{markdown_table(SCHEMAS[name])}\n')
+    parser = argparse.ArgumentParser(
+        prog='python -m wctls_ros.params',
+        description='The parameter tables of the nodes, from the one schema.')
+    parser.add_argument('nodes', nargs='*', metavar='NODE',
+                        help=f"nodes to print: {', '.join(SCHEMAS)} (default: all)")
+    action = parser.add_mutually_exclusive_group()
+    action.add_argument('--write', metavar='FILE', help='replace the marked table blocks of '
+                        "every node in FILE (e.g. docs/user_guide.md) with today's tables")
+    action.add_argument('--check', metavar='FILE', help='exit 1 when a marked table in FILE '
+                        'differs from the schema')
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    unknown = [name for name in args.nodes if name not in SCHEMAS]
+    if unknown:
+        parser.error(f"unknown nodes {unknown}; choose among {', '.join(SCHEMAS)}")
+    path = args.write or args.check
+    if path is None:
+        for name in args.nodes or SCHEMAS:
+            print(f'### {name}\n\n{markdown_table(SCHEMAS[name])}\n')
+        return 0
+    try:
+        document = pathlib.Path(path).read_text()
+        updated = with_tables(document)
+        if args.write and updated != document:
+            pathlib.Path(path).write_text(updated)
+    except (OSError, ConfigError) as error:
+        print(f'{parser.prog}: error: {path}: {getattr(error, "strerror", None) or error}',
+              file=sys.stderr)
+        return 2
+    if args.check and updated != document:
+        print(f'{path}: the parameter tables differ from the schema; regenerate them with '
+              f'python -m wctls_ros.params --write {path}', file=sys.stderr)
+        return 1
     return 0
 
 

@@ -66,7 +66,8 @@ def test_simulate_refuses_a_bad_plan_or_value_in_one_line(tmp_path, make_args, s
 
 
 def write(path, text):
-    """Write ``text`` to ``path``; return the path."""
+    """Write ``text`` to ``path`` (its folder made); return the path."""
+    path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text)
     return path
 
@@ -115,3 +116,15 @@ def test_calibrate_refuses_what_it_cannot_use_in_one_line(tmp_path, args, says):
     result = run('calibrate', *args, cwd=tmp_path)
     assert_one_line_error(result, 'calibrate', says)
     assert result.stdout == '' and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize('make_args, says', [
+    (lambda tmp: ['/nonexistent/bag'], '/nonexistent/bag'),
+    (lambda tmp: [write(tmp / 'bag' / 'metadata.yaml', 'x').parent], 'cannot read'),
+    (lambda tmp: ['/nonexistent/bag', '--methods', 'wtls,tls'], "unknown methods ['tls']"),
+    (lambda tmp: ['/nonexistent/bag', '--min-presence', '2'], 'argument --min-presence'),
+])
+def test_evaluate_refuses_what_it_cannot_use_in_one_line(tmp_path, make_args, says):
+    result = run('evaluate', *make_args(tmp_path), '--out', tmp_path / 'out', cwd=tmp_path)
+    assert_one_line_error(result, 'evaluate', says)
+    assert not (tmp_path / 'out').exists() and result.stdout == ''

@@ -22,14 +22,17 @@ from .analysis import evaluate_scans, PROPAGATIONS
 from .calibration import fit_noise
 from .samples import NoiseParameters
 from .scans import load_scans, MovingSensorError, require_still
+from ..cli import bounded, Parser, USER_ERROR, UserError
 from ..core import METHODS
 
 
-def _common_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument('bag', help='ROS 2 (mcap/sqlite3) or ROS 1 bag of scans from a still sensor')
-    p.add_argument('--topic', default=None, help="LaserScan topic (default: the bag's only one)")
-    p.add_argument('--limit', type=int, default=None,
-                   help='use at most this many scans (default: all)')
+def _methods(text: str) -> list:
+    """Parse a comma-separated list of methods (an argparse type)."""
+    methods = [m.strip() for m in text.split(',') if m.strip()]
+    unknown = sorted(set(methods) - set(METHODS))
+    if unknown or not methods:
+        raise argparse.ArgumentTypeError(f'unknown methods {unknown}; choose among {METHODS}')
+    return methods
 
 
 def evaluate_parser() -> argparse.ArgumentParser:
@@ -38,15 +41,19 @@ def evaluate_parser() -> argparse.ArgumentParser:
 
     :return: the parser
     """
-    p = argparse.ArgumentParser(
+    p = Parser(
         prog='evaluate', description='Per-corner sigma tables, ellipse figure, per-scan '
         'median area box plots and the propagated-versus-empirical check (NEES) of UTLS, WTLS, '
-        'WCTLS (and ML) on repeated scans from a still sensor.')
-    _common_arguments(p)
+        'WCTLS (and ML) on repeated scans from a still sensor.',
+        epilog='Exit status: 0 done; 2 a user error or a moving sensor (one line on stderr).')
+    p.add_argument('bag', help='ROS 2 (mcap/sqlite3) or ROS 1 bag of scans from a still sensor')
+    p.add_argument('--topic', default=None, help="LaserScan topic (default: the bag's only one)")
+    p.add_argument('--limit', type=bounded(int, 1), default=None,
+                   help='use at most this many scans (default: all)')
     p.add_argument('--out', required=True,
                    help='output folder (report.md, PNG, CSV); required, no default')
     p.add_argument('--title', default=None, help='report title (default: the bag name)')
-    p.add_argument('--methods', default='utls,wtls,wctls,ml',
+    p.add_argument('--methods', type=_methods, default='utls,wtls,wctls,ml',
                    help='comma-separated methods among ' + ', '.join(METHODS)
                    + ' (default: %(default)s)')
     p.add_argument('--propagation', choices=PROPAGATIONS, default='full',
@@ -54,14 +61,14 @@ def evaluate_parser() -> argparse.ArgumentParser:
                    "the off-diagonal terms of each line's 3x3 covariance before the corner "
                    "(an analysis of the paper's results, never the node's behaviour) "
                    '(default: %(default)s)')
-    p.add_argument('--range-sigma', type=float, default=None,
+    p.add_argument('--range-sigma', type=bounded(float, 0.0), default=None,
                    help='range noise std, m (default: fitted from the data)')
-    p.add_argument('--bearing-sigma-deg', type=float, default=None,
+    p.add_argument('--bearing-sigma-deg', type=bounded(float, 0.0), default=None,
                    help='bearing noise std, deg (default: fitted with the range sigma)')
-    p.add_argument('--common-range-sigma', type=float, default=None,
+    p.add_argument('--common-range-sigma', type=bounded(float, 0.0), default=None,
                    help='per-scan common range offset std, m (default: fitted when the noise '
                    'is fitted, else 0)')
-    p.add_argument('--min-presence', type=float, default=0.8,
+    p.add_argument('--min-presence', type=bounded(float, 0.0, 1.0), default=0.8,
                    help='keep corners found in at least this fraction of the scans '
                    '(default: %(default)s)')
     return p
@@ -90,28 +97,17 @@ def main(argv=None) -> int:
     Run ``evaluate``.
 
     :param argv: arguments (default: sys.argv[1:])
-    :return: exit status (2 for a moving sensor)
+    :return: exit status: 0 done; 2 a user error, an unreadable bag or a moving sensor
     """
-    args = evaluate_parser().parse_args(argv)
-    methods = [m.strip() for m in args.methods.split(',') if m.strip()]
-    unknown = sorted(set(methods) - set(METHODS))
-    if unknown or not methods:
-        print(f'evaluate: unknown methods {unknown}; choose among {METHODS}', file=sys.stderr)
-        return 1
-    return _guarded('evaluate', lambda: _evaluate(args, methods, argv))
-
-
-def _guarded(prog: str, work) -> int:
-    """Run a command's work; a moving sensor exits 2, an unreadable input 1, with the reason."""
     from ..bags import BagError
+    args = evaluate_parser().parse_args(argv)
     try:
-        return work()
+        return _evaluate(args, args.methods, argv)
     except MovingSensorError as error:
-        print(f'{prog}: refused: {error}', file=sys.stderr)
-        return 2
-    except (BagError, ValueError) as error:
-        print(f'{prog}: {error}', file=sys.stderr)
-        return 1
+        print(f'evaluate: error: refused: {error}', file=sys.stderr)
+    except (BagError, UserError, ValueError) as error:
+        print(f'evaluate: error: {error}', file=sys.stderr)
+    return USER_ERROR
 
 
 def _evaluate(args, methods, argv) -> int:

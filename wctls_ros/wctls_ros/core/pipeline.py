@@ -62,31 +62,52 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
 
 def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
                       config: FeatureConfig, range_min_m: float, range_max_m: float) -> Features:
-    """Run :func:`extract_features` with floating-point warnings already silenced."""
+    """
+    Run :func:`extract_features` with floating-point warnings already silenced.
+
+    The steps of the paper's Algorithm 1; each comment names the section of
+    docs/derivation.md that states the step's rule or formulas.
+    """
     if np.size(ranges_m) > config.max_beams:
         raise ScanError(f'{np.size(ranges_m)} beams are more than max_beams '
                         f'({config.max_beams})')
     points = scan_to_points(ranges_m, angle_min_rad, angle_increment_rad,
                             max(range_min_m, config.range_min_m),
                             min(range_max_m, config.range_max_m))
+    nothing = Features(config.method, SegmentSet.empty(), CornerSet.empty())
     if len(points) < config.min_segment_points:
-        return Features(config.method, SegmentSet.empty(), CornerSet.empty())
-    if config.range_sigma_from_scan:
-        config = replace(config, range_sigma_m=max(config.range_sigma_m,
-                                                   scan_range_sigma(points)))
+        return nothing
+    # #range-noise-from-the-scan
+    config = _with_range_sigma_of_the_scan(config, points)
+    # #segmentation-statistics: breakpoints, IEPF, merging, the size rules, the end trims.
     contour = _Contour.of(points, config)
-    segments, angle, radius, work_limited = _segment(contour, config)
+    segments, unsplit = _split(contour, config)
     if not len(segments):
-        return Features(config.method, SegmentSet.empty(), CornerSet.empty(), work_limited)
-    walls, positions = _fit_walls(contour, segments, angle, radius, config)
+        return replace(nothing, work_limited=unsplit)
+    segments, angle, radius, unmerged = _merge(contour, segments, config)
+    segments, angle, radius = _large_enough(contour, segments, angle, radius, config)
+    work_limited = unsplit or unmerged
+    if not len(segments):
+        return replace(nothing, work_limited=work_limited)
+    segments = _trim_ends(contour, segments, angle, radius, config)
+    # #utls, #wtls, #wctls or #maximum-likelihood: the configured fit with its covariance.
+    walls, positions = _fit_walls(contour, segments, config)
     if not len(walls):
-        return Features(config.method, SegmentSet.empty(), CornerSet.empty(), work_limited)
-    # Which pairs are corners is decided on the sensor noise alone; the published covariances
-    # add the model error (a rougher wall is less precise, not more of a corner).
+        return replace(nothing, work_limited=work_limited)
+    # #corners: which pairs are corners is decided on the sensor noise alone; the published
+    # covariances add the model error (a rougher wall is less precise, not more of a corner).
     corners = _corners(contour, walls, positions, config)
+    # #model-error (D17), (D18), then #corners and #common-mode-range-offset, (D11)-(D16).
     walls = _with_model_error(walls, config)
     return Features(config.method, walls, _corner_covariances(walls, corners, config),
                     work_limited)
+
+
+def _with_range_sigma_of_the_scan(config: FeatureConfig, points: ScanPoints) -> FeatureConfig:
+    """Return the config with range_sigma_m raised to the scan's own estimate, when enabled."""
+    if not config.range_sigma_from_scan:
+        return config
+    return replace(config, range_sigma_m=max(config.range_sigma_m, scan_range_sigma(points)))
 
 
 @dataclass(frozen=True)
@@ -125,64 +146,80 @@ class _Contour:
         return len(self.x)
 
 
-def _segment(contour: _Contour, config: FeatureConfig):
+def _split(contour: _Contour, config: FeatureConfig):
     """
-    Split the chains into straight segments, merge collinear neighbours, trim their ends.
+    Split the chains into straight segments by Iterative End Point Fit.
 
-    Steps: Iterative End Point Fit, merging of statistically collinear neighbours (never
-    across a discontinuity), the size rules (min_segment_points, min_segment_length_m), then
-    leaving out the returns where two segments meet that fit both lines and runs at the ends
-    that lie off the line together. Every pass of IEPF and of merging is O(n): a bounded
-    number of them (:func:`~.segmentation.pass_budget`) bounds the work on any scan.
+    The paper's split distance, but never within iepf_noise_sigmas of a return's noise: a
+    threshold of 2 sigma splits a straight wall at its noise in most scans. Every pass is O(n):
+    a bounded number of them (:func:`~.segmentation.pass_budget`) bounds the work on any scan.
 
-    :return: (segments in scan order, the merge fit's angle (S,) and radius (S,) in circular
-        order before sorting, whether the work bound stopped splitting or merging early);
-        positions are the contour's (circular order)
+    :return: (the segments, positions in the contour; whether the work bound stopped splitting)
     """
-    n, x, y = len(contour), contour.x, contour.y
-    budget = pass_budget(n)
-    runs = contour.chains
-    # The paper's split distance, but never within iepf_noise_sigmas of a return's noise: a
-    # threshold of 2 sigma splits a straight wall at its noise in most scans.
     threshold = config.iepf_threshold_m
     if config.iepf_noise_sigmas > 0.0:
         noise = np.sqrt(config.range_sigma_m ** 2
                         + (contour.rho * config.bearing_sigma_rad) ** 2)
         threshold = np.maximum(threshold, config.iepf_noise_sigmas * noise)
-    segments, unsplit = iterative_end_point_fit(x, y, runs.start, runs.stop, runs.chain,
-                                                threshold, budget)
-    if not len(segments):
-        return segments, None, None, unsplit
-    # Sums over the pieces between segment ends make the segmentation's line fits O(1) per
-    # segment, merged or not: merging works on piece ranges.
-    sums = piece_sums(moment_terms(x, y), segments)
+    runs = contour.chains
+    return iterative_end_point_fit(contour.x, contour.y, runs.start, runs.stop, runs.chain,
+                                   threshold, pass_budget(len(contour)))
+
+
+def _merge(contour: _Contour, segments: SegmentRanges, config: FeatureConfig):
+    """
+    Merge statistically collinear neighbours, never across a discontinuity.
+
+    Sums over the pieces between segment ends make the merge test's line fits
+    (:func:`~.segmentation.moment_fit`) O(1) per segment, merged or not: merging works on
+    piece ranges, with the same work bound as splitting.
+
+    :return: (merged segments, their merge fits' angle (S,) and radius (S,), whether the work
+        bound stopped merging)
+    """
+    sums = piece_sums(moment_terms(contour.x, contour.y), segments)
 
     def quick(pieces: SegmentRanges):
         return moment_fit(sums.over(pieces), config.range_sigma_m, config.bearing_sigma_rad)
 
+    runs = contour.chains
     joinable = contour.breaks.joinable[runs.order][sums.edges[:-1]]   # before each piece
     pieces, (angle, radius, _), unmerged = merge_collinear(
         sums.pieces(segments), contour.points.full_turn, sums.edges.size - 1, quick,
-        config.merge_chi2, budget, joinable)
-    segments = sums.positions(pieces)
-    first, last = segments.start, (segments.stop - 1) % n
+        config.merge_chi2, pass_budget(len(contour)), joinable)
+    return sums.positions(pieces), angle, radius, unmerged
+
+
+def _large_enough(contour: _Contour, segments: SegmentRanges, angle: np.ndarray,
+                  radius: np.ndarray, config: FeatureConfig):
+    """Return the segments (and their angle, radius) of min_segment_points and length."""
+    x, y = contour.x, contour.y
+    first, last = segments.start, (segments.stop - 1) % len(contour)
     dx, dy = x[last] - x[first], y[last] - y[first]
     keep = ((segments.stop - first >= config.min_segment_points)
             & (dx * dx + dy * dy >= config.min_segment_length_m ** 2))
-    segments, angle, radius = segments.select(keep), angle[keep], radius[keep]
-    if len(segments):
-        segments = trim_ambiguous_ends(segments, contour.points.full_turn, n, x, y, angle,
-                                       radius, config.range_sigma_m, config.bearing_sigma_rad,
-                                       config.min_segment_points)
-        if config.end_offset_sigmas > 0.0:
-            segments = trim_offset_ends(segments, n, x, y, angle, radius, config.range_sigma_m,
-                                        config.bearing_sigma_rad, config.min_segment_points,
-                                        config.end_offset_sigmas)
-    return segments, angle, radius, unsplit or unmerged
+    return segments.select(keep), angle[keep], radius[keep]
 
 
-def _fit_walls(contour: _Contour, segments: SegmentRanges, angle: np.ndarray,
-               radius: np.ndarray, config: FeatureConfig):
+def _trim_ends(contour: _Contour, segments: SegmentRanges, angle: np.ndarray,
+               radius: np.ndarray, config: FeatureConfig) -> SegmentRanges:
+    """
+    Leave out the returns at segment ends that fit both walls, and runs off the line together.
+
+    The lines are the merge fits' (angle, radius).
+    """
+    n, x, y = len(contour), contour.x, contour.y
+    segments = trim_ambiguous_ends(segments, contour.points.full_turn, n, x, y, angle, radius,
+                                   config.range_sigma_m, config.bearing_sigma_rad,
+                                   config.min_segment_points)
+    if config.end_offset_sigmas > 0.0:
+        segments = trim_offset_ends(segments, n, x, y, angle, radius, config.range_sigma_m,
+                                    config.bearing_sigma_rad, config.min_segment_points,
+                                    config.end_offset_sigmas)
+    return segments
+
+
+def _fit_walls(contour: _Contour, segments: SegmentRanges, config: FeatureConfig):
     """
     Fit every segment with the configured method and keep the ones that are walls.
 
@@ -195,13 +232,8 @@ def _fit_walls(contour: _Contour, segments: SegmentRanges, angle: np.ndarray,
     n, points, order = len(contour), contour.points, contour.chains.order
     first_index = points.index[order[segments.start]]
     segments = segments.select(np.argsort(first_index, kind='stable'))
-    counts = segments.stop - segments.start
-    offsets = np.cumsum(counts) - counts
-    position = np.arange(offsets[-1] + counts[-1]) + np.repeat(segments.start - offsets, counts)
-    returns = segment_returns(contour.rho.take(position, mode='wrap'),
-                              contour.theta.take(position, mode='wrap'), offsets, counts,
-                              contour.x.take(position, mode='wrap'),
-                              contour.y.take(position, mode='wrap'))
+    returns = _returns_of(contour, segments)
+    counts = returns.counts
     fits = fit_lines(config.method, returns, config.range_sigma_m, config.bearing_sigma_rad)
     last = (segments.stop - 1) % n
     start_xy, end_xy = _project(contour.x, contour.y, segments.start, last, fits)
@@ -216,6 +248,17 @@ def _fit_walls(contour: _Contour, segments: SegmentRanges, angle: np.ndarray,
         points.index[order[segments.start]], points.index[order[last]], counts,
         _residual_chi2_dof(returns, fits, usable, config))
     return walls, np.stack([segments.start, last])
+
+
+def _returns_of(contour: _Contour, segments: SegmentRanges) -> SegmentReturns:
+    """Return the segments' returns laid end to end (across the seam on a full turn)."""
+    counts = segments.stop - segments.start
+    offsets = np.cumsum(counts) - counts
+    position = np.arange(offsets[-1] + counts[-1]) + np.repeat(segments.start - offsets, counts)
+    return segment_returns(contour.rho.take(position, mode='wrap'),
+                           contour.theta.take(position, mode='wrap'), offsets, counts,
+                           contour.x.take(position, mode='wrap'),
+                           contour.y.take(position, mode='wrap'))
 
 
 def _with_model_error(walls: SegmentSet, config: FeatureConfig) -> SegmentSet:

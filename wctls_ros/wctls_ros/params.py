@@ -23,6 +23,7 @@ import yaml
 
 from .core import FeatureConfig, METHODS
 from .core.config import field_description, field_limits, Limits
+from .plain_yaml import load_without_aliases
 from .sensors import DEFAULT_SENSOR, PRESET_PARAMETERS, sensor_presets
 
 Value = Union[bool, int, float, str]
@@ -326,7 +327,7 @@ def load_parameters(path, node_name: str = 'feature_node',
     if path is not None:
         path = pathlib.Path(path)
         try:
-            document = yaml.safe_load(path.read_text())
+            document = load_without_aliases(path.read_text())
         except (OSError, UnicodeDecodeError, yaml.YAMLError) as error:
             raise ConfigError(f'cannot read the parameter file {path}: '
                               f'{str(error).splitlines()[0]}') from error

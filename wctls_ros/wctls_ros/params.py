@@ -326,6 +326,9 @@ def load_parameters(path, node_name: str = 'feature_node',
     given = {}
     if path is not None:
         path = pathlib.Path(path)
+        if path.exists() and not path.is_file():     # opening a FIFO would wait for a writer
+            raise ConfigError(f'cannot read the parameter file {path}: not a regular file (a '
+                              'folder, FIFO, device or socket)')
         try:
             document = load_without_aliases(path.read_text())
         except (OSError, UnicodeDecodeError, yaml.YAMLError) as error:

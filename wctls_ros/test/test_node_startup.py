@@ -3,6 +3,7 @@
 
 """Nodes refuse bad ROS arguments with one fatal line and exit 1; Ctrl-C ends them cleanly."""
 
+import os
 import signal
 import subprocess
 import time
@@ -18,6 +19,8 @@ from test_feature_node import installed_executable  # noqa: E402
     (['--params-file', '/nonexistent/feature_node.yaml'],
      "Couldn't parse params file: '--params-file /nonexistent/feature_node.yaml'"),
     (['--params-file', 'BROKEN'], "Couldn't parse params file"),
+    # rcl opened a FIFO and waited for a writer forever.
+    (['--params-file', 'FIFO'], 'fifo.yaml is not a regular file'),
     (['-r', '__node:=bad-name'], "Couldn't parse remap rule: '-r __node:=bad-name'"),
     (['--no-such-option'], "unknown ROS arguments ['--no-such-option']"),
 ])
@@ -25,7 +28,9 @@ from test_feature_node import installed_executable  # noqa: E402
 def test_bad_ros_arguments_give_one_fatal_line_and_exit_1(node, arguments, reason, tmp_path):
     broken = tmp_path / 'broken.yaml'
     broken.write_text('feature_node:\n  ros__parameters: [\n')
-    arguments = [str(broken) if a == 'BROKEN' else a for a in arguments]
+    os.mkfifo(tmp_path / 'fifo.yaml')
+    arguments = [{'BROKEN': str(broken), 'FIFO': str(tmp_path / 'fifo.yaml')}.get(a, a)
+                 for a in arguments]
     result = subprocess.run([str(installed_executable(node)), '--ros-args'] + arguments,
                             capture_output=True, text=True, timeout=30)
     lines = (result.stdout + result.stderr).splitlines()

@@ -5,6 +5,7 @@
 
 import dataclasses
 import math
+import os
 import pathlib
 import subprocess
 import sys
@@ -206,3 +207,19 @@ def test_each_shipped_parameter_file_sets_every_parameter_at_its_default(node_na
             assert f'# {name}: ' in path.read_text()
     assert set(written) == names
     assert load_parameters(path, node_name) == pytest.approx(load_parameters(None, node_name))
+
+
+def test_a_fifo_or_a_folder_as_the_parameter_file_is_refused_at_once(tmp_path):
+    # Opening a FIFO waits for a writer: process_bag -c FIFO hung, and SIGTERM (which it turns
+    # into a request to stop between two scans) could not end it.
+    os.mkfifo(tmp_path / 'fifo.yaml')
+    code = ('import sys; from wctls_ros.params import ConfigError, load_parameters\n'
+            'for path in sys.argv[1:]:\n'
+            '    try:\n'
+            '        load_parameters(path)\n'
+            '    except ConfigError as error:\n'
+            '        print(error)\n')
+    done = subprocess.run([sys.executable, '-c', code, str(tmp_path / 'fifo.yaml'),
+                           str(tmp_path)], capture_output=True, text=True, timeout=20)
+    lines = done.stdout.splitlines()
+    assert len(lines) == 2 and all('not a regular file' in line for line in lines), done

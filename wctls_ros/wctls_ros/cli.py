@@ -16,7 +16,12 @@ docs/user_guide.md lists every tool's statuses. Pure Python: no rclpy import.
 """
 
 import argparse
+import contextlib
 import math
+import os
+import pathlib
+import shutil
+import tempfile
 
 USER_ERROR = 2
 
@@ -57,3 +62,29 @@ def bounded(kind, low, high=math.inf):
             raise argparse.ArgumentTypeError(f'must be {span}, got {text}')
         return value
     return parse
+
+
+@contextlib.contextmanager
+def staged_folder(out_dir):
+    """
+    Yield a staging folder whose files move into ``out_dir`` once the block ends without error.
+
+    A tool writes its outputs into the staging folder (beside ``out_dir``, on the same file
+    system); only when all are written does each replace its namesake in ``out_dir`` (a rename,
+    which needs no space). A full disk or a file-size limit midway leaves ``out_dir`` as it was.
+    The staging folder is removed in every case.
+
+    :param out_dir: the output folder (created with its parents when missing)
+    :return: the staging folder (a context manager's value)
+    :raises OSError: when a folder cannot be created or a file cannot be moved into place
+    """
+    out = pathlib.Path(out_dir)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = pathlib.Path(tempfile.mkdtemp(prefix=f'.partial-{out.name}-', dir=out.parent))
+    try:
+        yield staging
+        out.mkdir(exist_ok=True)
+        for item in sorted(staging.iterdir()):
+            os.replace(item, out / item.name)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)

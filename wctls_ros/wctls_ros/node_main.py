@@ -3,8 +3,10 @@
 
 """The Jazzy ``main()`` every wctls_ros node shares, and its parameter declarations."""
 
+import os
 import re
 import signal
+import sys
 import threading
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -105,6 +107,12 @@ def run_node(name: str, make_node, spin=spin_forever, config_errors=(ValueError,
     :return: exit status: 0 on a clean end, 1 on a bad configuration
     """
     logger = rclpy.logging.get_logger(name)
+    unreadable = _special_params_files(sys.argv if args is None else args)
+    if unreadable:
+        # rcl would open it and wait for a writer (a FIFO) before any signal handler exists.
+        logger.fatal(f'cannot start: --params-file {unreadable[0]} is not a regular file (a '
+                     'folder, FIFO, device or socket)')
+        return 1
     try:
         # Parsed once before rclpy.init, which would log an extra rcl line before raising.
         remove_ros_args(args)
@@ -136,6 +144,12 @@ def run_node(name: str, make_node, spin=spin_forever, config_errors=(ValueError,
             node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def _special_params_files(args) -> list:
+    """Return the --params-file arguments that exist but are not regular files."""
+    given = [path for option, path in zip(args, args[1:]) if option == '--params-file']
+    return [path for path in given if os.path.exists(path) and not os.path.isfile(path)]
 
 
 def _ignore_further_interrupts():

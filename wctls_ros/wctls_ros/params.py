@@ -26,6 +26,7 @@ import yaml
 
 from .core import FeatureConfig, METHODS
 from .core.config import field_description, field_limits, Limits
+from .plain_yaml import load_without_aliases
 from .sensors import DEFAULT_SENSOR, PRESET_PARAMETERS, sensor_presets
 
 Value = Union[bool, int, float, str]
@@ -328,8 +329,11 @@ def load_parameters(path, node_name: str = 'feature_node',
     given = {}
     if path is not None:
         path = pathlib.Path(path)
+        if path.exists() and not path.is_file():     # opening a FIFO would wait for a writer
+            raise ConfigError(f'cannot read the parameter file {path}: not a regular file (a '
+                              'folder, FIFO, device or socket)')
         try:
-            document = yaml.safe_load(path.read_text())
+            document = load_without_aliases(path.read_text())
         except (OSError, UnicodeDecodeError, yaml.YAMLError) as error:
             raise ConfigError(f'cannot read the parameter file {path}: '
                               f'{str(error).splitlines()[0]}') from error

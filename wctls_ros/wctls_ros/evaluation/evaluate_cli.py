@@ -15,6 +15,7 @@ The noise calibration that prints the node's parameters is ``calibrate`` (calibr
 
 import argparse
 import math
+import pathlib
 import shlex
 import sys
 
@@ -22,7 +23,7 @@ from .analysis import evaluate_scans, PROPAGATIONS
 from .calibration import fit_noise
 from .samples import NoiseParameters
 from .scans import load_scans, MovingSensorError, require_still
-from ..cli import bounded, Parser, USER_ERROR, UserError
+from ..cli import bounded, Parser, staged_folder, USER_ERROR, UserError
 from ..core import METHODS
 
 
@@ -121,7 +122,13 @@ def _evaluate(args, methods, argv) -> int:
                                      (sys.argv[1:] if argv is None else argv))
     notes = [origin, f'stillness check: {still.steady_beams} steady beams, '
              f'{100 * still.drifted_fraction:.1f} % drifted (refused above 10 %)']
-    path = write_report(evaluation, args.out, args.title or str(args.bag), command, notes)
+    try:
+        with staged_folder(args.out) as staging:
+            written = write_report(evaluation, staging, args.title or str(args.bag), command,
+                                   notes)
+    except OSError as error:                # a full disk, a file-size limit, no permission
+        raise ValueError(f'cannot write {args.out}: {error.strerror or error}') from error
+    path = pathlib.Path(args.out) / written.name
     print(f'evaluate: {len(scans)} scans, {len(evaluation.centers)} corners, noise '
           f'{noise.describe()}, propagation {args.propagation}')
     for row in summary_rows(evaluation):

@@ -27,7 +27,7 @@ from typing import Dict, Optional
 from .scans import check_still, load_json_scans, load_scans, StaticScans
 from .score import markdown_table, RECURRING_PRESENCE, score_scans, write_score
 from .truth import load_truth, Truth, TRUTH_FILE
-from ..cli import Parser, USER_ERROR, UserError
+from ..cli import Parser, staged_folder, USER_ERROR, UserError
 from ..core import FeatureConfig, METHODS
 from ..params import feature_settings, load_parameters, SENSOR
 from ..sensors import DEFAULT_SENSOR, sensor_presets
@@ -204,8 +204,13 @@ def run(args, argv) -> int:
     if args.out is not None:
         command = 'score ' + ' '.join(shlex.quote(a) for a in
                                       (sys.argv[1:] if argv is None else argv))
-        path = write_score(table, args.out, args.title or pathlib.Path(args.bag).name, command,
-                           notes)
+        try:
+            with staged_folder(args.out) as staging:
+                written = write_score(table, staging, args.title or pathlib.Path(args.bag).name,
+                                      command, notes)
+        except OSError as error:            # a full disk, a file-size limit, no permission
+            raise UserError(f'cannot write {args.out}: {error.strerror or error}') from error
+        path = pathlib.Path(args.out) / written.name
         print(f'score: wrote {path}')
     return 0
 

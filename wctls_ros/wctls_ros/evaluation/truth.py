@@ -39,6 +39,7 @@ from typing import Optional, Tuple
 import numpy as np
 import yaml
 
+from ..plain_yaml import load_without_aliases
 from ..simulation import CORNER_KINDS
 
 # The truth simulate writes into a bag folder, and where score looks for it.
@@ -264,7 +265,7 @@ def load_truth(path) -> Truth:
     if path.stat().st_size > _MAX_BYTES:
         raise TruthError(f'{path}: larger than {_MAX_BYTES} bytes')
     try:
-        document = yaml.safe_load(path.read_text())
+        document = load_without_aliases(path.read_text())
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as error:
         raise TruthError(f'{path}: not a readable YAML file: '
                          f'{str(error).splitlines()[0]}') from error

@@ -47,6 +47,7 @@ import numpy as np
 import yaml
 
 from .scene import roughness_profile, Scene, Surfaces, Walker
+from ..plain_yaml import load_without_aliases
 
 BUNDLED_PLANS = ('environment_a', 'environment_b', 'environment_a_cluttered',
                  'environment_b_cluttered')
@@ -497,7 +498,7 @@ def _plan_text(name_or_path: str, folder: Optional[pathlib.Path] = None):
 def _parse(text: str, source: str) -> dict:
     """Parse a plan's YAML text into its mapping."""
     try:
-        spec = yaml.safe_load(text)
+        spec = load_without_aliases(text)
     except yaml.YAMLError as error:
         raise ValueError(f'floor plan {source}: not valid YAML: '
                          f'{str(error).splitlines()[0]}') from error

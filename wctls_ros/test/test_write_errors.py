@@ -1,0 +1,60 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""A write that fails midway (full disk, file-size limit): one line, and nothing half written."""
+
+import resource
+import subprocess
+import sys
+
+import pytest
+
+# Enough for the CSV tables, too little for a figure: the tools fail midway through their output.
+FILE_SIZE_LIMIT_BYTES = 16 * 1024
+
+
+@pytest.fixture(scope='module')
+def still_bag(tmp_path_factory):
+    pytest.importorskip('rclpy')
+    from wctls_ros.evaluation.simulate_cli import main
+    path = tmp_path_factory.mktemp('writes') / 'room'
+    assert main(['environment_a', str(path), '--scans', '30', '--seed', '2',
+                 '--sensor', '1cm']) == 0
+    return path
+
+
+def limit_file_size():
+    resource.setrlimit(resource.RLIMIT_FSIZE, (FILE_SIZE_LIMIT_BYTES, FILE_SIZE_LIMIT_BYTES))
+
+
+@pytest.mark.parametrize('module, arguments, status', [
+    ('score_cli', ['--methods', 'wctls'], 2),
+    ('evaluate_cli', ['--methods', 'wctls', '--range-sigma', '0.01',
+                      '--bearing-sigma-deg', '0.05'], 2),
+])
+def test_a_file_size_limit_midway_is_one_line_and_leaves_the_folder_as_it_was(
+        still_bag, tmp_path, module, arguments, status):
+    # Before, evaluate ended in a 55-line traceback and both left the tables they had written
+    # next to the user's files.
+    out = tmp_path / 'report'
+    out.mkdir()
+    (out / 'notes.md').write_text('a user file in the output folder\n')
+    done = subprocess.run(
+        [sys.executable, '-m', f'wctls_ros.evaluation.{module}', str(still_bag), '--out',
+         str(out), *arguments], capture_output=True, text=True, timeout=300,
+        preexec_fn=limit_file_size)
+    prog = module.split('_')[0]
+    assert done.returncode == status, done.stderr
+    assert len(done.stderr.splitlines()) == 1 and 'Traceback' not in done.stderr, done.stderr
+    assert done.stderr.startswith(f'{prog}: ') and f'cannot write {out}' in done.stderr
+    assert 'File too large' in done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['report']       # no staging left
+    assert [p.name for p in out.iterdir()] == ['notes.md']
+    # Without the limit the same command writes its report beside the user's file.
+    done = subprocess.run(
+        [sys.executable, '-m', f'wctls_ros.evaluation.{module}', str(still_bag), '--out',
+         str(out), *arguments], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert {'notes.md', 'table.md' if prog == 'score' else 'report.md'} <= {
+        p.name for p in out.iterdir()}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['report']

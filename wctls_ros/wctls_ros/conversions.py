@@ -55,23 +55,31 @@ class MessageTypes:
     """
     The message classes the codec builds with, by type name (``types.Corner``, ...).
 
-    Made from rclpy's message packages (:meth:`from_rclpy`, for nodes) or from a rosbags
-    typestore (:meth:`from_typestore`, for bags); both take the same field values, except that
-    a float32 sequence is held as :attr:`float32_array` makes it.
+    Made from rclpy's message packages (:meth:`from_rclpy`) or from a rosbags typestore
+    (:meth:`from_typestore`); both take the same field values, except that a float32 sequence
+    is held as :attr:`float32_array` makes it. Either serialises its messages to CDR bytes,
+    which an rclpy publisher publishes as they are and a bag stores: rosbags' classes build
+    and serialise in a fraction of the time rclpy's take (see docs/results/message_path.md),
+    so the node and the bag tools both build with them.
 
     :ivar float32_array: turns a float32 sequence into what the message classes hold
+    :ivar serialize: turns a message of these classes into its CDR bytes (with the
+        encapsulation header, as ``rclpy.serialization.serialize_message`` gives)
     """
 
-    def __init__(self, classes: Dict[str, type], float32_array: Callable):
+    def __init__(self, classes: Dict[str, type], float32_array: Callable,
+                 serialize: Callable[[object], bytes]):
         """
         Name the classes.
 
         :param classes: ROS type name (one of MESSAGE_TYPES) -> class
         :param float32_array: turns a float32 sequence into what the classes hold
+        :param serialize: turns a message of these classes into its CDR bytes
         """
         for name, kind in classes.items():
             setattr(self, name.rsplit('/', 1)[1], kind)
         self.float32_array = float32_array
+        self.serialize = serialize
 
     @classmethod
     def from_rclpy(cls) -> 'MessageTypes':
@@ -80,22 +88,54 @@ class MessageTypes:
 
         :return: the types
         """
+        from rclpy.serialization import serialize_message
         classes = {}
         for name in MESSAGE_TYPES:
             package, _, kind = name.split('/')
             classes[name] = getattr(importlib.import_module(f'{package}.msg'), kind)
-        return cls(classes, _float32_array_for_rclpy)
+        return cls(classes, _float32_array_for_rclpy, serialize_message)
 
     @classmethod
     def from_typestore(cls, store) -> 'MessageTypes':
         """
         Return the classes of a rosbags typestore (which must know wctls_msgs).
 
+        rosbags makes a type's (de)serialiser at its first use: they are all made now, so
+        that the first message is not slow and worker processes forked later inherit them.
+
         :param store: a rosbags Typestore
         :return: the types
         """
+        for name in MESSAGE_TYPES:
+            store.get_msgdef(name)
+
+        def serialize(message) -> bytes:
+            return bytes(store.serialize_cdr(message, message.__msgtype__))
         return cls({name: store.types[name] for name in MESSAGE_TYPES},
-                   _float32_array_for_rosbags)
+                   _float32_array_for_rosbags, serialize)
+
+
+def mismatched_types(store, published: Dict[str, str]) -> list:
+    """
+    Name the types whose definition in a rosbags typestore is not the one a ROS install uses.
+
+    Messages serialised with the typestore's definitions are read correctly only where the
+    definitions agree, which their RIHS01 type hashes tell (rclpy reports a publisher's in
+    ``get_publishers_info_by_topic``).
+
+    :param store: a rosbags Typestore
+    :param published: ROS type name -> its type hash in the ROS install (``RIHS01_...``)
+    :return: the names (sorted) whose definition differs or that the typestore lacks
+    """
+    mismatched = []
+    for name, type_hash in published.items():
+        try:
+            known = store.hash_rihs01(name)
+        except KeyError:
+            known = None
+        if known != type_hash:
+            mismatched.append(name)
+    return sorted(mismatched)
 
 
 @functools.lru_cache(maxsize=1)
@@ -191,14 +231,6 @@ def laser_scan(scan, types: Optional[MessageTypes] = None):
         intensities=types.float32_array(scan.intensities))
 
 
-def _point(types: MessageTypes, x: float, y: float, z: float = 0.0):
-    return types.Point(x=x, y=y, z=z)
-
-
-def _quaternion_from_yaw(types: MessageTypes, yaw: float):
-    return types.Quaternion(x=0.0, y=0.0, z=math.sin(0.5 * yaw), w=math.cos(0.5 * yaw))
-
-
 def pose_covariances(covariance_xy_yaw: np.ndarray) -> np.ndarray:
     """
     Lay out (x, y, yaw) covariances as row-major 6x6 pose covariances.
@@ -215,36 +247,41 @@ def corner_array(features: Features, header, types: Optional[MessageTypes] = Non
     """
     Convert the corners of one scan to a CornerArray.
 
+    Every field is computed for all corners at once, in numpy, and read out as Python numbers
+    (``tolist``), so that the one Python step per corner is building its messages.
+
     :param features: output of ``extract_features``
     :param header: the scan's header, a ``types.Header`` (shared, not copied)
     :param types: the message classes to build with (None: rclpy's)
     :return: the message
     """
     types = types or rclpy_types()
+    Corner, Point, Quaternion = types.Corner, types.Point, types.Quaternion
+    PoseWithCovariance, Pose = types.PoseWithCovariance, types.Pose
     corners, segments = features.corners, features.segments
-    covariances = pose_covariances(corners.covariance)
     walls = np.stack([corners.first_segment, corners.second_segment], axis=1)
+    half_yaw = 0.5 * corners.yaw_rad      # a turn about z: (0, 0, sin(yaw / 2), cos(yaw / 2))
     messages = [
-        types.Corner(pose=types.PoseWithCovariance(
-            pose=types.Pose(position=_point(types, x, y),
-                            orientation=_quaternion_from_yaw(types, yaw)),
+        Corner(pose=PoseWithCovariance(
+            pose=Pose(position=Point(x=x, y=y, z=0.0),
+                      orientation=Quaternion(x=0.0, y=0.0, z=qz, w=qw)),
             covariance=covariance),
             first_line=first, second_line=second, opening_angle=opening,
             first_line_points=first_points, second_line_points=second_points,
             first_line_chi2_dof=first_chi2, second_line_chi2_dof=second_chi2,
             first_end_seen=first_seen, second_end_seen=second_seen)
-        for (x, y), yaw, covariance, opening, (first, second), (first_points, second_points),
+        for (x, y), qz, qw, covariance, opening, (first, second), (first_points, second_points),
         (first_chi2, second_chi2), (first_seen, second_seen) in zip(
-            corners.xy_m.tolist(), corners.yaw_rad.tolist(), covariances,
-            corners.opening_angle_rad.tolist(), walls.tolist(),
-            segments.num_points[walls].tolist(), segments.residual_chi2_dof[walls].tolist(),
-            corners.end_seen.tolist())]
+            corners.xy_m.tolist(), np.sin(half_yaw).tolist(), np.cos(half_yaw).tolist(),
+            pose_covariances(corners.covariance), corners.opening_angle_rad.tolist(),
+            walls.tolist(), segments.num_points[walls].tolist(),
+            segments.residual_chi2_dof[walls].tolist(), corners.end_seen.tolist())]
     return types.CornerArray(header=header, method=features.method, corners=messages)
 
 
 def line_segment_array(features: Features, header, types: Optional[MessageTypes] = None):
     """
-    Convert the segments of one scan to a LineSegmentArray.
+    Convert the segments of one scan to a LineSegmentArray (built as :func:`corner_array`).
 
     :param features: output of ``extract_features``
     :param header: the scan's header, a ``types.Header`` (shared, not copied)
@@ -252,13 +289,15 @@ def line_segment_array(features: Features, header, types: Optional[MessageTypes]
     :return: the message
     """
     types = types or rclpy_types()
+    LineSegment, Point = types.LineSegment, types.Point
     s = features.segments
     messages = [
-        types.LineSegment(angle=angle, radius=radius, covariance=covariance,
-                          start=_point(types, *start), end=_point(types, *end),
-                          first_index=first, last_index=last, num_points=count,
-                          residual_chi2_dof=chi2_dof)
-        for angle, radius, covariance, start, end, first, last, count, chi2_dof in zip(
+        LineSegment(angle=angle, radius=radius, covariance=covariance,
+                    start=Point(x=start_x, y=start_y, z=0.0), end=Point(x=end_x, y=end_y, z=0.0),
+                    first_index=first, last_index=last, num_points=count,
+                    residual_chi2_dof=chi2_dof)
+        for angle, radius, covariance, (start_x, start_y), (end_x, end_y), first, last, count,
+        chi2_dof in zip(
             s.angle_rad.tolist(), s.radius_m.tolist(),
             np.ascontiguousarray(s.covariance, dtype=float).reshape(-1, 4),
             s.start_xy_m.tolist(), s.end_xy_m.tolist(), s.first_index.tolist(),
@@ -287,7 +326,7 @@ def marker_array(features: Features, header, style: MarkerStyle = MarkerStyle(),
     segments are one LINE_LIST, all corners one SPHERE_LIST; each corner's k-sigma covariance
     ellipse is one flat CYLINDER scaled to its axes and turned to its orientation (as RViz draws
     covariances) and, with ``style.text_ids``, its index one TEXT_VIEW_FACING marker. Markers
-    of one array may share sub-messages (colours, scales): change a copy, not them.
+    of one array share sub-messages (header, colours, scales): change a copy, not them.
 
     :param features: output of ``extract_features``
     :param header: the scan's header, a ``types.Header`` (shared, not copied)
@@ -296,49 +335,50 @@ def marker_array(features: Features, header, style: MarkerStyle = MarkerStyle(),
     :return: the markers
     """
     types = types or rclpy_types()
-    Marker, Point, Pose, Vector3 = types.Marker, types.Point, types.Pose, types.Vector3
-    unused = _unused_marker_fields(types)
-    upright = types.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
-
-    def marker(namespace, marker_id, marker_type, color, scale, position,
-               orientation=upright, points=(), text='', action=Marker.ADD):
-        return Marker(header=header, ns=namespace, id=marker_id, type=marker_type,
-                      action=action, pose=Pose(position=position, orientation=orientation),
-                      scale=scale, color=color, points=list(points), text=text, **unused)
-
-    def color(r, g, b, a):
-        return types.ColorRGBA(r=r, g=g, b=b, a=a)
-
-    origin = Point(x=0.0, y=0.0, z=0.0)
-    markers = [marker('', 0, Marker.ARROW, color(0.0, 0.0, 0.0, 0.0),
-                      Vector3(x=0.0, y=0.0, z=0.0), origin, action=Marker.DELETEALL)]
+    Marker, Point, Pose, Quaternion = types.Marker, types.Point, types.Pose, types.Quaternion
+    Vector3, ColorRGBA = types.Vector3, types.ColorRGBA
+    # What the markers of each kind have alike; each marker adds its id, pose and what varies.
+    alike = dict(_unused_marker_fields(types), header=header, action=Marker.ADD)
+    upright = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
+    at_origin = Pose(position=Point(x=0.0, y=0.0, z=0.0), orientation=upright)
+    no_scale = Vector3(x=0.0, y=0.0, z=0.0)
+    markers = [Marker(**dict(alike, action=Marker.DELETEALL), ns='', id=0, type=Marker.ARROW,
+                      pose=at_origin, scale=no_scale, color=ColorRGBA(r=0.0, g=0.0, b=0.0, a=0.0),
+                      points=[], text='')]
     segments, corners = features.segments, features.corners
     if len(segments):
         ends = np.stack([segments.start_xy_m, segments.end_xy_m], 1).reshape(-1, 2).tolist()
-        markers.append(marker('segments', 0, Marker.LINE_LIST, color(0.1, 0.5, 1.0, 1.0),
-                              Vector3(x=style.line_width_m, y=0.0, z=0.0), origin,
-                              points=[Point(x=x, y=y, z=0.0) for x, y in ends]))
+        markers.append(Marker(
+            **alike, ns='segments', id=0, type=Marker.LINE_LIST, pose=at_origin,
+            scale=Vector3(x=style.line_width_m, y=0.0, z=0.0),
+            color=ColorRGBA(r=0.1, g=0.5, b=1.0, a=1.0),
+            points=[Point(x=x, y=y, z=0.0) for x, y in ends], text=''))
     if not len(corners):
         return types.MarkerArray(markers=markers)
     size = style.corner_size_m
-    markers.append(marker('corners', 0, Marker.SPHERE_LIST, color(1.0, 0.2, 0.2, 1.0),
-                          Vector3(x=size, y=size, z=size), origin,
-                          points=[Point(x=x, y=y, z=0.0) for x, y in corners.xy_m.tolist()]))
+    markers.append(Marker(
+        **alike, ns='corners', id=0, type=Marker.SPHERE_LIST, pose=at_origin,
+        scale=Vector3(x=size, y=size, z=size), color=ColorRGBA(r=1.0, g=0.2, b=0.2, a=1.0),
+        points=[Point(x=x, y=y, z=0.0) for x, y in corners.xy_m.tolist()], text=''))
+    label_fields = dict(alike, ns='corner_ids', type=Marker.TEXT_VIEW_FACING, points=[],
+                        scale=Vector3(x=0.0, y=0.0, z=2.0 * size),
+                        color=ColorRGBA(r=1.0, g=1.0, b=1.0, a=1.0))
+    ellipse_fields = dict(alike, ns='ellipses', type=Marker.CYLINDER, points=[], text='',
+                          color=ColorRGBA(r=1.0, g=0.6, b=0.0, a=0.5))
     shape = ellipse(corners.covariance[:, :2, :2])
     diameter = 2.0 * style.ellipse_sigma * style.ellipse_scale
     half_turn = 0.5 * shape.orientation_rad
     rows = np.column_stack([corners.xy_m, diameter * shape.semi_major,
                             diameter * shape.semi_minor, np.sin(half_turn),
                             np.cos(half_turn)]).tolist()
-    label_color, label_scale = color(1.0, 1.0, 1.0, 1.0), Vector3(x=0.0, y=0.0, z=2.0 * size)
-    ellipse_color = color(1.0, 0.6, 0.0, 0.5)
     for i, (x, y, major_axis, minor_axis, qz, qw) in enumerate(rows):
         if style.text_ids:
-            markers.append(marker('corner_ids', i, Marker.TEXT_VIEW_FACING, label_color,
-                                  label_scale, Point(x=x, y=y, z=2.0 * size), text=str(i)))
+            markers.append(Marker(**label_fields, id=i, text=str(i), pose=Pose(
+                position=Point(x=x, y=y, z=2.0 * size), orientation=upright)))
         # A flat elliptic cylinder: one marker per ellipse, no outline points to send.
-        markers.append(marker('ellipses', i, Marker.CYLINDER, ellipse_color,
-                              Vector3(x=major_axis, y=minor_axis, z=_ELLIPSE_THICKNESS_M),
-                              Point(x=x, y=y, z=0.0),
-                              types.Quaternion(x=0.0, y=0.0, z=qz, w=qw)))
+        markers.append(Marker(
+            **ellipse_fields, id=i,
+            pose=Pose(position=Point(x=x, y=y, z=0.0),
+                      orientation=Quaternion(x=0.0, y=0.0, z=qz, w=qw)),
+            scale=Vector3(x=major_axis, y=minor_axis, z=_ELLIPSE_THICKNESS_M)))
     return types.MarkerArray(markers=markers)

@@ -10,6 +10,11 @@ publishers both reach it) and publishes ``corners`` (wctls_msgs/CornerArray), ``
 scan's header. Topic names are relative, so they follow the node's namespace and remappings.
 The input queue holds one scan: a node that falls behind processes the newest scan and counts
 the ones it skipped, in a throttled warning and on ``/diagnostics`` (1 Hz).
+
+The outputs are built as rosbags messages, serialised by rosbags and published as CDR bytes:
+a fraction of the time rclpy's message classes take (docs/results/message_path.md), with the
+same bytes on the wire, as long as rosbags' definitions are this ROS install's (the node
+checks the type hashes at start-up and falls back to rclpy's classes otherwise).
 """
 
 from dataclasses import dataclass, field
@@ -25,7 +30,9 @@ from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import MarkerArray
 from wctls_msgs.msg import CornerArray, LineSegmentArray
 
-from .conversions import corner_array, line_segment_array, marker_array, scan_features
+from .bags import typestore
+from .conversions import (copy_header, corner_array, line_segment_array, marker_array,
+                          MessageTypes, mismatched_types, rclpy_types, scan_features)
 from .core import CornerSet, Features, SegmentSet
 from .node_main import declare_parameters, run_node
 from .params import FEATURE_NODE, feature_settings
@@ -72,6 +79,7 @@ class FeatureNode(Node):
         self._lines = self.create_publisher(LineSegmentArray, 'lines', 10)
         self._markers = self.create_publisher(MarkerArray, 'markers', 10)
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._types = self._output_types()
         self._total, self._recent = ScanCounters(), ScanCounters()
         self._last_sequence = None
         self._frame_id = ''
@@ -79,6 +87,22 @@ class FeatureNode(Node):
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
         self.get_logger().info(f'extracting features with {self._config.method} from '
                                f'{self.resolve_topic_name("scan")}')
+
+    def _output_types(self) -> MessageTypes:
+        """Choose the classes the outputs are built with: rosbags' where its definitions fit."""
+        published = {info.topic_type: str(info.topic_type_hash)
+                     for publisher in (self._corners, self._lines, self._markers)
+                     for info in self.get_publishers_info_by_topic(publisher.topic_name)
+                     if (info.node_name, info.node_namespace) == (self.get_name(),
+                                                                  self.get_namespace())}
+        store = typestore()
+        mismatched = mismatched_types(store, published)
+        if len(published) == 3 and not mismatched:
+            return MessageTypes.from_typestore(store)
+        self.get_logger().warning(
+            "building the outputs with rclpy's message classes (slower): rosbags' definitions "
+            f"of {', '.join(mismatched) or 'the output types'} are not this ROS install's")
+        return rclpy_types()
 
     def _on_set_parameters(self, changes) -> SetParametersResult:
         values = {spec.name: self.get_parameter(spec.name).value for spec in FEATURE_NODE}
@@ -141,13 +165,16 @@ class FeatureNode(Node):
                                     throttle_duration_sec=WARN_PERIOD_S)
             self._count('malformed')
             features = Features(self._config.method, SegmentSet.empty(), CornerSet.empty())
+        types = self._types
         try:
-            self._corners.publish(corner_array(features, scan.header))
-            self._lines.publish(line_segment_array(features, scan.header))
+            header = copy_header(scan.header, types)
+            self._corners.publish(types.serialize(corner_array(features, header, types)))
+            self._lines.publish(types.serialize(line_segment_array(features, header, types)))
             # Markers are costly to build (a Marker per corner label and ellipse): only for a
             # listener such as RViz.
             if self._publish_markers and self._markers.get_subscription_count():
-                self._markers.publish(marker_array(features, scan.header, self._style))
+                self._markers.publish(types.serialize(
+                    marker_array(features, header, self._style, types)))
         except Exception:  # noqa: B902 - only a shutdown (Ctrl-C mid-callback) is expected here
             if self.context.ok():
                 raise

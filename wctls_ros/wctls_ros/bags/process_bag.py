@@ -242,20 +242,8 @@ class ScanWork:
         self.configs = {m: config.replace(method=m) for m in self.methods}
         self.topics = output_topics(self.methods)
         self.store = typestore()
+        # Its (de)serialisers are made now, before worker processes are forked.
         self.types = MessageTypes.from_typestore(self.store)
-        # rosbags makes each type's (de)serialiser at its first use: make them now, before
-        # worker processes are forked, so that each does not make its own.
-        for name in (LASER_SCAN, CORNER_ARRAY, LINE_SEGMENT_ARRAY, MARKER_ARRAY):
-            self.store.get_msgdef(name)
-
-    def serialize(self, message) -> bytes:
-        """
-        Serialise a message built with :attr:`types` (CDR, by rosbags).
-
-        :param message: the message
-        :return: its bytes
-        """
-        return bytes(self.store.serialize_cdr(message, message.__msgtype__))
 
     def __call__(self, index: int, log_time_ns: int, scan) -> ScanOutput:
         """
@@ -266,7 +254,7 @@ class ScanWork:
         :param scan: the scan, a LaserScan of :attr:`types`
         :return: the output
         """
-        header, types, serialize = scan.header, self.types, self.serialize
+        header, types, serialize = scan.header, self.types, self.types.serialize
         stamp = f'{header.stamp.sec}.{header.stamp.nanosec:09d}'
         messages, csv_rows, corners_of, corners, segments = [], [], {}, {}, {}
         problems = []
@@ -328,7 +316,7 @@ def _outputs(work: ScanWork, records, jobs: int):
     if jobs <= 1:
         for index, record in enumerate(records):
             scan = laser_scan(record.scan, work.types)
-            yield [(record.timestamp_ns, work.serialize(scan),
+            yield [(record.timestamp_ns, work.types.serialize(scan),
                     work(index, record.timestamp_ns, scan))]
         return
     # Forked, the workers inherit the work and start at once; they die with this process.
@@ -337,7 +325,7 @@ def _outputs(work: ScanWork, records, jobs: int):
         pending = collections.deque()
         for batch in _batches(enumerate(records), BATCH_SCANS):
             scans = [(index, record.timestamp_ns,
-                      work.serialize(laser_scan(record.scan, work.types)))
+                      work.types.serialize(laser_scan(record.scan, work.types)))
                      for index, record in batch]
             pending.append((scans, pool.submit(_work_on, scans)))
             if len(pending) >= 2 * jobs:

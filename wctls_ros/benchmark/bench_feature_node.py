@@ -6,7 +6,7 @@
 Benchmark feature_node's message path and end-to-end latency, against baselines in one run.
 
 Scans: 1080-beam full turns of simulated environment A (10 mm range noise), 50 different ones
-over and over; the node runs with its defaults (all methods' outputs, markers with text ids)
+over and over; the node runs with its defaults (all methods' outputs, markers without text ids)
 and ``range_sigma_m: 0.01``. Trees (this one and each ``--baseline``, a built wctls_ros
 checkout) are measured alternately, round after round, so that a busy machine slows them alike.
 

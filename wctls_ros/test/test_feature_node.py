@@ -106,7 +106,8 @@ def test_room_corners_arrive_with_header_covariance_and_indices(ros_context, exe
     assert spin_until(executor, lambda: markers)
     assert markers[-1].markers[0].action == Marker.DELETEALL
     namespaces = [m.ns for m in markers[-1].markers[1:]]
-    assert namespaces.count('ellipses') == namespaces.count('corner_ids') == len(truth)
+    # One ellipse per corner; the text ids are off by default (marker_text_ids).
+    assert namespaces.count('ellipses') == len(truth) and 'corner_ids' not in namespaces
     assert all(m.header == scan.header for m in markers[-1].markers)
 
 

@@ -7,7 +7,7 @@
 Examples::
 
     evaluate out/env_a --out docs/results/env_a --range-sigma 0.05 --bearing-sigma-deg 0.391
-    evaluate ../shared/data/sick_lms111_static --out out/lms111            # noise fitted
+    evaluate data/sick_lms111_static --out out/lms111                      # noise fitted
     evaluate out/env_a --out out/env_a_diag --propagation diagonal        # the paper's gap?
 
 The noise calibration that prints the node's parameters is ``calibrate`` (calibrate_cli).

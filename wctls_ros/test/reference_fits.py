@@ -42,12 +42,20 @@ def normal_form(line, covariance):
     """
     a, b, c = line
     sign = -1.0 if c > 0.0 else 1.0
-    n2 = a * a + b * b
-    n = math.sqrt(n2)
-    jacobian = np.array([[-b / n2, a / n2, 0.0],
-                         [sign * c * a / (n2 * n), sign * c * b / (n2 * n), -sign / n]])
+    n = math.hypot(a, b)
+    jacobian = _normal_jacobian(line)
     return (math.atan2(sign * b, sign * a), -sign * c / n,
             jacobian @ np.asarray(covariance) @ jacobian.T)
+
+
+def _normal_jacobian(line):
+    """Return d(angle, radius) / d(a, b, c) of a x + b y + c = 0, shape (2, 3)."""
+    a, b, c = line
+    sign = -1.0 if c > 0.0 else 1.0
+    n2 = a * a + b * b
+    n = math.sqrt(n2)
+    return np.array([[-b / n2, a / n2, 0.0],
+                     [sign * c * a / (n2 * n), sign * c * b / (n2 * n), -sign / n]])
 
 
 def algebraic_fit(rho, theta, range_sigma, bearing_sigma, weighted):
@@ -177,13 +185,7 @@ def fit(method, rho, theta, range_sigma, bearing_sigma):
         line, covariance, offset = algebraic_fit(rho, theta, range_sigma, bearing_sigma,
                                                  method == 'wtls')
     angle, radius, normal = normal_form(line, covariance)
-    a, b, c = line
-    sign = -1.0 if c > 0.0 else 1.0
-    n2 = a * a + b * b
-    n = math.sqrt(n2)
-    to_normal = np.array([[-b / n2, a / n2, 0.0],
-                          [sign * c * a / (n2 * n), sign * c * b / (n2 * n), -sign / n]])
-    return line, covariance, angle, radius, normal, offset, to_normal @ offset
+    return line, covariance, angle, radius, normal, offset, _normal_jacobian(line) @ offset
 
 
 def corner(line_1, cov_1, offset_1, line_2, cov_2, offset_2, middle_1, middle_2,

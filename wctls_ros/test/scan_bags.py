@@ -25,6 +25,19 @@ REAL_BAGS = [
 ]
 
 
+def simulated_bag(folder, plan, scans, seed, sensor):
+    """
+    Write a bag of ``simulate`` (with its truth.yaml) into ``folder``, as a user would.
+
+    :return: the bag's path
+    """
+    from wctls_ros.evaluation.simulate_cli import main
+    path = folder / plan
+    assert main([plan, str(path), '--scans', str(scans), '--seed', str(seed),
+                 '--sensor', sensor]) == 0
+    return path
+
+
 def scan_at(index):
     """Return the simulated scan number ``index`` and its log time, ns."""
     log_ns = START_NS + index * PERIOD_NS

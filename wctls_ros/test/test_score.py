@@ -17,6 +17,7 @@ import sys
 from conftest import REAL_DATA
 import numpy as np
 import pytest
+from scan_bags import simulated_bag
 from wctls_ros.evaluation import (load_truth, match_detections, ScanCorners, score_detections,
                                   score_scans, StaticScans, Truth, truth_from_dict,
                                   truth_from_recording, truth_to_yaml, TruthError)
@@ -179,11 +180,8 @@ def test_score_scans_on_simulated_scans_finds_the_walls_corners():
 @pytest.fixture(scope='module')
 def cluttered_bag(tmp_path_factory):
     pytest.importorskip('rclpy')
-    from wctls_ros.evaluation.simulate_cli import main
-    path = tmp_path_factory.mktemp('score') / 'a_cluttered'
-    assert main(['environment_a_cluttered', str(path), '--scans', '12', '--seed', '4',
-                 '--sensor', 's1_like']) == 0
-    return path
+    return simulated_bag(tmp_path_factory.mktemp('score'), 'environment_a_cluttered', 12, 4,
+                         's1_like')
 
 
 def test_the_command_finds_the_truth_beside_the_bag_and_writes_the_report(cluttered_bag,

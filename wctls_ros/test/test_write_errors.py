@@ -8,6 +8,7 @@ import subprocess
 import sys
 
 import pytest
+from scan_bags import simulated_bag
 
 # Enough for the CSV tables, too little for a figure: the tools fail midway through their output.
 FILE_SIZE_LIMIT_BYTES = 16 * 1024
@@ -16,11 +17,7 @@ FILE_SIZE_LIMIT_BYTES = 16 * 1024
 @pytest.fixture(scope='module')
 def still_bag(tmp_path_factory):
     pytest.importorskip('rclpy')
-    from wctls_ros.evaluation.simulate_cli import main
-    path = tmp_path_factory.mktemp('writes') / 'room'
-    assert main(['environment_a', str(path), '--scans', '30', '--seed', '2',
-                 '--sensor', '1cm']) == 0
-    return path
+    return simulated_bag(tmp_path_factory.mktemp('writes'), 'environment_a', 30, 2, '1cm')
 
 
 def limit_file_size():

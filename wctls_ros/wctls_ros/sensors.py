@@ -21,7 +21,7 @@ import functools
 import pathlib
 from typing import Dict, Mapping, Union
 
-import yaml
+from .plain_yaml import load_without_aliases
 
 # The feature_node parameters a preset sets: the sensor's noise model.
 PRESET_PARAMETERS = ('range_sigma_m', 'range_sigma_from_scan', 'bearing_sigma_deg',
@@ -62,7 +62,7 @@ class SensorPreset:
         :return: the preset
         :raises PresetError: when a parameter, or the source of one, is missing or unknown
         """
-        document = yaml.safe_load(path.read_text())
+        document = load_without_aliases(path.read_text())
         if not isinstance(document, dict):
             raise PresetError(f'{path}: not a mapping')
         parameters, sources = document.get('parameters'), document.get('sources')

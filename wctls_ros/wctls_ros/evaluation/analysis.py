@@ -118,6 +118,18 @@ def run_methods(scans: StaticScans, noise: NoiseParameters, methods: Sequence[st
             for method in methods}
 
 
+def features_per_scan(scans: StaticScans, config: FeatureConfig) -> list:
+    """
+    Extract every scan's features and corners with one configuration.
+
+    :param scans: the scans
+    :param config: the pipeline configuration (method and noise model)
+    :return: one (the core's Features, ScanCorners) per scan
+    """
+    return [scan_corners(ranges, scans.angle_min, scans.angle_increment, scans.range_min,
+                         scans.range_max, config) for ranges in scans.ranges]
+
+
 def corners_per_scan(scans: StaticScans, config: FeatureConfig) -> List[ScanCorners]:
     """
     Extract every scan's corners with one configuration.
@@ -126,8 +138,7 @@ def corners_per_scan(scans: StaticScans, config: FeatureConfig) -> List[ScanCorn
     :param config: the pipeline configuration (method and noise model)
     :return: one ScanCorners per scan
     """
-    return [scan_corners(ranges, scans.angle_min, scans.angle_increment, scans.range_min,
-                         scans.range_max, config)[1] for ranges in scans.ranges]
+    return [corners for _, corners in features_per_scan(scans, config)]
 
 
 def _gate(covariance: np.ndarray) -> float:

@@ -28,8 +28,8 @@ from typing import Callable, List, Sequence, Tuple
 
 import numpy as np
 
-from .analysis import assign, associate, corner_stats
-from .samples import scan_corners, ScanCorners
+from .analysis import assign, associate, corner_stats, corners_per_scan, features_per_scan
+from .samples import ScanCorners
 from .scans import StaticScans
 from ..core import FeatureConfig
 
@@ -91,18 +91,6 @@ class CornerNees:
         return self.found - self.jumps
 
 
-def extract(scans: StaticScans, config: FeatureConfig):
-    """
-    Extract every scan's features and corners with one configuration.
-
-    :param scans: the scans
-    :param config: the pipeline configuration
-    :return: one (Features, ScanCorners) per scan
-    """
-    return [scan_corners(ranges, scans.angle_min, scans.angle_increment, scans.range_min,
-                         scans.range_max, config) for ranges in scans.ranges]
-
-
 def track_corners(scans: StaticScans, config: FeatureConfig,
                   crossed: np.ndarray) -> List[TrackedCorner]:
     """
@@ -113,7 +101,7 @@ def track_corners(scans: StaticScans, config: FeatureConfig,
     :param crossed: returns something crossed, shape (T, N)
     :return: the corners found in at least TRACK_PRESENCE of the scans, clockwise from +x
     """
-    extracted = extract(scans, config)
+    extracted = features_per_scan(scans, config)
     per_scan = [corners for _, corners in extracted]
     centers, gates = associate(per_scan, TRACK_PRESENCE)
     assignment = assign(per_scan, centers, gates)
@@ -155,7 +143,7 @@ def corner_nees(scans: StaticScans, config: FeatureConfig,
     """
     if not corners:
         return []
-    per_scan = [found for _, found in extract(scans, config)]
+    per_scan = corners_per_scan(scans, config)
     return nees_of(per_scan, corners)
 
 

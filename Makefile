@@ -18,7 +18,7 @@ SOURCES := $(shell find wctls_msgs wctls_ros -type f -not -path '*/__pycache__/*
 # Every recipe line that runs project code does so inside the venv + install overlay.
 WITH_ENV := source tools/env.sh &&
 PYTEST_ARGS ?=
-# The tests that need numpy alone run a second time with the oldest numpy requirements/python.txt
+# The tests that need numpy and numba alone run a second time with the oldest numpy requirements/python.txt
 # admits: Ubuntu 24.04's 1.26, which an apt install of ROS 2 Jazzy uses.
 OLDEST_NUMPY_VENV := .venv-oldest-numpy
 OLDEST_NUMPY_STAMP := $(OLDEST_NUMPY_VENV)/.deps.stamp
@@ -52,7 +52,7 @@ $(DEPS_STAMP): $(REQUIREMENTS) tools/fix_wheel_cmake_paths.sh tools/pip_install.
 $(OLDEST_NUMPY_STAMP): requirements/python.txt requirements/test.txt tools/pip_install.sh
 	PYTHON=$(PYTHON) tools/pip_install.sh $(OLDEST_NUMPY_VENV) \
 	  "numpy==$$(sed -n 's/^numpy>=//p' requirements/python.txt).*" \
-	  $$(grep -hE '^(PyYAML|pytest|hypothesis)[=>]' requirements/*.txt)
+	  $$(grep -hE '^(numba|PyYAML|pytest|hypothesis)[=>]' requirements/*.txt)
 	touch $@
 
 build: $(BUILD_STAMP)
@@ -67,7 +67,9 @@ demo: $(BUILD_STAMP)
 
 test: $(BUILD_STAMP) $(OLDEST_NUMPY_STAMP)
 	$(WITH_ENV) python -m pytest $(PYTEST_ARGS)
-	PYTHONPATH=wctls_ros:wctls_ros/test $(OLDEST_NUMPY_VENV)/bin/python -m pytest -p no:cacheprovider \
+	@# Its own JIT cache: code compiled against one numpy is not reused under another.
+	NUMBA_CACHE_DIR=$(ROOT)/$(OLDEST_NUMPY_VENV)/numba-cache \
+	  PYTHONPATH=wctls_ros:wctls_ros/test $(OLDEST_NUMPY_VENV)/bin/python -m pytest -p no:cacheprovider \
 	  -o addopts='-ra --strict-markers' --junitxml=out/test-results-oldest-numpy.xml \
 	  $(NUMPY_ONLY_TESTS)
 

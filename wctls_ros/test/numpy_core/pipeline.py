@@ -1,0 +1,383 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""The per-scan pipeline of the paper's Algorithm 1 in numpy: returns -> segments -> corners."""
+
+from dataclasses import dataclass, replace
+import math
+
+import numpy as np
+from wctls_ros.core.config import FeatureConfig
+from wctls_ros.core.features import CornerSet, Features, SegmentSet
+
+from .corners import find_corners, walls_end_at_corners
+from .lines import fit_lines, LineFits, normal_jacobian, segment_returns, SegmentReturns
+from .model_error import flatness_covariance, line_from_normal_jacobian, residual_factor
+from .noise import scan_range_sigma
+from .scan import scan_to_points, ScanError, ScanPoints
+from .segmentation import (breakpoints, Breaks, Chains, chains, iterative_end_point_fit,
+                           merge_collinear, moment_fit, moment_terms, pass_budget, piece_sums,
+                           SegmentRanges, trim_ambiguous_ends, trim_offset_ends)
+
+_DEFAULT_CONFIG = FeatureConfig()
+# Most returns between two walls that meet at a corner: the ones both trims leave out (8 at each
+# end), the IEPF split return, and pieces of a wall too short to be segments, cut off by
+# something in front of it (a leg). More, and something else stands between the walls.
+_CORNER_WINDOW = 40
+# A corner may sit one beam without a return beyond a wall's last return (a dropout there),
+# reported with that wall's end not seen; farther, it is an extrapolation, not a corner.
+_CORNER_MISSING_BEAMS = 1
+
+
+def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
+                     config: FeatureConfig = _DEFAULT_CONFIG, range_min_m: float = 0.0,
+                     range_max_m: float = math.inf) -> Features:
+    """
+    Extract straight segments and corners with covariances from one 2D scan.
+
+    The scan is a LaserScan's geometry: beam i has bearing angle_min + i * angle_increment and
+    range ``ranges_m[i]``; invalid returns (NaN, +-inf, outside the range limits) are skipped.
+    Steps: adaptive breakpoints, Iterative End Point Fit, merging of collinear neighbours,
+    trimming of the returns at segment ends that fit both walls of a corner or lie off the
+    segment's line together, the configured line fit with its covariance, and the corners of
+    adjacent segments (across the +-pi seam on a full turn) with their propagated (x, y, yaw)
+    covariance.
+
+    :param ranges_m: ranges, shape (N,), m
+    :param angle_min_rad: bearing of the first beam, rad
+    :param angle_increment_rad: bearing step, rad (non-zero, either sign)
+    :param config: the pipeline's settings (noise model, thresholds, method)
+    :param range_min_m: the scan's own range_min (LaserScan.range_min), m
+    :param range_max_m: the scan's own range_max (LaserScan.range_max), m
+    :return: the segments and corners, in scan order
+    :raises wctls_ros.core.ScanError: when the scan geometry makes no sense, or the scan has
+        more than ``config.max_beams`` beams (a ValueError)
+    """
+    # Degenerate pieces (parallel lines, returns in one spot) give inf or NaN along the way;
+    # every such segment or corner is dropped before it reaches the result.
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return _extract_features(ranges_m, angle_min_rad, angle_increment_rad, config,
+                                 range_min_m, range_max_m)
+
+
+def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
+                      config: FeatureConfig, range_min_m: float, range_max_m: float) -> Features:
+    """
+    Run :func:`extract_features` with floating-point warnings already silenced.
+
+    The steps of the paper's Algorithm 1; each comment names the section of
+    docs/derivation.md that states the step's rule or formulas.
+    """
+    if np.size(ranges_m) > config.max_beams:
+        raise ScanError(f'{np.size(ranges_m)} beams are more than max_beams '
+                        f'({config.max_beams})')
+    points = scan_to_points(ranges_m, angle_min_rad, angle_increment_rad,
+                            max(range_min_m, config.range_min_m),
+                            min(range_max_m, config.range_max_m))
+    nothing = Features(config.method, SegmentSet.empty(), CornerSet.empty())
+    if len(points) < config.min_segment_points:
+        return nothing
+    # #range-noise-from-the-scan
+    config = _with_range_sigma_of_the_scan(config, points)
+    # #segmentation-statistics: breakpoints, IEPF, merging, the size rules, the end trims.
+    contour = _Contour.of(points, config)
+    segments, unsplit = _split(contour, config)
+    if not len(segments):
+        return replace(nothing, work_limited=unsplit)
+    segments, angle, radius, unmerged = _merge(contour, segments, config)
+    segments, angle, radius = _large_enough(contour, segments, angle, radius, config)
+    work_limited = unsplit or unmerged
+    if not len(segments):
+        return replace(nothing, work_limited=work_limited)
+    segments = _trim_ends(contour, segments, angle, radius, config)
+    # #utls, #wtls, #wctls or #maximum-likelihood: the configured fit with its covariance.
+    walls, positions = _fit_walls(contour, segments, config)
+    if not len(walls):
+        return replace(nothing, work_limited=work_limited)
+    # #corners: which pairs are corners is decided on the sensor noise alone; the published
+    # covariances add the model error (a rougher wall is less precise, not more of a corner).
+    corners = _corners(contour, walls, positions, config)
+    # #model-error (D17), (D18), then #corners and #common-mode-range-offset, (D11)-(D16).
+    walls = _with_model_error(walls, config)
+    return Features(config.method, walls, _corner_covariances(walls, corners, config),
+                    work_limited)
+
+
+def _with_range_sigma_of_the_scan(config: FeatureConfig, points: ScanPoints) -> FeatureConfig:
+    """Return the config with range_sigma_m raised to the scan's own estimate, when enabled."""
+    if not config.range_sigma_from_scan:
+        return config
+    return replace(config, range_sigma_m=max(config.range_sigma_m, scan_range_sigma(points)))
+
+
+@dataclass(frozen=True)
+class _Contour:
+    """
+    The scan's valid returns in circular order (a full turn starts at a breakpoint).
+
+    :ivar points: the returns in beam order
+    :ivar breaks: where the breakpoint rule separates neighbours (beam order)
+    :ivar chains: the runs between breakpoints, and the circular order
+    :ivar rho: ranges in circular order, m
+    :ivar theta: bearings in circular order, rad
+    :ivar x: x in circular order, m
+    :ivar y: y in circular order, m
+    """
+
+    points: ScanPoints
+    breaks: Breaks
+    chains: Chains
+    rho: np.ndarray
+    theta: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+
+    @staticmethod
+    def of(points: ScanPoints, config: FeatureConfig) -> '_Contour':
+        """Cut the returns into chains at breakpoints (Borges and Aldon) and order them."""
+        breaks = breakpoints(points, config.range_sigma_m, config.bearing_sigma_rad,
+                             config.breakpoint_lambda_rad, config.merge_max_missing_beams)
+        runs = chains(points, breaks.separated)
+        order = runs.order
+        return _Contour(points, breaks, runs, points.range_m[order], points.bearing_rad[order],
+                        points.x_m[order], points.y_m[order])
+
+    def __len__(self):
+        return len(self.x)
+
+
+def _split(contour: _Contour, config: FeatureConfig):
+    """
+    Split the chains into straight segments by Iterative End Point Fit.
+
+    The paper's split distance, but never within iepf_noise_sigmas of a return's noise: a
+    threshold of 2 sigma splits a straight wall at its noise in most scans. Every pass is O(n):
+    a bounded number of them (:func:`~.segmentation.pass_budget`) bounds the work on any scan.
+
+    :return: (the segments, positions in the contour; whether the work bound stopped splitting)
+    """
+    threshold = config.iepf_threshold_m
+    if config.iepf_noise_sigmas > 0.0:
+        noise = np.sqrt(config.range_sigma_m ** 2
+                        + (contour.rho * config.bearing_sigma_rad) ** 2)
+        threshold = np.maximum(threshold, config.iepf_noise_sigmas * noise)
+    runs = contour.chains
+    return iterative_end_point_fit(contour.x, contour.y, runs.start, runs.stop, runs.chain,
+                                   threshold, pass_budget(len(contour)))
+
+
+def _merge(contour: _Contour, segments: SegmentRanges, config: FeatureConfig):
+    """
+    Merge statistically collinear neighbours, never across a discontinuity.
+
+    Sums over the pieces between segment ends make the merge test's line fits
+    (:func:`~.segmentation.moment_fit`) O(1) per segment, merged or not: merging works on
+    piece ranges, with the same work bound as splitting.
+
+    :return: (merged segments, their merge fits' angle (S,) and radius (S,), whether the work
+        bound stopped merging)
+    """
+    sums = piece_sums(moment_terms(contour.x, contour.y), segments)
+
+    def quick(pieces: SegmentRanges):
+        return moment_fit(sums.over(pieces), config.range_sigma_m, config.bearing_sigma_rad)
+
+    runs = contour.chains
+    joinable = contour.breaks.joinable[runs.order][sums.edges[:-1]]   # before each piece
+    pieces, (angle, radius, _), unmerged = merge_collinear(
+        sums.pieces(segments), contour.points.full_turn, sums.edges.size - 1, quick,
+        config.merge_chi2, pass_budget(len(contour)), joinable)
+    return sums.positions(pieces), angle, radius, unmerged
+
+
+def _large_enough(contour: _Contour, segments: SegmentRanges, angle: np.ndarray,
+                  radius: np.ndarray, config: FeatureConfig):
+    """Return the segments (and their angle, radius) of min_segment_points and length."""
+    x, y = contour.x, contour.y
+    first, last = segments.start, (segments.stop - 1) % len(contour)
+    dx, dy = x[last] - x[first], y[last] - y[first]
+    keep = ((segments.stop - first >= config.min_segment_points)
+            & (dx * dx + dy * dy >= config.min_segment_length_m ** 2))
+    return segments.select(keep), angle[keep], radius[keep]
+
+
+def _trim_ends(contour: _Contour, segments: SegmentRanges, angle: np.ndarray,
+               radius: np.ndarray, config: FeatureConfig) -> SegmentRanges:
+    """
+    Leave out the returns at segment ends that fit both walls, and runs off the line together.
+
+    The lines are the merge fits' (angle, radius).
+    """
+    n, x, y = len(contour), contour.x, contour.y
+    segments = trim_ambiguous_ends(segments, contour.points.full_turn, n, x, y, angle, radius,
+                                   config.range_sigma_m, config.bearing_sigma_rad,
+                                   config.min_segment_points)
+    if config.end_offset_sigmas > 0.0:
+        segments = trim_offset_ends(segments, n, x, y, angle, radius, config.range_sigma_m,
+                                    config.bearing_sigma_rad, config.min_segment_points,
+                                    config.end_offset_sigmas)
+    return segments
+
+
+def _fit_walls(contour: _Contour, segments: SegmentRanges, config: FeatureConfig):
+    """
+    Fit every segment with the configured method and keep the ones that are walls.
+
+    A segment is left out when its fit is degenerate (non-finite, or a covariance that is not
+    positive definite) or when it lies within min_wall_beam_angle of the beam to its middle:
+    returns strung along the beams are mixed pixels or grazing veils, not a wall.
+
+    :return: (the walls in scan order, their first and last positions in the contour (2, S))
+    """
+    n, points, order = len(contour), contour.points, contour.chains.order
+    first_index = points.index[order[segments.start]]
+    segments = segments.select(np.argsort(first_index, kind='stable'))
+    returns = _returns_of(contour, segments)
+    counts = returns.counts
+    fits = fit_lines(config.method, returns, config.range_sigma_m, config.bearing_sigma_rad)
+    last = (segments.stop - 1) % n
+    start_xy, end_xy = _project(contour.x, contour.y, segments.start, last, fits)
+    middle = 0.5 * (start_xy + end_xy)
+    along_beam = np.abs(np.cos(np.arctan2(middle[:, 1], middle[:, 0]) - fits.angle_rad))
+    usable = _finite_and_positive(fits) & (along_beam >= math.sin(config.min_wall_beam_angle_rad))
+    fits, segments, counts = fits.select(usable), segments.select(usable), counts[usable]
+    start_xy, end_xy, last = start_xy[usable], end_xy[usable], last[usable]
+    walls = SegmentSet(
+        fits.angle_rad, fits.radius_m, fits.normal_covariance, fits.line,
+        fits.line_covariance, fits.line_offset_jacobian, start_xy, end_xy,
+        points.index[order[segments.start]], points.index[order[last]], counts,
+        _residual_chi2_dof(returns, fits, usable, config))
+    return walls, np.stack([segments.start, last])
+
+
+def _returns_of(contour: _Contour, segments: SegmentRanges) -> SegmentReturns:
+    """Return the segments' returns laid end to end (across the seam on a full turn)."""
+    counts = segments.stop - segments.start
+    offsets = np.cumsum(counts) - counts
+    position = np.arange(offsets[-1] + counts[-1]) + np.repeat(segments.start - offsets, counts)
+    return segment_returns(contour.rho.take(position, mode='wrap'),
+                           contour.theta.take(position, mode='wrap'), offsets, counts,
+                           contour.x.take(position, mode='wrap'),
+                           contour.y.take(position, mode='wrap'))
+
+
+def _with_model_error(walls: SegmentSet, config: FeatureConfig) -> SegmentSet:
+    """
+    Return the walls with the model error in their line covariances (:mod:`.model_error`).
+
+    The (angle, radius) covariance gets the common-mode range offset too, which corners
+    propagate separately through the line offset Jacobian (its effect on two walls is
+    correlated).
+    """
+    normal = walls.covariance
+    if config.residual_scaling:
+        normal = normal * residual_factor(walls.residual_chi2_dof, walls.num_points)[:, None, None]
+    if config.wall_flatness_sigma_m > 0.0:
+        normal = normal + flatness_covariance(walls.angle_rad, walls.start_xy_m, walls.end_xy_m,
+                                              config.wall_flatness_sigma_m)
+    jacobian = line_from_normal_jacobian(walls.line, walls.angle_rad)
+    line_covariance = walls.line_covariance + jacobian @ (normal - walls.covariance) @ (
+        jacobian.transpose(0, 2, 1))
+    offset = config.common_range_sigma_m * np.einsum('sij,sj->si', normal_jacobian(walls.line),
+                                                     walls.line_offset_jacobian)
+    return replace(walls, covariance=normal + offset[:, :, None] * offset[:, None, :],
+                   line_covariance=line_covariance)
+
+
+def _corner_covariances(walls: SegmentSet, corners: CornerSet,
+                        config: FeatureConfig) -> CornerSet:
+    """Return the corners with covariances propagated from the walls' (model error included)."""
+    if not len(corners):
+        return corners
+    again = find_corners(walls.line, walls.line_covariance, walls.start_xy_m, walls.end_xy_m,
+                         corners.first_segment, corners.second_segment, 0.0,
+                         walls.line_offset_jacobian, config.common_range_sigma_m)
+    return replace(corners, covariance=again.covariance)
+
+
+def _residual_chi2_dof(returns: SegmentReturns, fits: LineFits, usable: np.ndarray,
+                       config: FeatureConfig) -> np.ndarray:
+    """
+    Return each kept fit's residual chi2 per degree of freedom.
+
+    The residual of return i from the line (angle, radius) is d_i = rho_i cos(theta_i - angle)
+    - radius, whose variance under the noise model is range_sigma^2 cos^2(theta_i - angle) +
+    bearing_sigma^2 rho_i^2 sin^2(theta_i - angle) (docs/derivation.md#maximum-likelihood).
+
+    :return: shape (S,) for the kept fits (usable selects them among the segments of returns)
+    """
+    kept = usable.nonzero()[0]
+    angle = np.repeat(fits.angle_rad, returns.counts[kept])
+    radius = np.repeat(fits.radius_m, returns.counts[kept])
+    member = np.repeat(usable, returns.counts)
+    rho, theta = returns.rho[member], returns.theta[member]
+    incidence = theta - angle
+    residual = rho * np.cos(incidence) - radius
+    variance = ((config.range_sigma_m * np.cos(incidence)) ** 2
+                + (config.bearing_sigma_rad * rho * np.sin(incidence)) ** 2)
+    counts = returns.counts[kept]
+    if not len(kept):
+        return np.zeros(0)
+    chi2 = np.add.reduceat(residual * residual / variance, np.cumsum(counts) - counts)
+    return chi2 / np.maximum(counts - 2, 1)
+
+
+def _corners(contour: _Contour, walls: SegmentSet, positions: np.ndarray,
+             config: FeatureConfig) -> CornerSet:
+    """
+    Intersect neighbouring walls (across the seam on a full turn) and keep the real corners.
+
+    A pair makes a corner when its walls are not close to parallel (min_corner_angle) and both
+    end at the intersection (:func:`~.corners.walls_end_at_corners`).
+    """
+    count = len(walls)
+    first = np.arange(count - 1)
+    if contour.points.full_turn and count >= 3:
+        first = np.arange(count)               # the last wall meets the first at the seam
+    candidates = find_corners(walls.line, walls.line_covariance, walls.start_xy_m,
+                              walls.end_xy_m, first, (first + 1) % max(count, 1),
+                              config.min_corner_angle_rad, walls.line_offset_jacobian,
+                              config.common_range_sigma_m)
+    if not len(candidates):
+        return candidates
+    keep, seen = walls_end_at_corners(
+        candidates, walls.angle_rad, walls.radius_m, 0.5 * (walls.start_xy_m + walls.end_xy_m),
+        contour.x, contour.y, positions[1], positions[0],
+        abs(contour.points.angle_increment_rad), config.range_sigma_m, config.bearing_sigma_rad,
+        config.corner_end_sigmas, config.corner_end_floor_m, _CORNER_WINDOW,
+        _CORNER_MISSING_BEAMS, config.end_offset_sigmas)
+    kept = candidates.select(keep)
+    return CornerSet(kept.xy_m, kept.yaw_rad, kept.covariance, kept.opening_angle_rad,
+                     kept.first_segment, kept.second_segment, seen[keep])
+
+
+def _project(x_m: np.ndarray, y_m: np.ndarray, first: np.ndarray, last: np.ndarray,
+             fits: LineFits):
+    """
+    Return the feet of the perpendiculars from each segment's end returns to its line.
+
+    :param x_m: x of the returns in position order, shape (n,), m
+    :param y_m: y of the returns in position order, shape (n,), m
+    :param first: position of each segment's first return, shape (S,)
+    :param last: position of each segment's last return, shape (S,)
+    :param fits: the S lines
+    :return: (first returns projected (S, 2), last returns projected (S, 2)), m
+    """
+    c, s = np.cos(fits.angle_rad), np.sin(fits.angle_rad)
+    feet = []
+    for position in (first, last):
+        x, y = x_m[position], y_m[position]
+        offset = x * c + y * s - fits.radius_m
+        foot = np.empty((position.size, 2))
+        foot[:, 0], foot[:, 1] = x - offset * c, y - offset * s
+        feet.append(foot)
+    return feet
+
+
+def _finite_and_positive(fits: LineFits) -> np.ndarray:
+    """Return which fits are usable: finite everywhere, positive-definite normal covariance."""
+    cov = fits.normal_covariance
+    # A NaN or inf anywhere makes the row's total non-finite.
+    finite = np.isfinite(fits.line.sum(axis=1) + fits.line_covariance.sum(axis=(1, 2))
+                         + fits.angle_rad + fits.radius_m + cov.sum(axis=(1, 2)))
+    return finite & (cov[:, 0, 0] > 0.0) & (cov[:, 0, 0] * cov[:, 1, 1] > cov[:, 0, 1] ** 2)

@@ -30,13 +30,13 @@ from wctls_ros.simulation.adversarial import peeling_wall
 RELATIVE = 1e-9
 SETTINGS = {
     'paper': {},
-    'preset': dict(range_sigma_m=0.01, bearing_sigma_rad=math.radians(0.1),
-                   range_sigma_from_scan=True),
-    'every_term': dict(range_sigma_m=0.005, bearing_sigma_rad=math.radians(0.05),
-                       common_range_sigma_m=0.002, wall_flatness_sigma_m=0.003,
-                       iepf_noise_sigmas=4.0),
-    'rules_off': dict(range_sigma_m=0.01, bearing_sigma_rad=0.0, residual_scaling=False,
-                      end_offset_sigmas=0.0, merge_chi2=0.0),
+    'preset': {'range_sigma_m': 0.01, 'bearing_sigma_rad': math.radians(0.1),
+               'range_sigma_from_scan': True},
+    'every_term': {'range_sigma_m': 0.005, 'bearing_sigma_rad': math.radians(0.05),
+                   'common_range_sigma_m': 0.002, 'wall_flatness_sigma_m': 0.003,
+                   'iepf_noise_sigmas': 4.0},
+    'rules_off': {'range_sigma_m': 0.01, 'bearing_sigma_rad': 0.0, 'residual_scaling': False,
+                  'end_offset_sigmas': 0.0, 'merge_chi2': 0.0},
 }
 
 

@@ -21,9 +21,13 @@ import math
 import os
 import pathlib
 import shutil
+import sys
 import tempfile
 
 USER_ERROR = 2
+# Compiling the feature pipeline takes seconds on a machine that has never run it, a fraction
+# of one from numba's cache: only the first is worth a line on standard error.
+SLOW_START_S = 1.0
 
 
 class UserError(ValueError):
@@ -88,3 +92,21 @@ def staged_folder(out_dir):
             os.replace(item, out / item.name)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
+
+
+def warm_up_core(prog: str) -> float:
+    """
+    Compile the feature pipeline (or load it from the cache) before a tool's first scan.
+
+    Done once in the tool's own process, before any worker process is forked, so that the
+    workers inherit the compiled code. A slow compile is reported on standard error.
+
+    :param prog: the tool's name, for the message
+    :return: how long it took, s
+    """
+    from .core import warm_up
+    seconds = warm_up()
+    if seconds >= SLOW_START_S:
+        print(f'{prog}: compiled the feature pipeline for this machine in {seconds:.1f} s '
+              '(cached for later runs)', file=sys.stderr)
+    return seconds

@@ -33,7 +33,7 @@ from wctls_msgs.msg import CornerArray, LineSegmentArray
 from .bags import typestore
 from .conversions import (copy_header, corner_array, line_segment_array, marker_array,
                           MessageTypes, mismatched_types, rclpy_types, scan_features)
-from .core import CornerSet, Features, SegmentSet
+from .core import CornerSet, Features, SegmentSet, warm_up
 from .node_main import declare_parameters, run_node
 from .params import FEATURE_NODE, feature_settings
 
@@ -83,6 +83,8 @@ class FeatureNode(Node):
         self._total, self._recent = ScanCounters(), ScanCounters()
         self._last_sequence = None
         self._frame_id = ''
+        # Compiled (or loaded from the cache) before the first scan, which would wait for it.
+        self.get_logger().info(f'feature pipeline compiled in {warm_up():.2f} s')
         self.create_subscription(LaserScan, 'scan', self._on_scan, SCAN_QOS)
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
         self.get_logger().info(f'extracting features with {self._config.method} from '

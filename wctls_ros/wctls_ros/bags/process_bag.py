@@ -43,6 +43,7 @@ import numpy as np
 
 from .bag_io import (bag_info, BagError, BagWriter, choose_scan_topic, LASER_SCAN, read_scans,
                      typestore)
+from ..cli import warm_up_core
 from ..conversions import (corner_array, laser_scan, line_segment_array, marker_array,
                            MessageTypes, scan_features)
 from ..core import CornerSet, METHODS, SegmentSet
@@ -606,6 +607,7 @@ def main(argv=None) -> int:
             except ValueError as error:
                 raise ConfigError(f'process_bag: error: {error}') from error
             runs = _plan(args)
+            warm_up_core('process_bag')
             tqdm.monitor_interval = 0       # no thread of its own: worker processes are forked
             bar = tqdm(total=sum(scans for _, _, scans in runs), unit='scan', file=sys.stderr,
                        disable=None if args.progress is None else not args.progress,

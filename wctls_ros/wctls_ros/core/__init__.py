@@ -19,7 +19,7 @@ from .config import FeatureConfig, METHODS, validation_errors
 from .corners import find_corners, intersect
 from .features import Corner, CornerSet, Features, Segment, SegmentSet
 from .lines import fit_lines, LineFits, normal_form, segment_returns, SegmentReturns
-from .pipeline import extract_features
+from .pipeline import extract_features, warm_up
 from .scan import scan_to_points, ScanError, ScanPoints
 from .uncertainty import confidence_scale, Ellipse, ellipse, nees
 
@@ -27,5 +27,5 @@ __all__ = [
     'Corner', 'CornerSet', 'Ellipse', 'FeatureConfig', 'Features', 'LineFits', 'METHODS',
     'ScanError', 'ScanPoints', 'Segment', 'SegmentReturns', 'SegmentSet', 'confidence_scale',
     'ellipse', 'extract_features', 'find_corners', 'fit_lines', 'intersect', 'nees',
-    'normal_form', 'scan_to_points', 'segment_returns', 'validation_errors',
+    'normal_form', 'scan_to_points', 'segment_returns', 'validation_errors', 'warm_up',
 ]

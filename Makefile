@@ -18,8 +18,8 @@ SOURCES := $(shell find wctls_msgs wctls_ros -type f -not -path '*/__pycache__/*
 # Every recipe line that runs project code does so inside the venv + install overlay.
 WITH_ENV := source tools/env.sh &&
 PYTEST_ARGS ?=
-# The tests that need numpy and numba alone run a second time with the oldest numpy requirements/python.txt
-# admits: Ubuntu 24.04's 1.26, which an apt install of ROS 2 Jazzy uses.
+# The tests that need numpy and numba alone run a second time with the oldest numpy
+# requirements/python.txt admits: Ubuntu 24.04's 1.26, which an apt install of ROS 2 Jazzy uses.
 OLDEST_NUMPY_VENV := .venv-oldest-numpy
 OLDEST_NUMPY_STAMP := $(OLDEST_NUMPY_VENV)/.deps.stamp
 NUMPY_ONLY_TESTS := $(addprefix wctls_ros/test/,test_core_lines.py test_core_pipeline.py \
@@ -60,6 +60,9 @@ build: $(BUILD_STAMP)
 $(BUILD_STAMP): $(DEPS_STAMP) $(SOURCES)
 	$(WITH_ENV) colcon build --event-handlers console_cohesion- summary+ \
 	  --cmake-args -DPython3_EXECUTABLE=$(ROOT)/$(VENV)/bin/python
+	@# Compile the feature pipeline into numba's cache now, not at the first scan.
+	$(WITH_ENV) python -c 'from wctls_ros.core import warm_up; \
+	  print(f"wctls_ros: feature pipeline compiled in {warm_up():.1f} s")'
 	touch $@
 
 demo: $(BUILD_STAMP)

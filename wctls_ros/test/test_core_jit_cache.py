@@ -1,0 +1,87 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""
+Where the compiled core keeps its JIT cache (issue 18).
+
+Next to a writable install, else in $XDG_CACHE_HOME/wctls_ros, and wherever NUMBA_CACHE_DIR
+says when the user sets it.
+
+Each case runs a fresh interpreter on a copy of the package with a one-line compiled probe in
+its core/, so that numba's real cache locator decides, as it will for the pipeline.
+"""
+
+import os
+import pathlib
+import shutil
+import stat
+import subprocess
+import sys
+
+import pytest
+import wctls_ros
+
+PROBE = """from ._jit import jit
+
+
+@jit
+def twice(value):
+    return 2.0 * value
+"""
+
+
+@pytest.fixture()
+def package(tmp_path):
+    """Return a copy of wctls_ros with a compiled probe in core/, and its core folder."""
+    copy = tmp_path / 'site'
+    shutil.copytree(pathlib.Path(wctls_ros.__file__).parent, copy / 'wctls_ros',
+                    ignore=shutil.ignore_patterns('__pycache__'))
+    core = copy / 'wctls_ros' / 'core'
+    (core / 'probe.py').write_text(PROBE)
+    yield copy, core
+    if os.geteuid() == 0:
+        subprocess.run(['chattr', '-i', str(core)], check=False)
+    core.chmod(stat.S_IRWXU)                  # so that pytest can remove it
+
+
+def make_read_only(folder: pathlib.Path) -> None:
+    """Make a folder unwritable, also for root (immutable, where the file system allows)."""
+    folder.chmod(stat.S_IRUSR | stat.S_IXUSR)
+    if os.geteuid() == 0 and subprocess.run(['chattr', '+i', str(folder)],
+                                            capture_output=True).returncode:
+        pytest.skip('root writes to read-only folders, and chattr +i is not available here')
+
+
+def run_probe(site: pathlib.Path, **environment) -> None:
+    """Compile and run the probe in a fresh interpreter with the given environment."""
+    env = {key: value for key, value in os.environ.items() if key != 'NUMBA_CACHE_DIR'}
+    env.update(environment, PYTHONPATH=str(site))
+    subprocess.run([sys.executable, '-c', 'from wctls_ros.core.probe import twice; '
+                    'assert twice(2.0) == 4.0'], env=env, check=True, timeout=120)
+
+
+def cache_files(folder: pathlib.Path):
+    """Return numba's cache files (index and data) under a folder."""
+    return sorted(path.name for path in folder.rglob('probe.twice-*.nb[ic]'))
+
+
+def test_a_writable_install_keeps_the_cache_next_to_its_source(package, tmp_path):
+    site, core = package
+    run_probe(site, XDG_CACHE_HOME=str(tmp_path / 'xdg'))
+    assert cache_files(core / '__pycache__')
+    assert not cache_files(tmp_path / 'xdg')
+
+
+def test_a_read_only_install_keeps_the_cache_in_the_users_cache_folder(package, tmp_path):
+    site, core = package
+    make_read_only(core)
+    run_probe(site, XDG_CACHE_HOME=str(tmp_path / 'xdg'))
+    assert cache_files(tmp_path / 'xdg' / 'wctls_ros')
+    assert not (core / '__pycache__').exists()
+
+
+def test_numba_cache_dir_wins(package, tmp_path):
+    site, core = package
+    run_probe(site, XDG_CACHE_HOME=str(tmp_path / 'xdg'), NUMBA_CACHE_DIR=str(tmp_path / 'own'))
+    assert cache_files(tmp_path / 'own')
+    assert not cache_files(core / '__pycache__') and not cache_files(tmp_path / 'xdg')

@@ -26,8 +26,10 @@ from wctls_ros.simulation.adversarial import peeling_wall
 
 # Relative agreement of every value: |fast - reference| <= RELATIVE * scale, the scale being
 # the largest magnitude of that quantity in the feature (a covariance's largest entry, the
-# larger coordinate of a point), so that an entry near zero is not held to its own magnitude.
+# larger coordinate of a point), so that an entry near zero is not held to its own magnitude;
+# for an angle (defined modulo 2 pi) at least pi.
 RELATIVE = 1e-9
+ANGLES = ('angle_rad', 'yaw_rad', 'opening_angle_rad')
 SETTINGS = {
     'paper': {},
     'preset': {'range_sigma_m': 0.01, 'bearing_sigma_rad': math.radians(0.1),
@@ -92,6 +94,8 @@ def assert_same(fast, reference, where):
                 assert np.array_equal(a, b), (where, group, name)
                 continue
             scale = np.abs(b.reshape(len(b), -1)).max(axis=1) if len(b) else np.zeros(0)
+            if name in ANGLES:
+                scale = np.maximum(scale, np.pi)
             error = np.abs(a - b).reshape(len(b), -1).max(axis=1) if len(b) else np.zeros(0)
             assert np.all(error <= RELATIVE * scale), (where, group, name,
                                                        float(np.max(error / scale)))

@@ -283,7 +283,7 @@ def walls_end_at_corners(corners: CornerSet, wall_angle_rad: np.ndarray,
     on_line = present & (np.abs(in_front) <= line_tolerance)
     occluder = present & (in_front > line_tolerance).all(axis=0)
     # The corner's std along each wall, and how far apart the wall's returns are there.
-    along_sigma = np.sqrt(np.einsum('kic,cij,kjc->kc', inward, corners.covariance[:, :2, :2],
+    along_sigma = np.sqrt(np.einsum('ikc,cij,jkc->kc', inward, corners.covariance[:, :2, :2],
                                     inward))
     incidence = np.abs((normal * corners.xy_m.T[:, None, :]).sum(axis=0)) / corner_range
     spacing = corner_range * step_rad / np.maximum(incidence, 1e-3)

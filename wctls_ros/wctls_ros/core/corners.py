@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 
+from ._jit import jit
 from .features import CornerSet
 
 # The upper triangle of the symmetric (x, y, yaw) covariance, row by row: (row, column) of each
@@ -328,3 +329,242 @@ def walls_end_at_corners(corners: CornerSet, wall_angle_rad: np.ndarray,
     keep = ((between <= window) & here[0, :, 0] & here[1, :, -1] & ~goes_on & ~blocked
             & (short <= 1.0 + max_missing_beams).all(axis=0))
     return keep, (short <= 1.0).T
+
+
+# The compiled kernels of the pipeline (issue 18): one pair of walls at a time, the same
+# algebra as the batched functions above.
+_UPPER_ROWS = (0, 0, 0, 1, 1, 2)
+_UPPER_COLUMNS = (0, 1, 2, 1, 2, 2)
+
+
+@jit
+def corner_candidates(line, line_covariance, start_xy_m, end_xy_m, first, second, min_angle_rad,
+                      line_offset_jacobian, common_range_sigma_m):
+    """
+    Intersect pairs of walls that are not close to parallel (:func:`find_corners`).
+
+    For each pair: the corner z = -A^-1 (c_1, c_2) (the paper's eqs. (24)-(25)), the bisector's
+    yaw towards the open side the sensor sees, the opening angle, and the joint covariance of
+    (x, y, yaw) of (D11)-(D14): sum_k J_k C_k J_k^T with dz/dL_k = -A^-1 e_k h^T, h = (x, y, 1),
+    d yaw / dL_k = g_k = (-b_k, a_k, 0) / (2 (a_k^2 + b_k^2)); plus sigma^2 j j^T for the range
+    offset common to the scan, j = sum_k J_k dL_k / d offset ((D15)-(D16)).
+
+    :param line: (a, b, c) of every wall, shape (S, 3)
+    :param line_covariance: covariance of (a, b, c), shape (S, 3, 3)
+    :param start_xy_m: first return of each wall projected on its line, shape (S, 2), m
+    :param end_xy_m: last return projected on its line, shape (S, 2), m
+    :param first: earlier wall of each pair, shape (k,)
+    :param second: later wall of each pair, shape (k,)
+    :param min_angle_rad: smallest angle between the two walls, rad
+    :param line_offset_jacobian: d(a, b, c) / d(common range offset), shape (S, 3), per m
+    :param common_range_sigma_m: std of that common offset, m
+    :return: (which pairs passed (C,), position (C, 2) m, yaw (C,) rad, covariance of (x, y,
+        yaw) (C, 3, 3), opening angle (C,) rad)
+    """
+    pairs = first.size
+    kept = np.empty(pairs, np.intp)
+    xy = np.empty((pairs, 2))
+    yaw = np.empty(pairs)
+    covariance = np.empty((pairs, 3, 3))
+    opening = np.empty(pairs)
+    found = 0
+    min_sine = math.sin(min_angle_rad)
+    walls = np.empty(2, np.intp)
+    u, w = np.empty(2), np.empty(2)
+    normal_x, normal_y, norm = np.empty(2), np.empty(2), np.empty(2)
+    direction_x, direction_y = np.empty(2), np.empty(2)
+    upper = np.empty(6)
+    common = np.empty(3)
+    for p in range(pairs):
+        walls[0], walls[1] = first[p], second[p]
+        one, two = line[walls[0]], line[walls[1]]
+        det = one[0] * two[1] - two[0] * one[1]
+        inv_det = 1.0 / det
+        x = (one[1] * two[2] - two[1] * one[2]) * inv_det
+        y = (two[0] * one[2] - one[0] * two[2]) * inv_det
+        # A^-1 e_k = (u_k, -w_k): the partner's b and a over the determinant of the row whose
+        # own line is k (the second row's is -det).
+        u[0], w[0] = two[1] * inv_det, two[0] * inv_det
+        u[1], w[1] = one[1] * (1.0 / -det), one[0] * (1.0 / -det)
+        for k in range(2):
+            a, b = line[walls[k], 0], line[walls[k], 1]
+            norm[k] = math.hypot(a, b)
+            normal_x[k], normal_y[k] = a / norm[k], b / norm[k]
+        sine = abs(normal_x[0] * normal_y[1] - normal_y[0] * normal_x[1])
+        if not sine >= min_sine:
+            continue
+        # Unit vectors from the corner along each wall, towards the middle of its returns,
+        # held as (-x, y).
+        for k in range(2):
+            wall = walls[k]
+            middle_x = (x - start_xy_m[wall, 0]) + (x - end_xy_m[wall, 0])
+            middle_y = (y - start_xy_m[wall, 1]) + (y - end_xy_m[wall, 1])
+            side = math.copysign(1.0, normal_y[k] * middle_x - normal_x[k] * middle_y)
+            direction_x[k], direction_y[k] = normal_y[k] * side, normal_x[k] * side
+        between = math.acos(min(max(direction_x[0] * direction_x[1]
+                                    + direction_y[0] * direction_y[1], -1.0), 1.0))
+        bisector_x, bisector_y = direction_x[0] + direction_x[1], direction_y[0] + direction_y[1]
+        # The sensor (origin) sees the open side: inside a concave corner it lies along
+        # +bisector.
+        concave = bisector_y * y - bisector_x * x < 0.0
+        toward_sensor = 1.0 if concave else -1.0
+        kept[found] = p
+        xy[found, 0], xy[found, 1] = x, y
+        yaw[found] = math.atan2(bisector_y * toward_sensor, bisector_x * -toward_sensor)
+        opening[found] = between if concave else 2.0 * np.pi - between
+        # Three quadratic forms of each C_k: h^T C h, g^T C h, g^T C g (g = (-gx, gy, 0)).
+        upper[:] = 0.0
+        common[:] = 0.0
+        for k in range(2):
+            c = line_covariance[walls[k]]
+            half_inv_norm = 0.5 / norm[k]
+            gradient_x, gradient_y = normal_y[k] * half_inv_norm, normal_x[k] * half_inv_norm
+            moved_a = c[0, 0] * x + c[0, 1] * y + c[0, 2]
+            moved_b = c[1, 0] * x + c[1, 1] * y + c[1, 2]
+            along_h = x * (moved_a + c[2, 0]) + y * (moved_b + c[2, 1]) + c[2, 2]
+            cross = gradient_x * moved_a - gradient_y * moved_b                # -g^T C h
+            upper[0] += u[k] * (u[k] * along_h)
+            upper[1] += u[k] * (w[k] * along_h)
+            upper[2] += u[k] * cross
+            upper[3] += w[k] * (w[k] * along_h)
+            upper[4] += w[k] * cross
+            upper[5] += (gradient_x * (gradient_x * c[0, 0] - gradient_y * c[0, 1])
+                         + gradient_y * (gradient_y * c[1, 1] - gradient_x * c[1, 0]))
+            if common_range_sigma_m > 0.0:
+                offset = line_offset_jacobian[walls[k]]
+                offset_along_h = x * offset[0] + y * offset[1] + offset[2]
+                common[0] += u[k] * offset_along_h
+                common[1] += -(w[k] * offset_along_h)
+                common[2] += gradient_x * offset[0] - gradient_y * offset[1]
+        upper[1] = -upper[1]
+        upper[4] = -upper[4]
+        if common_range_sigma_m > 0.0:
+            for entry in range(6):
+                upper[entry] += (common_range_sigma_m * common[_UPPER_ROWS[entry]]
+                                 * (common_range_sigma_m * common[_UPPER_COLUMNS[entry]]))
+        for entry in range(6):
+            row, column = _UPPER_ROWS[entry], _UPPER_COLUMNS[entry]
+            covariance[found, row, column] = covariance[found, column, row] = upper[entry]
+        found += 1
+    return kept[:found], xy[:found], yaw[:found], covariance[:found], opening[:found]
+
+
+@jit
+def walls_end_at(corner_xy_m, corner_covariance, first_segment, second_segment, wall_angle_rad,
+                 wall_radius_m, wall_middle_m, x_m, y_m, last_position, first_position, step_rad,
+                 range_sigma_m, bearing_sigma_rad, sigmas, floor_m, window, max_missing_beams,
+                 run_sigmas):
+    """
+    Tell which corners both walls end at, and which ends were seen (:func:`walls_end_at_corners`).
+
+    :return: (corners both walls end at (C,), whether each wall's end was seen (C, 2))
+    """
+    corners, count, width = corner_xy_m.shape[0], x_m.size, window + 2
+    keep = np.zeros(corners, np.bool_)
+    seen = np.zeros((corners, 2), np.bool_)
+    present = np.empty(width, np.bool_)
+    x, y, noise = np.empty(width), np.empty(width), np.empty(width)
+    line_tolerance = np.empty(width)
+    in_front, along = np.empty((2, width)), np.empty((2, width))
+    on_line, here = np.empty((2, width), np.bool_), np.empty((2, width), np.bool_)
+    at_corner = np.empty(width, np.bool_)
+    normal, inward = np.empty((2, 2)), np.empty((2, 2))
+    along_sigma, spacing, tolerance = np.empty(2), np.empty(2), np.empty(2)
+    walls = np.empty(2, np.intp)
+    for c in range(corners):
+        walls[0], walls[1] = first_segment[c], second_segment[c]
+        after_first, before_second = last_position[walls[0]], first_position[walls[1]]
+        between = (before_second - after_first - 1) % count
+        corner_x, corner_y = corner_xy_m[c, 0], corner_xy_m[c, 1]
+        corner_range = math.hypot(corner_x, corner_y)
+        # Column 0 is the first wall's facing end, the last column the second's; between them
+        # the returns that belong to neither segment (absent where there are fewer).
+        for s in range(width):
+            position = before_second if s == width - 1 else after_first + s
+            present[s] = s <= between or s == width - 1
+            x[s], y[s] = x_m[position % count], y_m[position % count]
+            noise[s] = math.sqrt(range_sigma_m ** 2 + (x[s] * x[s] + y[s] * y[s])
+                                 * bearing_sigma_rad ** 2)
+            line_tolerance[s] = sigmas * noise[s] + floor_m
+        for k in range(2):
+            wall = walls[k]
+            normal[k, 0] = math.cos(wall_angle_rad[wall])
+            normal[k, 1] = math.sin(wall_angle_rad[wall])
+            inward[k, 0], inward[k, 1] = -normal[k, 1], normal[k, 0]
+            towards_middle = ((wall_middle_m[wall, 0] - corner_x) * inward[k, 0]
+                              + (wall_middle_m[wall, 1] - corner_y) * inward[k, 1])
+            side = math.copysign(1.0, towards_middle)
+            inward[k, 0] *= side
+            inward[k, 1] *= side
+            for s in range(width):
+                offset = x[s] * normal[k, 0] + y[s] * normal[k, 1]
+                in_front[k, s] = wall_radius_m[wall] - offset
+                along[k, s] = (x[s] - corner_x) * inward[k, 0] + (y[s] - corner_y) * inward[k, 1]
+                on_line[k, s] = present[s] and abs(in_front[k, s]) <= line_tolerance[s]
+            # The corner's std along the wall, and how far apart the wall's returns are there.
+            variance = 0.0
+            for i in range(2):
+                for j in range(2):
+                    variance += inward[k, i] * corner_covariance[c, i, j] * inward[k, j]
+            along_sigma[k] = math.sqrt(variance)
+            incidence = abs(normal[k, 0] * corner_x + normal[k, 1] * corner_y) / corner_range
+            spacing[k] = corner_range * step_rad / max(incidence, 1e-3)
+            tolerance[k] = sigmas * along_sigma[k] + floor_m
+        # Returns this close to the corner belong to either wall.
+        sine = abs(normal[0, 0] * normal[1, 1] - normal[0, 1] * normal[1, 0])
+        corner_noise = math.sqrt(range_sigma_m ** 2 + (corner_range * bearing_sigma_rad) ** 2)
+        zone = (sigmas * math.hypot(corner_noise, max(along_sigma[0], along_sigma[1])) / sine
+                + floor_m + min(spacing[0], spacing[1]))
+        for s in range(width):
+            at_corner[s] = present[s] and math.hypot(x[s] - corner_x, y[s] - corner_y) <= zone
+        # Returns away from the corner that a wall claims beyond its segment must not lie in
+        # front of its line together (the test of trim_offset_ends).
+        for k in range(2):
+            run, together = 0, 0.0
+            for s in range(1, width - 1):
+                if on_line[k, s] and along[k, s] >= -tolerance[k] and not at_corner[s]:
+                    run += 1
+                    together += in_front[k, s] / noise[s]
+            together /= math.sqrt(max(run, 1))
+            if run_sigmas > 0.0 and together > run_sigmas:
+                for s in range(1, width - 1):
+                    if on_line[k, s] and along[k, s] >= -tolerance[k] and not at_corner[s]:
+                        on_line[k, s] = False
+        goes_on = False
+        first_anchor, second_anchor = 0, width - 1
+        for s in range(width):
+            occluder = present[s] and in_front[0, s] > line_tolerance[s] and (
+                in_front[1, s] > line_tolerance[s])
+            for k in range(2):
+                reaches = along[k, s] >= -tolerance[k]
+                here[k, s] = at_corner[s] or (on_line[k, s] and reaches)
+                if (not at_corner[s] and on_line[k, s] and not on_line[1 - k, s]
+                        and along[k, s] < -tolerance[k]):
+                    goes_on = True
+            if on_line[0, s] and along[0, s] >= -tolerance[0] and not at_corner[s]:
+                first_anchor = max(first_anchor, s)
+            if on_line[1, s] and along[1, s] >= -tolerance[1] and not at_corner[s]:
+                second_anchor = min(second_anchor, s)
+            present[s] = present[s] and not occluder      # reused below: present, no occluder
+        blocked = False
+        for s in range(width):
+            visible = s <= between or s == width - 1
+            interrupts = visible and not here[0, s] and not here[1, s]
+            outside = s < first_anchor or s > second_anchor
+            if interrupts and ((present[s] and outside) or not outside):
+                blocked = True
+        # How far each wall's own returns stop short of the corner, beyond the tolerance, in
+        # beams.
+        short_ok, ends = True, np.zeros(2, np.bool_)
+        for k in range(2):
+            gap = np.inf
+            for s in range(width):
+                if on_line[k, s] and here[k, s]:
+                    gap = min(gap, max(along[k, s], 0.0))
+            short = max(gap - tolerance[k], 0.0) / spacing[k]
+            short_ok = short_ok and short <= 1.0 + max_missing_beams
+            ends[k] = short <= 1.0
+        keep[c] = (between <= window and here[0, 0] and here[1, width - 1] and not goes_on
+                   and not blocked and short_ok)
+        seen[c, 0], seen[c, 1] = ends[0], ends[1]
+    return keep, seen

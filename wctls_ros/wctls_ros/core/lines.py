@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-Line fits with first-order covariance, batched over many segments at once.
+Line fits with first-order covariance, compiled loops over each segment's returns.
 
 Every fit works on the returns of S segments laid end to end: ``rho`` and ``theta`` of shape
 (P,), segment k owning ``rho[offsets[k]:offsets[k] + counts[k]]``. The noise is independent per
@@ -21,8 +21,12 @@ covariance of (angle, radius).
 """
 
 from dataclasses import dataclass
+import math
 
 import numpy as np
+
+from ._jit import jit
+from .config import METHODS
 
 # Gauss-Newton of the maximum-likelihood fit stops once every step is below this (rad and m)...
 _ML_STEP_TOLERANCE = 1e-12
@@ -107,64 +111,106 @@ class LineFits:
                         self.line_offset_jacobian[keep], self.normal_offset_jacobian[keep])
 
 
-def _square_order(k: int) -> np.ndarray:
+def _fits(method: str, returns: SegmentReturns, range_sigma: float,
+          bearing_sigma: float) -> LineFits:
+    """Run :func:`fit_segments` on a bundle of returns and wrap its arrays."""
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return LineFits(*fit_segments(
+            METHODS.index(method), returns.rho, returns.theta, returns.x, returns.y,
+            returns.offsets, returns.counts, float(range_sigma), float(bearing_sigma)))
+
+
+def utls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
     """
-    Return where each entry of a symmetric k x k matrix, in row-major order, is summed.
+    Unweighted algebraic fit of eqs. (2)-(4) with the covariance of eqs. (6)-(7) (corrected).
 
-    :func:`_lever_sums` sums the entries diagonal by diagonal: (0, 0), (1, 1), [(2, 2),] (0, 1),
-    [(1, 2), (0, 2)].
+    :param returns: the segments' returns
+    :param range_sigma: range noise std, m
+    :param bearing_sigma: bearing noise std, rad
+    :return: (line (S, 3), covariance (S, 3, 3), offset Jacobian (S, 3))
     """
-    order = np.empty((k, k), dtype=np.intp)
-    place = 0
-    for shift in range(k):
-        for row in range(k - shift):
-            order[row, row + shift] = order[row + shift, row] = place
-            place += 1
-    return order.ravel()
+    fits = _fits('utls', returns, range_sigma, bearing_sigma)
+    return fits.line, fits.line_covariance, fits.line_offset_jacobian
 
 
-# Takes the summed entries, columns (S, k (k + 1) / 2), to the matrices (S, k, k) in one copy.
-_SQUARE = {k: _square_order(k) for k in (2, 3)}
-
-
-def _weighted_sums(returns: SegmentReturns, weighted: bool):
+def wtls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
     """
-    Return the per-segment sums S_x, S_y, S_xx, S_yy, S_xy, weighted or not.
+    Weighted algebraic fit of eqs. (8)-(12) with the covariance of eqs. (14)-(15) (corrected).
 
-    The weights are those of eq. (8) up to its constant factor: w_i = 1 / rho_i^2. The factor
-    1 / (range_sigma bearing_sigma)^2 is left out: it scales (a_w, b_w, c_w) by a constant,
-    which cancels in the normal form, in the WCTLS point Q and in every corner, and it is
-    undefined for a zero bearing sigma.
-
-    :return: (1 / rho (P,), weights (P,), both None when unweighted; sums, shape (5, S))
+    :param returns: the segments' returns
+    :param range_sigma: range noise std, m
+    :param bearing_sigma: bearing noise std, rad
+    :return: (line (S, 3), covariance (S, 3, 3), offset Jacobian (S, 3))
     """
-    x, y = returns.x, returns.y
-    if weighted:
-        inv_rho = 1.0 / returns.rho
-        weight = inv_rho * inv_rho
-        wx, wy = weight * x, weight * y
-    else:
-        inv_rho, weight, wx, wy = None, None, x, y
-    columns = np.empty((5, len(x)))
-    columns[0], columns[1], columns[2], columns[3], columns[4] = wx, wy, wx * x, wy * y, wx * y
-    return inv_rho, weight, np.add.reduceat(columns, returns.offsets, axis=1)
+    fits = _fits('wtls', returns, range_sigma, bearing_sigma)
+    return fits.line, fits.line_covariance, fits.line_offset_jacobian
 
 
-def _algebraic_line(sums: np.ndarray) -> np.ndarray:
-    """Return (a, b, c) of eqs. (2)-(4) / (10)-(12) from the (weighted) sums, shape (S, 3)."""
-    s_x, s_y, s_xx, s_yy, s_xy = sums
-    line = np.empty((len(s_x), 3))
-    line[:, 0] = s_x * s_yy - s_y * s_xy
-    line[:, 1] = s_y * s_xx - s_x * s_xy
-    line[:, 2] = s_xy * s_xy - s_xx * s_yy
-    return line
-
-
-# A degenerate segment (det S_M = 0: every return on one ray) yields NaN or inf, not warnings.
-@np.errstate(divide='ignore', invalid='ignore')
-def _lever_sums(returns: SegmentReturns, range_sigma: float, bearing_sigma: float,
-                weighted: bool, scaled: bool):
+def wctls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
     """
+    Weighted conformal fit of eqs. (16)-(23): the normalised line from the point Q.
+
+    Q is the weighted least-squares solution of x_Q x - y_Q y = 1 with the WTLS weights, and C_Q
+    its exact first-order covariance (docs/derivation.md#wctls, (D9); the paper never defines
+    C_Q).
+
+    :param returns: the segments' returns
+    :param range_sigma: range noise std, m
+    :param bearing_sigma: bearing noise std, rad
+    :return: (line (S, 3) with a^2 + b^2 = 1 and c > 0, covariance (S, 3, 3) of rank 2, offset
+        Jacobian (S, 3))
+    """
+    fits = _fits('wctls', returns, range_sigma, bearing_sigma)
+    return fits.line, fits.line_covariance, fits.line_offset_jacobian
+
+
+def normal_jacobian(line: np.ndarray) -> np.ndarray:
+    """Return d(angle, radius) / d(a, b, c) of implicit lines, shape (S, 2, 3)."""
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return normal_jacobians(np.asarray(line, dtype=float))
+
+
+def normal_form(line: np.ndarray, line_covariance: np.ndarray):
+    """
+    Convert implicit lines a x + b y + c = 0 to x cos(angle) + y sin(angle) = radius >= 0.
+
+    :param line: (a, b, c), shape (S, 3)
+    :param line_covariance: shape (S, 3, 3)
+    :return: (angle (S,) rad, radius (S,) m, covariance of (angle, radius) (S, 2, 2))
+    """
+    a, b, c = np.asarray(line, dtype=float).T
+    sign = np.where(c > 0.0, -1.0, 1.0)            # so that radius = -sign c / |(a, b)| >= 0
+    jac = normal_jacobian(line)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return (np.arctan2(sign * b, sign * a), -sign * c / np.hypot(a, b),
+                jac @ line_covariance @ jac.transpose(0, 2, 1))
+
+
+def fit_lines(method: str, returns: SegmentReturns, range_sigma: float,
+              bearing_sigma: float) -> LineFits:
+    """
+    Fit every segment with one method and report it in both forms.
+
+    :param method: 'utls', 'wtls', 'wctls' or 'ml'
+    :param returns: the segments' returns (each segment with >= 2 returns)
+    :param range_sigma: range noise std, m
+    :param bearing_sigma: bearing noise std, rad
+    :return: the fits
+    :raises ValueError: on an unknown method
+    """
+    if method not in METHODS:
+        raise ValueError(f'unknown line fit {method!r}; use one of utls, wtls, wctls, ml')
+    return _fits(method, returns, range_sigma, bearing_sigma)
+
+
+_UTLS, _WTLS, _WCTLS, _ML = (METHODS.index(method) for method in ('utls', 'wtls', 'wctls', 'ml'))
+
+
+@jit
+def _lever_segment(x, y, rho, first, stop, range_sigma, bearing_sigma, weighted, scaled):
+    """
+    Fit p of one segment and sum the first-order covariance of its coordinates u.
+
     Fit p of every segment and sum the first-order covariance of its coordinates u.
 
     UTLS, WTLS and WCTLS all rest on the least-squares solution p of p.z = 1: S_M p = S_g with
@@ -185,348 +231,320 @@ def _lever_sums(returns: SegmentReturns, range_sigma: float, bearing_sigma: floa
     their products are summed: summing z z^T and applying S_M^-1 on both sides afterwards would
     lose digits on short, distant segments, where S_M is ill-conditioned.
 
-    :param returns: the segments' returns
-    :param range_sigma: range noise std, m
-    :param bearing_sigma: bearing noise std, rad
-    :param weighted: use the weights of eq. (8), else unit weights
-    :param scaled: take u = (p_perp.dp, p.dp, |p|^2 d ln s / 2), for a line that carries the
-        scale s, else u = (d angle, d radius)
-    :return: ((a, b, c) (S, 3); p as (p_x, p_y), each (S,); 1 / |p| (S,); the covariance of u,
-        its entries in the order of :func:`_square_order` (k (k + 1) / 2, S); its offset Jacobian
-        du / d(range offset common to all returns) (k, S)), k = 3 if scaled else 2
+    The weights are those of eq. (8) up to its constant factor: w_i = 1 / rho_i^2. The factor
+    1 / (range_sigma bearing_sigma)^2 is left out: it scales (a_w, b_w, c_w) by a constant,
+    which cancels in the normal form, in the WCTLS point Q and in every corner, and it is
+    undefined for a zero bearing sigma.
+
+    :return: ((a, b, c), p_x, p_y, 1 / |p|, the covariance of u as (k, k), its offset
+        Jacobian (k,)), k = 3 if scaled else 2
     """
-    inv_rho, weight, sums = _weighted_sums(returns, weighted)
-    line = _algebraic_line(sums)
-    x, y = returns.x, returns.y
-    # Per segment Pi e_x, Pi e_y and p, repeated to every return, in rows Pi e_x, p_x, Pi e_y,
-    # p_y, -Pi e_x, -p_x: rows 0-5 times x plus rows 3-8 times y are Pi z, p.z, Pi z_perp and
-    # p.z_perp in one pass. S_M^-1 = adj(S_M) / det S_M makes the rows of Pi A^T adj(S_M) and
-    # B^T adj(S_M) with A = p_perp / det S_M and B = p / det S_M, here also scaled by
-    # (1 / |p|^2, -1 / |p|^3) when u = (d angle, d radius).
-    inv_det = -1.0 / line[:, 2]
-    px, py = line[:, 0] * inv_det, line[:, 1] * inv_det
-    inv_norm = 1.0 / np.hypot(px, py)
+    s_x = s_y = s_xx = s_yy = s_xy = 0.0
+    for i in range(first, stop):
+        inv_rho = 1.0 / rho[i]
+        weight = inv_rho * inv_rho if weighted else 1.0
+        wx, wy = weight * x[i], weight * y[i]
+        s_x += wx
+        s_y += wy
+        s_xx += wx * x[i]
+        s_yy += wy * y[i]
+        s_xy += wx * y[i]
+    line = np.array([s_x * s_yy - s_y * s_xy, s_y * s_xx - s_x * s_xy, s_xy * s_xy - s_xx * s_yy])
+    inv_det = -1.0 / line[2]
+    px, py = line[0] * inv_det, line[1] * inv_det
+    inv_norm = 1.0 / math.hypot(px, py)
     if scaled:
-        to_angle, to_radius = inv_det, inv_det
+        to_angle = to_radius = inv_det
     else:
         to_angle = inv_norm * inv_norm * inv_det
         to_radius = -inv_norm * to_angle
     a_x, a_y = -py * to_angle, px * to_angle
     b_x, b_y = px * to_radius, py * to_radius
-    _, _, s_xx, s_yy, s_xy = sums
-    pi_x = [a_x * s_yy - a_y * s_xy, b_x * s_yy - b_y * s_xy]     # Pi e_x
-    pi_y = [a_y * s_xx - a_x * s_xy, b_y * s_xx - b_x * s_xy]     # Pi e_y
-    basis = np.stack([*pi_x, px, *pi_y, py, -pi_x[0], -pi_x[1], -px])
-    basis = np.repeat(basis, returns.counts, axis=1)
-    projected = basis[:6] * x
-    projected += basis[3:] * y
-    # Per return: Pi z_i (2 rows), p.z_i, Pi z_perp_i (2 rows), p.z_perp_i.
-    along, ahead, across, turn = projected[:2], projected[2], projected[3:5], projected[5]
+    pi_x0, pi_x1 = a_x * s_yy - a_y * s_xy, b_x * s_yy - b_y * s_xy          # Pi e_x
+    pi_y0, pi_y1 = a_y * s_xx - a_x * s_xy, b_y * s_xx - b_x * s_xy          # Pi e_y
     k = 3 if scaled else 2
-    pairs = k * (k + 1) // 2
-    kinds = 1 if bearing_sigma == 0.0 else 2        # a zero bearing sigma adds nothing
-    # Per kind (bearing if kept, then range): du/dtheta_i or -du/drho_i (the sign that costs no
-    # operation, undone in the offset), then their products diagonal by diagonal. One array
-    # holds them all, each row written in place (out=), so that a diagonal of products of both
-    # kinds is one multiplication and the sums one reduction: this is the one hot loop of the
-    # fits, and written row by row with temporaries fit_lines took 1.2-1.5 times as long on
-    # 1000-4200 returns (side by side, 2-core AMD EPYC VM).
-    work = np.empty((kinds, k + pairs, len(x)))
-    jac = work[:, :k]
-    if weighted:
-        np.multiply(along, weight * inv_rho, out=jac[-1, :2])
-    else:
-        inv_rho = 1.0 / returns.rho
-        np.multiply(along, (2.0 * ahead - 1.0) * inv_rho, out=jac[-1, :2])
-    if scaled and weighted:
-        jac[-1, 2] = 0.0
-    elif scaled:
-        np.multiply(turn * along[0] - ahead * along[1], inv_rho, out=jac[-1, 2])
-    if kinds == 2:
-        np.subtract((1.0 - ahead) * across, turn * along, out=jac[0, :2])
-        if scaled:
-            np.subtract(ahead * across[1], turn * across[0], out=jac[0, 2])
+    range_products, bearing_products = np.zeros((k, k)), np.zeros((k, k))
+    offset = np.zeros(k)
+    by_range, by_bearing = np.zeros(k), np.zeros(k)
+    for i in range(first, stop):
+        x_i, y_i, inv_rho = x[i], y[i], 1.0 / rho[i]
+        # Pi z_i, p.z_i, Pi z_perp_i, p.z_perp_i.
+        along0, along1 = pi_x0 * x_i + pi_y0 * y_i, pi_x1 * x_i + pi_y1 * y_i
+        ahead = px * x_i + py * y_i
+        across0, across1 = pi_y0 * x_i - pi_x0 * y_i, pi_y1 * x_i - pi_x1 * y_i
+        turn = py * x_i - px * y_i
+        # -du/drho_i (the sign is undone in the offset), then du/dtheta_i.
         if weighted:
-            jac[0] *= weight
-    start = k
-    for shift in range(k):
-        np.multiply(jac[:, :k - shift], jac[:, shift:], out=work[:, start:start + k - shift])
-        start += k - shift
-    # Rows summed per segment: [bearing products,] range -u, range products.
-    sums = np.add.reduceat(work.reshape(-1, len(x))[(kinds - 1) * k:], returns.offsets,
-                           axis=1)
-    covariance = range_sigma ** 2 * sums[-pairs:]
-    if kinds == 2:
-        covariance += bearing_sigma ** 2 * sums[:pairs]
-    return line, (px, py), inv_norm, covariance, -sums[-pairs - k:-pairs]
+            weight = inv_rho * inv_rho
+            by_range[0], by_range[1] = along0 * (weight * inv_rho), along1 * (weight * inv_rho)
+        else:
+            lever = (2.0 * ahead - 1.0) * inv_rho
+            by_range[0], by_range[1] = along0 * lever, along1 * lever
+        if scaled:
+            by_range[2] = 0.0 if weighted else (turn * along0 - ahead * along1) * inv_rho
+        by_bearing[0] = (1.0 - ahead) * across0 - turn * along0
+        by_bearing[1] = (1.0 - ahead) * across1 - turn * along1
+        if scaled:
+            by_bearing[2] = ahead * across1 - turn * across0
+        if weighted:
+            for r in range(k):
+                by_bearing[r] *= weight
+        for r in range(k):
+            offset[r] -= by_range[r]
+            for c in range(k):
+                range_products[r, c] += by_range[r] * by_range[c]
+                bearing_products[r, c] += by_bearing[r] * by_bearing[c]
+    covariance = range_sigma ** 2 * range_products
+    if bearing_sigma != 0.0:                   # a zero bearing sigma adds nothing, not 0 * inf
+        covariance += bearing_sigma ** 2 * bearing_products
+    return line, px, py, inv_norm, covariance, offset
 
 
-def _algebraic_fits(returns: SegmentReturns, range_sigma: float, bearing_sigma: float,
-                    weighted: bool) -> LineFits:
+@jit
+def _sandwich(jacobian, covariance):
+    """Return J C J^T for a small Jacobian J (m, k) and covariance C (k, k)."""
+    rows, inner = jacobian.shape
+    moved = np.zeros((rows, inner))
+    for r in range(rows):
+        for c in range(inner):
+            for k in range(inner):
+                moved[r, c] += jacobian[r, k] * covariance[k, c]
+    result = np.zeros((rows, rows))
+    for r in range(rows):
+        for c in range(rows):
+            for k in range(inner):
+                result[r, c] += moved[r, k] * jacobian[c, k]
+    return result
+
+
+@jit
+def _times(jacobian, vector):
+    """Return J v for a small Jacobian J (m, k) and vector v (k,)."""
+    result = np.zeros(jacobian.shape[0])
+    for r in range(jacobian.shape[0]):
+        for k in range(jacobian.shape[1]):
+            result[r] += jacobian[r, k] * vector[k]
+    return result
+
+
+@jit
+def fit_segments(method_code, rho, theta, x, y, offsets, counts, range_sigma, bearing_sigma):
     """
-    Fit UTLS (unit weights) or WTLS (weights of eq. (8)) lines, see :func:`_lever_sums`.
+    Fit every segment with one method, in its own form and in normal form (:func:`fit_lines`).
 
-    d(angle, radius) = (u_1 / |p|^2, -u_2 / |p|^3) and, as (a, b, c) = s (p, -1),
-    d(a, b, c) = K u with K = (s / |p|^2) [(p_perp, 0), (p, 0), 2 (p, -1)] (by columns).
+    UTLS and WTLS: eqs. (2)-(4) / (8)-(12) with the covariance of (6)-(7) / (14)-(15)
+    (corrected); WCTLS: eqs. (16)-(23) with C_Q of (D9); ML: Gauss-Newton from the WTLS line
+    with the inverse Fisher information (docs/derivation.md#maximum-likelihood).
+
+    :param method_code: METHODS.index of the method: utls 0, wtls 1, wctls 2, ml 3
+    :param rho: ranges of the returns laid end to end, shape (P,), m
+    :param theta: bearings, shape (P,), rad
+    :param x: rho cos(theta), shape (P,), m
+    :param y: rho sin(theta), shape (P,), m
+    :param offsets: first return of each segment, shape (S,)
+    :param counts: returns per segment, shape (S,)
+    :param range_sigma: range noise std, m
+    :param bearing_sigma: bearing noise std, rad
+    :return: (line (S, 3), its covariance (S, 3, 3), angle (S,) rad, radius (S,) m, covariance of
+        (angle, radius) (S, 2, 2), d line / d offset (S, 3), d (angle, radius) / d offset (S, 2))
     """
-    line, (px, py), inv_norm, pairs, offset = _lever_sums(returns, range_sigma, bearing_sigma,
-                                                          weighted, True)
-    covariance = pairs.T[:, _SQUARE[3]].reshape(-1, 3, 3)
-    inv_n2 = inv_norm * inv_norm
-    jac = np.zeros((len(px), 3, 3))
-    jac[:, 0, 0], jac[:, 0, 1], jac[:, 0, 2] = -py, px, 2.0 * px
-    jac[:, 1, 0], jac[:, 1, 1], jac[:, 1, 2] = px, py, 2.0 * py
-    jac[:, 2, 2] = -2.0
-    jac *= (-line[:, 2] * inv_n2)[:, None, None]
-    to_normal = np.empty((len(px), 2))              # d(angle, radius) / d(u_1, u_2)
-    to_normal[:, 0], to_normal[:, 1] = inv_n2, -inv_n2 * inv_norm
-    normal = covariance[:, :2, :2] * to_normal[:, :, None] * to_normal[:, None, :]
-    return LineFits(line, jac @ covariance @ jac.transpose(0, 2, 1), np.arctan2(py, px),
-                    inv_norm, normal, (jac @ offset.T[:, :, None])[:, :, 0],
-                    offset[:2].T * to_normal)
-
-
-def _conformal_fits(returns: SegmentReturns, range_sigma: float,
-                    bearing_sigma: float) -> LineFits:
-    """
-    Fit WCTLS lines, see :func:`_lever_sums`; there u = (d angle, d radius).
-
-    The line (-cos angle, -sin angle, radius) moves by (sin angle, -cos angle, 0) d angle and
-    (0, 0, 1) d radius: the J_WC of eq. (23) with Q = F p.
-    """
-    _, (px, py), inv_norm, pairs, offset = _lever_sums(returns, range_sigma, bearing_sigma,
-                                                       True, False)
-    var_angle, var_radius, cov_angle_radius = pairs
-    normal = pairs.T[:, _SQUARE[2]].reshape(-1, 2, 2)
-    count = len(px)
-    minus_cos, sin = px * -inv_norm, py * inv_norm
+    count = offsets.size
     line = np.empty((count, 3))
-    line[:, 0], line[:, 1], line[:, 2] = minus_cos, py * -inv_norm, inv_norm
-    # d line = (sin, -cos, 0) d angle + (0, 0, 1) d radius.
-    sin_var = sin * var_angle
     line_covariance = np.empty((count, 3, 3))
-    line_covariance[:, 0, 0] = sin * sin_var
-    line_covariance[:, 0, 1] = line_covariance[:, 1, 0] = minus_cos * sin_var
-    line_covariance[:, 1, 1] = minus_cos * (minus_cos * var_angle)
-    line_covariance[:, 0, 2] = line_covariance[:, 2, 0] = sin * cov_angle_radius
-    line_covariance[:, 1, 2] = line_covariance[:, 2, 1] = minus_cos * cov_angle_radius
-    line_covariance[:, 2, 2] = var_radius
-    line_offset = np.empty((count, 3))
-    line_offset[:, 0], line_offset[:, 1], line_offset[:, 2] = (sin * offset[0],
-                                                               minus_cos * offset[0], offset[1])
-    return LineFits(line, line_covariance, np.arctan2(py, px), inv_norm, normal, line_offset,
-                    offset.T)
+    angle, radius = np.empty(count), np.empty(count)
+    normal_covariance = np.empty((count, 2, 2))
+    line_offset, normal_offset = np.empty((count, 3)), np.empty((count, 2))
+    if method_code == _ML:
+        _ml_fits(rho, theta, x, y, offsets, counts, range_sigma, bearing_sigma, angle, radius,
+                 normal_covariance, normal_offset)
+        for s in range(count):
+            c, sn = math.cos(angle[s]), math.sin(angle[s])
+            to_line = np.array([[-sn, 0.0], [c, 0.0], [0.0, -1.0]])    # d line / d(angle, r)
+            line[s, 0], line[s, 1], line[s, 2] = c, sn, -radius[s]
+            line_covariance[s] = _sandwich(to_line, normal_covariance[s])
+            line_offset[s] = _times(to_line, normal_offset[s])
+        return (line, line_covariance, angle, radius, normal_covariance, line_offset,
+                normal_offset)
+    weighted, scaled = method_code != _UTLS, method_code != _WCTLS
+    for s in range(count):
+        own, p_x, p_y, inv_norm, pairs, offset = _lever_segment(
+            x, y, rho, offsets[s], offsets[s] + counts[s], range_sigma, bearing_sigma, weighted,
+            scaled)
+        angle[s], radius[s] = math.atan2(p_y, p_x), inv_norm
+        if scaled:
+            # (a, b, c) = s (p, -1): d(a, b, c) = K u, K = (s / |p|^2) [(p_perp, 0), (p, 0),
+            # 2 (p, -1)] by columns; d(angle, radius) = (u_1 / |p|^2, -u_2 / |p|^3).
+            inv_n2 = inv_norm * inv_norm
+            scale = -own[2] * inv_n2
+            to_line = np.array([[-p_y, p_x, 2.0 * p_x], [p_x, p_y, 2.0 * p_y],
+                                [0.0, 0.0, -2.0]]) * scale
+            line[s] = own
+            line_covariance[s] = _sandwich(to_line, pairs)
+            line_offset[s] = _times(to_line, offset)
+            to_angle, to_radius = inv_n2, -inv_n2 * inv_norm
+            normal_covariance[s, 0, 0] = pairs[0, 0] * to_angle * to_angle
+            normal_covariance[s, 0, 1] = pairs[0, 1] * to_angle * to_radius
+            normal_covariance[s, 1, 0] = pairs[1, 0] * to_radius * to_angle
+            normal_covariance[s, 1, 1] = pairs[1, 1] * to_radius * to_radius
+            normal_offset[s, 0], normal_offset[s, 1] = offset[0] * to_angle, offset[1] * to_radius
+        else:
+            # WCTLS: (-cos, -sin, radius) moves by (sin, -cos, 0) d angle + (0, 0, 1) d radius.
+            minus_cos, sin = p_x * -inv_norm, p_y * inv_norm
+            var_angle, var_radius, cov_angle_radius = pairs[0, 0], pairs[1, 1], pairs[0, 1]
+            line[s, 0], line[s, 1], line[s, 2] = minus_cos, p_y * -inv_norm, inv_norm
+            sin_var = sin * var_angle
+            line_covariance[s, 0, 0] = sin * sin_var
+            line_covariance[s, 0, 1] = line_covariance[s, 1, 0] = minus_cos * sin_var
+            line_covariance[s, 1, 1] = minus_cos * (minus_cos * var_angle)
+            line_covariance[s, 0, 2] = line_covariance[s, 2, 0] = sin * cov_angle_radius
+            line_covariance[s, 1, 2] = line_covariance[s, 2, 1] = minus_cos * cov_angle_radius
+            line_covariance[s, 2, 2] = var_radius
+            normal_covariance[s] = pairs
+            line_offset[s, 0], line_offset[s, 1] = sin * offset[0], minus_cos * offset[0]
+            line_offset[s, 2] = offset[1]
+            normal_offset[s] = offset
+    return line, line_covariance, angle, radius, normal_covariance, line_offset, normal_offset
 
 
-def utls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
+@jit
+def _ml_sums(x, y, rho, first, stop, angle, radius, range_sigma, bearing_sigma):
     """
-    Unweighted algebraic fit of eqs. (2)-(4) with the covariance of eqs. (6)-(7) (corrected).
+    Return the Gauss-Newton sums of one segment at the line (angle, radius).
 
-    :param returns: the segments' returns
-    :param range_sigma: range noise std, m
-    :param bearing_sigma: bearing noise std, rad
-    :return: (line (S, 3), covariance (S, 3, 3), offset Jacobian (S, 3))
+    With the residual d_i = rho_i cos(theta_i - angle) - radius, its gradient (g_i, -1) by
+    (angle, radius) and s_i^-2 as iv_i, the sums are C = sum iv, B = sum iv g, A = sum iv g^2
+    (the Fisher information F = [[A, -B], [-B, C]]), sum iv d, sum iv g d, sum iv
+    cos(theta_i - angle), sum iv g cos(theta_i - angle). The variances s_i^2 use the range to
+    the current line along each beam instead of the measured range: a weight computed from the
+    noisy range would correlate with the residual and bias the line (by several mm at grazing
+    incidence). rho cos(theta - angle) and rho sin(theta - angle) are x cos + y sin and
+    y cos - x sin of the angle, so no trigonometric function runs per return.
+
+    :return: shape (7,): sum iv, iv g, iv g^2, iv d, iv g d, iv cos, iv g cos
     """
-    fits = _algebraic_fits(returns, range_sigma, bearing_sigma, False)
-    return fits.line, fits.line_covariance, fits.line_offset_jacobian
+    c, s = math.cos(angle), math.sin(angle)
+    sums = np.zeros(7)
+    for i in range(first, stop):
+        along = c * x[i] + s * y[i]                       # rho cos(theta - angle)
+        across = -s * x[i] + c * y[i]                     # rho sin(theta - angle)
+        cos_d = along * (1.0 / rho[i])
+        residual = along - radius
+        g_angle = radius * across / along
+        inv_var = 1.0 / (range_sigma ** 2 * (cos_d * cos_d)
+                         + bearing_sigma ** 2 * (g_angle * g_angle))
+        inv_var_g = inv_var * g_angle
+        sums[0] += inv_var
+        sums[1] += inv_var_g
+        sums[2] += inv_var_g * g_angle
+        sums[3] += inv_var * residual
+        sums[4] += inv_var_g * residual
+        sums[5] += inv_var * cos_d
+        sums[6] += inv_var_g * cos_d
+    return sums
 
 
-def wtls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
+@jit
+def _ml_fits(rho, theta, x, y, offsets, counts, range_sigma, bearing_sigma, angle, radius,
+             covariance, normal_offset):
     """
-    Weighted algebraic fit of eqs. (8)-(12) with the covariance of eqs. (14)-(15) (corrected).
+    Fill in the maximum-likelihood lines of every segment (Pfister et al. 2003), from WTLS.
 
-    :param returns: the segments' returns
-    :param range_sigma: range noise std, m
-    :param bearing_sigma: bearing noise std, rad
-    :return: (line (S, 3), covariance (S, 3, 3), offset Jacobian (S, 3))
+    Minimises sum d_i^2 / s_i^2 by Gauss-Newton, the variances re-evaluated at each iterate;
+    all segments iterate together until every step is below _ML_STEP_TOLERANCE (or
+    _ML_MAX_ITERATIONS). The covariance is the inverse Fisher information F^-1 =
+    [[C, B], [B, A]] / det F, and the offset Jacobian d(angle, radius) / d(offset of every
+    range) is -F^-1 (sum iv g cos, -sum iv cos), from the estimating equations
+    sum_i s_i^-2 (g_i, -1) d_i = 0 (first order).
     """
-    fits = _algebraic_fits(returns, range_sigma, bearing_sigma, True)
-    return fits.line, fits.line_covariance, fits.line_offset_jacobian
-
-
-def wctls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
-    """
-    Weighted conformal fit of eqs. (16)-(23): the normalised line from the point Q.
-
-    Q is the weighted least-squares solution of x_Q x - y_Q y = 1 with the WTLS weights, and C_Q
-    its exact first-order covariance (docs/derivation.md#wctls, (D9); the paper never defines
-    C_Q).
-
-    :param returns: the segments' returns
-    :param range_sigma: range noise std, m
-    :param bearing_sigma: bearing noise std, rad
-    :return: (line (S, 3) with a^2 + b^2 = 1 and c > 0, covariance (S, 3, 3) of rank 2, offset
-        Jacobian (S, 3))
-    """
-    fits = _conformal_fits(returns, range_sigma, bearing_sigma)
-    return fits.line, fits.line_covariance, fits.line_offset_jacobian
-
-
-def line_angle_radius(line: np.ndarray):
-    """
-    Return the normal form of implicit lines a x + b y + c = 0 (no covariance).
-
-    :param line: (a, b, c), shape (S, 3)
-    :return: (angle (S,) rad in (-pi, pi], radius (S,) m >= 0; NaN where a = b = 0)
-    """
-    a, b, c = line.T
-    sign = np.where(c > 0.0, -1.0, 1.0)            # so that radius = -sign c / |(a, b)| >= 0
-    with np.errstate(divide='ignore', invalid='ignore'):
-        return np.arctan2(sign * b, sign * a), -sign * c / np.hypot(a, b)
-
-
-def normal_jacobian(line: np.ndarray) -> np.ndarray:
-    """Return d(angle, radius) / d(a, b, c) of implicit lines, shape (S, 2, 3)."""
-    a, b, c = line.T
-    n2 = a * a + b * b
-    n = np.sqrt(n2)
-    sign = np.where(c > 0.0, -1.0, 1.0)
-    jac = np.zeros((len(a), 2, 3))
-    with np.errstate(divide='ignore', invalid='ignore'):   # a = b = 0 gives NaN, caught later
-        jac[:, 0, 0], jac[:, 0, 1] = -b / n2, a / n2
-        jac[:, 1, 0], jac[:, 1, 1] = sign * c * a / (n2 * n), sign * c * b / (n2 * n)
-        jac[:, 1, 2] = -sign / n
-    return jac
-
-
-def normal_form(line: np.ndarray, line_covariance: np.ndarray):
-    """
-    Convert implicit lines a x + b y + c = 0 to x cos(angle) + y sin(angle) = radius >= 0.
-
-    :param line: (a, b, c), shape (S, 3)
-    :param line_covariance: shape (S, 3, 3)
-    :return: (angle (S,) rad, radius (S,) m, covariance of (angle, radius) (S, 2, 2))
-    """
-    jac = normal_jacobian(line)
-    return (*line_angle_radius(line), jac @ line_covariance @ jac.transpose(0, 2, 1))
-
-
-def implicit_from_normal(angle: np.ndarray, radius: np.ndarray, covariance: np.ndarray):
-    """
-    Convert normal-form lines to L = (cos angle, sin angle, -radius) with covariance J C J^T.
-
-    :param angle: shape (S,), rad
-    :param radius: shape (S,), m
-    :param covariance: covariance of (angle, radius), shape (S, 2, 2)
-    :return: (line (S, 3), covariance (S, 3, 3), Jacobian d line / d(angle, radius) (S, 3, 2))
-    """
-    c, s = np.cos(angle), np.sin(angle)
-    jac = np.zeros((len(c), 3, 2))
-    jac[:, 0, 0], jac[:, 1, 0], jac[:, 2, 1] = -s, c, -1.0
-    return (np.column_stack([c, s, -radius]), jac @ covariance @ jac.transpose(0, 2, 1), jac)
-
-
-# A singular Fisher information (e.g. every return on one ray) yields NaN or inf, not warnings.
-@np.errstate(divide='ignore', invalid='ignore')
-def ml(returns: SegmentReturns, range_sigma: float, bearing_sigma: float,
-       start_angle: np.ndarray, start_radius: np.ndarray):
-    """
-    Maximum-likelihood line (Pfister et al. 2003) with the inverse Fisher information.
-
-    Minimises sum d_i^2 / s_i^2, d_i = rho_i cos(theta_i - angle) - radius,
-    s_i^2 = range_sigma^2 cos^2(theta_i - angle) + bearing_sigma^2 rho_i^2 sin^2(theta_i - angle),
-    by Gauss-Newton with the variances re-evaluated at each iterate.
-
-    :param returns: the segments' returns
-    :param range_sigma: range noise std, m
-    :param bearing_sigma: bearing noise std, rad
-    :param start_angle: initial normal angles, shape (S,), rad (e.g. the WTLS line)
-    :param start_radius: initial radii, shape (S,), m
-    :return: (angle (S,), radius (S,), covariance of (angle, radius) (S, 2, 2),
-        d(angle, radius) / d(common range offset) (S, 2))
-    """
-    angle = np.array(start_angle, dtype=float)
-    radius = np.array(start_radius, dtype=float)
-    inv_rho = 1.0 / returns.rho
+    count = offsets.size
+    for s in range(count):
+        s_x = s_y = s_xx = s_yy = s_xy = 0.0
+        for i in range(offsets[s], offsets[s] + counts[s]):
+            inv_rho = 1.0 / rho[i]
+            weight = inv_rho * inv_rho
+            wx, wy = weight * x[i], weight * y[i]
+            s_x += wx
+            s_y += wy
+            s_xx += wx * x[i]
+            s_yy += wy * y[i]
+            s_xy += wx * y[i]
+        a, b, c = s_x * s_yy - s_y * s_xy, s_y * s_xx - s_x * s_xy, s_xy * s_xy - s_xx * s_yy
+        sign = -1.0 if c > 0.0 else 1.0
+        angle[s], radius[s] = math.atan2(sign * b, sign * a), -sign * c / math.hypot(a, b)
+    sums = np.empty((count, 7))
     for _ in range(_ML_MAX_ITERATIONS):
-        sums, inv_det = _ml_sums(returns, inv_rho, angle, radius, range_sigma, bearing_sigma)
-        step = _ml_solve(sums, inv_det, 3)
-        angle += step[0]
-        radius += step[1]
-        if not (np.abs(step) > _ML_STEP_TOLERANCE).any():
+        moving = False
+        for s in range(count):
+            sums[s] = _ml_sums(x, y, rho, offsets[s], offsets[s] + counts[s], angle[s],
+                               radius[s], range_sigma, bearing_sigma)
+        for s in range(count):
+            f = sums[s]
+            inv_det = 1.0 / (f[2] * f[0] - f[1] * f[1])
+            step_angle = (f[1] * f[3] - f[0] * f[4]) * inv_det
+            step_radius = (f[2] * f[3] - f[1] * f[4]) * inv_det
+            angle[s] += step_angle
+            radius[s] += step_radius
+            moving |= abs(step_angle) > _ML_STEP_TOLERANCE or abs(step_radius) > _ML_STEP_TOLERANCE
+        if not moving:
             break
-    sums, inv_det = _ml_sums(returns, inv_rho, angle, radius, range_sigma, bearing_sigma)
-    offset = _ml_solve(sums, inv_det, 5)
-    flip = radius < 0.0
-    angle = np.where(flip, angle + np.pi, angle)
-    angle = np.angle(np.exp(1j * angle))
-    # Reflecting (angle, radius) -> (angle + pi, -radius) flips the sign of their correlation.
-    sign = np.where(flip, -1.0, 1.0)
-    offset[1] *= sign
-    covariance = np.empty((len(angle), 2, 2))      # F^-1 = [[C, B], [B, A]] / det F
-    covariance[:, 0, 0] = sums[0] * inv_det
-    covariance[:, 1, 1] = sums[2] * inv_det
-    covariance[:, 0, 1] = covariance[:, 1, 0] = sums[1] * (inv_det * sign)
-    return angle, np.abs(radius), covariance, offset.T
+    for s in range(count):
+        f = _ml_sums(x, y, rho, offsets[s], offsets[s] + counts[s], angle[s], radius[s],
+                     range_sigma, bearing_sigma)
+        inv_det = 1.0 / (f[2] * f[0] - f[1] * f[1])
+        normal_offset[s, 0] = (f[1] * f[5] - f[0] * f[6]) * inv_det
+        normal_offset[s, 1] = (f[2] * f[5] - f[1] * f[6]) * inv_det
+        # Reflecting (angle, radius) -> (angle + pi, -radius) flips their correlation's sign.
+        sign = 1.0
+        if radius[s] < 0.0:
+            angle[s] += np.pi
+            sign = -1.0
+        angle[s] = math.atan2(math.sin(angle[s]), math.cos(angle[s]))
+        normal_offset[s, 1] *= sign
+        covariance[s, 0, 0] = f[0] * inv_det
+        covariance[s, 1, 1] = f[2] * inv_det
+        covariance[s, 0, 1] = covariance[s, 1, 0] = f[1] * (inv_det * sign)
+        radius[s] = abs(radius[s])
 
 
-def _ml_sums(returns, inv_rho, angle, radius, range_sigma, bearing_sigma):
+@jit
+def residual_chi2_dof(rho, theta, offsets, counts, angle_rad, radius_m, range_sigma,
+                      bearing_sigma):
     """
-    Return the sums of the Gauss-Newton system and 1 / det F at the lines (angle, radius).
+    Return each fit's residual chi2 per degree of freedom (docs/derivation.md#model-error).
 
-    With the residual d_i, its gradient (g_i, -1) by (angle, radius) and s_i^-2 as iv_i, the
-    rows are C = sum iv, B = sum iv g, A = sum iv g^2 (the Fisher information
-    F = [[A, -B], [-B, C]]), sum iv d, sum iv g d, sum iv cos(theta_i - angle),
-    sum iv g cos(theta_i - angle). The variances s_i^2 use the range to the current line along
-    each beam instead of the measured range: a weight computed from the noisy range would
-    correlate with the residual and bias the line (by several mm at grazing incidence).
-    rho cos(theta - angle) and rho sin(theta - angle) are x cos + y sin and y cos - x sin of the
-    angle, so no trigonometric function runs per return.
+    The residual of return i from the line (angle, radius) is d_i = rho_i cos(theta_i - angle)
+    - radius, whose variance under the noise model is range_sigma^2 cos^2(theta_i - angle) +
+    bearing_sigma^2 rho_i^2 sin^2(theta_i - angle) (docs/derivation.md#maximum-likelihood).
 
-    :return: (sums (7, S), 1 / det F (S,))
+    :return: shape (S,)
     """
-    # Each segment's line, repeated to every one of its returns.
-    cos, sin, line_radius = (np.repeat(value, returns.counts)
-                             for value in (np.cos(angle), np.sin(angle), radius))
-    x, y = returns.x, returns.y
-    along = cos * x + sin * y                      # rho cos(theta - angle)
-    across = -sin * x + cos * y                    # rho sin(theta - angle)
-    cos_d = along * inv_rho
-    residual = along - line_radius
-    g_angle = line_radius * across / along         # d residual / d angle; d / d radius = -1
-    # The rows of the sums, each written once into the array that is summed.
-    columns = np.empty((7, len(x)))
-    columns[0] = inv_var = 1.0 / (range_sigma ** 2 * (cos_d * cos_d)
-                                  + bearing_sigma ** 2 * (g_angle * g_angle))
-    columns[1] = inv_var_g = inv_var * g_angle
-    columns[2] = inv_var_g * g_angle
-    columns[3], columns[4] = inv_var * residual, inv_var_g * residual
-    columns[5], columns[6] = inv_var * cos_d, inv_var_g * cos_d
-    sums = np.add.reduceat(columns, returns.offsets, axis=1)
-    return sums, 1.0 / (sums[2] * sums[0] - sums[1] * sums[1])
+    chi2 = np.zeros(offsets.size)
+    for s in range(offsets.size):
+        for i in range(offsets[s], offsets[s] + counts[s]):
+            incidence = theta[i] - angle_rad[s]
+            residual = rho[i] * math.cos(incidence) - radius_m[s]
+            variance = ((range_sigma * math.cos(incidence)) ** 2
+                        + (bearing_sigma * rho[i] * math.sin(incidence)) ** 2)
+            chi2[s] += residual * residual / variance
+        chi2[s] /= max(counts[s] - 2, 1)
+    return chi2
 
 
-def _ml_solve(sums, inv_det, row):
+@jit
+def normal_jacobians(line):
     """
-    Return -F^-1 (sum iv g q, -sum iv q) for the pair of rows (sum iv q, sum iv g q) at ``row``.
+    Return d(angle, radius) / d(a, b, c) of implicit lines a x + b y + c = 0.
 
-    q = d gives the Gauss-Newton step; q = cos(theta - angle) the offset Jacobian
-    d(angle, radius) / d(offset of every range), from the estimating equations
-    sum_i s_i^-2 (g_i, -1) d_i = 0 (first order). Shape (2, S).
+    :param line: (a, b, c), shape (S, 3)
+    :return: shape (S, 2, 3); NaN where a = b = 0
     """
-    return (sums[1:3] * sums[row] - sums[:2] * sums[row + 1]) * inv_det
-
-
-def fit_lines(method: str, returns: SegmentReturns, range_sigma: float,
-              bearing_sigma: float) -> LineFits:
-    """
-    Fit every segment with one method and report it in both forms.
-
-    :param method: 'utls', 'wtls', 'wctls' or 'ml'
-    :param returns: the segments' returns (each segment with >= 2 returns)
-    :param range_sigma: range noise std, m
-    :param bearing_sigma: bearing noise std, rad
-    :return: the fits
-    :raises ValueError: on an unknown method
-    """
-    if method == 'ml':
-        start = line_angle_radius(_algebraic_line(_weighted_sums(returns, True)[-1]))  # WTLS
-        angle, radius, covariance, offset = ml(returns, range_sigma, bearing_sigma, *start)
-        line, line_covariance, jac = implicit_from_normal(angle, radius, covariance)
-        return LineFits(line, line_covariance, angle, radius, covariance,
-                        np.einsum('sij,sj->si', jac, offset), offset)
-    if method == 'wctls':
-        return _conformal_fits(returns, range_sigma, bearing_sigma)
-    if method not in ('utls', 'wtls'):
-        raise ValueError(f'unknown line fit {method!r}; use one of utls, wtls, wctls, ml')
-    return _algebraic_fits(returns, range_sigma, bearing_sigma, method == 'wtls')
+    jacobian = np.zeros((line.shape[0], 2, 3))
+    for s in range(line.shape[0]):
+        a, b, c = line[s, 0], line[s, 1], line[s, 2]
+        n2 = a * a + b * b
+        n = math.sqrt(n2)
+        sign = -1.0 if c > 0.0 else 1.0
+        jacobian[s, 0, 0], jacobian[s, 0, 1] = -b / n2, a / n2
+        jacobian[s, 1, 0], jacobian[s, 1, 1] = sign * c * a / (n2 * n), sign * c * b / (n2 * n)
+        jacobian[s, 1, 2] = -sign / n
+    return jacobian

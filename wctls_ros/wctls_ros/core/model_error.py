@@ -15,12 +15,18 @@ perfectly straight wall. Two terms widen them (docs/derivation.md#model-error):
   it (a wall straight only to a few mm, bowed or leaning), independently: the line's offset
   and direction move together, by an amount that does not shrink with the number of returns.
 
-Pure numpy; no ROS.
+Compiled loops (numba); no ROS.
 """
+
+import math
 
 import numpy as np
 
+from ._jit import jit
+from .lines import normal_jacobians
 
+
+@jit
 def flatness_covariance(angle_rad: np.ndarray, start_xy_m: np.ndarray, end_xy_m: np.ndarray,
                         flatness_sigma_m: float) -> np.ndarray:
     """
@@ -38,49 +44,104 @@ def flatness_covariance(angle_rad: np.ndarray, start_xy_m: np.ndarray, end_xy_m:
     :param flatness_sigma_m: std of each end's offset from the line, m
     :return: shape (S, 2, 2): rad^2, rad m, m^2
     """
-    length2 = np.sum((end_xy_m - start_xy_m) ** 2, axis=1)
-    middle = 0.5 * (start_xy_m + end_xy_m)
-    lever = middle[:, 1] * np.cos(angle_rad) - middle[:, 0] * np.sin(angle_rad)
-    var_angle = 2.0 * flatness_sigma_m ** 2 / length2
-    covariance = np.empty((len(angle_rad), 2, 2))
-    covariance[:, 0, 0] = var_angle
-    covariance[:, 0, 1] = covariance[:, 1, 0] = lever * var_angle
-    covariance[:, 1, 1] = 0.5 * flatness_sigma_m ** 2 + lever * lever * var_angle
+    covariance = np.empty((angle_rad.size, 2, 2))
+    end_variance = flatness_sigma_m * flatness_sigma_m
+    for s in range(angle_rad.size):
+        dx, dy = end_xy_m[s, 0] - start_xy_m[s, 0], end_xy_m[s, 1] - start_xy_m[s, 1]
+        middle_x = 0.5 * (start_xy_m[s, 0] + end_xy_m[s, 0])
+        middle_y = 0.5 * (start_xy_m[s, 1] + end_xy_m[s, 1])
+        lever = middle_y * math.cos(angle_rad[s]) - middle_x * math.sin(angle_rad[s])   # m . t
+        var_angle = 2.0 * end_variance / (dx * dx + dy * dy)
+        covariance[s, 0, 0] = var_angle
+        covariance[s, 0, 1] = covariance[s, 1, 0] = lever * var_angle
+        covariance[s, 1, 1] = 0.5 * end_variance + lever * lever * var_angle
     return covariance
 
 
-def line_from_normal_jacobian(line: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
+@jit
+def residual_factor(chi2_dof: float, returns: int) -> float:
     """
-    Return d(a, b, c) / d(angle, radius) of lines in their method's own scale.
-
-    Each method's (a, b, c) is lambda (cos angle, sin angle, -radius) for some lambda (its
-    scale, e.g. det S_M for UTLS); the corner covariance does not depend on lambda's own
-    variation (docs/derivation.md#the-wctls-corner-equals-the-wtls-corner), so this is
-    lambda [[-sin angle, 0], [cos angle, 0], [0, -1]].
-
-    :param line: (a, b, c), shape (S, 3)
-    :param angle_rad: normal angles, shape (S,), rad
-    :return: shape (S, 3, 2)
-    """
-    cos, sin = np.cos(angle_rad), np.sin(angle_rad)
-    scale = line[:, 0] * cos + line[:, 1] * sin
-    jacobian = np.zeros((len(angle_rad), 3, 2))
-    jacobian[:, 0, 0], jacobian[:, 1, 0], jacobian[:, 2, 1] = -sin, cos, -1.0
-    return jacobian * scale[:, None, None]
-
-
-def residual_factor(chi2_dof: np.ndarray, returns: np.ndarray) -> np.ndarray:
-    """
-    Return the a-posteriori variance factor of each fit (docs/derivation.md#model-error, (D17)).
+    Return the a-posteriori variance factor of a fit (docs/derivation.md#model-error, (D17)).
 
     On a straight wall under the right noise model chi2 / dof has mean 1 and standard
     deviation sqrt(2 / dof), dof = returns - 2; the factor counts only the excess beyond that
     one standard deviation, so that clean walls keep their covariance (its mean is 1.07 at
     8 returns, 1.02 at 50).
 
-    :param chi2_dof: residual chi2 per degree of freedom, shape (S,)
-    :param returns: returns of each fit, shape (S,)
-    :return: max(1, chi2_dof - sqrt(2 / dof)), shape (S,)
+    :param chi2_dof: residual chi2 per degree of freedom
+    :param returns: returns of the fit
+    :return: max(1, chi2_dof - sqrt(2 / dof))
     """
-    dof = np.maximum(returns - 2, 1)
-    return np.maximum(chi2_dof - np.sqrt(2.0 / dof), 1.0)
+    dof = max(returns - 2, 1)
+    return max(chi2_dof - math.sqrt(2.0 / dof), 1.0)
+
+
+@jit
+def with_model_error(line: np.ndarray, angle_rad: np.ndarray, normal_covariance: np.ndarray,
+                     line_covariance: np.ndarray, line_offset_jacobian: np.ndarray,
+                     start_xy_m: np.ndarray, end_xy_m: np.ndarray, chi2_dof: np.ndarray,
+                     num_points: np.ndarray, residual_scaling: bool, flatness_sigma_m: float,
+                     common_range_sigma_m: float):
+    """
+    Return the walls' covariances with the model error (docs/derivation.md#model-error).
+
+    The (angle, radius) covariance N becomes f N (f of (D17), when ``residual_scaling``) plus
+    the flatness term of (D18). The line's own (a, b, c) covariance gets the same addition
+    through d(a, b, c) / d(angle, radius) = lambda [[-sin angle, 0], [cos angle, 0], [0, -1]]:
+    each method's (a, b, c) is lambda (cos angle, sin angle, -radius), and the corner does not
+    depend on lambda's own variation (docs/derivation.md#the-wctls-corner-equals-the-wtls-corner).
+    The published (angle, radius) covariance also gets the common-mode range offset, o o^T with
+    o = sigma_c d(angle, radius) / d(a, b, c) d(a, b, c) / d offset; the (a, b, c) covariance
+    does not, since corners propagate that offset with its correlation between the two walls
+    ((D15)-(D16)).
+
+    :param line: (a, b, c) of every wall, shape (S, 3)
+    :param angle_rad: normal angles, shape (S,), rad
+    :param normal_covariance: covariance of (angle, radius) from the sensor noise, (S, 2, 2)
+    :param line_covariance: covariance of (a, b, c) from the sensor noise, (S, 3, 3)
+    :param line_offset_jacobian: d(a, b, c) / d(common range offset), shape (S, 3), per m
+    :param start_xy_m: first end of each wall, shape (S, 2), m
+    :param end_xy_m: last end of each wall, shape (S, 2), m
+    :param chi2_dof: residual chi2 per degree of freedom of each fit, shape (S,)
+    :param num_points: returns of each fit, shape (S,)
+    :param residual_scaling: apply the variance factor of (D17)
+    :param flatness_sigma_m: std of each wall end's offset from the line, m (0: none)
+    :param common_range_sigma_m: std of the range offset common to the scan, m
+    :return: (covariance of (angle, radius) (S, 2, 2), covariance of (a, b, c) (S, 3, 3))
+    """
+    count = angle_rad.size
+    added = np.zeros((count, 2, 2))           # the model error in (angle, radius)
+    if residual_scaling:
+        for s in range(count):
+            factor = residual_factor(chi2_dof[s], num_points[s])
+            for i in range(2):
+                for j in range(2):
+                    added[s, i, j] = (factor - 1.0) * normal_covariance[s, i, j]
+    if flatness_sigma_m > 0.0:
+        added += flatness_covariance(angle_rad, start_xy_m, end_xy_m, flatness_sigma_m)
+    to_normal = normal_jacobians(line)
+    published = normal_covariance + added
+    new_line_covariance = line_covariance.copy()
+    to_line = np.zeros((3, 2))
+    for s in range(count):
+        cos, sin = math.cos(angle_rad[s]), math.sin(angle_rad[s])
+        scale = line[s, 0] * cos + line[s, 1] * sin
+        to_line[0, 0], to_line[1, 0], to_line[2, 1] = -sin * scale, cos * scale, -scale
+        for i in range(3):
+            for j in range(3):
+                total = 0.0
+                for k in range(2):
+                    for m in range(2):
+                        total += to_line[i, k] * added[s, k, m] * to_line[j, m]
+                new_line_covariance[s, i, j] += total
+        offset_angle = offset_radius = 0.0
+        for k in range(3):
+            offset_angle += to_normal[s, 0, k] * line_offset_jacobian[s, k]
+            offset_radius += to_normal[s, 1, k] * line_offset_jacobian[s, k]
+        offset_angle *= common_range_sigma_m
+        offset_radius *= common_range_sigma_m
+        published[s, 0, 0] += offset_angle * offset_angle
+        published[s, 0, 1] += offset_angle * offset_radius
+        published[s, 1, 0] += offset_angle * offset_radius
+        published[s, 1, 1] += offset_radius * offset_radius
+    return published, new_line_covariance

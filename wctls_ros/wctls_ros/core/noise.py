@@ -6,13 +6,14 @@ The range noise of a scan, estimated from the scan itself.
 
 The derivation: docs/derivation.md#range-noise-from-the-scan.
 
-Pure numpy; no ROS.
+Compiled (numba); no ROS.
 """
 
 import math
 
 import numpy as np
 
+from ._jit import jit
 from .scan import ScanPoints
 
 # Fewer triples of neighbouring returns than this estimate nothing (a scan of a few returns).
@@ -46,14 +47,29 @@ def scan_range_sigma(points: ScanPoints) -> float:
     :param points: the scan's valid returns
     :return: the estimated sigma, m; 0.0 with fewer than MIN_TRIPLES triples of neighbours
     """
-    index, ranges = points.index, points.range_m
-    triple = (index[1:-1] - index[:-2] == 1) & (index[2:] - index[1:-1] == 1)
-    if np.count_nonzero(triple) < MIN_TRIPLES:
+    return range_sigma_of_returns(points.index, points.range_m)
+
+
+@jit
+def range_sigma_of_returns(index, range_m):
+    """
+    Return :func:`scan_range_sigma` of the returns with these beam indices and ranges.
+
+    :param index: beam index of every return, shape (n,)
+    :param range_m: range of every return, shape (n,), m
+    :return: the estimated sigma, m; 0.0 with fewer than MIN_TRIPLES triples of neighbours
+    """
+    second = np.empty(max(index.size - 2, 0))
+    triples = 0
+    for i in range(1, index.size - 1):
+        if index[i] - index[i - 1] == 1 and index[i + 1] - index[i] == 1:
+            second[triples] = range_m[i - 1] - 2.0 * range_m[i] + range_m[i + 1]
+            triples += 1
+    if triples < MIN_TRIPLES:
         return 0.0
-    second = (ranges[:-2] - 2.0 * ranges[1:-1] + ranges[2:])[triple]
-    second = second - np.median(second)
+    second = second[:triples] - np.median(second[:triples])
     sigma = _MAD_TO_SIGMA * np.median(np.abs(second))
     for _ in range(_REFINEMENTS):
         kept = second[np.abs(second) < _CUT_SIGMAS * sigma]
-        sigma = math.sqrt(np.mean(kept * kept) / _CUT_VARIANCE) if len(kept) else 0.0
-    return float(sigma / math.sqrt(6.0))
+        sigma = math.sqrt(np.mean(kept * kept) / _CUT_VARIANCE) if kept.size else 0.0
+    return sigma / math.sqrt(6.0)

@@ -1,24 +1,31 @@
 # Copyright 2026 wctls_ros maintainers
 # SPDX-License-Identifier: Apache-2.0
 
-"""The per-scan pipeline of the paper's Algorithm 1: returns -> segments -> lines -> corners."""
+"""
+The per-scan pipeline of the paper's Algorithm 1: returns -> segments -> lines -> corners.
 
-from dataclasses import dataclass, replace
+One compiled function (:func:`_features_of_scan`) runs every step on a scan, as loops over its
+returns (numba); :func:`extract_features` checks the scan's geometry and packs the arrays it
+returns into the frozen result dataclasses.
+"""
+
+import functools
 import math
 import time
+from typing import NamedTuple
 
 import numpy as np
 
-from .config import FeatureConfig
-from .corners import find_corners, walls_end_at_corners
+from ._jit import jit
+from .config import FeatureConfig, METHODS
+from .corners import corner_candidates, walls_end_at
 from .features import CornerSet, Features, SegmentSet
-from .lines import fit_lines, LineFits, normal_jacobian, segment_returns, SegmentReturns
-from .model_error import flatness_covariance, line_from_normal_jacobian, residual_factor
-from .noise import scan_range_sigma
-from .scan import scan_to_points, ScanError, ScanPoints
-from .segmentation import (breakpoints, Breaks, Chains, chains, iterative_end_point_fit,
-                           merge_collinear, moment_fit, moment_terms, pass_budget, piece_sums,
-                           SegmentRanges, trim_ambiguous_ends, trim_offset_ends)
+from .lines import fit_segments, residual_chi2_dof
+from .model_error import with_model_error
+from .noise import range_sigma_of_returns
+from .scan import scan_geometry, ScanError, valid_returns
+from .segmentation import (breakpoints_of, chains_of, merge_segments, pass_budget, split_iepf,
+                           trim_ambiguous, trim_offset)
 
 _DEFAULT_CONFIG = FeatureConfig()
 # Most returns between two walls that meet at a corner: the ones both trims leave out (8 at each
@@ -28,6 +35,38 @@ _CORNER_WINDOW = 40
 # A corner may sit one beam without a return beyond a wall's last return (a dropout there),
 # reported with that wall's end not seen; farther, it is an extrapolation, not a corner.
 _CORNER_MISSING_BEAMS = 1
+
+
+class _Settings(NamedTuple):
+    """The FeatureConfig fields the compiled pipeline reads, as plain typed values."""
+
+    method_code: int
+    range_sigma_m: float
+    bearing_sigma_rad: float
+    range_sigma_from_scan: bool
+    common_range_sigma_m: float
+    breakpoint_lambda_rad: float
+    iepf_threshold_m: float
+    iepf_noise_sigmas: float
+    merge_chi2: float
+    merge_max_missing_beams: int
+    end_offset_sigmas: float
+    residual_scaling: bool
+    wall_flatness_sigma_m: float
+    min_segment_points: int
+    min_segment_length_m: float
+    min_corner_angle_rad: float
+    min_wall_beam_angle_rad: float
+    corner_end_sigmas: float
+    corner_end_floor_m: float
+
+
+@functools.lru_cache(maxsize=64)
+def _settings(config: FeatureConfig) -> _Settings:
+    """Return the compiled pipeline's view of a configuration (one per distinct config)."""
+    values = {name: getattr(config, name) for name in _Settings._fields if name != 'method_code'}
+    return _Settings(method_code=METHODS.index(config.method), **{
+        name: _Settings.__annotations__[name](value) for name, value in values.items()})
 
 
 def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
@@ -54,11 +93,16 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
     :raises wctls_ros.core.ScanError: when the scan geometry makes no sense, or the scan has
         more than ``config.max_beams`` beams (a ValueError)
     """
-    # Degenerate pieces (parallel lines, returns in one spot) give inf or NaN along the way;
-    # every such segment or corner is dropped before it reaches the result.
-    with np.errstate(divide='ignore', invalid='ignore'):
-        return _extract_features(ranges_m, angle_min_rad, angle_increment_rad, config,
-                                 range_min_m, range_max_m)
+    if np.size(ranges_m) > config.max_beams:
+        raise ScanError(f'{np.size(ranges_m)} beams are more than max_beams '
+                        f'({config.max_beams})')
+    ranges, full_turn, cos, sin = scan_geometry(ranges_m, angle_min_rad, angle_increment_rad)
+    found = _features_of_scan(
+        ranges, cos, sin, float(angle_min_rad), float(angle_increment_rad),
+        float(max(range_min_m, config.range_min_m)), float(min(range_max_m, config.range_max_m)),
+        full_turn, _settings(config))
+    segments, corners, work_limited = SegmentSet(*found[:12]), CornerSet(*found[12:19]), found[19]
+    return Features(config.method, segments, corners, bool(work_limited))
 
 
 def warm_up() -> float:
@@ -79,324 +123,230 @@ def warm_up() -> float:
     return time.perf_counter() - started
 
 
-def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
-                      config: FeatureConfig, range_min_m: float, range_max_m: float) -> Features:
+@jit
+def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, range_min_m,
+                      range_max_m, full_turn, settings):
     """
-    Run :func:`extract_features` with floating-point warnings already silenced.
+    Run the steps of the paper's Algorithm 1 on one scan.
 
-    The steps of the paper's Algorithm 1; each comment names the section of
-    docs/derivation.md that states the step's rule or formulas.
+    Each step names the section of docs/derivation.md that states its rule or formulas.
+    Degenerate pieces (parallel lines, returns in one spot) give inf or NaN along the way;
+    every such segment or corner is dropped before it reaches the result.
+
+    :param ranges_m: ranges, shape (N,), m
+    :param cos: cos of every beam's bearing, shape (N,)
+    :param sin: sin of every beam's bearing, shape (N,)
+    :param angle_min_rad: bearing of the first beam, rad
+    :param angle_increment_rad: bearing step, rad
+    :param range_min_m: closest valid range, m
+    :param range_max_m: farthest valid range, m
+    :param full_turn: the beams cover a full turn (the first and last are neighbours)
+    :param settings: the configuration
+    :return: the twelve arrays of a SegmentSet, the seven of a CornerSet, and whether the work
+        bound stopped splitting or merging
     """
-    if np.size(ranges_m) > config.max_beams:
-        raise ScanError(f'{np.size(ranges_m)} beams are more than max_beams '
-                        f'({config.max_beams})')
-    points = scan_to_points(ranges_m, angle_min_rad, angle_increment_rad,
-                            max(range_min_m, config.range_min_m),
-                            min(range_max_m, config.range_max_m))
-    nothing = Features(config.method, SegmentSet.empty(), CornerSet.empty())
-    if len(points) < config.min_segment_points:
-        return nothing
+    index, range_m, bearing_rad, x_m, y_m = valid_returns(
+        ranges_m, cos, sin, angle_min_rad, angle_increment_rad, range_min_m, range_max_m)
+    count = index.size
+    if count < settings.min_segment_points:
+        return _nothing(False)
     # #range-noise-from-the-scan
-    config = _with_range_sigma_of_the_scan(config, points)
-    # #segmentation-statistics: breakpoints, IEPF, merging, the size rules, the end trims.
-    contour = _Contour.of(points, config)
-    segments, unsplit = _split(contour, config)
-    if not len(segments):
-        return replace(nothing, work_limited=unsplit)
-    segments, angle, radius, unmerged = _merge(contour, segments, config)
-    segments, angle, radius = _large_enough(contour, segments, angle, radius, config)
+    range_sigma = settings.range_sigma_m
+    if settings.range_sigma_from_scan:
+        range_sigma = max(range_sigma, range_sigma_of_returns(index, range_m))
+    bearing_sigma = settings.bearing_sigma_rad
+    # #segmentation-statistics: breakpoints, chains in circular order, IEPF, merging, the size
+    # rules, the end trims. From here on, positions index the returns in circular order.
+    separated, joinable = breakpoints_of(
+        index, x_m, y_m, range_m, ranges_m.size, abs(angle_increment_rad), full_turn,
+        range_sigma, bearing_sigma, settings.breakpoint_lambda_rad,
+        settings.merge_max_missing_beams)
+    order, run_start, run_stop, run_chain = chains_of(range_m, x_m, y_m, separated)
+    rho, theta, x, y = range_m[order], bearing_rad[order], x_m[order], y_m[order]
+    budget = pass_budget(count)
+    start, stop, chain, unsplit = split_iepf(
+        x, y, run_start, run_stop, run_chain,
+        _split_threshold(rho, range_sigma, bearing_sigma, settings), budget)
+    if start.size == 0:
+        return _nothing(unsplit)
+    start, stop, chain, angle, radius, unmerged = merge_segments(
+        x, y, start, stop, chain, full_turn, joinable[order], range_sigma, bearing_sigma,
+        settings.merge_chi2, budget)
     work_limited = unsplit or unmerged
-    if not len(segments):
-        return replace(nothing, work_limited=work_limited)
-    segments = _trim_ends(contour, segments, angle, radius, config)
-    # #utls, #wtls, #wctls or #maximum-likelihood: the configured fit with its covariance.
-    walls, positions = _fit_walls(contour, segments, config)
-    if not len(walls):
-        return replace(nothing, work_limited=work_limited)
+    keep = _large_enough(x, y, start, stop, settings)
+    start, stop, chain, angle, radius = (start[keep], stop[keep], chain[keep], angle[keep],
+                                         radius[keep])
+    if start.size == 0:
+        return _nothing(work_limited)
+    start, stop, chain = trim_ambiguous(start, stop, chain, full_turn, x, y, angle, radius,
+                                        range_sigma, bearing_sigma, settings.min_segment_points)
+    if settings.end_offset_sigmas > 0.0:
+        start, stop, chain = trim_offset(start, stop, chain, x, y, angle, radius, range_sigma,
+                                         bearing_sigma, settings.min_segment_points,
+                                         settings.end_offset_sigmas)
+    # #utls, #wtls, #wctls or #maximum-likelihood: the configured fit with its covariance, in
+    # scan order of the walls' first returns.
+    start, stop = _in_scan_order(index[order], start, stop)
+    walls = _fit_walls(rho, theta, x, y, start, stop, range_sigma, bearing_sigma, settings)
+    (angle, radius, normal_covariance, line, line_covariance, line_offset, start_xy, end_xy,
+     first, last, counts, chi2_dof) = walls
+    if angle.size == 0:
+        return _nothing(work_limited)
     # #corners: which pairs are corners is decided on the sensor noise alone; the published
     # covariances add the model error (a rougher wall is less precise, not more of a corner).
-    corners = _corners(contour, walls, positions, config)
+    first_wall, second_wall, corner_xy, corner_yaw, opening, end_seen = _corners(
+        x, y, walls, first, last, full_turn, abs(angle_increment_rad), range_sigma,
+        bearing_sigma, settings)
     # #model-error (D17), (D18), then #corners and #common-mode-range-offset, (D11)-(D16).
-    walls = _with_model_error(walls, config)
-    return Features(config.method, walls, _corner_covariances(walls, corners, config),
-                    work_limited)
+    normal_covariance, line_covariance = with_model_error(
+        line, angle, normal_covariance, line_covariance, line_offset, start_xy, end_xy,
+        chi2_dof, counts, settings.residual_scaling, settings.wall_flatness_sigma_m,
+        settings.common_range_sigma_m)
+    corner_covariance = corner_candidates(
+        line, line_covariance, start_xy, end_xy, first_wall, second_wall, 0.0, line_offset,
+        settings.common_range_sigma_m)[3]
+    beam_order = index[order]
+    return (angle, radius, normal_covariance, line, line_covariance, line_offset, start_xy,
+            end_xy, beam_order[first], beam_order[last], counts, chi2_dof, corner_xy, corner_yaw,
+            corner_covariance, opening, first_wall, second_wall, end_seen, work_limited)
 
 
-def _with_range_sigma_of_the_scan(config: FeatureConfig, points: ScanPoints) -> FeatureConfig:
-    """Return the config with range_sigma_m raised to the scan's own estimate, when enabled."""
-    if not config.range_sigma_from_scan:
-        return config
-    return replace(config, range_sigma_m=max(config.range_sigma_m, scan_range_sigma(points)))
+@jit
+def _nothing(work_limited):
+    """Return the result of a scan without segments, in :func:`_features_of_scan`'s shape."""
+    no_index = np.zeros(0, np.intp)
+    return (np.zeros(0), np.zeros(0), np.zeros((0, 2, 2)), np.zeros((0, 3)),
+            np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros((0, 2)), np.zeros((0, 2)), no_index,
+            no_index, no_index, np.zeros(0), np.zeros((0, 2)), np.zeros(0), np.zeros((0, 3, 3)),
+            np.zeros(0), no_index, no_index, np.zeros((0, 2), np.bool_), work_limited)
 
 
-@dataclass(frozen=True)
-class _Contour:
+@jit
+def _split_threshold(rho, range_sigma, bearing_sigma, settings):
     """
-    The scan's valid returns in circular order (a full turn starts at a breakpoint).
-
-    :ivar points: the returns in beam order
-    :ivar breaks: where the breakpoint rule separates neighbours (beam order)
-    :ivar chains: the runs between breakpoints, and the circular order
-    :ivar rho: ranges in circular order, m
-    :ivar theta: bearings in circular order, rad
-    :ivar x: x in circular order, m
-    :ivar y: y in circular order, m
-    """
-
-    points: ScanPoints
-    breaks: Breaks
-    chains: Chains
-    rho: np.ndarray
-    theta: np.ndarray
-    x: np.ndarray
-    y: np.ndarray
-
-    @staticmethod
-    def of(points: ScanPoints, config: FeatureConfig) -> '_Contour':
-        """Cut the returns into chains at breakpoints (Borges and Aldon) and order them."""
-        breaks = breakpoints(points, config.range_sigma_m, config.bearing_sigma_rad,
-                             config.breakpoint_lambda_rad, config.merge_max_missing_beams)
-        runs = chains(points, breaks.separated)
-        order = runs.order
-        return _Contour(points, breaks, runs, points.range_m[order], points.bearing_rad[order],
-                        points.x_m[order], points.y_m[order])
-
-    def __len__(self):
-        return len(self.x)
-
-
-def _split(contour: _Contour, config: FeatureConfig):
-    """
-    Split the chains into straight segments by Iterative End Point Fit.
+    Return the IEPF split distance of every return, m.
 
     The paper's split distance, but never within iepf_noise_sigmas of a return's noise: a
-    threshold of 2 sigma splits a straight wall at its noise in most scans. Every pass is O(n):
-    a bounded number of them (:func:`~.segmentation.pass_budget`) bounds the work on any scan.
-
-    :return: (the segments, positions in the contour; whether the work bound stopped splitting)
+    threshold of 2 sigma splits a straight wall at its noise in most scans.
     """
-    threshold = config.iepf_threshold_m
-    if config.iepf_noise_sigmas > 0.0:
-        noise = np.sqrt(config.range_sigma_m ** 2
-                        + (contour.rho * config.bearing_sigma_rad) ** 2)
-        threshold = np.maximum(threshold, config.iepf_noise_sigmas * noise)
-    runs = contour.chains
-    return iterative_end_point_fit(contour.x, contour.y, runs.start, runs.stop, runs.chain,
-                                   threshold, pass_budget(len(contour)))
+    threshold = np.full(rho.size, settings.iepf_threshold_m)
+    if settings.iepf_noise_sigmas > 0.0:
+        for i in range(rho.size):
+            noise = math.sqrt(range_sigma * range_sigma
+                              + (rho[i] * bearing_sigma) * (rho[i] * bearing_sigma))
+            threshold[i] = max(threshold[i], settings.iepf_noise_sigmas * noise)
+    return threshold
 
 
-def _merge(contour: _Contour, segments: SegmentRanges, config: FeatureConfig):
-    """
-    Merge statistically collinear neighbours, never across a discontinuity.
-
-    Sums over the pieces between segment ends make the merge test's line fits
-    (:func:`~.segmentation.moment_fit`) O(1) per segment, merged or not: merging works on
-    piece ranges, with the same work bound as splitting.
-
-    :return: (merged segments, their merge fits' angle (S,) and radius (S,), whether the work
-        bound stopped merging)
-    """
-    sums = piece_sums(moment_terms(contour.x, contour.y), segments)
-
-    def quick(pieces: SegmentRanges):
-        return moment_fit(sums.over(pieces), config.range_sigma_m, config.bearing_sigma_rad)
-
-    runs = contour.chains
-    joinable = contour.breaks.joinable[runs.order][sums.edges[:-1]]   # before each piece
-    pieces, (angle, radius, _), unmerged = merge_collinear(
-        sums.pieces(segments), contour.points.full_turn, sums.edges.size - 1, quick,
-        config.merge_chi2, pass_budget(len(contour)), joinable)
-    return sums.positions(pieces), angle, radius, unmerged
+@jit
+def _large_enough(x, y, start, stop, settings):
+    """Return which segments have min_segment_points returns and min_segment_length."""
+    count = x.size
+    keep = np.empty(start.size, np.bool_)
+    for s in range(start.size):
+        last = (stop[s] - 1) % count
+        dx, dy = x[last] - x[start[s]], y[last] - y[start[s]]
+        keep[s] = (stop[s] - start[s] >= settings.min_segment_points
+                   and dx * dx + dy * dy >= settings.min_segment_length_m ** 2)
+    return keep
 
 
-def _large_enough(contour: _Contour, segments: SegmentRanges, angle: np.ndarray,
-                  radius: np.ndarray, config: FeatureConfig):
-    """Return the segments (and their angle, radius) of min_segment_points and length."""
-    x, y = contour.x, contour.y
-    first, last = segments.start, (segments.stop - 1) % len(contour)
-    dx, dy = x[last] - x[first], y[last] - y[first]
-    keep = ((segments.stop - first >= config.min_segment_points)
-            & (dx * dx + dy * dy >= config.min_segment_length_m ** 2))
-    return segments.select(keep), angle[keep], radius[keep]
+@jit
+def _in_scan_order(beam_of_position, start, stop):
+    """Return the segments sorted by the beam index of their first return."""
+    ordered = np.argsort(beam_of_position[start], kind='mergesort')
+    return start[ordered], stop[ordered]
 
 
-def _trim_ends(contour: _Contour, segments: SegmentRanges, angle: np.ndarray,
-               radius: np.ndarray, config: FeatureConfig) -> SegmentRanges:
-    """
-    Leave out the returns at segment ends that fit both walls, and runs off the line together.
-
-    The lines are the merge fits' (angle, radius).
-    """
-    n, x, y = len(contour), contour.x, contour.y
-    segments = trim_ambiguous_ends(segments, contour.points.full_turn, n, x, y, angle, radius,
-                                   config.range_sigma_m, config.bearing_sigma_rad,
-                                   config.min_segment_points)
-    if config.end_offset_sigmas > 0.0:
-        segments = trim_offset_ends(segments, n, x, y, angle, radius, config.range_sigma_m,
-                                    config.bearing_sigma_rad, config.min_segment_points,
-                                    config.end_offset_sigmas)
-    return segments
-
-
-def _fit_walls(contour: _Contour, segments: SegmentRanges, config: FeatureConfig):
+@jit
+def _fit_walls(rho, theta, x, y, start, stop, range_sigma, bearing_sigma, settings):
     """
     Fit every segment with the configured method and keep the ones that are walls.
 
     A segment is left out when its fit is degenerate (non-finite, or a covariance that is not
     positive definite) or when it lies within min_wall_beam_angle of the beam to its middle:
-    returns strung along the beams are mixed pixels or grazing veils, not a wall.
+    returns strung along the beams are mixed pixels or grazing veils, not a wall. A segment
+    crossing the seam of a full turn runs past the last position (positions wrap).
 
-    :return: (the walls in scan order, their first and last positions in the contour (2, S))
+    :return: (angle, radius, covariance of (angle, radius), line, its covariance, its offset
+        Jacobian, start and end projected on the line, first and last position, returns,
+        residual chi2 per degree of freedom), one row per kept wall
     """
-    n, points, order = len(contour), contour.points, contour.chains.order
-    first_index = points.index[order[segments.start]]
-    segments = segments.select(np.argsort(first_index, kind='stable'))
-    returns = _returns_of(contour, segments)
-    counts = returns.counts
-    fits = fit_lines(config.method, returns, config.range_sigma_m, config.bearing_sigma_rad)
-    last = (segments.stop - 1) % n
-    start_xy, end_xy = _project(contour.x, contour.y, segments.start, last, fits)
-    middle = 0.5 * (start_xy + end_xy)
-    along_beam = np.abs(np.cos(np.arctan2(middle[:, 1], middle[:, 0]) - fits.angle_rad))
-    usable = _finite_and_positive(fits) & (along_beam >= math.sin(config.min_wall_beam_angle_rad))
-    fits, segments, counts = fits.select(usable), segments.select(usable), counts[usable]
-    start_xy, end_xy, last = start_xy[usable], end_xy[usable], last[usable]
-    walls = SegmentSet(
-        fits.angle_rad, fits.radius_m, fits.normal_covariance, fits.line,
-        fits.line_covariance, fits.line_offset_jacobian, start_xy, end_xy,
-        points.index[order[segments.start]], points.index[order[last]], counts,
-        _residual_chi2_dof(returns, fits, usable, config))
-    return walls, np.stack([segments.start, last])
+    count = x.size
+    counts = stop - start
+    offsets = np.zeros(start.size, np.intp)
+    offsets[1:] = np.cumsum(counts)[:-1]
+    total = counts.sum()
+    position = np.empty(total, np.intp)
+    for s in range(start.size):
+        for k in range(counts[s]):
+            position[offsets[s] + k] = (start[s] + k) % count
+    rho_w, theta_w, x_w, y_w = rho[position], theta[position], x[position], y[position]
+    (line, line_covariance, angle, radius, normal_covariance, line_offset,
+     _) = fit_segments(settings.method_code, rho_w, theta_w, x_w, y_w, offsets, counts,
+                       range_sigma, bearing_sigma)
+    chi2_dof = residual_chi2_dof(rho_w, theta_w, offsets, counts, angle, radius, range_sigma,
+                                 bearing_sigma)
+    last = (stop - 1) % count
+    start_xy, end_xy = _feet(x, y, start, angle, radius), _feet(x, y, last, angle, radius)
+    min_along_beam = math.sin(settings.min_wall_beam_angle_rad)
+    keep = np.empty(start.size, np.bool_)
+    for s in range(start.size):
+        middle_x = 0.5 * (start_xy[s, 0] + end_xy[s, 0])
+        middle_y = 0.5 * (start_xy[s, 1] + end_xy[s, 1])
+        along_beam = abs(math.cos(math.atan2(middle_y, middle_x) - angle[s]))
+        keep[s] = _usable(line[s], line_covariance[s], angle[s], radius[s],
+                          normal_covariance[s]) and along_beam >= min_along_beam
+    return (angle[keep], radius[keep], normal_covariance[keep], line[keep],
+            line_covariance[keep], line_offset[keep], start_xy[keep], end_xy[keep],
+            start[keep], last[keep], counts[keep], chi2_dof[keep])
 
 
-def _returns_of(contour: _Contour, segments: SegmentRanges) -> SegmentReturns:
-    """Return the segments' returns laid end to end (across the seam on a full turn)."""
-    counts = segments.stop - segments.start
-    offsets = np.cumsum(counts) - counts
-    position = np.arange(offsets[-1] + counts[-1]) + np.repeat(segments.start - offsets, counts)
-    return segment_returns(contour.rho.take(position, mode='wrap'),
-                           contour.theta.take(position, mode='wrap'), offsets, counts,
-                           contour.x.take(position, mode='wrap'),
-                           contour.y.take(position, mode='wrap'))
+@jit
+def _feet(x, y, position, angle, radius):
+    """Return the feet of the perpendiculars from the returns at ``position`` to the lines, m."""
+    foot = np.empty((position.size, 2))
+    for s in range(position.size):
+        c, s_ = math.cos(angle[s]), math.sin(angle[s])
+        offset = x[position[s]] * c + y[position[s]] * s_ - radius[s]
+        foot[s, 0], foot[s, 1] = x[position[s]] - offset * c, y[position[s]] - offset * s_
+    return foot
 
 
-def _with_model_error(walls: SegmentSet, config: FeatureConfig) -> SegmentSet:
-    """
-    Return the walls with the model error in their line covariances (:mod:`.model_error`).
-
-    The (angle, radius) covariance gets the common-mode range offset too, which corners
-    propagate separately through the line offset Jacobian (its effect on two walls is
-    correlated).
-    """
-    normal = walls.covariance
-    if config.residual_scaling:
-        normal = normal * residual_factor(walls.residual_chi2_dof, walls.num_points)[:, None, None]
-    if config.wall_flatness_sigma_m > 0.0:
-        normal = normal + flatness_covariance(walls.angle_rad, walls.start_xy_m, walls.end_xy_m,
-                                              config.wall_flatness_sigma_m)
-    jacobian = line_from_normal_jacobian(walls.line, walls.angle_rad)
-    line_covariance = walls.line_covariance + jacobian @ (normal - walls.covariance) @ (
-        jacobian.transpose(0, 2, 1))
-    offset = config.common_range_sigma_m * np.einsum('sij,sj->si', normal_jacobian(walls.line),
-                                                     walls.line_offset_jacobian)
-    return replace(walls, covariance=normal + offset[:, :, None] * offset[:, None, :],
-                   line_covariance=line_covariance)
+@jit
+def _usable(line, line_covariance, angle, radius, normal_covariance):
+    """Return whether a fit is finite everywhere with a positive-definite normal covariance."""
+    total = line.sum() + line_covariance.sum() + angle + radius + normal_covariance.sum()
+    return (np.isfinite(total) and normal_covariance[0, 0] > 0.0
+            and normal_covariance[0, 0] * normal_covariance[1, 1] > normal_covariance[0, 1] ** 2)
 
 
-def _corner_covariances(walls: SegmentSet, corners: CornerSet,
-                        config: FeatureConfig) -> CornerSet:
-    """Return the corners with covariances propagated from the walls' (model error included)."""
-    if not len(corners):
-        return corners
-    again = find_corners(walls.line, walls.line_covariance, walls.start_xy_m, walls.end_xy_m,
-                         corners.first_segment, corners.second_segment, 0.0,
-                         walls.line_offset_jacobian, config.common_range_sigma_m)
-    return replace(corners, covariance=again.covariance)
-
-
-def _residual_chi2_dof(returns: SegmentReturns, fits: LineFits, usable: np.ndarray,
-                       config: FeatureConfig) -> np.ndarray:
-    """
-    Return each kept fit's residual chi2 per degree of freedom.
-
-    The residual of return i from the line (angle, radius) is d_i = rho_i cos(theta_i - angle)
-    - radius, whose variance under the noise model is range_sigma^2 cos^2(theta_i - angle) +
-    bearing_sigma^2 rho_i^2 sin^2(theta_i - angle) (docs/derivation.md#maximum-likelihood).
-
-    :return: shape (S,) for the kept fits (usable selects them among the segments of returns)
-    """
-    kept = usable.nonzero()[0]
-    angle = np.repeat(fits.angle_rad, returns.counts[kept])
-    radius = np.repeat(fits.radius_m, returns.counts[kept])
-    member = np.repeat(usable, returns.counts)
-    rho, theta = returns.rho[member], returns.theta[member]
-    incidence = theta - angle
-    residual = rho * np.cos(incidence) - radius
-    variance = ((config.range_sigma_m * np.cos(incidence)) ** 2
-                + (config.bearing_sigma_rad * rho * np.sin(incidence)) ** 2)
-    counts = returns.counts[kept]
-    if not len(kept):
-        return np.zeros(0)
-    chi2 = np.add.reduceat(residual * residual / variance, np.cumsum(counts) - counts)
-    return chi2 / np.maximum(counts - 2, 1)
-
-
-def _corners(contour: _Contour, walls: SegmentSet, positions: np.ndarray,
-             config: FeatureConfig) -> CornerSet:
+@jit
+def _corners(x, y, walls, first, last, full_turn, step_rad, range_sigma, bearing_sigma,
+             settings):
     """
     Intersect neighbouring walls (across the seam on a full turn) and keep the real corners.
 
     A pair makes a corner when its walls are not close to parallel (min_corner_angle) and both
-    end at the intersection (:func:`~.corners.walls_end_at_corners`).
+    end at the intersection (:func:`~.corners.walls_end_at`).
+
+    :return: (first wall, second wall, position (C, 2) m, yaw (C,) rad, opening angle (C,) rad,
+        whether each wall's end was seen (C, 2)) of the corners
     """
-    count = len(walls)
-    first = np.arange(count - 1)
-    if contour.points.full_turn and count >= 3:
-        first = np.arange(count)               # the last wall meets the first at the seam
-    candidates = find_corners(walls.line, walls.line_covariance, walls.start_xy_m,
-                              walls.end_xy_m, first, (first + 1) % max(count, 1),
-                              config.min_corner_angle_rad, walls.line_offset_jacobian,
-                              config.common_range_sigma_m)
-    if not len(candidates):
-        return candidates
-    keep, seen = walls_end_at_corners(
-        candidates, walls.angle_rad, walls.radius_m, 0.5 * (walls.start_xy_m + walls.end_xy_m),
-        contour.x, contour.y, positions[1], positions[0],
-        abs(contour.points.angle_increment_rad), config.range_sigma_m, config.bearing_sigma_rad,
-        config.corner_end_sigmas, config.corner_end_floor_m, _CORNER_WINDOW,
-        _CORNER_MISSING_BEAMS, config.end_offset_sigmas)
-    kept = candidates.select(keep)
-    return CornerSet(kept.xy_m, kept.yaw_rad, kept.covariance, kept.opening_angle_rad,
-                     kept.first_segment, kept.second_segment, seen[keep])
-
-
-def _project(x_m: np.ndarray, y_m: np.ndarray, first: np.ndarray, last: np.ndarray,
-             fits: LineFits):
-    """
-    Return the feet of the perpendiculars from each segment's end returns to its line.
-
-    :param x_m: x of the returns in position order, shape (n,), m
-    :param y_m: y of the returns in position order, shape (n,), m
-    :param first: position of each segment's first return, shape (S,)
-    :param last: position of each segment's last return, shape (S,)
-    :param fits: the S lines
-    :return: (first returns projected (S, 2), last returns projected (S, 2)), m
-    """
-    c, s = np.cos(fits.angle_rad), np.sin(fits.angle_rad)
-    feet = []
-    for position in (first, last):
-        x, y = x_m[position], y_m[position]
-        offset = x * c + y * s - fits.radius_m
-        foot = np.empty((position.size, 2))
-        foot[:, 0], foot[:, 1] = x - offset * c, y - offset * s
-        feet.append(foot)
-    return feet
-
-
-def _finite_and_positive(fits: LineFits) -> np.ndarray:
-    """Return which fits are usable: finite everywhere, positive-definite normal covariance."""
-    cov = fits.normal_covariance
-    # A NaN or inf anywhere makes the row's total non-finite.
-    finite = np.isfinite(fits.line.sum(axis=1) + fits.line_covariance.sum(axis=(1, 2))
-                         + fits.angle_rad + fits.radius_m + cov.sum(axis=(1, 2)))
-    return finite & (cov[:, 0, 0] > 0.0) & (cov[:, 0, 0] * cov[:, 1, 1] > cov[:, 0, 1] ** 2)
+    angle, radius, line, line_covariance, line_offset, start_xy, end_xy = (
+        walls[0], walls[1], walls[3], walls[4], walls[5], walls[6], walls[7])
+    count = angle.size
+    pairs = count if full_turn and count >= 3 else count - 1   # the last meets the first
+    first_wall = np.arange(max(pairs, 0))
+    second_wall = (first_wall + 1) % max(count, 1)
+    kept, xy, yaw, covariance, opening = corner_candidates(
+        line, line_covariance, start_xy, end_xy, first_wall, second_wall,
+        settings.min_corner_angle_rad, line_offset, settings.common_range_sigma_m)
+    first_wall, second_wall = first_wall[kept], second_wall[kept]
+    keep, seen = walls_end_at(
+        xy, covariance, first_wall, second_wall, angle, radius, 0.5 * (start_xy + end_xy), x, y,
+        last, first, step_rad, range_sigma, bearing_sigma, settings.corner_end_sigmas,
+        settings.corner_end_floor_m, _CORNER_WINDOW, _CORNER_MISSING_BEAMS,
+        settings.end_offset_sigmas)
+    return (first_wall[keep], second_wall[keep], xy[keep], yaw[keep], opening[keep],
+            seen[keep])

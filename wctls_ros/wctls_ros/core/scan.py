@@ -11,6 +11,8 @@ import threading
 
 import numpy as np
 
+from ._jit import jit
+
 # A scan whose last beam is at most this many increments short of a full turn after its first
 # is a full turn: its last beam neighbours its first across the +-pi seam. (A driver that
 # publishes every sample of a turn, like sllidar_ros2 without angle_compensate, gives 926 or 927
@@ -19,6 +21,8 @@ _FULL_TURN_GAP_INCREMENTS = 2.5
 # More than a full turn between the first and last beam (beyond float32 rounding of the
 # LaserScan's angle_increment) would revisit bearings: refused.
 _OVER_TURN_TOLERANCE = 1e-4
+# The largest float: a range_max of inf still refuses nothing finite.
+_LARGEST_RANGE = sys.float_info.max
 
 
 class ScanError(ValueError):
@@ -99,6 +103,75 @@ class _DirectionCache:
 _BEAM_DIRECTIONS = _DirectionCache(8 * 2 ** 20)
 
 
+def scan_geometry(ranges_m, angle_min_rad: float, angle_increment_rad: float):
+    """
+    Check a LaserScan's geometry and return what the compiled pipeline needs of it.
+
+    :param ranges_m: ranges, shape (N,), m
+    :param angle_min_rad: bearing of the first beam, rad
+    :param angle_increment_rad: bearing step between beams, rad (non-zero, either sign)
+    :return: (the ranges as a new float64 array (N,), whether the beams cover a full turn,
+        cos and sin of every beam's bearing (N,) each, read-only)
+    :raises ScanError: on ranges that are not one-dimensional, a non-finite or zero increment,
+        or more than a full turn of beams
+    """
+    ranges = np.array(ranges_m, dtype=np.float64)       # a copy: contiguous and writable
+    if ranges.ndim != 1:
+        raise ScanError(f'ranges must be one-dimensional, got shape {ranges.shape}')
+    if not (math.isfinite(angle_min_rad) and math.isfinite(angle_increment_rad)):
+        raise ScanError('angle_min and angle_increment must be finite')
+    if angle_increment_rad == 0.0 and ranges.size > 1:
+        raise ScanError('angle_increment is 0: the beams have no distinct bearings')
+    beam_count = ranges.size
+    span = abs(angle_increment_rad) * max(beam_count - 1, 0)
+    if span > 2.0 * math.pi * (1.0 + _OVER_TURN_TOLERANCE):
+        raise ScanError(f'{beam_count} beams of {angle_increment_rad:g} rad span {span:.4f} rad, '
+                        'more than a full turn')
+    full_turn = (beam_count > 1 and 2.0 * math.pi - span
+                 <= _FULL_TURN_GAP_INCREMENTS * abs(angle_increment_rad))
+    cos, sin = _BEAM_DIRECTIONS.directions(float(angle_min_rad), float(angle_increment_rad),
+                                           beam_count)
+    return ranges, bool(full_turn), cos, sin
+
+
+@jit
+def valid_returns(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, range_min_m,
+                  range_max_m):
+    """
+    Return the valid returns of a scan in beam order, as Cartesian points.
+
+    Invalid per REP-117: NaN, +-inf, ranges outside [range_min_m, range_max_m], and 0 (a point
+    at the sensor itself, never a wall return).
+
+    :param ranges_m: ranges, shape (N,), m
+    :param cos: cos of every beam's bearing, shape (N,)
+    :param sin: sin of every beam's bearing, shape (N,)
+    :param angle_min_rad: bearing of the first beam, rad
+    :param angle_increment_rad: bearing step, rad
+    :param range_min_m: closest valid range, m
+    :param range_max_m: farthest valid range, m
+    :return: (beam index (n,), range (n,) m, bearing (n,) rad, x (n,) m, y (n,) m)
+    """
+    farthest = min(range_max_m, _LARGEST_RANGE)
+    index = np.empty(ranges_m.size, np.intp)
+    count = 0
+    for i in range(ranges_m.size):
+        r = ranges_m[i]
+        # NaN fails every comparison, +-inf one of the two.
+        if (r >= range_min_m if range_min_m > 0.0 else r > 0.0) and r <= farthest:
+            index[count] = i
+            count += 1
+    index = index[:count]
+    range_m = np.empty(count)
+    bearing, x, y = np.empty(count), np.empty(count), np.empty(count)
+    for k in range(count):
+        i = index[k]
+        range_m[k] = ranges_m[i]
+        bearing[k] = angle_min_rad + i * angle_increment_rad
+        x[k], y[k] = range_m[k] * cos[i], range_m[k] * sin[i]
+    return index, range_m, bearing, x, y
+
+
 def scan_to_points(ranges_m, angle_min_rad: float, angle_increment_rad: float,
                    range_min_m: float = 0.0, range_max_m: float = math.inf) -> ScanPoints:
     """
@@ -115,27 +188,9 @@ def scan_to_points(ranges_m, angle_min_rad: float, angle_increment_rad: float,
     :return: the valid returns
     :raises ScanError: on a non-finite or zero increment, or more than a full turn of beams
     """
-    ranges = np.asarray(ranges_m, dtype=float)
-    if ranges.ndim != 1:
-        raise ScanError(f'ranges must be one-dimensional, got shape {ranges.shape}')
-    if not (math.isfinite(angle_min_rad) and math.isfinite(angle_increment_rad)):
-        raise ScanError('angle_min and angle_increment must be finite')
-    if angle_increment_rad == 0.0 and ranges.size > 1:
-        raise ScanError('angle_increment is 0: the beams have no distinct bearings')
-    beam_count = ranges.size
-    span = abs(angle_increment_rad) * max(beam_count - 1, 0)
-    if span > 2.0 * math.pi * (1.0 + _OVER_TURN_TOLERANCE):
-        raise ScanError(f'{beam_count} beams of {angle_increment_rad:g} rad span {span:.4f} rad, '
-                        'more than a full turn')
-    full_turn = (beam_count > 1 and 2.0 * math.pi - span
-                 <= _FULL_TURN_GAP_INCREMENTS * abs(angle_increment_rad))
-    # NaN fails every comparison, +-inf one of the two; a zero range is a point at the sensor
-    # itself, never a wall return.
-    lower = (ranges >= range_min_m) if range_min_m > 0.0 else (ranges > 0.0)
-    index = (lower & (ranges <= min(range_max_m, sys.float_info.max))).nonzero()[0]
-    range_m = ranges[index]
-    cos, sin = _BEAM_DIRECTIONS.directions(float(angle_min_rad), float(angle_increment_rad),
-                                           beam_count)
-    return ScanPoints(index, range_m, angle_min_rad + index * angle_increment_rad,
-                      range_m * cos[index], range_m * sin[index], bool(full_turn), beam_count,
+    ranges, full_turn, cos, sin = scan_geometry(ranges_m, angle_min_rad, angle_increment_rad)
+    index, range_m, bearing, x, y = valid_returns(ranges, cos, sin, float(angle_min_rad),
+                                                  float(angle_increment_rad), float(range_min_m),
+                                                  float(range_max_m))
+    return ScanPoints(index, range_m, bearing, x, y, full_turn, ranges.size,
                       float(angle_increment_rad))

@@ -18,6 +18,7 @@ from typing import Callable, NamedTuple, Tuple
 
 import numpy as np
 
+from ._jit import jit
 from ._linalg import mahalanobis_squared_2x2
 from .scan import ScanPoints
 
@@ -28,8 +29,11 @@ MIN_FIT_RETURNS = 3
 # The work bound of IEPF and merging: passes per scan of n returns (see :func:`pass_budget`).
 _BUDGET_LEVELS_PER_DOUBLING = 2
 _BUDGET_EXTRA_PASSES = 8
+# Returns examined (and trimmed) at each segment end by the end trims.
+_END_WINDOW = 8
 
 
+@jit
 def pass_budget(count: int) -> int:
     """
     Return how many whole-contour passes IEPF (and merging) may make on a scan.
@@ -641,3 +645,372 @@ def _within_contour(start: np.ndarray, stop: np.ndarray, chain: np.ndarray,
     """Return trimmed segments; one that crosses the contour's end may start past it: to [0, n)."""
     wrapped = (start >= contour_length) * contour_length
     return SegmentRanges(start - wrapped, stop - wrapped, chain)
+
+
+# The compiled kernels of the pipeline (issue 18): plain loops over the returns in circular
+# order, the same rules as the batched functions above.
+
+
+@jit
+def breakpoints_of(index, x_m, y_m, range_m, beam_count, step_rad, full_turn, range_sigma_m,
+                   bearing_sigma_rad, lambda_rad, max_missing_beams):
+    """
+    Mark the breakpoints of Borges and Aldon between neighbouring returns (:func:`breakpoints`).
+
+    :param index: beam index of every return, shape (n,)
+    :param x_m: x of every return, shape (n,), m
+    :param y_m: y of every return, shape (n,), m
+    :param range_m: range of every return, shape (n,), m
+    :param beam_count: beams of the scan, valid or not
+    :param step_rad: |angle_increment|, rad
+    :param full_turn: whether the beams cover a full turn
+    :param range_sigma_m: range noise std, m
+    :param bearing_sigma_rad: bearing noise std, rad
+    :param lambda_rad: worst incidence angle still treated as one surface, rad
+    :param max_missing_beams: most invalid beams between two returns of one chain
+    :return: (separated (n,), joinable (n,)): return i against return i - 1 (entry 0 against
+        the last return, across the seam)
+    """
+    n = index.size
+    separated = np.zeros(n, np.bool_)
+    joinable = np.zeros(n, np.bool_)
+    if n == 0:
+        return separated, joinable
+    neighbour_reach = (math.sin(step_rad) / math.sin(lambda_rad - step_rad)
+                       if step_rad < lambda_rad else -1.0)
+    for i in range(n):
+        before = i - 1 if i > 0 else n - 1
+        if i > 0:
+            beams = float(index[i] - index[i - 1])
+        else:      # across the seam: the rest of the turn, in increments (about 1)
+            beams = (index[0] + (2.0 * math.pi - (beam_count - 1) * step_rad) / step_rad
+                     + (beam_count - 1 - index[n - 1]))
+        reach = neighbour_reach
+        if beams != 1.0:
+            dphi = beams * step_rad
+            reach = math.sin(dphi) / math.sin(lambda_rad - dphi) if dphi < lambda_rad else -1.0
+        r = min(range_m[i], range_m[before])
+        dx, dy = x_m[i] - x_m[before], y_m[i] - y_m[before]
+        surface = r * reach
+        noise = math.sqrt(range_sigma_m ** 2 + (r * bearing_sigma_rad) ** 2)
+        distance = math.sqrt(dx * dx + dy * dy)
+        gap = beams - 1.0 >= max_missing_beams + 0.5
+        separated[i] = reach < 0.0 or gap or distance > surface + 3.0 * noise
+        joinable[i] = (separated[i] and reach >= 0.0 and not gap
+                       and distance <= surface + _JOINABLE_SIGMAS * noise)
+    if not full_turn or n == 1:
+        separated[0], joinable[0] = True, False
+    return separated, joinable
+
+
+@jit
+def chains_of(range_m, x_m, y_m, separated):
+    """
+    Group the returns into chains between breakpoints, in circular order (:func:`chains`).
+
+    :return: (order (n,), run start (K,), run stop (K,), run chain (K,))
+    """
+    n = range_m.size
+    breaks = np.nonzero(separated)[0]
+    if n and breaks.size == 0:
+        first = int(np.argmax(range_m))
+        farthest, opposite = -1.0, 0
+        for i in range(n):
+            dx, dy = x_m[i] - x_m[first], y_m[i] - y_m[first]
+            if dx * dx + dy * dy > farthest:
+                farthest, opposite = dx * dx + dy * dy, i
+        opposite = (opposite - first) % n
+        start = np.array([1, opposite + 1])
+        stop = np.array([opposite, n])
+        chain = np.zeros(2, np.intp)
+    else:
+        first = breaks[0] if n else 0
+        start = breaks - first
+        stop = np.empty_like(start)
+        stop[:-1] = start[1:]
+        if start.size:
+            stop[-1] = n
+        chain = np.arange(start.size)
+    order = np.arange(first, first + n)
+    order[n - first:] -= n
+    return order, start, stop, chain
+
+
+@jit
+def split_iepf(x_m, y_m, start, stop, chain, threshold_m, max_levels):
+    """
+    Split runs of returns by Iterative End Point Fit (:func:`iterative_end_point_fit`).
+
+    Depth first: a piece made by d splits is measured as the batched version measures it in
+    its pass d, so the pieces, the returns left out at splits (the one farthest from the chord,
+    the first of equals) and the pieces dropped when the passes run out are the same.
+
+    :param x_m: x of the returns in circular order, shape (n,), m
+    :param y_m: y of the returns in circular order, shape (n,), m
+    :param start: first position of each run, shape (K,)
+    :param stop: one past the last position of each run, shape (K,)
+    :param chain: the chain of each run, shape (K,)
+    :param threshold_m: split distance of every return, shape (n,), m
+    :param max_levels: the most split passes
+    :return: (start (S,), stop (S,), chain (S,) of the straight pieces with at least
+        MIN_FIT_RETURNS returns; whether pieces were left out because the passes ran out)
+    """
+    n = x_m.size
+    out_start = np.empty(n + 1, np.intp)
+    out_stop = np.empty(n + 1, np.intp)
+    out_chain = np.empty(n + 1, np.intp)
+    found = 0
+    unsplit = False
+    # Pending pieces (first, stop, depth): the right part of every split waits on the stack.
+    stack = np.empty((max_levels + 2, 3), np.intp)
+    for run in range(start.size):
+        stack[0, 0], stack[0, 1], stack[0, 2] = start[run], stop[run], 0
+        pending = 1
+        while pending:
+            pending -= 1
+            first, end, depth = stack[pending, 0], stack[pending, 1], stack[pending, 2]
+            last = end - 1
+            x0, y0, x1, y1 = x_m[first], y_m[first], x_m[last], y_m[last]
+            dx, dy = x1 - x0, y1 - y0
+            offset = x0 * y1 - y0 * x1
+            farthest, cut, undefined = -1.0, first, False
+            for i in range(first, end):
+                # |chord x (return - chord start)| over the return's threshold.
+                cross = dx * y_m[i]
+                cross -= dy * x_m[i]
+                cross += offset
+                cross = abs(cross) * (1.0 / threshold_m[i])
+                if cross > farthest:
+                    farthest, cut = cross, i
+                elif cross != cross:
+                    undefined = True
+            chord2 = dx * dx + dy * dy
+            if (not undefined and farthest * farthest > chord2
+                    and chord2 > _MIN_CHORD_M ** 2):
+                if depth == max_levels:          # out of passes: not straight, left out
+                    unsplit = True
+                    continue
+                stack[pending, 0], stack[pending, 1], stack[pending, 2] = cut + 1, end, depth + 1
+                stack[pending + 1, 0], stack[pending + 1, 1] = first, cut
+                stack[pending + 1, 2] = depth + 1
+                pending += 2
+            elif end - first >= MIN_FIT_RETURNS:
+                out_start[found], out_stop[found], out_chain[found] = first, end, chain[run]
+                found += 1
+    return out_start[:found], out_stop[:found], out_chain[:found], unsplit
+
+
+@jit
+def _moment_line(x_m, y_m, first, stop, range_sigma_m, bearing_sigma_rad):
+    """
+    Return :func:`moment_fit` of the returns at positions [first, stop) (modulo n).
+
+    :return: (angle rad, radius m, Var(angle), Cov(angle, radius), Var(radius))
+    """
+    n = x_m.size
+    count = float(stop - first)
+    sx = sy = sxx = syy = sxy = 0.0
+    for k in range(first, stop):
+        i = k % n
+        x, y = x_m[i], y_m[i]
+        sx += x
+        sy += y
+        sxx += x * x
+        syy += y * y
+        sxy += x * y
+    mx, my, mxx, myy, mxy = sx / count, sy / count, sxx / count, syy / count, sxy / count
+    cxx, cyy, cxy = mxx - mx * mx, myy - my * my, mxy - mx * my
+    normal = 0.5 * math.atan2(-2.0 * cxy, cyy - cxx)          # the minor axis
+    c, s = math.cos(normal), math.sin(normal)
+    radius = mx * c + my * s
+    flip = math.copysign(1.0, radius)                         # the normal points to the line
+    c *= flip
+    s *= flip
+    along = cxx * s * s + cyy * c * c - 2.0 * cxy * s * c     # variance along the line
+    offset = my * c - mx * s
+    scatter = range_sigma_m ** 2 + bearing_sigma_rad ** 2 * (mxx + myy)
+    var_angle = scatter / (count * along)
+    return (math.atan2(s, c), abs(radius), var_angle, offset * var_angle,
+            scatter / count + offset * offset * var_angle)
+
+
+@jit
+def merge_segments(x_m, y_m, start, stop, chain, circular, joinable, range_sigma_m,
+                   bearing_sigma_rad, chi2_threshold, max_passes):
+    """
+    Merge neighbouring segments that are statistically the same line (:func:`merge_collinear`).
+
+    The fits are :func:`moment_fit`'s, from the returns' sums.
+
+    :param x_m: x of the returns in circular order, shape (n,), m
+    :param y_m: y of the returns in circular order, shape (n,), m
+    :param start: first position of each segment, sorted, shape (S,)
+    :param stop: one past the last position, shape (S,)
+    :param chain: the chain of each segment, shape (S,)
+    :param circular: whether the returns cover a full turn
+    :param joinable: per position, whether a merge may cross the break before it, shape (n,)
+    :param range_sigma_m: range noise std, m
+    :param bearing_sigma_rad: bearing noise std, rad
+    :param chi2_threshold: merge below this squared Mahalanobis distance (0: never)
+    :param max_passes: the most merging passes
+    :return: (start, stop, chain, angle rad, radius m of the merged segments' fits; whether
+        the passes ran out)
+    """
+    n = x_m.size
+    start, stop, chain = start.copy(), stop.copy(), chain.copy()
+    for passes in range(max_passes + 1):
+        count = start.size
+        fit = np.empty((count, 5))
+        for s in range(count):
+            fit[s] = _moment_line(x_m, y_m, start[s], stop[s], range_sigma_m,
+                                  bearing_sigma_rad)
+        if count < 2 or chi2_threshold <= 0.0:
+            break
+        distance = np.full(count, np.inf)
+        merged_stop = np.empty(count, np.intp)
+        candidates = 0
+        for k in range(count):
+            j = k + 1 if k + 1 < count else 0
+            merged_stop[k] = stop[j] + (n if j == 0 else 0)
+            touching = stop[k] % n == start[j] and joinable[start[j]]
+            ok = (chain[k] == chain[j] or touching) and merged_stop[k] - start[k] <= n
+            if j == 0 and (not circular or count < 3):
+                ok = False                        # the last segment has no successor
+            if not ok:
+                continue
+            turn = (fit[k, 0] - fit[j, 0] + np.pi) % (2.0 * np.pi) - np.pi
+            shift = fit[k, 1] - fit[j, 1]
+            a, b, d = fit[k, 2] + fit[j, 2], fit[k, 3] + fit[j, 3], fit[k, 4] + fit[j, 4]
+            chi2 = (d * turn * turn - 2.0 * b * turn * shift + a * shift * shift) / (a * d - b * b)
+            if chi2 < chi2_threshold:
+                distance[k] = chi2
+                candidates += 1
+        if candidates == 0:
+            break
+        if passes == max_passes:
+            return start, stop, chain, fit[:, 0], fit[:, 1], True
+        used = np.zeros(count, np.bool_)
+        keep = np.ones(count, np.bool_)
+        # Chains joined by a merged segment are one chain from now on: union by root.
+        parent = np.arange(max(chain.max() + 1, 1))
+        for k in np.argsort(distance, kind='mergesort')[:candidates]:
+            j = k + 1 if k + 1 < count else 0
+            if used[k] or used[j]:
+                continue
+            used[k] = used[j] = True
+            keep[j] = False
+            stop[k] = merged_stop[k]
+            into, other = chain[k], chain[j]
+            while parent[into] != into:
+                into = parent[into]
+            while parent[other] != other:
+                other = parent[other]
+            if into != other:
+                parent[other] = into
+        for s in range(count):
+            label = chain[s]
+            while parent[label] != label:
+                label = parent[label]
+            chain[s] = label
+        start, stop, chain = start[keep], stop[keep], chain[keep]
+    return start, stop, chain, fit[:, 0], fit[:, 1], False
+
+
+@jit
+def _within(start, stop, n):
+    """Bring segments that start past the contour's end back into [0, n) (in place)."""
+    for s in range(start.size):
+        if start[s] >= n:
+            start[s] -= n
+            stop[s] -= n
+
+
+@jit
+def trim_ambiguous(start, stop, chain, circular, x_m, y_m, angle_rad, radius_m, range_sigma_m,
+                   bearing_sigma_rad, min_returns):
+    """
+    Drop the returns at meeting ends that fit both lines (:func:`trim_ambiguous_ends`).
+
+    :return: (start, stop, chain) of the trimmed segments
+    """
+    n, count, window = x_m.size, start.size, _END_WINDOW
+    if count < 2:
+        return start, stop, chain
+    meets = np.empty(count, np.bool_)
+    for k in range(count):
+        j = k + 1 if k + 1 < count else 0
+        meets[k] = (start[j] - stop[k]) % n <= 1
+    meets[count - 1] = meets[count - 1] and circular and count > 2
+    room = np.maximum(stop - start - min_returns, 0)
+    cut_end = np.zeros(count, np.intp)
+    cut_start = np.zeros(count, np.intp)
+    for k in range(count):
+        if not meets[k]:
+            continue
+        j = k + 1 if k + 1 < count else 0
+        cos_k, sin_k = math.cos(angle_rad[k]), math.sin(angle_rad[k])
+        cos_j, sin_j = math.cos(angle_rad[j]), math.sin(angle_rad[j])
+        sine = sin_j * cos_k - cos_j * sin_k                  # sin(angle_j - angle_k)
+        corner_x = (radius_m[k] * sin_j - radius_m[j] * sin_k) / sine
+        corner_y = (radius_m[j] * cos_k - radius_m[k] * cos_j) / sine
+        reach2 = 9.0 * (range_sigma_m ** 2 + (corner_x * corner_x + corner_y * corner_y)
+                        * bearing_sigma_rad ** 2) / (sine * sine)
+        for side in range(2):       # back from the end of k, then forward from the start of j
+            run = 0
+            while run < window:
+                i = (stop[k] - 1 - run if side == 0 else start[j] + run) % n
+                dx, dy = x_m[i] - corner_x, y_m[i] - corner_y
+                if not dx * dx + dy * dy < reach2:
+                    break
+                run += 1
+            if side == 0:
+                cut_end[k] = run
+            else:
+                cut_start[j] = run
+    new_start, new_stop = start.copy(), stop.copy()
+    for k in range(count):
+        both = meets[k] and meets[k - 1]          # meets[-1] is the last's, across the seam
+        allowance = room[k] // 2 if both else room[k]
+        new_stop[k] -= min(cut_end[k], allowance)
+        new_start[k] += min(cut_start[k], allowance)
+    _within(new_start, new_stop, n)
+    return new_start, new_stop, chain
+
+
+@jit
+def trim_offset(start, stop, chain, x_m, y_m, angle_rad, radius_m, range_sigma_m,
+                bearing_sigma_rad, min_returns, threshold_sigmas):
+    """
+    Cut off the returns at segment ends that lie off the line together (:func:`trim_offset_ends`).
+
+    :return: (start, stop, chain) of the trimmed segments
+    """
+    n, count, window = x_m.size, start.size, _END_WINDOW
+    new_start, new_stop = start.copy(), stop.copy()
+    limit = threshold_sigmas * threshold_sigmas
+    for s in range(count):
+        c, sn = math.cos(angle_rad[s]), math.sin(angle_rad[s])
+        room = (stop[s] - start[s] - min_returns) // 2
+        for side in range(2):             # back from the end, then forward from the start
+            total, best, cut = 0.0, -1.0, 0
+            for k in range(1, window + 1):
+                i = (stop[s] - k if side == 0 else start[s] + k - 1) % n
+                x, y = x_m[i], y_m[i]
+                residual = x * c + y * sn
+                residual -= radius_m[s]
+                if bearing_sigma_rad > 0.0:
+                    residual /= math.sqrt(range_sigma_m ** 2
+                                          + (x * x + y * y) * bearing_sigma_rad ** 2)
+                else:
+                    residual /= range_sigma_m
+                total += residual
+                score = total * total / k if k <= room else 0.0
+                if score > best:
+                    best, cut = score, k
+            if best > limit:                     # NaN (a NaN line) compares False: no cut
+                if side == 0:
+                    new_stop[s] -= cut
+                else:
+                    new_start[s] += cut
+    _within(new_start, new_stop, n)
+    return new_start, new_stop, chain

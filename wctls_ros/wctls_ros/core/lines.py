@@ -249,7 +249,9 @@ def _lever_segment(x, y, rho, first, stop, range_sigma, bearing_sigma, weighted,
         s_xx += wx * x[i]
         s_yy += wy * y[i]
         s_xy += wx * y[i]
-    line = np.array([s_x * s_yy - s_y * s_xy, s_y * s_xx - s_x * s_xy, s_xy * s_xy - s_xx * s_yy])
+    line = np.empty(3)
+    line[0], line[1], line[2] = (s_x * s_yy - s_y * s_xy, s_y * s_xx - s_x * s_xy,
+                                 s_xy * s_xy - s_xx * s_yy)
     inv_det = -1.0 / line[2]
     px, py = line[0] * inv_det, line[1] * inv_det
     inv_norm = 1.0 / math.hypot(px, py)
@@ -294,37 +296,38 @@ def _lever_segment(x, y, rho, first, stop, range_sigma, bearing_sigma, weighted,
             for c in range(k):
                 range_products[r, c] += by_range[r] * by_range[c]
                 bearing_products[r, c] += by_bearing[r] * by_bearing[c]
-    covariance = range_sigma ** 2 * range_products
-    if bearing_sigma != 0.0:                   # a zero bearing sigma adds nothing, not 0 * inf
-        covariance += bearing_sigma ** 2 * bearing_products
+    covariance = np.empty((k, k))
+    for r in range(k):
+        for c in range(k):
+            covariance[r, c] = range_sigma ** 2 * range_products[r, c]
+            if bearing_sigma != 0.0:           # a zero bearing sigma adds nothing, not 0 * inf
+                covariance[r, c] += bearing_sigma ** 2 * bearing_products[r, c]
     return line, px, py, inv_norm, covariance, offset
 
 
 @jit
-def _sandwich(jacobian, covariance):
-    """Return J C J^T for a small Jacobian J (m, k) and covariance C (k, k)."""
+def _sandwich(jacobian, covariance, out):
+    """Write J C J^T into ``out`` (m, m) for a small Jacobian J (m, k) and covariance C (k, k)."""
     rows, inner = jacobian.shape
-    moved = np.zeros((rows, inner))
-    for r in range(rows):
-        for c in range(inner):
-            for k in range(inner):
-                moved[r, c] += jacobian[r, k] * covariance[k, c]
-    result = np.zeros((rows, rows))
     for r in range(rows):
         for c in range(rows):
+            total = 0.0
             for k in range(inner):
-                result[r, c] += moved[r, k] * jacobian[c, k]
-    return result
+                moved = 0.0
+                for m in range(inner):
+                    moved += jacobian[r, m] * covariance[m, k]
+                total += moved * jacobian[c, k]
+            out[r, c] = total
 
 
 @jit
-def _times(jacobian, vector):
-    """Return J v for a small Jacobian J (m, k) and vector v (k,)."""
-    result = np.zeros(jacobian.shape[0])
+def _times(jacobian, vector, out):
+    """Write J v into ``out`` (m,) for a small Jacobian J (m, k) and vector v (k,)."""
     for r in range(jacobian.shape[0]):
+        total = 0.0
         for k in range(jacobian.shape[1]):
-            result[r] += jacobian[r, k] * vector[k]
-    return result
+            total += jacobian[r, k] * vector[k]
+        out[r] = total
 
 
 @jit
@@ -357,15 +360,18 @@ def fit_segments(method_code, rho, theta, x, y, offsets, counts, range_sigma, be
     if method_code == _ML:
         _ml_fits(rho, theta, x, y, offsets, counts, range_sigma, bearing_sigma, angle, radius,
                  normal_covariance, normal_offset)
+        to_line = np.zeros((3, 2))                 # d line / d(angle, radius)
+        to_line[2, 1] = -1.0
         for s in range(count):
             c, sn = math.cos(angle[s]), math.sin(angle[s])
-            to_line = np.array([[-sn, 0.0], [c, 0.0], [0.0, -1.0]])    # d line / d(angle, r)
+            to_line[0, 0], to_line[1, 0] = -sn, c
             line[s, 0], line[s, 1], line[s, 2] = c, sn, -radius[s]
-            line_covariance[s] = _sandwich(to_line, normal_covariance[s])
-            line_offset[s] = _times(to_line, normal_offset[s])
+            _sandwich(to_line, normal_covariance[s], line_covariance[s])
+            _times(to_line, normal_offset[s], line_offset[s])
         return (line, line_covariance, angle, radius, normal_covariance, line_offset,
                 normal_offset)
     weighted, scaled = method_code != _UTLS, method_code != _WCTLS
+    to_line = np.zeros((3, 3))
     for s in range(count):
         own, p_x, p_y, inv_norm, pairs, offset = _lever_segment(
             x, y, rho, offsets[s], offsets[s] + counts[s], range_sigma, bearing_sigma, weighted,
@@ -376,11 +382,14 @@ def fit_segments(method_code, rho, theta, x, y, offsets, counts, range_sigma, be
             # 2 (p, -1)] by columns; d(angle, radius) = (u_1 / |p|^2, -u_2 / |p|^3).
             inv_n2 = inv_norm * inv_norm
             scale = -own[2] * inv_n2
-            to_line = np.array([[-p_y, p_x, 2.0 * p_x], [p_x, p_y, 2.0 * p_y],
-                                [0.0, 0.0, -2.0]]) * scale
-            line[s] = own
-            line_covariance[s] = _sandwich(to_line, pairs)
-            line_offset[s] = _times(to_line, offset)
+            to_line[0, 0], to_line[0, 1], to_line[0, 2] = -p_y * scale, p_x * scale, (
+                2.0 * p_x * scale)
+            to_line[1, 0], to_line[1, 1], to_line[1, 2] = p_x * scale, p_y * scale, (
+                2.0 * p_y * scale)
+            to_line[2, 2] = -2.0 * scale
+            line[s, 0], line[s, 1], line[s, 2] = own[0], own[1], own[2]
+            _sandwich(to_line, pairs, line_covariance[s])
+            _times(to_line, offset, line_offset[s])
             to_angle, to_radius = inv_n2, -inv_n2 * inv_norm
             normal_covariance[s, 0, 0] = pairs[0, 0] * to_angle * to_angle
             normal_covariance[s, 0, 1] = pairs[0, 1] * to_angle * to_radius
@@ -399,17 +408,18 @@ def fit_segments(method_code, rho, theta, x, y, offsets, counts, range_sigma, be
             line_covariance[s, 0, 2] = line_covariance[s, 2, 0] = sin * cov_angle_radius
             line_covariance[s, 1, 2] = line_covariance[s, 2, 1] = minus_cos * cov_angle_radius
             line_covariance[s, 2, 2] = var_radius
-            normal_covariance[s] = pairs
+            normal_covariance[s, 0, 0], normal_covariance[s, 1, 1] = var_angle, var_radius
+            normal_covariance[s, 0, 1] = normal_covariance[s, 1, 0] = cov_angle_radius
             line_offset[s, 0], line_offset[s, 1] = sin * offset[0], minus_cos * offset[0]
             line_offset[s, 2] = offset[1]
-            normal_offset[s] = offset
+            normal_offset[s, 0], normal_offset[s, 1] = offset[0], offset[1]
     return line, line_covariance, angle, radius, normal_covariance, line_offset, normal_offset
 
 
 @jit
-def _ml_sums(x, y, rho, first, stop, angle, radius, range_sigma, bearing_sigma):
+def _ml_sums(x, y, rho, first, stop, angle, radius, range_sigma, bearing_sigma, sums):
     """
-    Return the Gauss-Newton sums of one segment at the line (angle, radius).
+    Write the Gauss-Newton sums of one segment at the line (angle, radius) into ``sums``.
 
     With the residual d_i = rho_i cos(theta_i - angle) - radius, its gradient (g_i, -1) by
     (angle, radius) and s_i^-2 as iv_i, the sums are C = sum iv, B = sum iv g, A = sum iv g^2
@@ -420,10 +430,10 @@ def _ml_sums(x, y, rho, first, stop, angle, radius, range_sigma, bearing_sigma):
     incidence). rho cos(theta - angle) and rho sin(theta - angle) are x cos + y sin and
     y cos - x sin of the angle, so no trigonometric function runs per return.
 
-    :return: shape (7,): sum iv, iv g, iv g^2, iv d, iv g d, iv cos, iv g cos
+    :param sums: shape (7,), for sum iv, iv g, iv g^2, iv d, iv g d, iv cos, iv g cos
     """
     c, s = math.cos(angle), math.sin(angle)
-    sums = np.zeros(7)
+    sums[:] = 0.0
     for i in range(first, stop):
         along = c * x[i] + s * y[i]                       # rho cos(theta - angle)
         across = -s * x[i] + c * y[i]                     # rho sin(theta - angle)
@@ -440,7 +450,6 @@ def _ml_sums(x, y, rho, first, stop, angle, radius, range_sigma, bearing_sigma):
         sums[4] += inv_var_g * residual
         sums[5] += inv_var * cos_d
         sums[6] += inv_var_g * cos_d
-    return sums
 
 
 @jit
@@ -475,8 +484,8 @@ def _ml_fits(rho, theta, x, y, offsets, counts, range_sigma, bearing_sigma, angl
     for _ in range(_ML_MAX_ITERATIONS):
         moving = False
         for s in range(count):
-            sums[s] = _ml_sums(x, y, rho, offsets[s], offsets[s] + counts[s], angle[s],
-                               radius[s], range_sigma, bearing_sigma)
+            _ml_sums(x, y, rho, offsets[s], offsets[s] + counts[s], angle[s], radius[s],
+                     range_sigma, bearing_sigma, sums[s])
         for s in range(count):
             f = sums[s]
             inv_det = 1.0 / (f[2] * f[0] - f[1] * f[1])
@@ -488,8 +497,9 @@ def _ml_fits(rho, theta, x, y, offsets, counts, range_sigma, bearing_sigma, angl
         if not moving:
             break
     for s in range(count):
-        f = _ml_sums(x, y, rho, offsets[s], offsets[s] + counts[s], angle[s], radius[s],
-                     range_sigma, bearing_sigma)
+        f = sums[s]
+        _ml_sums(x, y, rho, offsets[s], offsets[s] + counts[s], angle[s], radius[s], range_sigma,
+                 bearing_sigma, f)
         inv_det = 1.0 / (f[2] * f[0] - f[1] * f[1])
         normal_offset[s, 0] = (f[1] * f[5] - f[0] * f[6]) * inv_det
         normal_offset[s, 1] = (f[2] * f[5] - f[1] * f[6]) * inv_det

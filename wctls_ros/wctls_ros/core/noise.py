@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from ._jit import jit
+from ._order import median
 from .scan import ScanPoints
 
 # Fewer triples of neighbouring returns than this estimate nothing (a scan of a few returns).
@@ -67,9 +68,18 @@ def range_sigma_of_returns(index, range_m):
             triples += 1
     if triples < MIN_TRIPLES:
         return 0.0
-    second = second[:triples] - np.median(second[:triples])
-    sigma = _MAD_TO_SIGMA * np.median(np.abs(second))
+    second = second[:triples]
+    centre = median(second)
+    deviation = np.empty(triples)
+    for k in range(triples):
+        second[k] -= centre
+        deviation[k] = abs(second[k])
+    sigma = _MAD_TO_SIGMA * median(deviation)
     for _ in range(_REFINEMENTS):
-        kept = second[np.abs(second) < _CUT_SIGMAS * sigma]
-        sigma = math.sqrt(np.mean(kept * kept) / _CUT_VARIANCE) if kept.size else 0.0
+        total, kept = 0.0, 0
+        for k in range(triples):
+            if deviation[k] < _CUT_SIGMAS * sigma:
+                total += second[k] * second[k]
+                kept += 1
+        sigma = math.sqrt(total / kept / _CUT_VARIANCE) if kept else 0.0
     return sigma / math.sqrt(6.0)

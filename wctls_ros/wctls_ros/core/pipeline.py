@@ -186,7 +186,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
                                          settings.end_offset_sigmas)
     # #utls, #wtls, #wctls or #maximum-likelihood: the configured fit with its covariance, in
     # scan order of the walls' first returns.
-    start, stop = _in_scan_order(index[order], start, stop)
+    start, stop = _in_scan_order(index[order], ranges_m.size, start, stop)
     walls = _fit_walls(rho, theta, x, y, start, stop, range_sigma, bearing_sigma, settings)
     (angle, radius, normal_covariance, line, line_covariance, line_offset, start_xy, end_xy,
      first, last, counts, chi2_dof) = walls
@@ -229,11 +229,11 @@ def _split_threshold(rho, range_sigma, bearing_sigma, settings):
     The paper's split distance, but never within iepf_noise_sigmas of a return's noise: a
     threshold of 2 sigma splits a straight wall at its noise in most scans.
     """
-    threshold = np.full(rho.size, settings.iepf_threshold_m)
-    if settings.iepf_noise_sigmas > 0.0:
-        for i in range(rho.size):
-            noise = math.sqrt(range_sigma * range_sigma
-                              + (rho[i] * bearing_sigma) * (rho[i] * bearing_sigma))
+    threshold = np.empty(rho.size)
+    for i in range(rho.size):
+        threshold[i] = settings.iepf_threshold_m
+        if settings.iepf_noise_sigmas > 0.0:
+            noise = math.sqrt(range_sigma ** 2 + (rho[i] * bearing_sigma) ** 2)
             threshold[i] = max(threshold[i], settings.iepf_noise_sigmas * noise)
     return threshold
 
@@ -252,10 +252,24 @@ def _large_enough(x, y, start, stop, settings):
 
 
 @jit
-def _in_scan_order(beam_of_position, start, stop):
-    """Return the segments sorted by the beam index of their first return."""
-    ordered = np.argsort(beam_of_position[start], kind='mergesort')
-    return start[ordered], stop[ordered]
+def _in_scan_order(beam_of_position, beam_count, start, stop):
+    """
+    Return the segments sorted by the beam index of their first return.
+
+    Every segment starts at a different return, so each beam index holds at most one: placing
+    them by beam index sorts them in O(beams).
+    """
+    segment_at_beam = np.full(beam_count, -1, np.intp)
+    for s in range(start.size):
+        segment_at_beam[beam_of_position[start[s]]] = s
+    sorted_start, sorted_stop = np.empty_like(start), np.empty_like(stop)
+    placed = 0
+    for beam in range(beam_count):
+        s = segment_at_beam[beam]
+        if s >= 0:
+            sorted_start[placed], sorted_stop[placed] = start[s], stop[s]
+            placed += 1
+    return sorted_start, sorted_stop
 
 
 @jit
@@ -272,16 +286,18 @@ def _fit_walls(rho, theta, x, y, start, stop, range_sigma, bearing_sigma, settin
         Jacobian, start and end projected on the line, first and last position, returns,
         residual chi2 per degree of freedom), one row per kept wall
     """
-    count = x.size
-    counts = stop - start
-    offsets = np.zeros(start.size, np.intp)
-    offsets[1:] = np.cumsum(counts)[:-1]
-    total = counts.sum()
-    position = np.empty(total, np.intp)
-    for s in range(start.size):
+    count, segments = x.size, start.size
+    counts, offsets = np.empty(segments, np.intp), np.empty(segments, np.intp)
+    total = 0
+    for s in range(segments):
+        counts[s], offsets[s] = stop[s] - start[s], total
+        total += counts[s]
+    rho_w, theta_w, x_w, y_w = np.empty(total), np.empty(total), np.empty(total), np.empty(total)
+    for s in range(segments):
         for k in range(counts[s]):
-            position[offsets[s] + k] = (start[s] + k) % count
-    rho_w, theta_w, x_w, y_w = rho[position], theta[position], x[position], y[position]
+            i = (start[s] + k) % count
+            at = offsets[s] + k
+            rho_w[at], theta_w[at], x_w[at], y_w[at] = rho[i], theta[i], x[i], y[i]
     (line, line_covariance, angle, radius, normal_covariance, line_offset,
      _) = fit_segments(settings.method_code, rho_w, theta_w, x_w, y_w, offsets, counts,
                        range_sigma, bearing_sigma)

@@ -19,6 +19,7 @@ from typing import Callable, NamedTuple, Tuple
 import numpy as np
 
 from ._jit import jit
+from ._order import stable_order
 from ._linalg import mahalanobis_squared_2x2
 from .scan import ScanPoints
 
@@ -858,12 +859,15 @@ def merge_segments(x_m, y_m, start, stop, chain, circular, joinable, range_sigma
     """
     n = x_m.size
     start, stop, chain = start.copy(), stop.copy(), chain.copy()
+    angle, radius = np.empty(start.size), np.empty(start.size)
     for passes in range(max_passes + 1):
         count = start.size
-        fit = np.empty((count, 5))
+        angle, radius = np.empty(count), np.empty(count)
+        covariance = np.empty((count, 3))                 # Var(angle), Cov, Var(radius)
         for s in range(count):
-            fit[s] = _moment_line(x_m, y_m, start[s], stop[s], range_sigma_m,
-                                  bearing_sigma_rad)
+            (angle[s], radius[s], covariance[s, 0], covariance[s, 1],
+             covariance[s, 2]) = _moment_line(x_m, y_m, start[s], stop[s], range_sigma_m,
+                                              bearing_sigma_rad)
         if count < 2 or chi2_threshold <= 0.0:
             break
         distance = np.full(count, np.inf)
@@ -878,9 +882,12 @@ def merge_segments(x_m, y_m, start, stop, chain, circular, joinable, range_sigma
                 ok = False                        # the last segment has no successor
             if not ok:
                 continue
-            turn = (fit[k, 0] - fit[j, 0] + np.pi) % (2.0 * np.pi) - np.pi
-            shift = fit[k, 1] - fit[j, 1]
-            a, b, d = fit[k, 2] + fit[j, 2], fit[k, 3] + fit[j, 3], fit[k, 4] + fit[j, 4]
+            # The squared Mahalanobis distance of the difference of the two lines.
+            turn = (angle[k] - angle[j] + np.pi) % (2.0 * np.pi) - np.pi
+            shift = radius[k] - radius[j]
+            a = covariance[k, 0] + covariance[j, 0]
+            b = covariance[k, 1] + covariance[j, 1]
+            d = covariance[k, 2] + covariance[j, 2]
             chi2 = (d * turn * turn - 2.0 * b * turn * shift + a * shift * shift) / (a * d - b * b)
             if chi2 < chi2_threshold:
                 distance[k] = chi2
@@ -888,18 +895,24 @@ def merge_segments(x_m, y_m, start, stop, chain, circular, joinable, range_sigma
         if candidates == 0:
             break
         if passes == max_passes:
-            return start, stop, chain, fit[:, 0], fit[:, 1], True
+            return start, stop, chain, angle, radius, True
         used = np.zeros(count, np.bool_)
-        keep = np.ones(count, np.bool_)
         # Chains joined by a merged segment are one chain from now on: union by root.
-        parent = np.arange(max(chain.max() + 1, 1))
-        for k in np.argsort(distance, kind='mergesort')[:candidates]:
+        labels = 1
+        for s in range(count):
+            labels = max(labels, chain[s] + 1)
+        parent = np.arange(labels)
+        kept = count
+        lowest_first = stable_order(distance)
+        for rank in range(candidates):
+            k = lowest_first[rank]
             j = k + 1 if k + 1 < count else 0
             if used[k] or used[j]:
                 continue
             used[k] = used[j] = True
-            keep[j] = False
             stop[k] = merged_stop[k]
+            start[j] = -1                         # absorbed into k
+            kept -= 1
             into, other = chain[k], chain[j]
             while parent[into] != into:
                 into = parent[into]
@@ -907,13 +920,19 @@ def merge_segments(x_m, y_m, start, stop, chain, circular, joinable, range_sigma
                 other = parent[other]
             if into != other:
                 parent[other] = into
+        new_start, new_stop = np.empty(kept, np.intp), np.empty(kept, np.intp)
+        new_chain = np.empty(kept, np.intp)
+        out = 0
         for s in range(count):
+            if start[s] < 0:
+                continue
             label = chain[s]
             while parent[label] != label:
                 label = parent[label]
-            chain[s] = label
-        start, stop, chain = start[keep], stop[keep], chain[keep]
-    return start, stop, chain, fit[:, 0], fit[:, 1], False
+            new_start[out], new_stop[out], new_chain[out] = start[s], stop[s], label
+            out += 1
+        start, stop, chain = new_start, new_stop, new_chain
+    return start, stop, chain, angle, radius, False
 
 
 @jit

@@ -9,19 +9,16 @@ rotated to start at a breakpoint (or, on a closed contour without any, at the fa
 so a wall crossing the +-pi seam is an ordinary run of positions. SegmentRanges are half-open
 position ranges [start, stop) into that order; on a full turn a segment may run past its end
 (positions count modulo the number of returns).
+
+Every step is a compiled loop (numba) over arrays, called by the pipeline's compiled function.
 """
 
-from dataclasses import dataclass
-import functools
 import math
-from typing import Callable, NamedTuple, Tuple
 
 import numpy as np
 
 from ._jit import jit
 from ._order import stable_order
-from ._linalg import mahalanobis_squared_2x2
-from .scan import ScanPoints
 
 # A chord shorter than this (m) has no usable direction: distances are measured from its start.
 _MIN_CHORD_M = 1e-9
@@ -52,174 +49,6 @@ def pass_budget(count: int) -> int:
             + _BUDGET_EXTRA_PASSES)
 
 
-@dataclass(frozen=True)
-class Chains:
-    """
-    Runs of returns without a breakpoint between neighbours, in circular order.
-
-    :ivar order: indices into the ScanPoints arrays in circular order, shape (n,)
-    :ivar start: first position of each run, shape (K,)
-    :ivar stop: one past the last position of each run, shape (K,)
-    :ivar chain: the chain each run belongs to, shape (K,) (the two arcs of a closed contour are
-        one chain)
-    """
-
-    order: np.ndarray
-    start: np.ndarray
-    stop: np.ndarray
-    chain: np.ndarray
-
-
-@dataclass(frozen=True)
-class SegmentRanges:
-    """
-    Segment position ranges into ``Chains.order``, in circular order.
-
-    :ivar start: first position, shape (S,)
-    :ivar stop: one past the last position, shape (S,)
-    :ivar chain: the chain each segment lies on, shape (S,)
-    """
-
-    start: np.ndarray
-    stop: np.ndarray
-    chain: np.ndarray
-
-    def __len__(self):
-        return len(self.start)
-
-    def select(self, keep: np.ndarray) -> 'SegmentRanges':
-        """
-        Return the segments where ``keep`` is true (a boolean or index array).
-
-        :param keep: selection over the segments
-        :return: the selected segments
-        """
-        return SegmentRanges(self.start[keep], self.stop[keep], self.chain[keep])
-
-
-def moment_terms(x_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:
-    """
-    Return the per-return quantities whose sums :func:`moment_fit` needs.
-
-    :param x_m: shape (P,), m
-    :param y_m: shape (P,), m
-    :return: rows (1, x, y, x^2, y^2, x y, rho^2), shape (7, P)
-    """
-    rows = np.empty((7, len(x_m)))
-    rows[0], rows[1], rows[2] = 1.0, x_m, y_m
-    np.multiply(x_m, x_m, out=rows[3])
-    np.multiply(y_m, y_m, out=rows[4])
-    np.multiply(x_m, y_m, out=rows[5])
-    np.add(rows[3], rows[4], out=rows[6])
-    return rows
-
-
-def moment_fit(sums: np.ndarray, range_sigma_m: float, bearing_sigma_rad: float):
-    """
-    Fit lines from per-segment sums alone: orthogonal regression with an isotropic covariance.
-
-    Cheap enough to refit merged segments from piece sums in O(1) each; meant for
-    segmentation decisions, not for the published covariance. Each return is taken to scatter
-    isotropically with variance range_sigma^2 + bearing_sigma^2 rho^2 (an upper bound of its
-    scatter across the line), which gives Var(angle) = s2 / (N L), Cov(angle, radius) = d Var
-    (angle), Var(radius) = s2 / N + d^2 Var(angle), with L the variance of the returns along the
-    line and d the offset of their centroid from the foot of the perpendicular.
-
-    :param sums: per-segment sums of :func:`moment_terms`, shape (S, 7)
-    :param range_sigma_m: range noise std, m
-    :param bearing_sigma_rad: bearing noise std, rad
-    :return: (angle (S,) rad in (-pi, pi], radius (S,) m >= 0, covariance of (angle, radius)
-        (S, 2, 2))
-    """
-    n = sums[:, 0]
-    mx, my, mxx, myy, mxy, mrr = (sums[:, 1:] / n[:, None]).T
-    cxx, cyy, cxy = mxx - mx * mx, myy - my * my, mxy - mx * my
-    normal = 0.5 * np.arctan2(-2.0 * cxy, cyy - cxx)         # the minor axis
-    c, s = np.cos(normal), np.sin(normal)
-    radius = mx * c + my * s
-    flip = np.copysign(1.0, radius)                          # the normal points to the line
-    c *= flip
-    s *= flip
-    along = cxx * s * s + cyy * c * c - 2.0 * cxy * s * c    # variance along the line
-    offset = my * c - mx * s
-    scatter = range_sigma_m ** 2 + bearing_sigma_rad ** 2 * mrr
-    var_angle = scatter / (n * along)                        # inf for returns all in one spot
-    covariance = np.empty((len(n), 2, 2))
-    covariance[:, 0, 0] = var_angle
-    covariance[:, 0, 1] = covariance[:, 1, 0] = offset * var_angle
-    covariance[:, 1, 1] = scatter / n + offset * offset * var_angle
-    return np.arctan2(s, c), np.abs(radius), covariance
-
-
-@dataclass(frozen=True)
-class PieceSums:
-    """
-    A contour cut into pieces at segment ends, with per-piece sums of per-return quantities.
-
-    Segments and their merges are whole runs of pieces: written as piece ranges (a
-    SegmentRanges over piece indices, wrapping modulo the number of pieces on a full turn),
-    each one's sums are a difference of two rows of ``prefix``, O(1) per segment.
-
-    :ivar edges: piece boundaries as positions, from 0 to n (the contour's length), shape (m + 1,)
-    :ivar prefix: sums over the pieces before each boundary, then once more after a full turn,
-        shape (2 m + 1, k)
-    """
-
-    edges: np.ndarray
-    prefix: np.ndarray
-
-    def pieces(self, segments: SegmentRanges) -> SegmentRanges:
-        """
-        Return segments whose ends are piece boundaries as piece ranges.
-
-        :param segments: position ranges, start in [0, n), stop in (start, n]
-        :return: the same segments over piece indices
-        """
-        return SegmentRanges(np.searchsorted(self.edges, segments.start),
-                             np.searchsorted(self.edges, segments.stop), segments.chain)
-
-    def positions(self, pieces: SegmentRanges) -> SegmentRanges:
-        """
-        Return piece ranges as position ranges (stop past n where a range wraps).
-
-        :param pieces: piece ranges, start in [0, m), stop in (start, start + m]
-        :return: the same segments over positions
-        """
-        count = self.edges.size - 1
-        wrapped = pieces.stop > count
-        stop = self.edges[pieces.stop - count * wrapped] + self.edges[-1] * wrapped
-        return SegmentRanges(self.edges[pieces.start], stop, pieces.chain)
-
-    def over(self, pieces: SegmentRanges) -> np.ndarray:
-        """
-        Return the sums over piece ranges.
-
-        :param pieces: piece ranges, start in [0, m), stop in (start, start + m]
-        :return: shape (S, k)
-        """
-        return self.prefix[pieces.stop] - self.prefix[pieces.start]
-
-
-def piece_sums(values: np.ndarray, segments: SegmentRanges) -> PieceSums:
-    """
-    Sum per-return values over the pieces of a contour cut at every segment end.
-
-    :param values: shape (k, n), one row per quantity
-    :param segments: position ranges within [0, n)
-    :return: the pieces and their sums
-    """
-    count = values.shape[1]
-    boundary = np.zeros(count + 1, dtype=bool)
-    boundary[segments.start] = boundary[segments.stop] = boundary[0] = boundary[count] = True
-    edges = boundary.nonzero()[0]
-    pieces = edges.size - 1
-    prefix = np.empty((2 * pieces + 1, values.shape[0]))
-    prefix[0] = 0.0
-    np.cumsum(np.add.reduceat(values, edges[:-1], axis=1).T, axis=0, out=prefix[1:pieces + 1])
-    np.add(prefix[1:pieces + 1], prefix[pieces], out=prefix[pieces + 1:])
-    return PieceSums(edges, prefix)
-
-
 # A break between two returns one surface could have given is one the noise made: their
 # distance exceeds the surface's allowance by at most this many sigma of the difference of two
 # returns (a pair on one surface goes beyond it with probability 6e-7). Beyond it, the break is
@@ -227,23 +56,9 @@ def piece_sums(values: np.ndarray, segments: SegmentRanges) -> PieceSums:
 _JOINABLE_SIGMAS = 5.0 * math.sqrt(2.0)
 
 
-class Breaks(NamedTuple):
-    """
-    Where neighbouring returns are separated, and which separations merging may cross.
-
-    :ivar separated: return i starts a new chain, shape (n,) (entry 0 refers to the seam between
-        the last and the first return of a full turn, and is True otherwise)
-    :ivar joinable: of those, the separations noise can explain: at most ``max_missing_beams``
-        invalid beams between the two returns, and a distance within 5 sqrt(2) sigma of what
-        one surface allows; shape (n,)
-    """
-
-    separated: np.ndarray
-    joinable: np.ndarray
-
-
-def breakpoints(points: ScanPoints, range_sigma_m: float, bearing_sigma_rad: float,
-                lambda_rad: float, max_missing_beams: int) -> Breaks:
+@jit
+def breakpoints_of(index, x_m, y_m, range_m, beam_count, step_rad, full_turn, range_sigma_m,
+                   bearing_sigma_rad, lambda_rad, max_missing_beams):
     """
     Mark where the adaptive breakpoint rule of Borges and Aldon separates neighbouring returns.
 
@@ -258,405 +73,6 @@ def breakpoints(points: ScanPoints, range_sigma_m: float, bearing_sigma_rad: flo
     separates one pair of returns in a few hundred on a wall, so a separation is joinable
     (merging may restore it) unless it is a gap or the distance exceeds the allowance by more
     than 5 sqrt(2) sigma: a discontinuity (an occlusion, a range jump).
-
-    :param points: the scan's valid returns
-    :param range_sigma_m: range noise std, m
-    :param bearing_sigma_rad: bearing noise std, rad
-    :param lambda_rad: worst incidence angle still treated as one surface, rad
-    :param max_missing_beams: most invalid beams between two returns of one chain
-    :return: the separations
-    """
-    n = len(points)
-    if n == 0:
-        return Breaks(np.zeros(0, dtype=bool), np.zeros(0, dtype=bool))
-    x, y, rho, index = points.x_m, points.y_m, points.range_m, points.index
-    # Each return against its predecessor; entry 0 against the last return, across the seam.
-    beams = np.empty(n)
-    beams[1:] = index[1:] - index[:-1]
-    # Across the seam: the rest of the turn, in increments (about 1 for a full turn).
-    step = abs(points.angle_increment_rad)
-    beams[0] = (index[0] + (2.0 * math.pi - (points.beam_count - 1) * step) / step
-                + (points.beam_count - 1 - index[-1]))
-    dx, dy, r = np.empty(n), np.empty(n), np.empty(n)
-    dx[1:], dx[0] = x[1:] - x[:-1], x[0] - x[-1]
-    dy[1:], dy[0] = y[1:] - y[:-1], y[0] - y[-1]
-    np.minimum(rho[1:], rho[:-1], out=r[1:])
-    r[0] = min(rho[0], rho[-1])
-    # sin(dphi) / sin(lambda - dphi) is one number for neighbouring beams, the usual case.
-    # (dphi >= lambda: no surface is seen that obliquely, always separated: reach -1.)
-    reach = np.empty(n)
-    reach.fill(math.sin(step) / math.sin(lambda_rad - step) if step < lambda_rad else -1.0)
-    wider = (beams != 1.0).nonzero()[0]
-    if wider.size:
-        dphi = beams[wider] * step
-        with np.errstate(divide='ignore', invalid='ignore'):
-            reach[wider] = np.where(dphi < lambda_rad,
-                                    np.sin(dphi) / np.sin(lambda_rad - dphi), -1.0)
-    surface = r * reach
-    noise = np.sqrt(range_sigma_m ** 2 + (r * bearing_sigma_rad) ** 2)
-    distance = np.sqrt(dx * dx + dy * dy)
-    missing = beams - 1.0                       # fractional across the seam of a full turn
-    gap = missing >= max_missing_beams + 0.5
-    separated = (reach < 0.0) | gap | (distance > surface + 3.0 * noise)
-    joinable = (separated & (reach >= 0.0) & ~gap
-                & (distance <= surface + _JOINABLE_SIGMAS * noise))
-    if not points.full_turn or n == 1:
-        separated[0], joinable[0] = True, False
-    return Breaks(separated, joinable)
-
-
-def chains(points: ScanPoints, separated: np.ndarray) -> Chains:
-    """
-    Group the returns into chains between breakpoints, in circular order.
-
-    A closed contour (a full turn without any breakpoint) is cut at the farthest return s and at
-    the return farthest from s, both left out like IEPF split points, into two arcs of one
-    chain: a choice that depends neither on where the scan's seam lies nor on the beam order.
-
-    :param points: the scan's valid returns
-    :param separated: where returns start a new chain (:attr:`Breaks.separated`)
-    :return: the chains
-    """
-    n = len(points)
-    breaks = separated.nonzero()[0]
-    if n and not breaks.size:
-        first = int(np.argmax(points.range_m))
-        dx, dy = points.x_m - points.x_m[first], points.y_m - points.y_m[first]
-        opposite = (int(np.argmax(dx * dx + dy * dy)) - first) % n
-        start, stop, chain = np.array([1, opposite + 1]), np.array([opposite, n]), np.zeros(2)
-    else:
-        first = int(breaks[0]) if n else 0
-        start = breaks - first
-        stop = np.append(start[1:], n) if n else start
-        chain = np.arange(start.size)
-    order = np.arange(first, first + n)
-    order[n - first:] -= n
-    return Chains(order, start, stop, chain.astype(np.intp))
-
-
-def iterative_end_point_fit(x_m: np.ndarray, y_m: np.ndarray, start: np.ndarray,
-                            stop: np.ndarray, chain: np.ndarray, threshold_m,
-                            max_levels: int) -> Tuple[SegmentRanges, bool]:
-    """
-    Split runs of returns where a return lies farther than a threshold from the run's chord.
-
-    All runs are processed together, one split level per pass, as a partition of the positions
-    into pieces (a boundary mask): each pass measures every return against its piece's chord
-    and cuts the pieces whose farthest return is beyond the threshold (farthest in units of
-    each return's own threshold, when they differ). The return at a split is
-    the one nearest the corner and belongs to neither side (it would otherwise be shared, or
-    bias one wall); merging restores it when the two sides turn out to be one line. After
-    ``max_levels`` passes the pieces that would still split are not straight and are left out
-    (:func:`pass_budget` keeps the work O(n log n) on any input).
-
-    :param x_m: x of the returns in position order, shape (m,), m
-    :param y_m: y of the returns in position order, shape (m,), m
-    :param start: first position of each run, sorted, shape (K,)
-    :param stop: one past the last position of each run, shape (K,) (runs do not overlap)
-    :param chain: the chain of each run, shape (K,)
-    :param threshold_m: the IEPF split distance, m: one for all returns, or per return, shape
-        (m,)
-    :param max_levels: the most split passes
-    :return: the straight pieces with at least MIN_FIT_RETURNS returns (fewer can be neither
-        fitted nor split), sorted by start position; and whether pieces were left out because
-        the passes ran out
-    """
-    count = x_m.size
-    boundary = np.zeros(count + 1, dtype=bool)
-    boundary[start] = boundary[stop] = boundary[0] = boundary[count] = True
-    # Distances are compared in units of each return's threshold.
-    inv_threshold = 1.0 / np.broadcast_to(np.asarray(threshold_m, dtype=float), (count,))
-    for level in range(max_levels + 1):
-        edges = boundary.nonzero()[0]
-        first, last = edges[:-1], edges[1:] - 1
-        counts = edges[1:] - first
-        x0, y0, x1, y1 = x_m[first], y_m[first], x_m[last], y_m[last]
-        dx, dy = x1 - x0, y1 - y0
-        # |chord x (return - chord start)|: the return's distance times the chord length.
-        cross = np.repeat(dx, counts) * y_m
-        cross -= np.repeat(dy, counts) * x_m
-        cross += np.repeat(x0 * y1 - y0 * x1, counts)
-        np.abs(cross, out=cross)
-        cross *= inv_threshold
-        farthest = np.maximum.reduceat(cross, first)
-        chord2 = dx * dx + dy * dy
-        # A chord too short to have a direction never splits (it would at distance 0).
-        split = (farthest * farthest > chord2) & (chord2 > _MIN_CHORD_M ** 2)
-        if not split.any():
-            break
-        if level == max_levels:                  # out of passes: drop what is not straight
-            break
-        farthest[~split] = np.inf
-        cut = (cross == np.repeat(farthest, counts)).nonzero()[0]
-        if cut.size > np.count_nonzero(split):       # ties: the first return at the maximum
-            piece = np.repeat(np.arange(first.size), counts)
-            cut = cut[np.concatenate(([True], piece[cut[1:]] != piece[cut[:-1]]))]
-        boundary[cut] = boundary[cut + 1] = True
-    # Keep the straight pieces inside a run (not the returns between runs) with enough returns.
-    run = np.searchsorted(start, first, side='right') - 1
-    keep = (edges[1:] - first >= MIN_FIT_RETURNS) & (run >= 0) & (first < stop[run]) & ~split
-    return SegmentRanges(first[keep], edges[1:][keep], chain[run[keep]]), bool(split.any())
-
-
-def merge_collinear(segments: SegmentRanges, circular: bool, contour_length: int,
-                    fit: Callable[[SegmentRanges], tuple], chi2_threshold: float,
-                    max_passes: int, joinable: np.ndarray) -> Tuple[SegmentRanges, tuple, bool]:
-    """
-    Merge neighbouring segments that are statistically the same line.
-
-    Neighbours are consecutive segments on one chain, or on two chains that touch (no return
-    between them) across a break that noise can explain (``joinable``: e.g. a bearing error at
-    grazing incidence); never across a discontinuity or a long run of missing beams, where two
-    surfaces that happen to be collinear would make a phantom wall. Each pass fits every
-    segment, computes for each neighbouring pair the squared Mahalanobis distance of the
-    difference of their (angle, radius) under the sum of the two covariances (independent
-    returns), and merges the pairs below ``chi2_threshold``, lowest first, each segment at most
-    once per pass. A merged segment spans both, including any return between them left out by
-    the split. Passes repeat until nothing merges, or ``max_passes`` have run (the segments are
-    then valid but some neighbours stay apart). Positions may count returns or, as in the
-    pipeline, the pieces of :class:`PieceSums` (whose fits are then O(1) each).
-
-    :param segments: segments with >= 3 returns each, sorted by start position
-    :param circular: whether the returns cover a full turn (the last and first can be neighbours)
-    :param contour_length: number of positions n (they wrap modulo n)
-    :param fit: returns (angle (S,) rad, radius (S,) m, covariance (S, 2, 2)) of segments
-    :param chi2_threshold: merge below this squared Mahalanobis distance (0: never merge)
-    :param max_passes: the most merging passes
-    :param joinable: per position, whether a merge may cross the break before it, shape
-        (contour_length,)
-    :return: the merged segments, their fit (the last pass's, so not computed twice), and
-        whether merging stopped because the passes ran out
-    """
-    for passes in range(max_passes + 1):
-        line_fit = fit(segments)
-        count = len(segments)
-        if count < 2 or chi2_threshold <= 0.0:
-            break
-        start, stop, chain = segments.start, segments.stop, segments.chain
-        second = np.arange(1, count + 1)
-        second[-1] = 0
-        # A merged segment must not wrap onto itself around a closed contour.
-        merged_stop = stop[second]
-        merged_stop[-1] += contour_length
-        touching = (stop % contour_length == start[second]) & joinable[start[second]]
-        pair_ok = (((chain == chain[second]) | touching)
-                   & (merged_stop - start <= contour_length))
-        if not circular or count < 3:
-            pair_ok[-1] = False                     # the last segment has no successor
-        angle, radius, covariance = line_fit
-        distance = mahalanobis_squared_2x2(
-            np.remainder(angle - angle[second] + np.pi, 2.0 * np.pi) - np.pi,
-            radius - radius[second], covariance + covariance[second])
-        candidates = (pair_ok & (distance < chi2_threshold)).nonzero()[0]
-        if not candidates.size:
-            break
-        if passes == max_passes:
-            return segments, line_fit, True
-        # Few candidates: plain Python is faster than numpy here.
-        used = [False] * count
-        absorbed = []
-        new_stop, chain_of = stop.copy(), chain.tolist()
-        joined = {}                                # chain -> the chain it joined
-
-        def root(label):
-            while label in joined:
-                label = joined[label]
-            return label
-
-        for k in candidates[np.argsort(distance[candidates], kind='stable')].tolist():
-            j = (k + 1) % count
-            if not (used[k] or used[j]):
-                used[k] = used[j] = True
-                absorbed.append(j)
-                new_stop[k] = merged_stop[k]
-                # Two chains joined by a merged segment are one chain from now on.
-                into, other = root(chain_of[k]), root(chain_of[j])
-                if into != other:
-                    joined[other] = into
-        if joined:
-            relabel = np.arange(chain.max() + 1)
-            for label in joined:
-                relabel[label] = root(label)
-            chain = relabel[chain]
-        keep = np.ones(count, dtype=bool)
-        keep[absorbed] = False
-        segments = SegmentRanges(start, new_stop, chain).select(keep)
-    return segments, line_fit, False
-
-
-def trim_ambiguous_ends(segments: SegmentRanges, circular: bool, contour_length: int,
-                        x_m: np.ndarray, y_m: np.ndarray, angle_rad: np.ndarray,
-                        radius_m: np.ndarray, range_sigma_m: float, bearing_sigma_rad: float,
-                        min_returns: int, window: int = 8) -> SegmentRanges:
-    """
-    Drop the returns at the meeting ends of two neighbouring segments that could fit both lines.
-
-    Where two segments meet (no return, or only the IEPF split return, between them), the
-    returns nearest the corner lie within the noise of both lines, and which segment they
-    fall into changes from scan to scan. Left in, that switching adds corner scatter no
-    covariance describes (most on short walls). The two lines are closer to each other than
-    t = 3 sqrt(range_sigma^2 + (r bearing_sigma)^2) (3 sigma of a return at the corner's range
-    r) within a distance t / sin(angle between them) of their intersection: the returns at a
-    meeting end inside that radius, in an unbroken run from the end, are left out of both
-    segments. A segment keeps at least ``min_returns`` returns, shared evenly by its two ends
-    when both meet a neighbour (so that the rule does not depend on the beam order).
-
-    :param segments: segments sorted by start position (positions modulo contour_length)
-    :param circular: whether the returns cover a full turn (the last and first can meet)
-    :param contour_length: number of returns n
-    :param x_m: x of the returns in position order, shape (n,), m
-    :param y_m: y of the returns in position order, shape (n,), m
-    :param angle_rad: normal angle of each segment's line, shape (S,), rad
-    :param radius_m: radius of each segment's line, shape (S,), m
-    :param range_sigma_m: range noise std, m
-    :param bearing_sigma_rad: bearing noise std, rad
-    :param min_returns: never trim a segment below this many returns
-    :param window: most returns examined (and trimmed) at each end
-    :return: the trimmed segments
-    """
-    count = len(segments)
-    if count < 2:
-        return segments
-    start, stop = segments.start, segments.stop
-    second = np.arange(1, count + 1)
-    second[-1] = 0
-    meets = (start[second] - stop) % contour_length <= 1
-    meets[-1] &= circular and count > 2
-    k = meets.nonzero()[0]
-    if not k.size:
-        return segments
-    j = second[k]
-    cos_k, sin_k, cos_j, sin_j = (np.cos(angle_rad[k]), np.sin(angle_rad[k]),
-                                  np.cos(angle_rad[j]), np.sin(angle_rad[j]))
-    sine = sin_j * cos_k - cos_j * sin_k                      # sin(angle_j - angle_k)
-    # Parallel neighbours give inf / NaN here, and so no return inside reach.
-    corner_x = (radius_m[k] * sin_j - radius_m[j] * sin_k) / sine
-    corner_y = (radius_m[j] * cos_k - radius_m[k] * cos_j) / sine
-    reach2 = 9.0 * (range_sigma_m ** 2
-                    + (corner_x * corner_x + corner_y * corner_y) * bearing_sigma_rad ** 2
-                    ) / (sine * sine)
-    # Both meeting ends at once: columns [0, K) walk back from the ends of segments k, columns
-    # [K, 2 K) forward from the starts of segments j.
-    position = _end_windows(stop[k] - 1, start[j], window)
-    dx = x_m.take(position, mode='wrap') - np.concatenate((corner_x, corner_x))
-    dy = y_m.take(position, mode='wrap') - np.concatenate((corner_y, corner_y))
-    # The run from the end is the first return outside (a last row that is never inside).
-    inside = np.zeros((window + 1, 2 * k.size), dtype=bool)
-    np.less(dx * dx + dy * dy, np.concatenate((reach2, reach2)), out=inside[:window])
-    run = inside.argmin(axis=0)
-    room = np.maximum(stop - start - min_returns, 0)
-    meets_previous = np.concatenate((meets[-1:], meets[:-1]))
-    allowance = np.where(meets & meets_previous, room // 2, room)
-    stop, start = stop.copy(), start.copy()
-    stop[k] -= np.minimum(run[:k.size], allowance[k])
-    start[j] += np.minimum(run[k.size:], allowance[j])
-    return _within_contour(start, stop, segments.chain, contour_length)
-
-
-def trim_offset_ends(segments: SegmentRanges, contour_length: int, x_m: np.ndarray,
-                     y_m: np.ndarray, angle_rad: np.ndarray, radius_m: np.ndarray,
-                     range_sigma_m: float, bearing_sigma_rad: float, min_returns: int,
-                     threshold_sigmas: float, window: int = 8) -> SegmentRanges:
-    """
-    Cut off the returns at segment ends that lie off the segment's line together.
-
-    IEPF leaves a run of returns from another surface at a segment's end when the run stays
-    within its threshold of the chord: a box beside a wall, met at a shallow angle, whose
-    returns then join the wall in some scans and not in others, and move its line by more than
-    its covariance says. Each return's residual from the line over its noise is
-    z = (x cos(angle) + y sin(angle) - radius) / sqrt(range_sigma^2 + (rho bearing_sigma)^2),
-    and the last k returns at an end sum to Z_k, which on one line is normal with a variance of
-    at most k (the noise is an upper bound of the scatter across the line). An end is cut after
-    the k that maximises |Z_k| / sqrt(k), when that maximum exceeds ``threshold_sigmas``. Each
-    end cuts at most half of the returns a segment has beyond ``min_returns``, so that the rule
-    does not depend on the beam order.
-
-    :param segments: segments sorted by start position (positions modulo contour_length)
-    :param contour_length: number of returns n
-    :param x_m: x of the returns in position order, shape (n,), m
-    :param y_m: y of the returns in position order, shape (n,), m
-    :param angle_rad: normal angle of each segment's line, shape (S,), rad
-    :param radius_m: radius of each segment's line, shape (S,), m
-    :param range_sigma_m: range noise std, m
-    :param bearing_sigma_rad: bearing noise std, rad
-    :param min_returns: never cut a segment below this many returns
-    :param threshold_sigmas: cut where max_k |Z_k| / sqrt(k) exceeds this
-    :param window: most returns examined (and cut) at each end
-    :return: the trimmed segments
-    """
-    count = len(segments)
-    if not count:
-        return segments
-    start, stop = segments.start, segments.stop
-    # Columns [0, S) walk back from the segments' ends, columns [S, 2 S) forward from their
-    # starts; row k - 1 is the k-th return from the end.
-    position = _end_windows(stop - 1, start, window)
-    x, y = x_m.take(position, mode='wrap'), y_m.take(position, mode='wrap')
-    angle = np.concatenate((angle_rad, angle_rad))
-    residual = x * np.cos(angle) + y * np.sin(angle)
-    residual -= np.concatenate((radius_m, radius_m))
-    if bearing_sigma_rad > 0.0:
-        residual /= np.sqrt(range_sigma_m ** 2 + (x * x + y * y) * bearing_sigma_rad ** 2)
-    else:
-        residual /= range_sigma_m
-    # Z_k down each column as one small matrix product (a cumsum costs five times as much);
-    # the score is Z_k^2 / k, zero where a cut would leave too few returns.
-    total = np.dot(_lower_ones(window), residual)
-    score = total * total
-    returns = np.arange(1, window + 1)[:, None]
-    score /= returns
-    room = (stop - start - min_returns) // 2
-    score *= returns <= np.concatenate((room, room))
-    # NaN scores (a NaN line, never kept by the pipeline) compare False: no cut.
-    over = score > threshold_sigmas * threshold_sigmas
-    if not over.any():
-        return segments
-    cut = (score.argmax(axis=0) + 1) * over.any(axis=0)
-    return _within_contour(start + cut[count:], stop - cut[:count], segments.chain,
-                           contour_length)
-
-
-@functools.lru_cache(maxsize=4)
-def _lower_ones(size: int) -> np.ndarray:
-    """Return the lower-triangular (size, size) matrix of ones: its product cumulates rows."""
-    ones = np.tri(size)
-    ones.flags.writeable = False
-    return ones
-
-
-def _end_windows(last: np.ndarray, first: np.ndarray, window: int) -> np.ndarray:
-    """
-    Return the positions of the returns within ``window`` of segment ends, from the end inwards.
-
-    :param last: last position of some segments, shape (A,)
-    :param first: first position of some segments, shape (B,)
-    :param window: returns per end
-    :return: shape (window, A + B): columns [0, A) walk back from ``last``, columns [A, A + B)
-        forward from ``first``; positions are not wrapped (gather with ``take(mode='wrap')``)
-    """
-    steps = np.arange(window)[:, None]
-    position = np.empty((window, last.size + first.size), dtype=np.intp)
-    np.subtract(last, steps, out=position[:, :last.size])
-    np.add(first, steps, out=position[:, last.size:])
-    return position
-
-
-def _within_contour(start: np.ndarray, stop: np.ndarray, chain: np.ndarray,
-                    contour_length: int) -> SegmentRanges:
-    """Return trimmed segments; one that crosses the contour's end may start past it: to [0, n)."""
-    wrapped = (start >= contour_length) * contour_length
-    return SegmentRanges(start - wrapped, stop - wrapped, chain)
-
-
-# The compiled kernels of the pipeline (issue 18): plain loops over the returns in circular
-# order, the same rules as the batched functions above.
-
-
-@jit
-def breakpoints_of(index, x_m, y_m, range_m, beam_count, step_rad, full_turn, range_sigma_m,
-                   bearing_sigma_rad, lambda_rad, max_missing_beams):
-    """
-    Mark the breakpoints of Borges and Aldon between neighbouring returns (:func:`breakpoints`).
 
     :param index: beam index of every return, shape (n,)
     :param x_m: x of every return, shape (n,), m
@@ -707,9 +123,18 @@ def breakpoints_of(index, x_m, y_m, range_m, beam_count, step_rad, full_turn, ra
 @jit
 def chains_of(range_m, x_m, y_m, separated):
     """
-    Group the returns into chains between breakpoints, in circular order (:func:`chains`).
+    Group the returns into chains between breakpoints, in circular order.
 
-    :return: (order (n,), run start (K,), run stop (K,), run chain (K,))
+    A closed contour (a full turn without any breakpoint) is cut at the farthest return s and at
+    the return farthest from s, both left out like IEPF split points, into two arcs of one
+    chain: a choice that depends neither on where the scan's seam lies nor on the beam order.
+
+    :param range_m: range of every return in beam order, shape (n,), m
+    :param x_m: x of every return, shape (n,), m
+    :param y_m: y of every return, shape (n,), m
+    :param separated: where returns start a new chain (from :func:`breakpoints_of`), shape (n,)
+    :return: (the returns' indices in circular order (n,); each run's first position (K,), one
+        past its last (K,) and its chain (K,): the two arcs of a closed contour are one chain)
     """
     n = range_m.size
     breaks = np.nonzero(separated)[0]
@@ -740,11 +165,15 @@ def chains_of(range_m, x_m, y_m, separated):
 @jit
 def split_iepf(x_m, y_m, start, stop, chain, threshold_m, max_levels):
     """
-    Split runs of returns by Iterative End Point Fit (:func:`iterative_end_point_fit`).
+    Split runs of returns where a return lies farther than a threshold from the run's chord.
 
-    Depth first: a piece made by d splits is measured as the batched version measures it in
-    its pass d, so the pieces, the returns left out at splits (the one farthest from the chord,
-    the first of equals) and the pieces dropped when the passes run out are the same.
+    Depth first, a piece at a time: each piece is measured against its chord and cut at its
+    farthest return (farthest in units of each return's own threshold, the first of equals)
+    when that is beyond the threshold. The return at a split is the one nearest the corner and
+    belongs to neither side (it would otherwise be shared, or bias one wall); merging restores
+    it when the two sides turn out to be one line. A piece made by ``max_levels`` splits that
+    would still split is not straight and is left out (:func:`pass_budget` keeps the work
+    O(n log n) on any input).
 
     :param x_m: x of the returns in circular order, shape (n,), m
     :param y_m: y of the returns in circular order, shape (n,), m
@@ -770,6 +199,8 @@ def split_iepf(x_m, y_m, start, stop, chain, threshold_m, max_levels):
         while pending:
             pending -= 1
             first, end, depth = stack[pending, 0], stack[pending, 1], stack[pending, 2]
+            if end - first < MIN_FIT_RETURNS:     # can be neither fitted nor split
+                continue
             last = end - 1
             x0, y0, x1, y1 = x_m[first], y_m[first], x_m[last], y_m[last]
             dx, dy = x1 - x0, y1 - y0
@@ -795,18 +226,32 @@ def split_iepf(x_m, y_m, start, stop, chain, threshold_m, max_levels):
                 stack[pending + 1, 0], stack[pending + 1, 1] = first, cut
                 stack[pending + 1, 2] = depth + 1
                 pending += 2
-            elif end - first >= MIN_FIT_RETURNS:
+            else:
                 out_start[found], out_stop[found], out_chain[found] = first, end, chain[run]
                 found += 1
     return out_start[:found], out_stop[:found], out_chain[:found], unsplit
 
 
 @jit
-def _moment_line(x_m, y_m, first, stop, range_sigma_m, bearing_sigma_rad):
+def moment_line(x_m, y_m, first, stop, range_sigma_m, bearing_sigma_rad):
     """
-    Return :func:`moment_fit` of the returns at positions [first, stop) (modulo n).
+    Fit the returns at positions [first, stop) (modulo n) from their sums alone.
 
-    :return: (angle rad, radius m, Var(angle), Cov(angle, radius), Var(radius))
+    Orthogonal regression with an isotropic covariance, meant for segmentation decisions, not
+    for the published covariance. Each return is taken to scatter
+    isotropically with variance range_sigma^2 + bearing_sigma^2 rho^2 (an upper bound of its
+    scatter across the line), which gives Var(angle) = s2 / (N L), Cov(angle, radius) = d Var
+    (angle), Var(radius) = s2 / N + d^2 Var(angle), with L the variance of the returns along the
+    line and d the offset of their centroid from the foot of the perpendicular.
+
+    :param x_m: x of the returns in circular order, shape (n,), m
+    :param y_m: y of the returns in circular order, shape (n,), m
+    :param first: first position
+    :param stop: one past the last position (up to first + n)
+    :param range_sigma_m: range noise std, m
+    :param bearing_sigma_rad: bearing noise std, rad
+    :return: (angle rad in (-pi, pi], radius m >= 0, Var(angle), Cov(angle, radius),
+        Var(radius)); inf variances for returns all in one spot
     """
     n = x_m.size
     count = float(stop - first)
@@ -839,9 +284,18 @@ def _moment_line(x_m, y_m, first, stop, range_sigma_m, bearing_sigma_rad):
 def merge_segments(x_m, y_m, start, stop, chain, circular, joinable, range_sigma_m,
                    bearing_sigma_rad, chi2_threshold, max_passes):
     """
-    Merge neighbouring segments that are statistically the same line (:func:`merge_collinear`).
+    Merge neighbouring segments that are statistically the same line.
 
-    The fits are :func:`moment_fit`'s, from the returns' sums.
+    Neighbours are consecutive segments on one chain, or on two chains that touch (no return
+    between them) across a break that noise can explain (``joinable``: e.g. a bearing error at
+    grazing incidence); never across a discontinuity or a long run of missing beams, where two
+    surfaces that happen to be collinear would make a phantom wall. Each pass fits every
+    segment, computes for each neighbouring pair the squared Mahalanobis distance of the
+    difference of their (angle, radius) under the sum of the two covariances (independent
+    returns), and merges the pairs below ``chi2_threshold``, lowest first, each segment at most
+    once per pass. A merged segment spans both, including any return between them left out by
+    the split. Passes repeat until nothing merges, or ``max_passes`` have run (the segments are
+    then valid but some neighbours stay apart). The fits are :func:`moment_line`'s.
 
     :param x_m: x of the returns in circular order, shape (n,), m
     :param y_m: y of the returns in circular order, shape (n,), m
@@ -865,9 +319,9 @@ def merge_segments(x_m, y_m, start, stop, chain, circular, joinable, range_sigma
         angle, radius = np.empty(count), np.empty(count)
         covariance = np.empty((count, 3))                 # Var(angle), Cov, Var(radius)
         for s in range(count):
-            (angle[s], radius[s], covariance[s, 0], covariance[s, 1],
-             covariance[s, 2]) = _moment_line(x_m, y_m, start[s], stop[s], range_sigma_m,
-                                              bearing_sigma_rad)
+            fit = moment_line(x_m, y_m, start[s], stop[s], range_sigma_m, bearing_sigma_rad)
+            angle[s], radius[s] = fit[0], fit[1]
+            covariance[s, 0], covariance[s, 1], covariance[s, 2] = fit[2], fit[3], fit[4]
         if count < 2 or chi2_threshold <= 0.0:
             break
         distance = np.full(count, np.inf)
@@ -948,8 +402,30 @@ def _within(start, stop, n):
 def trim_ambiguous(start, stop, chain, circular, x_m, y_m, angle_rad, radius_m, range_sigma_m,
                    bearing_sigma_rad, min_returns):
     """
-    Drop the returns at meeting ends that fit both lines (:func:`trim_ambiguous_ends`).
+    Drop the returns at the meeting ends of two neighbouring segments that could fit both lines.
 
+    Where two segments meet (no return, or only the IEPF split return, between them), the
+    returns nearest the corner lie within the noise of both lines, and which segment they
+    fall into changes from scan to scan. Left in, that switching adds corner scatter no
+    covariance describes (most on short walls). The two lines are closer to each other than
+    t = 3 sqrt(range_sigma^2 + (r bearing_sigma)^2) (3 sigma of a return at the corner's range
+    r) within a distance t / sin(angle between them) of their intersection: the returns at a
+    meeting end inside that radius, in an unbroken run from the end, are left out of both
+    segments. A segment keeps at least ``min_returns`` returns, shared evenly by its two ends
+    when both meet a neighbour (so that the rule does not depend on the beam order). At most
+    8 returns are examined at each end.
+
+    :param start: first position of each segment, sorted, shape (S,)
+    :param stop: one past the last position (modulo n), shape (S,)
+    :param chain: the chain of each segment, shape (S,)
+    :param circular: whether the returns cover a full turn (the last and first can meet)
+    :param x_m: x of the returns in circular order, shape (n,), m
+    :param y_m: y of the returns in circular order, shape (n,), m
+    :param angle_rad: normal angle of each segment's line, shape (S,), rad
+    :param radius_m: radius of each segment's line, shape (S,), m
+    :param range_sigma_m: range noise std, m
+    :param bearing_sigma_rad: bearing noise std, rad
+    :param min_returns: never trim a segment below this many returns
     :return: (start, stop, chain) of the trimmed segments
     """
     n, count, window = x_m.size, start.size, _END_WINDOW
@@ -1000,8 +476,30 @@ def trim_ambiguous(start, stop, chain, circular, x_m, y_m, angle_rad, radius_m, 
 def trim_offset(start, stop, chain, x_m, y_m, angle_rad, radius_m, range_sigma_m,
                 bearing_sigma_rad, min_returns, threshold_sigmas):
     """
-    Cut off the returns at segment ends that lie off the line together (:func:`trim_offset_ends`).
+    Cut off the returns at segment ends that lie off the segment's line together.
 
+    IEPF leaves a run of returns from another surface at a segment's end when the run stays
+    within its threshold of the chord: a box beside a wall, met at a shallow angle, whose
+    returns then join the wall in some scans and not in others, and move its line by more than
+    its covariance says. Each return's residual from the line over its noise is
+    z = (x cos(angle) + y sin(angle) - radius) / sqrt(range_sigma^2 + (rho bearing_sigma)^2),
+    and the last k returns at an end sum to Z_k, which on one line is normal with a variance of
+    at most k (the noise is an upper bound of the scatter across the line). An end is cut after
+    the k that maximises |Z_k| / sqrt(k), when that maximum exceeds ``threshold_sigmas``. Each
+    end cuts at most half of the returns a segment has beyond ``min_returns``, so that the rule
+    does not depend on the beam order. At most 8 returns are examined at each end.
+
+    :param start: first position of each segment, sorted, shape (S,)
+    :param stop: one past the last position (modulo n), shape (S,)
+    :param chain: the chain of each segment, shape (S,)
+    :param x_m: x of the returns in circular order, shape (n,), m
+    :param y_m: y of the returns in circular order, shape (n,), m
+    :param angle_rad: normal angle of each segment's line, shape (S,), rad
+    :param radius_m: radius of each segment's line, shape (S,), m
+    :param range_sigma_m: range noise std, m
+    :param bearing_sigma_rad: bearing noise std, rad
+    :param min_returns: never trim a segment below this many returns
+    :param threshold_sigmas: cut where max_k |Z_k| / sqrt(k) exceeds this
     :return: (start, stop, chain) of the trimmed segments
     """
     n, count, window = x_m.size, start.size, _END_WINDOW

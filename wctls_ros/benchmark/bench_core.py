@@ -5,14 +5,21 @@
 """
 Benchmark extract_features per scan on simulated RPLIDAR S1 scans of a furnished room.
 
-Prints median and p99 time per scan (one core) for 1080-beam scans and 4x denser ones, for
+First, side by side in one run on the same scans: the compiled core, the numpy core it
+replaced (kept in wctls_ros/test/numpy_core as the tests' reference) and, when given, the C++
+laser_line_extraction (``--peer BINARY``: a timing driver built outside this repository from its
+public source, reading the scans file this script writes; see docs/performance.md), on 1080-
+and 4320-beam room scans with 5 mm of range noise and on the real 541-beam SICK LMS1xx scans of
+data/; then the start-up of a fresh process to its first extracted scan, with numba's cache
+warm and cold. Then median and p99 time per scan (one core) for 1080-beam scans and 4x denser ones, for
 every method, and the mean number of segments and corners. Then, for wctls, how the time grows
 with the beam count from 270 to 8640 beams: the exponent between each doubling (1 is linear; below
 1 is slower growth than N, let alone N log N) and a least-squares split of the time into a fixed
 per-scan cost and a cost per beam. Last, the worst case: a crafted scan (a wall whose every
 other return lies a growing few cm behind it, which made IEPF quadratic before its pass bound)
 next to a room scan of as many beams, with the default noise model (5 cm, which makes the crafted
-wall one chain), 1080 to 100 000 beams. Usage: python bench_core.py [scans]
+wall one chain), 1080 to 100 000 beams.
+Usage: python bench_core.py [scans] [--peer BINARY]
 """
 
 import os
@@ -21,25 +28,35 @@ import os
 for variable in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ.setdefault(variable, '1')
 
+import argparse  # noqa: E402
+import pathlib  # noqa: E402
+import subprocess  # noqa: E402
 import sys  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 from wctls_ros.core import extract_features, FeatureConfig, METHODS  # noqa: E402
+from wctls_ros.evaluation.scans import load_scans  # noqa: E402
 from wctls_ros.simulation import (full_turn_bearings, load_floor_plan, NoiseModel,  # noqa: E402
                                   simulate_ranges)
 from wctls_ros.simulation.adversarial import peeling_wall  # noqa: E402
 
 RANGE_NOISE_M = 0.01
+SIDE_BY_SIDE_NOISE_M = 0.005
+DATA = pathlib.Path(__file__).resolve().parents[2] / 'data'
+# The numpy core, kept as the tests' reference implementation.
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'test'))
+import numpy_core  # noqa: E402, I100
 SWEEP_BEAMS = (270, 540, 1080, 2160, 4320, 8640)
 WORST_CASE_BEAMS = (1080, 4320, 16000, 64000, 100000)
 
 
-def scans(beams, count, seed=1):
+def scans(beams, count, seed=1, range_noise_m=RANGE_NOISE_M):
     """Return `count` noisy full-turn scans of environment A and their geometry."""
     walls, _ = load_floor_plan('environment_a').in_sensor_frame()
     angle_min, increment, bearings = full_turn_bearings(beams)
-    noise = NoiseModel(range_sigma_m=RANGE_NOISE_M, bearing_sigma_rad=0.0)
+    noise = NoiseModel(range_sigma_m=range_noise_m, bearing_sigma_rad=0.0)
     rng = np.random.default_rng(seed)
     return angle_min, increment, [simulate_ranges(walls, bearings, noise, rng)
                                   for _ in range(count)]
@@ -60,8 +77,88 @@ def time_per_scan(beams, count, config):
     return np.array(times), np.mean(segments), np.mean(corners)
 
 
+def median_ms(extract, ranges, angle_min, increment, config):
+    """Return the median time per scan (ms) of an extract_features function, after a warm-up."""
+    for r in ranges[:20]:
+        extract(r, angle_min, increment, config)
+    times = []
+    for r in ranges:
+        start = time.perf_counter()
+        extract(r, angle_min, increment, config)
+        times.append(time.perf_counter() - start)
+    return 1e3 * float(np.median(times))
+
+
+def peer_ms(peer, ranges, angle_min, increment):
+    """Return the C++ peer's median time per scan (ms) and lines per scan on the same scans."""
+    with tempfile.NamedTemporaryFile(suffix='.scans') as scans_file:
+        header = np.array([len(ranges), ranges.shape[1]], dtype=np.int32).tobytes()
+        scans_file.write(header + np.array([angle_min, increment]).tobytes()
+                         + np.ascontiguousarray(ranges, dtype=np.float64).tobytes())
+        scans_file.flush()
+        lines, median, _ = subprocess.run([peer, scans_file.name], check=True,
+                                          capture_output=True, text=True).stdout.split()
+    return float(median), float(lines)
+
+
+def side_by_side(count, peer):
+    """Print ours, the numpy reference and the peer on the same scans, and the ratios."""
+    cases = []
+    for beams in (1080, 4320):
+        angle_min, increment, ranges = scans(beams, count, range_noise_m=SIDE_BY_SIDE_NOISE_M)
+        cases.append((f'room {beams}', np.array(ranges), angle_min, increment,
+                      FeatureConfig(range_sigma_m=SIDE_BY_SIDE_NOISE_M, bearing_sigma_rad=0.0)))
+    sick = load_scans(DATA / 'sick_lms1xx_static')
+    cases.append(('SICK 541', sick.ranges, sick.angle_min, sick.angle_increment,
+                  FeatureConfig(range_sigma_m=0.012, bearing_sigma_rad=0.0)))
+    print(f'side by side, median ms per scan ({count} room scans, {len(sick.ranges)} real);'
+          f' peer: {peer or "not given (--peer BINARY)"}')
+    print(f'{"scans":>9} ' + ' '.join(f'{m:>6}' for m in METHODS)
+          + f' {"numpy":>7} {"peer":>7} {"wctls/peer":>10} {"numpy/wctls":>11} '
+          f'{"ml/wctls":>8} {"peer lines":>10}')
+    for name, ranges, angle_min, increment, config in cases:
+        ours = {method: median_ms(extract_features, ranges, angle_min, increment,
+                                  config.replace(method=method)) for method in METHODS}
+        reference = median_ms(numpy_core.extract_features, ranges, angle_min, increment, config)
+        peer_time, peer_lines = (peer_ms(peer, ranges, angle_min, increment) if peer
+                                 else (float('nan'), float('nan')))
+        print(f'{name:>9} ' + ' '.join(f'{ours[m]:>6.3f}' for m in METHODS)
+              + f' {reference:>7.3f} {peer_time:>7.3f} {ours["wctls"] / peer_time:>10.2f} '
+              f'{reference / ours["wctls"]:>11.1f} {ours["ml"] / ours["wctls"]:>8.2f} '
+              f'{peer_lines:>10.1f}')
+
+
+FIRST_SCAN = ('import time; start = time.perf_counter(); import numpy as np; '
+              'from wctls_ros.core import extract_features; '
+              'b = -np.pi + 2 * np.pi / 1080 * np.arange(1080); '
+              'extract_features(2.0 / np.maximum(abs(np.cos(b)), abs(np.sin(b))), -np.pi, '
+              '2 * np.pi / 1080); print(time.perf_counter() - start)')
+
+
+def start_up(repeats=3):
+    """Print the time from a fresh interpreter to its first extracted scan, warm and cold."""
+    def first_scan_s(environment):
+        started = time.perf_counter()
+        inside = float(subprocess.run([sys.executable, '-c', FIRST_SCAN], env=environment,
+                                      check=True, capture_output=True, text=True).stdout)
+        return time.perf_counter() - started, inside
+
+    warm = [first_scan_s(dict(os.environ)) for _ in range(repeats)]
+    with tempfile.TemporaryDirectory() as empty:
+        cold = first_scan_s(dict(os.environ, NUMBA_CACHE_DIR=empty))
+    print(f'start-up to the first extracted scan (process wall time; after its imports): warm '
+          f'cache {np.median([w[0] for w in warm]):.2f} s ({np.median([w[1] for w in warm]):.2f}'
+          f' s), cold cache {cold[0]:.1f} s ({cold[1]:.1f} s)')
+
+
 def main():
-    count = int(sys.argv[1]) if len(sys.argv) > 1 else 1000
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    parser.add_argument('scans', type=int, nargs='?', default=1000)
+    parser.add_argument('--peer', help='the C++ peer timing driver (optional)')
+    args = parser.parse_args()
+    count = args.scans
+    side_by_side(min(count, 300), args.peer)
+    start_up()
     print(f'extract_features per scan: environment A, {RANGE_NOISE_M * 1e3:.0f} mm range noise,'
           f' {count} scans, one core')
     print(f'{"beams":>6} {"method":>6} {"median ms":>10} {"p99 ms":>8} {"p99/med":>8} '

@@ -115,7 +115,7 @@ def test_a_node_that_falls_behind_processes_the_newest_scan_and_counts_the_rest(
             node.scans.publish(scan)
         assert spin_until(node.executor, lambda: 40 in node.stamps(), 20.0), node.stamps()
         burst = [s for s in node.stamps() if s > 1]
-        assert 2 <= len(burst) < 20, burst               # the queue held the newest scan only
+        assert 1 <= len(burst) < 20, burst               # the queue held the newest scan only
         assert burst == sorted(burst)
         after = report_of(len(node.stamps()))
         processed = int(after['scans processed']) - int(before['scans processed'])

@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-The estimation core of wctls_ros: plain numpy, no ROS imports.
+The estimation core of wctls_ros: numpy arrays in and out, loops compiled by numba, no ROS.
 
 One entry point serves the nodes, the tools and users' scripts::
 

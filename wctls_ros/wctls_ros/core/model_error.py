@@ -27,6 +27,17 @@ from .lines import normal_jacobians
 
 
 @jit
+def _flatness(angle_rad, start_x, start_y, end_x, end_y, flatness_sigma_m):
+    """Return (Var(angle), Cov(angle, radius), Var(radius)) of (D18) for one wall."""
+    dx, dy = end_x - start_x, end_y - start_y
+    middle_x, middle_y = 0.5 * (start_x + end_x), 0.5 * (start_y + end_y)
+    lever = middle_y * math.cos(angle_rad) - middle_x * math.sin(angle_rad)        # m . t
+    end_variance = flatness_sigma_m * flatness_sigma_m
+    var_angle = 2.0 * end_variance / (dx * dx + dy * dy)
+    return var_angle, lever * var_angle, 0.5 * end_variance + lever * lever * var_angle
+
+
+@jit
 def flatness_covariance(angle_rad: np.ndarray, start_xy_m: np.ndarray, end_xy_m: np.ndarray,
                         flatness_sigma_m: float) -> np.ndarray:
     """
@@ -45,16 +56,12 @@ def flatness_covariance(angle_rad: np.ndarray, start_xy_m: np.ndarray, end_xy_m:
     :return: shape (S, 2, 2): rad^2, rad m, m^2
     """
     covariance = np.empty((angle_rad.size, 2, 2))
-    end_variance = flatness_sigma_m * flatness_sigma_m
     for s in range(angle_rad.size):
-        dx, dy = end_xy_m[s, 0] - start_xy_m[s, 0], end_xy_m[s, 1] - start_xy_m[s, 1]
-        middle_x = 0.5 * (start_xy_m[s, 0] + end_xy_m[s, 0])
-        middle_y = 0.5 * (start_xy_m[s, 1] + end_xy_m[s, 1])
-        lever = middle_y * math.cos(angle_rad[s]) - middle_x * math.sin(angle_rad[s])   # m . t
-        var_angle = 2.0 * end_variance / (dx * dx + dy * dy)
-        covariance[s, 0, 0] = var_angle
-        covariance[s, 0, 1] = covariance[s, 1, 0] = lever * var_angle
-        covariance[s, 1, 1] = 0.5 * end_variance + lever * lever * var_angle
+        var_angle, cov_angle_radius, var_radius = _flatness(
+            angle_rad[s], start_xy_m[s, 0], start_xy_m[s, 1], end_xy_m[s, 0], end_xy_m[s, 1],
+            flatness_sigma_m)
+        covariance[s, 0, 0], covariance[s, 1, 1] = var_angle, var_radius
+        covariance[s, 0, 1] = covariance[s, 1, 0] = cov_angle_radius
     return covariance
 
 
@@ -111,16 +118,22 @@ def with_model_error(line: np.ndarray, angle_rad: np.ndarray, normal_covariance:
     """
     count = angle_rad.size
     added = np.zeros((count, 2, 2))           # the model error in (angle, radius)
-    if residual_scaling:
-        for s in range(count):
-            factor = residual_factor(chi2_dof[s], num_points[s])
+    for s in range(count):
+        if residual_scaling:
+            excess = residual_factor(chi2_dof[s], num_points[s]) - 1.0
             for i in range(2):
                 for j in range(2):
-                    added[s, i, j] = (factor - 1.0) * normal_covariance[s, i, j]
-    if flatness_sigma_m > 0.0:
-        added += flatness_covariance(angle_rad, start_xy_m, end_xy_m, flatness_sigma_m)
+                    added[s, i, j] = excess * normal_covariance[s, i, j]
+        if flatness_sigma_m > 0.0:
+            var_angle, cov_angle_radius, var_radius = _flatness(
+                angle_rad[s], start_xy_m[s, 0], start_xy_m[s, 1], end_xy_m[s, 0],
+                end_xy_m[s, 1], flatness_sigma_m)
+            added[s, 0, 0] += var_angle
+            added[s, 0, 1] += cov_angle_radius
+            added[s, 1, 0] += cov_angle_radius
+            added[s, 1, 1] += var_radius
     to_normal = normal_jacobians(line)
-    published = normal_covariance + added
+    published = normal_covariance.copy()
     new_line_covariance = line_covariance.copy()
     to_line = np.zeros((3, 2))
     for s in range(count):
@@ -140,6 +153,9 @@ def with_model_error(line: np.ndarray, angle_rad: np.ndarray, normal_covariance:
             offset_radius += to_normal[s, 1, k] * line_offset_jacobian[s, k]
         offset_angle *= common_range_sigma_m
         offset_radius *= common_range_sigma_m
+        for i in range(2):
+            for j in range(2):
+                published[s, i, j] += added[s, i, j]
         published[s, 0, 0] += offset_angle * offset_angle
         published[s, 0, 1] += offset_angle * offset_radius
         published[s, 1, 0] += offset_angle * offset_radius

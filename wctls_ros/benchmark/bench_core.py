@@ -11,8 +11,8 @@ laser_line_extraction (``--peer BINARY``: a timing driver built outside this rep
 public source, reading the scans file this script writes; see docs/performance.md), on 1080-
 and 4320-beam room scans with 5 mm of range noise and on the real 541-beam SICK LMS1xx scans of
 data/; then the start-up of a fresh process to its first extracted scan, with numba's cache
-warm and cold. Then median and p99 time per scan (one core) for 1080-beam scans and 4x denser ones, for
-every method, and the mean number of segments and corners. Then, for wctls, how the time grows
+warm and cold. Then median and p99 time per scan (one core) for 1080-beam scans and 4x denser
+ones, for every method, and the mean number of segments and corners. Then, for wctls, how the time grows
 with the beam count from 270 to 8640 beams: the exponent between each doubling (1 is linear; below
 1 is slower growth than N, let alone N log N) and a least-squares split of the time into a fixed
 per-scan cost and a cost per beam. Last, the worst case: a crafted scan (a wall whose every
@@ -22,13 +22,13 @@ wall one chain), 1080 to 100 000 beams.
 Usage: python bench_core.py [scans] [--peer BINARY]
 """
 
+import argparse
 import os
 
 # One core: keep any BLAS thread pool from spreading the work.
 for variable in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ.setdefault(variable, '1')
 
-import argparse  # noqa: E402
 import pathlib  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402

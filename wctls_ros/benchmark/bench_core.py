@@ -14,8 +14,8 @@ data/; then the start-up of a fresh process to its first extracted scan, with nu
 warm and cold. Then median and p99 time per scan (one core) for 1080-beam scans and 4x denser
 ones, for every method, and the mean number of segments and corners. Then, for wctls, how the
 time grows with the beam count from 270 to 8640 beams: the exponent between each doubling (1 is
-linear; below 1 is slower growth than N, let alone N log N) and a least-squares split of the time into a fixed
-per-scan cost and a cost per beam. Last, the worst case: a crafted scan (a wall whose every
+linear; below 1 is slower growth than N, let alone N log N) and a least-squares split of the
+time into a fixed per-scan cost and a cost per beam. Last, the worst case: a crafted scan (a wall whose every
 other return lies a growing few cm behind it, which made IEPF quadratic before its pass bound)
 next to a room scan of as many beams, with the default noise model (5 cm, which makes the crafted
 wall one chain), 1080 to 100 000 beams.

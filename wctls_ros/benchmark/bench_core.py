@@ -5,20 +5,20 @@
 """
 Benchmark extract_features per scan on simulated RPLIDAR S1 scans of a furnished room.
 
-First, side by side in one run on the same scans: the compiled core, the numpy core it
-replaced (kept in wctls_ros/test/numpy_core as the tests' reference) and, when given, the C++
+First, side by side in one run on the same scans: the compiled core, the numpy core it replaced
+(kept in wctls_ros/test/numpy_core as the tests' reference) and, when given, the C++
 laser_line_extraction (``--peer BINARY``: a timing driver built outside this repository from its
-public source, reading the scans file this script writes; see docs/performance.md), on 1080-
-and 4320-beam room scans with 5 mm of range noise and on the real 541-beam SICK LMS1xx scans of
-data/; then the start-up of a fresh process to its first extracted scan, with numba's cache
-warm and cold. Then median and p99 time per scan (one core) for 1080-beam scans and 4x denser
-ones, for every method, and the mean number of segments and corners. Then, for wctls, how the
-time grows with the beam count from 270 to 8640 beams: the exponent between each doubling (1 is
-linear; below 1 is slower growth than N, let alone N log N) and a least-squares split of the
-time into a fixed per-scan cost and a cost per beam. Last, the worst case: a crafted scan (a wall whose every
-other return lies a growing few cm behind it, which made IEPF quadratic before its pass bound)
-next to a room scan of as many beams, with the default noise model (5 cm, which makes the crafted
-wall one chain), 1080 to 100 000 beams.
+public source, reading the scans file this script writes; see docs/performance.md), on 1080- and
+4320-beam room scans with 5 mm of range noise and on the real 541-beam SICK LMS1xx scans of data/;
+then the start-up of a fresh process to its first extracted scan, with numba's cache warm and cold.
+Then median and p99 time per scan (one core) for 1080-beam scans and 4x denser ones, for every
+method, and the mean number of segments and corners. Then, for wctls, how the time grows with the
+beam count from 270 to 8640 beams: the exponent between each doubling (1 is linear; below 1 is
+slower growth than N, let alone N log N) and a least-squares split of the time into a fixed per-
+scan cost and a cost per beam. Last, the worst case: a crafted scan (a wall whose every other
+return lies a growing few cm behind it, which made IEPF quadratic before its pass bound) next to a
+room scan of as many beams, with the default noise model (5 cm, which makes the crafted wall one
+chain), 1080 to 100 000 beams.
 Usage: python bench_core.py [scans] [--peer BINARY]
 """
 

@@ -22,11 +22,19 @@ import pytest
 import wctls_ros
 
 PROBE = """from ._jit import jit
+from .probe_factor import factor
 
 
 @jit
 def twice(value):
-    return 2.0 * value
+    return factor(value)
+"""
+FACTOR = """from ._jit import jit
+
+
+@jit
+def factor(value):
+    return {} * value
 """
 
 
@@ -38,6 +46,7 @@ def package(tmp_path):
                     ignore=shutil.ignore_patterns('__pycache__'))
     core = copy / 'wctls_ros' / 'core'
     (core / 'probe.py').write_text(PROBE)
+    (core / 'probe_factor.py').write_text(FACTOR.format(2.0))
     yield copy, core
     if os.geteuid() == 0:
         subprocess.run(['chattr', '-i', str(core)], check=False)
@@ -52,12 +61,13 @@ def make_read_only(folder: pathlib.Path) -> None:
         pytest.skip('root writes to read-only folders, and chattr +i is not available here')
 
 
-def run_probe(site: pathlib.Path, **environment) -> None:
+def run_probe(site: pathlib.Path, expected=4.0, **environment) -> None:
     """Compile and run the probe in a fresh interpreter with the given environment."""
     env = {key: value for key, value in os.environ.items() if key != 'NUMBA_CACHE_DIR'}
     env.update(environment, PYTHONPATH=str(site))
     subprocess.run([sys.executable, '-c', 'from wctls_ros.core.probe import twice; '
-                    'assert twice(2.0) == 4.0'], env=env, check=True, timeout=120)
+                    f'assert twice(2.0) == {expected}, twice(2.0)'], env=env, check=True,
+                   timeout=120)
 
 
 def cache_files(folder: pathlib.Path):
@@ -85,3 +95,15 @@ def test_numba_cache_dir_wins(package, tmp_path):
     run_probe(site, XDG_CACHE_HOME=str(tmp_path / 'xdg'), NUMBA_CACHE_DIR=str(tmp_path / 'own'))
     assert cache_files(tmp_path / 'own')
     assert not cache_files(core / '__pycache__') and not cache_files(tmp_path / 'xdg')
+
+
+def test_a_changed_callee_in_another_file_is_not_served_from_the_cache(package, tmp_path):
+    # numba alone checks only the caller's own file: probe.py is unchanged (same time stamp and
+    # size), so without the core's fingerprint the cached twice() would still multiply by 2.
+    site, core = package
+    run_probe(site, XDG_CACHE_HOME=str(tmp_path / 'xdg'))
+    caller = core / 'probe.py'
+    stamp = caller.stat()
+    (core / 'probe_factor.py').write_text(FACTOR.format(3.0))
+    os.utime(caller, ns=(stamp.st_atime_ns, stamp.st_mtime_ns))
+    run_probe(site, expected=6.0, XDG_CACHE_HOME=str(tmp_path / 'xdg'))

@@ -4,18 +4,26 @@
 """
 The compiler of the core's loops: numba's ``njit``, with its on-disk cache in a writable place.
 
-Every loop of the core is compiled once per machine and kept on disk (``cache=True``), next to
-the source when that is writable (a colcon install space), else in
-``$XDG_CACHE_HOME/wctls_ros`` (``~/.cache/wctls_ros``; an apt install under /opt is read-only).
-``NUMBA_CACHE_DIR`` set by the user wins over both. The options are the same for every kernel:
-``error_model='numpy'`` so that a division by zero gives inf or NaN as in numpy (degenerate
-segments and corners are dropped later, not raised on), and no fastmath, so that NaN compares
-and rounding are IEEE as in the numpy reference the tests hold the kernels to.
+Every loop of the core is compiled once per machine and kept on disk (``cache=True``), next to the
+source when that is writable (a colcon install space), else in ``$XDG_CACHE_HOME/wctls_ros``
+(``~/.cache/wctls_ros``; an apt install under /opt is read-only). ``NUMBA_CACHE_DIR`` set by the
+user wins over both. numba checks a cached function against the time stamp of its own file only,
+not of the functions it calls from other files: after an upgrade that changed ``_order.py`` alone,
+``pipeline.py``'s cached code would still hold the old sort. So the cache is tied to a fingerprint
+of every source file of the core: when that changes, the core's cached functions are deleted before
+any is loaded. The options are the same for every kernel: ``error_model='numpy'`` so that a
+division by zero gives inf or NaN as in numpy (degenerate segments and corners are dropped later,
+not raised on), and no fastmath, so that NaN compares and rounding are IEEE as in the numpy
+reference the tests hold the kernels to.
 """
 
+import glob
+import hashlib
 import os
 
 _CACHE_VARIABLE = 'NUMBA_CACHE_DIR'
+_CORE = os.path.dirname(os.path.abspath(__file__))
+_FINGERPRINT_FILE = 'wctls_ros_core.fingerprint'
 
 
 def _user_cache_dir() -> str:
@@ -28,9 +36,56 @@ if _CACHE_VARIABLE not in os.environ and not os.access(os.path.dirname(__file__)
     os.environ[_CACHE_VARIABLE] = _user_cache_dir()
 
 import numba  # noqa: E402  (numba reads NUMBA_CACHE_DIR when imported)
+from numba.core.caching import FunctionCache  # noqa: E402
 
 # A user's script may have imported numba before us: it then re-reads its environment.
 numba.config.reload_config()
+
+
+def _located_here():
+    """Stand for every function of the core when asking numba where their cache is."""
+
+
+def _fingerprint() -> str:
+    """Return a digest of numba's version and every source file of the core."""
+    digest = hashlib.sha256(numba.__version__.encode())
+    for path in sorted(glob.glob(os.path.join(_CORE, '*.py'))):
+        digest.update(os.path.basename(path).encode())
+        with open(path, 'rb') as source:
+            digest.update(source.read())
+    return digest.hexdigest()
+
+
+def _forget_stale_kernels() -> None:
+    """Delete the core's cached functions if any core source changed since they were made."""
+    try:
+        folder = FunctionCache(_located_here).cache_path
+    except RuntimeError:          # no writable cache location: numba compiles in memory
+        return
+    stamp, current = os.path.join(folder, _FINGERPRINT_FILE), _fingerprint()
+    try:
+        with open(stamp) as recorded:
+            if recorded.read() == current:
+                return
+    except OSError:
+        pass
+    modules = {os.path.splitext(os.path.basename(path))[0]
+               for path in glob.glob(os.path.join(_CORE, '*.py'))}
+    for cached in glob.glob(os.path.join(folder, '*.nb[ic]')):
+        if os.path.basename(cached).split('.', 1)[0] in modules:
+            try:
+                os.remove(cached)
+            except OSError:       # another process got there first
+                pass
+    try:
+        os.makedirs(folder, exist_ok=True)
+        with open(stamp, 'w') as recorded:
+            recorded.write(current)
+    except OSError:               # unwritable: numba will not cache there either
+        pass
+
+
+_forget_stale_kernels()
 
 
 def jit(function):

@@ -163,6 +163,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
         settings.merge_max_missing_beams)
     order, run_start, run_stop, run_chain = chains_of(range_m, x_m, y_m, separated)
     rho, theta, x, y = range_m[order], bearing_rad[order], x_m[order], y_m[order]
+    beam_order = index[order]
     budget = pass_budget(count)
     start, stop, chain, unsplit = split_iepf(
         x, y, run_start, run_stop, run_chain,
@@ -186,7 +187,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
                                          settings.end_offset_sigmas)
     # #utls, #wtls, #wctls or #maximum-likelihood: the configured fit with its covariance, in
     # scan order of the walls' first returns.
-    start, stop = _in_scan_order(index[order], ranges_m.size, start, stop)
+    start, stop = _in_scan_order(beam_order, ranges_m.size, start, stop)
     walls = _fit_walls(rho, theta, x, y, start, stop, range_sigma, bearing_sigma, settings)
     (angle, radius, normal_covariance, line, line_covariance, line_offset, start_xy, end_xy,
      first, last, counts, chi2_dof) = walls
@@ -205,7 +206,6 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     corner_covariance = corner_candidates(
         line, line_covariance, start_xy, end_xy, first_wall, second_wall, 0.0, line_offset,
         settings.common_range_sigma_m)[3]
-    beam_order = index[order]
     return (angle, radius, normal_covariance, line, line_covariance, line_offset, start_xy,
             end_xy, beam_order[first], beam_order[last], counts, chi2_dof, corner_xy, corner_yaw,
             corner_covariance, opening, first_wall, second_wall, end_seen, work_limited)

@@ -14,7 +14,10 @@ import math
 import numpy as np
 import pytest
 from wctls_ros.core import extract_features, FeatureConfig
+from wctls_ros.core.corners import seen_through
+from wctls_ros.params import feature_settings, load_parameters
 from wctls_ros.simulation import floor_plan_from_dict, NoiseModel, simulate_recording
+from wctls_ros.simulation.scanner import SENSOR_MODELS
 
 ONE_CM = NoiseModel(range_sigma_m=0.01, bearing_sigma_rad=math.radians(0.05))
 ONE_CM_CONFIG = FeatureConfig(range_sigma_m=0.01, bearing_sigma_rad=math.radians(0.05))
@@ -73,6 +76,54 @@ def test_lines_that_meet_across_an_occlusion_make_no_corner():
     virtual = (2.5, 0.5)
     found = corners_near(ranges, angle_min, increment, virtual, within=0.1)
     assert not any(len(corners) for corners in found)
+
+
+def test_a_wall_seen_behind_an_edge_where_the_face_would_go_on_makes_no_corner():
+    # A pilaster 1 m to the right, its face y = -1 ending at an edge x = 1.75; behind it a wall
+    # at 45 deg crosses the face's line 0.3 m beyond the edge, at (2.05, -1). Past the edge the
+    # sensor sees that wall behind where the face would have to stand (up to 11 cm behind its
+    # line, ~12 beams): the lines meet, the walls do not. Environment A has two of these
+    # (issue 14: most of its remaining false corners at S1-like noise). The rule's test is a
+    # run test on the returns' offsets, so its switch is end_offset_sigmas (0 also stops the
+    # trim of segment ends, which does not decide here).
+    plan = {'polylines': [{'closed': False, 'points': [
+        [0.0, -1.25], [1.35, -1.25], [1.35, -1.0], [1.75, -1.0], [1.75, -1.25], [1.8, -1.25],
+        [3.55, 0.5]]}]}
+    ranges, angle_min, increment = scans_of(plan, SENSOR_MODELS['s1_like'], count=100)
+    config = feature_settings(load_parameters(None))[0]       # the shipped default
+
+    def scans_with_a_corner_at(xy, setting, within=0.15):
+        found = corners_near(ranges, angle_min, increment, xy, setting, within)
+        return sum(len(corners) > 0 for corners in found)
+
+    without = scans_with_a_corner_at((2.05, -1.0), config.replace(end_offset_sigmas=0.0))
+    with_rule = scans_with_a_corner_at((2.05, -1.0), config)
+    assert without >= 15
+    assert with_rule <= 5
+    # The pilaster's own corner (1.35, -1), where the face meets its side, stays.
+    assert scans_with_a_corner_at((1.35, -1.0), config, within=0.1) >= 95
+
+
+def test_seen_through_needs_the_other_walls_returns_behind_the_wall_together():
+    # Wall y = 1 (normal +y, radius 1) to the left of a corner at the origin's (0, 1); the
+    # other wall x + y = 1 goes on behind it, to the upper left.
+    normal, inward, other = (0.0, 1.0), (-1.0, 0.0), (math.sqrt(0.5), math.sqrt(0.5))
+    t = np.linspace(0.05, 0.15, 6)
+
+    def test(x, y):
+        return seen_through(0.0, 1.0, *normal, 1.0, *inward, 0.02, *other, math.sqrt(0.5),
+                            np.asarray(x), np.asarray(y), 0, len(x) - 1, 0.01, 0.0, 3.0, 0.01,
+                            4.0)
+
+    # Returns on the other wall, 5-15 cm behind the wall's line: seen through.
+    assert test(-t, 1.0 + t)
+    # The same wall seen only 1-3 mm behind (within the noise together): not.
+    assert not test(-t, 1.0 + 0.02 * t)
+    # Returns behind the wall but off the other wall's line (a rounded corner's wedge): not.
+    assert not test(-t - 0.1, 1.0 + t)
+    # Returns on the other wall whose sight lines cross the line within the tolerance of the
+    # corner: not.
+    assert not test(-0.01 * t, 1.0 + 0.01 * t)
 
 
 def test_a_corner_behind_a_pole_is_no_corner_and_one_behind_a_leg_in_mid_wall_is():

@@ -272,3 +272,21 @@ def test_hand_labels_are_the_intersections_of_their_listed_walls(name):
                         truth.select(first, last - first + 1), static=False)
     rates = [c.rate for c in table.methods[0].corner_rates if c.visible_scans]
     assert rates and min(rates) >= 0.9, rates
+
+
+@pytest.mark.parametrize('name', ['sick_lms111_static', 'sick_lms1xx_static'])
+def test_the_shipped_default_meets_the_real_static_targets(name):
+    # Issue 14 on the real static recordings, with what a user gets out of the box: every
+    # labelled visible corner in >= 95 % of the scans, and >= 80 % of the detections on
+    # corners present in most scans (recurrence), for every method.
+    from wctls_ros.evaluation import load_scans
+    from wctls_ros.params import feature_settings, load_parameters
+    truth = load_truth(LABELS / f'{name}.yaml')
+    scans = load_scans(REAL_DATA / name)
+    default = feature_settings(load_parameters(None))[0]
+    methods = {method: default.replace(method=method) for method in ('utls', 'wtls', 'ml')}
+    table = score_scans(scans, methods, truth, static=True)
+    for method in table.methods:
+        summary = method.summary()
+        assert summary['min_corner_rate'] >= 0.95, (method.method, summary)
+        assert summary['recurrence'] >= 0.8, (method.method, summary)

@@ -230,7 +230,8 @@ def walls_end_at_corners(corners: CornerSet, wall_angle_rad: np.ndarray,
       gap where the walls do not meet;
     - a wall's reach stops short of the corner by more than ``sigmas`` standard deviations of
       the corner's position along that wall, plus ``floor_m``, plus ``1 + max_missing_beams``
-      beams' spacing on the wall: the corner is an extrapolation across an unseen stretch.
+      beams' spacing on the wall: the corner is an extrapolation across an unseen stretch;
+    - a wall is seen through where it would have to stand (:func:`_seen_through`).
 
     A wall's end is seen when its reach is within one beam's spacing of that bound.
 
@@ -327,4 +328,60 @@ def walls_end_at_corners(corners: CornerSet, wall_angle_rad: np.ndarray,
     short = np.maximum(gap - tolerance, 0.0) / spacing
     keep = ((between <= window) & here[0, :, 0] & here[1, :, -1] & ~goes_on & ~blocked
             & (short <= 1.0 + max_missing_beams).all(axis=0))
+    if run_sigmas > 0.0:
+        # Wall 0's stretch is crossed by the sight lines after its last return up to wall 1's
+        # last; wall 1's by those from wall 0's first return up to its own first.
+        spans = ((after_first + 1, last_position[walls[1]]),
+                 (first_position[walls[0]], before_second - 1))
+        for c in np.flatnonzero(keep):
+            for k, (start, stop) in enumerate(spans):
+                crossing = np.arange(start[c], start[c] + (stop[c] - start[c]) % count + 1)
+                if _seen_through(corners.xy_m[c], normal[:, k, c], wall_radius_m[walls[k, c]],
+                                 inward[:, k, c], tolerance[k, c], normal[:, 1 - k, c],
+                                 wall_radius_m[walls[1 - k, c]],
+                                 x_m.take(crossing, mode='wrap'), y_m.take(crossing, mode='wrap'),
+                                 range_sigma_m, bearing_sigma_rad, sigmas, floor_m, run_sigmas):
+                    keep[c] = False
     return keep, (short <= 1.0).T
+
+
+def _seen_through(corner_xy_m: np.ndarray, normal: np.ndarray, radius_m: float,
+                  inward: np.ndarray, along_tolerance_m: float, other_normal: np.ndarray,
+                  other_radius_m: float, x_m: np.ndarray, y_m: np.ndarray, range_sigma_m: float,
+                  bearing_sigma_rad: float, sigmas: float, floor_m: float,
+                  run_sigmas: float) -> bool:
+    """
+    Tell whether the other wall is seen through a wall between its segment and the corner.
+
+    The returns on the other wall's line whose sight lines cross this wall's line farther than
+    ``along_tolerance_m`` into the wall (and that are not in front of it beyond the noise) lie
+    behind it together: sum of (distance behind / noise) over sqrt(count) > ``run_sigmas``.
+
+    :param corner_xy_m: the corner, shape (2,), m
+    :param normal: the wall's unit normal, shape (2,)
+    :param radius_m: the wall's radius, m
+    :param inward: unit direction from the corner into the wall, shape (2,)
+    :param along_tolerance_m: how far from the corner a crossing is surely on the wall, m
+    :param other_normal: the other wall's unit normal, shape (2,)
+    :param other_radius_m: the other wall's radius, m
+    :param x_m: x of the returns whose sight lines may cross, shape (m,), m
+    :param y_m: y of those returns, shape (m,), m
+    :param range_sigma_m: range noise std, m
+    :param bearing_sigma_rad: bearing noise std, rad
+    :param sigmas: tolerance in standard deviations
+    :param floor_m: tolerance floor, m
+    :param run_sigmas: largest sum of normalised residuals (behind) over sqrt(count)
+    :return: whether the wall is seen through
+    """
+    noise = np.sqrt(range_sigma_m ** 2 + (x_m ** 2 + y_m ** 2) * bearing_sigma_rad ** 2)
+    line_tolerance = sigmas * noise + floor_m
+    offset = x_m * normal[0] + y_m * normal[1]
+    on_other = np.abs(other_radius_m - x_m * other_normal[0] - y_m * other_normal[1])
+    with np.errstate(divide='ignore', invalid='ignore'):
+        crossing = np.column_stack([x_m, y_m]) * (radius_m / offset)[:, None]
+    along = (crossing - corner_xy_m) @ inward
+    tested = ((on_other <= line_tolerance) & (offset > 0.0)
+              & (radius_m - offset <= line_tolerance) & (along > along_tolerance_m))
+    run = np.count_nonzero(tested)
+    return bool(run) and ((offset - radius_m)[tested] / noise[tested]).sum() / np.sqrt(run) > (
+        run_sigmas)

@@ -119,7 +119,8 @@ class FeatureConfig:
     end_offset_sigmas: float = _setting(
         4.0, 'cut the last k returns of a segment end when their residuals, each in sigmas of '
         'its noise, sum to more than this times sqrt(k) (another surface met at a shallow '
-        'angle); 0 disables', Limits(0.0, 1e3))
+        'angle); the same run test tells a wall seen behind an edge from a corner; 0 disables '
+        'both', Limits(0.0, 1e3))
     residual_scaling: bool = _setting(
         True, "scale each line's covariance by its residual chi2 per degree of freedom when "
         'above 1 (an a-posteriori variance factor: a wall rougher, or returns noisier, than '
@@ -143,7 +144,9 @@ class FeatureConfig:
         3.0, 'a corner needs both walls to end at it: its bearing between their facing ends, '
         'and every return between them on one of the two lines, within this many standard '
         'deviations (plus corner_end_floor_m); a nearer return there is an occluder, a farther '
-        'one a gap where the walls do not meet', Limits(0.0, 100.0, low_open=True))
+        'one a gap where the walls do not meet; nor may the other wall be seen behind one '
+        "wall's line between its end and the corner (end_offset_sigmas)",
+        Limits(0.0, 100.0, low_open=True))
     corner_end_floor_m: float = _setting(
         0.01, 'the smallest tolerance of the corner end test, m', Limits(0.0, 1.0))
 

@@ -207,6 +207,66 @@ def corner_candidates(line, line_covariance, start_xy_m, end_xy_m, first, second
 
 
 @jit
+def seen_through(corner_x_m, corner_y_m, normal_x, normal_y, radius_m, inward_x, inward_y,
+                 along_tolerance_m, other_normal_x, other_normal_y, other_radius_m, x_m, y_m,
+                 start, stop, range_sigma_m, bearing_sigma_rad, sigmas, floor_m, run_sigmas):
+    """
+    Tell whether the other wall is seen through a wall's stretch between its segment and a corner.
+
+    If the wall ended at the corner it would stand between them, and no line of sight could
+    cross its line there to a return farther away. Returns on the other wall's line (within
+    ``sigmas`` standard deviations of their position noise plus ``floor_m``) whose line of
+    sight crosses this wall's line farther than ``along_tolerance_m`` from the corner, into
+    the wall, and not in front of it by more than that noise tolerance, are tested together
+    like :func:`~.segmentation.trim_offset`'s runs: the sum of their distances behind the line
+    over their noise, over the square root of their number, above ``run_sigmas`` means the
+    other wall goes on behind this one's end (the end is an edge: a pilaster, a wardrobe, a
+    door frame in front of a wall, whose line merely meets the wall behind). One return
+    behind by a few sigma is noise or a rounded corner; a run of them is not.
+
+    :param corner_x_m: x of the corner, m
+    :param corner_y_m: y of the corner, m
+    :param normal_x: x of the wall's unit normal (towards its line from the sensor)
+    :param normal_y: y of the wall's unit normal
+    :param radius_m: the wall's radius, m (>= 0)
+    :param inward_x: x of the unit direction from the corner into the wall
+    :param inward_y: y of that direction
+    :param along_tolerance_m: how far from the corner a crossing is surely on the wall, m
+    :param other_normal_x: x of the other wall's unit normal
+    :param other_normal_y: y of the other wall's unit normal
+    :param other_radius_m: the other wall's radius, m
+    :param x_m: x of the returns in position order, shape (n,), m
+    :param y_m: y of the returns in position order, shape (n,), m
+    :param start: position of the first return to test (taken modulo n)
+    :param stop: position of the last return to test (taken modulo n, after ``start``)
+    :param range_sigma_m: range noise std, m
+    :param bearing_sigma_rad: bearing noise std, rad
+    :param sigmas: tolerance in standard deviations
+    :param floor_m: tolerance floor, m
+    :param run_sigmas: largest sum of normalised residuals (behind) over sqrt(count)
+    :return: whether the wall is seen through
+    """
+    count = x_m.size
+    run, behind = 0, 0.0
+    for step in range((stop - start) % count + 1):
+        position = (start + step) % count
+        x, y = x_m[position], y_m[position]
+        noise = math.sqrt(range_sigma_m ** 2 + (x * x + y * y) * bearing_sigma_rad ** 2)
+        line_tolerance = sigmas * noise + floor_m
+        offset = x * normal_x + y * normal_y
+        if (abs(other_radius_m - x * other_normal_x - y * other_normal_y) > line_tolerance
+                or offset <= 0.0 or radius_m - offset > line_tolerance):
+            continue
+        # Where the line of sight crosses the wall's line: the return scaled by radius/offset.
+        scale = radius_m / offset
+        along = ((scale * x - corner_x_m) * inward_x + (scale * y - corner_y_m) * inward_y)
+        if along > along_tolerance_m:
+            run += 1
+            behind += (offset - radius_m) / noise
+    return run > 0 and behind / math.sqrt(run) > run_sigmas
+
+
+@jit
 def walls_end_at(corner_xy_m, corner_covariance, first_segment, second_segment, wall_angle_rad,
                  wall_radius_m, wall_middle_m, x_m, y_m, last_position, first_position, step_rad,
                  range_sigma_m, bearing_sigma_rad, sigmas, floor_m, window, max_missing_beams,
@@ -233,7 +293,9 @@ def walls_end_at(corner_xy_m, corner_covariance, first_segment, second_segment, 
       gap where the walls do not meet;
     - a wall's reach stops short of the corner by more than ``sigmas`` standard deviations of
       the corner's position along that wall, plus ``floor_m``, plus ``1 + max_missing_beams``
-      beams' spacing on the wall: the corner is an extrapolation across an unseen stretch.
+      beams' spacing on the wall: the corner is an extrapolation across an unseen stretch;
+    - a wall is seen through where it would have to stand (:func:`seen_through`): the other
+      wall goes on behind this wall's end, an edge in front of it, not a corner.
 
     A wall's end is seen when its reach is within one beam's spacing of that bound.
 
@@ -367,5 +429,16 @@ def walls_end_at(corner_xy_m, corner_covariance, first_segment, second_segment, 
             ends[k] = short <= 1.0
         keep[c] = (between <= window and here[0, 0] and here[1, width - 1] and not goes_on
                    and not blocked and short_ok)
+        for k in range(2):
+            if keep[c] and run_sigmas > 0.0:
+                # Wall 0's stretch is crossed by the sight lines after its last return, up to
+                # wall 1's last; wall 1's by those from wall 0's first return to its own first.
+                start = after_first + 1 if k == 0 else first_position[walls[0]]
+                stop = last_position[walls[1]] if k == 0 else before_second - 1
+                keep[c] = not seen_through(
+                    corner_x, corner_y, normal[k, 0], normal[k, 1], wall_radius_m[walls[k]],
+                    inward[k, 0], inward[k, 1], tolerance[k], normal[1 - k, 0],
+                    normal[1 - k, 1], wall_radius_m[walls[1 - k]], x_m, y_m, start, stop,
+                    range_sigma_m, bearing_sigma_rad, sigmas, floor_m, run_sigmas)
         seen[c, 0], seen[c, 1] = ends[0], ends[1]
     return keep, seen

@@ -15,7 +15,9 @@ checkout) are measured alternately, round after round, so that a busy machine sl
    outputs received by a listener process that subscribes corners and lines, and markers or
    not. The core, extract_features, is timed inside the callback (this benchmark wraps it);
    the message path is everything else. Printed: the core's median, and the message path as a
-   ratio to the core (their sums over the scans), median of the rounds.
+   ratio to the core (their sums over the scans), median of the rounds; with baselines, also
+   this tree's message path over each tree's core (mean time per scan), since issue 17 states
+   its targets against the numpy core of its day (e.g. ``--baseline`` a build of 0109046).
 2. End to end: the tree's installed feature_node as its own process; this process publishes
    the scans at 10 Hz and at 40 Hz (reliable, like sllidar_ros2), subscribes all three outputs
    and takes latency = CornerArray received - the scan's stamp (its publish time). Next to the
@@ -322,6 +324,8 @@ def main():
                                          / 'feature_node')] + NODE_ARGUMENTS))
               for label, tree in trees]
     cores = {label: [] for label, _ in trees}
+    core_means = {label: [] for label, _ in trees}         # s per scan, per round and case
+    path_means = {(label, markers): [] for label, _ in trees for markers in (True, False)}
     # (tree, markers subscribed) -> per round: stage -> its sum over the scans / the core's
     shares = {(label, markers): [] for label, _ in trees for markers in (True, False)}
     latencies = {(label, rate): [] for label, _ in nodes for rate in RATES_HZ}
@@ -334,6 +338,9 @@ def main():
                     stages = message_path(tree, markers, args.path_scans)
                     core = stages['extract_features']
                     cores[label].append(np.median(core))
+                    core_means[label].append(core.mean())
+                    path_means[(label, markers)].append(
+                        sum(values.mean() for values in stages.values()) - core.mean())
                     shares[(label, markers)].append(
                         {stage: values.sum() / core.sum() for stage, values in stages.items()})
             for label, command in nodes:
@@ -356,6 +363,17 @@ def main():
                 for markers in (True, False)}
         print(f'   {label:12s} {1e3 * statistics.median(cores[label]):8.3f} '
               f'{path[True]:18.2f}x {path[False]:15.2f}x')
+    if len(trees) > 1:
+        # Issue 17 states its targets against the core of its day (a baseline's numpy core):
+        # this tree's message path in ms over each tree's core time, same scans, same run.
+        print("   this tree's message path over each tree's core:")
+        this = trees[-1][0]
+        path = {markers: statistics.median(path_means[(this, markers)])
+                for markers in (True, False)}
+        for label, _ in trees:
+            core = statistics.median(core_means[label])
+            print(f'   {label:12s} {1e3 * core:8.3f} {path[True] / core:18.2f}x '
+                  f'{path[False] / core:15.2f}x')
     print('   each stage, markers subscribed ("rest": scan checks, headers, serialising outside '
           'publish, counting):')
     print(f'   {"stage":18s}' + ''.join(f'{label:>14s}' for label, _ in trees))

@@ -219,7 +219,8 @@ class Peer:
         self.node = Node('feature_node_benchmark')
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
-        threading.Thread(target=self._spin, daemon=True).start()
+        self.spinner = threading.Thread(target=self._spin, daemon=True)
+        self.spinner.start()
         self.scans = scan_messages()
 
     def _spin(self):
@@ -274,7 +275,10 @@ class Peer:
     def close(self):
         """Stop spinning and shut rclpy down."""
         import rclpy
+        # Join the spinning thread before rclpy goes: a thread still in spin() at exit aborts
+        # the process ("terminate called without an active exception").
         self.executor.shutdown()
+        self.spinner.join(timeout=10.0)
         self.node.destroy_node()
         rclpy.try_shutdown()
 

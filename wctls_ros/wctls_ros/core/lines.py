@@ -207,11 +207,30 @@ _UTLS, _WTLS, _WCTLS, _ML = (METHODS.index(method) for method in ('utls', 'wtls'
 
 
 @jit
+def _moment_sums(x, y, rho, first, stop, weighted):
+    """
+    Return the sums S_g = sum w z and S_M = sum w z z^T of returns first..stop-1.
+
+    :return: (sum w x, sum w y, sum w x^2, sum w y^2, sum w x y), w = 1 / rho^2 when weighted
+        (eq. (8) up to its constant factor), else 1
+    """
+    s_x = s_y = s_xx = s_yy = s_xy = 0.0
+    for i in range(first, stop):
+        inv_rho = 1.0 / rho[i]
+        weight = inv_rho * inv_rho if weighted else 1.0
+        wx, wy = weight * x[i], weight * y[i]
+        s_x += wx
+        s_y += wy
+        s_xx += wx * x[i]
+        s_yy += wy * y[i]
+        s_xy += wx * y[i]
+    return s_x, s_y, s_xx, s_yy, s_xy
+
+
+@jit
 def _lever_segment(x, y, rho, first, stop, range_sigma, bearing_sigma, weighted, scaled):
     """
     Fit p of one segment and sum the first-order covariance of its coordinates u.
-
-    Fit p of every segment and sum the first-order covariance of its coordinates u.
 
     UTLS, WTLS and WCTLS all rest on the least-squares solution p of p.z = 1: S_M p = S_g with
     S_M = sum w z z^T and S_g = sum w z. The (a, b, c) of eqs. (2)-(4) / (10)-(12) are
@@ -239,16 +258,7 @@ def _lever_segment(x, y, rho, first, stop, range_sigma, bearing_sigma, weighted,
     :return: ((a, b, c), p_x, p_y, 1 / |p|, the covariance of u as (k, k), its offset
         Jacobian (k,)), k = 3 if scaled else 2
     """
-    s_x = s_y = s_xx = s_yy = s_xy = 0.0
-    for i in range(first, stop):
-        inv_rho = 1.0 / rho[i]
-        weight = inv_rho * inv_rho if weighted else 1.0
-        wx, wy = weight * x[i], weight * y[i]
-        s_x += wx
-        s_y += wy
-        s_xx += wx * x[i]
-        s_yy += wy * y[i]
-        s_xy += wx * y[i]
+    s_x, s_y, s_xx, s_yy, s_xy = _moment_sums(x, y, rho, first, stop, weighted)
     line = np.empty(3)
     line[0], line[1], line[2] = (s_x * s_yy - s_y * s_xy, s_y * s_xx - s_x * s_xy,
                                  s_xy * s_xy - s_xx * s_yy)
@@ -467,16 +477,8 @@ def _ml_fits(rho, theta, x, y, offsets, counts, range_sigma, bearing_sigma, angl
     """
     count = offsets.size
     for s in range(count):
-        s_x = s_y = s_xx = s_yy = s_xy = 0.0
-        for i in range(offsets[s], offsets[s] + counts[s]):
-            inv_rho = 1.0 / rho[i]
-            weight = inv_rho * inv_rho
-            wx, wy = weight * x[i], weight * y[i]
-            s_x += wx
-            s_y += wy
-            s_xx += wx * x[i]
-            s_yy += wy * y[i]
-            s_xy += wx * y[i]
+        s_x, s_y, s_xx, s_yy, s_xy = _moment_sums(x, y, rho, offsets[s], offsets[s] + counts[s],
+                                                  True)
         a, b, c = s_x * s_yy - s_y * s_xy, s_y * s_xx - s_x * s_xy, s_xy * s_xy - s_xx * s_yy
         sign = -1.0 if c > 0.0 else 1.0
         angle[s], radius[s] = math.atan2(sign * b, sign * a), -sign * c / math.hypot(a, b)

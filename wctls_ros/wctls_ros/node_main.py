@@ -3,6 +3,7 @@
 
 """The Jazzy ``main()`` every wctls_ros node shares, and its parameter declarations."""
 
+import itertools
 import os
 import re
 import signal
@@ -113,6 +114,7 @@ def run_node(name: str, make_node, spin=spin_forever, config_errors=(ValueError,
         logger.fatal(f'cannot start: --params-file {unreadable[0]} is not a regular file (a '
                      'folder, FIFO, device or socket)')
         return 1
+    _interrupt_once()
     try:
         # Parsed once before rclpy.init, which would log an extra rcl line before raising.
         remove_ros_args(args)
@@ -152,14 +154,34 @@ def _special_params_files(args) -> list:
     return [path for path in given if os.path.exists(path) and not os.path.isfile(path)]
 
 
+def _interrupt_once():
+    """
+    Make the first SIGINT a KeyboardInterrupt and ignore the ones after it (main thread only).
+
+    ``ros2 launch`` forwards a Ctrl-C that the terminal has already sent to the whole process
+    group, and users press it twice: a second one would interrupt the clean-up with a
+    KeyboardInterrupt traceback. Ignoring SIGINT only once the first KeyboardInterrupt is
+    caught leaves a window of a few bytecodes, which a busy machine widens (the double Ctrl-C
+    test failed at one of its five delays during a full test run). Installed before
+    rclpy.init, which chains its own handler (that wakes the executor) to this one.
+    """
+    if threading.current_thread() is threading.main_thread():
+        interrupts = itertools.count()
+
+        def interrupt(signal_number, frame):
+            if next(interrupts) == 0:      # one C call: no window between test and count
+                raise KeyboardInterrupt
+
+        signal.signal(signal.SIGINT, interrupt)
+
+
 def _ignore_further_interrupts():
     """
     Ignore SIGINT from here on: the process is ending (in the main thread; others get none).
 
-    ``ros2 launch`` forwards a Ctrl-C that the terminal has already sent to the whole process
-    group, and users press it twice: a second one would interrupt ``destroy_node()`` with a
-    KeyboardInterrupt traceback, or kill the process as it exits (status -2). Clean-up takes
-    milliseconds; a hung one still ends on SIGTERM, which launch sends next.
+    Python gives SIGINT back to the system's default as it exits, so a Ctrl-C then would
+    kill the process (status -2) although :func:`_interrupt_once` ignores it until then.
+    Clean-up takes milliseconds; a hung one still ends on SIGTERM, which launch sends next.
     """
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)

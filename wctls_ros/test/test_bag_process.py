@@ -119,8 +119,10 @@ def test_real_bags_give_an_output_bag_with_every_scan_and_method(name, method, t
         rows = list(csv.DictReader(table))
     assert {row['method'] for row in rows} == set(methods)
     for m in methods:
+        # Every scan of these recordings shows a corner (the LMS111 its room corner, and
+        # hardly ever one of the two hidden beside the sensor).
         corners = sum(row['method'] == m for row in rows)
-        assert corners > count and f'{m}: {corners} corners' in out
+        assert corners >= count and f'{m}: {corners} corners' in out
 
 
 def test_config_file_is_checked_like_the_node_does(tmp_path, capsys):

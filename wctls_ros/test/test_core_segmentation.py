@@ -108,23 +108,35 @@ def test_merging_across_touching_chains_makes_them_one_chain():
     np.testing.assert_allclose(radius, [1.0, 2.0], atol=1e-9)
 
 
+# The frame trim_offset measures returns in: the line y = 1.5 (normal angle pi / 2, radius 1.5).
+ON_THE_LINE = (np.array([math.pi / 2]), np.array([1.5]))
+
+
 @pytest.mark.parametrize('at_start', [False, True])
 def test_a_run_off_the_line_at_an_end_is_cut_exactly(at_start):
-    # The last 5 returns 2 sigma off the line: |Z_k| / sqrt(k) = 2 sqrt(k) rises to 4.47 at
-    # k = 5 and falls after it, since the other returns lie on the line: exactly 5 are cut.
-    sigma = 0.01
-    x, y = np.linspace(-0.8, 0.8, 40), np.full(40, 1.5)
-    off = slice(0, 5) if at_start else slice(35, 40)
-    y[off] -= 2.0 * sigma
-    one = (np.array([0]), np.array([40]), np.array([0]))
-    start, stop, _ = trim_offset(*one, x, y, np.array([math.pi / 2]), np.array([1.5]), sigma,
+    # 40 returns on a line, the 5 at one end 2.5 sigma off it. Against the line of the other
+    # 35, Z_5 = 12.5 with Var(Z_5) = 5 + 25 (1 / 35 + t^2 Var(angle) / sigma^2) = 8.6 (t the
+    # run's distance from their centroid): 4.3 > 4, and less for any other k: exactly 5 cut.
+    sigma, count = 0.01, 40
+    x, y = np.linspace(-0.8, 0.8, count), np.full(count, 1.5)
+    off = slice(0, 5) if at_start else slice(count - 5, count)
+    y[off] -= 2.5 * sigma
+    one = (np.array([0]), np.array([count]), np.array([0]))
+    start, stop, _ = trim_offset(*one, x, y, *ON_THE_LINE, sigma, 0.0, 8, 4.0)
+    assert (start[0], stop[0]) == ((5, count) if at_start else (0, count - 5))
+    # The run pulls the line of all 40 towards itself: tested against that line, as the rule
+    # did before, it peaks at 3.3 and stays. As the frame, that line cuts the same 5.
+    angle, radius = moment_line(x, y, 0, count, sigma, 0.0)[:2]
+    residual = (x * math.cos(angle) + y * math.sin(angle) - radius) / sigma
+    ends = residual[:8] if at_start else residual[::-1][:8]
+    assert np.max(np.abs(np.cumsum(ends)) / np.sqrt(np.arange(1, 9))) < 3.5
+    start, stop, _ = trim_offset(*one, x, y, np.array([angle]), np.array([radius]), sigma,
                                  0.0, 8, 4.0)
-    assert (start[0], stop[0]) == ((5, 40) if at_start else (0, 35))
-    # A step of 1.5 sigma peaks at 1.5 sqrt(5) = 3.35 < 4: kept.
+    assert (start[0], stop[0]) == ((5, count) if at_start else (0, count - 5))
+    # A step of 2 sigma peaks at 10 / sqrt(8.6) = 3.4 < 4: kept.
     y[off] += 0.5 * sigma
-    start, stop, _ = trim_offset(*one, x, y, np.array([math.pi / 2]), np.array([1.5]), sigma,
-                                 0.0, 8, 4.0)
-    assert (start[0], stop[0]) == (0, 40)
+    start, stop, _ = trim_offset(*one, x, y, *ON_THE_LINE, sigma, 0.0, 8, 4.0)
+    assert (start[0], stop[0]) == (0, count)
 
 
 def test_an_end_cuts_at_most_half_the_returns_beyond_the_minimum():
@@ -132,24 +144,23 @@ def test_an_end_cuts_at_most_half_the_returns_beyond_the_minimum():
     x, y = np.linspace(-0.8, 0.8, 14), np.full(14, 1.5)
     y[-8:] += 10.0 * sigma                      # far off: the score peaks at the window's end
     start, stop, _ = trim_offset(np.array([0]), np.array([14]), np.array([0]), x, y,
-                                 np.array([math.pi / 2]), np.array([1.5]), sigma, 0.0, 8, 4.0)
+                                 *ON_THE_LINE, sigma, 0.0, 8, 4.0)
     assert (start[0], stop[0]) == (0, 11)                        # (14 - 8) // 2 = 3 cut
 
 
 def test_straight_walls_are_rarely_cut():
-    # 4000 noisy straight walls fitted by moment_line, as in the pipeline: on one line
-    # max_k |Z_k| / sqrt(k) over 8 returns exceeds 4 with probability below 8 P(|N| > 4) = 5e-4
-    # per end (fewer: the noise used is an upper bound). Without the sqrt(k) the rule would cut
-    # about 1 end in 6.
+    # 4000 noisy straight walls: against the line of a wall's other returns, Z_k / sqrt(Var(Z_k))
+    # is standard normal for each k, so the largest of 8 exceeds 4 with probability below
+    # 8 P(|N| > 4) = 5e-4 per end (4 of these 8000 ends are cut). Without the line's own error
+    # in Var(Z_k) the rule would cut 35 (measured once, with a throwaway polyfit).
     rng = np.random.default_rng(7)
     sigma, walls, count = 0.01, 4000, 60
     x = np.tile(np.linspace(-0.8, 0.8, count), walls)
     y = 1.5 + rng.normal(0.0, sigma, walls * count)
     start = np.arange(walls) * count
-    angle, radius = np.array([moment_line(x, y, first, first + count, sigma, 0.0)[:2]
-                              for first in start]).T
+    frame = np.full(walls, math.pi / 2), np.full(walls, 1.5)
     trimmed_start, trimmed_stop, _ = trim_offset(start, start + count, np.arange(walls), x, y,
-                                                 angle, radius, sigma, 0.0, 8, 4.0)
+                                                 *frame, sigma, 0.0, 8, 4.0)
     cut_ends = np.count_nonzero(trimmed_start != start) + np.count_nonzero(
         trimmed_stop != start + count)
     assert cut_ends <= 8                        # 2 * 4000 * 5e-4 = 4 expected at most

@@ -12,7 +12,6 @@ position ranges [start, stop) into that order; on a full turn a segment may run 
 """
 
 from dataclasses import dataclass
-import functools
 import math
 from typing import Callable, NamedTuple, Tuple
 
@@ -556,26 +555,34 @@ def trim_offset_ends(segments: SegmentRanges, contour_length: int, x_m: np.ndarr
     Cut off the returns at segment ends that lie off the segment's line together.
 
     IEPF leaves a run of returns from another surface at a segment's end when the run stays
-    within its threshold of the chord: a box beside a wall, met at a shallow angle, whose
-    returns then join the wall in some scans and not in others, and move its line by more than
-    its covariance says. Each return's residual from the line over its noise is
-    z = (x cos(angle) + y sin(angle) - radius) / sqrt(range_sigma^2 + (rho bearing_sigma)^2),
-    and the last k returns at an end sum to Z_k, which on one line is normal with a variance of
-    at most k (the noise is an upper bound of the scatter across the line). An end is cut after
-    the k that maximises |Z_k| / sqrt(k), when that maximum exceeds ``threshold_sigmas``. Each
-    end cuts at most half of the returns a segment has beyond ``min_returns``, so that the rule
-    does not depend on the beam order.
+    within its threshold of the chord: a box beside a wall, met at a shallow angle, or a chair
+    leg a few cm in front of it, whose returns then join the wall in some scans and not in
+    others, and move its line by more than its covariance says. The last k returns at an end
+    are tested against the line of the segment's other returns, not against a line they have
+    pulled towards themselves (a deleted-residual test). In the frame of the segment's line
+    (angle, radius), each return has a coordinate t along it and a residual e across it; the
+    other returns' line is the least-squares line e = a + b t through theirs (m returns,
+    t-mean t_m, sum of squares S_tt about it; to first order the orthogonal fit of those
+    returns). With z_j = (e_j - a - b t_j) / sigma_j, sigma_j = sqrt(range_sigma^2 +
+    (rho_j bearing_sigma)^2), the k returns sum to Z_k, normal with mean 0 on one line and
+    variance at most k + s^2 (W^2 / m + (T - t_m W)^2 / S_tt), W and T the sums of 1 / sigma_j
+    and t_j / sigma_j over the k returns and s^2 the mean sigma^2 of the other returns (the
+    noise is an upper bound of the scatter across the line; the second term is their line's
+    own error carried to the end). An end is cut after the k that maximises Z_k^2 / Var(Z_k),
+    when that maximum exceeds ``threshold_sigmas`` squared. Each end cuts at most half of the
+    returns a segment has beyond ``min_returns``, so that the rule does not depend on the beam
+    order.
 
     :param segments: segments sorted by start position (positions modulo contour_length)
     :param contour_length: number of returns n
     :param x_m: x of the returns in position order, shape (n,), m
     :param y_m: y of the returns in position order, shape (n,), m
-    :param angle_rad: normal angle of each segment's line, shape (S,), rad
+    :param angle_rad: normal angle of each segment's line (the frame), shape (S,), rad
     :param radius_m: radius of each segment's line, shape (S,), m
     :param range_sigma_m: range noise std, m
     :param bearing_sigma_rad: bearing noise std, rad
     :param min_returns: never cut a segment below this many returns
-    :param threshold_sigmas: cut where max_k |Z_k| / sqrt(k) exceeds this
+    :param threshold_sigmas: cut where max_k |Z_k| / sqrt(Var(Z_k)) exceeds this
     :param window: most returns examined (and cut) at each end
     :return: the trimmed segments
     """
@@ -583,40 +590,46 @@ def trim_offset_ends(segments: SegmentRanges, contour_length: int, x_m: np.ndarr
     if not count:
         return segments
     start, stop = segments.start, segments.stop
+    # Each segment's sums of t, t^2, e, t e and rho^2 in its line's frame, from its moment
+    # sums (prefix sums over the contour walked twice).
+    terms = moment_terms(np.tile(x_m, 2), np.tile(y_m, 2))
+    prefix = np.concatenate((np.zeros((7, 1)), np.cumsum(terms, axis=1)), axis=1)
+    returns, sx, sy, sxx, syy, sxy, srr = prefix[:, stop] - prefix[:, start]
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    whole_t = c * sy - s * sx
+    whole = np.array([whole_t, c * c * syy - 2.0 * c * s * sxy + s * s * sxx,
+                      c * sx + s * sy - returns * radius_m,
+                      (c * c - s * s) * sxy + c * s * (syy - sxx) - radius_m * whole_t, srr])
     # Columns [0, S) walk back from the segments' ends, columns [S, 2 S) forward from their
-    # starts; row k - 1 is the k-th return from the end.
+    # starts; row k - 1 holds the sums over the k returns nearest the end.
     position = _end_windows(stop - 1, start, window)
     x, y = x_m.take(position, mode='wrap'), y_m.take(position, mode='wrap')
-    angle = np.concatenate((angle_rad, angle_rad))
-    residual = x * np.cos(angle) + y * np.sin(angle)
-    residual -= np.concatenate((radius_m, radius_m))
-    if bearing_sigma_rad > 0.0:
-        residual /= np.sqrt(range_sigma_m ** 2 + (x * x + y * y) * bearing_sigma_rad ** 2)
-    else:
-        residual /= range_sigma_m
-    # Z_k down each column as one small matrix product (a cumsum costs five times as much);
-    # the score is Z_k^2 / k, zero where a cut would leave too few returns.
-    total = np.dot(_lower_ones(window), residual)
-    score = total * total
-    returns = np.arange(1, window + 1)[:, None]
-    score /= returns
+    c, s, radius = np.tile(c, 2), np.tile(s, 2), np.tile(radius_m, 2)
+    t, e = y * c - x * s, x * c + y * s - radius
+    rho2 = x * x + y * y
+    weight = 1.0 / np.sqrt(range_sigma_m ** 2 + rho2 * bearing_sigma_rad ** 2)
+    rest_t, rest_tt, rest_e, rest_te, rest_rr = (
+        np.tile(whole, 2)[:, None, :] - np.cumsum([t, t * t, e, t * e, rho2], axis=1))
+    sum_z, sum_w, sum_tw = np.cumsum([e * weight, weight, t * weight], axis=1)
+    k = np.arange(1, window + 1)[:, None]
+    m = np.tile(returns, 2) - k
+    with np.errstate(divide='ignore', invalid='ignore'):
+        mean_t, mean_e = rest_t / m, rest_e / m
+        spread = rest_tt - m * mean_t * mean_t                              # S_tt
+        slope = (rest_te - m * mean_t * mean_e) / spread
+        lever = sum_tw - mean_t * sum_w                                     # T - t_m W
+        total = sum_z - mean_e * sum_w - slope * lever
+        scatter = range_sigma_m ** 2 + bearing_sigma_rad ** 2 * rest_rr / m
+        score = total * total / (k + scatter * (sum_w * sum_w / m + lever * lever / spread))
     room = (stop - start - min_returns) // 2
-    score *= returns <= np.concatenate((room, room))
-    # NaN scores (a NaN line, never kept by the pipeline) compare False: no cut.
-    over = score > threshold_sigmas * threshold_sigmas
+    # Too few returns left for a cut, or a NaN line (never kept by the pipeline): no cut.
+    score[(k > np.concatenate((room, room))) | np.isnan(score)] = -np.inf
+    over = score.max(axis=0) > threshold_sigmas * threshold_sigmas
     if not over.any():
         return segments
-    cut = (score.argmax(axis=0) + 1) * over.any(axis=0)
+    cut = (score.argmax(axis=0) + 1) * over
     return _within_contour(start + cut[count:], stop - cut[:count], segments.chain,
                            contour_length)
-
-
-@functools.lru_cache(maxsize=4)
-def _lower_ones(size: int) -> np.ndarray:
-    """Return the lower-triangular (size, size) matrix of ones: its product cumulates rows."""
-    ones = np.tri(size)
-    ones.flags.writeable = False
-    return ones
 
 
 def _end_windows(last: np.ndarray, first: np.ndarray, window: int) -> np.ndarray:

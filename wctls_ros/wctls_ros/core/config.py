@@ -117,10 +117,11 @@ class FeatureConfig:
         'crosses such a gap (nor a range jump beyond what noise explains): collinear surfaces '
         'across a dark or open gap are not one wall', Limits(0, 100000))
     end_offset_sigmas: float = _setting(
-        4.0, 'cut the last k returns of a segment end when their residuals, each in sigmas of '
-        'its noise, sum to more than this times sqrt(k) (another surface met at a shallow '
-        'angle); the same run test tells a wall seen behind an edge from a corner; 0 disables '
-        'both', Limits(0.0, 1e3))
+        4.0, 'cut the last k returns of a segment end when their residuals from the line of '
+        "the segment's other returns, each in sigmas of its noise, sum to more than this many "
+        'standard deviations of their sum (another surface met at a shallow angle, an object '
+        "before the wall's end); the same threshold tells a wall seen behind an edge from a "
+        'corner; 0 disables both', Limits(0.0, 1e3))
     residual_scaling: bool = _setting(
         True, "scale each line's covariance by its residual chi2 per degree of freedom when "
         'above 1 (an a-posteriori variance factor: a wall rougher, or returns noisier, than '

@@ -284,8 +284,8 @@ def walls_end_at(corner_xy_m, corner_covariance, first_segment, second_segment, 
     rounded), in front of both lines (an occluder) or elsewhere. Each wall reaches as far
     towards the corner as its returns do, also beyond something in front of it (e.g. a leg),
     unless those returns lie in front of its line together (their residuals over the noise sum
-    to more than ``run_sigmas`` times the square root of their number, the test of
-    :func:`trim_offset_ends`): an object before the wall's end.
+    to more than ``run_sigmas`` times the square root of their number): an object before the
+    wall's end.
     The corner is rejected when
 
     - a wall's line carries returns past the corner: the wall goes on, it does not end there;

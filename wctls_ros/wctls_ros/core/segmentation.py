@@ -479,49 +479,85 @@ def trim_offset(start, stop, chain, x_m, y_m, angle_rad, radius_m, range_sigma_m
     Cut off the returns at segment ends that lie off the segment's line together.
 
     IEPF leaves a run of returns from another surface at a segment's end when the run stays
-    within its threshold of the chord: a box beside a wall, met at a shallow angle, whose
-    returns then join the wall in some scans and not in others, and move its line by more than
-    its covariance says. Each return's residual from the line over its noise is
-    z = (x cos(angle) + y sin(angle) - radius) / sqrt(range_sigma^2 + (rho bearing_sigma)^2),
-    and the last k returns at an end sum to Z_k, which on one line is normal with a variance of
-    at most k (the noise is an upper bound of the scatter across the line). An end is cut after
-    the k that maximises |Z_k| / sqrt(k), when that maximum exceeds ``threshold_sigmas``. Each
-    end cuts at most half of the returns a segment has beyond ``min_returns``, so that the rule
-    does not depend on the beam order. At most 8 returns are examined at each end.
+    within its threshold of the chord: a box beside a wall, met at a shallow angle, or a chair
+    leg a few cm in front of it, whose returns then join the wall in some scans and not in
+    others, and move its line by more than its covariance says. The last k returns at an end
+    are tested against the line of the segment's other returns, not against a line they have
+    pulled towards themselves (a deleted-residual test). In the frame of the segment's line
+    (angle, radius), each return has a coordinate t along it and a residual e across it; the
+    other returns' line is the least-squares line e = a + b t through theirs (m returns,
+    t-mean t_m, sum of squares S_tt about it; to first order the orthogonal fit of those
+    returns). With z_j = (e_j - a - b t_j) / sigma_j, sigma_j = sqrt(range_sigma^2 +
+    (rho_j bearing_sigma)^2), the k returns sum to Z_k, normal with mean 0 on one line and
+    variance at most k + s^2 (W^2 / m + (T - t_m W)^2 / S_tt), W and T the sums of 1 / sigma_j
+    and t_j / sigma_j over the k returns and s^2 the mean sigma^2 of the other returns (the
+    noise is an upper bound of the scatter across the line; the second term is their line's
+    own error carried to the end). An end is cut after the k that maximises Z_k^2 / Var(Z_k),
+    when that maximum exceeds ``threshold_sigmas`` squared. Each end cuts at most half of the
+    returns a segment has beyond ``min_returns``, so that the rule does not depend on the beam
+    order. At most 8 returns are examined at each end.
 
     :param start: first position of each segment, sorted, shape (S,)
     :param stop: one past the last position (modulo n), shape (S,)
     :param chain: the chain of each segment, shape (S,)
     :param x_m: x of the returns in circular order, shape (n,), m
     :param y_m: y of the returns in circular order, shape (n,), m
-    :param angle_rad: normal angle of each segment's line, shape (S,), rad
+    :param angle_rad: normal angle of each segment's line (the frame), shape (S,), rad
     :param radius_m: radius of each segment's line, shape (S,), m
     :param range_sigma_m: range noise std, m
     :param bearing_sigma_rad: bearing noise std, rad
     :param min_returns: never trim a segment below this many returns
-    :param threshold_sigmas: cut where max_k |Z_k| / sqrt(k) exceeds this
+    :param threshold_sigmas: cut where max_k |Z_k| / sqrt(Var(Z_k)) exceeds this
     :return: (start, stop, chain) of the trimmed segments
     """
-    n, count, window = x_m.size, start.size, _END_WINDOW
+    n, count = x_m.size, start.size
     new_start, new_stop = start.copy(), stop.copy()
     limit = threshold_sigmas * threshold_sigmas
     for s in range(count):
+        reach = min((stop[s] - start[s] - min_returns) // 2, _END_WINDOW)
+        if reach <= 0:
+            continue
         c, sn = math.cos(angle_rad[s]), math.sin(angle_rad[s])
-        room = (stop[s] - start[s] - min_returns) // 2
+        # Sums over the whole segment of t, t^2, e, t e and rho^2.
+        whole_t = whole_tt = whole_e = whole_te = whole_rr = 0.0
+        for p in range(start[s], stop[s]):
+            x, y = x_m[p % n], y_m[p % n]
+            t, e = y * c - x * sn, x * c + y * sn - radius_m[s]
+            whole_t += t
+            whole_tt += t * t
+            whole_e += e
+            whole_te += t * e
+            whole_rr += x * x + y * y
         for side in range(2):             # back from the end, then forward from the start
-            total, best, cut = 0.0, -1.0, 0
-            for k in range(1, window + 1):
+            rest_t, rest_tt, rest_e, rest_te, rest_rr = (whole_t, whole_tt, whole_e, whole_te,
+                                                         whole_rr)
+            sum_z = sum_w = sum_tw = 0.0  # of e / sigma, 1 / sigma, t / sigma over the k
+            best, cut = -1.0, 0
+            for k in range(1, reach + 1):
                 i = (stop[s] - k if side == 0 else start[s] + k - 1) % n
                 x, y = x_m[i], y_m[i]
-                residual = x * c + y * sn
-                residual -= radius_m[s]
-                if bearing_sigma_rad > 0.0:
-                    residual /= math.sqrt(range_sigma_m ** 2
-                                          + (x * x + y * y) * bearing_sigma_rad ** 2)
-                else:
-                    residual /= range_sigma_m
-                total += residual
-                score = total * total / k if k <= room else 0.0
+                t, e = y * c - x * sn, x * c + y * sn - radius_m[s]
+                rest_t -= t
+                rest_tt -= t * t
+                rest_e -= e
+                rest_te -= t * e
+                rest_rr -= x * x + y * y
+                weight = 1.0 / math.sqrt(range_sigma_m ** 2
+                                         + (x * x + y * y) * bearing_sigma_rad ** 2)
+                sum_z += e * weight
+                sum_w += weight
+                sum_tw += t * weight
+                m = float(stop[s] - start[s] - k)
+                mean_t, mean_e = rest_t / m, rest_e / m
+                spread = rest_tt - m * mean_t * mean_t                      # S_tt
+                if not spread > 0.0:          # the other returns at one point: no line
+                    break
+                slope = (rest_te - m * mean_t * mean_e) / spread
+                lever = sum_tw - mean_t * sum_w                             # T - t_m W
+                total = sum_z - mean_e * sum_w - slope * lever
+                scatter = range_sigma_m ** 2 + bearing_sigma_rad ** 2 * rest_rr / m
+                variance = k + scatter * (sum_w * sum_w / m + lever * lever / spread)
+                score = total * total / variance
                 if score > best:
                     best, cut = score, k
             if best > limit:                     # NaN (a NaN line) compares False: no cut

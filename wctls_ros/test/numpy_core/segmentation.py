@@ -552,26 +552,11 @@ def trim_offset_ends(segments: SegmentRanges, contour_length: int, x_m: np.ndarr
                      range_sigma_m: float, bearing_sigma_rad: float, min_returns: int,
                      threshold_sigmas: float, window: int = 8) -> SegmentRanges:
     """
-    Cut off the returns at segment ends that lie off the segment's line together.
+    Cut off the returns at segment ends that lie off the line of the segment's other returns.
 
-    IEPF leaves a run of returns from another surface at a segment's end when the run stays
-    within its threshold of the chord: a box beside a wall, met at a shallow angle, or a chair
-    leg a few cm in front of it, whose returns then join the wall in some scans and not in
-    others, and move its line by more than its covariance says. The last k returns at an end
-    are tested against the line of the segment's other returns, not against a line they have
-    pulled towards themselves (a deleted-residual test). In the frame of the segment's line
-    (angle, radius), each return has a coordinate t along it and a residual e across it; the
-    other returns' line is the least-squares line e = a + b t through theirs (m returns,
-    t-mean t_m, sum of squares S_tt about it; to first order the orthogonal fit of those
-    returns). With z_j = (e_j - a - b t_j) / sigma_j, sigma_j = sqrt(range_sigma^2 +
-    (rho_j bearing_sigma)^2), the k returns sum to Z_k, normal with mean 0 on one line and
-    variance at most k + s^2 (W^2 / m + (T - t_m W)^2 / S_tt), W and T the sums of 1 / sigma_j
-    and t_j / sigma_j over the k returns and s^2 the mean sigma^2 of the other returns (the
-    noise is an upper bound of the scatter across the line; the second term is their line's
-    own error carried to the end). An end is cut after the k that maximises Z_k^2 / Var(Z_k),
-    when that maximum exceeds ``threshold_sigmas`` squared. Each end cuts at most half of the
-    returns a segment has beyond ``min_returns``, so that the rule does not depend on the beam
-    order.
+    The reference of :func:`wctls_ros.core.segmentation.trim_offset`, whose docstring states the
+    deleted-residual test (and docs/derivation.md, "Offset ends"): the same sums, for every
+    segment end and every k at once.
 
     :param segments: segments sorted by start position (positions modulo contour_length)
     :param contour_length: number of returns n

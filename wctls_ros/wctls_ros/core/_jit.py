@@ -15,6 +15,11 @@ any is loaded. The options are the same for every kernel: ``error_model='numpy'`
 division by zero gives inf or NaN as in numpy (degenerate segments and corners are dropped later,
 not raised on), and no fastmath, so that NaN compares and rounding are IEEE as in the numpy
 reference the tests hold the kernels to.
+
+The first run on a machine compiles every kernel (about 20 s on a 2-core EPYC VM), so the
+kernels avoid what costs compile time without need: an array assigned to a slice
+(``a[:-1] = b[1:]``) makes numba compile its shape-mismatch message (string formatting), 1.7 s
+for the one such line the core had; the core's kernels write those as loops.
 """
 
 import glob

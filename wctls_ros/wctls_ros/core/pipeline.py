@@ -149,7 +149,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
         ranges_m, cos, sin, angle_min_rad, angle_increment_rad, range_min_m, range_max_m)
     count = index.size
     if count < settings.min_segment_points:
-        return _nothing(False)
+        return _nothing() + (False,)
     # #range-noise-from-the-scan
     range_sigma = settings.range_sigma_m
     if settings.range_sigma_from_scan:
@@ -169,7 +169,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
         x, y, run_start, run_stop, run_chain,
         _split_threshold(rho, range_sigma, bearing_sigma, settings), budget)
     if start.size == 0:
-        return _nothing(unsplit)
+        return _nothing() + (unsplit,)
     start, stop, chain, angle, radius, unmerged = merge_segments(
         x, y, start, stop, chain, full_turn, joinable[order], range_sigma, bearing_sigma,
         settings.merge_chi2, budget)
@@ -178,7 +178,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     start, stop, chain, angle, radius = (start[keep], stop[keep], chain[keep], angle[keep],
                                          radius[keep])
     if start.size == 0:
-        return _nothing(work_limited)
+        return _nothing() + (work_limited,)
     start, stop, chain = trim_ambiguous(start, stop, chain, full_turn, x, y, angle, radius,
                                         range_sigma, bearing_sigma, settings.min_segment_points)
     if settings.end_offset_sigmas > 0.0:
@@ -192,7 +192,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     (angle, radius, normal_covariance, line, line_covariance, line_offset, start_xy, end_xy,
      first, last, counts, chi2_dof) = walls
     if angle.size == 0:
-        return _nothing(work_limited)
+        return _nothing() + (work_limited,)
     # #corners: which pairs are corners is decided on the sensor noise alone; the published
     # covariances add the model error (a rougher wall is less precise, not more of a corner).
     first_wall, second_wall, corner_xy, corner_yaw, opening, end_seen = _corners(
@@ -212,13 +212,18 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
 
 
 @jit
-def _nothing(work_limited):
-    """Return the result of a scan without segments, in :func:`_features_of_scan`'s shape."""
+def _nothing():
+    """
+    Return the arrays of a scan without segments, in :func:`_features_of_scan`'s shape.
+
+    The caller appends whether the work bound stopped splitting or merging: as an argument, a
+    literal False and a bool would compile this twice (0.5 s of the cold start).
+    """
     no_index = np.zeros(0, np.intp)
     return (np.zeros(0), np.zeros(0), np.zeros((0, 2, 2)), np.zeros((0, 3)),
             np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros((0, 2)), np.zeros((0, 2)), no_index,
             no_index, no_index, np.zeros(0), np.zeros((0, 2)), np.zeros(0), np.zeros((0, 3, 3)),
-            np.zeros(0), no_index, no_index, np.zeros((0, 2), np.bool_), work_limited)
+            np.zeros(0), no_index, no_index, np.zeros((0, 2), np.bool_))
 
 
 @jit

@@ -153,12 +153,10 @@ def chains_of(range_m, x_m, y_m, separated):
         first = breaks[0] if n else 0
         start = breaks - first
         stop = np.empty_like(start)
-        stop[:-1] = start[1:]
-        if start.size:
-            stop[-1] = n
+        for k in range(start.size):   # a loop, not stop[:-1] = start[1:] (see _jit.py)
+            stop[k] = start[k + 1] if k + 1 < start.size else n
         chain = np.arange(start.size)
-    order = np.arange(first, first + n)
-    order[n - first:] -= n
+    order = np.arange(first, first + n) % max(n, 1)
     return order, start, stop, chain
 
 

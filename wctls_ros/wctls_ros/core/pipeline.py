@@ -16,7 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._jit import jit
+from ._jit import jit, jit_inline
 from .config import FeatureConfig, METHODS
 from .corners import corner_candidates, walls_end_at
 from .features import CornerSet, Features, SegmentSet
@@ -277,7 +277,7 @@ def _in_scan_order(beam_of_position, beam_count, start, stop):
     return sorted_start, sorted_stop
 
 
-@jit
+@jit_inline
 def _fit_walls(rho, theta, x, y, start, stop, range_sigma, bearing_sigma, settings):
     """
     Fit every segment with the configured method and keep the ones that are walls.
@@ -342,7 +342,7 @@ def _usable(line, line_covariance, angle, radius, normal_covariance):
             and normal_covariance[0, 0] * normal_covariance[1, 1] > normal_covariance[0, 1] ** 2)
 
 
-@jit
+@jit_inline
 def _corners(x, y, walls, first, last, full_turn, step_rad, range_sigma, bearing_sigma,
              settings):
     """

@@ -607,8 +607,10 @@ def trim_offset_ends(segments: SegmentRanges, contour_length: int, x_m: np.ndarr
         scatter = range_sigma_m ** 2 + bearing_sigma_rad ** 2 * rest_rr / m
         score = total * total / (k + scatter * (sum_w * sum_w / m + lever * lever / spread))
     room = (stop - start - min_returns) // 2
-    # Too few returns left for a cut, or a NaN line (never kept by the pipeline): no cut.
-    score[(k > np.concatenate((room, room))) | np.isnan(score)] = -np.inf
+    # Too few returns left for a cut, or a NaN line (never kept by the pipeline): no cut; nor
+    # from the first k whose other returns lie at one point along the line (no line of theirs).
+    spread_left = np.logical_and.accumulate(spread > 0.0, axis=0)
+    score[(k > np.concatenate((room, room))) | np.isnan(score) | ~spread_left] = -np.inf
     over = score.max(axis=0) > threshold_sigmas * threshold_sigmas
     if not over.any():
         return segments

@@ -381,7 +381,9 @@ def walls_end_at(corner_xy_m, corner_covariance, first_segment, second_segment, 
         for s in range(width):
             at_corner[s] = present[s] and math.hypot(x[s] - corner_x, y[s] - corner_y) <= zone
         # Returns away from the corner that a wall claims beyond its segment must not lie in
-        # front of its line together (the test of segmentation.trim_offset).
+        # front of its line together. Its line was fitted without them, so their plain sum of
+        # normalised residuals is already a deleted-residual test (segmentation.trim_offset
+        # tests a segment's own returns, and so against the line of the others).
         for k in range(2):
             run, together = 0, 0.0
             for s in range(1, width - 1):

@@ -205,7 +205,7 @@ def _serve(args):
         signal.signal(signal.SIGTERM, lambda *_: emulator.commands.put('quit'))
         # A shell starts a script's background jobs with SIGINT ignored, and Python then leaves
         # it so: the demo's SIGINT to its process group (or a test's) would not stop us. Whoever
-        # sends it means it, as for the nodes (rclpy handles it whatever it inherited).
+        # sends it means it, as for the nodes (node_main installs its own SIGINT handler).
         signal.signal(signal.SIGINT, signal.default_int_handler)
         print(f'pty {emulator.pty.path}', flush=True)
         if args.link:

@@ -322,7 +322,7 @@ def _outputs(work: ScanWork, records, jobs: int):
         return
     # Forked, the workers inherit the work and start at once; they die with this process. The
     # compiled core too, if it is loaded here first: otherwise each worker of each bag loads it
-    # from the cache again (0.3 s of CPU each; a no-op once loaded).
+    # from the cache again (0.3 s of CPU each; once loaded, warm_up takes a fraction of a ms).
     warm_up()
     pool = ProcessPoolExecutor(jobs, multiprocessing.get_context('fork'), _start_worker, (work,))
     try:

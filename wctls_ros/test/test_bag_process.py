@@ -531,6 +531,21 @@ def process_ids_of_children(pid):
     return children
 
 
+@pytest.mark.parametrize('parent_gone', [False, True])
+def test_a_worker_ends_at_once_when_its_parent_died_before_it_started(parent_gone):
+    # The parent can die between forking a worker and the worker's set-up (a Ctrl-C at that
+    # moment): no death signal comes then, and the worker would wait for work for ever (seen
+    # once in this suite, an orphan worker an hour later). Here the "parent" is a process id
+    # that is not the caller's parent when parent_gone, the real one otherwise.
+    script = ('import os, sys\n'
+              'from wctls_ros.bags.process_bag import _start_worker\n'
+              f'_start_worker(None, os.getppid() + {int(parent_gone)})\n'
+              'sys.exit(0)\n')
+    result = subprocess.run([sys.executable, '-c', script], capture_output=True, text=True,
+                            timeout=60)
+    assert (result.returncode, result.stderr) == (1 if parent_gone else 0, '')
+
+
 def wait_until_gone(pids, timeout_s=10.0):
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:

@@ -284,14 +284,23 @@ class ScanWork:
 _WORK: Optional[ScanWork] = None
 
 
-def _start_worker(work: ScanWork) -> None:
-    """Set up a worker process: its work, and no signals of its own (its parent stops it)."""
+def _start_worker(work: ScanWork, parent_pid: int) -> None:
+    """
+    Set up a worker process: its work, and no signals of its own (its parent stops it).
+
+    :param work: the work, inherited
+    :param parent_pid: the process that forked this one; if that is gone already, so is this
+    """
     global _WORK
     _WORK = work
     for number in StopSignals.SIGNALS:
         signal.signal(number, signal.SIG_IGN)
     with contextlib.suppress(OSError, AttributeError):   # die with the parent, even by SIGKILL
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    # A parent that died before the line above (a Ctrl-C right after the fork) sends no signal:
+    # this worker would wait for work for ever, on a queue lock a killed sibling may hold.
+    if os.getppid() != parent_pid:
+        os._exit(1)
 
 
 def _work_on(batch: list) -> list:
@@ -324,7 +333,8 @@ def _outputs(work: ScanWork, records, jobs: int):
     # compiled core too, if it is loaded here first: otherwise each worker of each bag loads it
     # from the cache again (0.3 s of CPU each; once loaded, warm_up takes a fraction of a ms).
     warm_up()
-    pool = ProcessPoolExecutor(jobs, multiprocessing.get_context('fork'), _start_worker, (work,))
+    pool = ProcessPoolExecutor(jobs, multiprocessing.get_context('fork'), _start_worker,
+                               (work, os.getpid()))
     try:
         pending = collections.deque()
         for batch in _batches(enumerate(records), BATCH_SCANS):

@@ -57,6 +57,10 @@ class NodeProcess:
         return output
 
 
+# No output for this long: the node has caught up with what it was sent, s.
+QUIET_S = 2.0
+
+
 def scan_message(ranges, angle_min, increment, sec):
     scan = LaserScan(angle_min=angle_min, angle_max=angle_min + (len(ranges) - 1) * increment,
                      angle_increment=increment, range_min=0.05, range_max=40.0,
@@ -113,15 +117,25 @@ def test_a_node_that_falls_behind_processes_the_newest_scan_and_counts_the_rest(
         heavy = [room_scan_message(beams=60000, stamp=(sec, 0)) for sec in range(2, 41)]
         for scan in heavy:
             node.scans.publish(scan)
-        assert spin_until(node.executor, lambda: 40 in node.stamps(), 20.0), node.stamps()
-        burst = [s for s in node.stamps() if s > 1]
+        # The scan subscription is best effort: while the node is busy, the transport may drop
+        # the burst's last large scan (it did once in a full run: stamps [1, 7, 39]). So once
+        # the node has gone quiet, one small scan follows; that newest one it must process,
+        # and count every scan it missed before it.
+        deadline = time.monotonic() + 20.0
+        while time.monotonic() < deadline:
+            seen = len(node.stamps())
+            if not spin_until(node.executor, lambda: len(node.stamps()) > seen, QUIET_S):
+                break
+        node.scans.publish(room_scan_message(stamp=(41, 0)))
+        assert spin_until(node.executor, lambda: 41 in node.stamps(), 10.0), node.stamps()
+        burst = [s for s in node.stamps() if 1 < s < 41]
         assert 1 <= len(burst) < 20, burst               # the queue held the newest scan only
         assert burst == sorted(burst)
         after = report_of(len(node.stamps()))
         processed = int(after['scans processed']) - int(before['scans processed'])
         skipped = (int(after['scans skipped (falling behind)'])
                    - int(before['scans skipped (falling behind)']))
-        assert (processed, processed + skipped) == (len(burst), 39)
+        assert (processed, processed + skipped) == (len(burst) + 1, 40)
         assert any(r['level'] == DiagnosticStatus.WARN for r in node.diagnostics)
         assert 'falling behind' in node.stop()
     except BaseException:

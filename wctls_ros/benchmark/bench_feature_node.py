@@ -114,23 +114,28 @@ STAGES = ('deserialize', 'extract_features', 'build corners', 'build lines', 'bu
           'publish corners', 'publish lines', 'publish markers', 'rest')
 
 
-def floor_path_node():
+def empty_outputs_node(name: str, lines: bool):
     """
-    Return a node whose scan callback only publishes an empty CornerArray and LineSegmentArray.
+    Return a node that answers each scan with an empty CornerArray (and LineSegmentArray).
 
-    :return: the node, named and wired as feature_node (scan in; corners, lines out)
+    The floor of both measurements: what rclpy takes for a scan in and empty messages out.
+
+    :param name: the node's name
+    :param lines: also publish an empty LineSegmentArray on ``lines``, as feature_node does
+    :return: the node
     """
     from rclpy.node import Node
     from sensor_msgs.msg import LaserScan
     from wctls_msgs.msg import CornerArray, LineSegmentArray
     from wctls_ros.feature_node import SCAN_QOS
-    node = Node('feature_node')
+    node = Node(name)
     corners = node.create_publisher(CornerArray, 'corners', 10)
-    lines = node.create_publisher(LineSegmentArray, 'lines', 10)
+    line_publisher = node.create_publisher(LineSegmentArray, 'lines', 10) if lines else None
 
-    def on_scan(scan, info):
+    def on_scan(scan, info=None):         # info: measure_path passes it, as to feature_node's
         corners.publish(CornerArray(header=scan.header, method='none'))
-        lines.publish(LineSegmentArray(header=scan.header, method='none'))
+        if line_publisher is not None:
+            line_publisher.publish(LineSegmentArray(header=scan.header, method='none'))
     node.create_subscription(LaserScan, 'scan', on_scan, SCAN_QOS)
     return node
 
@@ -141,7 +146,8 @@ def measure_path(markers: bool, count: int, floor: bool = False) -> None:
 
     :param markers: whether the listener subscribes the markers
     :param count: scans measured (after :data:`WARM_UP_SCANS`)
-    :param floor: measure :func:`floor_path_node`'s callback instead of feature_node's
+    :param floor: measure the callback of :func:`empty_outputs_node` (named and wired as
+        feature_node) instead of feature_node's
     """
     import importlib
     import rclpy
@@ -170,7 +176,7 @@ def measure_path(markers: bool, count: int, floor: bool = False) -> None:
                               'publish ' + publisher.topic_name.rsplit('/', 1)[1])
 
     rclpy.init()
-    node = floor_path_node() if floor else FeatureNode(
+    node = empty_outputs_node('feature_node', lines=True) if floor else FeatureNode(
         parameter_overrides=[Parameter('range_sigma_m', value=0.01)])
     listener = subprocess.Popen([sys.executable, __file__, '--listen', str(int(markers))],
                                 stdin=subprocess.PIPE)
@@ -224,15 +230,8 @@ def floor_node() -> None:
     """Run the floor: receive each scan and publish an empty CornerArray with its header."""
     import rclpy
     from rclpy.executors import ExternalShutdownException
-    from rclpy.node import Node
-    from sensor_msgs.msg import LaserScan
-    from wctls_msgs.msg import CornerArray
-    from wctls_ros.feature_node import SCAN_QOS
     rclpy.init()
-    node = Node('floor_node')
-    corners = node.create_publisher(CornerArray, 'corners', 10)
-    node.create_subscription(LaserScan, 'scan', lambda scan: corners.publish(
-        CornerArray(header=scan.header, method='none')), SCAN_QOS)
+    node = empty_outputs_node('floor_node', lines=False)
     try:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):     # terminated: rclpy's handler

@@ -23,7 +23,8 @@ PYTEST_ARGS ?=
 OLDEST_NUMPY_VENV := .venv-oldest-numpy
 OLDEST_NUMPY_STAMP := $(OLDEST_NUMPY_VENV)/.deps.stamp
 NUMPY_ONLY_TESTS := $(addprefix wctls_ros/test/,test_core_lines.py test_core_pipeline.py \
-                      test_core_segmentation.py test_rplidar_scan.py test_simulation.py)
+                      test_core_precompile.py test_core_segmentation.py test_rplidar_scan.py \
+                      test_simulation.py)
 
 .PHONY: help deps build demo test lint bench results docs clean
 

@@ -37,6 +37,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 from wctls_ros.core import extract_features, FeatureConfig, METHODS  # noqa: E402
+from wctls_ros.core.precompile import default_helpers  # noqa: E402
 from wctls_ros.evaluation.scans import load_scans  # noqa: E402
 from wctls_ros.simulation import (full_turn_bearings, load_floor_plan, NoiseModel,  # noqa: E402
                                   simulate_ranges)
@@ -128,27 +129,38 @@ def side_by_side(count, peer):
               f'{peer_lines:>10.1f}')
 
 
-FIRST_SCAN = ('import time; start = time.perf_counter(); import numpy as np; '
-              'from wctls_ros.core import extract_features; '
+# As the nodes and tools start: warm_up (helper processes on an empty cache), then a scan.
+FIRST_SCAN = ('import sys, time; start = time.perf_counter(); import numpy as np; '
+              'from wctls_ros.core import extract_features, warm_up; '
+              'warm_up(None if sys.argv[1] == "default" else int(sys.argv[1])); '
               'b = -np.pi + 2 * np.pi / 1080 * np.arange(1080); '
               'extract_features(2.0 / np.maximum(abs(np.cos(b)), abs(np.sin(b))), -np.pi, '
               '2 * np.pi / 1080); print(time.perf_counter() - start)')
 
 
 def start_up(repeats=3):
-    """Print the time from a fresh interpreter to its first extracted scan, warm and cold."""
-    def first_scan_s(environment):
+    """
+    Print the time from a fresh interpreter to its first extracted scan, warm and cold.
+
+    Cold twice, alternately: with warm_up's default helper processes and without any.
+    """
+    def first_scan_s(environment, helpers='default'):
         started = time.perf_counter()
-        inside = float(subprocess.run([sys.executable, '-c', FIRST_SCAN], env=environment,
-                                      check=True, capture_output=True, text=True).stdout)
+        inside = float(subprocess.run([sys.executable, '-c', FIRST_SCAN, helpers],
+                                      env=environment, check=True, capture_output=True,
+                                      text=True).stdout)
         return time.perf_counter() - started, inside
 
     warm = [first_scan_s(dict(os.environ)) for _ in range(repeats)]
-    with tempfile.TemporaryDirectory() as empty:
-        cold = first_scan_s(dict(os.environ, NUMBA_CACHE_DIR=empty))
     print(f'start-up to the first extracted scan (process wall time; after its imports): warm '
           f'cache {np.median([w[0] for w in warm]):.2f} s ({np.median([w[1] for w in warm]):.2f}'
-          f' s), cold cache {cold[0]:.1f} s ({cold[1]:.1f} s)')
+          f' s)')
+    for helpers in ('default', '0', 'default', '0'):
+        with tempfile.TemporaryDirectory() as empty:
+            cold = first_scan_s(dict(os.environ, NUMBA_CACHE_DIR=empty), helpers)
+        label = f'{default_helpers()} (default)' if helpers == 'default' else helpers
+        print(f'  cold cache, {label} helper processes, {os.cpu_count()} CPUs: {cold[0]:.1f} s '
+              f'({cold[1]:.1f} s)')
 
 
 def main():

@@ -19,7 +19,8 @@ from .config import FeatureConfig, METHODS, validation_errors
 from .corners import find_corners, intersect
 from .features import Corner, CornerSet, Features, Segment, SegmentSet
 from .lines import fit_lines, LineFits, normal_form, segment_returns, SegmentReturns
-from .pipeline import extract_features, warm_up
+from .pipeline import extract_features
+from .precompile import warm_up
 from .scan import scan_to_points, ScanError, ScanPoints
 from .uncertainty import confidence_scale, Ellipse, ellipse, nees
 

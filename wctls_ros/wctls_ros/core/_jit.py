@@ -16,20 +16,21 @@ division by zero gives inf or NaN as in numpy (degenerate segments and corners a
 not raised on), and no fastmath, so that NaN compares and rounding are IEEE as in the numpy
 reference the tests hold the kernels to.
 
-The first run on a machine compiles every kernel (about 20 s on a 2-core EPYC VM), so the
-kernels avoid what costs compile time without need: an array assigned to a slice
-(``a[:-1] = b[1:]``) makes numba compile its shape-mismatch message (string formatting), 1.7 s
-for the one such line the core had; the core's kernels write those as loops. And numba builds
-each compiled function's machine code with its callees linked in, so a step that only calls
-others (the pipeline's ``_fit_walls`` and ``_corners``) has the code of its whole subtree built
-once more: such thin steps are inlined into their caller (:func:`jit_inline`), about 1.5 s
-less. Inlining a step with much code of its own costs more than it saves (one run each, against
-20.5 s: every kernel called at one place inlined 21.5 s, all of them 38 s).
+The first run on a machine compiles every kernel (15-20 s of CPU on a 2-core EPYC VM; helper
+processes share it, :mod:`.precompile`), so the kernels avoid what costs compile time without need:
+an array assigned to a slice (``a[:-1] = b[1:]``) makes numba compile its shape-mismatch message
+(string formatting), 1.7 s for the one such line the core had; the core's kernels write those as
+loops. And numba builds each compiled function's machine code with its callees linked in, so a step
+that only calls others (the pipeline's ``_fit_walls`` and ``_corners``) has the code of its whole
+subtree built once more: such thin steps are inlined into their caller (:func:`jit_inline`), about
+1.5 s less. Inlining a step with much code of its own costs more than it saves (one run each,
+against 20.5 s: every kernel called at one place inlined 21.5 s, all of them 38 s).
 """
 
 import glob
 import hashlib
 import os
+from typing import Optional
 
 _CACHE_VARIABLE = 'NUMBA_CACHE_DIR'
 _CORE = os.path.dirname(os.path.abspath(__file__))
@@ -66,11 +67,18 @@ def _fingerprint() -> str:
     return digest.hexdigest()
 
 
+def cache_folder() -> Optional[str]:
+    """Return the folder of the core's cached functions, or None when nothing can be cached."""
+    try:
+        return FunctionCache(_located_here).cache_path
+    except RuntimeError:          # no writable cache location: numba compiles in memory
+        return None
+
+
 def _forget_stale_kernels() -> None:
     """Delete the core's cached functions if any core source changed since they were made."""
-    try:
-        folder = FunctionCache(_located_here).cache_path
-    except RuntimeError:          # no writable cache location: numba compiles in memory
+    folder = cache_folder()
+    if folder is None:
         return
     stamp, current = os.path.join(folder, _FINGERPRINT_FILE), _fingerprint()
     try:

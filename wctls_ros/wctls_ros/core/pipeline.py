@@ -11,9 +11,10 @@ returns into the frozen result dataclasses.
 
 import functools
 import math
-import time
 from typing import NamedTuple
 
+import numba
+from numba import types
 import numpy as np
 
 from ._jit import jit, jit_inline
@@ -105,22 +106,52 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
     return Features(config.method, segments, corners, bool(work_limited))
 
 
-def warm_up() -> float:
+def kernels_last_first():
     """
-    Compile the pipeline for this machine, or load it from the on-disk cache.
+    Return the kernels the pipeline calls, last step first, with the types it passes them.
 
-    The first scan would otherwise pay it: seconds on a machine that has never run it, a
-    fraction of one from the cache. Nodes and tools call it before their first scan.
+    The reverse of :func:`_features_of_scan`'s calls, for compiling them in other processes
+    while this one compiles the pipeline (:mod:`.precompile`). numba compiles a kernel once for
+    each tuple of argument types, so these must be exactly the pipeline's, down to the constants
+    it passes as literals; a test holds them to the signatures of a compiled pipeline.
 
-    :return: how long it took, s
+    :return: tuples (kernel, tuple of numba argument types)
     """
-    started = time.perf_counter()
-    beams = 360
-    angle_min, increment = -math.pi, 2.0 * math.pi / beams
-    bearing = angle_min + increment * np.arange(beams)
-    square_room = 2.0 / np.maximum(np.abs(np.cos(bearing)), np.abs(np.sin(bearing)))
-    extract_features(square_room, angle_min, increment)
-    return time.perf_counter() - started
+    real, integer, flag = types.float64, types.intp, types.boolean
+    values, indices, flags = real[::1], integer[::1], flag[::1]
+    read_only_values = types.Array(real, 1, 'C', readonly=True)
+    rows, stacks = real[:, ::1], real[:, :, ::1]         # (K, m) and (K, m, m) float arrays
+    settings = numba.typeof(_settings(_DEFAULT_CONFIG))
+    return (
+        (with_model_error, (rows, values, stacks, stacks, rows, rows, rows, values, indices,
+                            flag, real, real)),
+        (walls_end_at, (rows, stacks, indices, indices, values, values, rows, values, values,
+                        indices, indices, real, real, real, real, real,
+                        types.literal(_CORNER_WINDOW), types.literal(_CORNER_MISSING_BEAMS),
+                        real)),
+        (corner_candidates, (rows, stacks, rows, rows, indices, indices, real, rows, real)),
+        (_usable, (values, rows, real, real, rows)),
+        (_feet, (values, values, indices, values, values)),
+        (residual_chi2_dof, (values, values, indices, indices, values, values, real, real)),
+        (fit_segments, (integer, values, values, values, values, indices, indices, real, real)),
+        (_in_scan_order, (indices, integer, indices, indices)),
+        (trim_offset, (indices, indices, indices, values, values, values, values, real, real,
+                       integer, real)),
+        (trim_ambiguous, (indices, indices, indices, flag, values, values, values, values, real,
+                          real, integer)),
+        (_large_enough, (values, values, indices, indices, settings)),
+        (merge_segments, (values, values, indices, indices, indices, flag, flags, real, real,
+                          real, integer)),
+        (split_iepf, (values, values, indices, indices, indices, values, integer)),
+        (_split_threshold, (values, real, real, settings)),
+        (pass_budget, (integer,)),
+        (chains_of, (values, values, values, flags)),
+        (breakpoints_of, (indices, values, values, values, integer, real, flag, real, real, real,
+                          integer)),
+        (range_sigma_of_returns, (indices, values)),
+        (valid_returns, (values, read_only_values, read_only_values, real, real, real, real)),
+        (_nothing, ()),
+    )
 
 
 @jit

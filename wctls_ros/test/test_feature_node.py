@@ -6,6 +6,7 @@
 import math
 import os
 import pathlib
+import struct
 import subprocess
 import sys
 
@@ -18,6 +19,7 @@ pytest.importorskip('rclpy')
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
+from rclpy.serialization import serialize_message  # noqa: E402
 from scans import NODE_PARAMETERS, room_scan_message, room_truth  # noqa: E402
 from sensor_msgs.msg import LaserScan  # noqa: E402
 from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
@@ -182,6 +184,25 @@ def test_a_burst_of_malformed_scans_then_a_good_one(ros_context, executor):
         assert len(corners.corners) == len(lines.segments) == 0
     corners, _ = harness.exchange(good, count=len(bad) + 1)
     assert len(corners.corners) == 5
+
+
+def test_bytes_that_are_no_scan_are_counted_and_the_next_is_processed(ros_context, executor):
+    # The node takes scans as CDR bytes and decodes them itself: whatever a publisher sends
+    # on scan (e.g. a raw publish with the wrong layout) must not stop it.
+    harness = Harness(ros_context, executor)
+    good = serialize_message(room_scan_message())
+    ranges_length = good.find(struct.pack('<I', 1080))
+    undecodable = (good[:4],                                      # the encapsulation alone
+                   good[:len(good) // 2],                         # cut in the ranges
+                   good[:ranges_length] + struct.pack('<I', 2 ** 31 - 1)
+                   + good[ranges_length + 4:])                    # a sequence too long
+    harness.wait_for_subscriber()
+    for count, data in enumerate(undecodable, start=1):       # one at a time: a one-scan queue
+        harness.scans.publish(data)
+        assert spin_until(harness.executor, lambda: harness.node.counters.malformed == count)
+    corners, _ = harness.exchange(room_scan_message())
+    assert len(corners.corners) == 5 and len(harness.received['corners']) == 1
+    assert harness.node.counters.processed == 1
 
 
 def installed_executable(name):

@@ -65,21 +65,25 @@ class MessageTypes:
     :ivar float32_array: turns a float32 sequence into what the message classes hold
     :ivar serialize: turns a message of these classes into its CDR bytes (with the
         encapsulation header, as ``rclpy.serialization.serialize_message`` gives)
+    :ivar deserialize: turns CDR bytes and a ROS type name into a message of these classes
     """
 
     def __init__(self, classes: Dict[str, type], float32_array: Callable,
-                 serialize: Callable[[object], bytes]):
+                 serialize: Callable[[object], bytes],
+                 deserialize: Callable[[bytes, str], object]):
         """
         Name the classes.
 
         :param classes: ROS type name (one of MESSAGE_TYPES) -> class
         :param float32_array: turns a float32 sequence into what the classes hold
         :param serialize: turns a message of these classes into its CDR bytes
+        :param deserialize: turns CDR bytes and a type name into a message of these classes
         """
         for name, kind in classes.items():
             setattr(self, name.rsplit('/', 1)[1], kind)
         self.float32_array = float32_array
         self.serialize = serialize
+        self.deserialize = deserialize
 
     @classmethod
     def from_rclpy(cls) -> 'MessageTypes':
@@ -88,12 +92,15 @@ class MessageTypes:
 
         :return: the types
         """
-        from rclpy.serialization import serialize_message
+        from rclpy.serialization import deserialize_message, serialize_message
         classes = {}
         for name in MESSAGE_TYPES:
             package, _, kind = name.split('/')
             classes[name] = getattr(importlib.import_module(f'{package}.msg'), kind)
-        return cls(classes, _float32_array_for_rclpy, serialize_message)
+
+        def deserialize(data: bytes, name: str):
+            return deserialize_message(data, classes[name])
+        return cls(classes, _float32_array_for_rclpy, serialize_message, deserialize)
 
     @classmethod
     def from_typestore(cls, store) -> 'MessageTypes':
@@ -112,7 +119,7 @@ class MessageTypes:
         def serialize(message) -> bytes:
             return bytes(store.serialize_cdr(message, message.__msgtype__))
         return cls({name: store.types[name] for name in MESSAGE_TYPES},
-                   _float32_array_for_rosbags, serialize)
+                   _float32_array_for_rosbags, serialize, store.deserialize_cdr)
 
 
 def mismatched_types(store, published: Dict[str, str]) -> list:

@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-Sorting for the compiled kernels: a stable order and a median, as plain loops.
+Order for the compiled kernels: a stable order and a median as plain loops, circular positions.
 
 numba's own np.argsort(kind='mergesort') and np.median compile a generic implementation per
 argument type that costs seconds on a machine that has never run the core; these few loops
@@ -12,6 +12,19 @@ cost a fraction of that and are all the pipeline needs.
 import numpy as np
 
 from ._jit import jit
+
+
+@jit
+def wrapped(position, n):
+    """
+    Return a position taken modulo n (a segment across the seam of a full turn runs past n).
+
+    For a position >= 0 that is at most a turn or two past n, as in the loops over a segment's
+    or a window's returns: a subtraction where ``%`` divides (tens of cycles), once per return.
+    """
+    while position >= n:
+        position -= n
+    return position
 
 
 @jit

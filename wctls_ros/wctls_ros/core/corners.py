@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from ._jit import jit
+from ._order import wrapped
 from .features import CornerSet
 
 
@@ -249,7 +250,7 @@ def seen_through(corner_x_m, corner_y_m, normal_x, normal_y, radius_m, inward_x,
     count = x_m.size
     run, behind = 0, 0.0
     for step in range((stop - start) % count + 1):
-        position = (start + step) % count
+        position = wrapped(start + step, count)
         x, y = x_m[position], y_m[position]
         noise = math.sqrt(range_sigma_m ** 2 + (x * x + y * y) * bearing_sigma_rad ** 2)
         line_tolerance = sigmas * noise + floor_m
@@ -345,7 +346,8 @@ def walls_end_at(corner_xy_m, corner_covariance, first_segment, second_segment, 
         for s in range(width):
             position = before_second if s == width - 1 else after_first + s
             present[s] = s <= between or s == width - 1
-            x[s], y[s] = x_m[position % count], y_m[position % count]
+            position = wrapped(position, count)
+            x[s], y[s] = x_m[position], y_m[position]
             noise[s] = math.sqrt(range_sigma_m ** 2 + (x[s] * x[s] + y[s] * y[s])
                                  * bearing_sigma_rad ** 2)
             line_tolerance[s] = sigmas * noise[s] + floor_m

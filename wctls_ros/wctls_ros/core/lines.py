@@ -519,7 +519,7 @@ def _ml_fits(rho, theta, x, y, offsets, counts, range_sigma, bearing_sigma, angl
 
 
 @jit
-def residual_chi2_dof(rho, theta, offsets, counts, angle_rad, radius_m, range_sigma,
+def residual_chi2_dof(rho, x, y, offsets, counts, angle_rad, radius_m, range_sigma,
                       bearing_sigma):
     """
     Return each fit's residual chi2 per degree of freedom (docs/derivation.md#model-error).
@@ -527,16 +527,24 @@ def residual_chi2_dof(rho, theta, offsets, counts, angle_rad, radius_m, range_si
     The residual of return i from the line (angle, radius) is d_i = rho_i cos(theta_i - angle)
     - radius, whose variance under the noise model is range_sigma^2 cos^2(theta_i - angle) +
     bearing_sigma^2 rho_i^2 sin^2(theta_i - angle) (docs/derivation.md#maximum-likelihood).
+    With x_i = rho_i cos theta_i and y_i = rho_i sin theta_i, rho_i cos(theta_i - angle) =
+    x_i cos angle + y_i sin angle and rho_i sin(theta_i - angle) = y_i cos angle - x_i sin
+    angle: no sine or cosine per return.
 
+    :param rho: ranges of the returns laid end to end, shape (P,), m
+    :param x: rho cos(theta), shape (P,), m
+    :param y: rho sin(theta), shape (P,), m
+    :param offsets: first return of each segment, shape (S,)
+    :param counts: returns per segment, shape (S,)
     :return: shape (S,)
     """
     chi2 = np.zeros(offsets.size)
     for s in range(offsets.size):
+        cos, sin = math.cos(angle_rad[s]), math.sin(angle_rad[s])
         for i in range(offsets[s], offsets[s] + counts[s]):
-            incidence = theta[i] - angle_rad[s]
-            residual = rho[i] * math.cos(incidence) - radius_m[s]
-            variance = ((range_sigma * math.cos(incidence)) ** 2
-                        + (bearing_sigma * rho[i] * math.sin(incidence)) ** 2)
+            along, across = x[i] * cos + y[i] * sin, y[i] * cos - x[i] * sin
+            residual = along - radius_m[s]
+            variance = (range_sigma * along / rho[i]) ** 2 + (bearing_sigma * across) ** 2
             chi2[s] += residual * residual / variance
         chi2[s] /= max(counts[s] - 2, 1)
     return chi2

@@ -18,6 +18,7 @@ from numba import types
 import numpy as np
 
 from ._jit import jit, jit_inline
+from ._order import wrapped
 from .config import FeatureConfig, METHODS
 from .corners import corner_candidates, walls_end_at
 from .features import CornerSet, Features, SegmentSet
@@ -132,7 +133,8 @@ def kernels_last_first():
         (corner_candidates, (rows, stacks, rows, rows, indices, indices, real, rows, real)),
         (_usable, (values, rows, real, real, rows)),
         (_feet, (values, values, indices, values, values)),
-        (residual_chi2_dof, (values, values, indices, indices, values, values, real, real)),
+        (residual_chi2_dof, (values, values, values, indices, indices, values, values, real,
+                             real)),
         (fit_segments, (integer, values, values, values, values, indices, indices, real, real)),
         (_in_scan_order, (indices, integer, indices, indices)),
         (trim_offset, (indices, indices, indices, values, values, values, values, real, real,
@@ -331,13 +333,13 @@ def _fit_walls(rho, theta, x, y, start, stop, range_sigma, bearing_sigma, settin
     rho_w, theta_w, x_w, y_w = np.empty(total), np.empty(total), np.empty(total), np.empty(total)
     for s in range(segments):
         for k in range(counts[s]):
-            i = (start[s] + k) % count
+            i = wrapped(start[s] + k, count)
             at = offsets[s] + k
             rho_w[at], theta_w[at], x_w[at], y_w[at] = rho[i], theta[i], x[i], y[i]
     (line, line_covariance, angle, radius, normal_covariance, line_offset,
      _) = fit_segments(settings.method_code, rho_w, theta_w, x_w, y_w, offsets, counts,
                        range_sigma, bearing_sigma)
-    chi2_dof = residual_chi2_dof(rho_w, theta_w, offsets, counts, angle, radius, range_sigma,
+    chi2_dof = residual_chi2_dof(rho_w, x_w, y_w, offsets, counts, angle, radius, range_sigma,
                                  bearing_sigma)
     last = (stop - 1) % count
     start_xy, end_xy = _feet(x, y, start, angle, radius), _feet(x, y, last, angle, radius)

@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from ._jit import jit
-from ._order import stable_order
+from ._order import stable_order, wrapped
 
 # A chord shorter than this (m) has no usable direction: distances are measured from its start.
 _MIN_CHORD_M = 1e-9
@@ -54,6 +54,18 @@ def pass_budget(count: int) -> int:
 # returns (a pair on one surface goes beyond it with probability 6e-7). Beyond it, the break is
 # a discontinuity, which merging never crosses.
 _JOINABLE_SIGMAS = 5.0 * math.sqrt(2.0)
+
+
+@jit
+def _reach_factor(beams, step_rad, lambda_rad):
+    """
+    Return sin(dphi) / sin(lambda - dphi) for returns ``beams`` steps apart, -1 if dphi >= lambda.
+
+    The distance neighbours on one surface may lie apart is r times this factor (Borges and
+    Aldon); no surface is seen at a bearing difference of lambda or more.
+    """
+    dphi = beams * step_rad
+    return math.sin(dphi) / math.sin(lambda_rad - dphi) if dphi < lambda_rad else -1.0
 
 
 @jit
@@ -93,19 +105,23 @@ def breakpoints_of(index, x_m, y_m, range_m, beam_count, step_rad, full_turn, ra
     joinable = np.zeros(n, np.bool_)
     if n == 0:
         return separated, joinable
-    neighbour_reach = (math.sin(step_rad) / math.sin(lambda_rad - step_rad)
-                       if step_rad < lambda_rad else -1.0)
+    # The factor for returns 1, 2, ... beams apart, computed once (in the loop, LLVM computed both
+    # sines for every return, 5 % of a scan). Only returns at most max_missing_beams + 1 beams
+    # apart can be one surface (farther apart is a gap), and none lambda or more apart.
+    factors = np.empty(min(max_missing_beams + 2, int(lambda_rad / step_rad) + 2))
+    for beams in range(1, factors.size):
+        factors[beams] = _reach_factor(float(beams), step_rad, lambda_rad)
+    # Across the seam: the rest of the turn, in increments (about 1).
+    seam_beams = (index[0] + (2.0 * math.pi - (beam_count - 1) * step_rad) / step_rad
+                  + (beam_count - 1 - index[n - 1]))
+    seam_reach = _reach_factor(seam_beams, step_rad, lambda_rad)
     for i in range(n):
         before = i - 1 if i > 0 else n - 1
         if i > 0:
-            beams = float(index[i] - index[i - 1])
-        else:      # across the seam: the rest of the turn, in increments (about 1)
-            beams = (index[0] + (2.0 * math.pi - (beam_count - 1) * step_rad) / step_rad
-                     + (beam_count - 1 - index[n - 1]))
-        reach = neighbour_reach
-        if beams != 1.0:
-            dphi = beams * step_rad
-            reach = math.sin(dphi) / math.sin(lambda_rad - dphi) if dphi < lambda_rad else -1.0
+            apart = index[i] - index[i - 1]
+            beams, reach = float(apart), factors[apart] if apart < factors.size else -1.0
+        else:
+            beams, reach = seam_beams, seam_reach
         r = min(range_m[i], range_m[before])
         dx, dy = x_m[i] - x_m[before], y_m[i] - y_m[before]
         surface = r * reach
@@ -156,7 +172,9 @@ def chains_of(range_m, x_m, y_m, separated):
         for k in range(start.size):   # a loop, not stop[:-1] = start[1:] (see _jit.py)
             stop[k] = start[k + 1] if k + 1 < start.size else n
         chain = np.arange(start.size)
-    order = np.arange(first, first + n) % max(n, 1)
+    order = np.empty(n, np.intp)
+    for position in range(n):
+        order[position] = wrapped(first + position, n)
     return order, start, stop, chain
 
 
@@ -189,6 +207,10 @@ def split_iepf(x_m, y_m, start, stop, chain, threshold_m, max_levels):
     out_chain = np.empty(n + 1, np.intp)
     found = 0
     unsplit = False
+    # 1 / threshold of each return, once: the pieces measure most returns several times.
+    per_threshold = np.empty(n)
+    for i in range(n):
+        per_threshold[i] = 1.0 / threshold_m[i]
     # Pending pieces (first, stop, depth): the right part of every split waits on the stack.
     stack = np.empty((max_levels + 2, 3), np.intp)
     for run in range(start.size):
@@ -209,7 +231,7 @@ def split_iepf(x_m, y_m, start, stop, chain, threshold_m, max_levels):
                 cross = dx * y_m[i]
                 cross -= dy * x_m[i]
                 cross += offset
-                cross = abs(cross) * (1.0 / threshold_m[i])
+                cross = abs(cross) * per_threshold[i]
                 if cross > farthest:
                     farthest, cut = cross, i
                 elif cross != cross:
@@ -255,7 +277,7 @@ def moment_line(x_m, y_m, first, stop, range_sigma_m, bearing_sigma_rad):
     count = float(stop - first)
     sx = sy = sxx = syy = sxy = 0.0
     for k in range(first, stop):
-        i = k % n
+        i = wrapped(k, n)
         x, y = x_m[i], y_m[i]
         sx += x
         sy += y
@@ -519,7 +541,8 @@ def trim_offset(start, stop, chain, x_m, y_m, angle_rad, radius_m, range_sigma_m
         # Sums over the whole segment of t, t^2, e, t e and rho^2.
         whole_t = whole_tt = whole_e = whole_te = whole_rr = 0.0
         for p in range(start[s], stop[s]):
-            x, y = x_m[p % n], y_m[p % n]
+            i = wrapped(p, n)
+            x, y = x_m[i], y_m[i]
             t, e = y * c - x * sn, x * c + y * sn - radius_m[s]
             whole_t += t
             whole_tt += t * t
@@ -532,7 +555,7 @@ def trim_offset(start, stop, chain, x_m, y_m, angle_rad, radius_m, range_sigma_m
             sum_z = sum_w = sum_tw = 0.0  # of e / sigma, 1 / sigma, t / sigma over the k
             best, cut = -1.0, 0
             for k in range(1, reach + 1):
-                i = (stop[s] - k if side == 0 else start[s] + k - 1) % n
+                i = wrapped(stop[s] - k if side == 0 else start[s] + k - 1, n)
                 x, y = x_m[i], y_m[i]
                 t, e = y * c - x * sn, x * c + y * sn - radius_m[s]
                 rest_t -= t

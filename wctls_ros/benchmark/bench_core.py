@@ -19,7 +19,9 @@ scan cost and a cost per beam. Last, the worst case: a crafted scan (a wall whos
 return lies a growing few cm behind it, which made IEPF quadratic before its pass bound) next to a
 room scan of as many beams, with the default noise model (5 cm, which makes the crafted wall one
 chain), 1080 to 100 000 beams.
-Usage: python bench_core.py [scans] [--peer BINARY]
+With ``--numpy-core TREE``, also the compiled core against a numpy core (a source tree from before
+issue 18) in alternating processes on the same scans.
+Usage: python bench_core.py [scans] [--peer BINARY] [--numpy-core TREE]
 """
 
 import argparse
@@ -129,6 +131,56 @@ def side_by_side(count, peer):
               f'{peer_lines:>10.1f}')
 
 
+# Prints the median ms per scan of the extract_features on the import path (wctls with that
+# core's defaults) on the scans of the .npz file named by its argument.
+PER_SCAN = """
+import sys, time
+import numpy as np
+from wctls_ros.core import extract_features, FeatureConfig
+saved = np.load(sys.argv[1])
+angle_min, increment = float(saved['angle_min']), float(saved['increment'])
+config = FeatureConfig(range_sigma_m=float(saved['noise']), bearing_sigma_rad=0.0)
+for ranges in saved['ranges'][:20]:
+    extract_features(ranges, angle_min, increment, config)
+seconds = []
+for ranges in saved['ranges']:
+    start = time.perf_counter()
+    extract_features(ranges, angle_min, increment, config)
+    seconds.append(time.perf_counter() - start)
+print(1e3 * np.median(seconds))
+"""
+
+
+def against_numpy_core(tree, count, rounds=5):
+    """
+    Print the compiled core's time per scan against a numpy core's, in alternating processes.
+
+    The numpy core is a wctls_ros source tree from before the compiled core (e.g. 28c8ec9, the
+    last one, exported with ``git archive``): its package folder goes first on the import path
+    of every other process. Same 1080-beam room scans (5 mm), each core's defaults (wctls).
+    """
+    angle_min, increment, ranges = scans(1080, count, range_noise_m=SIDE_BY_SIDE_NOISE_M)
+    package = pathlib.Path(__file__).resolve().parents[1]
+    times = {'compiled': [], 'numpy core': []}
+    with tempfile.TemporaryDirectory() as folder:
+        saved = os.path.join(folder, 'scans.npz')
+        np.savez(saved, ranges=np.array(ranges), angle_min=angle_min, increment=increment,
+                 noise=SIDE_BY_SIDE_NOISE_M)
+        for _ in range(rounds):
+            for label, path in (('compiled', package), ('numpy core', pathlib.Path(tree))):
+                environment = dict(os.environ, PYTHONPATH=os.pathsep.join(
+                    [str(path), os.environ.get('PYTHONPATH', '')]))
+                times[label].append(float(subprocess.run(
+                    [sys.executable, '-c', PER_SCAN, saved], env=environment, check=True,
+                    capture_output=True, text=True).stdout))
+    compiled, numpy_core = np.median(times['compiled']), np.median(times['numpy core'])
+    ratios = np.array(times['numpy core']) / np.array(times['compiled'])
+    print(f'against the numpy core of {tree}: {count} 1080-beam room scans, medians of {rounds} '
+          f'alternating processes: compiled {compiled:.4f} ms, numpy core {numpy_core:.4f} ms: '
+          f'{numpy_core / compiled:.1f}x (pairs of processes {ratios.min():.1f}x to '
+          f'{ratios.max():.1f}x)')
+
+
 # As the nodes and tools start: warm_up (helper processes on an empty cache), then a scan.
 FIRST_SCAN = ('import sys, time; start = time.perf_counter(); import numpy as np; '
               'from wctls_ros.core import extract_features, warm_up; '
@@ -167,9 +219,13 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('scans', type=int, nargs='?', default=1000)
     parser.add_argument('--peer', help='the C++ peer timing driver (optional)')
+    parser.add_argument('--numpy-core', metavar='TREE',
+                        help='a numpy core to compare with in one run (a source tree of it)')
     args = parser.parse_args()
     count = args.scans
     side_by_side(min(count, 300), args.peer)
+    if args.numpy_core:
+        against_numpy_core(args.numpy_core, min(count, 300))
     start_up()
     print(f'extract_features per scan: environment A, {RANGE_NOISE_M * 1e3:.0f} mm range noise,'
           f' {count} scans, one core')

@@ -275,9 +275,11 @@ def _lever_segment(x, y, rho, first, stop, range_sigma, bearing_sigma, weighted,
     pi_x0, pi_x1 = a_x * s_yy - a_y * s_xy, b_x * s_yy - b_y * s_xy          # Pi e_x
     pi_y0, pi_y1 = a_y * s_xx - a_x * s_xy, b_y * s_xx - b_x * s_xy          # Pi e_y
     k = 3 if scaled else 2
-    range_products, bearing_products = np.zeros((k, k)), np.zeros((k, k))
-    offset = np.zeros(k)
-    by_range, by_bearing = np.zeros(k), np.zeros(k)
+    # Three components always (the third 0 when not scaled): loops of a fixed length, which
+    # the compiler unrolls.
+    range_products, bearing_products = np.zeros((3, 3)), np.zeros((3, 3))
+    offset = np.zeros(3)
+    by_range, by_bearing = np.zeros(3), np.zeros(3)
     for i in range(first, stop):
         x_i, y_i, inv_rho = x[i], y[i], 1.0 / rho[i]
         # Pi z_i, p.z_i, Pi z_perp_i, p.z_perp_i.
@@ -299,11 +301,11 @@ def _lever_segment(x, y, rho, first, stop, range_sigma, bearing_sigma, weighted,
         if scaled:
             by_bearing[2] = ahead * across1 - turn * across0
         if weighted:
-            for r in range(k):
+            for r in range(3):
                 by_bearing[r] *= weight
-        for r in range(k):
+        for r in range(3):
             offset[r] -= by_range[r]
-            for c in range(k):
+            for c in range(3):
                 range_products[r, c] += by_range[r] * by_range[c]
                 bearing_products[r, c] += by_bearing[r] * by_bearing[c]
     covariance = np.empty((k, k))
@@ -312,7 +314,7 @@ def _lever_segment(x, y, rho, first, stop, range_sigma, bearing_sigma, weighted,
             covariance[r, c] = range_sigma ** 2 * range_products[r, c]
             if bearing_sigma != 0.0:           # a zero bearing sigma adds nothing, not 0 * inf
                 covariance[r, c] += bearing_sigma ** 2 * bearing_products[r, c]
-    return line, px, py, inv_norm, covariance, offset
+    return line, px, py, inv_norm, covariance, offset[:k]
 
 
 @jit

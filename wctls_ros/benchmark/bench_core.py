@@ -132,7 +132,9 @@ def side_by_side(count, peer):
 
 
 # Prints the median ms per scan of the extract_features on the import path (wctls with that
-# core's defaults) on the scans of the .npz file named by its argument.
+# core's defaults) on the scans of the .npz file named by its argument. median_ms's loop as a
+# script of its own: it runs in processes whose import path holds another tree's core, which
+# cannot import this benchmark (nor its simulation).
 PER_SCAN = """
 import sys, time
 import numpy as np

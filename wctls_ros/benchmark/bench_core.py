@@ -5,12 +5,13 @@
 """
 Benchmark extract_features per scan on simulated RPLIDAR S1 scans of a furnished room.
 
-First, side by side in one run on the same scans: the compiled core, the numpy core it replaced
-(kept in wctls_ros/test/numpy_core as the tests' reference) and, when given, the C++
+First, side by side in one run on the same scans: the compiled core, the numpy core (the
+fallback where numba is missing, wctls_ros.core.numpy_core) and, when given, the C++
 laser_line_extraction (``--peer BINARY``: a timing driver built outside this repository from its
 public source, reading the scans file this script writes; see docs/performance.md), on 1080- and
 4320-beam room scans with 5 mm of range noise and on the real 541-beam SICK LMS1xx scans of data/;
-then the start-up of a fresh process to its first extracted scan, with numba's cache warm and cold.
+then both cores again in alternating fresh processes (``WCTLS_ROS_CORE=numba`` and ``numpy``), and
+the start-up of a fresh process to its first extracted scan, with numba's cache warm and cold.
 Then median and p99 time per scan (one core) for 1080-beam scans and 4x denser ones, for every
 method, and the mean number of segments and corners. Then, for wctls, how the time grows with the
 beam count from 270 to 8640 beams: the exponent between each doubling (1 is linear; below 1 is
@@ -19,9 +20,7 @@ scan cost and a cost per beam. Last, the worst case: a crafted scan (a wall whos
 return lies a growing few cm behind it, which made IEPF quadratic before its pass bound) next to a
 room scan of as many beams, with the default noise model (5 cm, which makes the crafted wall one
 chain), 1080 to 100 000 beams.
-With ``--numpy-core TREE``, also the compiled core against a numpy core (a source tree from before
-issue 18) in alternating processes on the same scans.
-Usage: python bench_core.py [scans] [--peer BINARY] [--numpy-core TREE]
+Usage: python bench_core.py [scans] [--peer BINARY]
 """
 
 import argparse
@@ -30,6 +29,8 @@ import os
 # One core: keep any BLAS thread pool from spreading the work.
 for variable in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ.setdefault(variable, '1')
+# extract_features below is the compiled core's (an error if numba cannot give it).
+os.environ['WCTLS_ROS_CORE'] = 'numba'
 
 import pathlib  # noqa: E402
 import subprocess  # noqa: E402
@@ -38,8 +39,7 @@ import tempfile  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
-from wctls_ros.core import extract_features, FeatureConfig, METHODS  # noqa: E402
-from wctls_ros.core.precompile import default_helpers  # noqa: E402
+from wctls_ros.core import extract_features, FeatureConfig, METHODS, numpy_core  # noqa: E402
 from wctls_ros.evaluation.scans import load_scans  # noqa: E402
 from wctls_ros.simulation import (full_turn_bearings, load_floor_plan, NoiseModel,  # noqa: E402
                                   simulate_ranges)
@@ -48,9 +48,6 @@ from wctls_ros.simulation.adversarial import peeling_wall  # noqa: E402
 RANGE_NOISE_M = 0.01
 SIDE_BY_SIDE_NOISE_M = 0.005
 DATA = pathlib.Path(__file__).resolve().parents[2] / 'data'
-# The numpy core, kept as the tests' reference implementation.
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'test'))
-import numpy_core  # noqa: E402, I100
 SWEEP_BEAMS = (270, 540, 1080, 2160, 4320, 8640)
 WORST_CASE_BEAMS = (1080, 4320, 16000, 64000, 100000)
 
@@ -131,14 +128,13 @@ def side_by_side(count, peer):
               f'{peer_lines:>10.1f}')
 
 
-# Prints the median ms per scan of the extract_features on the import path (wctls with that
-# core's defaults) on the scans of the .npz file named by its argument. median_ms's loop as a
-# script of its own: it runs in processes whose import path holds another tree's core, which
-# cannot import this benchmark (nor its simulation).
+# Prints the median ms per scan of the core WCTLS_ROS_CORE names (wctls, the scans' noise) on
+# the scans of the .npz file named by its argument: median_ms's loop in a fresh process.
 PER_SCAN = """
 import sys, time
 import numpy as np
-from wctls_ros.core import extract_features, FeatureConfig
+from wctls_ros.core import extract_features, FeatureConfig, warm_up
+warm_up()
 saved = np.load(sys.argv[1])
 angle_min, increment = float(saved['angle_min']), float(saved['increment'])
 config = FeatureConfig(range_sigma_m=float(saved['noise']), bearing_sigma_rad=0.0)
@@ -153,81 +149,77 @@ print(1e3 * np.median(seconds))
 """
 
 
-def against_numpy_core(tree, count, rounds=5):
+def alternating_cores(count, rounds=5):
     """
-    Print the compiled core's time per scan against a numpy core's, in alternating processes.
+    Print the compiled core's time per scan against the numpy core's, in alternating processes.
 
-    The numpy core is a wctls_ros source tree from before the compiled core (e.g. 28c8ec9, the
-    last one, exported with ``git archive``): its package folder goes first on the import path
-    of every other process. Same 1080-beam room scans (5 mm), each core's defaults (wctls).
+    The same 1080-beam room scans (5 mm), wctls, each process starting afresh: what a user gets
+    with numba and without it.
     """
     angle_min, increment, ranges = scans(1080, count, range_noise_m=SIDE_BY_SIDE_NOISE_M)
-    package = pathlib.Path(__file__).resolve().parents[1]
-    times = {'compiled': [], 'numpy core': []}
+    times = {'numba': [], 'numpy': []}
     with tempfile.TemporaryDirectory() as folder:
         saved = os.path.join(folder, 'scans.npz')
         np.savez(saved, ranges=np.array(ranges), angle_min=angle_min, increment=increment,
                  noise=SIDE_BY_SIDE_NOISE_M)
         for _ in range(rounds):
-            for label, path in (('compiled', package), ('numpy core', pathlib.Path(tree))):
-                environment = dict(os.environ, PYTHONPATH=os.pathsep.join(
-                    [str(path), os.environ.get('PYTHONPATH', '')]))
-                times[label].append(float(subprocess.run(
+            for core in times:
+                environment = dict(os.environ, WCTLS_ROS_CORE=core)
+                times[core].append(float(subprocess.run(
                     [sys.executable, '-c', PER_SCAN, saved], env=environment, check=True,
                     capture_output=True, text=True).stdout))
-    compiled, numpy_core = np.median(times['compiled']), np.median(times['numpy core'])
-    ratios = np.array(times['numpy core']) / np.array(times['compiled'])
-    print(f'against the numpy core of {tree}: {count} 1080-beam room scans, medians of {rounds} '
-          f'alternating processes: compiled {compiled:.4f} ms, numpy core {numpy_core:.4f} ms: '
-          f'{numpy_core / compiled:.1f}x (pairs of processes {ratios.min():.1f}x to '
+    compiled, numpy_time = np.median(times['numba']), np.median(times['numpy'])
+    ratios = np.array(times['numpy']) / np.array(times['numba'])
+    print(f'numpy core against the compiled core: {count} 1080-beam room scans, medians of '
+          f'{rounds} alternating processes: compiled {compiled:.4f} ms, numpy {numpy_time:.4f} '
+          f'ms: {numpy_time / compiled:.1f}x (pairs of processes {ratios.min():.1f}x to '
           f'{ratios.max():.1f}x)')
 
 
-# As the nodes and tools start: warm_up (helper processes on an empty cache), then a scan.
+# As the nodes and tools start (wctls_ros.core.start), then a scan; argv[1] 'wait' compiles
+# before the first scan, 'auto' answers with the numpy core while a compile runs beside it.
 FIRST_SCAN = ('import sys, time; start = time.perf_counter(); import numpy as np; '
-              'from wctls_ros.core import extract_features, warm_up; '
-              'warm_up(None if sys.argv[1] == "default" else int(sys.argv[1])); '
+              'from wctls_ros.core import extract_features, start as choose, status; '
+              'choose(wait=sys.argv[1] == "wait"); '
               'b = -np.pi + 2 * np.pi / 1080 * np.arange(1080); '
               'extract_features(2.0 / np.maximum(abs(np.cos(b)), abs(np.sin(b))), -np.pi, '
-              '2 * np.pi / 1080); print(time.perf_counter() - start)')
+              '2 * np.pi / 1080); print(time.perf_counter() - start, status().name)')
 
 
 def start_up(repeats=3):
     """
     Print the time from a fresh interpreter to its first extracted scan, warm and cold.
 
-    Cold twice, alternately: with warm_up's default helper processes and without any.
+    Cold twice, alternately: answering at once (the numpy core while the compiled one compiles
+    in another process, as the nodes do) and waiting for the compile.
     """
-    def first_scan_s(environment, helpers='default'):
+    def first_scan_s(environment, mode='auto'):
         started = time.perf_counter()
-        inside = float(subprocess.run([sys.executable, '-c', FIRST_SCAN, helpers],
-                                      env=environment, check=True, capture_output=True,
-                                      text=True).stdout)
-        return time.perf_counter() - started, inside
+        inside, core = subprocess.run(
+            [sys.executable, '-c', FIRST_SCAN, mode], check=True, capture_output=True,
+            text=True, env=dict(environment, WCTLS_ROS_CORE='auto')).stdout.split()
+        return time.perf_counter() - started, float(inside), core
 
     warm = [first_scan_s(dict(os.environ)) for _ in range(repeats)]
     print(f'start-up to the first extracted scan (process wall time; after its imports): warm '
           f'cache {np.median([w[0] for w in warm]):.2f} s ({np.median([w[1] for w in warm]):.2f}'
-          f' s)')
-    for helpers in ('default', '0', 'default', '0'):
+          f' s, {warm[0][2]} core)')
+    for mode in ('auto', 'wait', 'auto', 'wait'):
         with tempfile.TemporaryDirectory() as empty:
-            cold = first_scan_s(dict(os.environ, NUMBA_CACHE_DIR=empty), helpers)
-        label = f'{default_helpers()} (default)' if helpers == 'default' else helpers
-        print(f'  cold cache, {label} helper processes, {os.cpu_count()} CPUs: {cold[0]:.1f} s '
-              f'({cold[1]:.1f} s)')
+            cold = first_scan_s(dict(os.environ, NUMBA_CACHE_DIR=empty), mode)
+        label = 'answering at once' if mode == 'auto' else 'waiting for the compile'
+        print(f'  cold cache, {label}, {os.cpu_count()} CPUs: {cold[0]:.2f} s ({cold[1]:.2f} s, '
+              f'{cold[2]} core)')
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('scans', type=int, nargs='?', default=1000)
     parser.add_argument('--peer', help='the C++ peer timing driver (optional)')
-    parser.add_argument('--numpy-core', metavar='TREE',
-                        help='a numpy core to compare with in one run (a source tree of it)')
     args = parser.parse_args()
     count = args.scans
     side_by_side(min(count, 300), args.peer)
-    if args.numpy_core:
-        against_numpy_core(args.numpy_core, min(count, 300))
+    alternating_cores(min(count, 300))
     start_up()
     print(f'extract_features per scan: environment A, {RANGE_NOISE_M * 1e3:.0f} mm range noise,'
           f' {count} scans, one core')

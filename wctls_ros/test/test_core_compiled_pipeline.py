@@ -2,10 +2,10 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-The compiled pipeline against the numpy one it replaced, scan by scan (issue 18).
+The compiled pipeline against the numpy one, scan by scan.
 
-The reference (``numpy_core``) is the batched numpy implementation the core was until the
-compiled one: on every scan both must give the same segments and corners (identical beam
+The numpy implementation (``core.numpy_core``) serves where numba is missing and is the plainer
+reading of each rule: on every scan both must give the same segments and corners (identical beam
 indices, counts, pairings and flags) and the same values within 1e-9 relative. Scans: simulated
 furnished and cluttered rooms at 270 to 4320 beams and 0.5 mm to 5 cm of noise, partial fields of
 view, hostile ones (NaN, inf, zeros, one ray, a crafted peeling wall), and every scan of every
@@ -17,9 +17,10 @@ import math
 
 from conftest import REAL_DATA
 import numpy as np
-import numpy_core
 import pytest
-from wctls_ros.core import extract_features, FeatureConfig, METHODS
+from wctls_ros.core import FeatureConfig, METHODS, numpy_core
+# The compiled pipeline itself, whatever wctls_ros.core.runtime would choose.
+from wctls_ros.core.numba_core.pipeline import extract_features
 from wctls_ros.evaluation.scans import load_json_scans, load_scans
 from wctls_ros.simulation import load_floor_plan, NoiseModel, simulate_recording
 from wctls_ros.simulation.adversarial import peeling_wall

@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 from wctls_ros.core import extract_features, FeatureConfig
-from wctls_ros.core.corners import seen_through
+from wctls_ros.core.numba_core.corners import seen_through
 from wctls_ros.params import feature_settings, load_parameters
 from wctls_ros.simulation import floor_plan_from_dict, NoiseModel, simulate_recording
 from wctls_ros.simulation.scanner import SENSOR_MODELS

@@ -40,11 +40,11 @@ def factor(value):
 
 @pytest.fixture()
 def package(tmp_path):
-    """Return a copy of wctls_ros with a compiled probe in core/, and its core folder."""
+    """Return a copy of wctls_ros with a compiled probe in core/numba_core/, and that folder."""
     copy = tmp_path / 'site'
     shutil.copytree(pathlib.Path(wctls_ros.__file__).parent, copy / 'wctls_ros',
                     ignore=shutil.ignore_patterns('__pycache__'))
-    core = copy / 'wctls_ros' / 'core'
+    core = copy / 'wctls_ros' / 'core' / 'numba_core'
     (core / 'probe.py').write_text(PROBE)
     (core / 'probe_factor.py').write_text(FACTOR.format(2.0))
     yield copy, core
@@ -65,7 +65,7 @@ def run_probe(site: pathlib.Path, expected=4.0, **environment) -> None:
     """Compile and run the probe in a fresh interpreter with the given environment."""
     env = {key: value for key, value in os.environ.items() if key != 'NUMBA_CACHE_DIR'}
     env.update(environment, PYTHONPATH=str(site))
-    subprocess.run([sys.executable, '-c', 'from wctls_ros.core.probe import twice; '
+    subprocess.run([sys.executable, '-c', 'from wctls_ros.core.numba_core.probe import twice; '
                     f'assert twice(2.0) == {expected}, twice(2.0)'], env=env, check=True,
                    timeout=120)
 

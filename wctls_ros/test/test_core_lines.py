@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 from wctls_ros.core import find_corners, fit_lines, intersect, METHODS, nees, segment_returns
-from wctls_ros.core.lines import normal_form, utls, wctls, wtls
+from wctls_ros.core.numba_core.lines import normal_form, utls, wctls, wtls
 
 RANGE_SIGMA = 0.05
 BEARING_SIGMA = math.radians(0.391)

@@ -18,8 +18,8 @@ import math
 
 import numpy as np
 import pytest
-from wctls_ros.core import extract_features, nees
-from wctls_ros.core.lines import fit_lines, segment_returns
+from wctls_ros.core import extract_features, nees, segment_returns
+from wctls_ros.core.numba_core.lines import fit_lines
 
 RANGE_SIGMA = 0.01
 BEARING_SIGMA = math.radians(0.1)

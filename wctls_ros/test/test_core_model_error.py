@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 from wctls_ros.core import extract_features, FeatureConfig, nees
-from wctls_ros.core.model_error import flatness_covariance
+from wctls_ros.core.numba_core.model_error import flatness_covariance
 from wctls_ros.simulation import floor_plan_from_dict, NoiseModel, simulate_recording
 
 NOISE = NoiseModel(range_sigma_m=0.005, bearing_sigma_rad=math.radians(0.05))

@@ -9,7 +9,7 @@ from conftest import REAL_DATA
 import numpy as np
 import pytest
 from wctls_ros.core import extract_features, FeatureConfig, scan_to_points
-from wctls_ros.core.noise import scan_range_sigma
+from wctls_ros.core.numba_core.noise import scan_range_sigma
 from wctls_ros.evaluation import fit_noise, load_scans
 from wctls_ros.simulation import (full_turn_bearings, load_floor_plan, NoiseModel,
                                   simulate_scan)

@@ -31,7 +31,7 @@ class Compiles(event.Listener):
 
 
 event.register('numba:compile', Compiles())
-from wctls_ros.core import precompile, pipeline
+from wctls_ros.core.numba_core import pipeline, precompile
 before = precompile.pipeline_is_cached()
 precompile.warm_up(helpers=1)
 try:
@@ -75,7 +75,7 @@ def test_a_helper_whose_parent_died_compiles_nothing(tmp_path):
     parent = subprocess.Popen(['true'])
     parent.wait()
     started = time.perf_counter()
-    run('from wctls_ros.core.precompile import compile_share; '
+    run('from wctls_ros.core.numba_core.precompile import compile_share; '
         f'compile_share(0, 1, parent_pid={parent.pid})', tmp_path)
     assert time.perf_counter() - started < 60.0       # one kernel alone takes seconds here
     assert not list(tmp_path.rglob('*.nbi'))

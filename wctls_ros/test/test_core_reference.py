@@ -16,8 +16,8 @@ from conftest import REAL_DATA
 import numpy as np
 import pytest
 import reference_fits
-from wctls_ros.core import extract_features, find_corners
-from wctls_ros.core.lines import fit_lines, segment_returns
+from wctls_ros.core import extract_features, find_corners, segment_returns
+from wctls_ros.core.numba_core.lines import fit_lines
 
 METHODS = ('utls', 'wtls', 'wctls', 'ml')
 RELATIVE = 1e-9

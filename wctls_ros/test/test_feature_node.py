@@ -6,6 +6,7 @@
 import math
 import os
 import pathlib
+import shutil
 import struct
 import subprocess
 import sys
@@ -206,6 +207,10 @@ def test_bytes_that_are_no_scan_are_counted_and_the_next_is_processed(ros_contex
 
 
 def installed_executable(name):
+    """Return an installed executable: the one on PATH (tools/env.sh), else in a prefix."""
+    on_path = shutil.which(name)
+    if on_path is not None and pathlib.Path(on_path).parent.name == 'wctls_ros':
+        return pathlib.Path(on_path)
     prefix = pathlib.Path(sys.prefix).parent.parent / 'install' / 'wctls_ros'
     candidates = [pathlib.Path(p) / 'lib' / 'wctls_ros' / name
                   for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
@@ -253,3 +258,30 @@ def test_installed_executable_refuses_a_parameter_of_the_wrong_type_in_one_line(
     assert result.returncode == 1
     assert 'range_sigma_m' in result.stderr + result.stdout
     assert 'Traceback' not in result.stderr + result.stdout
+
+
+def test_a_first_start_answers_with_the_numpy_core_while_numba_compiles(
+        ros_context, executor, tmp_path):
+    pytest.importorskip('numba')             # the stock-install run has the numpy core alone
+    executable = installed_executable('feature_node')
+    environment = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path), WCTLS_ROS_CORE='auto')
+    process = subprocess.Popen([str(executable), '--ros-args', '-p', 'range_sigma_m:=0.01',
+                                '-p', 'bearing_sigma_deg:=0.05'], env=environment,
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        peer = Node('peer', context=ros_context)
+        executor.add_node(peer)
+        publisher = peer.create_publisher(LaserScan, 'scan', 10)
+        received = []
+        peer.create_subscription(CornerArray, 'corners', received.append, 10)
+        scan = room_scan_message()
+        assert spin_until(executor, lambda: received or publisher.publish(scan), timeout_s=60.0)
+        assert len(received[0].corners) == 5
+        # Answered before the compile (tens of seconds here) has ended: nothing is cached yet.
+        assert not list(tmp_path.rglob('*_features_of_scan*.nbi'))
+    finally:
+        process.terminate()
+        output, _ = process.communicate(timeout=30)
+    assert process.returncode == 0, output
+    assert 'numpy feature pipeline for now: the compiled one' in output
+    assert 'now running the compiled feature pipeline' not in output

@@ -25,9 +25,6 @@ import sys
 import tempfile
 
 USER_ERROR = 2
-# Compiling the feature pipeline takes seconds on a machine that has never run it, a fraction
-# of one from numba's cache: only the first is worth a line on standard error.
-SLOW_START_S = 1.0
 
 
 class UserError(ValueError):
@@ -94,19 +91,26 @@ def staged_folder(out_dir):
         shutil.rmtree(staging, ignore_errors=True)
 
 
-def warm_up_core(prog: str) -> float:
+def start_core(prog: str, wait: bool = False):
     """
-    Compile the feature pipeline (or load it from the cache) before a tool's first scan.
+    Choose the feature pipeline's implementation before a tool's first scan, and say so.
 
-    Done once in the tool's own process, before any worker process is forked, so that the
-    workers inherit the compiled code. A slow compile is reported on standard error.
+    Silent when the compiled pipeline serves from numba's cache; otherwise one line on standard
+    error says which runs and why (numba missing, compiling in the background, compiled now),
+    and a second one when a background compile has ended. Done once in the tool's own process,
+    before any worker process is forked, so that the workers inherit what serves then.
 
-    :param prog: the tool's name, for the message
-    :return: how long it took, s
+    :param prog: the tool's name, for the messages
+    :param wait: compile the compiled pipeline now if it is not cached (a tool about to fork
+        workers), instead of starting with the numpy one
+    :return: the :class:`wctls_ros.core.CoreStatus`
     """
-    from .core import warm_up
-    seconds = warm_up()
-    if seconds >= SLOW_START_S:
-        print(f'{prog}: compiled the feature pipeline for this machine in {seconds:.1f} s '
-              '(cached for later runs)', file=sys.stderr)
-    return seconds
+    from .core import start
+
+    def switched(status) -> None:
+        print(f'{prog}: {status.describe()}', file=sys.stderr)
+
+    status = start(wait=wait, on_switch=switched)
+    if status.name != 'numba' or status.compiled_here:
+        print(f'{prog}: {status.describe()}', file=sys.stderr)
+    return status

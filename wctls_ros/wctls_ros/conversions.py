@@ -14,6 +14,7 @@ import array
 import functools
 import importlib
 import math
+import pathlib
 from typing import Callable, Dict, Optional
 
 import numpy as np
@@ -33,6 +34,7 @@ MESSAGE_TYPES = (
     'wctls_msgs/msg/Corner', 'wctls_msgs/msg/CornerArray', 'wctls_msgs/msg/LineSegment',
     'wctls_msgs/msg/LineSegmentArray',
 )
+MESSAGE_PACKAGE = 'wctls_msgs'
 # Rows/columns of (x, y, yaw) in a geometry_msgs 6x6 pose covariance (x, y, z, roll, pitch, yaw).
 _POSE_INDEX = np.array([0, 1, 5])
 # Height of the flat cylinders that draw covariance ellipses, m.
@@ -143,6 +145,39 @@ def mismatched_types(store, published: Dict[str, str]) -> list:
         if known != type_hash:
             mismatched.append(name)
     return sorted(mismatched)
+
+
+@functools.lru_cache(maxsize=1)
+def typestore():
+    """
+    Return rosbags' ROS 2 Jazzy typestore with the wctls_msgs types registered.
+
+    rosbags is imported now: the bag tools need it, the node only uses it when it is installed.
+
+    :return: a rosbags Typestore
+    :raises ImportError: when rosbags is not installed
+    :raises LookupError: when the wctls_msgs .msg files cannot be found
+    """
+    from rosbags.typesys import get_types_from_msg, get_typestore, Stores
+    store = get_typestore(Stores.ROS2_JAZZY)
+    types = {}
+    for path in sorted(_message_directory().glob('*.msg')):
+        types.update(get_types_from_msg(path.read_text(), f'{MESSAGE_PACKAGE}/msg/{path.stem}'))
+    store.register(types)
+    return store
+
+
+def _message_directory() -> pathlib.Path:
+    """Find wctls_msgs/msg: in the install space, else beside this package's source."""
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        return pathlib.Path(get_package_share_directory(MESSAGE_PACKAGE)) / 'msg'
+    except (ImportError, LookupError, ValueError):
+        source = pathlib.Path(__file__).resolve().parents[2] / MESSAGE_PACKAGE / 'msg'
+        if source.is_dir():
+            return source
+    raise LookupError(f'cannot find the {MESSAGE_PACKAGE} message definitions: source the '
+                      'workspace (install/setup.bash) first')
 
 
 @functools.lru_cache(maxsize=1)

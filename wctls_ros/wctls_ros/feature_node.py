@@ -11,11 +11,15 @@ scan's header. Topic names are relative, so they follow the node's namespace and
 The input queue holds one scan: a node that falls behind processes the newest scan and counts
 the ones it skipped, in a throttled warning and on ``/diagnostics`` (1 Hz).
 
-The scan is taken as its CDR bytes and decoded by rosbags, and the outputs are built as rosbags
-messages, serialised by rosbags and published as CDR bytes: a fraction of the time rclpy's
-message classes take (docs/results/message_path.md), with the same bytes on the wire, as long
-as rosbags' definitions are this ROS install's (the node checks the type hashes at start-up and
-falls back to rclpy's classes otherwise).
+The scan is taken as its CDR bytes and decoded, and the outputs are built, serialised and
+published as CDR bytes. With rosbags installed its message classes do it, in a fraction of the
+time rclpy's take (docs/results/message_path.md), with the same bytes on the wire, as long as
+rosbags' definitions are this ROS install's (the node checks the type hashes at start-up);
+otherwise rclpy's classes do (a stock ROS install has no rosbags).
+
+The feature pipeline starts at once: the compiled one when numba has it in its cache, else the
+numpy one, while the compiled one compiles in another process (the first start on a machine)
+and takes over when ready (:mod:`wctls_ros.core.runtime`). Both are logged.
 """
 
 from dataclasses import dataclass, field
@@ -31,10 +35,10 @@ from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import MarkerArray
 from wctls_msgs.msg import CornerArray, LineSegmentArray
 
-from .bags import typestore
 from .conversions import (copy_header, corner_array, line_segment_array, marker_array,
-                          MessageTypes, mismatched_types, rclpy_types, scan_features)
-from .core import CornerSet, Features, SegmentSet, warm_up
+                          MessageTypes, mismatched_types, rclpy_types, scan_features, typestore)
+from .core import CoreStatus, CornerSet, Features, SegmentSet, start as start_core
+from .extras import missing_extra
 from .node_main import declare_parameters, run_node
 from .params import FEATURE_NODE, feature_settings
 
@@ -84,8 +88,8 @@ class FeatureNode(Node):
         self._total, self._recent = ScanCounters(), ScanCounters()
         self._last_sequence = None
         self._frame_id = ''
-        # Compiled (or loaded from the cache) before the first scan, which would wait for it.
-        self.get_logger().info(f'feature pipeline compiled in {warm_up():.2f} s')
+        # Never waits for a compile: the numpy pipeline serves until the compiled one is ready.
+        self.get_logger().info(start_core(on_switch=self._on_core_switch).describe())
         # The scan arrives as its CDR bytes, decoded with the same classes the outputs are
         # built with (rosbags' decode in about half the time rclpy's take).
         self._scans = self.create_subscription(LaserScan, 'scan', self._on_scan, SCAN_QOS,
@@ -103,7 +107,13 @@ class FeatureNode(Node):
         endpoints += self.get_subscriptions_info_by_topic(self._scans.topic_name)
         installed = {info.topic_type: str(info.topic_type_hash) for info in endpoints
                      if (info.node_name, info.node_namespace) == mine}
-        store = typestore()
+        try:
+            store = typestore()
+        except ImportError as error:
+            self.get_logger().info(
+                "decoding scans and building the outputs with rclpy's message classes: "
+                f'{missing_extra(error) or error}')
+            return rclpy_types()
         mismatched = mismatched_types(store, installed)
         if len(installed) == 4 and not mismatched:
             return MessageTypes.from_typestore(store)
@@ -112,6 +122,11 @@ class FeatureNode(Node):
             f"rosbags' definitions of {', '.join(mismatched) or 'the message types'} are not "
             "this ROS install's")
         return rclpy_types()
+
+    def _on_core_switch(self, status: CoreStatus) -> None:
+        """Log the end of the background compile (called from its thread)."""
+        self.get_logger().info(f'now running the {status.describe()}' if status.name == 'numba'
+                               else status.describe())
 
     def _on_set_parameters(self, changes) -> SetParametersResult:
         values = {spec.name: self.get_parameter(spec.name).value for spec in FEATURE_NODE}

@@ -15,7 +15,6 @@ staging folder of a killed writer (SIGKILL) is removed by the next writer in the
 import contextlib
 from dataclasses import dataclass
 import fcntl
-import functools
 import os
 import pathlib
 import re
@@ -25,10 +24,10 @@ from typing import Iterator, Optional
 
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
-from rosbags.typesys import get_types_from_msg, get_typestore, Stores
+
+from ..conversions import typestore
 
 LASER_SCAN = 'sensor_msgs/msg/LaserScan'
-MESSAGE_PACKAGE = 'wctls_msgs'
 # Files that hold a ROS 2 bag's messages when its metadata.yaml is missing (recorder killed).
 _STORAGE_SUFFIXES = ('.mcap', '.db3')
 # A bag is written in a staging folder beside it, named after the writing process and locked
@@ -39,35 +38,6 @@ _STAGING_NAME = re.compile(r'\.partial-(\d+)-[a-z0-9_]+')
 
 class BagError(RuntimeError):
     """A bag that cannot be read or written, with the reason."""
-
-
-@functools.lru_cache(maxsize=1)
-def typestore():
-    """
-    Return the ROS 2 Jazzy typestore with the wctls_msgs types registered.
-
-    :return: a rosbags Typestore
-    :raises BagError: when the wctls_msgs .msg files cannot be found
-    """
-    store = get_typestore(Stores.ROS2_JAZZY)
-    types = {}
-    for path in sorted(_message_directory().glob('*.msg')):
-        types.update(get_types_from_msg(path.read_text(), f'{MESSAGE_PACKAGE}/msg/{path.stem}'))
-    store.register(types)
-    return store
-
-
-def _message_directory() -> pathlib.Path:
-    """Find wctls_msgs/msg: in the install space, else beside this package's source."""
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        return pathlib.Path(get_package_share_directory(MESSAGE_PACKAGE)) / 'msg'
-    except (ImportError, LookupError, ValueError):
-        source = pathlib.Path(__file__).resolve().parents[3] / MESSAGE_PACKAGE / 'msg'
-        if source.is_dir():
-            return source
-    raise BagError(f'cannot find the {MESSAGE_PACKAGE} message definitions: source the '
-                   'workspace (install/setup.bash) first')
 
 
 @dataclass(frozen=True)

@@ -43,10 +43,10 @@ import numpy as np
 
 from .bag_io import (bag_info, BagError, BagWriter, choose_scan_topic, LASER_SCAN, read_scans,
                      typestore)
-from ..cli import warm_up_core
+from ..cli import start_core
 from ..conversions import (corner_array, laser_scan, line_segment_array, marker_array,
                            MessageTypes, scan_features)
-from ..core import CornerSet, METHODS, SegmentSet, warm_up
+from ..core import CornerSet, METHODS, SegmentSet, start
 from ..params import ConfigError, feature_settings, load_parameters, SENSOR
 from ..sensors import DEFAULT_SENSOR, sensor_presets
 
@@ -331,8 +331,8 @@ def _outputs(work: ScanWork, records, jobs: int):
         return
     # Forked, the workers inherit the work and start at once; they die with this process. The
     # compiled core too, if it is loaded here first: otherwise each worker of each bag loads it
-    # from the cache again (0.3 s of CPU each; once loaded, warm_up takes a fraction of a ms).
-    warm_up()
+    # from the cache again (0.3 s of CPU each; once chosen, start returns at once).
+    start(wait=True)
     pool = ProcessPoolExecutor(jobs, multiprocessing.get_context('fork'), _start_worker,
                                (work, os.getpid()))
     try:
@@ -596,6 +596,39 @@ def _table(results: list, methods, seconds: float) -> str:
                      for row in rows)
 
 
+def _progress_bar(total: int, wanted):
+    """
+    Return a tqdm progress bar on standard error, or a silent stand-in without tqdm.
+
+    :param total: scans in all
+    :param wanted: --progress: True, False, or None (a bar when standard error is a terminal)
+    :return: an object with update(), set_description() and close()
+    :raises ImportError: when a bar is asked for (--progress) and tqdm is not installed
+    """
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        if wanted:
+            raise
+        return _NoProgress()
+    tqdm.monitor_interval = 0       # no thread of its own: worker processes are forked
+    return tqdm(total=total, unit='scan', file=sys.stderr,
+                disable=None if wanted is None else not wanted, delay=PROGRESS_DELAY_S)
+
+
+class _NoProgress:
+    """What process_bag shows without tqdm: nothing."""
+
+    def update(self, count: int) -> None:
+        """Count nothing."""
+
+    def set_description(self, text: str) -> None:
+        """Describe nothing."""
+
+    def close(self) -> None:
+        """Close nothing."""
+
+
 def main(argv=None) -> int:
     """
     Run the command line tool.
@@ -604,7 +637,6 @@ def main(argv=None) -> int:
     :return: exit status: 0 done, 2 user error (one line per problem), 128 + the signal number
         when stopped by SIGINT or SIGTERM (the output being written is not)
     """
-    from tqdm import tqdm
     started = time.perf_counter()
     with StopSignals() as stop:
         args = parser().parse_args(argv)
@@ -620,11 +652,9 @@ def main(argv=None) -> int:
             except ValueError as error:
                 raise ConfigError(f'process_bag: error: {error}') from error
             runs = _plan(args)
-            warm_up_core('process_bag')
-            tqdm.monitor_interval = 0       # no thread of its own: worker processes are forked
-            bar = tqdm(total=sum(scans for _, _, scans in runs), unit='scan', file=sys.stderr,
-                       disable=None if args.progress is None else not args.progress,
-                       delay=PROGRESS_DELAY_S)
+            # Workers are forked from a process that has chosen (and compiled) the core.
+            start_core('process_bag', wait=args.jobs > 1)
+            bar = _progress_bar(sum(scans for _, _, scans in runs), args.progress)
 
             def after_scans(count: int) -> None:
                 bar.update(count)

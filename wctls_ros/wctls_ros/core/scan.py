@@ -1,7 +1,13 @@
 # Copyright 2026 wctls_ros maintainers
 # SPDX-License-Identifier: Apache-2.0
 
-"""LaserScan geometry to Cartesian points, with REP-117 filtering of invalid returns."""
+"""
+LaserScan geometry to Cartesian points, with REP-117 filtering of invalid returns.
+
+Shared by both implementations of the pipeline: the geometry checks and the beam directions
+(:func:`scan_geometry`) and the valid returns as points (:func:`scan_to_points`, numpy; the
+compiled pipeline has its own loop, ``numba_core.scan.valid_returns``).
+"""
 
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -10,8 +16,6 @@ import sys
 import threading
 
 import numpy as np
-
-from ._jit import jit
 
 # A scan whose last beam is at most this many increments short of a full turn after its first
 # is a full turn: its last beam neighbours its first across the +-pi seam. (A driver that
@@ -134,44 +138,6 @@ def scan_geometry(ranges_m, angle_min_rad: float, angle_increment_rad: float):
     return ranges, bool(full_turn), cos, sin
 
 
-@jit
-def valid_returns(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, range_min_m,
-                  range_max_m):
-    """
-    Return the valid returns of a scan in beam order, as Cartesian points.
-
-    Invalid per REP-117: NaN, +-inf, ranges outside [range_min_m, range_max_m], and 0 (a point
-    at the sensor itself, never a wall return).
-
-    :param ranges_m: ranges, shape (N,), m
-    :param cos: cos of every beam's bearing, shape (N,)
-    :param sin: sin of every beam's bearing, shape (N,)
-    :param angle_min_rad: bearing of the first beam, rad
-    :param angle_increment_rad: bearing step, rad
-    :param range_min_m: closest valid range, m
-    :param range_max_m: farthest valid range, m
-    :return: (beam index (n,), range (n,) m, bearing (n,) rad, x (n,) m, y (n,) m)
-    """
-    farthest = min(range_max_m, _LARGEST_RANGE)
-    index = np.empty(ranges_m.size, np.intp)
-    count = 0
-    for i in range(ranges_m.size):
-        r = ranges_m[i]
-        # NaN fails every comparison, +-inf one of the two.
-        if (r >= range_min_m if range_min_m > 0.0 else r > 0.0) and r <= farthest:
-            index[count] = i
-            count += 1
-    index = index[:count]
-    range_m = np.empty(count)
-    bearing, x, y = np.empty(count), np.empty(count), np.empty(count)
-    for k in range(count):
-        i = index[k]
-        range_m[k] = ranges_m[i]
-        bearing[k] = angle_min_rad + i * angle_increment_rad
-        x[k], y[k] = range_m[k] * cos[i], range_m[k] * sin[i]
-    return index, range_m, bearing, x, y
-
-
 def scan_to_points(ranges_m, angle_min_rad: float, angle_increment_rad: float,
                    range_min_m: float = 0.0, range_max_m: float = math.inf) -> ScanPoints:
     """
@@ -189,8 +155,12 @@ def scan_to_points(ranges_m, angle_min_rad: float, angle_increment_rad: float,
     :raises ScanError: on a non-finite or zero increment, or more than a full turn of beams
     """
     ranges, full_turn, cos, sin = scan_geometry(ranges_m, angle_min_rad, angle_increment_rad)
-    index, range_m, bearing, x, y = valid_returns(ranges, cos, sin, float(angle_min_rad),
-                                                  float(angle_increment_rad), float(range_min_m),
-                                                  float(range_max_m))
-    return ScanPoints(index, range_m, bearing, x, y, full_turn, ranges.size,
+    beam_count = ranges.size
+    # NaN fails every comparison, +-inf one of the two; a zero range is a point at the sensor
+    # itself, never a wall return.
+    lower = (ranges >= range_min_m) if range_min_m > 0.0 else (ranges > 0.0)
+    index = (lower & (ranges <= min(range_max_m, _LARGEST_RANGE))).nonzero()[0]
+    range_m = ranges[index]
+    return ScanPoints(index, range_m, angle_min_rad + index * angle_increment_rad,
+                      range_m * cos[index], range_m * sin[index], bool(full_turn), beam_count,
                       float(angle_increment_rad))

@@ -33,7 +33,7 @@ from .corner_check import CornerNees, TrackedCorner
 from .samples import NoiseParameters
 from .scans import load_scans, require_still, StaticScans
 from .score_cli import node_config
-from ..cli import bounded, Parser, USER_ERROR, UserError, warm_up_core
+from ..cli import bounded, Parser, start_core, USER_ERROR, UserError
 from ..core import FeatureConfig, METHODS
 from ..sensors import DEFAULT_SENSOR, sensor_presets
 
@@ -98,7 +98,7 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     from ..bags import BagError
     try:
-        warm_up_core('calibrate')
+        start_core('calibrate')
         return run(args)
     except (BagError, OSError, ValueError) as error:
         message = str(error).splitlines()[0] if str(error) else type(error).__name__

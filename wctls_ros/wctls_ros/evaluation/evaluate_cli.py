@@ -23,7 +23,7 @@ from .analysis import evaluate_scans, PROPAGATIONS
 from .calibration import fit_noise
 from .samples import NoiseParameters
 from .scans import load_scans, MovingSensorError, require_still
-from ..cli import bounded, Parser, staged_folder, USER_ERROR, UserError, warm_up_core
+from ..cli import bounded, Parser, staged_folder, start_core, USER_ERROR, UserError
 from ..core import METHODS
 
 
@@ -103,7 +103,7 @@ def main(argv=None) -> int:
     from ..bags import BagError
     args = evaluate_parser().parse_args(argv)
     try:
-        warm_up_core('evaluate')
+        start_core('evaluate')
         return _evaluate(args, args.methods, argv)
     except MovingSensorError as error:
         print(f'evaluate: error: refused: {error}', file=sys.stderr)

@@ -27,7 +27,7 @@ from typing import Dict, Optional
 from .scans import check_still, load_json_scans, load_scans, StaticScans
 from .score import markdown_table, RECURRING_PRESENCE, score_scans, write_score
 from .truth import load_truth, Truth, TRUTH_FILE
-from ..cli import Parser, staged_folder, USER_ERROR, UserError, warm_up_core
+from ..cli import Parser, staged_folder, start_core, USER_ERROR, UserError
 from ..core import FeatureConfig, METHODS
 from ..params import feature_settings, load_parameters, SENSOR
 from ..sensors import DEFAULT_SENSOR, sensor_presets
@@ -225,7 +225,7 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     from ..bags import BagError
     try:
-        warm_up_core('score')
+        start_core('score')
         return run(args, argv)
     except (BagError, OSError, ValueError) as error:
         message = str(error).splitlines()[0] if str(error) else type(error).__name__

@@ -23,7 +23,7 @@ import numpy as np
 
 from ._jit import jit
 from ._order import wrapped
-from .features import CornerSet
+from ..features import CornerSet
 
 
 def intersect(line_a: np.ndarray, cov_a: np.ndarray, line_b: np.ndarray,

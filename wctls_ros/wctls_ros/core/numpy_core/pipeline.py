@@ -7,17 +7,18 @@ from dataclasses import dataclass, replace
 import math
 
 import numpy as np
-from wctls_ros.core.config import FeatureConfig
-from wctls_ros.core.features import CornerSet, Features, SegmentSet
 
 from .corners import find_corners, walls_end_at_corners
-from .lines import fit_lines, LineFits, normal_jacobian, segment_returns, SegmentReturns
+from .lines import fit_lines, normal_jacobian
 from .model_error import flatness_covariance, line_from_normal_jacobian, residual_factor
 from .noise import scan_range_sigma
-from .scan import scan_to_points, ScanError, ScanPoints
 from .segmentation import (breakpoints, Breaks, Chains, chains, iterative_end_point_fit,
                            merge_collinear, moment_fit, moment_terms, pass_budget, piece_sums,
                            SegmentRanges, trim_ambiguous_ends, trim_offset_ends)
+from ..config import FeatureConfig
+from ..features import (CornerSet, Features, LineFits, segment_returns, SegmentReturns,
+                        SegmentSet)
+from ..scan import scan_to_points, ScanError, ScanPoints
 
 _DEFAULT_CONFIG = FeatureConfig()
 # Most returns between two walls that meet at a corner: the ones both trims leave out (8 at each

@@ -18,7 +18,7 @@ from typing import Callable, NamedTuple, Tuple
 import numpy as np
 
 from ._linalg import mahalanobis_squared_2x2
-from .scan import ScanPoints
+from ..scan import ScanPoints
 
 # A chord shorter than this (m) has no usable direction: distances are measured from its start.
 _MIN_CHORD_M = 1e-9

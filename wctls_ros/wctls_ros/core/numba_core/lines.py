@@ -20,95 +20,19 @@ method's line in one common form x cos(angle) + y sin(angle) = radius, radius >=
 covariance of (angle, radius).
 """
 
-from dataclasses import dataclass
 import math
 
 import numpy as np
 
 from ._jit import jit
-from .config import METHODS
+from ..config import METHODS
+from ..features import LineFits, SegmentReturns
 
 # Gauss-Newton of the maximum-likelihood fit stops once every step is below this (rad and m)...
 _ML_STEP_TOLERANCE = 1e-12
 # ... or after this many iterations. From the WTLS line it takes 5 to 8 on simulated S1 scans
 # (the variances move with the line, so convergence is linear), the last step below 1e-12.
 _ML_MAX_ITERATIONS = 8
-
-
-@dataclass(frozen=True)
-class SegmentReturns:
-    """
-    The returns of S segments laid end to end.
-
-    :ivar rho: ranges, shape (P,), m
-    :ivar theta: bearings, shape (P,), rad
-    :ivar x: rho cos(theta), shape (P,), m
-    :ivar y: rho sin(theta), shape (P,), m
-    :ivar offsets: first return of each segment, shape (S,)
-    :ivar counts: returns per segment, shape (S,), each >= 2
-    """
-
-    rho: np.ndarray
-    theta: np.ndarray
-    x: np.ndarray
-    y: np.ndarray
-    offsets: np.ndarray
-    counts: np.ndarray
-
-
-def segment_returns(rho, theta, offsets, counts, x=None, y=None) -> SegmentReturns:
-    """
-    Bundle the returns of consecutive segments for the batched fits.
-
-    :param rho: ranges, shape (P,), m
-    :param theta: bearings, shape (P,), rad
-    :param offsets: first return of each segment, shape (S,)
-    :param counts: returns per segment, shape (S,), each >= 2
-    :param x: rho cos(theta) when already known, shape (P,), m
-    :param y: rho sin(theta) when already known, shape (P,), m
-    :return: the bundle
-    """
-    rho = np.asarray(rho, dtype=float)
-    theta = np.asarray(theta, dtype=float)
-    counts = np.asarray(counts, dtype=np.intp)
-    if x is None or y is None:
-        x, y = rho * np.cos(theta), rho * np.sin(theta)
-    return SegmentReturns(rho, theta, x, y, np.asarray(offsets, dtype=np.intp), counts)
-
-
-@dataclass(frozen=True)
-class LineFits:
-    """
-    Fitted lines of S segments, in the method's own form and in normal form.
-
-    :ivar line: (a, b, c) of a x + b y + c = 0 as the method defines them, shape (S, 3)
-    :ivar line_covariance: covariance of (a, b, c), shape (S, 3, 3), in units of (a, b, c)^2
-    :ivar angle_rad: direction of the line's normal, pointing from the origin to the line,
-        shape (S,), rad in (-pi, pi]
-    :ivar radius_m: distance of the line from the origin, shape (S,), m, >= 0
-    :ivar normal_covariance: covariance of (angle, radius), shape (S, 2, 2): rad^2, rad m, m^2
-    :ivar line_offset_jacobian: d(a, b, c) / d(range offset common to all returns), (S, 3), per m
-    :ivar normal_offset_jacobian: d(angle, radius) / d(common range offset), (S, 2): rad/m, m/m
-    """
-
-    line: np.ndarray
-    line_covariance: np.ndarray
-    angle_rad: np.ndarray
-    radius_m: np.ndarray
-    normal_covariance: np.ndarray
-    line_offset_jacobian: np.ndarray
-    normal_offset_jacobian: np.ndarray
-
-    def select(self, keep: np.ndarray) -> 'LineFits':
-        """
-        Return the fits where ``keep`` selects (a boolean or index array over the segments).
-
-        :param keep: selection over the segments
-        :return: the selected fits
-        """
-        return LineFits(self.line[keep], self.line_covariance[keep], self.angle_rad[keep],
-                        self.radius_m[keep], self.normal_covariance[keep],
-                        self.line_offset_jacobian[keep], self.normal_offset_jacobian[keep])
 
 
 def _fits(method: str, returns: SegmentReturns, range_sigma: float,

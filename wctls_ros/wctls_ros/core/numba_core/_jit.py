@@ -33,7 +33,9 @@ import os
 from typing import Optional
 
 _CACHE_VARIABLE = 'NUMBA_CACHE_DIR'
-_CORE = os.path.dirname(os.path.abspath(__file__))
+_HERE = os.path.dirname(os.path.abspath(__file__))
+# Kernels use constants of the shared modules and of the numpy core too: every core source counts.
+_CORE_SOURCES = os.path.join(os.path.dirname(_HERE), '**', '*.py')
 _FINGERPRINT_FILE = 'wctls_ros_core.fingerprint'
 
 
@@ -60,8 +62,8 @@ def _located_here():
 def _fingerprint() -> str:
     """Return a digest of numba's version and every source file of the core."""
     digest = hashlib.sha256(numba.__version__.encode())
-    for path in sorted(glob.glob(os.path.join(_CORE, '*.py'))):
-        digest.update(os.path.basename(path).encode())
+    for path in sorted(glob.glob(_CORE_SOURCES, recursive=True)):
+        digest.update(os.path.relpath(path, _HERE).encode())
         with open(path, 'rb') as source:
             digest.update(source.read())
     return digest.hexdigest()
@@ -88,7 +90,7 @@ def _forget_stale_kernels() -> None:
     except OSError:
         pass
     modules = {os.path.splitext(os.path.basename(path))[0]
-               for path in glob.glob(os.path.join(_CORE, '*.py'))}
+               for path in glob.glob(os.path.join(_HERE, '*.py'))}
     for cached in glob.glob(os.path.join(folder, '*.nb[ic]')):
         if os.path.basename(cached).split('.', 1)[0] in modules:
             try:

@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from wctls_ros.core.features import CornerSet
+from ..features import CornerSet
 
 # The upper triangle of the symmetric (x, y, yaw) covariance, row by row: (row, column) of each
 # of its six entries, and which of them each entry of the full matrix is.

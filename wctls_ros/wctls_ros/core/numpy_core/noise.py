@@ -12,10 +12,21 @@ Pure numpy; no ROS.
 import math
 
 import numpy as np
-from wctls_ros.core.noise import (_CUT_SIGMAS, _CUT_VARIANCE, _MAD_TO_SIGMA, _REFINEMENTS,
-                                  MIN_TRIPLES)
 
-from .scan import ScanPoints
+from ..scan import ScanPoints
+
+# Fewer triples of neighbouring returns than this estimate nothing (a scan of a few returns).
+MIN_TRIPLES = 30
+# 1 / Phi^-1(3/4): the median absolute deviation of a normal sample times this is its sigma.
+_MAD_TO_SIGMA = 1.482602218505602
+# Second differences beyond this many sigma are not noise (edges, mixed pixels, clutter)...
+_CUT_SIGMAS = 3.0
+# ... and a normal sample cut there keeps this share of its variance: 1 - 2 k phi(k) / (2 Phi(k)
+# - 1) for k = 3.
+_CUT_VARIANCE = 1.0 - 2.0 * _CUT_SIGMAS * math.exp(-0.5 * _CUT_SIGMAS ** 2) / math.sqrt(
+    2.0 * math.pi) / math.erf(_CUT_SIGMAS / math.sqrt(2.0))
+# Re-cuts after the median absolute deviation's first guess (the sigma settles in two).
+_REFINEMENTS = 3
 
 
 def scan_range_sigma(points: ScanPoints) -> float:

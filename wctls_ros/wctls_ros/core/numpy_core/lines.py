@@ -21,7 +21,8 @@ covariance of (angle, radius).
 """
 
 import numpy as np
-from wctls_ros.core.lines import LineFits, segment_returns, SegmentReturns  # noqa: F401
+
+from ..features import LineFits, SegmentReturns
 
 # Gauss-Newton of the maximum-likelihood fit stops once every step is below this (rad and m)...
 _ML_STEP_TOLERANCE = 1e-12

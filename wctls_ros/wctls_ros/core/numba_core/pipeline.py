@@ -19,15 +19,16 @@ import numpy as np
 
 from ._jit import jit, jit_inline
 from ._order import wrapped
-from .config import FeatureConfig, METHODS
 from .corners import corner_candidates, walls_end_at
-from .features import CornerSet, Features, SegmentSet
 from .lines import fit_segments, residual_chi2_dof
 from .model_error import with_model_error
 from .noise import range_sigma_of_returns
-from .scan import scan_geometry, ScanError, valid_returns
+from .scan import valid_returns
 from .segmentation import (breakpoints_of, chains_of, merge_segments, pass_budget, split_iepf,
                            trim_ambiguous, trim_offset)
+from ..config import FeatureConfig, METHODS
+from ..features import CornerSet, Features, SegmentSet
+from ..scan import scan_geometry, ScanError
 
 _DEFAULT_CONFIG = FeatureConfig()
 # Most returns between two walls that meet at a corner: the ones both trims leave out (8 at each

@@ -1,0 +1,174 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""
+Which implementation serves: numba when it can, numpy otherwise and while numba compiles.
+
+Each case runs a fresh interpreter, since the choice is made once per process; an empty numba
+cache stands for the first start on a machine. numba's absence is made by a ``numba`` entry of
+None in ``sys.modules`` (the stock-install run has none at all), a too-old numba by a module of
+that name with an old version on the import path.
+"""
+
+import json
+import os
+import pathlib
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+import wctls_ros
+from wctls_ros.core import runtime
+
+PACKAGE_PARENT = str(pathlib.Path(wctls_ros.__file__).resolve().parents[1])
+# A square room's full turn, and what the process reports: the core after its first scan.
+FIRST_SCAN = """
+import json, math, sys, time
+import numpy as np
+{before}
+started = time.perf_counter()
+from wctls_ros.core import extract_features, start, status
+chosen = start({start_arguments})
+beams = 720
+bearing = -math.pi + 2 * math.pi / beams * np.arange(beams)
+ranges = 2.0 / np.maximum(np.abs(np.cos(bearing)), np.abs(np.sin(bearing)))
+corners = len(extract_features(ranges, -math.pi, 2 * math.pi / beams).corners)
+print(json.dumps({{'first_scan_s': time.perf_counter() - started, 'corners': corners,
+                  'core': status().name, 'reason': status().reason,
+                  'compiling': chosen.compiling, 'line': chosen.describe(),
+                  'numba_imported': 'numba' in sys.modules}}), flush=True)
+{after}
+"""
+
+
+def run_first_scan(tmp_path, before='', after='', start_arguments='', timeout=600.0,
+                   **environment):
+    """Run FIRST_SCAN in a fresh interpreter with an empty numba cache; return its report."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / 'cache'), **environment)
+    env['PYTHONPATH'] = os.pathsep.join([str(tmp_path), PACKAGE_PARENT,
+                                         os.environ.get('PYTHONPATH', '')])
+    code = FIRST_SCAN.format(before=before, after=after, start_arguments=start_arguments)
+    result = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True,
+                            text=True, timeout=timeout)
+    assert result.returncode == 0, result.stderr
+    return [json.loads(line) for line in result.stdout.splitlines()]
+
+
+def test_without_numba_the_numpy_core_serves_and_says_how_to_get_the_compiled_one(tmp_path):
+    report, = run_first_scan(tmp_path, before="sys.modules['numba'] = None")
+    assert report['core'] == 'numpy' and report['corners'] == 4
+    assert report['reason'] == 'numba is not installed'
+    assert runtime.INSTALL_NUMBA in report['line'] and f'{runtime.SPEEDUP}x' in report['line']
+
+
+def test_a_numba_older_than_the_oldest_supported_falls_back_to_numpy(tmp_path):
+    (tmp_path / 'numba').mkdir()
+    (tmp_path / 'numba' / '__init__.py').write_text("__version__ = '0.59.1'\n")
+    report, = run_first_scan(tmp_path)
+    assert report['core'] == 'numpy' and report['corners'] == 4
+    assert 'numba 0.59.1 is older than 0.60.0' in report['reason']
+
+
+def test_forcing_numpy_never_imports_numba(tmp_path):
+    report, = run_first_scan(tmp_path, WCTLS_ROS_CORE='numpy')
+    assert report['core'] == 'numpy' and not report['numba_imported']
+
+
+def test_forcing_numba_without_it_is_an_error_naming_the_install_command(tmp_path):
+    code = ("import sys; sys.modules['numba'] = None\n"
+            'from wctls_ros.core import start\nstart()')
+    environment = dict(os.environ, WCTLS_ROS_CORE='numba', PYTHONPATH=os.pathsep.join(
+        [PACKAGE_PARENT, os.environ.get('PYTHONPATH', '')]))
+    result = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                            env=environment)
+    assert result.returncode != 0
+    assert 'CoreUnavailable' in result.stderr and runtime.INSTALL_NUMBA in result.stderr
+
+
+def test_an_unknown_choice_is_refused(monkeypatch):
+    monkeypatch.setenv(runtime.CORE_VARIABLE, 'fortran')
+    with pytest.raises(runtime.CoreUnavailable, match='auto, numba, numpy'):
+        runtime.choice()
+
+
+def test_a_compile_that_fails_falls_back_to_numpy(monkeypatch):
+    from wctls_ros.core.numba_core import precompile
+
+    def failing(helpers=None):
+        raise RuntimeError('Failed in nopython mode pipeline\nthe details')
+    monkeypatch.setattr(precompile, 'warm_up', failing)
+    status = runtime._load_compiled('auto', compiled_here=True, started=time.perf_counter())
+    assert status.name == 'numpy'
+    assert 'failed to compile the core (RuntimeError: Failed in nopython' in status.reason
+    with pytest.raises(runtime.CoreUnavailable, match='failed to compile'):
+        runtime._load_compiled('numba', compiled_here=True, started=time.perf_counter())
+
+
+@pytest.mark.parametrize('version, expected', [
+    ('0.60.0', (0, 60, 0)), ('0.61.0rc1', (0, 61, 0)), ('0.68.1', (0, 68, 1)), ('1.0', (1, 0, 0)),
+    ('0.59.1+1.g5ab', (0, 59, 1))])
+def test_numba_versions_compare_by_their_numbers(version, expected):
+    assert runtime._version_tuple(version) == expected
+
+
+# After the first scan, wait for the switch and report again.
+AFTER_SWITCH = """
+deadline = time.monotonic() + 500
+while status().compiling and time.monotonic() < deadline:
+    time.sleep(0.1)
+corners = len(extract_features(ranges, -math.pi, 2 * math.pi / beams).corners)
+print(json.dumps({'core': status().name, 'corners': corners, 'line': status().describe(),
+                  'compiled_here': status().compiled_here}), flush=True)
+"""
+
+
+def test_a_cold_start_answers_with_numpy_at_once_then_switches_to_the_compiled_core(tmp_path):
+    first, switched = run_first_scan(tmp_path, after=AFTER_SWITCH)
+    # Answered by numpy while numba compiled in another process (which takes 10-200 s here).
+    assert first['core'] == 'numpy' and first['compiling'] and first['corners'] == 4
+    assert 'compiling in the background' in first['line']
+    assert switched['core'] == 'numba' and switched['compiled_here'] and switched['corners'] == 4
+    # The next process finds the cache: compiled at once, loaded rather than compiled.
+    again, = run_first_scan(tmp_path)
+    assert again['core'] == 'numba' and not again['compiling']
+    assert 'loaded in' in again['line']
+
+
+KEEP_RUNNING = """
+print(json.dumps({'compiler': __import__('wctls_ros.core.runtime').core.runtime._compiler.pid}),
+      flush=True)
+time.sleep(600)
+"""
+
+
+def test_the_background_compile_ends_when_its_process_is_killed(tmp_path):
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / 'cache'), PYTHONPATH=os.pathsep.join(
+        [PACKAGE_PARENT, os.environ.get('PYTHONPATH', '')]))
+    code = FIRST_SCAN.format(before='', after=KEEP_RUNNING, start_arguments='')
+    parent = subprocess.Popen([sys.executable, '-c', code], env=env, stdout=subprocess.PIPE,
+                              text=True)
+    try:
+        first = json.loads(parent.stdout.readline())
+        compiler = json.loads(parent.stdout.readline())['compiler']
+        assert first['compiling']
+        os.kill(compiler, 0)                     # running
+        parent.send_signal(signal.SIGKILL)
+        parent.wait()
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline and _alive(compiler):
+            time.sleep(0.05)
+        assert not _alive(compiler)
+    finally:
+        parent.kill()
+        parent.wait()
+
+
+def _alive(pid: int) -> bool:
+    """Return whether a process exists and is not a zombie."""
+    try:
+        with open(f'/proc/{pid}/stat') as stat:
+            return stat.read().split(')')[-1].split()[0] != 'Z'
+    except FileNotFoundError:
+        return False

@@ -1,0 +1,346 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""
+Which implementation of the feature pipeline runs: the compiled one (numba) or the numpy one.
+
+Both compute the same features: the tests hold them to the same segments and corners, every
+value within 1e-9 relative, on every scan of the test corpus. The compiled one
+(:mod:`.numba_core`) takes about a tenth of the numpy one's time per scan (``SPEEDUP``), but it
+needs numba (``OLDEST_NUMBA`` or newer) and compiles once per machine, about 15 s on a 2-core VM,
+after which it loads from numba's disk cache in well under a second. The numpy one
+(:mod:`.numpy_core`) needs numpy alone.
+
+The environment variable ``WCTLS_ROS_CORE`` chooses:
+
+- ``auto`` (the default): the compiled core when numba gives it; the numpy core while it
+  compiles (in a process of its own, so nothing waits for it) and whenever numba is missing, too
+  old, or fails to compile;
+- ``numba``: the compiled core, compiled before :func:`start` returns; whatever stands in its
+  way is an error (:class:`CoreUnavailable`);
+- ``numpy``: the numpy core; numba is never imported.
+
+Nothing happens at import. Nodes and tools call :func:`start` before their first scan; a
+script that calls :func:`extract_features` without it starts the choice at its first call.
+A process forked after :func:`start` keeps the implementation that served its parent then.
+"""
+
+from dataclasses import dataclass
+import math
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from typing import Callable, List, Optional
+
+from . import numpy_core
+from .config import FeatureConfig
+from .features import Features
+
+CORE_VARIABLE = 'WCTLS_ROS_CORE'
+CHOICES = ('auto', 'numba', 'numpy')
+# The oldest numba that compiles the core (older ones lack math.log2 and other functions it
+# uses; checked in ``make test`` with this version).
+OLDEST_NUMBA = (0, 60, 0)
+INSTALL_NUMBA = f"pip install 'numba>={'.'.join(map(str, OLDEST_NUMBA))}'"
+# The numpy core's time per 1080-beam room scan over the compiled core's, measured side by side
+# by benchmark/bench_core.py --cores (docs/performance.md).
+SPEEDUP = 10
+
+
+class CoreUnavailable(RuntimeError):
+    """The compiled core was required (``WCTLS_ROS_CORE=numba``) and cannot be had."""
+
+
+@dataclass(frozen=True)
+class CoreStatus:
+    """
+    Which implementation serves :func:`extract_features`, and why.
+
+    :ivar name: 'numba' (compiled) or 'numpy'
+    :ivar reason: why this one, in a few words (for a log line)
+    :ivar compiling: the compiled core is being compiled in the background, and replaces the
+        numpy one when it is ready
+    :ivar seconds: how long loading or compiling the compiled core took, s (0 for numpy)
+    :ivar compiled_here: the compiled core was compiled by this process (or its compile
+        process), not loaded from numba's cache
+    :ivar advice: how to get the compiled core, when installing something would
+    """
+
+    name: str
+    reason: str
+    compiling: bool = False
+    seconds: float = 0.0
+    compiled_here: bool = False
+    advice: str = ''
+
+    def describe(self) -> str:
+        """Return one line for a log: which core runs, why, and what the other one would give."""
+        if self.name == 'numba':
+            how = 'compiled for this machine' if self.compiled_here else 'loaded'
+            return f'compiled feature pipeline ({self.reason}): {how} in {self.seconds:.1f} s'
+        if self.compiling:
+            return ('numpy feature pipeline for now: the compiled one (about '
+                    f'{SPEEDUP}x faster per scan) is compiling in the background, about 15 s '
+                    'once per machine')
+        if self.reason.startswith(CORE_VARIABLE):
+            return f'numpy feature pipeline ({self.reason})'
+        advice = f'; {self.advice}' if self.advice else ''
+        return (f'numpy feature pipeline: {self.reason} (the compiled one is about {SPEEDUP}x '
+                f'faster per scan{advice})')
+
+
+_lock = threading.Lock()
+_extract: Callable[..., Features] = numpy_core.extract_features
+_status: Optional[CoreStatus] = None
+_compiler: Optional[subprocess.Popen] = None
+_listeners: List[Callable[[CoreStatus], None]] = []
+
+
+def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
+                     config: FeatureConfig = FeatureConfig(), range_min_m: float = 0.0,
+                     range_max_m: float = math.inf) -> Features:
+    """
+    Extract straight segments and corners with covariances from one 2D scan.
+
+    The scan is a LaserScan's geometry: beam i has bearing angle_min + i * angle_increment and
+    range ``ranges_m[i]``; invalid returns (NaN, +-inf, outside the range limits) are skipped.
+    Steps: adaptive breakpoints, Iterative End Point Fit, merging of collinear neighbours,
+    trimming of the returns at segment ends that fit both walls of a corner or lie off the
+    segment's line together, the configured line fit with its covariance, and the corners of
+    adjacent segments (across the +-pi seam on a full turn) with their propagated (x, y, yaw)
+    covariance. Runs the implementation :func:`status` names.
+
+    :param ranges_m: ranges, shape (N,), m
+    :param angle_min_rad: bearing of the first beam, rad
+    :param angle_increment_rad: bearing step, rad (non-zero, either sign)
+    :param config: the pipeline's settings (noise model, thresholds, method)
+    :param range_min_m: the scan's own range_min (LaserScan.range_min), m
+    :param range_max_m: the scan's own range_max (LaserScan.range_max), m
+    :return: the segments and corners, in scan order
+    :raises wctls_ros.core.ScanError: when the scan geometry makes no sense, or the scan has
+        more than ``config.max_beams`` beams (a ValueError)
+    """
+    if _status is None:
+        start()
+    return _extract(ranges_m, angle_min_rad, angle_increment_rad, config, range_min_m,
+                    range_max_m)
+
+
+def status() -> Optional[CoreStatus]:
+    """Return which implementation serves :func:`extract_features`; None before :func:`start`."""
+    return _status
+
+
+def choice() -> str:
+    """
+    Return the implementation asked for in ``WCTLS_ROS_CORE``: auto, numba or numpy.
+
+    :raises CoreUnavailable: on any other value
+    """
+    value = os.environ.get(CORE_VARIABLE, 'auto').strip().lower() or 'auto'
+    if value not in CHOICES:
+        raise CoreUnavailable(f'{CORE_VARIABLE}={value!r}: use one of {", ".join(CHOICES)}')
+    return value
+
+
+def numba_problem() -> Optional[str]:
+    """Return why numba cannot compile the core here (not installed, too old), or None."""
+    try:
+        import numba
+    except ImportError:
+        return 'numba is not installed'
+    except Exception as error:  # noqa: B902 - a broken numba install is no numba
+        return f'numba cannot be imported ({error!r})'
+    version = _version_tuple(numba.__version__)
+    if version < OLDEST_NUMBA:
+        return (f'numba {numba.__version__} is older than '
+                f'{".".join(map(str, OLDEST_NUMBA))}, the oldest that compiles the core')
+    return None
+
+
+def _version_tuple(text: str) -> tuple:
+    """Return (major, minor, patch) of a version string such as '0.61.0rc1' (pre-releases too)."""
+    numbers = []
+    for part in text.split('.')[:3]:
+        leading = re.match(r'\d+', part)
+        numbers.append(int(leading.group()) if leading else 0)
+        if not part.isdigit():
+            break
+    return tuple(numbers + [0] * (3 - len(numbers)))
+
+
+def start(wait: bool = False,
+          on_switch: Optional[Callable[[CoreStatus], None]] = None) -> CoreStatus:
+    """
+    Choose the implementation for this process, once; later calls return the choice.
+
+    With ``auto`` and numba at hand, the compiled core is loaded from numba's cache when it is
+    there (under a second); otherwise it is compiled in a process of its own while the numpy
+    core serves (``wait`` False), or before this returns (``wait`` True: a tool that forks
+    workers, a build step). Ctrl-C and SIGTERM are honoured while waiting: the compile process
+    ends with this one, however this one ends.
+
+    :param wait: compile before returning instead of in the background
+    :param on_switch: called (from another thread) with the new status once the background
+        compile has ended, whether the compiled core then serves or not
+    :return: the status now
+    :raises CoreUnavailable: when ``WCTLS_ROS_CORE=numba`` and numba cannot give the core
+    """
+    global _status
+    with _lock:
+        if _status is not None:
+            if _status.compiling and on_switch is not None:
+                _listeners.append(on_switch)
+            return _status
+        asked = choice()
+        if asked == 'numpy':
+            _status = CoreStatus('numpy', f'{CORE_VARIABLE}=numpy')
+            return _status
+        problem = numba_problem()
+        if problem is not None:
+            if asked == 'numba':
+                raise CoreUnavailable(f'{CORE_VARIABLE}=numba, but {problem} ({INSTALL_NUMBA})')
+            _status = CoreStatus('numpy', problem, advice=INSTALL_NUMBA)
+            return _status
+        from .numba_core import precompile
+        wait = wait or asked == 'numba'
+        started = time.perf_counter()
+        cached = precompile.pipeline_is_cached()
+        if not cached:
+            if not wait:
+                _start_background_compile(on_switch)
+                return _status
+            _compile_in_child()
+        _status = _load_compiled(asked, compiled_here=not cached, started=started)
+        return _status
+
+
+def warm_up() -> float:
+    """
+    Make the fastest available implementation ready now, compiling it if need be.
+
+    For scripts, benchmarks and build steps that would rather wait than run the numpy core
+    meanwhile. The compile runs in a process of its own (Ctrl-C ends it too).
+
+    :return: how long it took, s (about 0 when numba is missing or the numpy core is asked for)
+    """
+    started = time.perf_counter()
+    start(wait=True)
+    return time.perf_counter() - started
+
+
+def _load_compiled(asked: str, compiled_here: bool, started: float) -> CoreStatus:
+    """
+    Load the compiled pipeline (from the cache, or compiling it here) and make it serve.
+
+    :param asked: the choice of ``WCTLS_ROS_CORE``
+    :param compiled_here: whether this process (or its compile process) compiled it
+    :param started: when loading or compiling began (time.perf_counter), s
+    :return: the status: numba, or numpy with the reason the compiled core failed
+    """
+    global _extract
+    import numba
+    from .numba_core import pipeline, precompile
+    try:
+        precompile.warm_up(helpers=0)
+    except Exception as error:  # noqa: B902 - any compile failure falls back to numpy
+        if asked == 'numba':
+            raise CoreUnavailable(f'numba {numba.__version__} failed to compile the core: '
+                                  f'{_first_line(error)}') from error
+        return CoreStatus('numpy', f'numba {numba.__version__} failed to compile the core '
+                                   f'({_first_line(error)})')
+    _extract = pipeline.extract_features
+    return CoreStatus('numba', f'numba {numba.__version__}', seconds=time.perf_counter() - started,
+                      compiled_here=compiled_here)
+
+
+def _first_line(error: BaseException) -> str:
+    text = str(error).strip().splitlines()
+    return f'{type(error).__name__}: {text[0] if text else ""}'[:200]
+
+
+def _compile_command() -> list:
+    return [sys.executable, '-c',
+            'from wctls_ros.core.numba_core.precompile import warm_up; warm_up()']
+
+
+def _start_compiler() -> subprocess.Popen:
+    """Start a process that compiles the pipeline into numba's cache, ending with this one."""
+    environment = dict(os.environ, PYTHONPATH=os.pathsep.join(path for path in sys.path if path))
+    return subprocess.Popen(_compile_command(), env=environment, stdin=subprocess.DEVNULL,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            preexec_fn=_death_signal_setter())
+
+
+def _death_signal_setter() -> Optional[Callable[[], None]]:
+    """
+    Return what the compile process runs before its program: die when its parent dies.
+
+    Linux's PR_SET_PDEATHSIG, so that a parent killed outright (SIGKILL, a closed terminal)
+    leaves no compile behind. Looked up here, in the parent: between fork and exec the child
+    may not import anything. None where there is no prctl (the compile then ends by itself).
+    """
+    try:
+        import ctypes
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+    pr_set_pdeathsig = 1
+
+    def die_with_parent():
+        prctl(pr_set_pdeathsig, signal.SIGKILL)
+    return die_with_parent
+
+
+def _compile_in_child() -> None:
+    """Compile the pipeline into the cache in another process and wait for it (interruptible)."""
+    compiler = _start_compiler()
+    try:
+        _, errors = compiler.communicate()
+    finally:
+        if compiler.poll() is None:
+            compiler.kill()
+            compiler.wait()
+    # A failed compile shows again, with its reason, when this process loads the pipeline.
+    del errors
+
+
+def _start_background_compile(on_switch) -> None:
+    """Serve with numpy while another process compiles; switch when it is done (called locked)."""
+    global _status, _compiler
+    _status = CoreStatus('numpy', 'compiling the compiled core', compiling=True)
+    if on_switch is not None:
+        _listeners.append(on_switch)
+    _compiler = _start_compiler()
+    threading.Thread(target=_finish_background_compile, args=(_compiler, time.perf_counter()),
+                     name='wctls_ros core compile', daemon=True).start()
+
+
+def _finish_background_compile(compiler: subprocess.Popen, started: float) -> None:
+    """Wait for the compile process, then load what it compiled and switch to it."""
+    global _status
+    _, errors = compiler.communicate()
+    if compiler.returncode == 0:
+        loaded = _load_compiled('auto', compiled_here=True, started=started)
+    else:
+        lines = errors.decode(errors='replace').strip().splitlines()
+        loaded = CoreStatus('numpy', 'the background compile failed'
+                                     f' ({lines[-1][:200] if lines else compiler.returncode})')
+    with _lock:
+        _status = loaded
+        listeners = list(_listeners)
+        _listeners.clear()
+    for listener in listeners:
+        listener(loaded)
+
+
+def stop_background_compile() -> None:
+    """End a background compile (a node shutting down); the numpy core keeps serving."""
+    compiler = _compiler
+    if compiler is not None and compiler.poll() is None:
+        compiler.kill()
+        compiler.wait()

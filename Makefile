@@ -12,19 +12,28 @@ VENV := .venv
 ROOT := $(abspath .)
 DEPS_STAMP := $(VENV)/.deps.stamp
 BUILD_STAMP := install/.build.stamp
-REQUIREMENTS := $(wildcard requirements/*.txt)
+REQUIREMENTS := $(addprefix requirements/,build.txt python.txt ros.txt test.txt)
 SOURCES := $(shell find wctls_msgs wctls_ros -type f -not -path '*/__pycache__/*' \
              -not -name '*.pyc' 2>/dev/null)
 # Every recipe line that runs project code does so inside the venv + install overlay.
 WITH_ENV := source tools/env.sh &&
 PYTEST_ARGS ?=
-# The tests that need numpy and numba alone run a second time with the oldest numpy
-# requirements/python.txt admits: Ubuntu 24.04's 1.26, which an apt install of ROS 2 Jazzy uses.
-OLDEST_NUMPY_VENV := .venv-oldest-numpy
-OLDEST_NUMPY_STAMP := $(OLDEST_NUMPY_VENV)/.deps.stamp
-NUMPY_ONLY_TESTS := $(addprefix wctls_ros/test/,test_core_lines.py test_core_pipeline.py \
-                      test_core_precompile.py test_core_segmentation.py test_rplidar_scan.py \
-                      test_simulation.py)
+# Two more runs of some tests, each in a venv of its own. The oldest versions we support
+# (requirements/oldest.txt: numpy 1.26, numba 0.60) with the compiled core forced: it must build
+# and agree with the numpy core under them. And a stock ROS 2 Jazzy install on Ubuntu 24.04
+# (requirements/stock.txt: noble's numpy, PyYAML and pyserial, the ROS wheels, and no numba,
+# rosbags, matplotlib or tqdm): the core, the nodes and the emulator must run there.
+OLDEST_VENV := .venv-oldest
+OLDEST_STAMP := $(OLDEST_VENV)/.deps.stamp
+OLDEST_TESTS := $(addprefix wctls_ros/test/,test_core_compiled_pipeline.py test_core_lines.py \
+                  test_core_pipeline.py test_core_precompile.py test_core_segmentation.py \
+                  test_rplidar_scan.py test_simulation.py)
+STOCK_VENV := .venv-stock
+STOCK_STAMP := $(STOCK_VENV)/.deps.stamp
+STOCK_TESTS := $(addprefix wctls_ros/test/,stock_install_checks.py test_stock_install.py \
+                 test_feature_node.py test_params.py test_rplidar_node.py \
+                 test_rplidar_emulator.py test_rplidar_protocol.py test_rplidar_capsules.py \
+                 test_rplidar_scan.py)
 
 .PHONY: help deps build demo test lint bench results docs clean
 
@@ -50,10 +59,16 @@ $(DEPS_STAMP): $(REQUIREMENTS) tools/fix_wheel_cmake_paths.sh tools/pip_install.
 	    > $(VENV)/local_setup.$$shell; done
 	touch $@
 
-$(OLDEST_NUMPY_STAMP): requirements/python.txt requirements/test.txt tools/pip_install.sh
-	PYTHON=$(PYTHON) tools/pip_install.sh $(OLDEST_NUMPY_VENV) \
-	  "numpy==$$(sed -n 's/^numpy>=//p' requirements/python.txt).*" \
-	  $$(grep -hE '^(numba|PyYAML|pytest|hypothesis)[=>]' requirements/*.txt)
+$(OLDEST_STAMP): requirements/oldest.txt requirements/test.txt tools/pip_install.sh
+	PYTHON=$(PYTHON) tools/pip_install.sh $(OLDEST_VENV) -r requirements/oldest.txt \
+	  $$(grep -hE '^(pytest|hypothesis)[=>]' requirements/test.txt)
+	touch $@
+
+$(STOCK_STAMP): requirements/stock.txt requirements/ros.txt requirements/test.txt \
+                tools/pip_install.sh $(BUILD_STAMP)
+	PYTHON=$(PYTHON) tools/pip_install.sh $(STOCK_VENV) -r requirements/stock.txt \
+	  -r requirements/ros.txt -r requirements/test.txt
+	tools/stock_executables.sh $(STOCK_VENV)
 	touch $@
 
 build: $(BUILD_STAMP)
@@ -69,13 +84,14 @@ $(BUILD_STAMP): $(DEPS_STAMP) $(SOURCES)
 demo: $(BUILD_STAMP)
 	$(WITH_ENV) install/wctls_ros/lib/wctls_ros/demo
 
-test: $(BUILD_STAMP) $(OLDEST_NUMPY_STAMP)
+test: $(BUILD_STAMP) $(OLDEST_STAMP) $(STOCK_STAMP)
 	$(WITH_ENV) python -m pytest $(PYTEST_ARGS)
 	@# Its own JIT cache: code compiled against one numpy is not reused under another.
-	NUMBA_CACHE_DIR=$(ROOT)/$(OLDEST_NUMPY_VENV)/numba-cache \
-	  PYTHONPATH=wctls_ros:wctls_ros/test $(OLDEST_NUMPY_VENV)/bin/python -m pytest -p no:cacheprovider \
-	  -o addopts='-ra --strict-markers' --junitxml=out/test-results-oldest-numpy.xml \
-	  $(NUMPY_ONLY_TESTS)
+	WCTLS_ROS_CORE=numba NUMBA_CACHE_DIR=$(ROOT)/$(OLDEST_VENV)/numba-cache \
+	  PYTHONPATH=wctls_ros:wctls_ros/test $(OLDEST_VENV)/bin/python -m pytest -p no:cacheprovider \
+	  -o addopts='-ra --strict-markers' --junitxml=out/test-results-oldest.xml $(OLDEST_TESTS)
+	WCTLS_VENV=$(STOCK_VENV) $(WITH_ENV) python -m pytest -p no:cacheprovider \
+	  -o addopts='-ra --strict-markers' --junitxml=out/test-results-stock.xml $(STOCK_TESTS)
 
 lint: $(BUILD_STAMP)
 	$(WITH_ENV) python -m pytest -m linter $(PYTEST_ARGS)

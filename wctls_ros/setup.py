@@ -30,16 +30,16 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'bag_replay = wctls_ros.bags.replay_node:main',
-            'calibrate = wctls_ros.evaluation.calibrate_cli:main',
-            'evaluate = wctls_ros.evaluation.evaluate_cli:main',
+            'bag_replay = wctls_ros.executables:bag_replay',
+            'calibrate = wctls_ros.executables:calibrate',
+            'evaluate = wctls_ros.executables:evaluate',
             'feature_node = wctls_ros.feature_node:main',
-            'demo = wctls_ros.demo:main',
-            'process_bag = wctls_ros.bags.process_bag:main',
+            'demo = wctls_ros.executables:demo',
+            'process_bag = wctls_ros.executables:process_bag',
             'rplidar_node = wctls_ros.rplidar.rplidar_node:main',
             's1_emulator = wctls_ros.s1_emulator:main',
-            'score = wctls_ros.evaluation.score_cli:main',
-            'simulate = wctls_ros.evaluation.simulate_cli:main',
+            'score = wctls_ros.executables:score',
+            'simulate = wctls_ros.executables:simulate',
         ],
     },
 )

@@ -30,14 +30,15 @@ import numpy as np
 {before}
 started = time.perf_counter()
 from wctls_ros.core import extract_features, start, status
-chosen = start({start_arguments})
+changes = []
+chosen = start({start_arguments}on_change=lambda new: changes.append(new.describe()))
 beams = 720
 bearing = -math.pi + 2 * math.pi / beams * np.arange(beams)
 ranges = 2.0 / np.maximum(np.abs(np.cos(bearing)), np.abs(np.sin(bearing)))
 corners = len(extract_features(ranges, -math.pi, 2 * math.pi / beams).corners)
 print(json.dumps({{'first_scan_s': time.perf_counter() - started, 'corners': corners,
                   'core': status().name, 'reason': status().reason,
-                  'compiling': chosen.compiling, 'line': chosen.describe(),
+                  'pending': chosen.pending, 'line': chosen.describe(),
                   'numba_imported': 'numba' in sys.modules}}), flush=True)
 {after}
 """
@@ -66,6 +67,9 @@ def test_without_numba_the_numpy_core_serves_and_says_how_to_get_the_compiled_on
 def test_a_numba_older_than_the_oldest_supported_falls_back_to_numpy(tmp_path):
     (tmp_path / 'numba').mkdir()
     (tmp_path / 'numba' / '__init__.py').write_text("__version__ = '0.59.1'\n")
+    (tmp_path / 'numba-0.59.1.dist-info').mkdir()
+    (tmp_path / 'numba-0.59.1.dist-info' / 'METADATA').write_text(
+        'Metadata-Version: 2.1\nName: numba\nVersion: 0.59.1\n')
     report, = run_first_scan(tmp_path)
     assert report['core'] == 'numpy' and report['corners'] == 4
     assert 'numba 0.59.1 is older than 0.60.0' in report['reason']
@@ -98,12 +102,13 @@ def test_a_compile_that_fails_falls_back_to_numpy(monkeypatch):
 
     def failing(helpers=None):
         raise RuntimeError('Failed in nopython mode pipeline\nthe details')
+    monkeypatch.setattr(precompile, 'pipeline_is_cached', lambda: True)
     monkeypatch.setattr(precompile, 'warm_up', failing)
-    status = runtime._load_compiled('auto', compiled_here=True, started=time.perf_counter())
-    assert status.name == 'numpy'
+    status = runtime._bring_in_compiled('auto', on_compile=None)
+    assert status.name == 'numpy' and not status.pending
     assert 'failed to compile the core (RuntimeError: Failed in nopython' in status.reason
     with pytest.raises(runtime.CoreUnavailable, match='failed to compile'):
-        runtime._load_compiled('numba', compiled_here=True, started=time.perf_counter())
+        runtime._bring_in_compiled('numba', on_compile=None)
 
 
 @pytest.mark.parametrize('version, expected', [
@@ -113,13 +118,13 @@ def test_numba_versions_compare_by_their_numbers(version, expected):
     assert runtime._version_tuple(version) == expected
 
 
-# After the first scan, wait for the switch and report again.
+# After the first scan, wait for the switch and report again, with every change announced.
 AFTER_SWITCH = """
 deadline = time.monotonic() + 500
-while status().compiling and time.monotonic() < deadline:
+while status().pending and time.monotonic() < deadline:
     time.sleep(0.1)
 corners = len(extract_features(ranges, -math.pi, 2 * math.pi / beams).corners)
-print(json.dumps({'core': status().name, 'corners': corners, 'line': status().describe(),
+print(json.dumps({'core': status().name, 'corners': corners, 'changes': changes,
                   'compiled_here': status().compiled_here}), flush=True)
 """
 
@@ -127,18 +132,23 @@ print(json.dumps({'core': status().name, 'corners': corners, 'line': status().de
 def test_a_cold_start_answers_with_numpy_at_once_then_switches_to_the_compiled_core(tmp_path):
     first, switched = run_first_scan(tmp_path, after=AFTER_SWITCH)
     # Answered by numpy while numba compiled in another process (which takes 10-200 s here).
-    assert first['core'] == 'numpy' and first['compiling'] and first['corners'] == 4
-    assert 'compiling in the background' in first['line']
+    assert first['core'] == 'numpy' and first['pending'] and first['corners'] == 4
     assert switched['core'] == 'numba' and switched['compiled_here'] and switched['corners'] == 4
-    # The next process finds the cache: compiled at once, loaded rather than compiled.
-    again, = run_first_scan(tmp_path)
-    assert again['core'] == 'numba' and not again['compiling']
-    assert 'loaded in' in again['line']
+    compiling, compiled = switched['changes']
+    assert compiling.startswith('compiling the feature pipeline for this machine')
+    assert 'the numpy one serves meanwhile' in compiling
+    assert 'compiled for this machine in' in compiled
+    # The next process finds the cache: loaded, not compiled, and nothing said of a compile.
+    again, after = run_first_scan(tmp_path, after=AFTER_SWITCH)
+    assert again['pending'] and after['core'] == 'numba' and not after['compiled_here']
+    assert len(after['changes']) == 1 and 'loaded in' in after['changes'][0]
 
 
 KEEP_RUNNING = """
-print(json.dumps({'compiler': __import__('wctls_ros.core.runtime').core.runtime._compiler.pid}),
-      flush=True)
+from wctls_ros.core import runtime
+while runtime._compiler is None:
+    time.sleep(0.01)
+print(json.dumps({'compiler': runtime._compiler.pid}), flush=True)
 time.sleep(600)
 """
 
@@ -152,7 +162,7 @@ def test_the_background_compile_ends_when_its_process_is_killed(tmp_path):
     try:
         first = json.loads(parent.stdout.readline())
         compiler = json.loads(parent.stdout.readline())['compiler']
-        assert first['compiling']
+        assert first['pending']
         os.kill(compiler, 0)                     # running
         parent.send_signal(signal.SIGKILL)
         parent.wait()

@@ -95,22 +95,23 @@ def start_core(prog: str, wait: bool = False):
     """
     Choose the feature pipeline's implementation before a tool's first scan, and say so.
 
-    Silent when the compiled pipeline serves from numba's cache; otherwise one line on standard
-    error says which runs and why (numba missing, compiling in the background, compiled now),
-    and a second one when a background compile has ended. Done once in the tool's own process,
-    before any worker process is forked, so that the workers inherit what serves then.
+    Silent when the compiled pipeline comes from numba's cache; otherwise a line on standard
+    error says what happens: numba missing (the numpy pipeline serves), a compile starting (the
+    first run on a machine), its end. Done in the tool's own process, before any worker process
+    is forked, so that the workers inherit what serves then.
 
     :param prog: the tool's name, for the messages
-    :param wait: compile the compiled pipeline now if it is not cached (a tool about to fork
-        workers), instead of starting with the numpy one
+    :param wait: have the compiled pipeline now, compiling it if need be (a tool about to fork
+        workers), instead of starting with the numpy one while it loads
     :return: the :class:`wctls_ros.core.CoreStatus`
     """
     from .core import start
 
-    def switched(status) -> None:
-        print(f'{prog}: {status.describe()}', file=sys.stderr)
+    def changed(status) -> None:
+        if status.name != 'numba' or status.compiled_here:
+            print(f'{prog}: {status.describe()}', file=sys.stderr)
 
-    status = start(wait=wait, on_switch=switched)
-    if status.name != 'numba' or status.compiled_here:
-        print(f'{prog}: {status.describe()}', file=sys.stderr)
+    status = start(wait=wait, on_change=changed)
+    if not status.pending:
+        changed(status)
     return status

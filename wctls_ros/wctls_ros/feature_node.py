@@ -17,9 +17,10 @@ time rclpy's take (docs/results/message_path.md), with the same bytes on the wir
 rosbags' definitions are this ROS install's (the node checks the type hashes at start-up);
 otherwise rclpy's classes do (a stock ROS install has no rosbags).
 
-The feature pipeline starts at once: the compiled one when numba has it in its cache, else the
-numpy one, while the compiled one compiles in another process (the first start on a machine)
-and takes over when ready (:mod:`wctls_ros.core.runtime`). Both are logged.
+The feature pipeline starts at once: the numpy one, while a thread loads the compiled one from
+numba's cache (about a second) or, on the first start on a machine, has it compiled in another
+process (about 15 s); the compiled one takes over when ready (:mod:`wctls_ros.core.runtime`).
+Each step is logged.
 """
 
 from dataclasses import dataclass, field
@@ -89,7 +90,7 @@ class FeatureNode(Node):
         self._last_sequence = None
         self._frame_id = ''
         # Never waits for a compile: the numpy pipeline serves until the compiled one is ready.
-        self.get_logger().info(start_core(on_switch=self._on_core_switch).describe())
+        self.get_logger().info(start_core(on_change=self._on_core_change).describe())
         # The scan arrives as its CDR bytes, decoded with the same classes the outputs are
         # built with (rosbags' decode in about half the time rclpy's take).
         self._scans = self.create_subscription(LaserScan, 'scan', self._on_scan, SCAN_QOS,
@@ -123,8 +124,8 @@ class FeatureNode(Node):
             "this ROS install's")
         return rclpy_types()
 
-    def _on_core_switch(self, status: CoreStatus) -> None:
-        """Log the end of the background compile (called from its thread)."""
+    def _on_core_change(self, status: CoreStatus) -> None:
+        """Log a compile's start, and which pipeline serves in the end (called from a thread)."""
         self.get_logger().info(f'now running the {status.describe()}' if status.name == 'numba'
                                else status.describe())
 

@@ -13,9 +13,9 @@ after which it loads from numba's disk cache in well under a second. The numpy o
 
 The environment variable ``WCTLS_ROS_CORE`` chooses:
 
-- ``auto`` (the default): the compiled core when numba gives it; the numpy core while it
-  compiles (in a process of its own, so nothing waits for it) and whenever numba is missing, too
-  old, or fails to compile;
+- ``auto`` (the default): the compiled core when numba gives it; the numpy core while numba
+  loads it or compiles it (in a thread and a process of their own, so nothing waits for them)
+  and whenever numba is missing, too old, or fails to compile;
 - ``numba``: the compiled core, compiled before :func:`start` returns; whatever stands in its
   way is an error (:class:`CoreUnavailable`);
 - ``numpy``: the numpy core; numba is never imported.
@@ -27,6 +27,8 @@ A process forked after :func:`start` keeps the implementation that served its pa
 
 from dataclasses import dataclass
 import math
+from importlib import metadata
+import importlib.util
 import os
 import re
 import signal
@@ -62,16 +64,18 @@ class CoreStatus:
 
     :ivar name: 'numba' (compiled) or 'numpy'
     :ivar reason: why this one, in a few words (for a log line)
-    :ivar compiling: the compiled core is being compiled in the background, and replaces the
-        numpy one when it is ready
+    :ivar pending: the compiled core is being loaded or compiled in the background, and
+        replaces the numpy one when it is ready
+    :ivar compiling: that takes a compile (the first start on a machine), not a load
     :ivar seconds: how long loading or compiling the compiled core took, s (0 for numpy)
-    :ivar compiled_here: the compiled core was compiled by this process (or its compile
-        process), not loaded from numba's cache
+    :ivar compiled_here: the compiled core was compiled for this start (by this process or
+        its compile process), not loaded from numba's cache
     :ivar advice: how to get the compiled core, when installing something would
     """
 
     name: str
     reason: str
+    pending: bool = False
     compiling: bool = False
     seconds: float = 0.0
     compiled_here: bool = False
@@ -83,9 +87,13 @@ class CoreStatus:
             how = 'compiled for this machine' if self.compiled_here else 'loaded'
             return f'compiled feature pipeline ({self.reason}): {how} in {self.seconds:.1f} s'
         if self.compiling:
-            return ('numpy feature pipeline for now: the compiled one (about '
-                    f'{SPEEDUP}x faster per scan) is compiling in the background, about 15 s '
-                    'once per machine')
+            meanwhile = (f'; the numpy one serves meanwhile (about {SPEEDUP}x slower per scan)'
+                         if self.pending else '')
+            return ('compiling the feature pipeline for this machine in another process, '
+                    f'about 15 s once per machine{meanwhile}')
+        if self.pending:
+            return ('numpy feature pipeline for now: the compiled one is loading in the '
+                    'background')
         if self.reason.startswith(CORE_VARIABLE):
             return f'numpy feature pipeline ({self.reason})'
         advice = f'; {self.advice}' if self.advice else ''
@@ -93,11 +101,12 @@ class CoreStatus:
                 f'faster per scan{advice})')
 
 
+Listener = Callable[[CoreStatus], None]
 _lock = threading.Lock()
 _extract: Callable[..., Features] = numpy_core.extract_features
 _status: Optional[CoreStatus] = None
 _compiler: Optional[subprocess.Popen] = None
-_listeners: List[Callable[[CoreStatus], None]] = []
+_listeners: List[Listener] = []
 
 
 def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
@@ -148,17 +157,30 @@ def choice() -> str:
 
 
 def numba_problem() -> Optional[str]:
-    """Return why numba cannot compile the core here (not installed, too old), or None."""
-    try:
-        import numba
-    except ImportError:
+    """
+    Return why numba cannot compile the core here (not installed, too old), or None.
+
+    Reads the installed version without importing numba (which takes most of a second).
+    """
+    if 'numba' in sys.modules and sys.modules['numba'] is None:   # blocked from import
         return 'numba is not installed'
-    except Exception as error:  # noqa: B902 - a broken numba install is no numba
-        return f'numba cannot be imported ({error!r})'
-    version = _version_tuple(numba.__version__)
-    if version < OLDEST_NUMBA:
-        return (f'numba {numba.__version__} is older than '
-                f'{".".join(map(str, OLDEST_NUMBA))}, the oldest that compiles the core')
+    try:
+        version = metadata.version('numba')
+    except metadata.PackageNotFoundError:
+        try:
+            found = importlib.util.find_spec('numba') is not None
+        except (ImportError, ValueError):
+            found = False
+        if not found:
+            return 'numba is not installed'
+        try:                                  # a numba without its metadata: ask it
+            import numba
+            version = numba.__version__
+        except Exception as error:  # noqa: B902 - a broken numba install is no numba
+            return f'numba cannot be imported ({error!r})'
+    if _version_tuple(version) < OLDEST_NUMBA:
+        return (f'numba {version} is older than {".".join(map(str, OLDEST_NUMBA))}, the oldest '
+                'that compiles the core')
     return None
 
 
@@ -173,28 +195,28 @@ def _version_tuple(text: str) -> tuple:
     return tuple(numbers + [0] * (3 - len(numbers)))
 
 
-def start(wait: bool = False,
-          on_switch: Optional[Callable[[CoreStatus], None]] = None) -> CoreStatus:
+def start(wait: bool = False, on_change: Optional[Listener] = None) -> CoreStatus:
     """
     Choose the implementation for this process, once; later calls return the choice.
 
-    With ``auto`` and numba at hand, the compiled core is loaded from numba's cache when it is
-    there (under a second); otherwise it is compiled in a process of its own while the numpy
-    core serves (``wait`` False), or before this returns (``wait`` True: a tool that forks
-    workers, a build step). Ctrl-C and SIGTERM are honoured while waiting: the compile process
-    ends with this one, however this one ends.
+    With ``auto`` and numba at hand, the numpy core serves at once while a thread of this
+    process loads the compiled one from numba's cache (about a second) or, on the first start
+    on a machine, has it compiled in a process of its own; the compiled one serves from then on.
+    With ``wait`` (or ``WCTLS_ROS_CORE=numba``) that happens before this returns: a tool about
+    to fork workers, a build step. Ctrl-C and SIGTERM are honoured while waiting, and the
+    compile process ends with this one, however this one ends.
 
-    :param wait: compile before returning instead of in the background
-    :param on_switch: called (from another thread) with the new status once the background
-        compile has ended, whether the compiled core then serves or not
+    :param wait: load or compile the compiled core before returning
+    :param on_change: called (from another thread) with each later status: when a compile
+        starts, and when the compiled core serves or has failed
     :return: the status now
     :raises CoreUnavailable: when ``WCTLS_ROS_CORE=numba`` and numba cannot give the core
     """
     global _status
     with _lock:
         if _status is not None:
-            if _status.compiling and on_switch is not None:
-                _listeners.append(on_switch)
+            if _status.pending and on_change is not None:
+                _listeners.append(on_change)
             return _status
         asked = choice()
         if asked == 'numpy':
@@ -206,16 +228,17 @@ def start(wait: bool = False,
                 raise CoreUnavailable(f'{CORE_VARIABLE}=numba, but {problem} ({INSTALL_NUMBA})')
             _status = CoreStatus('numpy', problem, advice=INSTALL_NUMBA)
             return _status
-        from .numba_core import precompile
-        wait = wait or asked == 'numba'
-        started = time.perf_counter()
-        cached = precompile.pipeline_is_cached()
-        if not cached:
-            if not wait:
-                _start_background_compile(on_switch)
-                return _status
-            _compile_in_child()
-        _status = _load_compiled(asked, compiled_here=not cached, started=started)
+        if wait or asked == 'numba':
+            def compiling() -> None:
+                if on_change is not None:
+                    on_change(CoreStatus('numpy', 'compiling the compiled core', compiling=True))
+            _status = _bring_in_compiled(asked, on_compile=compiling)
+            return _status
+        _status = CoreStatus('numpy', 'loading the compiled core', pending=True)
+        if on_change is not None:
+            _listeners.append(on_change)
+        threading.Thread(target=_bring_in_compiled_in_background, name='wctls_ros core',
+                         daemon=True).start()
         return _status
 
 
@@ -233,29 +256,54 @@ def warm_up() -> float:
     return time.perf_counter() - started
 
 
-def _load_compiled(asked: str, compiled_here: bool, started: float) -> CoreStatus:
+def _bring_in_compiled(asked: str, on_compile: Optional[Callable[[], None]]) -> CoreStatus:
     """
-    Load the compiled pipeline (from the cache, or compiling it here) and make it serve.
+    Load the compiled pipeline, compiling it first in a process of its own if not cached.
 
-    :param asked: the choice of ``WCTLS_ROS_CORE``
-    :param compiled_here: whether this process (or its compile process) compiled it
-    :param started: when loading or compiling began (time.perf_counter), s
+    :param asked: the choice of ``WCTLS_ROS_CORE`` ('auto' falls back to numpy on failure)
+    :param on_compile: called when a compile is needed, before it starts
     :return: the status: numba, or numpy with the reason the compiled core failed
+    :raises CoreUnavailable: when ``asked`` is 'numba' and the compiled core fails
     """
     global _extract
-    import numba
-    from .numba_core import pipeline, precompile
+    started = time.perf_counter()
     try:
-        precompile.warm_up(helpers=0)
-    except Exception as error:  # noqa: B902 - any compile failure falls back to numpy
+        import numba
+        from .numba_core import pipeline, precompile
+        compiled_here = not precompile.pipeline_is_cached()
+        if compiled_here:
+            if on_compile is not None:
+                on_compile()
+            _compile_in_child()
+        precompile.warm_up(helpers=0)          # from the cache
+    except Exception as error:  # noqa: B902 - any failure of numba falls back to numpy
+        version = sys.modules['numba'].__version__ if sys.modules.get('numba') else '?'
+        reason = f'numba {version} failed to compile the core ({_first_line(error)})'
         if asked == 'numba':
-            raise CoreUnavailable(f'numba {numba.__version__} failed to compile the core: '
-                                  f'{_first_line(error)}') from error
-        return CoreStatus('numpy', f'numba {numba.__version__} failed to compile the core '
-                                   f'({_first_line(error)})')
+            raise CoreUnavailable(reason) from error
+        return CoreStatus('numpy', reason)
     _extract = pipeline.extract_features
     return CoreStatus('numba', f'numba {numba.__version__}', seconds=time.perf_counter() - started,
                       compiled_here=compiled_here)
+
+
+def _bring_in_compiled_in_background() -> None:
+    """What :func:`start`'s thread runs: bring in the compiled core, then tell the listeners."""
+    def compiling() -> None:
+        _tell(CoreStatus('numpy', 'compiling the compiled core', pending=True, compiling=True))
+    _tell(_bring_in_compiled('auto', on_compile=compiling))
+
+
+def _tell(new: CoreStatus) -> None:
+    """Make ``new`` the status and call the listeners with it (the last time, unless pending)."""
+    global _status
+    with _lock:
+        _status = new
+        listeners = list(_listeners)
+        if not new.pending:
+            _listeners.clear()
+    for listener in listeners:
+        listener(new)
 
 
 def _first_line(error: BaseException) -> str:
@@ -263,17 +311,33 @@ def _first_line(error: BaseException) -> str:
     return f'{type(error).__name__}: {text[0] if text else ""}'[:200]
 
 
-def _compile_command() -> list:
-    return [sys.executable, '-c',
-            'from wctls_ros.core.numba_core.precompile import warm_up; warm_up()']
+def _compile_in_child() -> None:
+    """
+    Compile the pipeline into numba's cache in a process of its own, and wait for it.
 
+    In another process, so that this one goes on (the numpy core serving) without sharing its
+    interpreter lock with numba's compiler. Interruptible: the compile ends with the wait, and
+    with this process however it ends (PR_SET_PDEATHSIG).
 
-def _start_compiler() -> subprocess.Popen:
-    """Start a process that compiles the pipeline into numba's cache, ending with this one."""
+    :raises RuntimeError: with the last line the compile printed, when it failed
+    """
+    global _compiler
     environment = dict(os.environ, PYTHONPATH=os.pathsep.join(path for path in sys.path if path))
-    return subprocess.Popen(_compile_command(), env=environment, stdin=subprocess.DEVNULL,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            preexec_fn=_death_signal_setter())
+    _compiler = subprocess.Popen(
+        [sys.executable, '-c', 'from wctls_ros.core.numba_core.precompile import warm_up; '
+                               'warm_up()'],
+        env=environment, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE, preexec_fn=_death_signal_setter())
+    try:
+        _, errors = _compiler.communicate()
+    finally:
+        if _compiler.poll() is None:
+            _compiler.kill()
+            _compiler.wait()
+    if _compiler.returncode != 0:
+        lines = errors.decode(errors='replace').strip().splitlines() or [
+            f'exit status {_compiler.returncode}']
+        raise RuntimeError(lines[-1])
 
 
 def _death_signal_setter() -> Optional[Callable[[], None]]:
@@ -281,8 +345,9 @@ def _death_signal_setter() -> Optional[Callable[[], None]]:
     Return what the compile process runs before its program: die when its parent dies.
 
     Linux's PR_SET_PDEATHSIG, so that a parent killed outright (SIGKILL, a closed terminal)
-    leaves no compile behind. Looked up here, in the parent: between fork and exec the child
-    may not import anything. None where there is no prctl (the compile then ends by itself).
+    leaves no compile behind; it acts when the thread that started the compile ends, which
+    waits for it. Looked up here, in the parent: between fork and exec the child may not import
+    anything. None where there is no prctl (the compile then ends by itself).
     """
     try:
         import ctypes
@@ -294,53 +359,3 @@ def _death_signal_setter() -> Optional[Callable[[], None]]:
     def die_with_parent():
         prctl(pr_set_pdeathsig, signal.SIGKILL)
     return die_with_parent
-
-
-def _compile_in_child() -> None:
-    """Compile the pipeline into the cache in another process and wait for it (interruptible)."""
-    compiler = _start_compiler()
-    try:
-        _, errors = compiler.communicate()
-    finally:
-        if compiler.poll() is None:
-            compiler.kill()
-            compiler.wait()
-    # A failed compile shows again, with its reason, when this process loads the pipeline.
-    del errors
-
-
-def _start_background_compile(on_switch) -> None:
-    """Serve with numpy while another process compiles; switch when it is done (called locked)."""
-    global _status, _compiler
-    _status = CoreStatus('numpy', 'compiling the compiled core', compiling=True)
-    if on_switch is not None:
-        _listeners.append(on_switch)
-    _compiler = _start_compiler()
-    threading.Thread(target=_finish_background_compile, args=(_compiler, time.perf_counter()),
-                     name='wctls_ros core compile', daemon=True).start()
-
-
-def _finish_background_compile(compiler: subprocess.Popen, started: float) -> None:
-    """Wait for the compile process, then load what it compiled and switch to it."""
-    global _status
-    _, errors = compiler.communicate()
-    if compiler.returncode == 0:
-        loaded = _load_compiled('auto', compiled_here=True, started=started)
-    else:
-        lines = errors.decode(errors='replace').strip().splitlines()
-        loaded = CoreStatus('numpy', 'the background compile failed'
-                                     f' ({lines[-1][:200] if lines else compiler.returncode})')
-    with _lock:
-        _status = loaded
-        listeners = list(_listeners)
-        _listeners.clear()
-    for listener in listeners:
-        listener(loaded)
-
-
-def stop_background_compile() -> None:
-    """End a background compile (a node shutting down); the numpy core keeps serving."""
-    compiler = _compiler
-    if compiler is not None and compiler.poll() is None:
-        compiler.kill()
-        compiler.wait()

@@ -26,9 +26,9 @@ A process forked after :func:`start` keeps the implementation that served its pa
 """
 
 from dataclasses import dataclass
-import math
 from importlib import metadata
 import importlib.util
+import math
 import os
 import re
 import signal
@@ -288,7 +288,7 @@ def _bring_in_compiled(asked: str, on_compile: Optional[Callable[[], None]]) -> 
 
 
 def _bring_in_compiled_in_background() -> None:
-    """What :func:`start`'s thread runs: bring in the compiled core, then tell the listeners."""
+    """Bring in the compiled core, then tell the listeners (:func:`start`'s thread)."""
     def compiling() -> None:
         _tell(CoreStatus('numpy', 'compiling the compiled core', pending=True, compiling=True))
     _tell(_bring_in_compiled('auto', on_compile=compiling))

@@ -136,7 +136,7 @@ def measure_path(count: int) -> None:
             subscription.callback(scans[index % len(scans)],
                                   {'publication_sequence_number': index + 1})
             callback_seconds.append(time.perf_counter() - started)
-        types = 'rosbags' if 'rosbags' in sys.modules else 'rclpy'
+        types = 'rosbags' if sys.modules.get('rosbags') is not None else 'rclpy'
     finally:
         node.destroy_node()
         rclpy.try_shutdown()

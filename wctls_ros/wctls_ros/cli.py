@@ -91,7 +91,7 @@ def staged_folder(out_dir):
         shutil.rmtree(staging, ignore_errors=True)
 
 
-def start_core(prog: str, wait: bool = False):
+def start_core(prog: str, wait: bool = False, give_up=None):
     """
     Choose the feature pipeline's implementation before a tool's first scan, and say so.
 
@@ -103,15 +103,18 @@ def start_core(prog: str, wait: bool = False):
     :param prog: the tool's name, for the messages
     :param wait: have the compiled pipeline now, compiling it if need be (a tool about to fork
         workers), instead of starting with the numpy one while it loads
+    :param give_up: with ``wait``, a callable saying whether to stop waiting for a compile (a
+        signal asked the tool to stop)
     :return: the :class:`wctls_ros.core.CoreStatus`
     """
     from .core import start
 
     def changed(status) -> None:
-        if status.name != 'numba' or status.compiled_here:
+        stopping = give_up is not None and give_up()
+        if (status.name != 'numba' or status.compiled_here) and not stopping:
             print(f'{prog}: {status.describe()}', file=sys.stderr)
 
-    status = start(wait=wait, on_change=changed)
+    status = start(wait=wait, on_change=changed, give_up=give_up)
     if not status.pending:
         changed(status)
     return status

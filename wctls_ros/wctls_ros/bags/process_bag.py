@@ -653,7 +653,9 @@ def main(argv=None) -> int:
                 raise ConfigError(f'process_bag: error: {error}') from error
             runs = _plan(args)
             # Workers are forked from a process that has chosen (and compiled) the core.
-            start_core('process_bag', wait=args.jobs > 1)
+            start_core('process_bag', wait=args.jobs > 1,
+                       give_up=lambda: stop.received is not None)
+            stop.check()
             bar = _progress_bar(sum(scans for _, _, scans in runs), args.progress)
 
             def after_scans(count: int) -> None:

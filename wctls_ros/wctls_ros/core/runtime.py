@@ -195,7 +195,8 @@ def _version_tuple(text: str) -> tuple:
     return tuple(numbers + [0] * (3 - len(numbers)))
 
 
-def start(wait: bool = False, on_change: Optional[Listener] = None) -> CoreStatus:
+def start(wait: bool = False, on_change: Optional[Listener] = None,
+          give_up: Optional[Callable[[], bool]] = None) -> CoreStatus:
     """
     Choose the implementation for this process, once; later calls return the choice.
 
@@ -209,6 +210,9 @@ def start(wait: bool = False, on_change: Optional[Listener] = None) -> CoreStatu
     :param wait: load or compile the compiled core before returning
     :param on_change: called (from another thread) with each later status: when a compile
         starts, and when the compiled core serves or has failed
+    :param give_up: with ``wait``, asked ten times a second during a compile whether to stop
+        waiting (a tool's signal handler was called): then the compile is ended and the numpy
+        core serves
     :return: the status now
     :raises CoreUnavailable: when ``WCTLS_ROS_CORE=numba`` and numba cannot give the core
     """
@@ -232,7 +236,7 @@ def start(wait: bool = False, on_change: Optional[Listener] = None) -> CoreStatu
             def compiling() -> None:
                 if on_change is not None:
                     on_change(CoreStatus('numpy', 'compiling the compiled core', compiling=True))
-            _status = _bring_in_compiled(asked, on_compile=compiling)
+            _status = _bring_in_compiled(asked, on_compile=compiling, give_up=give_up)
             return _status
         _status = CoreStatus('numpy', 'loading the compiled core', pending=True)
         if on_change is not None:
@@ -256,12 +260,14 @@ def warm_up() -> float:
     return time.perf_counter() - started
 
 
-def _bring_in_compiled(asked: str, on_compile: Optional[Callable[[], None]]) -> CoreStatus:
+def _bring_in_compiled(asked: str, on_compile: Optional[Callable[[], None]],
+                       give_up: Optional[Callable[[], bool]] = None) -> CoreStatus:
     """
     Load the compiled pipeline, compiling it first in a process of its own if not cached.
 
     :param asked: the choice of ``WCTLS_ROS_CORE`` ('auto' falls back to numpy on failure)
     :param on_compile: called when a compile is needed, before it starts
+    :param give_up: asked during the compile whether to end it (see :func:`start`)
     :return: the status: numba, or numpy with the reason the compiled core failed
     :raises CoreUnavailable: when ``asked`` is 'numba' and the compiled core fails
     """
@@ -274,7 +280,7 @@ def _bring_in_compiled(asked: str, on_compile: Optional[Callable[[], None]]) -> 
         if compiled_here:
             if on_compile is not None:
                 on_compile()
-            _compile_in_child()
+            _compile_in_child(give_up)
         precompile.warm_up(helpers=0)          # from the cache
     except Exception as error:  # noqa: B902 - any failure of numba falls back to numpy
         version = sys.modules['numba'].__version__ if sys.modules.get('numba') else '?'
@@ -311,7 +317,7 @@ def _first_line(error: BaseException) -> str:
     return f'{type(error).__name__}: {text[0] if text else ""}'[:200]
 
 
-def _compile_in_child() -> None:
+def _compile_in_child(give_up: Optional[Callable[[], bool]] = None) -> None:
     """
     Compile the pipeline into numba's cache in a process of its own, and wait for it.
 
@@ -319,7 +325,8 @@ def _compile_in_child() -> None:
     interpreter lock with numba's compiler. Interruptible: the compile ends with the wait, and
     with this process however it ends (PR_SET_PDEATHSIG).
 
-    :raises RuntimeError: with the last line the compile printed, when it failed
+    :param give_up: asked ten times a second whether to end the compile
+    :raises RuntimeError: with the last line the compile printed, when it failed or was ended
     """
     global _compiler
     environment = dict(os.environ, PYTHONPATH=os.pathsep.join(path for path in sys.path if path))
@@ -329,7 +336,13 @@ def _compile_in_child() -> None:
         env=environment, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE, preexec_fn=_death_signal_setter())
     try:
-        _, errors = _compiler.communicate()
+        while True:
+            try:
+                _, errors = _compiler.communicate(timeout=0.1)
+                break
+            except subprocess.TimeoutExpired:
+                if give_up is not None and give_up():
+                    raise RuntimeError('the compile was ended before it finished') from None
     finally:
         if _compiler.poll() is None:
             _compiler.kill()

@@ -59,9 +59,11 @@ $(DEPS_STAMP): $(REQUIREMENTS) tools/fix_wheel_cmake_paths.sh tools/pip_install.
 	    > $(VENV)/local_setup.$$shell; done
 	touch $@
 
-$(OLDEST_STAMP): requirements/oldest.txt requirements/test.txt tools/pip_install.sh
+$(OLDEST_STAMP): requirements/oldest.txt requirements/test.txt requirements/python.txt \
+                 tools/pip_install.sh
+	@# rosbags: the real recordings of data/ are bags.
 	PYTHON=$(PYTHON) tools/pip_install.sh $(OLDEST_VENV) -r requirements/oldest.txt \
-	  $$(grep -hE '^(pytest|hypothesis)[=>]' requirements/test.txt)
+	  $$(sed -n 's/ *#.*//; /^\(pytest\|hypothesis\|rosbags\)[=>]/p' requirements/*.txt)
 	touch $@
 
 $(STOCK_STAMP): requirements/stock.txt requirements/ros.txt requirements/test.txt \

@@ -8,6 +8,7 @@ The environment itself (noble's library versions, no optional package) is checke
 stock_install_checks.py, which only `make test`'s stock-install run collects.
 """
 
+import ast
 import pathlib
 import re
 import xml.etree.ElementTree as ET
@@ -89,3 +90,18 @@ def test_the_stock_run_installs_nobles_version_of_what_a_node_needs(requirement)
     # 1:1.26.4+ds-6ubuntu1 is upstream 1.26.4.
     upstream = re.sub(r'^\d+:', '', noble_version).split('-')[0].split('+')[0]
     assert pins[requirement] == upstream
+
+
+# Standard-library modules Python 3.12 (Ubuntu 24.04's) removed: PEP 594's first ones, PEP 632.
+REMOVED_IN_PYTHON_3_12 = {'distutils', 'imp', 'asynchat', 'asyncore', 'smtpd'}
+
+
+def test_nothing_imports_a_module_python_3_12_removed():
+    offenders = []
+    for path in sorted((REPOSITORY / 'wctls_ros').rglob('*.py')):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = ([alias.name for alias in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ''] if isinstance(node, ast.ImportFrom) else [])
+            offenders += [f'{path.relative_to(REPOSITORY)}: {name}' for name in names
+                          if name.split('.')[0] in REMOVED_IN_PYTHON_3_12]
+    assert not offenders

@@ -285,3 +285,25 @@ def test_a_first_start_answers_with_the_numpy_core_while_numba_compiles(
     assert process.returncode == 0, output
     assert 'numpy feature pipeline for now: the compiled one' in output
     assert 'now running the compiled feature pipeline' not in output
+
+
+def test_a_misspelled_parameter_in_a_params_file_is_named_with_the_closest_one(tmp_path):
+    params = tmp_path / 'params.yaml'
+    params.write_text('feature_node:\n  ros__parameters:\n    range_sigma: 0.01\n'
+                      '    publish_markers: false\n')
+    process = subprocess.Popen([str(installed_executable('feature_node')), '--ros-args',
+                                '--params-file', str(params)], stdout=subprocess.PIPE,
+                               stderr=subprocess.STDOUT, text=True)
+    lines = []
+    try:
+        for line in process.stdout:           # until the node says it runs
+            lines.append(line)
+            if 'extracting features with' in line:
+                break
+    finally:
+        process.terminate()
+        lines += process.communicate(timeout=30)[0].splitlines()
+    warnings = [line for line in lines if 'ignoring parameter' in line]
+    assert len(warnings) == 1
+    assert ('ignoring parameter range_sigma: feature_node has no such parameter (did you mean '
+            'range_sigma_m?)') in warnings[0]

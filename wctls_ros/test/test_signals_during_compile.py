@@ -11,6 +11,7 @@ times its end; the compile process must be gone too.
 
 import os
 import pathlib
+import re
 import signal
 import subprocess
 import time
@@ -93,3 +94,27 @@ def test_a_signal_during_the_compile_ends_it_within_two_seconds(command, signal_
     while any(alive(pid) for pid in compiling) and time.monotonic() < gone:
         time.sleep(0.05)
     assert not any(alive(pid) for pid in compiling)
+
+
+@pytest.mark.parametrize('program, arguments, status', [
+    ('feature_node', [], 0), ('rplidar_node', [], 0),
+    ('process_bag', [str(REAL_DATA / 'urg04lx_office'), '-d', '{out}'], 128 + signal.SIGINT)])
+def test_ctrl_c_while_a_program_imports_ends_it_quietly(program, arguments, status, tmp_path):
+    # The imports take a second or more; a Ctrl-C then gave a KeyboardInterrupt traceback.
+    # Python reports each import statement's module as it completes (PYTHONPROFILEIMPORTTIME):
+    # the signal is sent once the first module of the package has been imported by the
+    # program's module, and at delays into its imports after that.
+    environment = dict(os.environ, PYTHONPROFILEIMPORTTIME='1')
+    for delay_s in (0.0, 0.1, 0.3):
+        command = [str(installed_executable(program))] + [
+            argument.format(out=tmp_path / f'out{delay_s}') for argument in arguments]
+        process = subprocess.Popen(command, env=environment, stdout=subprocess.PIPE,
+                                   stderr=subprocess.PIPE, text=True)
+        for line in process.stderr:
+            if re.search(r'\|\s+wctls_ros\.', line):
+                break
+        time.sleep(delay_s)
+        process.send_signal(signal.SIGINT)
+        output, errors = process.communicate(timeout=30)
+        assert 'Traceback' not in output + errors, (delay_s, errors[-2000:])
+        assert process.returncode == status, (delay_s, process.returncode, errors[-2000:])

@@ -2,25 +2,44 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-The offline tools' installed executables: each imports its tool when it runs.
+The installed executables: each imports its node or tool when it runs, and runs it.
 
-So that a tool whose optional package is missing (rosbags, matplotlib, tqdm: :mod:`.extras`)
-ends with one line naming the install command and status 1, whether the package is needed at
-the tool's import or later. The nodes (feature_node, rplidar_node) need no optional package and
-start directly.
+The imports take a second or more (rclpy, numpy, the message packages); this module imports
+nothing heavy, so that what happens meanwhile is handled: Ctrl-C ends the program quietly with
+the status it has later (0 for a node, 130 for a tool) instead of a traceback, and a tool whose
+optional package is missing (rosbags, matplotlib, tqdm: :mod:`.extras`) ends with one line
+naming the install command and status 1, whether the package is needed at the tool's import or
+later.
 """
 
 import importlib
+import signal
 import sys
 
-from .extras import missing_extra
+# The status Ctrl-C gives: a node ends cleanly (the ROS convention), a tool reports the signal.
+NODE_INTERRUPTED = 0
+TOOL_INTERRUPTED = 128 + signal.SIGINT
 
 
-def _run(prog: str, module: str) -> int:
-    """Import a tool's module and run its main(); a missing optional package is one line."""
+def _run(prog: str, module: str, interrupted: int) -> int:
+    """
+    Import a program's module and run its main(), handling Ctrl-C and missing packages.
+
+    :param prog: the program's name, for messages
+    :param module: its module, relative to wctls_ros
+    :param interrupted: the exit status of a Ctrl-C during the imports
+    :return: the program's exit status
+    """
+    def quietly(signal_number, frame):
+        sys.exit(interrupted)
+
+    previous = signal.signal(signal.SIGINT, quietly)
     try:
-        return importlib.import_module(f'wctls_ros.{module}').main()
+        program = importlib.import_module(f'wctls_ros.{module}')
+        signal.signal(signal.SIGINT, previous)
+        return program.main()
     except ImportError as error:
+        from .extras import missing_extra
         reason = missing_extra(error)
         if reason is None:
             raise
@@ -28,36 +47,51 @@ def _run(prog: str, module: str) -> int:
         return 1
 
 
+def feature_node() -> int:
+    """Run the feature_node node (:mod:`wctls_ros.feature_node`)."""
+    return _run('feature_node', 'feature_node', NODE_INTERRUPTED)
+
+
+def rplidar_node() -> int:
+    """Run the rplidar_node node (:mod:`wctls_ros.rplidar.rplidar_node`)."""
+    return _run('rplidar_node', 'rplidar.rplidar_node', NODE_INTERRUPTED)
+
+
 def bag_replay() -> int:
-    """Run the bag_replay tool (:mod:`wctls_ros.bags.replay_node`)."""
-    return _run('bag_replay', 'bags.replay_node')
+    """Run the bag_replay node (:mod:`wctls_ros.bags.replay_node`)."""
+    return _run('bag_replay', 'bags.replay_node', NODE_INTERRUPTED)
+
+
+def s1_emulator() -> int:
+    """Run the s1_emulator tool (:mod:`wctls_ros.s1_emulator`)."""
+    return _run('s1_emulator', 's1_emulator', TOOL_INTERRUPTED)
 
 
 def calibrate() -> int:
     """Run the calibrate tool (:mod:`wctls_ros.evaluation.calibrate_cli`)."""
-    return _run('calibrate', 'evaluation.calibrate_cli')
+    return _run('calibrate', 'evaluation.calibrate_cli', TOOL_INTERRUPTED)
 
 
 def demo() -> int:
     """Run the demo tool (:mod:`wctls_ros.demo`)."""
-    return _run('demo', 'demo')
+    return _run('demo', 'demo', TOOL_INTERRUPTED)
 
 
 def evaluate() -> int:
     """Run the evaluate tool (:mod:`wctls_ros.evaluation.evaluate_cli`)."""
-    return _run('evaluate', 'evaluation.evaluate_cli')
+    return _run('evaluate', 'evaluation.evaluate_cli', TOOL_INTERRUPTED)
 
 
 def process_bag() -> int:
     """Run the process_bag tool (:mod:`wctls_ros.bags.process_bag`)."""
-    return _run('process_bag', 'bags.process_bag')
+    return _run('process_bag', 'bags.process_bag', TOOL_INTERRUPTED)
 
 
 def score() -> int:
     """Run the score tool (:mod:`wctls_ros.evaluation.score_cli`)."""
-    return _run('score', 'evaluation.score_cli')
+    return _run('score', 'evaluation.score_cli', TOOL_INTERRUPTED)
 
 
 def simulate() -> int:
     """Run the simulate tool (:mod:`wctls_ros.evaluation.simulate_cli`)."""
-    return _run('simulate', 'evaluation.simulate_cli')
+    return _run('simulate', 'evaluation.simulate_cli', TOOL_INTERRUPTED)

@@ -81,7 +81,9 @@ class FeatureNode(Node):
         super().__init__('feature_node', **kwargs)
         self._config, self._style, self._publish_markers = feature_settings(
             declare_parameters(self, FEATURE_NODE))
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        # As ros2/demos do: a change is checked whole before it is accepted, applied after.
+        self.add_on_set_parameters_callback(self._check_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
         self._corners = self.create_publisher(CornerArray, 'corners', 10)
         self._lines = self.create_publisher(LineSegmentArray, 'lines', 10)
         self._markers = self.create_publisher(MarkerArray, 'markers', 10)
@@ -129,16 +131,22 @@ class FeatureNode(Node):
         self.get_logger().info(f'now running the {status.describe()}' if status.name == 'numba'
                                else status.describe())
 
-    def _on_set_parameters(self, changes) -> SetParametersResult:
+    def _settings(self, changes=()):
+        """Return the settings of the current parameters with ``changes`` applied (validated)."""
         values = {spec.name: self.get_parameter(spec.name).value for spec in FEATURE_NODE}
         values.update({p.name: p.value for p in changes if p.name in values})
+        return feature_settings(values)
+
+    def _check_parameters(self, changes) -> SetParametersResult:
         try:
-            settings = feature_settings(values)
+            self._settings(changes)
         except (ValueError, TypeError) as error:
             return SetParametersResult(successful=False, reason=str(error))
-        # Takes effect on the next scan (callbacks of this node never run concurrently).
-        self._config, self._style, self._publish_markers = settings
         return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, changes) -> None:
+        # Takes effect on the next scan (callbacks of this node never run concurrently).
+        self._config, self._style, self._publish_markers = self._settings()
 
     @property
     def counters(self) -> ScanCounters:

@@ -3,6 +3,7 @@
 
 """The Jazzy ``main()`` every wctls_ros node shares, and its parameter declarations."""
 
+import difflib
 import itertools
 import os
 import re
@@ -24,6 +25,8 @@ from .params import defaults, SENSOR
 _INIT_ERRORS = (rclpy_implementation.RCLError, rclpy_implementation.UnknownROSArgsError)
 # rcl appends where in its C sources an error was found: of no use to the user.
 _SOURCE_LOCATION = re.compile(r', at \S+:\d+')
+# Parameters rclpy itself declares on every node (a params file may set them).
+_ROS_PARAMETERS = ('use_sim_time', 'start_type_description_service')
 
 
 def parameter_descriptor(parameter) -> ParameterDescriptor:
@@ -72,7 +75,26 @@ def declare_parameters(node, schema) -> dict:
     initial = defaults(schema, values.get(SENSOR))
     values.update({parameter.name: declare(parameter, initial[parameter.name])
                    for parameter in schema if parameter.name != SENSOR})
+    _warn_of_unknown_parameters(node, list(values))
     return values
+
+
+def _warn_of_unknown_parameters(node, declared: list) -> None:
+    """
+    Warn of each parameter a params file or ``-p`` sets that the node does not have.
+
+    ROS ignores them without a word (a misspelled ``range_sigma`` leaves the preset's value in
+    force); the offline tools refuse them, the nodes name them with the closest known name.
+    rclpy keeps the values given for a node in ``_parameter_overrides`` (no public accessor).
+    """
+    given = getattr(node, '_parameter_overrides', {})
+    unknown = sorted(name for name in given if name not in declared
+                     and name not in _ROS_PARAMETERS and not name.startswith('qos_overrides.'))
+    for name in unknown:
+        closest = difflib.get_close_matches(name, declared, n=1)
+        hint = f' (did you mean {closest[0]}?)' if closest else ''
+        node.get_logger().warning(f'ignoring parameter {name}: {node.get_name()} has no such '
+                                  f'parameter{hint}')
 
 
 def spin_forever(executor, node) -> int:
@@ -125,7 +147,7 @@ def run_node(name: str, make_node, spin=spin_forever, config_errors=(ValueError,
             reason = f'unknown ROS arguments {reason}'
         logger.fatal(f'cannot start: {reason}')
         return 1
-    node = None
+    node = executor = None
     try:
         # Made before the (slower) node, so a signal during start-up rarely meets it half-built.
         executor = SingleThreadedExecutor()
@@ -142,6 +164,8 @@ def run_node(name: str, make_node, spin=spin_forever, config_errors=(ValueError,
             raise
     finally:
         _ignore_further_interrupts()
+        if executor is not None:
+            executor.shutdown()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

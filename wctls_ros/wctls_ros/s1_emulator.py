@@ -10,10 +10,11 @@ angle theta is the range along the laser-frame bearing pi - theta, so a driver p
 sllidar_ros2's angle = pi - theta sees the plan in REP-103 orientation.
 
 Faults for testing recovery: ``--corrupt-rate`` / ``--drop-rate`` (per streamed byte),
+``--cut-rate`` (per streamed frame: a run of bytes lost from a random one to the frame's end),
 ``--silent-after``/``--silent-for``, ``--health warning|error``. Lines on standard input control it
 live: ``unplug``, ``replug``, ``silent SECONDS``, ``health ok|warning|error [RESETS]``,
-``corrupt RATE``, ``drop RATE``, ``clock`` (the true timing of the samples streamed), ``quit``;
-each is acknowledged on standard output.
+``corrupt RATE``, ``drop RATE``, ``cut RATE``, ``clock`` (the true timing of the samples
+streamed), ``quit``; each is acknowledged on standard output.
 
 Exit status: 0 after ``quit`` or SIGTERM, 2 on a user error (one line on standard error,
 ``s1_emulator: error: ...``), 130 on Ctrl-C.
@@ -99,8 +100,8 @@ def parser() -> argparse.ArgumentParser:
         description='An RPLIDAR S1 speaking the real byte protocol on a pseudo-terminal (and '
                     'TCP), streaming a simulated floor plan in real time.',
         epilog='Lines on standard input control it while it runs: unplug, replug, silent SECONDS, '
-               'health ok|warning|error [RESETS], corrupt RATE, drop RATE, clock, quit. Exit '
-               'status: 0 after quit or SIGTERM, 2 on a user error, 130 on Ctrl-C.')
+               'health ok|warning|error [RESETS], corrupt RATE, drop RATE, cut RATE, clock, '
+               'quit. Exit status: 0 after quit or SIGTERM, 2 on a user error, 130 on Ctrl-C.')
     probability = bounded(float, 0.0, 1.0)
     p.add_argument('--link', help='symlink to point at the pseudo-terminal, e.g. /tmp/ttyS1 '
                                   '(default: none, only the pty path is printed)')
@@ -132,6 +133,10 @@ def parser() -> argparse.ArgumentParser:
                         '%(default)s)')
     p.add_argument('--drop-rate', type=probability, default=0.0,
                    help='probability that a streamed byte is dropped (default: %(default)s)')
+    p.add_argument('--cut-rate', type=probability, default=0.0,
+                   help='probability that a streamed frame (capsule or node) is cut short: a '
+                        'run of its bytes, from a random one to its end, is lost (default: '
+                        '%(default)s)')
     p.add_argument('--silent-after', type=bounded(float, 0.0),
                    help='go silent after this many seconds (default: never)')
     p.add_argument('--silent-for', type=bounded(float, 0.0), default=3.0,
@@ -181,7 +186,7 @@ def _serve(args):
     """Start the emulator, announce it on standard output and serve until ``quit``."""
     scene, plan_name = _scene(args)
     faults = Faults(corrupt_rate=args.corrupt_rate, drop_rate=args.drop_rate,
-                    health=HealthStatus[args.health.upper()],
+                    cut_rate=args.cut_rate, health=HealthStatus[args.health.upper()],
                     resets_to_clear=args.health_error_resets)
     if args.silent_after is not None:
         faults.silent_from_s = time.monotonic() + args.silent_after

@@ -11,8 +11,10 @@ and streams what a :class:`Scene` shows in real time: every frame is due when it
 arrive over a 256000-baud line after its samples were measured. Dense capsule distances are
 whole millimetres and standard node distances quarter millimetres.
 
-:class:`Faults` (shared with the server's control commands) corrupts or drops streamed bytes,
-silences the device and sets the health it reports.
+:class:`Faults` (shared with the server's control commands) corrupts or drops streamed bytes, cuts
+frames short (a run of bytes lost, as when a USB packet or a burst of the UART's input is lost),
+silences the device, sets the health it reports and can make it report implausible scan mode
+entries.
 """
 
 from dataclasses import dataclass
@@ -61,6 +63,8 @@ class Faults:
 
     :ivar corrupt_rate: probability that a streamed byte is replaced by another value
     :ivar drop_rate: probability that a streamed byte is left out
+    :ivar cut_rate: probability that a streamed frame is cut short: its bytes from a random one
+        (uniform over the frame) to its end are lost
     :ivar silent_from_s: monotonic time from which the device neither answers nor streams
     :ivar silent_until_s: monotonic time at which it speaks again
     :ivar health: :class:`HealthStatus` reported by GET_HEALTH
@@ -69,6 +73,7 @@ class Faults:
 
     corrupt_rate: float = 0.0
     drop_rate: float = 0.0
+    cut_rate: float = 0.0
     silent_from_s: float = 0.0
     silent_until_s: float = 0.0
     health: int = HealthStatus.OK
@@ -286,10 +291,19 @@ class S1Device:
         return encode_standard_nodes(angle_q6, distance_q2, quality, angle_q6 < previous)
 
     def _inject_faults(self, data: bytes) -> bytes:
-        """Corrupt and drop streamed bytes at the configured rates."""
-        if not (self._faults.corrupt_rate or self._faults.drop_rate):
+        """Corrupt and drop streamed bytes and cut frames short at the configured rates."""
+        faults = self._faults
+        if not (faults.corrupt_rate or faults.drop_rate or faults.cut_rate):
             return data
         raw = np.frombuffer(data, np.uint8).copy()
-        corrupt = self._rng.random(raw.size) < self._faults.corrupt_rate
+        corrupt = self._rng.random(raw.size) < faults.corrupt_rate
         raw[corrupt] ^= self._rng.integers(1, 256, int(corrupt.sum()), dtype=np.uint8)
-        return raw[self._rng.random(raw.size) >= self._faults.drop_rate].tobytes()
+        kept = self._rng.random(raw.size) >= faults.drop_rate
+        if faults.cut_rate:
+            # A cut frame keeps 0 to size - 1 of its first bytes.
+            frames = raw.size // self._frame_size
+            cut = self._rng.random(frames) < faults.cut_rate
+            first_lost = np.where(cut, self._rng.integers(0, self._frame_size, frames),
+                                  self._frame_size)
+            kept &= (np.arange(self._frame_size) < first_lost[:, None]).reshape(-1)
+        return raw[kept].tobytes()

@@ -11,24 +11,34 @@ bytes: 0.95^84 = 1.3 % arrive intact), and the 1 in 256 damaged capsules that pa
 checksum are published as measured. This decoder uses what the stream guarantees besides the
 checksum, in four steps:
 
-1. Framing. Capsules are 84 bytes apart. From a capsule header (sync nibbles A, 5) the next one
-   is looked for within 12 bytes per capsule of 84, 168 or 252 bytes on (or exactly up to 672
-   bytes on): the region between two headers holds ``n`` capsules (headers in between may be
-   damaged) that lost (or gained) ``d`` bytes. Only without any header is sync lost and
-   searched byte by byte, as by the SDK.
+1. Framing. Capsules are 84 bytes apart. A capsule cut short (a run of lost bytes up to its
+   end: a lost USB packet, an overrun buffer) is followed at once by the next: from a capsule
+   header (sync nibbles A, 5) the next capsule starts at the first header within 84 bytes whose
+   start angle lies one sweep on (a false header in the distances has a random angle), else 84
+   bytes on, else the next one is looked for within 12 bytes per capsule of 84, 168 or 252
+   bytes on (or exactly up to 672 bytes on): the region between two headers holds ``n``
+   capsules (headers in between may be damaged) that lost ``d`` bytes. Bytes are lost, never
+   gained: a region longer than its capsules was framed on a false header, and its samples are
+   unreadable. Only without any header is sync lost and searched byte by byte, as by the SDK.
 2. Realignment. In a region that lost ``d`` bytes each distance lies 0..d bytes before its
    place; the shift grows at each lost byte, whose sample is lost with it. A distance read one
    byte off is a byte of one sample and a byte of the next, off by multiples of 256 mm, while
    neighbouring samples of a surface agree: each sample's shift is found by dynamic programming
-   as the monotone path, ending at ``d``, whose neighbours agree best. (Where a sample lost both
-   its bytes, its place among smooth neighbours cannot be told: the samples up to the previous
-   lost byte may land one sample step, 0.39 degrees, off.)
+   as the monotone path, ending at ``d`` at the region's end, whose neighbours agree best. Only
+   bytes between the two headers are read. A run of lost bytes is one move over the samples it
+   took; one that reached the next header ends the path early, and where its place is in doubt
+   the samples in doubt are left out rather than read a sample or more late. (Where a sample
+   lost both its bytes among scattered losses, its place among smooth neighbours cannot be
+   told: the samples up to the previous lost byte may land one sample step, 0.39 degrees, off.)
 3. Angles. Start angles advance by one capsule's sweep: a start angle is believed when it lies
    within 1/8 degree of the one predicted from the last believed capsule (1/8 of a sweep, for
    the motor's speed, for a capsule whose checksum passed on a line not otherwise damaged), or,
    without a recent prediction, when it and its successor's
    advance like the capsules before. Otherwise the predicted angle is used (counted as
-   replaced); with nothing to predict from, the capsule is lost. Sample k lies at
+   replaced), unless the prediction may be the wrong one: an intact capsule out of sequence
+   says it lost count of capsules, and in a region that lost a run of bytes a capsule may be
+   framed where none began; such a capsule is lost, as one with nothing to predict from.
+   Sample k lies at
    ``start + k * sweep / 40`` as in the SDK, the sweep from the next start angle when it is in
    step, else the tracked one.
 4. Plausibility. A capsule that failed its checksum, was realigned or had its angle replaced is
@@ -66,10 +76,12 @@ _JUMP_MM = 1000
 # capsule's first sample). One lost byte: read across it (that sample is garbage and left to
 # the plausibility check) or skip the sample it hit; two: skip one or two samples, or lose a
 # header's bytes. (Measured on the emulator at 5 % lost bytes, these keep the most samples
-# right.) Ties go to fewer shifts.
-_MOVES = ((1, 0, False), (1, 1, False), (1, 2, True), (2, 1, False), (2, 2, False),
-          (3, 2, False))
-_SHIFT_COST = 1e-3
+# right.) A run of lost bytes over more samples (a capsule cut short) costs, and ending a
+# region over lost samples is preferred to reading the samples before them a sample or more
+# late (see _monotone_paths).
+_RUN_COST = 0.2
+_MOVES = ((1, 0, False, 0.0), (1, 1, False, 0.0), (1, 2, True, 0.0), (2, 1, False, 0.0),
+          (2, 2, False, _RUN_COST), (3, 2, False, _RUN_COST))
 # Plausibility: noise sigmas allowed, the noise scale's floor (whole-mm distances) and its
 # prior (the S1's datasheet accuracy) until intact capsules have measured it.
 _SIGMAS = 4.0
@@ -110,16 +122,18 @@ def _wrap_q8(angle_q8: int) -> int:
 class _Frame:
     """One capsule's raw content once framed (mutable working record of the decoder)."""
 
-    __slots__ = ('slot', 'angle_field', 'distances', 'readable', 'clean', 'realigned', 'end',
-                 'start_q8', 'sweep_q8', 'suspect', 'replaced')
+    __slots__ = ('slot', 'angle_field', 'distances', 'readable', 'clean', 'realigned', 'cut',
+                 'end', 'start_q8', 'sweep_q8', 'suspect', 'replaced')
 
-    def __init__(self, slot, angle_field, distances, readable, clean, realigned, end):
+    def __init__(self, slot, angle_field, distances, readable, clean, realigned, end,
+                 cut=False):
         self.slot = slot
         self.angle_field = angle_field
         self.distances = distances
         self.readable = readable
         self.clean = clean
         self.realigned = realigned
+        self.cut = cut
         self.end = end
         self.start_q8 = None
         self.sweep_q8 = None
@@ -183,7 +197,7 @@ class DenseCapsuleDecoder:
                     pos = keep
                     break
                 pos = self._regain_sync(pos, pos + int(found[0]))
-            step = self._next_header(headers, pos, len(buffer))
+            step = self._next_header(raw, headers, pos)
             if step is None:
                 break
             count, end = step
@@ -205,7 +219,12 @@ class DenseCapsuleDecoder:
             return Samples.concat([])
         after = regions[-1][2]
         self._judge_angles(frames, int(raw[after + 2]) | int(raw[after + 3]) << 8)
-        placed = np.array([f.start_q8 is not None and f.sweep_q8 is not None for f in frames])
+        # A capsule whose start angle is out of sequence is not placed at the predicted one when
+        # that may be wrong too: in a region that lost a run of bytes it may be framed where
+        # none began (a short one's bytes read as its successor's), and an intact one says the
+        # prediction lost count of capsules.
+        placed = np.array([f.start_q8 is not None and f.sweep_q8 is not None
+                           and not ((f.cut or f.clean) and f.replaced) for f in frames])
         self._counts['lost_frames'] += int(np.count_nonzero(~placed))
         distances = self._check_distances(frames, placed)
         return self._samples([f for f, ok in zip(frames, placed) if ok], distances[placed])
@@ -222,16 +241,23 @@ class DenseCapsuleDecoder:
             self._gap_from = None
         return header
 
-    @staticmethod
-    def _next_header(headers: np.ndarray, pos: int, size: int):
+    def _next_header(self, raw: np.ndarray, headers: np.ndarray, pos: int):
         """
         Find where the capsules after the one at ``pos`` end.
 
         :return: ``(n, end)``: n capsules end at the header at ``end``; ``(0, None)`` when no
             header lies where one should; None until enough bytes have arrived
         """
+        size = raw.size
         for count in range(1, _MAX_EXACT_REGION + 1):
             expected, reach = pos + count * CAPSULE_SIZE, count * _MAX_SHIFT
+            if count == 1 and expected + 4 <= size:
+                # A header in sequence (a sweep on) wins over one merely 84 bytes on, which may
+                # lie in the distances of a successor that arrived early.
+                following = [at for at in np.flatnonzero(headers[pos + 1:expected + 1]) + pos + 1
+                             if self._follows(raw, pos, at)]
+                if following:
+                    return 1, int(following[-1] if following[-1] == expected else following[0])
             if expected + 4 <= size and headers[expected]:
                 return count, expected
             if count > _MAX_REGION:
@@ -247,30 +273,63 @@ class DenseCapsuleDecoder:
                 return count, int(near[np.argmin(np.abs(near - expected))])
         return 0, None
 
+    def _follows(self, raw: np.ndarray, pos: int, at: int) -> bool:
+        """
+        Tell whether the header at ``at`` starts the capsule after the one at ``pos``.
+
+        Any run of lost bytes shortens a capsule, up to all but its first byte: a header
+        anywhere within it starts the next capsule when its start angle lies one sweep on (a
+        false header in the distances has a random one).
+
+        :param raw: the received bytes
+        :param pos: a capsule header
+        :param at: a later header
+        :return: True when its start angle follows at the tracked sweep
+        """
+        this = _start_q8(int(raw[pos + 2]) | int(raw[pos + 3]) << 8)
+        following = _start_q8(int(raw[at + 2]) | int(raw[at + 3]) << 8)
+        if this is None or following is None:
+            return False
+        sweep_q8 = self._angles.sweep_deg() * 256.0
+        return abs(_wrap_q8(following - this - round(sweep_q8))) <= sweep_q8 / _CLEAN_ANGLE_SHARE
+
     def _frame(self, raw: np.ndarray, regions: list) -> list:
-        """Cut regions into capsules (realigning those that lost or gained bytes)."""
+        """
+        Cut regions into capsules, realigning those that lost bytes.
+
+        Bytes are lost, never gained: a region longer than its capsules (its closing header
+        found late, or false) was framed wrongly, and its samples are unreadable.
+        """
         shifts = [count * CAPSULE_SIZE - (end - pos) for pos, count, end, _ in regions]
         aligned = self._aligned(raw, [region for region, shift in zip(regions, shifts)
                                       if not shift])
         noise_mm = min(_SIGMAS * math.sqrt(2.0) * self._noise.sigma_mm, _JUMP_MM / 2.0)
-        realigned = _realign(raw, [r for r, shift in zip(regions, shifts) if shift],
-                             [shift for shift in shifts if shift], self._max_mm, noise_mm)
+        realigned = _realign(raw, [r for r, shift in zip(regions, shifts) if shift > 0],
+                             [shift for shift in shifts if shift > 0], self._max_mm, noise_mm)
         frames = []
         for (pos, count, end, slot), shift in zip(regions, shifts):
             if shift == 0:
                 frames += [next(aligned) for _ in range(count)]
+                continue
+            if shift < 0:
+                at = pos + CAPSULE_SIZE * np.arange(count) + 2
+                frames += [_Frame(slot + j, int(raw[at[j]]) | int(raw[at[j] + 1]) << 8,
+                                  np.zeros(SAMPLES_PER_CAPSULE, np.int64),
+                                  np.zeros(SAMPLES_PER_CAPSULE, bool), False, False,
+                                  self._offset + min(end, pos + CAPSULE_SIZE * (j + 1)), True)
+                           for j in range(count)]
                 continue
             distances, kept, path = next(realigned)
             for j in range(count):
                 first = j * SAMPLES_PER_CAPSULE
                 # The first capsule's angle follows its verified header; a later one's sits at
                 # the shift of its first sample.
-                at = pos + CAPSULE_SIZE * j + 2 - (int(np.sign(shift)) * path[first] if j else 0)
-                frame_end = min(end, pos + CAPSULE_SIZE * (j + 1) + max(-shift, 0))
+                at = pos + CAPSULE_SIZE * j + 2 - (path[first] if j else 0)
+                frame_end = min(end, pos + CAPSULE_SIZE * (j + 1))
                 frames.append(_Frame(slot + j, int(raw[at]) | int(raw[at + 1]) << 8,
                                      distances[first:first + SAMPLES_PER_CAPSULE],
                                      kept[first:first + SAMPLES_PER_CAPSULE], False, True,
-                                     self._offset + frame_end))
+                                     self._offset + frame_end, shift > count * _MAX_SHIFT))
         self._counts['frames'] += len(frames)
         self._counts['damaged_frames'] += sum(not f.clean for f in frames)
         self._counts['realigned_frames'] += sum(f.realigned for f in frames)
@@ -572,30 +631,40 @@ def _realign(raw: np.ndarray, regions: list, shifts: list, max_mm: int, noise_mm
                + np.tile(_DISTANCE_OFFSETS, count))
     pos = np.array([region[0] for region in regions])
     shift = np.array(shifts)
-    reach = np.arange(np.abs(shift).max() + 1)
-    index = np.clip(pos[:, None, None] + offsets[None, None, :]
-                    - np.sign(shift)[:, None, None] * reach[None, :, None], 0, raw.size - 2)
+    reach = np.arange(shift.max() + 1)
+    index = pos[:, None, None] + offsets[None, None, :] - reach[None, :, None]
+    # A distance is read between the region's first header and the next one.
+    end = np.array([region[2] for region in regions])
+    inside = ((index >= pos[:, None, None] + _DISTANCE_OFFSETS[0])
+              & (index + 2 <= end[:, None, None]))
+    index = np.clip(index, 0, raw.size - 2)
     values = raw[index].astype(np.int64) | (raw[index + 1].astype(np.int64) << 8)
     lengths = [SAMPLES_PER_CAPSULE * region[1] for region in regions]
-    paths, kept = _monotone_paths(values, np.abs(shift), lengths, max_mm, noise_mm)
+    paths, kept = _monotone_paths(values, inside, shift, lengths, max_mm, noise_mm)
     samples = np.arange(values.shape[2])
     return iter([(values[r, path, samples][:length], keep[:length], path[:length])
                  for r, (path, keep, length) in enumerate(zip(paths, kept, lengths))])
 
 
-def _monotone_paths(values: np.ndarray, last_shift: np.ndarray, lengths: list, max_mm: int,
-                    noise_mm: float) -> tuple:
+def _monotone_paths(values: np.ndarray, inside: np.ndarray, last_shift: np.ndarray,
+                    lengths: list, max_mm: int, noise_mm: float) -> tuple:
     """
-    Choose each sample's shift in regions that lost or gained bytes (step 2).
+    Choose each sample's shift in regions that lost bytes (step 2).
 
     A path scores per sample how well its distance agrees with the one kept before it (see
     ``_MOVES``): the shift grows by the bytes lost over one or two skipped samples, or over the
     header between two capsules. A misread row of true distances (two bytes off: each sample
     read as its neighbour) can only be reached through misread garbage, so the path that keeps
-    the most agreeing neighbours is the true one. It may start at any shift (the first start
-    angle may have lost bytes) and ends at its region's last sample and largest shift.
+    the most agreeing neighbours is the true one. A run of lost bytes (a capsule cut short) is
+    one move over the samples it took, at a cost, and its landing sample is judged by the move
+    after it: it beats reading the true distances after the run a few samples off, which takes
+    a costly move per two bytes. A path may start at any shift (the first start angle may have
+    lost bytes) and ends at its region's end (the next header) at its largest shift, after its
+    last sample read or over a run of lost bytes that reached the header: that ending costs
+    nothing, so where a run's place is in doubt the samples in doubt are left out.
 
     :param values: distances read at each shift, shape (regions, shifts, samples), mm
+    :param inside: which of them were read within the region (others cannot be its samples)
     :param last_shift: each region's largest shift
     :param lengths: each region's samples (the rest is padding)
     :param max_mm: farthest valid distance, mm
@@ -605,50 +674,78 @@ def _monotone_paths(values: np.ndarray, last_shift: np.ndarray, lengths: list, m
     """
     regions, shifts, size = values.shape
     valid = values <= max_mm
+    ends = np.array(lengths)
+    lanes = np.arange(regions)
     # Agreement is full within the noise of two neighbours and fades to none at 1 m: a distance
     # read a byte off moves by multiples of 256 mm where true neighbours move by millimetres.
     # Shifts beyond a region's own, and moves that only land on a capsule's first sample
-    # elsewhere, are barred (-inf).
-    agreement = np.zeros((len(_MOVES), size, regions, shifts))
-    for i, (back, rise, onto_first) in enumerate(_MOVES):
+    # elsewhere, are barred (-inf). Index ``lengths[r]`` is region r's end: landing there scores
+    # nothing, over skipped samples that cover the bytes lost.
+    agreement = np.zeros((len(_MOVES), size + 1, regions, shifts))
+    for i, (back, rise, onto_first, cost) in enumerate(_MOVES):
         before, after = values[:, :shifts - rise, :size - back], values[:, rise:, back:]
         both = valid[:, :shifts - rise, :size - back] & valid[:, rise:, back:]
         fade = (_JUMP_MM - np.abs(after - before)) / (_JUMP_MM - noise_mm)
-        agreement[i, back:, :, rise:] = np.where(both, np.clip(fade, 0.0, 1.0),
-                                                 0.0).transpose(2, 0, 1) - _SHIFT_COST * rise
+        possible = inside[:, :shifts - rise, :size - back] & inside[:, rise:, back:]
+        agreement[i, back:size, :, rise:] = np.where(
+            possible, np.where(both, np.clip(fade, 0.0, 1.0), 0.0), -np.inf).transpose(2, 0, 1)
+        agreement[i] -= cost
         if onto_first:
-            agreement[i, np.arange(size) % SAMPLES_PER_CAPSULE != 0] = -np.inf
+            agreement[i, np.arange(size + 1) % SAMPLES_PER_CAPSULE != 0] = -np.inf
+        agreement[i, ends, lanes] = 0.0 if back == 1 and rise == 0 else -np.inf
     barred = np.arange(shifts)[None, :] > last_shift[:, None]
     agreement[:, :, barred] = -np.inf
+    run_landing = np.full((size + 1, regions), -_RUN_COST)
+    run_landing[ends, lanes] = 0.0
     backs, rises = (np.array(column) for column in list(zip(*_MOVES))[:2])
     # scores[m + 3, :, 2 + s]: the best score of a path whose last sample is m, at shift s; the
     # rows before sample 0 and the two columns below shift 0 stay -inf, so that a move reads
     # its starting score at [m + 3 - back, :, 2 + s - rise] for every s at once.
-    scores = np.full((size + 3, regions, shifts + 2), -np.inf)
-    scores[3, :, 2:] = np.where(barred, -np.inf, -_SHIFT_COST * np.arange(shifts))
+    scores = np.full((size + 4, regions, shifts + 2), -np.inf)
+    scores[3, :, 2:] = np.where(barred | ~inside[:, :, 0], -np.inf, 0.0)
     rows = 3 - backs[:, None, None]
-    lanes = np.arange(regions)[None, :, None]
     columns = 2 - rises[:, None, None] + np.arange(shifts)[None, None, :]
-    choice = np.zeros((size, regions, shifts), np.int64)
-    for m in range(1, size):
-        candidates = agreement[:, m] + scores[rows + m, lanes, columns]
+    # Runs of q >= 2 samples, losing 2q or 2q - 1 bytes: runs[m][:, s] is the best score of a
+    # path at sample m - 1 - q and shift s - 2q over every q >= 1, and run_lengths its q.
+    runs = np.full((regions, shifts), -np.inf)
+    run_lengths = np.zeros((size + 1, regions, shifts), np.int64)
+    choice = np.zeros((size + 1, regions, shifts), np.int64)
+    for m in range(1, size + 1):
+        previous_runs = runs
+        runs = np.full((regions, shifts), -np.inf)
+        runs[:, 2:] = np.maximum(scores[m + 1, :, 2:shifts], previous_runs[:, :-2])
+        run_lengths[m, :, 2:] = np.where(scores[m + 1, :, 2:shifts] >= previous_runs[:, :-2], 1,
+                                         run_lengths[m - 1, :, :-2] + 1)
+        even, odd = np.full((2, regions, shifts), -np.inf)
+        even[:, 2:] = previous_runs[:, :-2]
+        odd[:, 1:] = previous_runs[:, :-1]
+        candidates = np.concatenate([
+            agreement[:, m] + scores[rows + m, lanes[None, :, None], columns],
+            np.stack([even, odd]) + np.where(barred, -np.inf, run_landing[m][:, None])])
         choice[m] = candidates.argmax(axis=0)
         scores[m + 3, :, 2:] = candidates.max(axis=0)
     paths, kept = [], []
-    for how_of, last, length in zip(choice.transpose(1, 0, 2).tolist(), last_shift.tolist(),
-                                    lengths):
+    for region, (last, length) in enumerate(zip(last_shift.tolist(), lengths)):
         path, keep = [0] * size, [True] * size
-        m, s = length - 1, last
-        while m >= 0:
-            path[m] = s
-            back, rise, _ = _MOVES[how_of[m][s]] if m else (1, 0, False)
+        m, s = length, last
+        while m > 0:
+            how = int(choice[m, region, s])
+            if how < len(_MOVES):
+                back, rise = _MOVES[how][:2]
+            else:
+                odd = how - len(_MOVES)
+                q = int(run_lengths[m - 1, region, s - 2 + odd]) + 1
+                back, rise = q + 1, 2 * q - odd
             for skipped in range(m - back + 1, m):
                 path[skipped], keep[skipped] = s - rise, False
             m, s = m - back, s - rise
+            path[m] = s
         paths.append(path)
         kept.append(keep)
     paths, kept = np.array(paths), np.array(kept)
-    kept &= np.take_along_axis(valid, paths[:, None, :], axis=1)[:, 0, :]
+    kept &= np.take_along_axis(valid & inside, paths[:, None, :], axis=1)[:, 0, :]
+    # A region with no possible path (cut to its header) keeps nothing.
+    kept &= np.isfinite(scores[ends + 3, lanes, last_shift + 2])[:, None]
     return paths, kept
 
 

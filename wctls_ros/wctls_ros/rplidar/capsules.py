@@ -73,15 +73,15 @@ _MAX_EXACT_REGION = 8
 # Realignment: neighbouring samples of one surface agree this well, mm.
 _JUMP_MM = 1000
 # Realignment moves from the sample before: (samples back, bytes lost in between, only onto a
-# capsule's first sample). One lost byte: read across it (that sample is garbage and left to
-# the plausibility check) or skip the sample it hit; two: skip one or two samples, or lose a
+# capsule's first sample, cost). One lost byte: read across it (that sample is garbage and left
+# to the plausibility check) or skip the sample it hit; two: skip one or two samples, or lose a
 # header's bytes. (Measured on the emulator at 5 % lost bytes, these keep the most samples
-# right.) A run of lost bytes over more samples (a capsule cut short) costs, and ending a
-# region over lost samples is preferred to reading the samples before them a sample or more
-# late (see _monotone_paths).
-_RUN_COST = 0.2
+# right.) Skipping a sample over two lost bytes costs: it is rare among scattered losses, and
+# the true samples before a run of lost bytes (a capsule cut short) read late take one such
+# skip per two bytes, where the run itself costs nothing (see _monotone_paths).
+_SKIP_COST = 0.2
 _MOVES = ((1, 0, False, 0.0), (1, 1, False, 0.0), (1, 2, True, 0.0), (2, 1, False, 0.0),
-          (2, 2, False, _RUN_COST), (3, 2, False, _RUN_COST))
+          (2, 2, False, _SKIP_COST), (3, 2, False, _SKIP_COST))
 # Plausibility: noise sigmas allowed, the noise scale's floor (whole-mm distances) and its
 # prior (the S1's datasheet accuracy) until intact capsules have measured it.
 _SIGMAS = 4.0
@@ -155,7 +155,7 @@ class DenseCapsuleDecoder:
     def __init__(self, us_per_sample: float, max_distance_m: float = 40.0):
         # The SDK's integer formula: the sweep of 40 samples at 100 Hz, in whole degrees.
         self._max_sweep_q8 = (360 * 100 * SAMPLES_PER_CAPSULE
-                              // (1000000 // max(int(us_per_sample), 1))) << 8
+                              // max(1000000 // max(int(us_per_sample), 1), 1)) << 8
         self._max_mm = int(max_distance_m * 1000.0)
         self._buffer = b''
         self._offset = 0            # stream offset of _buffer[0]
@@ -251,14 +251,15 @@ class DenseCapsuleDecoder:
         size = raw.size
         for count in range(1, _MAX_EXACT_REGION + 1):
             expected, reach = pos + count * CAPSULE_SIZE, count * _MAX_SHIFT
-            if count == 1 and expected + 4 <= size:
+            exact = expected + 4 <= size and headers[expected]
+            if count == 1 and expected + 4 <= size and not (
+                    exact and self._follows(raw, pos, expected)):
                 # A header in sequence (a sweep on) wins over one merely 84 bytes on, which may
                 # lie in the distances of a successor that arrived early.
-                following = [at for at in np.flatnonzero(headers[pos + 1:expected + 1]) + pos + 1
-                             if self._follows(raw, pos, at)]
-                if following:
-                    return 1, int(following[-1] if following[-1] == expected else following[0])
-            if expected + 4 <= size and headers[expected]:
+                for early in np.flatnonzero(headers[pos + 1:expected]) + pos + 1:
+                    if self._follows(raw, pos, early):
+                        return 1, int(early)
+            if exact:
                 return count, expected
             if count > _MAX_REGION:
                 # Beyond a few capsules only an exact 84-byte spacing is evidence enough.
@@ -655,13 +656,12 @@ def _monotone_paths(values: np.ndarray, inside: np.ndarray, last_shift: np.ndarr
     ``_MOVES``): the shift grows by the bytes lost over one or two skipped samples, or over the
     header between two capsules. A misread row of true distances (two bytes off: each sample
     read as its neighbour) can only be reached through misread garbage, so the path that keeps
-    the most agreeing neighbours is the true one. A run of lost bytes (a capsule cut short) is
-    one move over the samples it took, at a cost, and its landing sample is judged by the move
-    after it: it beats reading the true distances after the run a few samples off, which takes
-    a costly move per two bytes. A path may start at any shift (the first start angle may have
-    lost bytes) and ends at its region's end (the next header) at its largest shift, after its
-    last sample read or over a run of lost bytes that reached the header: that ending costs
-    nothing, so where a run's place is in doubt the samples in doubt are left out.
+    the most agreeing neighbours is the true one. It may start at any shift (the first start
+    angle may have lost bytes) and ends at its region's end (the next header) at its largest
+    shift: after its last sample, or over a run of lost bytes that reached the header (a capsule
+    cut short), which scores nothing for the samples the run took. Reading the samples before
+    such a run a sample or more late instead takes a costly skip per two bytes lost, so where
+    the run's place is in doubt the samples in doubt are left out.
 
     :param values: distances read at each shift, shape (regions, shifts, samples), mm
     :param inside: which of them were read within the region (others cannot be its samples)
@@ -670,7 +670,7 @@ def _monotone_paths(values: np.ndarray, inside: np.ndarray, last_shift: np.ndarr
     :param max_mm: farthest valid distance, mm
     :param noise_mm: how far true neighbours may differ by noise alone, mm (below 1 m)
     :return: ``(shift per sample, kept)``, each of shape (regions, samples): a sample stepped
-        over or out of range is not kept
+        over, out of range or beyond a run of lost bytes is not kept
     """
     regions, shifts, size = values.shape
     valid = values <= max_mm
@@ -678,9 +678,9 @@ def _monotone_paths(values: np.ndarray, inside: np.ndarray, last_shift: np.ndarr
     lanes = np.arange(regions)
     # Agreement is full within the noise of two neighbours and fades to none at 1 m: a distance
     # read a byte off moves by multiples of 256 mm where true neighbours move by millimetres.
-    # Shifts beyond a region's own, and moves that only land on a capsule's first sample
-    # elsewhere, are barred (-inf). Index ``lengths[r]`` is region r's end: landing there scores
-    # nothing, over skipped samples that cover the bytes lost.
+    # Shifts beyond a region's own, readings outside the region, and moves that only land on a
+    # capsule's first sample elsewhere, are barred (-inf). Index ``lengths[r]`` is region r's
+    # end, reached from its last sample at the same shift.
     agreement = np.zeros((len(_MOVES), size + 1, regions, shifts))
     for i, (back, rise, onto_first, cost) in enumerate(_MOVES):
         before, after = values[:, :shifts - rise, :size - back], values[:, rise:, back:]
@@ -692,11 +692,9 @@ def _monotone_paths(values: np.ndarray, inside: np.ndarray, last_shift: np.ndarr
         agreement[i] -= cost
         if onto_first:
             agreement[i, np.arange(size + 1) % SAMPLES_PER_CAPSULE != 0] = -np.inf
-        agreement[i, ends, lanes] = 0.0 if back == 1 and rise == 0 else -np.inf
+        agreement[i, ends, lanes] = 0.0 if (back, rise) == (1, 0) else -np.inf
     barred = np.arange(shifts)[None, :] > last_shift[:, None]
     agreement[:, :, barred] = -np.inf
-    run_landing = np.full((size + 1, regions), -_RUN_COST)
-    run_landing[ends, lanes] = 0.0
     backs, rises = (np.array(column) for column in list(zip(*_MOVES))[:2])
     # scores[m + 3, :, 2 + s]: the best score of a path whose last sample is m, at shift s; the
     # rows before sample 0 and the two columns below shift 0 stay -inf, so that a move reads
@@ -705,41 +703,25 @@ def _monotone_paths(values: np.ndarray, inside: np.ndarray, last_shift: np.ndarr
     scores[3, :, 2:] = np.where(barred | ~inside[:, :, 0], -np.inf, 0.0)
     rows = 3 - backs[:, None, None]
     columns = 2 - rises[:, None, None] + np.arange(shifts)[None, None, :]
-    # Runs of q >= 2 samples, losing 2q or 2q - 1 bytes: runs[m][:, s] is the best score of a
-    # path at sample m - 1 - q and shift s - 2q over every q >= 1, and run_lengths its q.
-    runs = np.full((regions, shifts), -np.inf)
-    run_lengths = np.zeros((size + 1, regions, shifts), np.int64)
     choice = np.zeros((size + 1, regions, shifts), np.int64)
     for m in range(1, size + 1):
-        previous_runs = runs
-        runs = np.full((regions, shifts), -np.inf)
-        runs[:, 2:] = np.maximum(scores[m + 1, :, 2:shifts], previous_runs[:, :-2])
-        run_lengths[m, :, 2:] = np.where(scores[m + 1, :, 2:shifts] >= previous_runs[:, :-2], 1,
-                                         run_lengths[m - 1, :, :-2] + 1)
-        even, odd = np.full((2, regions, shifts), -np.inf)
-        even[:, 2:] = previous_runs[:, :-2]
-        odd[:, 1:] = previous_runs[:, :-1]
-        candidates = np.concatenate([
-            agreement[:, m] + scores[rows + m, lanes[None, :, None], columns],
-            np.stack([even, odd]) + np.where(barred, -np.inf, run_landing[m][:, None])])
+        candidates = agreement[:, m] + scores[rows + m, lanes[None, :, None], columns]
         choice[m] = candidates.argmax(axis=0)
         scores[m + 3, :, 2:] = candidates.max(axis=0)
     paths, kept = [], []
     for region, (last, length) in enumerate(zip(last_shift.tolist(), lengths)):
         path, keep = [0] * size, [True] * size
-        m, s = length, last
-        while m > 0:
-            how = int(choice[m, region, s])
-            if how < len(_MOVES):
-                back, rise = _MOVES[how][:2]
-            else:
-                odd = how - len(_MOVES)
-                q = int(run_lengths[m - 1, region, s - 2 + odd]) + 1
-                back, rise = q + 1, 2 * q - odd
+        m, s = _path_end(scores[3:, region, 2:], length, last)
+        for skipped in range(m + 1, length):
+            path[skipped], keep[skipped] = last, False
+        if m == length:
+            m, s = m - 1, last                     # from the end, the last sample's shift
+        while m >= 0:
+            path[m] = s
+            back, rise = _MOVES[choice[m, region, s]][:2] if m else (1, 0)
             for skipped in range(m - back + 1, m):
                 path[skipped], keep[skipped] = s - rise, False
             m, s = m - back, s - rise
-            path[m] = s
         paths.append(path)
         kept.append(keep)
     paths, kept = np.array(paths), np.array(kept)
@@ -747,6 +729,26 @@ def _monotone_paths(values: np.ndarray, inside: np.ndarray, last_shift: np.ndarr
     # A region with no possible path (cut to its header) keeps nothing.
     kept &= np.isfinite(scores[ends + 3, lanes, last_shift + 2])[:, None]
     return paths, kept
+
+
+def _path_end(scores: np.ndarray, length: int, last_shift: int) -> tuple:
+    """
+    Choose where a region's path ends: at its end, or before a run of lost bytes up to it.
+
+    A run over q >= 2 samples before the end lost 2q or 2q - 1 bytes.
+
+    :param scores: the region's path scores, shape (samples + 1, shifts)
+    :param length: its samples (index ``length``: its end)
+    :param last_shift: its largest shift
+    :return: ``(sample, shift)`` of the path's last sample read, or ``(length, last_shift)``
+    """
+    best, end = scores[length, last_shift], (length, last_shift)
+    for q in range(2, length + 1):
+        for odd in (0, 1):
+            m, s = length - 1 - q, last_shift - 2 * q + odd
+            if m >= 0 and s >= 0 and scores[m, s] > best:
+                best, end = scores[m, s], (m, s)
+    return end
 
 
 def _supported(distances: np.ndarray, usable: np.ndarray, sigma_mm: float,

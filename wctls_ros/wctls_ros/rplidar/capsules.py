@@ -11,15 +11,16 @@ bytes: 0.95^84 = 1.3 % arrive intact), and the 1 in 256 damaged capsules that pa
 checksum are published as measured. This decoder uses what the stream guarantees besides the
 checksum, in four steps:
 
-1. Framing. Capsules are 84 bytes apart. A capsule cut short (a run of lost bytes up to its
-   end: a lost USB packet, an overrun buffer) is followed at once by the next: from a capsule
-   header (sync nibbles A, 5) the next capsule starts at the first header within 84 bytes whose
-   start angle lies one sweep on (a false header in the distances has a random angle), else 84
-   bytes on, else the next one is looked for within 12 bytes per capsule of 84, 168 or 252
-   bytes on (or exactly up to 672 bytes on): the region between two headers holds ``n``
-   capsules (headers in between may be damaged) that lost ``d`` bytes. Bytes are lost, never
-   gained: a region longer than its capsules was framed on a false header, and its samples are
-   unreadable. Only without any header is sync lost and searched byte by byte, as by the SDK.
+1. Framing (:mod:`~wctls_ros.rplidar.framing`, shared by every capsule format). Capsules are
+   84 bytes apart. A capsule cut short (a run of lost bytes up to its end: a lost USB packet,
+   an overrun buffer) is followed at once by the next: from a capsule header (sync nibbles A,
+   5) the next capsule starts at the first header within 84 bytes whose start angle lies one
+   sweep on (a false header in the distances has a random angle), else 84 bytes on, else the
+   next one is looked for within 12 bytes per capsule of 84, 168 or 252 bytes on (or exactly up
+   to 672 bytes on): the region between two headers holds ``n`` capsules (headers in between
+   may be damaged) that lost ``d`` bytes. Bytes are lost, never gained: a region longer than
+   its capsules was framed on a false header, and its samples are unreadable. Only without any
+   header is sync lost and searched byte by byte, as by the SDK.
 2. Realignment. In a region that lost ``d`` bytes each distance lies 0..d bytes before its
    place; the shift grows at each lost byte, whose sample is lost with it. A distance read one
    byte off is a byte of one sample and a byte of the next, off by multiples of 256 mm, while
@@ -30,17 +31,16 @@ checksum, in four steps:
    the samples in doubt are left out rather than read a sample or more late. (Where a sample
    lost both its bytes among scattered losses, its place among smooth neighbours cannot be
    told: the samples up to the previous lost byte may land one sample step, 0.39 degrees, off.)
-3. Angles. Start angles advance by one capsule's sweep: a start angle is believed when it lies
-   within 1/8 degree of the one predicted from the last believed capsule (1/8 of a sweep, for
-   the motor's speed, for a capsule whose checksum passed on a line not otherwise damaged), or,
-   without a recent prediction, when it and its successor's
-   advance like the capsules before. Otherwise the predicted angle is used (counted as
-   replaced), unless the prediction may be the wrong one: an intact capsule out of sequence
-   says it lost count of capsules, and in a region that lost a run of bytes a capsule may be
-   framed where none began; such a capsule is lost, as one with nothing to predict from.
-   Sample k lies at
-   ``start + k * sweep / 40`` as in the SDK, the sweep from the next start angle when it is in
-   step, else the tracked one.
+3. Angles (:class:`~wctls_ros.rplidar.framing.AngleTrack`). Start angles advance by one
+   capsule's sweep: a start angle is believed when it lies within 1/8 degree of the one
+   predicted from the last believed capsule (1/8 of a sweep, for the motor's speed, for a
+   capsule whose checksum passed on a line not otherwise damaged), or, without a recent
+   prediction, when it and its successor's advance like the capsules before. Otherwise the
+   predicted angle is used (counted as replaced), unless the prediction may be the wrong one:
+   an intact capsule out of sequence says it lost count of capsules, and in a region that lost
+   a run of bytes a capsule may be framed where none began; such a capsule is lost, as one with
+   nothing to predict from. Sample k lies at ``start + k * sweep / 40`` as in the SDK, the sweep
+   from the next start angle when it is in step, else the tracked one.
 4. Plausibility. A capsule that failed its checksum, was realigned or had its angle replaced is
    suspect, and so are all capsules while most recent ones fail (1 in 256 damaged capsules
    passes the checksum: on such a line a pass proves little). In a suspect capsule a distance
@@ -54,22 +54,17 @@ checksum, in four steps:
 On an undamaged stream the output is exactly the SDK's, and nothing is rejected.
 """
 
-from dataclasses import dataclass
 import math
-from typing import Optional
 
 import numpy as np
 
-from .protocol import (CAPSULE_SIZE, DENSE_RETURN_QUALITY, FULL_TURN_Q6, Samples,
-                       SAMPLES_PER_CAPSULE, StreamCounts)
+from .framing import AngleTrack, CapsuleFramer, placeable
+from .protocol import (CAPSULE_SIZE, DENSE_RETURN_QUALITY, Samples, SAMPLES_PER_CAPSULE,
+                       StreamCounts)
 
-FULL_TURN_Q8 = FULL_TURN_Q6 << 2
-# Bytes per capsule that framing and realignment follow (at 5 % lost bytes, 0.04 % of the
-# capsules lose more), and capsules between two headers: up to two damaged headers in a row
-# when bytes were lost, up to seven when the spacing is exact.
-_MAX_SHIFT = 12
-_MAX_REGION = 3
-_MAX_EXACT_REGION = 8
+# The S1's DenseBoost sweep of one capsule at 10 Hz, 1/256 degree, until one is measured.
+_NOMINAL_SWEEP_Q8 = 3980
+
 # Realignment: neighbouring samples of one surface agree this well, mm.
 _JUMP_MM = 1000
 # Realignment moves from the sample before: (samples back, bytes lost in between, only onto a
@@ -93,18 +88,6 @@ _SIGMA_WINDOW = 512
 _MAD_TO_SIGMA = 1.4826 / math.sqrt(6.0)
 # Steepest surface a neighbour pair may describe: tan(80 degrees) of range per radian.
 _STEEPEST = math.tan(math.radians(80.0))
-# Angles: tolerance for a suspect start angle (1/8 degree), the share of a sweep allowed for one
-# whose checksum passed, and how far (capsules, about a turn) a prediction reaches.
-_ANGLE_TOLERANCE_Q8 = 32
-_CLEAN_ANGLE_SHARE = 8
-_PREDICTION_REACH = 24
-# A prediction this few capsules old outranks a run of two observed angles; after this many
-# start angles in a row not believed, the sweep is measured anew; measured sweeps refine the
-# tracked one with this weight; the S1's sweep at 10 Hz, 1/256 degree, until one is measured.
-_FRESH_GAP = 2
-_RESTART_AFTER = 8
-_SWEEP_WEIGHT = 1.0 / 8.0
-_NOMINAL_SWEEP_Q8 = 3980
 # The line counts as damaged while this share of the recent capsules fails (weight 1/32).
 _DAMAGED_SHARE = 0.5
 _DAMAGE_WEIGHT = 1.0 / 32.0
@@ -114,16 +97,11 @@ _FRACTIONS = _K / SAMPLES_PER_CAPSULE
 _DISTANCE_OFFSETS = 4 + 2 * _K
 
 
-def _wrap_q8(angle_q8: int) -> int:
-    """Return an angle difference in 1/256 degree wrapped into [-180, 180) degrees."""
-    return (angle_q8 + FULL_TURN_Q8 // 2) % FULL_TURN_Q8 - FULL_TURN_Q8 // 2
-
-
 class _Frame:
     """One capsule's raw content once framed (mutable working record of the decoder)."""
 
     __slots__ = ('slot', 'angle_field', 'distances', 'readable', 'clean', 'realigned', 'cut',
-                 'end', 'start_q8', 'sweep_q8', 'suspect', 'replaced')
+                 'end', 'placement', 'suspect')
 
     def __init__(self, slot, angle_field, distances, readable, clean, realigned, end,
                  cut=False):
@@ -135,10 +113,8 @@ class _Frame:
         self.realigned = realigned
         self.cut = cut
         self.end = end
-        self.start_q8 = None
-        self.sweep_q8 = None
+        self.placement = None
         self.suspect = not clean
-        self.replaced = False
 
 
 class DenseCapsuleDecoder:
@@ -157,16 +133,12 @@ class DenseCapsuleDecoder:
         self._max_sweep_q8 = (360 * 100 * SAMPLES_PER_CAPSULE
                               // max(1000000 // max(int(us_per_sample), 1), 1)) << 8
         self._max_mm = int(max_distance_m * 1000.0)
-        self._buffer = b''
-        self._offset = 0            # stream offset of _buffer[0]
-        self._synced = False        # _buffer[0] starts a capsule header
-        self._slot = 0              # capsule index of the capsule at _buffer[0]
-        self._gap_from = None       # stream offset where sync was lost
-        self._angles = _AngleTrack(self._max_sweep_q8)
+        self._counts = dict.fromkeys(StreamCounts.__dataclass_fields__, 0)
+        self._angles = AngleTrack(self._max_sweep_q8, _NOMINAL_SWEEP_Q8)
+        self._framer = CapsuleFramer(CAPSULE_SIZE, self._angles, self._counts)
         self._last_angle = None
         self._damage = 0.0
         self._noise = _RangeNoise()
-        self._counts = dict.fromkeys(StreamCounts.__dataclass_fields__, 0)
 
     @property
     def counts(self) -> StreamCounts:
@@ -183,132 +155,35 @@ class DenseCapsuleDecoder:
         :param data: the next received bytes, any length
         :return: the samples decoded, in stream order
         """
-        buffer = self._buffer + bytes(data)
-        raw = np.frombuffer(buffer, np.uint8)
-        headers = ((raw[:-1] >> 4) == 0xA) & ((raw[1:] >> 4) == 0x5)
-        regions = []
-        pos = 0
-        while True:
-            if not self._synced:
-                found = np.flatnonzero(headers[pos:])
-                if not found.size:
-                    keep = max(len(buffer) - 1, pos)      # a header may begin in the last byte
-                    self._counts['discarded_bytes'] += keep - pos
-                    pos = keep
-                    break
-                pos = self._regain_sync(pos, pos + int(found[0]))
-            step = self._next_header(raw, headers, pos)
-            if step is None:
-                break
-            count, end = step
-            if count == 0:
-                # No header where the next capsules should begin: this one leads nowhere.
-                self._synced = False
-                self._gap_from = self._offset + pos
-                self._counts['resyncs'] += 1
-                self._counts['discarded_bytes'] += 1
-                pos += 1
-                continue
-            regions.append((pos, count, end, self._slot))
-            self._slot += count
-            pos = end
-        frames = self._frame(raw, regions)
-        self._buffer = buffer[pos:]
-        self._offset += pos
+        raw, regions, offset = self._framer.split(data)
+        frames = self._frame(raw, regions, offset)
         if not frames:
             return Samples.concat([])
-        after = regions[-1][2]
+        after = regions[-1].end
         self._judge_angles(frames, int(raw[after + 2]) | int(raw[after + 3]) << 8)
-        # A capsule whose start angle is out of sequence is not placed at the predicted one when
-        # that may be wrong too: in a region that lost a run of bytes it may be framed where
-        # none began (a short one's bytes read as its successor's), and an intact one says the
-        # prediction lost count of capsules.
-        placed = np.array([f.start_q8 is not None and f.sweep_q8 is not None
-                           and not ((f.cut or f.clean) and f.replaced) for f in frames])
+        placed = np.array([placeable(f.placement, f.clean, f.cut) for f in frames])
         self._counts['lost_frames'] += int(np.count_nonzero(~placed))
         distances = self._check_distances(frames, placed)
         return self._samples([f for f, ok in zip(frames, placed) if ok], distances[placed])
 
-    def _regain_sync(self, pos: int, header: int) -> int:
-        """Skip to a header found byte by byte; count the capsules the gap held as lost."""
-        self._counts['discarded_bytes'] += header - pos
-        self._synced = True
-        if self._gap_from is not None:
-            lost = max(round((self._offset + header - self._gap_from) / CAPSULE_SIZE), 1)
-            self._slot += lost
-            self._counts['frames'] += lost
-            self._counts['lost_frames'] += lost
-            self._gap_from = None
-        return header
-
-    def _next_header(self, raw: np.ndarray, headers: np.ndarray, pos: int):
-        """
-        Find where the capsules after the one at ``pos`` end.
-
-        :return: ``(n, end)``: n capsules end at the header at ``end``; ``(0, None)`` when no
-            header lies where one should; None until enough bytes have arrived
-        """
-        size = raw.size
-        for count in range(1, _MAX_EXACT_REGION + 1):
-            expected, reach = pos + count * CAPSULE_SIZE, count * _MAX_SHIFT
-            exact = expected + 4 <= size and headers[expected]
-            if count == 1 and expected + 4 <= size and not (
-                    exact and self._follows(raw, pos, expected)):
-                # A header in sequence (a sweep on) wins over one merely 84 bytes on, which may
-                # lie in the distances of a successor that arrived early.
-                for early in np.flatnonzero(headers[pos + 1:expected]) + pos + 1:
-                    if self._follows(raw, pos, early):
-                        return 1, int(early)
-            if exact:
-                return count, expected
-            if count > _MAX_REGION:
-                # Beyond a few capsules only an exact 84-byte spacing is evidence enough.
-                if expected + 4 > size:
-                    return None
-                continue
-            if expected + reach + 4 > size:
-                return None
-            near = np.flatnonzero(headers[expected - reach:expected + reach + 1])
-            if near.size:
-                near += expected - reach
-                return count, int(near[np.argmin(np.abs(near - expected))])
-        return 0, None
-
-    def _follows(self, raw: np.ndarray, pos: int, at: int) -> bool:
-        """
-        Tell whether the header at ``at`` starts the capsule after the one at ``pos``.
-
-        Any run of lost bytes shortens a capsule, up to all but its first byte: a header
-        anywhere within it starts the next capsule when its start angle lies one sweep on (a
-        false header in the distances has a random one).
-
-        :param raw: the received bytes
-        :param pos: a capsule header
-        :param at: a later header
-        :return: True when its start angle follows at the tracked sweep
-        """
-        this = _start_q8(int(raw[pos + 2]) | int(raw[pos + 3]) << 8)
-        following = _start_q8(int(raw[at + 2]) | int(raw[at + 3]) << 8)
-        if this is None or following is None:
-            return False
-        sweep_q8 = self._angles.sweep_deg() * 256.0
-        return abs(_wrap_q8(following - this - round(sweep_q8))) <= sweep_q8 / _CLEAN_ANGLE_SHARE
-
-    def _frame(self, raw: np.ndarray, regions: list) -> list:
+    def _frame(self, raw: np.ndarray, regions: list, offset: int) -> list:
         """
         Cut regions into capsules, realigning those that lost bytes.
 
-        Bytes are lost, never gained: a region longer than its capsules (its closing header
-        found late, or false) was framed wrongly, and its samples are unreadable.
+        An overlong region (framed on a false header) has unreadable samples.
+
+        :param raw: the bytes held by the framer
+        :param regions: the complete regions in them
+        :param offset: the stream offset of ``raw[0]``
+        :return: the capsules, a list of ``_Frame``
         """
-        shifts = [count * CAPSULE_SIZE - (end - pos) for pos, count, end, _ in regions]
-        aligned = self._aligned(raw, [region for region, shift in zip(regions, shifts)
-                                      if not shift])
+        aligned = self._aligned(raw, [region for region in regions if not region.lost], offset)
         noise_mm = min(_SIGMAS * math.sqrt(2.0) * self._noise.sigma_mm, _JUMP_MM / 2.0)
-        realigned = _realign(raw, [r for r, shift in zip(regions, shifts) if shift > 0],
-                             [shift for shift in shifts if shift > 0], self._max_mm, noise_mm)
+        short = [region for region in regions if region.lost > 0]
+        realigned = _realign(raw, short, [region.lost for region in short], self._max_mm,
+                             noise_mm)
         frames = []
-        for (pos, count, end, slot), shift in zip(regions, shifts):
+        for pos, count, end, slot, shift, cut in regions:
             if shift == 0:
                 frames += [next(aligned) for _ in range(count)]
                 continue
@@ -317,7 +192,7 @@ class DenseCapsuleDecoder:
                 frames += [_Frame(slot + j, int(raw[at[j]]) | int(raw[at[j] + 1]) << 8,
                                   np.zeros(SAMPLES_PER_CAPSULE, np.int64),
                                   np.zeros(SAMPLES_PER_CAPSULE, bool), False, False,
-                                  self._offset + min(end, pos + CAPSULE_SIZE * (j + 1)), True)
+                                  offset + min(end, pos + CAPSULE_SIZE * (j + 1)), True)
                            for j in range(count)]
                 continue
             distances, kept, path = next(realigned)
@@ -330,16 +205,17 @@ class DenseCapsuleDecoder:
                 frames.append(_Frame(slot + j, int(raw[at]) | int(raw[at + 1]) << 8,
                                      distances[first:first + SAMPLES_PER_CAPSULE],
                                      kept[first:first + SAMPLES_PER_CAPSULE], False, True,
-                                     self._offset + frame_end, shift > count * _MAX_SHIFT))
+                                     offset + frame_end, cut))
         self._counts['frames'] += len(frames)
         self._counts['damaged_frames'] += sum(not f.clean for f in frames)
         self._counts['realigned_frames'] += sum(f.realigned for f in frames)
         return frames
 
-    def _aligned(self, raw: np.ndarray, regions: list):
+    @staticmethod
+    def _aligned(raw: np.ndarray, regions: list, offset: int):
         """Return an iterator over the capsules of regions exactly 84 bytes per capsule long."""
-        starts = [pos + CAPSULE_SIZE * j for pos, count, _, _ in regions for j in range(count)]
-        slots = [slot + j for _, count, _, slot in regions for j in range(count)]
+        starts = [r.pos + CAPSULE_SIZE * j for r in regions for j in range(r.count)]
+        slots = [r.slot + j for r in regions for j in range(r.count)]
         capsules = raw[np.array(starts, np.int64)[:, None] + np.arange(CAPSULE_SIZE)]
         received = (capsules[:, 0] & 0x0F) | (capsules[:, 1] << 4)
         clean = (((capsules[:, 0] >> 4) == 0xA) & ((capsules[:, 1] >> 4) == 0x5)
@@ -348,7 +224,7 @@ class DenseCapsuleDecoder:
         values = fields[:, 0::2] | (fields[:, 1::2] << 8)
         readable = np.ones(SAMPLES_PER_CAPSULE, bool)
         return iter([_Frame(slot, int(row[0]), row[1:], readable, ok, False,
-                            self._offset + start + CAPSULE_SIZE)
+                            offset + start + CAPSULE_SIZE)
                      for slot, row, ok, start in zip(slots, values, clean, starts)])
 
     def _judge_angles(self, frames: list, next_field: int):
@@ -372,11 +248,10 @@ class DenseCapsuleDecoder:
                 frame.slot += placement.slip
                 self._counts['frames'] += max(placement.slip, 0)
                 self._counts['lost_frames'] += max(placement.slip, 0)
-            frame.start_q8, frame.sweep_q8 = placement.start_q8, placement.sweep_q8
-            frame.replaced = placement.replaced
-            self._counts['replaced_angles'] += frame.replaced
-            frame.suspect |= frame.replaced or damaged_line
-        self._slot += slip
+            frame.placement = placement
+            self._counts['replaced_angles'] += placement.replaced
+            frame.suspect |= placement.replaced or damaged_line
+        self._framer.slip(slip)
 
     def _check_distances(self, frames: list, placed: np.ndarray) -> np.ndarray:
         """
@@ -401,8 +276,8 @@ class DenseCapsuleDecoder:
         count = len(frames)
         if not count:
             return Samples.concat([])
-        starts = np.array([f.start_q8 for f in frames], np.float64)
-        sweeps = np.array([f.sweep_q8 for f in frames], np.float64)
+        starts = np.array([f.placement.start_q8 for f in frames], np.float64)
+        sweeps = np.array([f.placement.sweep_q8 for f in frames], np.float64)
         angle = np.mod((starts[:, None] + sweeps[:, None] * _FRACTIONS).reshape(-1) / 256.0,
                        360.0)
         distance = distances.reshape(-1)
@@ -453,164 +328,6 @@ class _RangeNoise:
         self.sigma_mm = max(_SIGMA_FLOOR_MM, _MAD_TO_SIGMA * float(np.median(window)))
 
 
-@dataclass(frozen=True)
-class Placement:
-    """
-    A capsule's place in angle, as :class:`_AngleTrack` decides it.
-
-    :ivar start_q8: start angle, 1/256 degree; None when the capsule cannot be placed
-    :ivar sweep_q8: angle its 40 samples span, 1/256 degree; None when it cannot be placed
-    :ivar replaced: the start angle is the predicted one, not the received one
-    :ivar slip: capsules the stream lost unseen before this one (negative: counted too many)
-    """
-
-    start_q8: Optional[int]
-    sweep_q8: Optional[float]
-    replaced: bool
-    slip: int
-
-
-class _AngleTrack:
-    """
-    The start angles of the capsules in sequence: which to believe and what to predict.
-
-    :param max_sweep_q8: the largest plausible sweep of one capsule, 1/256 degree (the SDK's)
-    """
-
-    def __init__(self, max_sweep_q8: int):
-        self._max_sweep_q8 = max_sweep_q8
-        self._reference = None      # (slot, start) of the last believed start angle
-        self._sweep = None          # one capsule's sweep, smoothed, 1/256 degree
-        self._previous = None       # (slot, observed start) of the capsule before
-        self._misses = 0            # start angles in a row not believed
-
-    def sweep_deg(self) -> float:
-        """Return one capsule's sweep, degrees (the S1's at 10 Hz until measured)."""
-        return (self._sweep or _NOMINAL_SWEEP_Q8) / 256.0
-
-    def place(self, slot: int, field: int, clean: bool, next_slot: int, next_field: int,
-              next_clean: bool) -> tuple:
-        """
-        Decide a capsule's start angle and sweep from its field and its successor's.
-
-        :param slot: the capsule's index in the stream
-        :param field: its start angle field (bit 15: S)
-        :param clean: its checksum passed on a line not otherwise damaged
-        :param next_slot: the successor's index
-        :param next_field: the successor's start angle field
-        :param next_clean: the same of the successor (False when not known yet)
-        :return: the :class:`Placement`
-        """
-        if clean and field & 0x8000:
-            # The device (re)started its stream here, as the SDK takes the S flag.
-            self._reference = self._sweep = self._previous = None
-        observed, following = _start_q8(field), _start_q8(next_field)
-        tolerance = self._tolerance(clean)
-        consecutive = next_slot == slot + 1
-        ahead = None if observed is None or following is None or not consecutive else (
-            (following - observed) % FULL_TURN_Q8)
-        predicted, gap = self._predict(slot)
-        matches = (observed is not None and predicted is not None
-                   and abs(_wrap_q8(observed - predicted)) <= tolerance)
-        slip = 0 if matches or predicted is None or observed is None else self._slip(
-            observed - predicted, gap, self._starts_run(slot, observed, ahead, clean, tolerance),
-            tolerance)
-        if slip:
-            slot, predicted, matches = slot + slip, observed, True
-        # Against a recent believed angle only the prediction counts; a run of two angles could
-        # be two damaged ones that happen to agree.
-        run = (not matches and (predicted is None or gap > _FRESH_GAP)
-               and self._starts_run(slot, observed, ahead, clean, tolerance))
-        self._previous = (slot, observed)
-        if matches or run:
-            self._believe(slot, observed, ahead if run else None)
-            start, replaced = observed, False
-        elif predicted is not None:
-            start, replaced = predicted, True
-        else:
-            return Placement(None, None, False, 0)
-        if not matches and not run:
-            self._misses += 1
-            if self._misses >= _RESTART_AFTER:
-                # Too long without a believed angle: start over from runs of start angles.
-                self._reference = self._sweep = None
-        step = None if following is None or not consecutive else (
-            (following - start) % FULL_TURN_Q8)
-        if step is not None and (abs(step - self._sweep) <= self._tolerance(next_clean)
-                                 if self._sweep is not None else 0 < step <= self._max_sweep_q8):
-            return Placement(start, step, replaced, slip)
-        if next_clean and next_field & 0x8000:
-            return Placement(start, None, replaced, slip)   # before a restart: dropped (SDK)
-        # The next start angle is damaged or far: sweep as the capsules before.
-        return Placement(start, self._sweep, replaced, slip)
-
-    def _slip(self, beyond_q8: int, gap: int, runs_on: bool, tolerance: float) -> int:
-        """
-        Tell how many capsules the stream lost unseen, from a start angle ahead of prediction.
-
-        :param beyond_q8: the observed start angle minus the predicted one, 1/256 degree
-        :param gap: capsules since the last believed start angle
-        :param runs_on: the successor's start angle follows on at the sweep
-        :param tolerance: how far the angle may lie from a whole number of sweeps
-        :return: capsules lost (negative: counted too many), 0 when it does not look like that
-        """
-        if not runs_on:
-            return 0
-        beyond = _wrap_q8(beyond_q8)
-        lost = round(beyond / self._sweep)
-        if lost == 0 or gap + lost < 1 or abs(beyond - lost * self._sweep) > tolerance:
-            return 0
-        return lost
-
-    def _tolerance(self, clean: bool) -> float:
-        """Return how far a start angle may lie from its prediction, 1/256 degree."""
-        if not clean or self._sweep is None:
-            return _ANGLE_TOLERANCE_Q8
-        # A passing checksum makes a damaged angle unlikely: allow for the motor's speed.
-        return max(self._sweep / _CLEAN_ANGLE_SHARE, _ANGLE_TOLERANCE_Q8)
-
-    def _predict(self, slot: int) -> tuple:
-        """Return the predicted start angle (1/256 degree) and its distance in capsules."""
-        if self._reference is None or self._sweep is None:
-            return None, None
-        gap = slot - self._reference[0]
-        if not 0 < gap <= _PREDICTION_REACH:
-            return None, None
-        return round(self._reference[1] + gap * self._sweep) % FULL_TURN_Q8, gap
-
-    def _starts_run(self, slot: int, observed, ahead, clean: bool, tolerance: float) -> bool:
-        """Tell whether a start angle advances to its successor's like the capsules before."""
-        if ahead is None or not 0 < ahead <= self._max_sweep_q8:
-            return False
-        if self._sweep is not None:
-            return abs(ahead - self._sweep) <= tolerance
-        if self._previous is not None and self._previous[0] == slot - 1 and (
-                self._previous[1] is not None):
-            behind = (observed - self._previous[1]) % FULL_TURN_Q8
-            return abs(ahead - behind) <= _ANGLE_TOLERANCE_Q8 or clean
-        # At the start of a stream, nothing to compare with: the SDK's rule, for intact capsules.
-        return clean
-
-    def _believe(self, slot: int, start: int, run_sweep):
-        """Take a start angle as true: it becomes the reference and refines the sweep."""
-        self._misses = 0
-        if self._reference is not None and self._reference[0] == slot - 1:
-            measured = (start - self._reference[1]) % FULL_TURN_Q8
-            if self._sweep is None:
-                self._sweep = measured if 0 < measured <= self._max_sweep_q8 else None
-            elif abs(measured - self._sweep) <= self._sweep / _CLEAN_ANGLE_SHARE:
-                self._sweep += (measured - self._sweep) * _SWEEP_WEIGHT
-        elif self._sweep is None:
-            self._sweep = run_sweep
-        self._reference = (slot, start)
-
-
-def _start_q8(field: int):
-    """Return a start angle field's angle in 1/256 degree, None when beyond 360 degrees."""
-    angle_q6 = field & 0x7FFF
-    return angle_q6 << 2 if angle_q6 < FULL_TURN_Q6 else None
-
-
 def _realign(raw: np.ndarray, regions: list, shifts: list, max_mm: int, noise_mm: float):
     """
     Read the distances of regions that lost (shift > 0) or gained bytes (step 2).
@@ -619,7 +336,7 @@ def _realign(raw: np.ndarray, regions: list, shifts: list, max_mm: int, noise_mm
     (shorter regions padded at the end).
 
     :param raw: the received bytes
-    :param regions: ``(pos, count, end, slot)`` of each region
+    :param regions: the regions (:class:`~wctls_ros.rplidar.framing.Region`)
     :param shifts: bytes each region lost (negative: gained)
     :param max_mm: farthest valid distance, mm
     :param noise_mm: how far true neighbours may differ by noise alone, mm
@@ -627,20 +344,20 @@ def _realign(raw: np.ndarray, regions: list, shifts: list, max_mm: int, noise_mm
     """
     if not regions:
         return iter(())
-    count = max(region[1] for region in regions)
+    count = max(region.count for region in regions)
     offsets = (np.repeat(CAPSULE_SIZE * np.arange(count), SAMPLES_PER_CAPSULE)
                + np.tile(_DISTANCE_OFFSETS, count))
-    pos = np.array([region[0] for region in regions])
+    pos = np.array([region.pos for region in regions])
     shift = np.array(shifts)
     reach = np.arange(shift.max() + 1)
     index = pos[:, None, None] + offsets[None, None, :] - reach[None, :, None]
     # A distance is read between the region's first header and the next one.
-    end = np.array([region[2] for region in regions])
+    end = np.array([region.end for region in regions])
     inside = ((index >= pos[:, None, None] + _DISTANCE_OFFSETS[0])
               & (index + 2 <= end[:, None, None]))
     index = np.clip(index, 0, raw.size - 2)
     values = raw[index].astype(np.int64) | (raw[index + 1].astype(np.int64) << 8)
-    lengths = [SAMPLES_PER_CAPSULE * region[1] for region in regions]
+    lengths = [SAMPLES_PER_CAPSULE * region.count for region in regions]
     paths, kept = _monotone_paths(values, inside, shift, lengths, max_mm, noise_mm)
     samples = np.arange(values.shape[2])
     return iter([(values[r, path, samples][:length], keep[:length], path[:length])

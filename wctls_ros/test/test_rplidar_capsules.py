@@ -288,3 +288,18 @@ def test_a_capsule_cut_to_its_header_does_not_lend_its_successor_its_angle():
     kept = samples.distance_mm > 0
     np.testing.assert_array_equal(samples.distance_mm[kept],
                                   distances.ravel()[samples.slot[kept]])
+
+
+def test_a_capsule_cut_within_its_header_after_another_cut_short_is_not_misread():
+    data, starts, distances = smooth_capsules(6)
+    raw = np.frombuffer(data, np.uint8)
+    # Capsule 2 keeps its header and 8 samples, capsule 3 only its two sync bytes: the header
+    # after capsule 2's samples starts capsule 4, two sweeps on.
+    lost = np.r_[np.arange(2 * 84 + 20, 3 * 84), np.arange(3 * 84 + 2, 4 * 84)]
+    samples, counts = decode(np.delete(raw, lost).tobytes())
+    kept = samples.distance_mm > 0
+    np.testing.assert_array_equal(samples.distance_mm[kept], distances.ravel()[samples.slot[kept]])
+    np.testing.assert_allclose(samples.angle_deg, ((starts[:, None] + STEP_Q6 * np.arange(40)
+                                                    / 40) / 64.0 % 360.0).ravel()[samples.slot],
+                               atol=1e-9)
+    assert {0, 1, 4} <= set(np.unique(samples.slot[kept] // 40).tolist()) <= {0, 1, 2, 4}

@@ -150,7 +150,7 @@ class CapsuleFramer:
                 continue
             lost = count * self._size - (end - pos)
             regions.append(Region(pos, count, end, self._slot, lost,
-                                  lost > count * self._max_shift))
+                                  2 * lost > (count + 1) * self._max_shift))
             self._slot += count
             pos = end
         offset = self._offset
@@ -191,11 +191,15 @@ class CapsuleFramer:
             exact = expected + 4 <= size and headers[expected]
             if count == 1 and expected + 4 <= size and not (
                     exact and self._follows(raw, pos, expected)):
-                # A header in sequence (a sweep on) wins over one merely a capsule on, which may
-                # lie in the distances of a successor that arrived early.
-                for early in np.flatnonzero(headers[pos + 1:expected]) + pos + 1:
-                    if self._follows(raw, pos, early):
-                        return 1, int(early)
+                # A header in sequence wins over one merely a capsule on, which may lie in the
+                # distances of a successor that arrived early. Two sweeps on, after a run of
+                # lost bytes, the successor was cut short within its own header.
+                early = np.flatnonzero(headers[pos + 1:expected]) + pos + 1
+                for sweeps, before in ((1, expected), (2, expected - reach)):
+                    following = [at for at in early
+                                 if at < before and self._follows(raw, pos, at, sweeps)]
+                    if following:
+                        return sweeps, int(following[0])
             if exact:
                 return count, expected
             if count > _MAX_REGION:
@@ -211,9 +215,9 @@ class CapsuleFramer:
                 return count, int(near[np.argmin(np.abs(near - expected))])
         return 0, None
 
-    def _follows(self, raw: np.ndarray, pos: int, at: int) -> bool:
+    def _follows(self, raw: np.ndarray, pos: int, at: int, sweeps: int = 1) -> bool:
         """
-        Tell whether the header at ``at`` starts the capsule after the one at ``pos``.
+        Tell whether the header at ``at`` starts the capsule ``sweeps`` after the one at ``pos``.
 
         Any run of lost bytes shortens a capsule, up to all but its first byte: a header
         anywhere within it starts the next capsule when its start angle lies one sweep on (a
@@ -222,6 +226,7 @@ class CapsuleFramer:
         :param raw: the received bytes
         :param pos: a capsule header
         :param at: a later header
+        :param sweeps: capsules on
         :return: True when its start angle follows at the tracked sweep
         """
         this = start_q8(int(raw[pos + 2]) | int(raw[pos + 3]) << 8)
@@ -229,7 +234,8 @@ class CapsuleFramer:
         if this is None or following is None:
             return False
         sweep_q8 = self._angles.sweep_deg() * 256.0
-        return abs(wrap_q8(following - this - round(sweep_q8))) <= sweep_q8 / _CLEAN_ANGLE_SHARE
+        return (abs(wrap_q8(following - this - round(sweeps * sweep_q8)))
+                <= sweep_q8 / _CLEAN_ANGLE_SHARE)
 
 
 def placeable(placement: 'Placement', clean: bool, region_cut: bool) -> bool:

@@ -198,6 +198,9 @@ def port_in_use():
     (lambda tmp, port: ['--tcp-port', '70000'], '--tcp-port'),
     (lambda tmp, port: ['--firmware', 'one'], '--firmware'),
     (lambda tmp, port: ['--corrupt-rate', '1.5'], '--corrupt-rate'),
+    (lambda tmp, port: ['--cut-rate', '-0.1'], '--cut-rate'),
+    (lambda tmp, port: ['--conf-answer', 'speed=3'], 'ENTRY one of mode_count'),
+    (lambda tmp, port: ['--conf-answer', 'us_per_sample=1e12'], 'does not fit'),
     (lambda tmp, port: ['--health', 'bad'], '--health'),
 ])
 def test_a_user_error_is_one_line_and_status_2_without_a_traceback(

@@ -202,7 +202,7 @@ DAMAGED_LINKS = [('--corrupt-rate', '0.05', 0.8, 0.8, 0.8, 2.5e-3, 10.0),
                  ('--drop-rate', '0.01', 0.95, 0.95, 0.95, 5e-4, 10.0),
                  ('--drop-rate', '0.05', 0.8, 0.8, 0.8, 2.5e-3, 10.0),
                  ('--cut-rate', '0.05', 0.9, 0.9, 0.9, 1e-3, 2.0),
-                 ('--cut-rate', '0.2', 0.8, 0.8, 0.8, 5e-3, 10.0)]
+                 ('--cut-rate', '0.2', 0.8, 0.75, 0.8, 5e-3, 10.0)]
 
 
 @pytest.mark.parametrize('fault, rate, turn_share, beam_share, kept_share, wrong_share, '

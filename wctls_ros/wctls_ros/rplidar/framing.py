@@ -74,7 +74,8 @@ class Region(NamedTuple):
     :ivar end: index of the header after it
     :ivar slot: stream index of its first capsule
     :ivar lost: bytes it lost: its capsules' bytes minus its length (negative: too long)
-    :ivar cut: it lost more bytes than scattered losses take: a run of them
+    :ivar cut: it lost more bytes than scattered losses take (12 per 84-byte capsule, 6 per
+        further one: they average out over capsules): a run of them
     """
 
     pos: int

@@ -8,11 +8,12 @@ Benchmark rplidar_node against the S1 emulator (its own process) on a pseudo-ter
 First, for DenseBoost and Standard on a clean link: the CPU time the node's reader thread
 (reading, decoding, turn assembly and publishing) and the whole node process spend per second of
 stream, and the delay from a turn's last byte to its LaserScan being published (median, p99).
-Then DenseBoost with 0, 1 and 5 % of the streamed bytes corrupted, or dropped, against the
-emulator's noiseless scene: the turns published (of those the emulator streamed), the share of
-streamed turns published with >= 80 % of their 1080 beams correct (within 1 cm of the range
-band the beam's bin covers), the correct and the filled beams per published turn, the beams
-wrong by more than 10 cm, and the CPU.
+Then DenseBoost with 0, 1 and 5 % of the streamed bytes corrupted, or dropped, and with 5 and
+20 % of the capsules cut short at a random byte (runs of lost bytes), against the emulator's
+noiseless scene: the turns published (of those the emulator streamed), the share of streamed
+turns published with >= 80 % of their 1080 beams correct (within 1 cm of the range band the
+beam's bin covers), the correct and the filled beams per published turn, the beams kept (correct
+beams of all the turns streamed), the published beams wrong by more than 10 cm, and the CPU.
 Usage: python bench_rplidar.py [seconds per run] (default 10).
 """
 
@@ -38,7 +39,8 @@ from rplidar_testing import (compensated_beam_bands, EMULATOR_TURN_S,  # noqa: E
 WARM_UP_S = 1.5
 FAULTS = (('clean', ()), ('1% corrupted', ('--corrupt-rate', '0.01')),
           ('5% corrupted', ('--corrupt-rate', '0.05')), ('1% dropped', ('--drop-rate', '0.01')),
-          ('5% dropped', ('--drop-rate', '0.05')))
+          ('5% dropped', ('--drop-rate', '0.05')), ('5% cut short', ('--cut-rate', '0.05')),
+          ('20% cut short', ('--cut-rate', '0.2')))
 GOOD_TOLERANCE_M = 0.01
 WRONG_M = 0.1
 GOOD_TURN_SHARE = 0.8
@@ -95,7 +97,9 @@ def beam_figures(scans, wall_s, bands):
             'good_turns': np.count_nonzero(good_share >= GOOD_TURN_SHARE) / streamed,
             'good': good_share.mean() if len(ranges) else 0.0,
             'filled': filled.mean() if len(ranges) else 0.0,
-            'wrong': int(wrong.sum()), 'turns': len(ranges), 'streamed': streamed}
+            'kept': good.sum() / (1080 * streamed),
+            'wrong': int(wrong.sum()), 'filled_beams': int(filled.sum()), 'turns': len(ranges),
+            'streamed': streamed}
 
 
 def main():
@@ -119,17 +123,19 @@ def main():
         print(f'\nDenseBoost on a damaged link (noiseless scene; {GOOD_TOLERANCE_M * 100:g} cm '
               'of the range band = correct)')
         print(f'{"link":>13} {"published":>10} {">=80% ok":>9} {"correct":>8} {"filled":>7} '
-              f'{">10cm wrong":>12} {"reader CPU":>11} {"process CPU":>12}')
+              f'{"kept":>6} {">10cm wrong":>22} {"reader CPU":>11} {"process CPU":>12}')
         for name, options in FAULTS:
             with start_emulator(directory, *options):
                 r = measure(link, seconds, 'DenseBoost')
             b = beam_figures(r['scans'], r['wall_s'], bands)
+            wrong = f'{b["wrong"]} of {b["filled_beams"]}'
             print(f'{name:>13} {100 * b["published"]:>9.1f}% {100 * b["good_turns"]:>8.1f}% '
-                  f'{100 * b["good"]:>7.1f}% {100 * b["filled"]:>6.1f}% '
-                  f'{b["wrong"]:>5} of {1080 * b["turns"]:<6} {100 * r["reader_cpu"]:>9.2f}% '
-                  f'{100 * r["process_cpu"]:>11.2f}%')
+                  f'{100 * b["good"]:>7.1f}% {100 * b["filled"]:>6.1f}% {100 * b["kept"]:>5.1f}% '
+                  f'{wrong:>13} {100 * b["wrong"] / max(b["filled_beams"], 1):>6.3f}% '
+                  f'{100 * r["reader_cpu"]:>9.2f}% {100 * r["process_cpu"]:>11.2f}%')
         print('(published and >=80% ok: shares of the turns streamed; correct and filled: '
-              'shares of the beams of the published turns)')
+              'shares of the beams of the published turns; kept: correct beams of all the turns '
+              'streamed; wrong: of the published (finite) beams)')
 
 
 if __name__ == '__main__':

@@ -145,7 +145,7 @@ def first_sample_times(clock_reply, stamps, first_angles_deg):
     return np.array(times)
 
 
-def denseboost_stream(plan='environment_a', seconds=3.0, noisy=False, seed=0):
+def denseboost_stream(plan='environment_a', seconds=3.0, noisy=False, seed=0, faults=None):
     """
     Return the bytes an emulated S1 streams in DenseBoost, without waiting for them.
 
@@ -153,11 +153,12 @@ def denseboost_stream(plan='environment_a', seconds=3.0, noisy=False, seed=0):
     :param seconds: stream length, s
     :param noisy: the S1's datasheet noise, else exact ranges
     :param seed: random seed
+    :param faults: the emulator's fault injection (default: none)
     :return: the capsules' bytes (after the scan descriptor)
     """
     rng = np.random.default_rng(seed)
     scene = SimulatedScene(load_floor_plan(plan), None, NoiseModel() if noisy else NOISELESS, rng)
-    device = S1Device(scene, Faults(), (1, 28), rng)
+    device = S1Device(scene, faults or Faults(), (1, 28), rng)
     device.receive(encode_express_scan(1), 0.0)
     # The device keeps at most 0.5 s of frames due: ask in steps.
     return b''.join(device.stream(t) for t in np.arange(0.1, seconds + 0.05, 0.1))

@@ -3,14 +3,16 @@
 
 """The dense capsule stream: the SDK's output on intact streams, far more of a damaged one."""
 
+import math
 import struct
 
 import numpy as np
 import pytest
-from rplidar_testing import denseboost_stream
+from rplidar_testing import denseboost_stream, true_ranges
 from test_rplidar_protocol import damaged, feed_in_chunks
 from wctls_ros.rplidar.capsules import DenseCapsuleDecoder
-from wctls_ros.rplidar.protocol import encode_dense_capsules, Samples
+from wctls_ros.rplidar.emulator.device import Faults
+from wctls_ros.rplidar.protocol import CAPSULE_SIZE, encode_dense_capsules, Samples
 
 STEP_Q6 = 995                    # the emulator's capsule sweep at 10 Hz, 1/64 degree
 
@@ -219,3 +221,85 @@ def test_pure_garbage_yields_nothing_and_is_counted():
     # Random sync nibbles an 84-byte step apart frame some garbage, which no start angle places.
     assert counts.samples == 0 and counts.lost_frames == counts.frames
     assert counts.discarded_bytes + 84 * counts.frames > 19000
+
+
+def test_the_emulator_cuts_capsules_short_keeping_their_first_bytes():
+    intact = np.frombuffer(denseboost_stream(seconds=1.0, seed=4), np.uint8)
+    cut = np.frombuffer(denseboost_stream(seconds=1.0, seed=4, faults=Faults(cut_rate=0.5)),
+                        np.uint8)
+    capsules = intact.reshape(-1, CAPSULE_SIZE)
+    # Walk the cut stream capsule by capsule: each is a prefix (0 to 83 bytes) of the intact
+    # one or the whole of it.
+    pos, kept = 0, []
+    for capsule in capsules:
+        rest = cut[pos:pos + CAPSULE_SIZE]
+        length = next((n for n in range(CAPSULE_SIZE + 1)
+                       if n == CAPSULE_SIZE or n == len(rest) or rest[n] != capsule[n]),
+                      CAPSULE_SIZE)
+        if length < CAPSULE_SIZE and length < len(rest):
+            # Cut short: the next capsule's sync follows.
+            assert rest[length] >> 4 == 0xA
+        kept.append(length)
+        pos += length
+    assert pos == cut.size
+    kept = np.array(kept)
+    assert 0.4 < np.mean(kept < CAPSULE_SIZE) < 0.6
+    assert kept.min() == 0 and kept[kept < CAPSULE_SIZE].max() >= 80
+
+
+@pytest.mark.parametrize('cut_rate, kept_share, wrong_share', [(0.05, 0.9, 1e-3),
+                                                               (0.2, 0.8, 5e-3)])
+def test_capsules_cut_short_give_no_wrong_sample(cut_rate, kept_share, wrong_share):
+    # Runs of lost bytes: a share of the capsules ends at a random byte and the next one
+    # follows at once. A sample published is the scene's range at its angle, or absent.
+    for seed in (0, 1):
+        data = denseboost_stream(seconds=4.0, seed=seed, faults=Faults(cut_rate=cut_rate))
+        samples, counts = decode(data, np.random.default_rng(seed))
+        streamed = round(4.0 / (40 * 108e-6)) * 40
+        truth_mm = 1000.0 * true_ranges(math.pi - np.radians(samples.angle_deg))
+        filled = samples.distance_mm > 0
+        wrong = filled & (np.abs(samples.distance_mm - truth_mm) > 100.0)
+        assert filled.sum() >= kept_share * streamed, f'{filled.sum()} of {streamed} kept'
+        assert wrong.sum() <= wrong_share * filled.sum(), (
+            f'{wrong.sum()} of {filled.sum()} samples more than 10 cm off')
+        assert counts.realigned_frames > 0 and counts.rejected_samples > 0
+
+
+def test_a_capsule_cut_short_keeps_its_first_samples_and_loses_the_rest():
+    data, starts, distances = smooth_capsules(4)
+    raw = np.frombuffer(data, np.uint8)
+    # Capsule 1 keeps its header and 25 samples; the 30 bytes after are lost.
+    samples, counts = decode(np.delete(raw, np.arange(84 + 4 + 50, 84 + 84)).tobytes())
+    expected = distances[:3].ravel().astype(float)
+    expected[65:80] = 0
+    np.testing.assert_array_equal(samples.distance_mm, expected)
+    np.testing.assert_allclose(samples.angle_deg, ((starts[:3, None] + STEP_Q6 * np.arange(40)
+                                                    / 40) / 64.0 % 360.0).ravel(), atol=1e-9)
+    assert counts.realigned_frames == 1 and counts.lost_frames == 0
+
+
+def test_a_capsule_cut_to_its_header_does_not_lend_its_successor_its_angle():
+    data, starts, distances = smooth_capsules(5)
+    raw = np.frombuffer(data, np.uint8)
+    # Capsule 2 keeps only its sync bytes: what follows is capsule 3 from its header on.
+    samples, counts = decode(np.delete(raw, np.arange(2 * 84 + 2, 3 * 84)).tobytes())
+    by_capsule = samples.slot // 40
+    assert 2 not in by_capsule[samples.distance_mm > 0].tolist()
+    kept = samples.distance_mm > 0
+    np.testing.assert_array_equal(samples.distance_mm[kept],
+                                  distances.ravel()[samples.slot[kept]])
+
+
+def test_a_capsule_cut_within_its_header_after_another_cut_short_is_not_misread():
+    data, starts, distances = smooth_capsules(6)
+    raw = np.frombuffer(data, np.uint8)
+    # Capsule 2 keeps its header and 8 samples, capsule 3 only its two sync bytes: the header
+    # after capsule 2's samples starts capsule 4, two sweeps on.
+    lost = np.r_[np.arange(2 * 84 + 20, 3 * 84), np.arange(3 * 84 + 2, 4 * 84)]
+    samples, counts = decode(np.delete(raw, lost).tobytes())
+    kept = samples.distance_mm > 0
+    np.testing.assert_array_equal(samples.distance_mm[kept], distances.ravel()[samples.slot[kept]])
+    np.testing.assert_allclose(samples.angle_deg, ((starts[:, None] + STEP_Q6 * np.arange(40)
+                                                    / 40) / 64.0 % 360.0).ravel()[samples.slot],
+                               atol=1e-9)
+    assert {0, 1, 4} <= set(np.unique(samples.slot[kept] // 40).tolist()) <= {0, 1, 2, 4}

@@ -171,7 +171,7 @@ def test_help_shows_every_default():
     options = result.stdout.split('options:')[1].split('Lines on standard input')[0]
     # One entry per option: its flags, then its help, possibly wrapped over several lines.
     entries = [' '.join(entry.split()) for entry in re.split(r'\n  (?=-)', options) if entry]
-    assert len(entries) == 18
+    assert len(entries) == 20
     for entry in entries[1:]:                                     # all but -h/--help
         assert '(default:' in entry, entry
     assert '(default: environment_a)' in result.stdout and '(default: 1.28;' in result.stdout
@@ -198,6 +198,9 @@ def port_in_use():
     (lambda tmp, port: ['--tcp-port', '70000'], '--tcp-port'),
     (lambda tmp, port: ['--firmware', 'one'], '--firmware'),
     (lambda tmp, port: ['--corrupt-rate', '1.5'], '--corrupt-rate'),
+    (lambda tmp, port: ['--cut-rate', '-0.1'], '--cut-rate'),
+    (lambda tmp, port: ['--conf-answer', 'speed=3'], 'ENTRY one of mode_count'),
+    (lambda tmp, port: ['--conf-answer', 'us_per_sample=1e12'], 'does not fit'),
     (lambda tmp, port: ['--health', 'bad'], '--health'),
 ])
 def test_a_user_error_is_one_line_and_status_2_without_a_traceback(

@@ -194,11 +194,22 @@ def test_old_firmware_falls_back_to_the_standard_mode_from_get_samplerate(
     np.testing.assert_allclose(scan.ranges, true_ranges(bearings(scan)), atol=1e-3)
 
 
-@pytest.mark.parametrize('fault, rate, turn_share, beam_share, wrong_share', [
-    ('--corrupt-rate', '0.05', 0.8, 0.8, 2.5e-3), ('--corrupt-rate', '0.01', 0.95, 0.95, 5e-4),
-    ('--drop-rate', '0.01', 0.95, 0.95, 5e-4), ('--drop-rate', '0.05', 0.8, 0.8, 2.5e-3)])
+# Fault, rate; the shares of the turns streamed with enough (beam share) beams right, of the
+# beams streamed right and of the published beams more than 10 cm off; the least damaged or
+# lost frames reported. Cut: runs of lost bytes, capsules cut short at a random byte.
+DAMAGED_LINKS = [('--corrupt-rate', '0.05', 0.8, 0.8, 0.8, 2.5e-3, 10.0),
+                 ('--corrupt-rate', '0.01', 0.95, 0.95, 0.95, 5e-4, 10.0),
+                 ('--drop-rate', '0.01', 0.95, 0.95, 0.95, 5e-4, 10.0),
+                 ('--drop-rate', '0.05', 0.8, 0.8, 0.8, 2.5e-3, 10.0),
+                 ('--cut-rate', '0.05', 0.9, 0.9, 0.9, 1e-3, 2.0),
+                 ('--cut-rate', '0.2', 0.8, 0.75, 0.8, 5e-3, 10.0)]
+
+
+@pytest.mark.parametrize('fault, rate, turn_share, beam_share, kept_share, wrong_share, '
+                         'damaged_pct', DAMAGED_LINKS)
 def test_a_damaged_link_still_publishes_turns_with_their_beams_right(
-        executor, ros_context, own_emulator, fault, rate, turn_share, beam_share, wrong_share):
+        executor, ros_context, own_emulator, fault, rate, turn_share, beam_share, kept_share,
+        wrong_share, damaged_pct):
     device = own_emulator(fault, rate)
     node, listener = start(executor, ros_context, serial_port=device.link)
     collect(executor, listener, 1)
@@ -217,6 +228,9 @@ def test_a_damaged_link_still_publishes_turns_with_their_beams_right(
     assert good_turns >= turn_share * streamed, (
         f'{good_turns:.1f} turns with {100 * beam_share:g} % of the beams right of '
         f'{streamed:.1f} streamed ({published} published)')
+    # Beams kept: right beams of all the turns streamed, also those not published.
+    kept = right.mean() * published / streamed
+    assert kept >= kept_share, f'{100 * kept:.1f} % of the beams streamed kept'
     # Damage the plausibility check cannot see (two neighbouring samples damaged alike) or a
     # misplaced sample where one lost both its bytes: a few in ten thousand at 5 %.
     assert wrong.sum() <= wrong_share * wrong.size, f'{wrong.sum()} beams more than 10 cm off'
@@ -226,7 +240,7 @@ def test_a_damaged_link_still_publishes_turns_with_their_beams_right(
     report = listener.diagnostics[-1]
     values = {value.key: value.value for value in report.values}
     assert report.level == DiagnosticStatus.WARN and 'damaged link' in report.message
-    assert float(values['frames damaged or lost (%)']) > 10.0
+    assert float(values['frames damaged or lost (%)']) > damaged_pct
     assert float(values['samples rejected (%)']) > 0.0
 
 
@@ -240,6 +254,54 @@ def test_a_stream_of_garbage_restarts_the_session_until_it_clears(executor, ros_
     device.command('corrupt 0')
     collect(executor, listener, 2, timeout_s=3.0)
     assert node.driver.status().reconnects >= 1
+
+
+@pytest.mark.parametrize('answer, beams, warnings, replaced', [
+    # Every distance beyond the range: scans without a return.
+    ('max_distance=0', (926, 927), 2, '0 m range'),
+    # The capsule decoder divided by zero in a loop of reconnects.
+    ('us_per_sample=16000000', (926, 927), 2, '1.6e+07 us/sample'),
+    # Modes the device does not describe: a loop of reconnects.
+    ('mode_count=60000', (411, 412), 1, '60000 scan modes')])
+def test_implausible_handshake_answers_are_replaced_and_scanning_goes_on(
+        executor, ros_context, own_emulator, answer, beams, warnings, replaced):
+    device = own_emulator('--conf-answer', answer)
+    node, listener = start(executor, ros_context, serial_port=device.link,
+                           angle_compensate=False)
+    scan = collect(executor, listener, 2)[-1]
+    assert len(scan.ranges) in beams and scan.range_max == 40.0
+    np.testing.assert_allclose(scan.ranges, true_ranges(bearings(scan)), atol=1e-3)
+    status = node.driver.status()
+    assert status.reconnects == 0 and len(status.handshake_warnings) == warnings
+    assert all(replaced in warning for warning in status.handshake_warnings)
+    assert spin_until(executor, lambda: any(
+        'implausible handshake answers' in d.message for d in listener.diagnostics), 2.0)
+    assert listener.diagnostics[-1].level == DiagnosticStatus.WARN
+
+
+def test_a_failing_handshake_reconnects_with_a_capped_exponential_back_off(
+        executor, ros_context, own_emulator):
+    # A scan mode entry answered without its value: every session fails in the handshake, at
+    # once (without a back-off the driver reconnected 38-42 times a second).
+    device = own_emulator('--conf-answer', 'us_per_sample=none')
+    node, listener = start(executor, ros_context, serial_port=device.link)
+    started = time.monotonic()
+    spin_until(executor, lambda: False, 3.5)
+    status = node.driver.status()
+    elapsed = time.monotonic() - started
+    # Waits of 0.05, 0.1, 0.2, 0.4, 0.8, 1.6 s after the failures: 5 or 6 of them in 3.5 s.
+    assert 4 <= status.reconnects <= 7, f'{status.reconnects} reconnects in {elapsed:.1f} s'
+    assert status.backoff_s in (1.6, 2.0) and 'GET_LIDAR_CONF' in status.message
+    report = listener.diagnostics[-1]
+    values = {value.key: value.value for value in report.values}
+    assert report.level == DiagnosticStatus.WARN
+    assert int(values['reconnects']) >= status.reconnects - 1
+    assert float(values['next reconnect after (s)']) >= 0.8
+    # Once the device answers, scanning resumes after the last wait and the back-off restarts.
+    device.command('conf us_per_sample=real')
+    collect(executor, listener, 1, timeout_s=4.0)
+    status = node.driver.status()
+    assert status.backoff_s == 0.05 and status.state == DriverState.SCANNING
 
 
 def test_unplug_and_replug_recover_within_two_seconds(executor, ros_context, own_emulator):

@@ -10,10 +10,12 @@ angle theta is the range along the laser-frame bearing pi - theta, so a driver p
 sllidar_ros2's angle = pi - theta sees the plan in REP-103 orientation.
 
 Faults for testing recovery: ``--corrupt-rate`` / ``--drop-rate`` (per streamed byte),
-``--silent-after``/``--silent-for``, ``--health warning|error``. Lines on standard input control it
-live: ``unplug``, ``replug``, ``silent SECONDS``, ``health ok|warning|error [RESETS]``,
-``corrupt RATE``, ``drop RATE``, ``clock`` (the true timing of the samples streamed), ``quit``;
-each is acknowledged on standard output.
+``--cut-rate`` (per streamed frame: a run of bytes lost from a random one to the frame's end),
+``--silent-after``/``--silent-for``, ``--health warning|error``, ``--conf-answer ENTRY=VALUE``
+(a scan mode entry reported wrongly). Lines on standard input control it live: ``unplug``,
+``replug``, ``silent SECONDS``, ``health ok|warning|error [RESETS]``, ``corrupt RATE``,
+``drop RATE``, ``cut RATE``, ``conf ENTRY=VALUE``, ``clock`` (the true timing of the samples
+streamed), ``quit``; each is acknowledged on standard output.
 
 Exit status: 0 after ``quit`` or SIGTERM, 2 on a user error (one line on standard error,
 ``s1_emulator: error: ...``), 130 on Ctrl-C.
@@ -34,7 +36,7 @@ import numpy as np
 import yaml
 
 from .cli import bounded, Parser, USER_ERROR, UserError
-from .rplidar.emulator.device import Faults
+from .rplidar.emulator.device import CONF_ENTRIES, Faults, parse_conf_answer
 from .rplidar.emulator.server import Emulator, PtyPort
 from .rplidar.protocol import HealthStatus
 from .simulation import (BUNDLED_PLANS, FloorPlan, load_floor_plan, NOISELESS, NoiseModel,
@@ -88,6 +90,15 @@ def _firmware(text: str) -> tuple:
     return int(major), int(minor)
 
 
+def _conf_answer(text: str) -> str:
+    """Check a ``--conf-answer`` value."""
+    try:
+        parse_conf_answer(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+    return text
+
+
 def parser() -> argparse.ArgumentParser:
     """
     Return the command-line parser.
@@ -99,8 +110,9 @@ def parser() -> argparse.ArgumentParser:
         description='An RPLIDAR S1 speaking the real byte protocol on a pseudo-terminal (and '
                     'TCP), streaming a simulated floor plan in real time.',
         epilog='Lines on standard input control it while it runs: unplug, replug, silent SECONDS, '
-               'health ok|warning|error [RESETS], corrupt RATE, drop RATE, clock, quit. Exit '
-               'status: 0 after quit or SIGTERM, 2 on a user error, 130 on Ctrl-C.')
+               'health ok|warning|error [RESETS], corrupt RATE, drop RATE, cut RATE, conf '
+               'ENTRY=VALUE, clock, quit. Exit status: 0 after quit or SIGTERM, 2 on a user '
+               'error, 130 on Ctrl-C.')
     probability = bounded(float, 0.0, 1.0)
     p.add_argument('--link', help='symlink to point at the pseudo-terminal, e.g. /tmp/ttyS1 '
                                   '(default: none, only the pty path is printed)')
@@ -132,12 +144,22 @@ def parser() -> argparse.ArgumentParser:
                         '%(default)s)')
     p.add_argument('--drop-rate', type=probability, default=0.0,
                    help='probability that a streamed byte is dropped (default: %(default)s)')
+    p.add_argument('--cut-rate', type=probability, default=0.0,
+                   help='probability that a streamed frame (capsule or node) is cut short: a '
+                        'run of its bytes, from a random one to its end, is lost (default: '
+                        '%(default)s)')
     p.add_argument('--silent-after', type=bounded(float, 0.0),
                    help='go silent after this many seconds (default: never)')
     p.add_argument('--silent-for', type=bounded(float, 0.0), default=3.0,
                    help='silence duration, s (default: %(default)s)')
     p.add_argument('--health', choices=['ok', 'warning', 'error'], default='ok',
                    help='health status to report (default: %(default)s)')
+    p.add_argument('--conf-answer', type=_conf_answer, action='append', default=[],
+                   metavar='ENTRY=VALUE',
+                   help=f'report this GET_LIDAR_CONF value instead of the real one (for every '
+                        f'scan mode: a faulty device), repeatable; ENTRY one of '
+                        f'{", ".join(CONF_ENTRIES)}, VALUE a number (max_distance in m) or none '
+                        f'(the entry answered with no value) (default: the real ones)')
     p.add_argument('--health-error-resets', type=bounded(int, 0), default=1,
                    help='RESETs that clear a health error (default: %(default)s)')
     return p
@@ -181,8 +203,10 @@ def _serve(args):
     """Start the emulator, announce it on standard output and serve until ``quit``."""
     scene, plan_name = _scene(args)
     faults = Faults(corrupt_rate=args.corrupt_rate, drop_rate=args.drop_rate,
-                    health=HealthStatus[args.health.upper()],
+                    cut_rate=args.cut_rate, health=HealthStatus[args.health.upper()],
                     resets_to_clear=args.health_error_resets)
+    for answer in args.conf_answer:
+        faults.replace_conf_answer(answer)
     if args.silent_after is not None:
         faults.silent_from_s = time.monotonic() + args.silent_after
         faults.silent_until_s = faults.silent_from_s + args.silent_for

@@ -9,11 +9,17 @@ scan modes (GET_LIDAR_CONF; GET_SAMPLERATE on firmware older than 1.24), sets th
 starts the requested mode (the typical one by default: DenseBoost on the S1). It then decodes the
 stream and hands every complete turn to a callback, on this thread.
 
+The handshake's answers carry no checksum: a scan mode's sample time and range and the number
+of modes are checked for plausibility, and an implausible value is replaced (the S1's own; the
+Standard mode every RPLIDAR has for an implausible mode list) with a warning, so that a damaged
+answer neither stalls the driver nor empties its scans.
+
 Recovery, without ever ending the thread: a link that cannot be opened or breaks (unplugged
-device, closed socket) is reopened with exponential back-off; a silent device, unanswered
-requests or a stream with no valid frame restart the session; a health warning is logged; a
-health error gets a RESET, a ~2 s wait and a new session, and after ``health_reset_attempts``
-failed resets the driver gives up with a clear error until the motor is started again.
+device, closed socket), a silent device, unanswered or unusable requests and a stream with no
+valid frame restart the session after an exponential back-off (50 ms doubling to 2 s, back to
+50 ms once a turn is published), counted as reconnects; a health warning is logged; a health
+error gets a RESET, a ~2 s wait and a new session, and after ``health_reset_attempts`` failed
+resets the driver gives up with a clear error until the motor is started again.
 """
 
 from dataclasses import dataclass, replace
@@ -36,7 +42,7 @@ from .turns import TurnAssembler
 ANSWER_TIMEOUT_S = 1.0
 RESET_WAIT_S = 2.0             # an S1 is silent for about 2 s after RESET
 BACKOFF_FIRST_S = 0.05
-BACKOFF_MAX_S = 1.0
+BACKOFF_MAX_S = 2.0
 STREAM_READ_TIMEOUT_S = 0.1
 # Waking up and decoding cost more than the work per byte, so the stream is read and decoded at
 # most this often, except around the predicted end of each turn: from shortly before it every
@@ -47,6 +53,15 @@ STREAM_READ_PERIOD_S = 0.05
 TURN_END_MARGIN_S = 0.005
 LOG_THROTTLE_S = 5.0
 LEGACY_MAX_DISTANCE_M = 16.0       # what the SDK assumes for devices without GET_LIDAR_CONF
+# What a handshake answer may plausibly say: RPLIDARs sample at 2 to 32 kHz (500 to 31.25 us per
+# sample) and reach 12 to 40 m, within the 65.535 m of a 16-bit millimetre distance; a few
+# scan modes each. Far outside, the answer was damaged on the way.
+PLAUSIBLE_US_PER_SAMPLE = (10.0, 5000.0)
+PLAUSIBLE_MAX_DISTANCE_M = (1.0, 65.535)
+MAX_SCAN_MODES = 16
+# What replaces an implausible value: the S1's.
+S1_US_PER_SAMPLE = {AnswerType.MEASUREMENT: 244.0, AnswerType.DENSE_CAPSULE: 108.0}
+S1_MAX_DISTANCE_M = 40.0
 _CHUNK_LOG_SIZE = 256
 _DECODED_ANSWERS = (AnswerType.MEASUREMENT, AnswerType.DENSE_CAPSULE)
 
@@ -111,7 +126,10 @@ class DriverStatus:
         repairs, losses, rejected samples)
     :ivar flushed_bytes: stale bytes discarded before a session or while the motor is stopped
     :ivar reconnects: sessions that ended in an error
+    :ivar backoff_s: the wait before the next attempt after a failure, s (doubles with each
+        failure up to its cap, back to the first once a turn is published)
     :ivar resets: RESETs sent after health errors
+    :ivar handshake_warnings: the implausible handshake answers replaced in the last session
     """
 
     state: DriverState = DriverState.CONNECTING
@@ -125,7 +143,9 @@ class DriverStatus:
     stream: StreamCounts = StreamCounts()
     flushed_bytes: int = 0
     reconnects: int = 0
+    backoff_s: float = BACKOFF_FIRST_S
     resets: int = 0
+    handshake_warnings: tuple = ()
 
 
 class DeviceError(Exception):
@@ -134,6 +154,29 @@ class DeviceError(Exception):
 
 class GiveUp(Exception):
     """Retrying cannot help: an unsupported scan mode or a health error that RESET does not fix."""
+
+
+def plausible_mode(mode: ScanMode) -> tuple:
+    """
+    Replace a scan mode's implausible sample time or range with the S1's.
+
+    :param mode: the mode as the device described it
+    :return: ``(mode, warnings)``: the mode to use and a line per value replaced
+    """
+    warnings = []
+    us_per_sample, max_distance_m = mode.us_per_sample, mode.max_distance_m
+    low, high = PLAUSIBLE_US_PER_SAMPLE
+    if not low <= us_per_sample <= high:
+        us_per_sample = S1_US_PER_SAMPLE.get(mode.answer_type,
+                                             S1_US_PER_SAMPLE[AnswerType.MEASUREMENT])
+        warnings.append(f'mode {mode.name!r}: {mode.us_per_sample:g} us/sample (plausible: '
+                        f'{low:g}-{high:g}): using {us_per_sample:g}')
+    low, high = PLAUSIBLE_MAX_DISTANCE_M
+    if not low <= max_distance_m <= high:
+        max_distance_m = S1_MAX_DISTANCE_M
+        warnings.append(f'mode {mode.name!r}: {mode.max_distance_m:g} m range (plausible: '
+                        f'{low:g}-{high:g} m): using {max_distance_m:g} m')
+    return replace(mode, us_per_sample=us_per_sample, max_distance_m=max_distance_m), warnings
 
 
 def open_link(config: DriverConfig):
@@ -229,23 +272,23 @@ class RplidarDriver:
             self._status = replace(self._status, **changes)
 
     def _run(self):
-        backoff_s = BACKOFF_FIRST_S
         while not self._closing.is_set():
             try:
                 link = self._link_factory(self._config)
             except LinkError as error:
                 self._update(state=DriverState.CONNECTING, message=str(error))
                 self._log.warning(f'{error}; retrying', throttle_duration_sec=LOG_THROTTLE_S)
-                self._closing.wait(backoff_s)
-                backoff_s = min(2.0 * backoff_s, BACKOFF_MAX_S)
+                self._back_off()
                 continue
-            backoff_s = BACKOFF_FIRST_S
             self._update(link=link.name)
             with self._motor_lock:
                 requests = self._motor_requests
+            failed = True
             try:
                 self._serve(link)
+                failed = False
             except GiveUp as error:
+                failed = False
                 self._give_up(str(error), requests)
             except (LinkError, DeviceError, ProtocolError) as error:
                 self._update(state=DriverState.CONNECTING, message=str(error), add_reconnects=1)
@@ -255,9 +298,16 @@ class RplidarDriver:
                              message=f'unexpected {type(error).__name__}: {error}')
                 self._log.error(f'unexpected {type(error).__name__} in the RPLIDAR reader: '
                                 f'{error}; reconnecting', throttle_duration_sec=LOG_THROTTLE_S)
-                self._closing.wait(BACKOFF_MAX_S)
             finally:
                 link.close()
+            if failed:
+                self._back_off()
+
+    def _back_off(self):
+        """Wait before the next attempt after a failure; double the wait for the one after."""
+        backoff_s = self.status().backoff_s
+        self._closing.wait(backoff_s)
+        self._update(backoff_s=min(2.0 * backoff_s, BACKOFF_MAX_S))
 
     def _give_up(self, reason: str, requests_before: int):
         """
@@ -364,21 +414,46 @@ class RplidarDriver:
         return decode_conf_value(conf_type, payload)
 
     def _list_modes(self, link, device: DeviceInfo) -> tuple:
-        """Return the device's scan modes and the typical mode's id."""
-        if device.firmware < CONF_COMMANDS_FIRMWARE:
+        """
+        Return the device's scan modes and the typical mode's id, made plausible.
+
+        Implausible answers are replaced, with a warning, and listed in the status.
+        """
+        warnings = []
+        count = None
+        max_distance_m = LEGACY_MAX_DISTANCE_M
+        if device.firmware >= CONF_COMMANDS_FIRMWARE:
+            count = self._conf(link, ConfType.MODE_COUNT)
+            if not 1 <= count <= MAX_SCAN_MODES:
+                warnings.append(f'{count} scan modes (plausible: 1-{MAX_SCAN_MODES}): using the '
+                                f'Standard mode every RPLIDAR has, {S1_MAX_DISTANCE_M:g} m')
+                count, max_distance_m = None, S1_MAX_DISTANCE_M
+        if count is None:
             rate = SampleRate.decode(self._ask(link, Command.GET_SAMPLERATE,
                                                AnswerType.SAMPLE_RATE))
-            return [ScanMode(0, 'Standard', float(rate.standard_us), LEGACY_MAX_DISTANCE_M,
-                             AnswerType.MEASUREMENT)], 0
-        modes = [ScanMode(mode_id=i, name=self._conf(link, ConfType.MODE_NAME, i),
-                          us_per_sample=self._conf(link, ConfType.US_PER_SAMPLE, i),
-                          max_distance_m=self._conf(link, ConfType.MAX_DISTANCE, i),
-                          answer_type=self._conf(link, ConfType.ANSWER_TYPE, i))
-                 for i in range(self._conf(link, ConfType.MODE_COUNT))]
-        bad = [m.name for m in modes if not m.us_per_sample > 0.0]
-        if bad:
-            raise DeviceError(f'the device reports 0 us/sample for mode(s) {bad}')
-        return modes, self._conf(link, ConfType.TYPICAL_MODE)
+            modes = [ScanMode(0, 'Standard', float(rate.standard_us), max_distance_m,
+                              AnswerType.MEASUREMENT)]
+            typical = 0
+        else:
+            modes = [ScanMode(mode_id=i, name=self._conf(link, ConfType.MODE_NAME, i),
+                              us_per_sample=self._conf(link, ConfType.US_PER_SAMPLE, i),
+                              max_distance_m=self._conf(link, ConfType.MAX_DISTANCE, i),
+                              answer_type=self._conf(link, ConfType.ANSWER_TYPE, i))
+                     for i in range(count)]
+            typical = self._conf(link, ConfType.TYPICAL_MODE)
+            if typical >= count:
+                usable = [m for m in modes if m.answer_type in _DECODED_ANSWERS] or modes
+                warnings.append(f'typical mode {typical} of {count} modes: using '
+                                f'{usable[0].name!r} instead')
+                typical = usable[0].mode_id
+        checked = [plausible_mode(mode) for mode in modes]
+        warnings += [warning for _, mode_warnings in checked for warning in mode_warnings]
+        self._update(handshake_warnings=tuple(warnings))
+        if warnings:
+            self._log.warning('implausible answers from the device (they carry no checksum) '
+                              f'replaced: {"; ".join(warnings)}',
+                              throttle_duration_sec=LOG_THROTTLE_S)
+        return [mode for mode, _ in checked], typical
 
     def _select_mode(self, modes: list, typical: int) -> ScanMode:
         """Pick the configured mode (or the typical one); give up on an unusable choice."""
@@ -478,7 +553,7 @@ class RplidarDriver:
                                   'serial_baudrate (S1: 256000) or a damaged link?')
 
     def _hand_over(self, turn, mode: ScanMode):
-        """Give a turn to the callback; a failing callback is logged, never fatal."""
+        """Give a turn to the callback (a success: the back-off restarts); never fatal."""
         try:
             self._on_turn(turn, mode)
         except Exception as error:  # the callback must not end the reader
@@ -486,4 +561,4 @@ class RplidarDriver:
                             throttle_duration_sec=LOG_THROTTLE_S)
             self._update(add_dropped_turns=1)
             return
-        self._update(add_turns=1)
+        self._update(add_turns=1, backoff_s=BACKOFF_FIRST_S)

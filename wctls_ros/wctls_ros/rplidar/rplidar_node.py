@@ -147,6 +147,11 @@ class RplidarNode(Node):
             level = max(level, DiagnosticStatus.WARN)
             message = (f'{message}; the device reports a health warning (code '
                        f'0x{status.health.error_code:04X})')
+        if status.handshake_warnings:
+            # Scanning on values that replaced the device's own: never report it as OK.
+            level = max(level, DiagnosticStatus.WARN)
+            message = (f'{message}; implausible handshake answers replaced: '
+                       f'{"; ".join(status.handshake_warnings)}')
         damaged = _share(recent.damaged_frames + recent.lost_frames, recent.frames)
         rejected = _share(recent.rejected_samples, recent.samples)
         if recent.resyncs or max(damaged, rejected) >= DAMAGED_LINK_SHARE:
@@ -177,6 +182,8 @@ class RplidarNode(Node):
             'start angles replaced': str(status.stream.replaced_angles),
             'bytes discarded': str(status.stream.discarded_bytes + status.flushed_bytes),
             'reconnects': str(status.reconnects),
+            'next reconnect after (s)': f'{status.backoff_s:g}',
+            'handshake answers replaced': '; '.join(status.handshake_warnings) or 'none',
             'health resets': str(status.resets),
             'publish latency median (ms)': (f'{1e3 * statistics.median(latencies):.2f}'
                                             if latencies else 'n/a'),

@@ -11,12 +11,15 @@ and streams what a :class:`Scene` shows in real time: every frame is due when it
 arrive over a 256000-baud line after its samples were measured. Dense capsule distances are
 whole millimetres and standard node distances quarter millimetres.
 
-:class:`Faults` (shared with the server's control commands) corrupts or drops streamed bytes,
-silences the device and sets the health it reports.
+:class:`Faults` (shared with the server's control commands) corrupts or drops streamed bytes, cuts
+frames short (a run of bytes lost, as when a USB packet or a burst of the UART's input is lost),
+silences the device, sets the health it reports and replaces the values of GET_LIDAR_CONF
+entries it reports (:func:`parse_conf_answer`).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
+import struct
 from typing import Optional, Protocol
 
 import numpy as np
@@ -40,6 +43,36 @@ RESET_SILENCE_S = 1.5
 HEALTH_ERROR_CODE = 0x0001
 MAX_NODE_DISTANCE_Q2 = 0xFFFF
 _CATCH_UP_LIMIT_S = 0.5
+# The GET_LIDAR_CONF entries whose reported value a fault can replace, by name.
+CONF_ENTRIES = {'mode_count': ConfType.MODE_COUNT, 'typical_mode': ConfType.TYPICAL_MODE,
+                'us_per_sample': ConfType.US_PER_SAMPLE, 'max_distance': ConfType.MAX_DISTANCE,
+                'answer_type': ConfType.ANSWER_TYPE}
+
+
+def parse_conf_answer(text: str) -> tuple:
+    """
+    Parse a replaced GET_LIDAR_CONF answer, ``ENTRY=VALUE``.
+
+    :param text: e.g. ``max_distance=0`` (metres), ``us_per_sample=none`` (the entry answered
+        with its type echo alone, as an unknown one), ``mode_count=real`` (the device's own)
+    :return: ``(conf_type, value)``; value None for ``none``, the string ``'real'`` for ``real``
+    :raises ValueError: on an unknown entry or a value that does not fit the entry's field
+    """
+    name, equals, value = text.partition('=')
+    if not equals or name not in CONF_ENTRIES:
+        raise ValueError(f'expected ENTRY=VALUE with ENTRY one of {", ".join(CONF_ENTRIES)}, '
+                         f'got {text!r}')
+    conf_type = CONF_ENTRIES[name]
+    if value in ('none', 'real'):
+        return conf_type, None if value == 'none' else value
+    number = float(value)
+    if conf_type not in (ConfType.US_PER_SAMPLE, ConfType.MAX_DISTANCE):
+        number = int(number)
+    try:
+        encode_conf_value(conf_type, number)
+    except struct.error:
+        raise ValueError(f'{value} does not fit the {name} field') from None
+    return conf_type, number
 
 
 class Scene(Protocol):
@@ -61,18 +94,37 @@ class Faults:
 
     :ivar corrupt_rate: probability that a streamed byte is replaced by another value
     :ivar drop_rate: probability that a streamed byte is left out
+    :ivar cut_rate: probability that a streamed frame is cut short: its bytes from a random one
+        (uniform over the frame) to its end are lost
     :ivar silent_from_s: monotonic time from which the device neither answers nor streams
     :ivar silent_until_s: monotonic time at which it speaks again
     :ivar health: :class:`HealthStatus` reported by GET_HEALTH
     :ivar resets_to_clear: RESETs still needed before an error health clears
+    :ivar conf_answers: GET_LIDAR_CONF values reported instead of the device's own, by
+        :class:`ConfType` (for every mode); None: the type echo alone
     """
 
     corrupt_rate: float = 0.0
     drop_rate: float = 0.0
+    cut_rate: float = 0.0
     silent_from_s: float = 0.0
     silent_until_s: float = 0.0
     health: int = HealthStatus.OK
     resets_to_clear: int = 1
+    conf_answers: dict = field(default_factory=dict)
+
+    def replace_conf_answer(self, text: str):
+        """
+        Report a GET_LIDAR_CONF entry's value instead of the device's own (or the own again).
+
+        :param text: ``ENTRY=VALUE`` (see :func:`parse_conf_answer`)
+        :raises ValueError: on an unknown entry or a value that does not fit
+        """
+        conf_type, value = parse_conf_answer(text)
+        if value == 'real':
+            self.conf_answers.pop(conf_type, None)
+        else:
+            self.conf_answers[conf_type] = value
 
     def silent(self, now_s: float) -> bool:
         """
@@ -192,6 +244,7 @@ class S1Device:
         else:
             value = {ConfType.MODE_COUNT: len(MODES), ConfType.TYPICAL_MODE: TYPICAL_MODE,
                      ConfType.DESIRED_ROTATION: (DEFAULT_RPM, 0)}.get(conf_type)
+        value = self._faults.conf_answers.get(conf_type, value)
         return encode_answer(AnswerType.LIDAR_CONF, encode_conf_value(conf_type, value))
 
     def _start(self, mode: ScanMode, now_s: float) -> bytes:
@@ -286,10 +339,19 @@ class S1Device:
         return encode_standard_nodes(angle_q6, distance_q2, quality, angle_q6 < previous)
 
     def _inject_faults(self, data: bytes) -> bytes:
-        """Corrupt and drop streamed bytes at the configured rates."""
-        if not (self._faults.corrupt_rate or self._faults.drop_rate):
+        """Corrupt and drop streamed bytes and cut frames short at the configured rates."""
+        faults = self._faults
+        if not (faults.corrupt_rate or faults.drop_rate or faults.cut_rate):
             return data
         raw = np.frombuffer(data, np.uint8).copy()
-        corrupt = self._rng.random(raw.size) < self._faults.corrupt_rate
+        corrupt = self._rng.random(raw.size) < faults.corrupt_rate
         raw[corrupt] ^= self._rng.integers(1, 256, int(corrupt.sum()), dtype=np.uint8)
-        return raw[self._rng.random(raw.size) >= self._faults.drop_rate].tobytes()
+        kept = self._rng.random(raw.size) >= faults.drop_rate
+        if faults.cut_rate:
+            # A cut frame keeps 0 to size - 1 of its first bytes.
+            frames = raw.size // self._frame_size
+            cut = self._rng.random(frames) < faults.cut_rate
+            first_lost = np.where(cut, self._rng.integers(0, self._frame_size, frames),
+                                  self._frame_size)
+            kept &= (np.arange(self._frame_size) < first_lost[:, None]).reshape(-1)
+        return raw[kept].tobytes()

@@ -6,8 +6,9 @@ Emulated S1 devices served on a pseudo-terminal and TCP, with live control comma
 
 One device answers on the pseudo-terminal (reachable through a symlink, like a udev name) and
 one more per TCP client. Control lines (``unplug``, ``replug``, ``silent SECONDS``,
-``health ok|warning|error [RESETS]``, ``corrupt RATE``, ``drop RATE``, ``clock`` (the pty
-device's sample clock: when and at what angle each sample of its stream is measured),
+``health ok|warning|error [RESETS]``, ``corrupt RATE``, ``drop RATE``, ``cut RATE``,
+``conf ENTRY=VALUE`` (a GET_LIDAR_CONF value reported instead of the device's own), ``clock``
+(the pty device's sample clock: when and at what angle each sample of its stream is measured),
 ``quit``) are queued on :attr:`Emulator.commands` and each is acknowledged with one line on
 standard output.
 """
@@ -210,9 +211,12 @@ class Emulator:
             self._faults.health = HealthStatus[args[0].upper()]
             self._faults.resets_to_clear = int(args[1]) if len(args) > 1 else 1
             return f'health {args[0]}'
-        if verb in ('corrupt', 'drop'):
+        if verb in ('corrupt', 'drop', 'cut'):
             setattr(self._faults, f'{verb}_rate', float(args[0]))
             return f'{verb} rate {float(args[0]):g}'
+        if verb == 'conf':
+            self._faults.replace_conf_answer(args[0])
+            return f'conf {args[0]}'
         if verb == 'clock':
             clock = self._pty_device.clock()
             if clock is None:
@@ -221,7 +225,7 @@ class Emulator:
                     f'sample, first at {clock.first_angle_deg:.9f} deg, '
                     f'{clock.step_deg:.9f} deg per sample')
         raise ValueError('unknown command (unplug, replug, silent S, health STATUS [RESETS], '
-                         'corrupt RATE, drop RATE, clock, quit)')
+                         'corrupt RATE, drop RATE, cut RATE, conf ENTRY=VALUE, clock, quit)')
 
     def close(self):
         """Close everything (and remove the link)."""

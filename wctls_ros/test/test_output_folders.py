@@ -10,8 +10,10 @@ or deleted same-named files of the user or of another tool (a bag of the user's 
 """
 
 import pathlib
+import signal
 import subprocess
 import sys
+import time
 
 from conftest import REAL_DATA
 import pytest
@@ -134,3 +136,27 @@ def test_the_rule_itself(tmp_path):
     (empty / 'notes.md').write_text("the user's")
     with pytest.raises(UserError, match=r'did not write \(notes.md\)'):
         claim(empty, 'evaluate')
+
+
+@pytest.mark.parametrize('command', [SCORE, EVALUATE], ids=['score', 'evaluate'])
+@pytest.mark.parametrize('number', [signal.SIGHUP, signal.SIGTERM, signal.SIGINT])
+def test_a_stop_signal_while_the_output_is_staged_leaves_nothing(tmp_path, command, number):
+    # Before, SIGHUP (a closed terminal) or SIGTERM killed the tool with its staging folder
+    # left beside the output, and Ctrl-C printed a traceback.
+    out = tmp_path / 'out'
+    tool_process = subprocess.Popen([sys.executable, '-m', *map(str, command), '--out', str(out)],
+                                    stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not list(tmp_path.glob('.partial-*')) and time.monotonic() < deadline:
+        time.sleep(0.002)
+    tool_process.send_signal(signal.SIGSTOP)
+    assert list(tmp_path.glob('.partial-*')), 'the tool never staged its output'
+    tool_process.send_signal(number)
+    tool_process.send_signal(signal.SIGCONT)
+    _, stderr = tool_process.communicate(timeout=60)
+    prog = command[0].split('.')[-1].split('_')[0]
+    assert tool_process.returncode == 128 + number, stderr
+    # (A line before it may say the feature pipeline was compiled, on a busy machine.)
+    assert stderr.splitlines()[-1] == f'{prog}: stopped by {signal.Signals(number).name}'
+    assert 'Traceback' not in stderr
+    assert list(tmp_path.iterdir()) == []

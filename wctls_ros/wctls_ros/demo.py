@@ -46,6 +46,7 @@ from .output_folders import claim, mark, remove_entries
 from .params import feature_settings, load_parameters
 from .simulation import full_turn_bearings, load_floor_plan, S1_BEAMS_PER_TURN
 from .simulation.visibility import visible_corners
+from .stop_signals import raise_stopped, raising, SIGNALS, Stopped
 
 # The driver and feature_node run with their shipped files and nothing else (feature_node with
 # the default sensor preset, generic: docs/sensors.md); the emulator simulates the S1 as we
@@ -55,8 +56,6 @@ MATCH_RADIUS_M = 0.1
 STOP_TIMEOUT_S = 10.0
 # What the demo writes into its output folder.
 OUTPUTS = ('bag', 'logs', 'scan.png', 'summary.md', 'ttyS1')
-# The signals that stop the demo: Ctrl-C, SIGTERM and a closed terminal.
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 # Its ROS domain is drawn from these (ROS 2's usable ids on Linux), never the environment's.
 DOMAIN_IDS = range(1, 102)
 # Settings that could take the demo's traffic off this machine or into a live system:
@@ -69,18 +68,6 @@ FOREIGN_SETTINGS = ('ROS_STATIC_PEERS', 'ROS_DISCOVERY_SERVER', 'ROS_LOCALHOST_O
 _PR_SET_PDEATHSIG = 1
 # Loaded before any fork: a child must not load a library between fork and exec.
 _LIBC = ctypes.CDLL(None, use_errno=True)
-
-
-class Stopped(Exception):
-    """The demo was asked to stop by a signal."""
-
-    def __init__(self, signal_number: int):
-        super().__init__(signal.Signals(signal_number).name)
-        self.signal_number = signal_number
-
-
-def _raise_stopped(number, _frame):
-    raise Stopped(number)
 
 
 @dataclass
@@ -208,7 +195,7 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
         seen.stopped_by = seen.stopped_by or number
         stop.set()
 
-    previous_handlers = {number: signal.signal(number, on_signal) for number in STOP_SIGNALS}
+    previous_handlers = {number: signal.signal(number, on_signal) for number in SIGNALS}
     node = rclpy.create_node('demo_recorder', context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
@@ -393,15 +380,12 @@ def main(argv=None) -> int:
     :return: exit status
     """
     args = parser().parse_args(argv)
-    previous = {number: signal.signal(number, _raise_stopped) for number in STOP_SIGNALS}
     try:
-        return _run(args)
+        with raising():
+            return _run(args)
     except Stopped as stopped:
         print(f'demo: stopped by {stopped}', file=sys.stderr)
         return 128 + stopped.signal_number
-    finally:
-        for number, handler in previous.items():
-            signal.signal(number, handler)
 
 
 def _prepare(out: pathlib.Path) -> None:
@@ -465,13 +449,13 @@ def _run(args) -> int:
     finally:
         # Stopping takes up to STOP_TIMEOUT_S: a signal meanwhile must not cut it short; it is
         # honoured once every process has stopped.
-        for number in STOP_SIGNALS:
+        for number in SIGNALS:
             signal.signal(number, lambda number, _: late.append(number))
         if seen.stopped_by:
             print('demo: interrupted; stopping everything', file=sys.stderr)
         processes.stop_all()
-        for number in STOP_SIGNALS:
-            signal.signal(number, _raise_stopped)
+        for number in SIGNALS:
+            signal.signal(number, raise_stopped)
     if late and not seen.stopped_by:
         print('demo: interrupted; every process stopped', file=sys.stderr)
     if seen.stopped_by or late:

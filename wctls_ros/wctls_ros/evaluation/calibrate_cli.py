@@ -37,6 +37,7 @@ from .score_cli import node_config
 from ..cli import bounded, Parser, USER_ERROR, UserError, warm_up_core
 from ..core import FeatureConfig, METHODS
 from ..sensors import DEFAULT_SENSOR, sensor_presets
+from ..stop_signals import raising, Stopped
 
 # Beyond the shared convention (0, 2 a user error, :mod:`wctls_ros.cli`): a model refused.
 IMPLAUSIBLE_EXIT = 3
@@ -101,8 +102,12 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     from ..bags import BagError
     try:
-        warm_up_core('calibrate')
-        return run(args)
+        with raising():
+            warm_up_core('calibrate')
+            return run(args)
+    except Stopped as stopped:
+        print(f'calibrate: stopped by {stopped}', file=sys.stderr)
+        return 128 + stopped.signal_number
     except (BagError, OSError, ValueError) as error:
         message = str(error).splitlines()[0] if str(error) else type(error).__name__
         print(f'calibrate: error: {message}', file=sys.stderr)

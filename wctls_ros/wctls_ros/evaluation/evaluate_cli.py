@@ -26,6 +26,7 @@ from .scans import load_scans, MovingSensorError, require_still
 from ..cli import bounded, Parser, USER_ERROR, UserError, warm_up_core
 from ..core import METHODS
 from ..output_folders import claim, owned_folder
+from ..stop_signals import raising, Stopped
 
 
 def _methods(text: str) -> list:
@@ -105,8 +106,12 @@ def main(argv=None) -> int:
     from ..bags import BagError
     args = evaluate_parser().parse_args(argv)
     try:
-        warm_up_core('evaluate')
-        return _evaluate(args, args.methods, argv)
+        with raising():
+            warm_up_core('evaluate')
+            return _evaluate(args, args.methods, argv)
+    except Stopped as stopped:
+        print(f'evaluate: stopped by {stopped}', file=sys.stderr)
+        return 128 + stopped.signal_number
     except MovingSensorError as error:
         print(f'evaluate: error: refused: {error}', file=sys.stderr)
     except (BagError, UserError, ValueError) as error:

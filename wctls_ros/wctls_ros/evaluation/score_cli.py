@@ -32,6 +32,7 @@ from ..core import FeatureConfig, METHODS
 from ..output_folders import claim, owned_folder
 from ..params import feature_settings, load_parameters, SENSOR
 from ..sensors import DEFAULT_SENSOR, sensor_presets
+from ..stop_signals import raising, Stopped
 
 
 def parser() -> argparse.ArgumentParser:
@@ -229,8 +230,12 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     from ..bags import BagError
     try:
-        warm_up_core('score')
-        return run(args, argv)
+        with raising():
+            warm_up_core('score')
+            return run(args, argv)
+    except Stopped as stopped:
+        print(f'score: stopped by {stopped}', file=sys.stderr)
+        return 128 + stopped.signal_number
     except (BagError, OSError, ValueError) as error:
         message = str(error).splitlines()[0] if str(error) else type(error).__name__
         print(f'score: error: {message}', file=sys.stderr)

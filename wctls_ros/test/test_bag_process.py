@@ -369,8 +369,10 @@ def start_and_stop_in_the_middle(bag, output, known=()):
     return process, staging
 
 
-@pytest.mark.parametrize('number,status', [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
-def test_sigint_and_sigterm_stop_a_run_and_leave_nothing(number, status, tmp_path):
+@pytest.mark.parametrize('number,status', [(signal.SIGINT, 130), (signal.SIGTERM, 143),
+                                           (signal.SIGHUP, 129)])
+def test_sigint_sigterm_and_sighup_stop_a_run_and_leave_nothing(number, status, tmp_path):
+    # SIGHUP (a closed terminal) once killed the run and left its staging folder behind.
     out = tmp_path / 'out'
     out.mkdir()
     process, _ = start_and_stop_in_the_middle(real_bag('ros1/urg04lx_office.bag'),

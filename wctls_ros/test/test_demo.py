@@ -9,6 +9,7 @@ import signal
 import subprocess
 import time
 
+from conftest import spin_until
 import pytest
 from test_feature_node import installed_executable
 
@@ -70,6 +71,55 @@ def test_ctrl_c_stops_every_process_and_exits_130(tmp_path):
     while leftovers(out) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not leftovers(out)
+
+
+def alive(pid):
+    """Return whether a process runs (a zombie, ended but not reaped, does not)."""
+    try:
+        with open(f'/proc/{pid}/stat') as stat:
+            return stat.read().rsplit(')', 1)[1].split()[0] != 'Z'
+    except FileNotFoundError:
+        return False
+
+
+def test_the_demo_is_sealed_from_the_users_domain_and_its_processes_end_with_it(
+        tmp_path, ros_context, executor):
+    # Before, the demo published its emulated scans and corners into the environment's
+    # ROS_DOMAIN_ID (on a robot: into the live system), and SIGKILL (or a closed terminal) left
+    # its emulator, driver and feature_node running for ever.
+    import rclpy
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import LaserScan
+    from wctls_msgs.msg import CornerArray
+    heard = []
+    listener = rclpy.create_node('users_system', context=ros_context)
+    listener.create_subscription(LaserScan, 'scan', heard.append, qos_profile_sensor_data)
+    listener.create_subscription(CornerArray, 'corners', heard.append, 10)
+    executor.add_node(listener)
+    demo = subprocess.Popen([str(installed_executable('demo')), '--seconds', '60', '--out',
+                             str(tmp_path / 'demo')], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)     # the user's ROS_DOMAIN_ID
+    printed = []
+    try:
+        for line in demo.stdout:
+            printed.append(line)
+            if 'recording' in line:
+                break
+        assert f"ROS_DOMAIN_ID {os.environ['ROS_DOMAIN_ID']}," not in ''.join(printed)
+        spin_until(executor, lambda: heard, timeout_s=5.0)
+        assert not heard, 'the demo published into the domain of the environment'
+        children = [int(pid) for pid in subprocess.run(
+            ['pgrep', '-P', str(demo.pid)], capture_output=True, text=True).stdout.split()]
+        assert len(children) == 3, children         # emulator, rplidar_node, feature_node
+        demo.kill()
+        demo.wait(timeout=10)
+    finally:
+        if demo.poll() is None:
+            demo.kill()
+    deadline = time.monotonic() + 5.0
+    while any(alive(pid) for pid in children) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not [pid for pid in children if alive(pid)]
 
 
 def test_the_summary_explains_missing_corner_arrays_and_corners_beyond_those_in_view():

@@ -1,12 +1,13 @@
 # Copyright 2026 wctls_ros maintainers
 # SPDX-License-Identifier: Apache-2.0
 
-"""YAML files from users and bags: a few hundred bytes of aliases cannot stand for billions."""
+"""YAML files from users and bags: no aliases standing for billions, no nesting thousands deep."""
 
 import subprocess
 import sys
 import time
 
+from conftest import REAL_DATA
 import pytest
 from wctls_ros.evaluation.truth import load_truth, TruthError
 from wctls_ros.params import ConfigError, load_parameters
@@ -45,6 +46,39 @@ def test_aliases_are_refused_at_once_in_one_line_that_says_where(tmp_path, load,
         load(path)
     assert time.monotonic() - start < 1.0
     assert '\n' not in str(refused.value) and len(str(refused.value)) < 300
+
+
+@pytest.mark.parametrize('load, error, text', [
+    (load_floor_plan, ValueError, ROOM + 'name: DEEP\n'),
+    (load_parameters, ConfigError, 'feature_node:\n  ros__parameters:\n    method: DEEP\n'),
+    (load_truth, TruthError, 'corners: DEEP\n'),
+])
+@pytest.mark.parametrize('opening, closing', [('[', ']'), ('{a: ', '}')])
+def test_a_deep_nesting_is_refused_in_one_line_that_says_where(tmp_path, load, error, text,
+                                                               opening, closing):
+    # Before, 20 000 levels ended in a RecursionError whose traceback ran 3 000 lines.
+    path = tmp_path / 'deep.yaml'
+    path.write_text(text.replace('DEEP', opening * 20000 + '1' + closing * 20000))
+    with pytest.raises(error, match=r'nested more than 50 deep at line \d+, column \d+') as \
+            refused:
+        load(path)
+    assert '\n' not in str(refused.value) and len(str(refused.value)) < 300
+
+
+def test_a_deep_nesting_is_one_line_from_a_tool(tmp_path):
+    labels = tmp_path / 'labels.yaml'
+    labels.write_text('corners: ' + '[' * 20000 + ']' * 20000 + '\n')
+    done = subprocess.run([sys.executable, '-m', 'wctls_ros.evaluation.score_cli',
+                           str(REAL_DATA / 'sick_lms1xx_static'), '--labels', str(labels)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2, done.stderr[-500:]
+    assert done.stderr.startswith('score: error: ') and len(done.stderr.splitlines()) == 1
+    assert 'nested more than 50 deep' in done.stderr
+
+
+def test_nesting_up_to_the_limit_reads_as_safe_load_reads_it():
+    text = '[' * 50 + '1' + ']' * 50
+    assert load_without_aliases(text) == yaml.safe_load(text)
 
 
 def test_an_eight_level_plan_fails_in_bounded_memory():

@@ -8,19 +8,27 @@ Starts the S1 emulator on a pseudo-terminal (streaming a simulated floor plan), 
 reading it, and feature_node extracting corners, each as its own process like ``ros2 run``
 would; records ``scan``, ``corners``, ``lines`` and ``markers`` into an mcap bag; then prints a
 table (corners per scan, their sigmas, their error against the simulated truth, latency) and
-draws one scan. Every process it started is stopped at the end, also on Ctrl-C.
+draws one scan.
+
+Sealed: its processes talk on a ROS domain of their own, discovered on this machine only,
+whatever ROS_DOMAIN_ID and the DDS settings of the environment say, so that its emulated scans
+never reach a live system. Every process it started is stopped at the end, also on Ctrl-C,
+SIGTERM or a closed terminal (SIGHUP); should the demo itself be killed (SIGKILL), the kernel
+ends them (``PR_SET_PDEATHSIG``). It writes only into a folder of its own
+(:mod:`wctls_ros.output_folders`).
 
 Exit status: 0 done; 1 the live run failed (a process did not start or no features came; one
-line, the logs say why); 2 a user error (one line ``demo: error: ...``); 130 / 143 stopped by
-Ctrl-C / SIGTERM before the summary.
+line, the logs say why); 2 a user error (one line ``demo: error: ...``); 128 + N stopped by
+signal N (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP), with one line and no traceback.
 """
 
 import argparse
+import ctypes
 from dataclasses import dataclass, field
+import functools
 import os
 import pathlib
 import random
-import shutil
 import signal
 import subprocess
 import sys
@@ -32,11 +40,13 @@ from typing import Dict, List
 import numpy as np
 
 from .bags import BagWriter
-from .cli import bounded, Parser, USER_ERROR
+from .cli import bounded, Parser, USER_ERROR, UserError
 from .core import METHODS, nees
+from .output_folders import claim, mark, remove_entries
 from .params import feature_settings, load_parameters
 from .simulation import full_turn_bearings, load_floor_plan, S1_BEAMS_PER_TURN
 from .simulation.visibility import visible_corners
+from .stop_signals import raise_stopped, raising, SIGNALS, Stopped
 
 # The driver and feature_node run with their shipped files and nothing else (feature_node with
 # the default sensor preset, generic: docs/sensors.md); the emulator simulates the S1 as we
@@ -44,6 +54,20 @@ from .simulation.visibility import visible_corners
 # A found corner is the true one when it is this close, m.
 MATCH_RADIUS_M = 0.1
 STOP_TIMEOUT_S = 10.0
+# What the demo writes into its output folder.
+OUTPUTS = ('bag', 'logs', 'scan.png', 'summary.md', 'ttyS1')
+# Its ROS domain is drawn from these (ROS 2's usable ids on Linux), never the environment's.
+DOMAIN_IDS = range(1, 102)
+# Settings that could take the demo's traffic off this machine or into a live system:
+# static peers, a discovery server, a DDS profile of the user's, the deprecated switch that the
+# discovery range replaces.
+FOREIGN_SETTINGS = ('ROS_STATIC_PEERS', 'ROS_DISCOVERY_SERVER', 'ROS_LOCALHOST_ONLY',
+                    'FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE',
+                    'CYCLONEDDS_URI')
+# prctl option: the signal a process gets when its parent dies (linux/prctl.h).
+_PR_SET_PDEATHSIG = 1
+# Loaded before any fork: a child must not load a library between fork and exec.
+_LIBC = ctypes.CDLL(None, use_errno=True)
 
 
 @dataclass
@@ -66,8 +90,39 @@ def _config_file() -> pathlib.Path:
     return pathlib.Path(get_package_share_directory('wctls_ros')) / 'config'
 
 
+def _end_with_parent(parent_pid: int) -> None:
+    """
+    In a child, between fork and exec: be sent SIGTERM when the demo ends, however it ends.
+
+    :param parent_pid: the demo's process id
+    """
+    _LIBC.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+    if os.getppid() != parent_pid:      # the demo ended before the line above
+        os._exit(1)
+
+
+def private_network(environment: dict) -> int:
+    """
+    Seal a ROS environment: a domain of its own, discovery on this machine only.
+
+    :param environment: the environment to change (e.g. os.environ)
+    :return: the domain id chosen (never the one the environment had)
+    """
+    taken = environment.get('ROS_DOMAIN_ID', '').strip()
+    domain = random.choice([d for d in DOMAIN_IDS if str(d) != taken])
+    for name in FOREIGN_SETTINGS:
+        environment.pop(name, None)
+    environment['ROS_DOMAIN_ID'] = str(domain)
+    environment['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    return domain
+
+
 class Processes:
-    """Child processes, each in its own session so that one signal stops all of its threads."""
+    """
+    Child processes, each in its own session so that one signal stops all of its threads.
+
+    Each is sent SIGTERM by the kernel if the demo dies without stopping it.
+    """
 
     def __init__(self, log_dir: pathlib.Path):
         self.log_dir = log_dir
@@ -83,7 +138,8 @@ class Processes:
         """
         log = open(self.log_dir / f'{name}.log', 'w')
         process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
-                                   stdin=subprocess.DEVNULL, start_new_session=True)
+                                   stdin=subprocess.DEVNULL, start_new_session=True,
+                                   preexec_fn=functools.partial(_end_with_parent, os.getpid()))
         log.close()
         self.running.append((name, process))
         return process
@@ -118,7 +174,7 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
 
     :param bag_path: the bag folder to write
     :param seconds: how long to record once features flow, s
-    :return: what was seen, for the summary (``stopped_by`` set on SIGINT or SIGTERM)
+    :return: what was seen, for the summary (``stopped_by`` set on a stop signal)
     """
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -131,16 +187,15 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
     seen = Recording()
     context = rclpy.context.Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
-    # Ctrl-C or SIGTERM ends the recording between two spins. A KeyboardInterrupt raised at any
-    # moment could cut a bag write short, or surface from inside rclpy's take as a RuntimeError.
+    # A stop signal ends the recording between two spins. An exception raised at any moment
+    # could cut a bag write short, or surface from inside rclpy's take as a RuntimeError.
     stop = threading.Event()
 
     def on_signal(number, _):
-        seen.stopped_by = number
+        seen.stopped_by = seen.stopped_by or number
         stop.set()
 
-    previous_handlers = {number: signal.signal(number, on_signal)
-                         for number in (signal.SIGINT, signal.SIGTERM)}
+    previous_handlers = {number: signal.signal(number, on_signal) for number in SIGNALS}
     node = rclpy.create_node('demo_recorder', context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
@@ -173,12 +228,12 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
             while time.monotonic() < end and not stop.is_set():
                 executor.spin_once(timeout_sec=0.1)
     finally:
-        for number, handler in previous_handlers.items():
-            if handler is not None:                # None: not installed from Python
-                signal.signal(number, handler)
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
+        for number, handler in previous_handlers.items():
+            if handler is not None:                # None: not installed from Python
+                signal.signal(number, handler)
     return seen
 
 
@@ -326,26 +381,52 @@ def main(argv=None) -> int:
     """
     args = parser().parse_args(argv)
     try:
+        with raising():
+            return _run(args)
+    except Stopped as stopped:
+        print(f'demo: stopped by {stopped}', file=sys.stderr)
+        return 128 + stopped.signal_number
+
+
+def _prepare(out: pathlib.Path) -> None:
+    """
+    Make the output folder the demo's own: refuse anyone else's, clear an earlier demo's.
+
+    :param out: the output folder
+    :raises UserError: when the folder is not the demo's to write
+    :raises OSError: when it cannot be written
+    """
+    earlier = claim(out, 'demo')
+    remove_entries(out, earlier)
+    (out / 'logs').mkdir(parents=True)
+    mark(out, 'demo', OUTPUTS)
+
+
+def _run(args) -> int:
+    """Start, record, stop and summarise; the exit status."""
+    try:
         plan = load_floor_plan(args.floor_plan)
     except (OSError, ValueError) as error:
         print(f'demo: error: --floor-plan: {" ".join(str(error).split())}', file=sys.stderr)
         return USER_ERROR
     out = pathlib.Path(args.out)
-    for stale in ('bag', 'logs', 'scan.png', 'summary.md', 'ttyS1'):
-        target = out / stale
-        if target.is_dir() and not target.is_symlink():
-            shutil.rmtree(target)
-        elif target.exists() or target.is_symlink():
-            target.unlink()
-    (out / 'logs').mkdir(parents=True, exist_ok=True)
-    # A private DDS domain keeps the demo from meeting (or disturbing) anything else running.
-    os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 100)))
+    try:
+        _prepare(out)
+    except UserError as error:
+        print(f'demo: error: --out: {error}', file=sys.stderr)
+        return USER_ERROR
+    except OSError as error:
+        print(f'demo: error: --out: cannot write {out}: {error.strerror or error}',
+              file=sys.stderr)
+        return USER_ERROR
+    domain = private_network(os.environ)
     tty = out.resolve() / 'ttyS1'
     parameters = {'method': args.method}
     config = feature_settings(
         load_parameters(_config_file() / 'feature_node.yaml', overrides=parameters))[0]
     processes = Processes(out / 'logs')
     seen = Recording()
+    late = []               # stop signals received while stopping
     try:
         emulator = processes.start('s1_emulator', [
             _executable('s1_emulator'), '--link', str(tty), '--floor-plan', args.floor_plan])
@@ -358,20 +439,27 @@ def main(argv=None) -> int:
             str(_config_file() / 'feature_node.yaml')]
             + [arg for k, v in parameters.items() for arg in ('-p', f'{k}:={v}')])
         print(f'demo: S1 emulator on {tty} -> rplidar_node -> feature_node '
-              f'(ROS_DOMAIN_ID {os.environ["ROS_DOMAIN_ID"]}, logs in {out / "logs"})',
-              flush=True)
+              f'(ROS_DOMAIN_ID {domain}, logs in {out / "logs"})', flush=True)
         seen = record(out / 'bag', args.seconds)
-    except KeyboardInterrupt:
-        seen.stopped_by = signal.SIGINT
+    except Stopped as stopped:
+        seen.stopped_by = stopped.signal_number
     except RuntimeError as error:
         print(f'demo: {error}', file=sys.stderr)
         return 1
     finally:
+        # Stopping takes up to STOP_TIMEOUT_S: a signal meanwhile must not cut it short; it is
+        # honoured once every process has stopped.
+        for number in SIGNALS:
+            signal.signal(number, lambda number, _: late.append(number))
         if seen.stopped_by:
             print('demo: interrupted; stopping everything', file=sys.stderr)
         processes.stop_all()
-    if seen.stopped_by:
-        return 128 + seen.stopped_by
+        for number in SIGNALS:
+            signal.signal(number, raise_stopped)
+    if late and not seen.stopped_by:
+        print('demo: interrupted; every process stopped', file=sys.stderr)
+    if seen.stopped_by or late:
+        return 128 + (seen.stopped_by or late[0])
     if not seen.corners:
         print(f'demo: no corners recorded (see {out / "logs"})', file=sys.stderr)
         return 1

@@ -85,14 +85,14 @@ class Interrupted(Exception):
 
 class StopSignals:
     """
-    While active, SIGINT and SIGTERM only ask the run to stop, which it does between two scans.
+    While active, SIGINT, SIGTERM and SIGHUP only ask the run to stop, between two scans.
 
-    A signal never lands inside a write, the cleanup or the rename that completes the output:
-    the run ends either complete or with nothing left. Use as a context manager, and call
-    :meth:`check` where stopping is safe.
+    SIGHUP is what closing the terminal sends. A signal never lands inside a write, the cleanup
+    or the rename that completes the output: the run ends either complete or with nothing left.
+    Use as a context manager, and call :meth:`check` where stopping is safe.
     """
 
-    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+    SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
     def __init__(self):
         self.received = None
@@ -114,7 +114,7 @@ class StopSignals:
         """
         Raise :class:`Interrupted` when a signal has asked the run to stop.
 
-        :raises Interrupted: after SIGINT or SIGTERM
+        :raises Interrupted: after SIGINT, SIGTERM or SIGHUP
         """
         if self.received is not None:
             raise Interrupted(self.received)
@@ -501,9 +501,9 @@ def parser() -> argparse.ArgumentParser:
                     f'markers, plus {CSV_NAME} and {JSON_NAME} inside the bag folder.',
         epilog='Exit status: 0 done; 2 a user error (bad argument, path, bag, parameter file, '
                'unwritable output), with one line on stderr and nothing written; 130 stopped by '
-               'SIGINT (Ctrl-C), 143 by SIGTERM, with nothing written. With several bags, each '
-               'output is complete or absent: a bag that turns out damaged midway is reported '
-               'in one line and skipped, and the status is 2.')
+               'SIGINT (Ctrl-C), 143 by SIGTERM, 129 by SIGHUP (a closed terminal), with nothing '
+               'written. With several bags, each output is complete or absent: a bag that turns '
+               'out damaged midway is reported in one line and skipped, and the status is 2.')
     cli.add_argument('bags', nargs='+', metavar='bag',
                      help='ROS 2 bag folder (or its .mcap / .db3 file) or ROS 1 .bag; several '
                           'are processed one after the other')
@@ -635,7 +635,7 @@ def main(argv=None) -> int:
 
     :param argv: arguments (None: sys.argv[1:])
     :return: exit status: 0 done, 2 user error (one line per problem), 128 + the signal number
-        when stopped by SIGINT or SIGTERM (the output being written is not)
+        when stopped by SIGINT, SIGTERM or SIGHUP (the output being written is not)
     """
     started = time.perf_counter()
     with StopSignals() as stop:

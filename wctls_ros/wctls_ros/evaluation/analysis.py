@@ -27,6 +27,8 @@ _GATE_SIGMAS = 5.0
 # ... but never tighter or wider than these, m.
 _GATE_MIN_M = 0.02
 _GATE_MAX_M = 0.25
+# Relative width of the rim of a gate where _within_gates asks np.hypot.
+_RIM = 1e-12
 
 
 @dataclass(frozen=True)
@@ -141,12 +143,6 @@ def corners_per_scan(scans: StaticScans, config: FeatureConfig) -> List[ScanCorn
     return [corners for _, corners in features_per_scan(scans, config)]
 
 
-def _gate(covariance: np.ndarray) -> float:
-    """Return the association radius around a corner with this covariance, m."""
-    return float(np.clip(_GATE_SIGMAS * ellipse(covariance).semi_major, _GATE_MIN_M,
-                         _GATE_MAX_M))
-
-
 def associate(per_scan: List[ScanCorners], min_presence: float):
     """
     Find the corners present in most scans by clustering their positions across scans.
@@ -154,7 +150,11 @@ def associate(per_scan: List[ScanCorners], min_presence: float):
     Greedy: the corner with the most scans holding a corner within its gate (5 predicted sigmas,
     2-25 cm) seeds a cluster, which takes the nearest corner of each scan within the gate; its
     members are removed and the next seed is chosen, until no seed reaches ``min_presence``.
-    The clusters' mean positions are then refined once by reassigning every scan's corners.
+    Ties go to the corner found first (scan order, then the scan's order). The clusters' mean
+    positions are then refined once by reassigning every scan's corners.
+
+    Memory grows with the number of corners, not with its square: the corners are binned into
+    cells (:class:`_Cells`), and only neighbouring cells are compared.
 
     :param per_scan: one method's corners per scan
     :param min_presence: keep corners found in at least this fraction of the scans
@@ -165,20 +165,28 @@ def associate(per_scan: List[ScanCorners], min_presence: float):
     scan_of = np.concatenate([np.full(len(c), t) for t, c in enumerate(per_scan)]
                              ).astype(np.intp) if count else np.zeros(0, np.intp)
     cov = np.concatenate([c.covariance for c in per_scan]) if count else np.zeros((0, 2, 2))
-    gates = np.array([_gate(c) for c in cov])
+    gates = np.clip(_GATE_SIGMAS * ellipse(cov).semi_major, _GATE_MIN_M, _GATE_MAX_M)
+    cells = _Cells(xy)
     free = np.ones(len(xy), dtype=bool)
-    distance = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
+    support = np.zeros(len(xy), dtype=np.intp)
+    for cell in cells.occupied():
+        support[cell] = cells.support(cell, xy, gates, scan_of, free)
     centers, radii = [], []
     needed = max(1, int(math.ceil(min_presence * count)))
     while free.any():
-        within = (distance <= gates[:, None]) & free[None, :] & free[:, None]
-        support = np.array([len(np.unique(scan_of[row])) for row in within])
         seed = int(np.argmax(support))
         if support[seed] < needed:
             break
-        members = _nearest_per_scan(np.flatnonzero(within[seed]), distance[seed], scan_of)
-        free[members] = False
-        free[seed] = False
+        candidates = cells.around(xy[seed], free)
+        distance = np.hypot(xy[seed, 0] - xy[candidates, 0], xy[seed, 1] - xy[candidates, 1])
+        inside = distance <= gates[seed]
+        members = _nearest_per_scan(candidates[inside], distance[inside], scan_of)
+        taken = np.append(members, seed)
+        free[taken] = False
+        support[taken] = 0
+        for cell in cells.next_to(xy[taken]):
+            rows = cell[free[cell]]
+            support[rows] = cells.support(rows, xy, gates, scan_of, free)
         centers.append(xy[members].mean(axis=0))
         radii.append(gates[seed])
     centers = np.array(centers).reshape(-1, 2)
@@ -193,14 +201,151 @@ def associate(per_scan: List[ScanCorners], min_presence: float):
     return centers[order], radii[order]
 
 
+class _Cells:
+    """
+    Corner positions binned into square cells twice the widest gate across.
+
+    Two corners within a gate of each other lie in the same cell or in neighbouring ones, so the
+    distances :func:`associate` needs are those between neighbouring cells: for a static scene,
+    each true corner's positions against themselves, never every corner against every other.
+    Positions that are not finite are in no cell (they are within no gate).
+    """
+
+    SIZE_M = 2 * _GATE_MAX_M
+    # Distances computed at once at most: bounds the memory a crowded cell takes.
+    BLOCK = 1 << 21
+
+    def __init__(self, xy: np.ndarray):
+        """
+        Bin the positions.
+
+        :param xy: positions, shape (N, 2), m (rows that are not finite are left out)
+        """
+        finite = np.flatnonzero(np.isfinite(xy).all(axis=1))
+        keys = np.floor(xy[finite] / self.SIZE_M).astype(np.int64)
+        order = np.lexsort((finite, keys[:, 1], keys[:, 0]))
+        keys, members = keys[order], finite[order]
+        starts = np.flatnonzero(np.r_[True, (keys[1:] != keys[:-1]).any(axis=1)])[:len(keys)]
+        # cell (i, j) -> its positions' indices, ascending
+        self._members = {tuple(key): group for key, group in
+                         zip(keys[starts].tolist(), np.split(members, starts[1:]))}
+
+    def occupied(self):
+        """
+        Yield the indices of the positions of each cell that holds any.
+
+        :return: an iterator of index arrays, ascending
+        """
+        return iter(self._members.values())
+
+    def _neighbourhood(self, key) -> np.ndarray:
+        """Return the indices of the positions in a cell and its eight neighbours, ascending."""
+        i, j = key
+        groups = [self._members[(i + di, j + dj)] for di in (-1, 0, 1) for dj in (-1, 0, 1)
+                  if (i + di, j + dj) in self._members]
+        return np.sort(np.concatenate(groups))
+
+    def _key(self, xy: np.ndarray):
+        return tuple(np.floor(xy / self.SIZE_M).astype(np.int64).tolist())
+
+    def around(self, xy: np.ndarray, free: np.ndarray) -> np.ndarray:
+        """
+        Return the free positions that can be within a gate of a point, ascending.
+
+        :param xy: the point, shape (2,), m (finite)
+        :param free: which positions are still free, shape (N,)
+        :return: indices
+        """
+        candidates = self._neighbourhood(self._key(xy))
+        return candidates[free[candidates]]
+
+    def next_to(self, xy: np.ndarray):
+        """
+        Yield the cells (their positions' indices) next to any of some points, each once.
+
+        :param xy: the points, shape (n, 2), m (finite)
+        :return: an iterator of index arrays
+        """
+        keys = np.unique(np.floor(xy / self.SIZE_M).astype(np.int64), axis=0).tolist()
+        near = {(i + di, j + dj) for i, j in keys for di in (-1, 0, 1) for dj in (-1, 0, 1)}
+        return (self._members[key] for key in sorted(near) if key in self._members)
+
+    def support(self, rows: np.ndarray, xy: np.ndarray, gates: np.ndarray,
+                scan_of: np.ndarray, free: np.ndarray) -> np.ndarray:
+        """
+        Count, for positions of one cell, the scans with a free position within their gate.
+
+        :param rows: positions of one cell, indices
+        :param xy: all positions, shape (N, 2), m
+        :param gates: their gates, shape (N,), m
+        :param scan_of: their scans, shape (N,), non-decreasing
+        :param free: which are still free, shape (N,)
+        :return: the count of each row (0 for a row that is not free), shape (len(rows),)
+        """
+        counts = np.zeros(len(rows), dtype=np.intp)
+        if not len(rows):
+            return counts
+        candidates = self.around(xy[rows[0]], free)
+        if not len(candidates):
+            return counts
+        # The candidates ascend, so each scan's are consecutive. Those alone in their scan
+        # count one each; the scans with several (a few) need a reduction, which is slower:
+        # the lone ones go first, the others after them, still by scan.
+        scan_starts = np.flatnonzero(np.r_[True, np.diff(scan_of[candidates]) != 0])
+        sizes = np.diff(np.r_[scan_starts, len(candidates)])
+        alone = np.repeat(sizes == 1, sizes)
+        lone = np.count_nonzero(alone)
+        candidates = np.concatenate([candidates[alone], candidates[~alone]])
+        shared_starts = np.cumsum(np.r_[0, sizes[sizes > 1][:-1]])
+        step = max(1, self.BLOCK // len(candidates))
+        for first in range(0, len(rows), step):
+            block = rows[first:first + step]
+            within = _within_gates(xy[block, 0, None] - xy[candidates, 0],
+                                   xy[block, 1, None] - xy[candidates, 1], gates[block, None])
+            counts[first:first + step] = np.count_nonzero(within[:, :lone], axis=1)
+            if lone < len(candidates):
+                counts[first:first + step] += np.count_nonzero(np.logical_or.reduceat(
+                    within[:, lone:], shared_starts, axis=1), axis=1)
+        counts[~free[rows]] = 0
+        return counts
+
+
+def _within_gates(dx: np.ndarray, dy: np.ndarray, gates: np.ndarray) -> np.ndarray:
+    """
+    Return whether hypot(dx, dy) <= gates, elementwise, computing hypot only where it matters.
+
+    np.hypot takes ~60 ns an element; the squared distance against the squared gate, with a
+    margin of 1e-12 (rounding errs by 1e-16), decides all but the pairs at the very rim, and
+    hypot decides those: the same answer as hypot everywhere, NaN included.
+
+    :param dx: differences in x, m
+    :param dy: differences in y (the shape of dx), m
+    :param gates: the gates, broadcast against dx, m
+    :return: the comparison, the shape of dx
+    """
+    squared = dx * dx + dy * dy
+    limit = gates * gates
+    within = squared <= limit * (1.0 - _RIM)
+    rim = ~within & ~(squared > limit * (1.0 + _RIM))
+    if rim.any():
+        gate = np.broadcast_to(gates, dx.shape)[rim]
+        within[rim] = np.hypot(dx[rim], dy[rim]) <= gate
+    return within
+
+
 def _nearest_per_scan(candidates: np.ndarray, distance: np.ndarray, scan_of: np.ndarray):
-    """Keep the candidate nearest the seed in each scan."""
-    best = {}
-    for i in candidates:
-        t = scan_of[i]
-        if t not in best or distance[i] < distance[best[t]]:
-            best[t] = i
-    return np.array(sorted(best.values()), dtype=np.intp)
+    """
+    Keep the candidate nearest the seed in each scan (of equals, the first).
+
+    :param candidates: indices, ascending
+    :param distance: their distances to the seed, m
+    :param scan_of: every position's scan
+    :return: the kept indices, ascending
+    """
+    order = np.lexsort((candidates, distance, scan_of[candidates]))
+    scans = scan_of[candidates[order]]
+    first = np.r_[True, scans[1:] != scans[:-1]]
+    return np.sort(candidates[order][first])
 
 
 def assign(per_scan: List[ScanCorners], centers: np.ndarray, radii: np.ndarray) -> np.ndarray:

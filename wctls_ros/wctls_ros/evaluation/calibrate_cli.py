@@ -23,6 +23,7 @@ and no YAML (nor preset file) unless --accept-implausible.
 
 import argparse
 import math
+import os
 import pathlib
 import sys
 from typing import List, Optional, Sequence
@@ -36,9 +37,12 @@ from .score_cli import node_config
 from ..cli import bounded, Parser, start_core, USER_ERROR, UserError
 from ..core import FeatureConfig, METHODS
 from ..sensors import DEFAULT_SENSOR, sensor_presets
+from ..stop_signals import raising, Stopped
 
 # Beyond the shared convention (0, 2 a user error, :mod:`wctls_ros.cli`): a model refused.
 IMPLAUSIBLE_EXIT = 3
+# The first line of every preset file calibrate writes: --write-preset replaces only such a file.
+PRESET_MARK = '# written by calibrate of wctls_ros: a later calibrate --write-preset replaces it'
 
 
 def parser() -> argparse.ArgumentParser:
@@ -80,8 +84,8 @@ def parser() -> argparse.ArgumentParser:
                    'the other way round (default: off)')
     p.add_argument('--write-preset', default=None, metavar='FILE',
                    help='also write the fitted model as a sensor preset file (as '
-                   'config/sensors/NAME.yaml; feature_node reads it from there as sensor NAME) '
-                   '(default: none)')
+                   'config/sensors/NAME.yaml; feature_node reads it from there as sensor NAME): '
+                   'a new file, or one an earlier --write-preset wrote (default: none)')
     p.add_argument('--accept-implausible', action='store_true',
                    help='print the YAML of an implausible model anyway, with the reasons as '
                    'comments, and exit 0 (default: off: refuse it, exit 3)')
@@ -98,8 +102,12 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     from ..bags import BagError
     try:
-        start_core('calibrate')
-        return run(args)
+        with raising():
+            start_core('calibrate')
+            return run(args)
+    except Stopped as stopped:
+        print(f'calibrate: stopped by {stopped}', file=sys.stderr)
+        return 128 + stopped.signal_number
     except (BagError, OSError, ValueError) as error:
         message = str(error).splitlines()[0] if str(error) else type(error).__name__
         print(f'calibrate: error: {message}', file=sys.stderr)
@@ -114,6 +122,8 @@ def run(args) -> int:
         raise UserError('--holdout needs a bag to calibrate on')
     if args.bag is None and args.write_preset:
         raise UserError('--write-preset needs a bag to calibrate on')
+    if args.write_preset:                   # refused now rather than after the fit
+        _claim_preset(pathlib.Path(args.write_preset))
     config = node_config(args.params, args.sensor)
     if args.method is not None:
         config = config.replace(method=args.method)
@@ -147,13 +157,37 @@ def run(args) -> int:
         if args.write_preset:
             preset = pathlib.Path(args.write_preset)
             refused = [f.text for f in findings if f.implausible]
-            preset.write_text(preset_yaml(calibration, str(args.bag), count, refused))
+            _write_preset(preset, preset_yaml(calibration, str(args.bag), count, refused))
             print(f'calibrate: wrote the sensor preset {preset}', file=sys.stderr)
     if implausible and not args.accept_implausible:
         print('calibrate: refused: the model is implausible (reasons above); '
               '--accept-implausible prints it anyway', file=sys.stderr)
         return IMPLAUSIBLE_EXIT
     return 0
+
+
+def _claim_preset(path: pathlib.Path) -> None:
+    """Refuse a preset path that holds anything but a preset file calibrate wrote."""
+    if not path.exists() and not path.is_symlink():
+        return
+    try:
+        first = path.read_text().splitlines()[:1]
+    except (OSError, UnicodeDecodeError):
+        first = []
+    if first != [PRESET_MARK]:
+        raise UserError(f'--write-preset: {path} exists and is not a preset file calibrate '
+                        'wrote: refusing to overwrite it; remove it or choose another name')
+
+
+def _write_preset(path: pathlib.Path, text: str) -> None:
+    """Write a preset file whole or not at all (a temporary file beside it, then a rename)."""
+    _claim_preset(path)
+    partial = path.with_name(f'.partial-{path.name}')
+    try:
+        partial.write_text(f'{PRESET_MARK}\n{text}')
+        os.replace(partial, path)
+    finally:
+        partial.unlink(missing_ok=True)
 
 
 def _load(path, args) -> StaticScans:

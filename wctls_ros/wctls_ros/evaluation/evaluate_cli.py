@@ -23,8 +23,10 @@ from .analysis import evaluate_scans, PROPAGATIONS
 from .calibration import fit_noise
 from .samples import NoiseParameters
 from .scans import load_scans, MovingSensorError, require_still
-from ..cli import bounded, Parser, staged_folder, start_core, USER_ERROR, UserError
+from ..cli import bounded, Parser, start_core, USER_ERROR, UserError
 from ..core import METHODS
+from ..output_folders import claim, owned_folder
+from ..stop_signals import raising, Stopped
 
 
 def _methods(text: str) -> list:
@@ -52,7 +54,8 @@ def evaluate_parser() -> argparse.ArgumentParser:
     p.add_argument('--limit', type=bounded(int, 1), default=None,
                    help='use at most this many scans (default: all)')
     p.add_argument('--out', required=True,
-                   help='output folder (report.md, PNG, CSV); required, no default')
+                   help='output folder (report.md, PNG, CSV): a new or empty folder, or an '
+                   'earlier output of evaluate, which is replaced; required, no default')
     p.add_argument('--title', default=None, help='report title (default: the bag name)')
     p.add_argument('--methods', type=_methods, default='utls,wtls,wctls,ml',
                    help='comma-separated methods among ' + ', '.join(METHODS)
@@ -103,8 +106,12 @@ def main(argv=None) -> int:
     from ..bags import BagError
     args = evaluate_parser().parse_args(argv)
     try:
-        start_core('evaluate')
-        return _evaluate(args, args.methods, argv)
+        with raising():
+            start_core('evaluate')
+            return _evaluate(args, args.methods, argv)
+    except Stopped as stopped:
+        print(f'evaluate: stopped by {stopped}', file=sys.stderr)
+        return 128 + stopped.signal_number
     except MovingSensorError as error:
         print(f'evaluate: error: refused: {error}', file=sys.stderr)
     except (BagError, UserError, ValueError) as error:
@@ -114,6 +121,7 @@ def main(argv=None) -> int:
 
 def _evaluate(args, methods, argv) -> int:
     """Load, check, analyse and write the report of ``evaluate``."""
+    claim(args.out, 'evaluate')            # refused now rather than after the analysis
     scans = load_scans(args.bag, args.topic, args.limit)
     still = require_still(scans)
     noise, origin = _noise(args, scans)
@@ -124,7 +132,7 @@ def _evaluate(args, methods, argv) -> int:
     notes = [origin, f'stillness check: {still.steady_beams} steady beams, '
              f'{100 * still.drifted_fraction:.1f} % drifted (refused above 10 %)']
     try:
-        with staged_folder(args.out) as staging:
+        with owned_folder(args.out, 'evaluate') as staging:
             written = write_report(evaluation, staging, args.title or str(args.bag), command,
                                    notes)
     except OSError as error:                # a full disk, a file-size limit, no permission

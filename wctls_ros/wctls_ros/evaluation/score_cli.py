@@ -27,10 +27,12 @@ from typing import Dict, Optional
 from .scans import check_still, load_json_scans, load_scans, StaticScans
 from .score import markdown_table, RECURRING_PRESENCE, score_scans, write_score
 from .truth import load_truth, Truth, TRUTH_FILE
-from ..cli import Parser, staged_folder, start_core, USER_ERROR, UserError
+from ..cli import Parser, start_core, USER_ERROR, UserError
 from ..core import FeatureConfig, METHODS
+from ..output_folders import claim, owned_folder
 from ..params import feature_settings, load_parameters, SENSOR
 from ..sensors import DEFAULT_SENSOR, sensor_presets
+from ..stop_signals import raising, Stopped
 
 
 def parser() -> argparse.ArgumentParser:
@@ -78,7 +80,8 @@ def parser() -> argparse.ArgumentParser:
                    help='a corner recurs when found in at least this share of the scans '
                    '(default: %(default)s)')
     p.add_argument('--out', default=None, help='folder for table.md, table.csv, corners.csv, '
-                   'score.png (default: print only)')
+                   'score.png: a new or empty folder, or an earlier output of score, which is '
+                   'replaced (default: print only)')
     p.add_argument('--title', default=None, help='report title (default: the bag name)')
     return p
 
@@ -157,6 +160,8 @@ def run(args, argv) -> int:
         raise UserError(f'unknown methods {unknown}; choose among {", ".join(METHODS)}')
     if not 0.0 < args.min_presence <= 1.0:
         raise UserError(f'--min-presence must be in (0, 1], got {args.min_presence}')
+    if args.out is not None:        # refused now rather than after the scoring
+        claim(args.out, 'score')
     settings = configs(args, methods)
     truth = _truth(args)
     first, last = _scan_range(args.scans, truth)
@@ -205,7 +210,7 @@ def run(args, argv) -> int:
         command = 'score ' + ' '.join(shlex.quote(a) for a in
                                       (sys.argv[1:] if argv is None else argv))
         try:
-            with staged_folder(args.out) as staging:
+            with owned_folder(args.out, 'score') as staging:
                 written = write_score(table, staging, args.title or pathlib.Path(args.bag).name,
                                       command, notes)
         except OSError as error:            # a full disk, a file-size limit, no permission
@@ -225,8 +230,12 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     from ..bags import BagError
     try:
-        start_core('score')
-        return run(args, argv)
+        with raising():
+            start_core('score')
+            return run(args, argv)
+    except Stopped as stopped:
+        print(f'score: stopped by {stopped}', file=sys.stderr)
+        return 128 + stopped.signal_number
     except (BagError, OSError, ValueError) as error:
         message = str(error).splitlines()[0] if str(error) else type(error).__name__
         print(f'score: error: {message}', file=sys.stderr)

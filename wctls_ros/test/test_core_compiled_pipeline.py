@@ -68,6 +68,8 @@ def simulated_scans():
             yield f'{plan}-{beams}-{k}', ranges, angle_min, increment
     yield 'peeling-wall', *peeling_wall(4000)
     yield 'one-ray', np.full(360, 2.0), 0.3, 0.0 + 1e-12
+    # lambda / step beyond the largest int64: a negative array size in the compiled breakpoints.
+    yield 'one-ray-1e-20', np.full(360, 2.0), 0.3, 1e-20
     yield 'one-spot', np.concatenate([np.full(50, 1.0), np.full(310, np.nan)]), -math.pi, \
         2.0 * math.pi / 360
 

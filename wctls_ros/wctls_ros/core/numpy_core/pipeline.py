@@ -157,7 +157,7 @@ def _split(contour: _Contour, config: FeatureConfig):
 
     :return: (the segments, positions in the contour; whether the work bound stopped splitting)
     """
-    threshold = config.iepf_threshold_m
+    threshold: np.ndarray = np.full(len(contour), config.iepf_threshold_m)
     if config.iepf_noise_sigmas > 0.0:
         noise = np.sqrt(config.range_sigma_m ** 2
                         + (contour.rho * config.bearing_sigma_rad) ** 2)

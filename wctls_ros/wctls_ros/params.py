@@ -177,7 +177,6 @@ FEATURE_NODE = (
 )
 
 
-
 def _read_only(name: str, default: Value, description: str, limits: Optional[Limits] = None,
                choices: Tuple[str, ...] = ()) -> Parameter:
     """Return a parameter fixed at start-up."""

@@ -79,7 +79,7 @@ class ScanCounters:
 
     @property
     def skipped(self) -> int:
-        """Scans overwritten in the one-scan queue (falling behind): the gaps not lost."""
+        """Return the scans overwritten in the one-scan queue (falling behind): gaps not lost."""
         return max(0, self.gaps - self.lost)
 
 

@@ -20,7 +20,7 @@ return lies a growing few cm behind it, which made IEPF quadratic before its pas
 room scan of as many beams, with the default noise model (5 cm, which makes the crafted wall one
 chain), 1080 to 100 000 beams.
 With ``--numpy-core TREE``, also the compiled core against a numpy core (a source tree from before
-issue 18) in alternating processes on the same scans.
+the core was compiled, e.g. 28c8ec9) in alternating processes on the same scans.
 Usage: python bench_core.py [scans] [--peer BINARY] [--numpy-core TREE]
 """
 

@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-The compiled pipeline against the numpy one it replaced, scan by scan (issue 18).
+The compiled pipeline against the numpy one it replaced, scan by scan.
 
 The reference (``numpy_core``) is the batched numpy implementation the core was until the
 compiled one: on every scan both must give the same segments and corners (identical beam

@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-The model-error term (issue 15): clean walls stay calibrated, rough and bowed walls become so.
+The model-error term: clean walls stay calibrated, rough and bowed walls become so.
 
 Monte Carlo against the simulator's truth: a room corner 2.2 m away seen in 300 scans; the
 mean NEES of the corner's position against the true corner is 2 for a calibrated estimate.

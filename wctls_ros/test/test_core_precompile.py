@@ -14,7 +14,11 @@ import subprocess
 import sys
 import time
 
+import pytest
 import wctls_ros
+
+# One of the suite's slowest modules: make test-fast leaves it out.
+pytestmark = pytest.mark.slow
 
 FIRST_START = """
 import json, os

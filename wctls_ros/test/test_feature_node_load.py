@@ -21,6 +21,9 @@ from test_feature_node import installed_executable  # noqa: E402
 from wctls_msgs.msg import CornerArray  # noqa: E402
 from wctls_ros.simulation.adversarial import peeling_wall  # noqa: E402
 
+# One of the suite's slowest modules: make test-fast leaves it out.
+pytestmark = pytest.mark.slow
+
 
 class NodeProcess:
     """The installed feature_node in a process of its own, and a peer that talks to it."""

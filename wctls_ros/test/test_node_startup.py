@@ -15,6 +15,9 @@ rclpy = pytest.importorskip('rclpy')
 
 from test_feature_node import installed_executable  # noqa: E402
 
+# One of the suite's slowest modules: make test-fast leaves it out.
+pytestmark = pytest.mark.slow
+
 
 @pytest.mark.parametrize('arguments,reason', [
     (['--params-file', '/nonexistent/feature_node.yaml'],

@@ -121,3 +121,12 @@ def test_other_numbers_and_paths_are_no_finding(line, tmp_path):
 def test_binary_files_are_skipped(tmp_path):
     (tmp_path / 'bag.db3').write_bytes(b'SQLite\0' + b' /tmp/x issue 3')
     assert findings(tmp_path, [pathlib.Path('bag.db3')]) == []
+
+
+def test_outside_a_git_checkout_every_file_but_the_builds_and_the_changelogs_is_checked(
+        tmp_path):
+    for name in ('docs/page.md', 'build/x.md', 'install/y.py', '.venv/z.py', 'CHANGELOG.rst',
+                 'pkg/CHANGELOG.rst', 'pkg/node.py'):
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text('text\n')
+    assert tracked_files(tmp_path) == [pathlib.Path('docs/page.md'), pathlib.Path('pkg/node.py')]

@@ -16,6 +16,9 @@ from wctls_ros.core import extract_features, FeatureConfig, nees
 from wctls_ros.core.model_error import flatness_covariance
 from wctls_ros.simulation import floor_plan_from_dict, NoiseModel, simulate_recording
 
+# One of the suite's slowest modules: make test-fast leaves it out.
+pytestmark = pytest.mark.slow
+
 NOISE = NoiseModel(range_sigma_m=0.005, bearing_sigma_rad=math.radians(0.05))
 CONFIG = FeatureConfig(range_sigma_m=0.005, bearing_sigma_rad=math.radians(0.05))
 CORNER = np.array([2.0, 1.0])

@@ -25,6 +25,9 @@ from wctls_ros.evaluation.scans import load_json_scans, load_scans
 from wctls_ros.simulation import load_floor_plan, NoiseModel, simulate_recording
 from wctls_ros.simulation.adversarial import peeling_wall
 
+# One of the suite's slowest modules: make test-fast leaves it out.
+pytestmark = pytest.mark.slow
+
 # Relative agreement of every value: |fast - reference| <= RELATIVE * scale, the scale being
 # the largest magnitude of that quantity in the feature (a covariance's largest entry, the
 # larger coordinate of a point), so that an entry near zero is not held to its own magnitude;

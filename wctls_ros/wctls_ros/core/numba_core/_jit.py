@@ -36,6 +36,8 @@ _CACHE_VARIABLE = 'NUMBA_CACHE_DIR'
 _HERE = os.path.dirname(os.path.abspath(__file__))
 # Kernels use constants of the shared modules and of the numpy core too: every core source counts.
 _CORE_SOURCES = os.path.join(os.path.dirname(_HERE), '**', '*.py')
+# ... but the one that chooses which implementation runs: no kernel reads it.
+_NOT_READ_BY_KERNELS = os.path.join(os.path.dirname(_HERE), 'runtime.py')
 _FINGERPRINT_FILE = 'wctls_ros_core.fingerprint'
 
 
@@ -60,9 +62,11 @@ def _located_here():
 
 
 def _fingerprint() -> str:
-    """Return a digest of numba's version and every source file of the core."""
+    """Return a digest of numba's version and every source file of the core kernels read."""
     digest = hashlib.sha256(numba.__version__.encode())
     for path in sorted(glob.glob(_CORE_SOURCES, recursive=True)):
+        if path == _NOT_READ_BY_KERNELS:
+            continue
         digest.update(os.path.relpath(path, _HERE).encode())
         with open(path, 'rb') as source:
             digest.update(source.read())

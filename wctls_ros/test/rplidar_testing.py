@@ -8,7 +8,7 @@ import re
 import time
 
 import numpy as np
-from wctls_ros.rplidar.emulator.device import Faults, S1Device
+from wctls_ros.rplidar.emulator.device import Faults, MODES, S1Device
 from wctls_ros.rplidar.emulator.process import EmulatorProcess
 from wctls_ros.rplidar.protocol import encode_express_scan
 from wctls_ros.s1_emulator import SimulatedScene
@@ -156,10 +156,22 @@ def denseboost_stream(plan='environment_a', seconds=3.0, noisy=False, seed=0, fa
     :param faults: the emulator's fault injection (default: none)
     :return: the capsules' bytes (after the scan descriptor)
     """
+    return emulated_stream(MODES, 1, plan, seconds, noisy, seed, faults)
+
+
+def emulated_stream(modes, mode_id, plan='environment_a', seconds=3.0, noisy=False, seed=0,
+                    faults=None):
+    """
+    Return the bytes an emulated device with ``modes`` streams in one, without waiting for them.
+
+    :param modes: the device's scan modes (e.g. the emulator's ``EXPRESS_MODES``)
+    :param mode_id: the mode streamed
+    :return: the frames' bytes (after the scan descriptor); see :func:`denseboost_stream`
+    """
     rng = np.random.default_rng(seed)
     scene = SimulatedScene(load_floor_plan(plan), None, NoiseModel() if noisy else NOISELESS, rng)
-    device = S1Device(scene, faults or Faults(), (1, 28), rng)
-    device.receive(encode_express_scan(1), 0.0)
+    device = S1Device(scene, faults or Faults(), (1, 28), rng, modes)
+    device.receive(encode_express_scan(mode_id), 0.0)
     # The device keeps at most 0.5 s of frames due: ask in steps.
     return b''.join(device.stream(t) for t in np.arange(0.1, seconds + 0.05, 0.1))
 

@@ -62,6 +62,7 @@ class AnswerType(enum.IntEnum):
     SAMPLE_RATE = 0x15
     LIDAR_CONF = 0x20
     MEASUREMENT = 0x81
+    EXPRESS_CAPSULE = 0x82
     DENSE_CAPSULE = 0x85
 
 

@@ -9,7 +9,10 @@ answer 0x81 and 1 DenseBoost, 108 us, answer 0x85, typical 1; no answer to RESET
 1.5 s of silence; requests other than STOP, RESET and MOTOR_SPEED are ignored while streaming)
 and streams what a :class:`Scene` shows in real time: every frame is due when its last byte would
 arrive over a 256000-baud line after its samples were measured. Dense capsule distances are
-whole millimetres and standard node distances quarter millimetres.
+whole millimetres and standard node distances quarter millimetres. Given other scan modes (such
+as :data:`EXPRESS_MODES`, an A-series device's) it streams express capsules too, whose samples
+it measures a distance-dependent angle correction before their place on the capsule's grid, as
+a triangulating device does.
 
 :class:`Faults` (shared with the server's control commands) corrupts or drops streamed bytes, cuts
 frames short (a run of bytes lost, as when a USB packet or a burst of the UART's input is lost),
@@ -24,6 +27,9 @@ from typing import Optional, Protocol
 
 import numpy as np
 
+from ..express import (encode_express_capsules, EXPRESS_CAPSULE_SIZE,
+                       EXPRESS_MAX_CORRECTION_Q3, EXPRESS_MAX_DISTANCE_MM,
+                       EXPRESS_SAMPLES_PER_CAPSULE)
 from ..protocol import (AnswerType, CAPSULE_SIZE, Command, CONF_COMMANDS_FIRMWARE, ConfType,
                         decode_conf_request, DeviceHealth, DeviceInfo, encode_answer,
                         encode_conf_value, encode_dense_capsules, encode_standard_nodes,
@@ -34,6 +40,16 @@ from ..protocol import (AnswerType, CAPSULE_SIZE, Command, CONF_COMMANDS_FIRMWAR
 MODES = (ScanMode(0, 'Standard', 244.0, 40.0, AnswerType.MEASUREMENT),
          ScanMode(1, 'DenseBoost', 108.0, 40.0, AnswerType.DENSE_CAPSULE))
 TYPICAL_MODE = 1
+# An A-series device's modes (the S1's have no express capsules): Standard, Express (0x82).
+EXPRESS_MODES = (ScanMode(0, 'Standard', 500.0, 12.0, AnswerType.MEASUREMENT),
+                 ScanMode(1, 'Express', 250.0, 12.0, AnswerType.EXPRESS_CAPSULE))
+# A triangulating device's laser sits beside its lens: the angle it measures at lies
+# atan(baseline / distance) before where the capsule's angles place a sample.
+TRIANGULATION_BASELINE_MM = 20.0
+# Per answer type of a scan mode: samples per frame and frame size, bytes.
+_FRAMES = {AnswerType.MEASUREMENT: (1, NODE_SIZE),
+           AnswerType.EXPRESS_CAPSULE: (EXPRESS_SAMPLES_PER_CAPSULE, EXPRESS_CAPSULE_SIZE),
+           AnswerType.DENSE_CAPSULE: (SAMPLES_PER_CAPSULE, CAPSULE_SIZE)}
 MODEL_S1M1 = 0x61
 HARDWARE = 18
 SERIAL_NUMBER = b'WCTLS-S1-EMULATR'
@@ -164,9 +180,15 @@ class S1Device:
     :param faults: shared fault settings
     :param firmware: (major, minor)
     :param rng: random generator (rotation phase, faults)
+    :param modes: its scan modes (mode i is ``modes[i]``; the first is Standard): the S1's, or
+        e.g. :data:`EXPRESS_MODES`
+    :param typical_mode: the id of its typical mode
     """
 
-    def __init__(self, scene: Scene, faults: Faults, firmware: tuple, rng: np.random.Generator):
+    def __init__(self, scene: Scene, faults: Faults, firmware: tuple, rng: np.random.Generator,
+                 modes: tuple = MODES, typical_mode: int = TYPICAL_MODE):
+        self._modes = modes
+        self._typical_mode = typical_mode
         self._scene = scene
         self._faults = faults
         self._firmware = firmware
@@ -209,9 +231,9 @@ class S1Device:
         elif self._mode is not None:
             return b''      # busy streaming: only STOP, RESET and MOTOR_SPEED are heard
         elif command in (Command.SCAN, Command.FORCE_SCAN):
-            return self._start(MODES[0], now_s)
-        elif command == Command.EXPRESS_SCAN and payload and payload[0] < len(MODES):
-            return self._start(MODES[payload[0]], now_s)
+            return self._start(self._modes[0], now_s)
+        elif command == Command.EXPRESS_SCAN and payload and payload[0] < len(self._modes):
+            return self._start(self._modes[payload[0]], now_s)
         elif command == Command.GET_INFO:
             return encode_answer(AnswerType.DEVICE_INFO, DeviceInfo(
                 MODEL_S1M1, self._firmware[1], self._firmware[0], HARDWARE,
@@ -222,7 +244,8 @@ class S1Device:
                                  DeviceHealth(self._faults.health, code).encode())
         elif command == Command.GET_SAMPLERATE:
             return encode_answer(AnswerType.SAMPLE_RATE, SampleRate(
-                int(MODES[0].us_per_sample), int(MODES[1].us_per_sample)).encode())
+                int(self._modes[0].us_per_sample),
+                int(self._modes[min(1, len(self._modes) - 1)].us_per_sample)).encode())
         elif command == Command.GET_LIDAR_CONF and self._firmware >= CONF_COMMANDS_FIRMWARE:
             return self._conf_answer(payload)
         return b''
@@ -234,15 +257,16 @@ class S1Device:
         except ProtocolError:
             return b''
         if conf_type in MODE_CONF_TYPES:
-            if mode_id is None or mode_id >= len(MODES):
+            if mode_id is None or mode_id >= len(self._modes):
                 return encode_answer(AnswerType.LIDAR_CONF, encode_conf_value(conf_type, None))
-            mode = MODES[mode_id]
+            mode = self._modes[mode_id]
             value = {ConfType.US_PER_SAMPLE: mode.us_per_sample,
                      ConfType.MAX_DISTANCE: mode.max_distance_m,
                      ConfType.ANSWER_TYPE: mode.answer_type,
                      ConfType.MODE_NAME: mode.name}[conf_type]
         else:
-            value = {ConfType.MODE_COUNT: len(MODES), ConfType.TYPICAL_MODE: TYPICAL_MODE,
+            value = {ConfType.MODE_COUNT: len(self._modes),
+                     ConfType.TYPICAL_MODE: self._typical_mode,
                      ConfType.DESIRED_ROTATION: (DEFAULT_RPM, 0)}.get(conf_type)
         value = self._faults.conf_answers.get(conf_type, value)
         return encode_answer(AnswerType.LIDAR_CONF, encode_conf_value(conf_type, value))
@@ -252,9 +276,7 @@ class S1Device:
         self._mode = mode
         self._start_s = now_s
         self._sent = 0
-        self._samples_per_frame = (SAMPLES_PER_CAPSULE
-                                   if mode.answer_type == AnswerType.DENSE_CAPSULE else 1)
-        self._frame_size = CAPSULE_SIZE if self._samples_per_frame > 1 else NODE_SIZE
+        self._samples_per_frame, self._frame_size = _FRAMES[mode.answer_type]
         self._frame_s = self._samples_per_frame * mode.us_per_sample * 1e-6
         rpm = self._rpm or DEFAULT_RPM
         # Whole 1/64 degrees per frame keep every sample on one exact, uniform angle grid.
@@ -315,6 +337,8 @@ class S1Device:
         start_q6 = (self._phase_q6 + frames * self._step_q6) % FULL_TURN_Q6
         if self._mode.answer_type == AnswerType.DENSE_CAPSULE:
             data = self._capsules(frames, start_q6)
+        elif self._mode.answer_type == AnswerType.EXPRESS_CAPSULE:
+            data = self._express_capsules(frames, start_q6)
         else:
             data = self._nodes(start_q6)
         return self._inject_faults(data)
@@ -327,6 +351,19 @@ class S1Device:
         distances[distances > 0xFFFF] = 0
         return encode_dense_capsules(start_q6, distances.reshape(angles.shape),
                                      frames == 0)
+
+    def _express_capsules(self, frames: np.ndarray, start_q6: np.ndarray) -> bytes:
+        """Encode express capsules: sample k of capsule i at start_i + k * step / 32 - dk."""
+        offsets = np.arange(EXPRESS_SAMPLES_PER_CAPSULE) / EXPRESS_SAMPLES_PER_CAPSULE
+        uniform = (start_q6[:, None] + self._step_q6 * offsets) / 64.0
+        ahead = np.maximum(self._scene.distances_mm(uniform.reshape(-1) % 360.0), 1.0)
+        correction_q3 = np.minimum(np.rint(8.0 * np.degrees(np.arctan(
+            TRIANGULATION_BASELINE_MM / ahead))), EXPRESS_MAX_CORRECTION_Q3).reshape(uniform.shape)
+        angles = (uniform - correction_q3 / 8.0) % 360.0
+        distances = np.rint(self._scene.distances_mm(angles.reshape(-1)))
+        distances[distances > EXPRESS_MAX_DISTANCE_MM] = 0
+        return encode_express_capsules(start_q6, distances.reshape(angles.shape), correction_q3,
+                                       frames == 0)
 
     def _nodes(self, angle_q6: np.ndarray) -> bytes:
         """Encode standard nodes, S set on the first node of each turn."""

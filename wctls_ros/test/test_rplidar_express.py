@@ -3,18 +3,26 @@
 
 """The express capsule stream (0x82): the SDK's layout and output, and capsules cut short."""
 
+import json
 import math
 import struct
+import subprocess
+import sys
+import threading
 
 from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
-from rplidar_testing import emulated_stream, true_ranges
+from rplidar_testing import emulated_stream, range_band, true_ranges
+from test_rplidar_emulator import SDK_CLIENT
 from test_rplidar_protocol import damaged, feed_in_chunks
 from wctls_ros.rplidar.emulator.device import EXPRESS_MODES, Faults
+from wctls_ros.rplidar.emulator.server import Emulator, PtyPort
 from wctls_ros.rplidar.express import (decode_express_capsules, encode_express_capsules,
                                        ExpressCapsuleDecoder)
 from wctls_ros.rplidar.protocol import Samples
+from wctls_ros.s1_emulator import SimulatedScene
+from wctls_ros.simulation import load_floor_plan, NOISELESS
 
 US_PER_SAMPLE = 250.0            # the emulated Express mode's
 # Two capsules by hand from the SDK's layout: capsule 1 starts at 4 degrees (0x0100 in 1/64
@@ -178,3 +186,36 @@ def test_corrupted_bytes_give_no_wrong_sample():
     assert not (filled & (np.abs(samples.distance_mm - truth_mm) > 0.5 + 1e-6)).any()
     counts = decoder.counts
     assert counts.damaged_frames > 0 and counts.rejected_samples >= 32 * counts.damaged_frames // 2
+
+
+@pytest.fixture
+def express_device():
+    """Serve an emulated device with an Express mode (typical) on a pseudo-terminal; yield it."""
+    scene = SimulatedScene(load_floor_plan('environment_a'), None, NOISELESS,
+                           np.random.default_rng(0))
+    emulator = Emulator(scene, Faults(), (1, 28), 0, PtyPort(None), modes=EXPRESS_MODES)
+    serving = threading.Thread(target=emulator.run)
+    serving.start()
+    try:
+        yield emulator.pty.path
+    finally:
+        emulator.commands.put('quit')
+        serving.join()
+        emulator.close()
+
+
+def test_the_official_sdk_reads_the_emulated_express_stream_end_to_end(express_device):
+    pytest.importorskip('pyrplidarsdk')
+    # The SDK starts the typical mode, whose answer type GET_LIDAR_CONF reports as 0x82, in its
+    # own process (it holds the GIL while it blocks).
+    result = subprocess.run([sys.executable, '-c', SDK_CLIENT, express_device], timeout=60,
+                            capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    for angles, ranges in json.loads(result.stdout)['turns']:
+        angles, ranges = np.array(angles), np.array(ranges)
+        assert len(angles) == 400                        # 4000 samples per second, at 10 Hz
+        # The SDK truncates each corrected angle to 1/64 degree, then to 90/16384 degree. (Were
+        # the corrections not applied, almost no range would lie in the band.)
+        bearing = math.pi - angles
+        low, high = range_band(bearing - math.radians(1 / 64 + 90 / 16384), bearing)
+        assert ((ranges >= low - 6e-4) & (ranges <= high + 6e-4)).all()

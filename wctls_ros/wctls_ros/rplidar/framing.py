@@ -29,7 +29,7 @@ the samples of each region (realigning those of a region that lost bytes, which 
 format's layout; an overlong region's are unreadable), places each capsule with a
 :class:`CapsulePlacer` and publishes only what :func:`placeable` allows: see
 :class:`~wctls_ros.rplidar.capsules.DenseCapsuleDecoder` and
-:class:`~wctls_ros.rplidar.express.ExpressCapsuleDecoder`.
+:class:`~wctls_ros.rplidar.checked.CheckedCapsuleDecoder`.
 """
 
 from dataclasses import dataclass

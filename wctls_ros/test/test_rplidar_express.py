@@ -8,21 +8,17 @@ import math
 import struct
 import subprocess
 import sys
-import threading
 
 from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
-from rplidar_testing import emulated_stream, range_band, true_ranges
+from rplidar_testing import emulated_stream, range_band, serving, true_ranges
 from test_rplidar_emulator import SDK_CLIENT
 from test_rplidar_protocol import damaged, feed_in_chunks
-from wctls_ros.rplidar.emulator.device import EXPRESS_MODES, Faults
-from wctls_ros.rplidar.emulator.server import Emulator, PtyPort
+from wctls_ros.rplidar.emulator.device import A_SERIES_MODES, Faults
 from wctls_ros.rplidar.express import (decode_express_capsules, encode_express_capsules,
                                        ExpressCapsuleDecoder)
 from wctls_ros.rplidar.protocol import Samples
-from wctls_ros.s1_emulator import SimulatedScene
-from wctls_ros.simulation import load_floor_plan, NOISELESS
 
 US_PER_SAMPLE = 250.0            # the emulated Express mode's
 # Two capsules by hand from the SDK's layout: capsule 1 starts at 4 degrees (0x0100 in 1/64
@@ -36,7 +32,7 @@ HAND_CAPSULES = (bytes.fromhex('A7 5C 00 01 A2 0F 41 1F 35') + bytes(75)
 
 def express_stream(seconds=3.0, seed=0, faults=None):
     """Return what the emulated Express mode streams (noiseless ranges)."""
-    return emulated_stream(EXPRESS_MODES, 1, seconds=seconds, seed=seed, faults=faults)
+    return emulated_stream(A_SERIES_MODES, 1, seconds=seconds, seed=seed, faults=faults)
 
 
 def sdk_express_reference(data):
@@ -193,18 +189,9 @@ def test_corrupted_bytes_give_no_wrong_sample():
 
 @pytest.fixture
 def express_device():
-    """Serve an emulated device with an Express mode (typical) on a pseudo-terminal; yield it."""
-    scene = SimulatedScene(load_floor_plan('environment_a'), None, NOISELESS,
-                           np.random.default_rng(0))
-    emulator = Emulator(scene, Faults(), (1, 28), 0, PtyPort(None), modes=EXPRESS_MODES)
-    serving = threading.Thread(target=emulator.run)
-    serving.start()
-    try:
-        yield emulator.pty.path
-    finally:
-        emulator.commands.put('quit')
-        serving.join()
-        emulator.close()
+    """Serve an emulated device whose typical mode is Express; yield its terminal's path."""
+    with serving(A_SERIES_MODES, 1) as path:
+        yield path
 
 
 def test_the_official_sdk_reads_the_emulated_express_stream_end_to_end(express_device):

@@ -3,12 +3,19 @@
 
 """The ultra capsule stream (0x84): the SDK's layout and output, and capsules cut short."""
 
+import json
+import math
 import struct
+import subprocess
+import sys
 
 from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
+from rplidar_testing import emulated_stream, range_band, serving, true_ranges
+from test_rplidar_emulator import SDK_CLIENT
 from test_rplidar_protocol import feed_in_chunks
+from wctls_ros.rplidar.emulator.device import A_SERIES_MODES
 from wctls_ros.rplidar.protocol import Samples
 from wctls_ros.rplidar.ultra import (encode_ultra_capsules, offset_deg, ULTRA_MAX_DISTANCE_MM,
                                      UltraCapsuleDecoder, varbitscale_decode, varbitscale_encode)
@@ -210,3 +217,36 @@ def test_capsules_cut_short_lose_only_themselves_and_give_no_wrong_sample(cut_ra
     assert lost <= np.count_nonzero(sent[:-2][cut[:-2]]) + 2 * cut.sum() + 96
     sdk_lost = returns - np.count_nonzero(np.array(sdk_ultra_reference(damaged))[:, 1])
     assert sdk_lost >= 2 * lost
+
+
+def test_an_emulated_boost_stream_shows_the_scene_as_the_sdk_decodes_it():
+    data = emulated_stream(A_SERIES_MODES, 2, seconds=3.0)
+    decoder = UltraCapsuleDecoder(US_PER_SAMPLE, max_distance_m=12.0)
+    samples = Samples.concat(feed_in_chunks(decoder, data, np.random.default_rng(4)))
+    reference = np.array(sdk_ultra_reference(data))
+    assert len(samples) == len(reference) - 96 == (len(data) // 132 - 2) * 96
+    np.testing.assert_array_equal(samples.distance_mm, reference[:len(samples), 1])
+    # Within half a step of the scale (up to 4 mm beyond 4 m) at the angle decoded.
+    truth_mm = 1000.0 * true_ranges(math.pi - np.radians(samples.angle_deg))
+    filled = samples.distance_mm > 0
+    assert filled.mean() > 0.97 and decoder.counts.rejected_samples == 0
+    assert (np.abs(samples.distance_mm[filled] - truth_mm[filled]) <= 4.0 + 1e-6).all()
+    # One turn per 800 samples (10 Hz), started where the uncorrected angles wrap.
+    assert set(np.diff(np.flatnonzero(samples.start)).tolist()) <= {799, 800, 801}
+
+
+def test_the_official_sdk_reads_the_emulated_boost_stream_end_to_end():
+    pytest.importorskip('pyrplidarsdk')
+    with serving(A_SERIES_MODES, 2) as path:
+        result = subprocess.run([sys.executable, '-c', SDK_CLIENT, path], timeout=60,
+                                capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    for angles, ranges in json.loads(result.stdout)['turns']:
+        angles, ranges = np.array(angles), np.array(ranges)
+        assert len(angles) > 0.97 * 800                  # 8000 samples per second, at 10 Hz
+        # The SDK truncates the step (up to 95/65536 degree), then each angle to 1/64 degree
+        # and to 90/16384 degree; the scale sends ranges up to 4 mm off beyond 4 m.
+        bearing = math.pi - angles
+        low, high = range_band(bearing - math.radians(1 / 64 + 90 / 16384),
+                               bearing + math.radians(95 / 65536))
+        assert ((ranges >= low - 4.1e-3) & (ranges <= high + 4.1e-3)).all()

@@ -10,9 +10,11 @@ answer 0x81 and 1 DenseBoost, 108 us, answer 0x85, typical 1; no answer to RESET
 and streams what a :class:`Scene` shows in real time: every frame is due when its last byte would
 arrive over a 256000-baud line after its samples were measured. Dense capsule distances are
 whole millimetres and standard node distances quarter millimetres. Given other scan modes (such
-as :data:`EXPRESS_MODES`, an A-series device's) it streams express capsules too, whose samples
-it measures a distance-dependent angle correction before their place on the capsule's grid, as
-a triangulating device does.
+as :data:`A_SERIES_MODES`, an A-series device's) it streams express and ultra capsules too, whose
+samples it measures a distance-dependent angle correction before their place on the capsule's
+grid, as a triangulating device does (for ultra capsules, the offset SLAMTEC's SDK applies to
+the distance sent, where a few passes find it; the distances sent are those the capsule's scale
+and predictions carry).
 
 :class:`Faults` (shared with the server's control commands) corrupts or drops streamed bytes, cuts
 frames short (a run of bytes lost, as when a USB packet or a burst of the UART's input is lost),
@@ -36,19 +38,26 @@ from ..protocol import (AnswerType, CAPSULE_SIZE, Command, CONF_COMMANDS_FIRMWAR
                         FULL_TURN_Q6, HealthStatus, MODE_CONF_TYPES, NODE_SIZE, ProtocolError,
                         RequestParser, ResponseDescriptor, SampleRate, SAMPLES_PER_CAPSULE,
                         ScanMode, SendMode)
+from ..ultra import (encode_ultra_capsules, offset_deg, ULTRA_CAPSULE_SIZE, ULTRA_MAX_DISTANCE_MM,
+                     ULTRA_SAMPLES_PER_CAPSULE, varbitscale_decode, varbitscale_encode)
 
 MODES = (ScanMode(0, 'Standard', 244.0, 40.0, AnswerType.MEASUREMENT),
          ScanMode(1, 'DenseBoost', 108.0, 40.0, AnswerType.DENSE_CAPSULE))
 TYPICAL_MODE = 1
-# An A-series device's modes (the S1's have no express capsules): Standard, Express (0x82).
-EXPRESS_MODES = (ScanMode(0, 'Standard', 500.0, 12.0, AnswerType.MEASUREMENT),
-                 ScanMode(1, 'Express', 250.0, 12.0, AnswerType.EXPRESS_CAPSULE))
+# An A-series device's modes (the S1's have no express or ultra capsules): Standard, Express
+# (0x82) and Boost (0x84).
+A_SERIES_MODES = (ScanMode(0, 'Standard', 500.0, 12.0, AnswerType.MEASUREMENT),
+                  ScanMode(1, 'Express', 250.0, 12.0, AnswerType.EXPRESS_CAPSULE),
+                  ScanMode(2, 'Boost', 125.0, 12.0, AnswerType.ULTRA_CAPSULE))
+# Passes measuring each ultra capsule sample where the offset of the distance it sends puts it.
+_ULTRA_PASSES = 3
 # A triangulating device's laser sits beside its lens: the angle it measures at lies
 # atan(baseline / distance) before where the capsule's angles place a sample.
 TRIANGULATION_BASELINE_MM = 20.0
 # Per answer type of a scan mode: samples per frame and frame size, bytes.
 _FRAMES = {AnswerType.MEASUREMENT: (1, NODE_SIZE),
            AnswerType.EXPRESS_CAPSULE: (EXPRESS_SAMPLES_PER_CAPSULE, EXPRESS_CAPSULE_SIZE),
+           AnswerType.ULTRA_CAPSULE: (ULTRA_SAMPLES_PER_CAPSULE, ULTRA_CAPSULE_SIZE),
            AnswerType.DENSE_CAPSULE: (SAMPLES_PER_CAPSULE, CAPSULE_SIZE)}
 MODEL_S1M1 = 0x61
 HARDWARE = 18
@@ -181,7 +190,7 @@ class S1Device:
     :param firmware: (major, minor)
     :param rng: random generator (rotation phase, faults)
     :param modes: its scan modes (mode i is ``modes[i]``; the first is Standard): the S1's, or
-        e.g. :data:`EXPRESS_MODES`
+        e.g. :data:`A_SERIES_MODES`
     :param typical_mode: the id of its typical mode
     """
 
@@ -282,6 +291,7 @@ class S1Device:
         # Whole 1/64 degrees per frame keep every sample on one exact, uniform angle grid.
         self._step_q6 = round(rpm / 60.0 * FULL_TURN_Q6 * self._frame_s)
         self._previous_angle_q6 = None
+        self._next_ultra_mm = None          # the next ultra capsule's first distance, decided
         return ResponseDescriptor(self._frame_size, SendMode.MULTIPLE, mode.answer_type).encode()
 
     def _stop(self):
@@ -339,6 +349,8 @@ class S1Device:
             data = self._capsules(frames, start_q6)
         elif self._mode.answer_type == AnswerType.EXPRESS_CAPSULE:
             data = self._express_capsules(frames, start_q6)
+        elif self._mode.answer_type == AnswerType.ULTRA_CAPSULE:
+            data = self._ultra_capsules(frames, start_q6)
         else:
             data = self._nodes(start_q6)
         return self._inject_faults(data)
@@ -364,6 +376,40 @@ class S1Device:
         distances[distances > EXPRESS_MAX_DISTANCE_MM] = 0
         return encode_express_capsules(start_q6, distances.reshape(angles.shape), correction_q3,
                                        frames == 0)
+
+    def _ultra_capsules(self, frames: np.ndarray, start_q6: np.ndarray) -> bytes:
+        """Encode ultra capsules: sample k of capsule i at start_i + k * step / 96 - offset."""
+        offsets = np.arange(ULTRA_SAMPLES_PER_CAPSULE) / ULTRA_SAMPLES_PER_CAPSULE
+        # The capsules' samples and the next capsule's first, whose major the last cabin needs.
+        uniform = np.append((start_q6[:, None] + self._step_q6 * offsets).reshape(-1),
+                            start_q6[-1] + self._step_q6) / 64.0
+        sent = np.zeros(uniform.size)
+        for _ in range(_ULTRA_PASSES):
+            distances = np.rint(self._scene.distances_mm((uniform - offset_deg(sent)) % 360.0))
+            distances[distances > ULTRA_MAX_DISTANCE_MM] = 0
+            if self._next_ultra_mm is not None:
+                distances[0] = self._next_ultra_mm
+            data, sent = self._encode_ultra(start_q6, frames == 0, distances)
+        # Where the offset of the distance sent keeps moving the sample (an edge, or a distance
+        # where the offset steps), the scene there may not show that distance: then the sample
+        # is sent as no return.
+        seen = self._scene.distances_mm((uniform - offset_deg(sent)) % 360.0)
+        step = 1 << varbitscale_decode(varbitscale_encode(sent))[1]
+        astray = (sent > 0) & (np.abs(seen - sent) > step / 2 + 1)
+        astray[0] &= self._next_ultra_mm is None
+        distances[astray] = 0
+        data, _ = self._encode_ultra(start_q6, frames == 0, distances)
+        self._next_ultra_mm = distances[-1]
+        return data
+
+    @staticmethod
+    def _encode_ultra(start_q6: np.ndarray, start_flag: np.ndarray, distances: np.ndarray):
+        """Encode capsules and the next one's first distance; return bytes, distances sent."""
+        data, sent = encode_ultra_capsules(
+            start_q6, distances[:-1].reshape(len(start_q6), ULTRA_SAMPLES_PER_CAPSULE),
+            start_flag, distances[-1])
+        return data, np.append(sent.reshape(-1),
+                               varbitscale_decode(varbitscale_encode(distances[-1]))[0])
 
     def _nodes(self, angle_q6: np.ndarray) -> bytes:
         """Encode standard nodes, S set on the first node of each turn."""

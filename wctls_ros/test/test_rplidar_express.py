@@ -209,3 +209,18 @@ def test_the_official_sdk_reads_the_emulated_express_stream_end_to_end(express_d
         bearing = math.pi - angles
         low, high = range_band(bearing - math.radians(1 / 64 + 90 / 16384), bearing)
         assert ((ranges >= low - 6e-4) & (ranges <= high + 6e-4)).all()
+
+
+@settings(max_examples=60, deadline=None)
+@given(garbage=st.binary(max_size=2000), seed=st.integers(0, 2 ** 32 - 1))
+def test_any_bytes_decode_without_error_into_consistent_samples(garbage, seed):
+    # Garbage between two runs of intact capsules: the decoder does not raise, and publishes
+    # samples in stream order, in range and counted.
+    intact = express_stream(seconds=0.2, seed=seed % 4)
+    decoder = ExpressCapsuleDecoder(US_PER_SAMPLE, max_distance_m=12.0)
+    samples = Samples.concat(feed_in_chunks(decoder, intact[:840] + garbage + intact[840:],
+                                            np.random.default_rng(seed)))
+    assert ((samples.angle_deg >= 0) & (samples.angle_deg < 360)).all()
+    assert (samples.distance_mm >= 0).all() and (samples.distance_mm <= 12000).all()
+    assert (np.diff(samples.slot) > 0).all()
+    assert decoder.counts.samples == len(samples)

@@ -250,3 +250,17 @@ def test_the_official_sdk_reads_the_emulated_boost_stream_end_to_end():
         low, high = range_band(bearing - math.radians(1 / 64 + 90 / 16384),
                                bearing + math.radians(95 / 65536))
         assert ((ranges >= low - 4.1e-3) & (ranges <= high + 4.1e-3)).all()
+
+
+@settings(max_examples=60, deadline=None)
+@given(garbage=st.binary(max_size=2000), seed=st.integers(0, 2 ** 32 - 1))
+def test_any_bytes_decode_without_error_into_consistent_samples(garbage, seed):
+    # Garbage between two runs of intact capsules: see the express decoder's test.
+    data, _, _ = smooth_stream(20, seed=seed % 4)
+    decoder = UltraCapsuleDecoder(US_PER_SAMPLE, max_distance_m=30.0)
+    samples = Samples.concat(feed_in_chunks(decoder, data[:1320] + garbage + data[1320:],
+                                            np.random.default_rng(seed)))
+    assert ((samples.angle_deg >= 0) & (samples.angle_deg < 360)).all()
+    assert (samples.distance_mm >= 0).all() and (samples.distance_mm <= 30000).all()
+    assert (np.diff(samples.slot) > 0).all()
+    assert decoder.counts.samples == len(samples)

@@ -35,11 +35,12 @@ STOCK_TESTS := $(addprefix wctls_ros/test/,stock_install_checks.py test_stock_in
                  test_rplidar_emulator.py test_rplidar_protocol.py test_rplidar_capsules.py \
                  test_rplidar_scan.py)
 
-.PHONY: help deps build demo test lint bench results docs clean
+.PHONY: help deps build demo test test-fast lint bench results docs clean
 
 help:
 	@echo 'make demo   set up, then run the S1 emulator, driver and feature node live for ~20 s'
 	@echo 'make test   set up (venv, ROS 2 wheels, colcon build) and run every test and the lint'
+	@echo 'make test-fast  the tests but the modules marked slow (the inner loop, about 2 min)'
 	@echo 'make build  set up and colcon build both packages into install/'
 	@echo 'make lint   only the ament-style lint (flake8 with ament rules, pep257)'
 	@echo 'make bench  run the benchmarks and print their figures'
@@ -94,6 +95,9 @@ test: $(BUILD_STAMP) $(OLDEST_STAMP) $(STOCK_STAMP)
 	  -o addopts='-ra --strict-markers' --junitxml=out/test-results-oldest.xml $(OLDEST_TESTS)
 	WCTLS_VENV=$(STOCK_VENV) $(WITH_ENV) python -m pytest -p no:cacheprovider \
 	  -o addopts='-ra --strict-markers' --junitxml=out/test-results-stock.xml $(STOCK_TESTS)
+
+test-fast: $(BUILD_STAMP)
+	$(WITH_ENV) python -m pytest -m 'not slow' $(PYTEST_ARGS)
 
 lint: $(BUILD_STAMP)
 	$(WITH_ENV) python -m pytest -m linter $(PYTEST_ARGS)

@@ -7,7 +7,7 @@ Hand-label the true corners of a recording (data/labels/README.md describes the 
 Run inside the built workspace (``source tools/env.sh``)::
 
     # 1. look: the median scan of the still scans, every beam's index, a 1 cm grid
-    tools/label_corners.py plot data/urg04lx_office --scans 0-24 --out /tmp/office.png \\
+    tools/label_corners.py plot data/urg04lx_office --scans 0-24 --out office.png \\
         --window 0.1,1.05,1.3,2.3 --every 1
     # 2. write data/labels/<recording>.yaml with, per corner, the beams of its two walls
     # 3. compute the positions: lines fitted to those beams, intersected (--write saves them)

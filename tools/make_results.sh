@@ -2,8 +2,8 @@
 # Copyright 2026 wctls_ros maintainers
 # SPDX-License-Identifier: Apache-2.0
 #
-# Regenerate docs/results (issue 8): the paper's analysis on simulated environments A and B and
-# on the real static SICK recordings; then docs/results/score (issue 13, make_score_results.sh).
+# Regenerate docs/results: the paper's analysis on simulated environments A and B and on the
+# real static SICK recordings; then docs/results/score (the yardstick, make_score_results.sh).
 # Run through `make results` (needs the built workspace).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -40,9 +40,8 @@ for bag in sick_lms111_static sick_lms1xx_static; do
       "$bin/evaluate" "$data/$bag" --out "$docs/${bag}_$prop" --title "$bag (noise fitted)" \
         --propagation "$prop"
     done
-    # The model, checked on the other half of the scans and on the other SICK recording (the
-    # issue 15 targets). It is printed even when a check finds it implausible, with the reasons
-    # as comments: the file records the figures, and score uses its model (--config).
+    # The model, checked on the other half of the scans and on the other SICK recording. It is
+    # printed even when a check finds it implausible, with the reasons as comments: the file records the figures, and score uses its model (--config).
     other=sick_lms1xx_static && [ "$bag" = sick_lms1xx_static ] && other=sick_lms111_static
     "$bin/calibrate" "$data/$bag" --holdout --validate "$data/$other" --accept-implausible \
       > "$docs/${bag}_calibration.txt"
@@ -50,6 +49,6 @@ for bag in sick_lms111_static sick_lms1xx_static; do
 done
 # The reports quote the command with the machine's paths: keep only the repository-relative part.
 sed -i "s#$(pwd)/##g" "$docs"/*/report.md
-# The yardstick (issue 13): score every method on simulated and hand-labelled real recordings.
+# The yardstick: score every method on simulated and hand-labelled real recordings.
 tools/make_score_results.sh
 echo "results in $docs"

@@ -2,7 +2,7 @@
 # Copyright 2026 wctls_ros maintainers
 # SPDX-License-Identifier: Apache-2.0
 #
-# Regenerate docs/results/score/ (issue 13, the yardstick): precision, recall, recurrence and
+# Regenerate docs/results/score/ (the yardstick): precision, recall, recurrence and
 # NEES of every method on clean and cluttered simulated A and B (1 cm and S1-like sensors) and
 # on the hand-labelled real recordings. Run by tools/make_results.sh (`make results`); needs the
 # built workspace and docs/results/*_calibration.txt (written by make_results.sh before this).

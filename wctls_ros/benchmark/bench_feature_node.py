@@ -16,8 +16,8 @@ checkout) are measured alternately, round after round, so that a busy machine sl
    not. The core, extract_features, is timed inside the callback (this benchmark wraps it);
    the message path is everything else. Printed: the core's median, and the message path as a
    ratio to the core (their sums over the scans), median of the rounds; with baselines, also
-   this tree's message path over each tree's core (mean time per scan), since issue 17 states
-   its targets against the numpy core of its day (e.g. ``--baseline`` a build of 0109046).
+   this tree's message path over each tree's core (mean time per scan), since the message path's
+   targets were set against the numpy core of its day (e.g. ``--baseline`` a build of 0109046).
    Next to them the path's floor, measured the same way: a callback that only publishes an
    empty CornerArray and LineSegmentArray for each scan (deserialising it included), i.e. what
    rclpy takes for the scan in and two messages out, whatever is built.
@@ -424,7 +424,7 @@ def main():
                 for markers in (True, False)}
         print(f'   {label:12s} {1e3 * statistics.median(cores[label]):8.3f} '
               f'{path[True]:18.2f}x {path[False]:15.2f}x')
-    # Issue 17 states its targets against the core of its day (a baseline's numpy core):
+    # The message path's targets were set against the core of its day (a baseline's numpy core):
     # this tree's message path in ms over each tree's core time, same scans, same run; and
     # the floor's (no markers to publish, so one column).
     this = trees[-1][0]

@@ -6,7 +6,7 @@
 Benchmark process_bag: scans per second, --jobs over several bags, memory on a long bag.
 
 Compares this tree with baselines (other checkouts of wctls_ros, built, e.g. an older commit
-unpacked with ``git archive <commit> | tar -x -C /tmp/old`` and ``make build`` there) in one
+unpacked with ``git archive <commit> | tar -x -C ../old`` and ``make build`` there) in one
 run, all measured alternately so that a busy machine slows them alike:
 
 1. Throughput: the 360-scan Hokuyo URG-04LX office bag (ROS 2 mcap, 681 beams) from data/,

@@ -31,6 +31,9 @@ from wctls_ros.bags.process_bag import CSV_COLUMNS, main, process  # noqa: E402
 from wctls_ros.core import METHODS  # noqa: E402
 from wctls_ros.params import feature_settings, load_parameters  # noqa: E402
 
+# One of the suite's slowest modules: make test-fast leaves it out.
+pytestmark = pytest.mark.slow
+
 CORNERS = 'wctls_msgs/msg/CornerArray'
 LINES = 'wctls_msgs/msg/LineSegmentArray'
 MARKERS = 'visualization_msgs/msg/MarkerArray'

@@ -28,6 +28,9 @@ from wctls_ros.bags import bag_info, BagError, read_scans  # noqa: E402
 from wctls_ros.bags.replay_node import BagReplay  # noqa: E402
 from wctls_ros.feature_node import FeatureNode  # noqa: E402
 
+# One of the suite's slowest modules: make test-fast leaves it out.
+pytestmark = pytest.mark.slow
+
 PACKAGE = pathlib.Path(__file__).resolve().parents[1]
 
 

@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-``calibrate`` (issue 15): robust to a moving object, refuses an implausible model, validates.
+``calibrate``: robust to a moving object, refuses an implausible model, validates.
 
 A walking person in a simulated room, or inserted in a real recording, must not change the
 model; a model far from what the wall beams show is refused (exit 3, no YAML); a model

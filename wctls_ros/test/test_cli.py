@@ -9,6 +9,9 @@ import subprocess
 import pytest
 from test_feature_node import installed_executable
 
+# One of the suite's slowest modules: make test-fast leaves it out.
+pytestmark = pytest.mark.slow
+
 # (module, function returning its parser) of every argparse tool.
 PARSERS = [
     ('wctls_ros.evaluation.simulate_cli', 'parser'),

@@ -25,6 +25,9 @@ from wctls_ros.evaluation.scans import load_json_scans, load_scans
 from wctls_ros.simulation import load_floor_plan, NoiseModel, simulate_recording
 from wctls_ros.simulation.adversarial import peeling_wall
 
+# One of the suite's slowest modules: make test-fast leaves it out.
+pytestmark = pytest.mark.slow
+
 # Relative agreement of every value: |fast - reference| <= RELATIVE * scale, the scale being
 # the largest magnitude of that quantity in the feature (a covariance's largest entry, the
 # larger coordinate of a point), so that an entry near zero is not held to its own magnitude;
@@ -68,6 +71,8 @@ def simulated_scans():
             yield f'{plan}-{beams}-{k}', ranges, angle_min, increment
     yield 'peeling-wall', *peeling_wall(4000)
     yield 'one-ray', np.full(360, 2.0), 0.3, 0.0 + 1e-12
+    # lambda / step beyond the largest int64: a negative array size in the compiled breakpoints.
+    yield 'one-ray-1e-20', np.full(360, 2.0), 0.3, 1e-20
     yield 'one-spot', np.concatenate([np.full(50, 1.0), np.full(310, np.nan)]), -math.pi, \
         2.0 * math.pi / 360
 

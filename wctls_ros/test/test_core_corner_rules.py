@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-The rules against false corners, each on a scene built to trigger it (issue 14).
+The rules against false corners, each on a scene built to trigger it.
 
 Every scene is seen by a simulated sensor at the origin; a rule is shown by the result with
 it (the default configuration) and without it (the rule's parameter set to switch it off, or
@@ -83,7 +83,7 @@ def test_a_wall_seen_behind_an_edge_where_the_face_would_go_on_makes_no_corner()
     # at 45 deg crosses the face's line 0.3 m beyond the edge, at (2.05, -1). Past the edge the
     # sensor sees that wall behind where the face would have to stand (up to 11 cm behind its
     # line, ~12 beams): the lines meet, the walls do not. Environment A has two of these
-    # (issue 14: most of its remaining false corners at S1-like noise). The rule's test is a
+    # (most of its remaining false corners at S1-like noise before this rule). The rule's test is a
     # run test on the returns' offsets, so its switch is end_offset_sigmas (0 also stops the
     # trim of segment ends, which does not decide here).
     plan = {'polylines': [{'closed': False, 'points': [

@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-Where the compiled core keeps its JIT cache (issue 18).
+Where the compiled core keeps its JIT cache.
 
 Next to a writable install, else in $XDG_CACHE_HOME/wctls_ros, and wherever NUMBA_CACHE_DIR
 says when the user sets it.

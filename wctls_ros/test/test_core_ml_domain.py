@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-ML's domain (issue 15, docs/derivation.md#where-ml-is-overconfident): grazing returns.
+ML's domain (docs/derivation.md#where-ml-is-overconfident): grazing returns.
 
 Monte Carlo of one wall 0.5 m away seen from -20 to 84 deg of incidence (SICK-like noise:
 1 cm range, 0.1 deg bearing), scored by the NEES (1 degree of freedom, mean 1 when

@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-The model-error term (issue 15): clean walls stay calibrated, rough and bowed walls become so.
+The model-error term: clean walls stay calibrated, rough and bowed walls become so.
 
 Monte Carlo against the simulator's truth: a room corner 2.2 m away seen in 300 scans; the
 mean NEES of the corner's position against the true corner is 2 for a calibrated estimate.
@@ -15,6 +15,9 @@ import pytest
 from wctls_ros.core import extract_features, FeatureConfig, nees
 from wctls_ros.core.numba_core.model_error import flatness_covariance
 from wctls_ros.simulation import floor_plan_from_dict, NoiseModel, simulate_recording
+
+# One of the suite's slowest modules: make test-fast leaves it out.
+pytestmark = pytest.mark.slow
 
 NOISE = NoiseModel(range_sigma_m=0.005, bearing_sigma_rad=math.radians(0.05))
 CONFIG = FeatureConfig(range_sigma_m=0.005, bearing_sigma_rad=math.radians(0.05))

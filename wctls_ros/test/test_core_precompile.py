@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-The first start on a machine: helper processes compile kernels into numba's cache (issue 18).
+The first start on a machine: helper processes compile kernels into numba's cache.
 
 Each case runs a fresh interpreter with its own empty cache, as a first start does; numba's own
 compile events say which kernels that process compiled rather than loaded.
@@ -14,7 +14,11 @@ import subprocess
 import sys
 import time
 
+import pytest
 import wctls_ros
+
+# One of the suite's slowest modules: make test-fast leaves it out.
+pytestmark = pytest.mark.slow
 
 FIRST_START = """
 import json, os

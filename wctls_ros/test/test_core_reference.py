@@ -19,6 +19,9 @@ import reference_fits
 from wctls_ros.core import extract_features, find_corners, segment_returns
 from wctls_ros.core.numba_core.lines import fit_lines
 
+# One of the suite's slowest modules: make test-fast leaves it out.
+pytestmark = pytest.mark.slow
+
 METHODS = ('utls', 'wtls', 'wctls', 'ml')
 RELATIVE = 1e-9
 RANGE_SIGMA = 0.01

@@ -15,6 +15,9 @@ from test_feature_node import installed_executable
 
 pytest.importorskip('rclpy')
 
+# One of the suite's slowest modules: make test-fast leaves it out.
+pytestmark = pytest.mark.slow
+
 
 def own_domain():
     """Return an environment with a DDS domain of the demo's own (away from other tests)."""

@@ -123,6 +123,22 @@ def test_best_effort_and_reliable_publishers_both_reach_the_node(ros_context, ex
     assert len(corners.corners) == 5
 
 
+def test_two_publishers_taking_turns_are_not_counted_as_skipped_scans(ros_context, executor):
+    # Each publisher numbers its own messages: read as one sequence, 5, 1, 6 gave a "gap" of 4
+    # scans although the node kept up with every scan.
+    harness = Harness(ros_context, executor)
+    second = harness.peer.create_publisher(LaserScan, 'scan',
+                                           QoSProfile(depth=10,
+                                                      reliability=ReliabilityPolicy.RELIABLE))
+    assert spin_until(executor, lambda: harness.node.count_publishers('scan') == 2)
+    for turn in range(8):              # 1, 2, 3, 4 from the first, then 5, 1, 6, 2
+        publisher = second if turn >= 4 and turn % 2 else harness.scans
+        publisher.publish(room_scan_message(stamp=(turn + 1, 0)))
+        assert spin_until(executor, lambda: len(harness.received['corners']) == turn + 1)
+    assert harness.node.counters.processed == 8
+    assert harness.node.counters.skipped == 0
+
+
 def test_parameter_changes_take_effect_on_the_next_scan(ros_context, executor):
     harness = Harness(ros_context, executor)
     corners, _ = harness.exchange(room_scan_message())

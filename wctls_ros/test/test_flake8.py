@@ -10,6 +10,8 @@ import pytest
 PACKAGE_DIR = pathlib.Path(__file__).resolve().parents[1]
 # The interface package's tests sit beside this package in the source tree.
 LINTED = [str(PACKAGE_DIR)] + [str(p) for p in [PACKAGE_DIR.parent / 'wctls_msgs'] if p.is_dir()]
+# One of the suite's slowest modules: make test-fast leaves it out (make lint runs it).
+pytestmark = pytest.mark.slow
 
 
 @pytest.mark.flake8

@@ -23,6 +23,9 @@ from wctls_ros.bags import read_scans, typestore
 from wctls_ros.conversions import laser_scan, marker_array, MessageTypes, scan_features
 from wctls_ros.params import feature_settings, load_parameters, MarkerStyle
 
+# One of the suite's slowest modules: make test-fast leaves it out.
+pytestmark = pytest.mark.slow
+
 ANGLES = np.linspace(0.0, 2.0 * math.pi, 72, endpoint=False)
 UNIT_CIRCLE = np.column_stack([np.cos(ANGLES), np.sin(ANGLES)])
 

@@ -8,11 +8,15 @@ import signal
 import subprocess
 import time
 
+from conftest import spin_until
 import pytest
 
-pytest.importorskip('rclpy')
+rclpy = pytest.importorskip('rclpy')
 
 from test_feature_node import installed_executable  # noqa: E402
+
+# One of the suite's slowest modules: make test-fast leaves it out.
+pytestmark = pytest.mark.slow
 
 
 @pytest.mark.parametrize('arguments,reason', [
@@ -39,17 +43,46 @@ def test_bad_ros_arguments_give_one_fatal_line_and_exit_1(node, arguments, reaso
     assert reason in lines[0] and ', at /' not in lines[0]
 
 
+def wait_until_spinning(executor, reports, process, name, timeout_s=180.0):
+    """
+    Return once the node ``name`` published diagnostics: its executor spins its 1 Hz timer.
+
+    :param executor: the test's executor, spinning a listener that puts status names in
+        ``reports``
+    :param reports: the names of the diagnostic statuses received so far
+    :param process: the node's process; its end before the first report fails the test
+    :param name: the node's name (its status names contain it)
+    :param timeout_s: deadline, s: generous, as with a cold numba cache the node compiles its
+        core first (10-30 s, minutes on a busy machine)
+    """
+    spin_until(executor, lambda: process.poll() is not None
+               or any(name in report for report in reports), timeout_s)
+    assert any(name in report for report in reports), (
+        f'{name} published no diagnostics within {timeout_s} s (status {process.poll()})')
+
+
 @pytest.mark.parametrize('node', ['feature_node', 'rplidar_node'])
-def test_a_second_ctrl_c_during_the_clean_up_ends_the_node_cleanly(node):
+def test_a_second_ctrl_c_during_the_clean_up_ends_the_node_cleanly(node, ros_context, executor):
     # ros2 launch forwards the terminal's Ctrl-C once more: before the fix, a second SIGINT a
     # few ms after the first gave a KeyboardInterrupt traceback or status -2 in 10 of 24 runs
     # of feature_node (delays 0-50 ms).
-    for delay_s in (0.0, 0.002, 0.005, 0.01, 0.05):
-        process = subprocess.Popen([str(installed_executable(node))], stdout=subprocess.PIPE,
+    from diagnostic_msgs.msg import DiagnosticArray
+    listener = rclpy.create_node('diagnostics_listener', context=ros_context)
+    executor.add_node(listener)
+    reports = []
+    listener.create_subscription(DiagnosticArray, '/diagnostics', lambda array: reports.extend(
+        status.name for status in array.status), 10)
+    for run, delay_s in enumerate((0.0, 0.002, 0.005, 0.01, 0.05)):
+        # A name of its own per run: a late report of the run before cannot pass for this one.
+        name = f'{node}_{run}'
+        process = subprocess.Popen([str(installed_executable(node)), '--ros-args', '-r',
+                                    f'__node:={name}'], stdout=subprocess.PIPE,
                                    stderr=subprocess.PIPE, text=True)
-        time.sleep(1.5)                             # up and spinning
-        process.send_signal(signal.SIGINT)
-        time.sleep(delay_s)
-        process.send_signal(signal.SIGINT)
-        _, errors = process.communicate(timeout=30)
+        try:
+            wait_until_spinning(executor, reports, process, name)
+        finally:
+            process.send_signal(signal.SIGINT)
+            time.sleep(delay_s)
+            process.send_signal(signal.SIGINT)
+            _, errors = process.communicate(timeout=30)
         assert (process.returncode, 'Traceback' in errors) == (0, False), (delay_s, errors)

@@ -26,6 +26,9 @@ from wctls_ros.rplidar.driver import DriverConfig, DriverState, RplidarDriver  #
 from wctls_ros.rplidar.rplidar_node import RplidarNode  # noqa: E402
 import yaml  # noqa: E402
 
+# One of the suite's slowest modules: make test-fast leaves it out.
+pytestmark = pytest.mark.slow
+
 PACKAGE_DIR = pathlib.Path(__file__).resolve().parents[1]
 
 

@@ -276,7 +276,7 @@ def test_hand_labels_are_the_intersections_of_their_listed_walls(name):
 
 @pytest.mark.parametrize('name', ['sick_lms111_static', 'sick_lms1xx_static'])
 def test_the_shipped_default_meets_the_real_static_targets(name):
-    # Issue 14 on the real static recordings, with what a user gets out of the box: every
+    # The corner targets on the real static recordings, with what a user gets out of the box: every
     # labelled visible corner in >= 95 % of the scans, and >= 80 % of the detections on
     # corners present in most scans (recurrence), for every method.
     from wctls_ros.evaluation import load_scans

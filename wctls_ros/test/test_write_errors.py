@@ -10,6 +10,9 @@ import sys
 import pytest
 from scan_bags import simulated_bag
 
+# One of the suite's slowest modules: make test-fast leaves it out.
+pytestmark = pytest.mark.slow
+
 # Enough for the CSV tables, too little for a figure: the tools fail midway through their output.
 FILE_SIZE_LIMIT_BYTES = 16 * 1024
 

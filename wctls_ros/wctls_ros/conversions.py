@@ -15,7 +15,7 @@ import functools
 import importlib
 import math
 import pathlib
-from typing import Callable, Dict, Optional
+from typing import Any, Callable, Dict, Optional
 
 import numpy as np
 
@@ -86,6 +86,17 @@ class MessageTypes:
         self.float32_array = float32_array
         self.serialize = serialize
         self.deserialize = deserialize
+
+    def __getattr__(self, name: str) -> Any:
+        """
+        Refuse a type that is not one of MESSAGE_TYPES (the others are attributes already).
+
+        Also tells a type checker that ``types.Corner`` and the like exist.
+
+        :param name: the short type name asked for
+        :raises AttributeError: always: the type is not one the codec builds
+        """
+        raise AttributeError(f'{name} is not one of the message types the codec builds')
 
     @classmethod
     def from_rclpy(cls) -> 'MessageTypes':

@@ -9,7 +9,8 @@ publishers both reach it) and publishes ``corners`` (wctls_msgs/CornerArray), ``
 (wctls_msgs/LineSegmentArray) and ``markers`` (visualization_msgs/MarkerArray), each with the
 scan's header. Topic names are relative, so they follow the node's namespace and remappings.
 The input queue holds one scan: a node that falls behind processes the newest scan and counts
-the ones it skipped, in a throttled warning and on ``/diagnostics`` (1 Hz).
+the ones it skipped, in a throttled warning and on ``/diagnostics`` (1 Hz); scans the transport
+lost (DDS's message-lost event) are counted apart.
 
 The scan is taken as its CDR bytes and decoded, and the outputs are built, serialised and
 published as CDR bytes. With rosbags installed its message classes do it, in a fraction of the
@@ -30,6 +31,7 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
@@ -59,8 +61,9 @@ class ScanCounters:
     What happened to the scans, since start-up and since the last diagnostics report.
 
     :ivar processed: scans turned into features and published
-    :ivar skipped: scans overwritten in the one-scan queue before they could be processed
-        (gaps in the publisher's sequence numbers; a count for one publisher on ``scan``)
+    :ivar gaps: scans missing from the publisher's sequence numbers, skipped or lost (counted
+        while one publisher is matched: rclpy does not say which publisher sent a scan)
+    :ivar lost: scans the transport lost (DDS's message-lost event)
     :ivar malformed: scans dropped because they cannot be interpreted (published empty) or
         not even decoded (not published: they have no header to publish with)
     :ivar work_limited: scans on which the per-scan work bound stopped splitting early
@@ -68,10 +71,16 @@ class ScanCounters:
     """
 
     processed: int = 0
-    skipped: int = 0
+    gaps: int = 0
+    lost: int = 0
     malformed: int = 0
     work_limited: int = 0
     seconds: list = field(default_factory=list)
+
+    @property
+    def skipped(self) -> int:
+        """Return the scans overwritten in the one-scan queue (falling behind): gaps not lost."""
+        return max(0, self.gaps - self.lost)
 
 
 class FeatureNode(Node):
@@ -95,8 +104,9 @@ class FeatureNode(Node):
         self.get_logger().info(start_core(on_change=self._on_core_change).describe())
         # The scan arrives as its CDR bytes, decoded with the same classes the outputs are
         # built with (rosbags' decode in about half the time rclpy's take).
-        self._scans = self.create_subscription(LaserScan, 'scan', self._on_scan, SCAN_QOS,
-                                               raw=True)
+        self._scans = self.create_subscription(
+            LaserScan, 'scan', self._on_scan, SCAN_QOS, raw=True,
+            event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_scans_lost))
         self._types = self._message_types()
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
         self.get_logger().info(f'extracting features with {self._config.method} from '
@@ -157,14 +167,19 @@ class FeatureNode(Node):
         for counters in (self._total, self._recent):
             setattr(counters, name, getattr(counters, name) + amount)
 
+    def _on_scans_lost(self, status) -> None:
+        self._count('lost', status.total_count_change)
+
     def _count_skipped(self, info: dict):
-        """Count the scans the one-scan queue dropped: gaps in the publication sequence."""
+        """Count the gaps in the publication sequence: scans skipped (falling behind) or lost."""
         sequence = info.get('publication_sequence_number')
-        if sequence is None:
+        # Each publisher numbers its own messages, and rclpy does not say which one sent a
+        # scan: with several, a gap is not a gap.
+        if sequence is None or self._scans.get_publisher_count() != 1:
+            self._last_sequence = None
             return
         if self._last_sequence is not None and sequence > self._last_sequence + 1:
-            skipped = sequence - self._last_sequence - 1
-            self._count('skipped', skipped)
+            self._count('gaps', sequence - self._last_sequence - 1)
             last = self._recent.seconds[-1:] or [0.0]
             self.get_logger().warning(
                 f'falling behind: {self._total.skipped} scans skipped so far (the last took '
@@ -225,10 +240,11 @@ class FeatureNode(Node):
     def _publish_diagnostics(self):
         recent, self._recent = self._recent, ScanCounters()
         level, message = DiagnosticStatus.OK, 'extracting features'
-        if recent.skipped or recent.malformed or recent.work_limited:
+        if recent.skipped or recent.lost or recent.malformed or recent.work_limited:
             level = DiagnosticStatus.WARN
             message = ', '.join(f'{count} scans {what}' for count, what in (
                 (recent.skipped, 'skipped (falling behind)'),
+                (recent.lost, 'lost in transport'),
                 (recent.malformed, 'dropped (malformed)'),
                 (recent.work_limited, 'over the work bound')) if count)
         elif not recent.processed:
@@ -240,6 +256,9 @@ class FeatureNode(Node):
             'scans processed (last period)': recent.processed,
             'scans processed': self._total.processed,
             'scans skipped (falling behind)': self._total.skipped,
+            'scans lost in transport': self._total.lost,
+            # Sequence gaps say nothing with several publishers on the topic (see above).
+            'scan publishers': self._scans.get_publisher_count(),
             'scans dropped (malformed)': self._total.malformed,
             'scans over the work bound': self._total.work_limited,
             'processing time median (ms)': f'{1e3 * statistics.median(seconds):.2f}',

@@ -114,7 +114,7 @@ def _feature_parameter(name: str) -> Parameter:
     :return: the parameter
     """
     default, limits = getattr(FeatureConfig(), name), field_limits(name)
-    if name.endswith('_rad'):
+    if name.endswith('_rad') and limits is not None:
         description = field_description(name, angle_unit='deg')
         degrees = math.degrees
         return Parameter(name[:-len('_rad')] + '_deg', round(degrees(default), 6),
@@ -176,7 +176,14 @@ FEATURE_NODE = (
               setting='text_ids'),
 )
 
-RPLIDAR_NODE = tuple(Parameter(*row, read_only=True) for row in (
+
+def _read_only(name: str, default: Value, description: str, limits: Optional[Limits] = None,
+               choices: Tuple[str, ...] = ()) -> Parameter:
+    """Return a parameter fixed at start-up."""
+    return Parameter(name, default, description, limits, choices, read_only=True)
+
+
+RPLIDAR_NODE = tuple(_read_only(*row) for row in (
     ('channel_type', 'serial', "Link to the device: 'serial' or 'tcp'", None,
      ('serial', 'tcp')),
     ('serial_port', '/dev/ttyUSB0', 'Serial device of the S1 (a udev symlink such as '
@@ -264,7 +271,9 @@ def feature_settings(values: Dict[str, Value]) -> FeatureSettings:
     :return: the settings
     :raises ValueError: with every reason when the values make no valid configuration
     """
-    config, style, problems = {}, {}, []
+    config: dict = {}
+    style: dict = {}
+    problems: list = []
     for parameter in FEATURE_NODE:
         try:
             value = parameter.check(values[parameter.name])
@@ -293,7 +302,8 @@ def _flatten(parameters: dict, prefix: str = '') -> dict:
 
 def _sections(document: dict, node_name: str) -> list:
     """Return the ros__parameters mappings that apply to the node, wildcards first."""
-    wildcards, own = [], []
+    wildcards: list = []
+    own: list = []
     for key, section in document.items():
         key = str(key)
         name = key.rstrip('/').rsplit('/', 1)[-1]
@@ -353,7 +363,8 @@ def load_parameters(path, node_name: str = 'feature_node',
         raise ConfigError(f'unknown {node_name} parameters {unknown}; known: {sorted(schema)}')
     checked = {name: schema[name].check(value) for name, value in given.items()
                if name in schema}
-    values = defaults(schema.values(), checked.get(SENSOR))
+    sensor = checked.get(SENSOR)
+    values = defaults(schema.values(), sensor if isinstance(sensor, str) else None)
     values.update(checked)
     return values
 

@@ -114,7 +114,7 @@ def parser() -> argparse.ArgumentParser:
                'ENTRY=VALUE, clock, quit. Exit status: 0 after quit or SIGTERM, 2 on a user '
                'error, 130 on Ctrl-C.')
     probability = bounded(float, 0.0, 1.0)
-    p.add_argument('--link', help='symlink to point at the pseudo-terminal, e.g. /tmp/ttyS1 '
+    p.add_argument('--link', help='symlink to point at the pseudo-terminal, e.g. ttyS1 '
                                   '(default: none, only the pty path is printed)')
     p.add_argument('--tcp-port', type=bounded(int, 0, 65535),
                    help='also serve on this TCP port (0 = any free port; S1 TCP: 20108) '

@@ -75,7 +75,7 @@ class _DirectionCache:
     def __init__(self, max_bytes: int):
         self.max_bytes = max_bytes
         self.bytes = 0
-        self._entries = OrderedDict()
+        self._entries: OrderedDict = OrderedDict()
         self._lock = threading.Lock()          # user scripts may extract from several threads
 
     def directions(self, angle_min_rad: float, angle_increment_rad: float, beam_count: int):

@@ -56,7 +56,7 @@ MATCH_SIGMAS = 3.0
 MATCH_FLOOR_M = 0.05
 # A corner recurs when found in at least this share of the scans.
 RECURRING_PRESENCE = 0.9
-# A labelled corner counts as reliably found at this detection rate (issue 14's bar).
+# A labelled corner counts as reliably found at this detection rate (the real data's bar).
 RELIABLE_RATE = 0.95
 # Scans the figure shows at most.
 FIGURE_SCANS = 3

@@ -18,6 +18,7 @@ Compiled loops (numba), one pair of walls at a time.
 """
 
 import math
+from typing import Optional
 
 import numpy as np
 
@@ -54,7 +55,7 @@ def intersect(line_a: np.ndarray, cov_a: np.ndarray, line_b: np.ndarray,
 def find_corners(line: np.ndarray, line_covariance: np.ndarray,
                  start_xy_m: np.ndarray, end_xy_m: np.ndarray, first: np.ndarray,
                  second: np.ndarray, min_angle_rad: float,
-                 line_offset_jacobian: np.ndarray = None,
+                 line_offset_jacobian: Optional[np.ndarray] = None,
                  common_range_sigma_m: float = 0.0) -> CornerSet:
     """
     Intersect the given pairs of segments that are not close to parallel.

@@ -76,25 +76,9 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
                      config: FeatureConfig = _DEFAULT_CONFIG, range_min_m: float = 0.0,
                      range_max_m: float = math.inf) -> Features:
     """
-    Extract straight segments and corners with covariances from one 2D scan.
+    Extract segments and corners from one scan, in compiled loops.
 
-    The scan is a LaserScan's geometry: beam i has bearing angle_min + i * angle_increment and
-    range ``ranges_m[i]``; invalid returns (NaN, +-inf, outside the range limits) are skipped.
-    Steps: adaptive breakpoints, Iterative End Point Fit, merging of collinear neighbours,
-    trimming of the returns at segment ends that fit both walls of a corner or lie off the
-    segment's line together, the configured line fit with its covariance, and the corners of
-    adjacent segments (across the +-pi seam on a full turn) with their propagated (x, y, yaw)
-    covariance.
-
-    :param ranges_m: ranges, shape (N,), m
-    :param angle_min_rad: bearing of the first beam, rad
-    :param angle_increment_rad: bearing step, rad (non-zero, either sign)
-    :param config: the pipeline's settings (noise model, thresholds, method)
-    :param range_min_m: the scan's own range_min (LaserScan.range_min), m
-    :param range_max_m: the scan's own range_max (LaserScan.range_max), m
-    :return: the segments and corners, in scan order
-    :raises wctls_ros.core.ScanError: when the scan geometry makes no sense, or the scan has
-        more than ``config.max_beams`` beams (a ValueError)
+    :func:`wctls_ros.core.extract_features` states the arguments, the result and the errors.
     """
     if np.size(ranges_m) > config.max_beams:
         raise ScanError(f'{np.size(ranges_m)} beams are more than max_beams '

@@ -108,7 +108,9 @@ def breakpoints_of(index, x_m, y_m, range_m, beam_count, step_rad, full_turn, ra
     # The factor for returns 1, 2, ... beams apart, computed once (in the loop, LLVM computed both
     # sines for every return, 5 % of a scan). Only returns at most max_missing_beams + 1 beams
     # apart can be one surface (farther apart is a gap), and none lambda or more apart.
-    factors = np.empty(min(max_missing_beams + 2, int(lambda_rad / step_rad) + 2))
+    # (The minimum is taken in floats: a step of 1e-20 rad makes lambda / step exceed the
+    # largest int64, which int() turns into a negative size.)
+    factors = np.empty(int(min(max_missing_beams + 2.0, lambda_rad / step_rad + 2.0)))
     for beams in range(1, factors.size):
         factors[beams] = _reach_factor(float(beams), step_rad, lambda_rad)
     # Across the seam: the rest of the turn, in increments (about 1).

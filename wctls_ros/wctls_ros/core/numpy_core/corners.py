@@ -20,6 +20,7 @@ second, written out entry by entry, and the rejected pairs are dropped in one st
 """
 
 import math
+from typing import Optional
 
 import numpy as np
 
@@ -113,7 +114,7 @@ def intersect(line_a: np.ndarray, cov_a: np.ndarray, line_b: np.ndarray,
 def find_corners(line: np.ndarray, line_covariance: np.ndarray,
                  start_xy_m: np.ndarray, end_xy_m: np.ndarray, first: np.ndarray,
                  second: np.ndarray, min_angle_rad: float,
-                 line_offset_jacobian: np.ndarray = None,
+                 line_offset_jacobian: Optional[np.ndarray] = None,
                  common_range_sigma_m: float = 0.0) -> CornerSet:
     """
     Intersect the given pairs of segments that are not close to parallel.

@@ -317,7 +317,8 @@ def chains(points: ScanPoints, separated: np.ndarray) -> Chains:
         first = int(np.argmax(points.range_m))
         dx, dy = points.x_m - points.x_m[first], points.y_m - points.y_m[first]
         opposite = (int(np.argmax(dx * dx + dy * dy)) - first) % n
-        start, stop, chain = np.array([1, opposite + 1]), np.array([opposite, n]), np.zeros(2)
+        start, stop = np.array([1, opposite + 1]), np.array([opposite, n])
+        chain = np.zeros(2, dtype=np.intp)
     else:
         first = int(breaks[0]) if n else 0
         start = breaks - first
@@ -450,7 +451,7 @@ def merge_collinear(segments: SegmentRanges, circular: bool, contour_length: int
         used = [False] * count
         absorbed = []
         new_stop, chain_of = stop.copy(), chain.tolist()
-        joined = {}                                # chain -> the chain it joined
+        joined: dict = {}                          # chain -> the chain it joined
 
         def root(label):
             while label in joined:

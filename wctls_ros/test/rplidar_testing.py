@@ -3,13 +3,16 @@
 
 """Helpers shared by the RPLIDAR tests: the emulator and its scene's true ranges."""
 
+import contextlib
 import math
 import re
+import threading
 import time
 
 import numpy as np
-from wctls_ros.rplidar.emulator.device import Faults, S1Device
+from wctls_ros.rplidar.emulator.device import Faults, MODES, S1Device
 from wctls_ros.rplidar.emulator.process import EmulatorProcess
+from wctls_ros.rplidar.emulator.server import Emulator, PtyPort
 from wctls_ros.rplidar.protocol import encode_express_scan
 from wctls_ros.s1_emulator import SimulatedScene
 from wctls_ros.simulation import cast_rays, load_floor_plan, NOISELESS, NoiseModel
@@ -156,12 +159,47 @@ def denseboost_stream(plan='environment_a', seconds=3.0, noisy=False, seed=0, fa
     :param faults: the emulator's fault injection (default: none)
     :return: the capsules' bytes (after the scan descriptor)
     """
+    return emulated_stream(MODES, 1, plan, seconds, noisy, seed, faults)
+
+
+def emulated_stream(modes, mode_id, plan='environment_a', seconds=3.0, noisy=False, seed=0,
+                    faults=None):
+    """
+    Return the bytes an emulated device with ``modes`` streams in one, without waiting for them.
+
+    :param modes: the device's scan modes (e.g. the emulator's ``A_SERIES_MODES``)
+    :param mode_id: the mode streamed
+    :return: the frames' bytes (after the scan descriptor); see :func:`denseboost_stream`
+    """
     rng = np.random.default_rng(seed)
     scene = SimulatedScene(load_floor_plan(plan), None, NoiseModel() if noisy else NOISELESS, rng)
-    device = S1Device(scene, faults or Faults(), (1, 28), rng)
-    device.receive(encode_express_scan(1), 0.0)
+    device = S1Device(scene, faults or Faults(), (1, 28), rng, modes)
+    device.receive(encode_express_scan(mode_id), 0.0)
     # The device keeps at most 0.5 s of frames due: ask in steps.
     return b''.join(device.stream(t) for t in np.arange(0.1, seconds + 0.05, 0.1))
+
+
+@contextlib.contextmanager
+def serving(modes, typical_mode):
+    """
+    Serve a noiseless emulated device with ``modes`` on a pseudo-terminal, in a thread.
+
+    :param modes: its scan modes (e.g. the emulator's ``A_SERIES_MODES``)
+    :param typical_mode: the id of its typical mode (the one the SDK starts)
+    :return: a context manager yielding the terminal's path
+    """
+    scene = SimulatedScene(load_floor_plan('environment_a'), None, NOISELESS,
+                           np.random.default_rng(0))
+    emulator = Emulator(scene, Faults(), (1, 28), 0, PtyPort(None), modes=modes,
+                        typical_mode=typical_mode)
+    thread = threading.Thread(target=emulator.run)
+    thread.start()
+    try:
+        yield emulator.pty.path
+    finally:
+        emulator.commands.put('quit')
+        thread.join()
+        emulator.close()
 
 
 def start_emulator(directory, *options):

@@ -58,7 +58,7 @@ import math
 
 import numpy as np
 
-from .framing import AngleTrack, CapsuleFramer, placeable
+from .framing import AngleTrack, CapsuleFramer, CapsulePlacer, placeable
 from .protocol import (CAPSULE_SIZE, DENSE_RETURN_QUALITY, Samples, SAMPLES_PER_CAPSULE,
                        StreamCounts)
 
@@ -88,9 +88,6 @@ _SIGMA_WINDOW = 512
 _MAD_TO_SIGMA = 1.4826 / math.sqrt(6.0)
 # Steepest surface a neighbour pair may describe: tan(80 degrees) of range per radian.
 _STEEPEST = math.tan(math.radians(80.0))
-# The line counts as damaged while this share of the recent capsules fails (weight 1/32).
-_DAMAGED_SHARE = 0.5
-_DAMAGE_WEIGHT = 1.0 / 32.0
 
 _K = np.arange(SAMPLES_PER_CAPSULE)
 _FRACTIONS = _K / SAMPLES_PER_CAPSULE
@@ -136,8 +133,8 @@ class DenseCapsuleDecoder:
         self._counts = dict.fromkeys(StreamCounts.__dataclass_fields__, 0)
         self._angles = AngleTrack(self._max_sweep_q8, _NOMINAL_SWEEP_Q8)
         self._framer = CapsuleFramer(CAPSULE_SIZE, self._angles, self._counts)
+        self._placer = CapsulePlacer(self._angles, self._framer, self._counts)
         self._last_angle = None
-        self._damage = 0.0
         self._noise = _RangeNoise()
 
     @property
@@ -160,7 +157,7 @@ class DenseCapsuleDecoder:
         if not frames:
             return Samples.concat([])
         after = regions[-1].end
-        self._judge_angles(frames, int(raw[after + 2]) | int(raw[after + 3]) << 8)
+        self._placer.place(frames, int(raw[after + 2]) | int(raw[after + 3]) << 8)
         placed = np.array([placeable(f.placement, f.clean, f.cut) for f in frames])
         self._counts['lost_frames'] += int(np.count_nonzero(~placed))
         distances = self._check_distances(frames, placed)
@@ -226,32 +223,6 @@ class DenseCapsuleDecoder:
         return iter([_Frame(slot, int(row[0]), row[1:], readable, ok, False,
                             offset + start + CAPSULE_SIZE)
                      for slot, row, ok, start in zip(slots, values, clean, starts)])
-
-    def _judge_angles(self, frames: list, next_field: int):
-        """Place each capsule's samples in angle, in stream order (step 3)."""
-        slip = 0
-        for i, frame in enumerate(frames):
-            self._damage += _DAMAGE_WEIGHT * ((not frame.clean) - self._damage)
-            damaged_line = self._damage > _DAMAGED_SHARE
-            after = frames[i + 1] if i + 1 < len(frames) else None
-            frame.slot += slip
-            # On a damaged line a passing checksum does not vouch for a start angle either.
-            placement = self._angles.place(
-                frame.slot, frame.angle_field, frame.clean and not damaged_line,
-                after.slot + slip if after else frame.slot + 1,
-                after.angle_field if after else next_field,
-                bool(after) and after.clean and not damaged_line)
-            if placement.slip:
-                # Whole capsules the stream lost without a trace in its bytes (or that a
-                # resync counted wrongly): the start angles tell how many.
-                slip += placement.slip
-                frame.slot += placement.slip
-                self._counts['frames'] += max(placement.slip, 0)
-                self._counts['lost_frames'] += max(placement.slip, 0)
-            frame.placement = placement
-            self._counts['replaced_angles'] += placement.replaced
-            frame.suspect |= placement.replaced or damaged_line
-        self._framer.slip(slip)
 
     def _check_distances(self, frames: list, placed: np.ndarray) -> np.ndarray:
         """

@@ -26,9 +26,10 @@ common to them all, and handled here:
 
 A decoder of a capsule format keeps a :class:`CapsuleFramer` and an :class:`AngleTrack`, reads
 the samples of each region (realigning those of a region that lost bytes, which depends on the
-format's layout; an overlong region's are unreadable), places each capsule with the track and
-publishes only what :func:`placeable` allows: see
-:class:`~wctls_ros.rplidar.capsules.DenseCapsuleDecoder`.
+format's layout; an overlong region's are unreadable), places each capsule with a
+:class:`CapsulePlacer` and publishes only what :func:`placeable` allows: see
+:class:`~wctls_ros.rplidar.capsules.DenseCapsuleDecoder` and
+:class:`~wctls_ros.rplidar.checked.CheckedCapsuleDecoder`.
 """
 
 from dataclasses import dataclass
@@ -58,6 +59,9 @@ _PREDICTION_REACH = 24
 _FRESH_GAP = 2
 _RESTART_AFTER = 8
 _SWEEP_WEIGHT = 1.0 / 8.0
+# The line counts as damaged while this share of the recent capsules fails (weight 1/32).
+_DAMAGED_SHARE = 0.5
+_DAMAGE_WEIGHT = 1.0 / 32.0
 
 
 def wrap_q8(angle_q8: int) -> int:
@@ -237,6 +241,60 @@ class CapsuleFramer:
         sweep_q8 = self._angles.sweep_deg() * 256.0
         return (abs(wrap_q8(following - this - round(sweeps * sweep_q8)))
                 <= sweep_q8 / _CLEAN_ANGLE_SHARE)
+
+
+class CapsulePlacer:
+    """
+    Places a decoder's capsules in angle, in stream order, with its :class:`AngleTrack`.
+
+    It follows how damaged the line is: while most recent capsules fail their checksum, a
+    passing one vouches for nothing (1 in 256 damaged capsules passes the 8-bit checksum), and
+    every capsule is suspect.
+
+    :param angles: the stream's start angle track
+    :param framer: the stream's framer (told of capsules lost without a trace)
+    :param counts: the decoder's counters (``StreamCounts`` fields), updated in place: frames
+        and lost frames found from the start angles, replaced angles
+    """
+
+    def __init__(self, angles: 'AngleTrack', framer: CapsuleFramer, counts: dict):
+        self._angles = angles
+        self._framer = framer
+        self._counts = counts
+        self._damage = 0.0
+
+    def place(self, frames: list, next_field: int):
+        """
+        Place each capsule, in stream order.
+
+        :param frames: the capsules, records with ``slot``, ``angle_field`` and ``clean``
+            (checksum passed) read, ``placement`` (:class:`Placement`) set and ``suspect``
+            raised here; ``slot`` moves on by the capsules lost before it without a trace
+        :param next_field: the start angle field of the capsule after the last
+        """
+        slip = 0
+        for i, frame in enumerate(frames):
+            self._damage += _DAMAGE_WEIGHT * ((not frame.clean) - self._damage)
+            damaged_line = self._damage > _DAMAGED_SHARE
+            after = frames[i + 1] if i + 1 < len(frames) else None
+            frame.slot += slip
+            # On a damaged line a passing checksum does not vouch for a start angle either.
+            placement = self._angles.place(
+                frame.slot, frame.angle_field, frame.clean and not damaged_line,
+                after.slot + slip if after else frame.slot + 1,
+                after.angle_field if after else next_field,
+                bool(after) and after.clean and not damaged_line)
+            if placement.slip:
+                # Whole capsules the stream lost without a trace in its bytes (or that a
+                # resync counted wrongly): the start angles tell how many.
+                slip += placement.slip
+                frame.slot += placement.slip
+                self._counts['frames'] += max(placement.slip, 0)
+                self._counts['lost_frames'] += max(placement.slip, 0)
+            frame.placement = placement
+            self._counts['replaced_angles'] += placement.replaced
+            frame.suspect |= placement.replaced or damaged_line
+        self._framer.slip(slip)
 
 
 def placeable(placement: 'Placement', clean: bool, region_cut: bool) -> bool:

@@ -62,6 +62,8 @@ class AnswerType(enum.IntEnum):
     SAMPLE_RATE = 0x15
     LIDAR_CONF = 0x20
     MEASUREMENT = 0x81
+    EXPRESS_CAPSULE = 0x82
+    ULTRA_CAPSULE = 0x84
     DENSE_CAPSULE = 0x85
 
 

@@ -9,7 +9,12 @@ answer 0x81 and 1 DenseBoost, 108 us, answer 0x85, typical 1; no answer to RESET
 1.5 s of silence; requests other than STOP, RESET and MOTOR_SPEED are ignored while streaming)
 and streams what a :class:`Scene` shows in real time: every frame is due when its last byte would
 arrive over a 256000-baud line after its samples were measured. Dense capsule distances are
-whole millimetres and standard node distances quarter millimetres.
+whole millimetres and standard node distances quarter millimetres. Given other scan modes (such
+as :data:`A_SERIES_MODES`, an A-series device's) it streams express and ultra capsules too, whose
+samples it measures a distance-dependent angle correction before their place on the capsule's
+grid, as a triangulating device does (for ultra capsules, the offset SLAMTEC's SDK applies to
+the distance sent, where a few passes find it; the distances sent are those the capsule's scale
+and predictions carry).
 
 :class:`Faults` (shared with the server's control commands) corrupts or drops streamed bytes, cuts
 frames short (a run of bytes lost, as when a USB packet or a burst of the UART's input is lost),
@@ -24,16 +29,36 @@ from typing import Optional, Protocol
 
 import numpy as np
 
+from ..express import (encode_express_capsules, EXPRESS_CAPSULE_SIZE,
+                       EXPRESS_MAX_CORRECTION_Q3, EXPRESS_MAX_DISTANCE_MM,
+                       EXPRESS_SAMPLES_PER_CAPSULE)
 from ..protocol import (AnswerType, CAPSULE_SIZE, Command, CONF_COMMANDS_FIRMWARE, ConfType,
                         decode_conf_request, DeviceHealth, DeviceInfo, encode_answer,
                         encode_conf_value, encode_dense_capsules, encode_standard_nodes,
                         FULL_TURN_Q6, HealthStatus, MODE_CONF_TYPES, NODE_SIZE, ProtocolError,
                         RequestParser, ResponseDescriptor, SampleRate, SAMPLES_PER_CAPSULE,
                         ScanMode, SendMode)
+from ..ultra import (encode_ultra_capsules, offset_deg, ULTRA_CAPSULE_SIZE, ULTRA_MAX_DISTANCE_MM,
+                     ULTRA_SAMPLES_PER_CAPSULE, varbitscale_decode, varbitscale_encode)
 
 MODES = (ScanMode(0, 'Standard', 244.0, 40.0, AnswerType.MEASUREMENT),
          ScanMode(1, 'DenseBoost', 108.0, 40.0, AnswerType.DENSE_CAPSULE))
 TYPICAL_MODE = 1
+# An A-series device's modes (the S1's have no express or ultra capsules): Standard, Express
+# (0x82) and Boost (0x84).
+A_SERIES_MODES = (ScanMode(0, 'Standard', 500.0, 12.0, AnswerType.MEASUREMENT),
+                  ScanMode(1, 'Express', 250.0, 12.0, AnswerType.EXPRESS_CAPSULE),
+                  ScanMode(2, 'Boost', 125.0, 12.0, AnswerType.ULTRA_CAPSULE))
+# Passes measuring each ultra capsule sample where the offset of the distance it sends puts it.
+_ULTRA_PASSES = 3
+# A triangulating device's laser sits beside its lens: the angle it measures at lies
+# atan(baseline / distance) before where the capsule's angles place a sample.
+TRIANGULATION_BASELINE_MM = 20.0
+# Per answer type of a scan mode: samples per frame and frame size, bytes.
+_FRAMES = {AnswerType.MEASUREMENT: (1, NODE_SIZE),
+           AnswerType.EXPRESS_CAPSULE: (EXPRESS_SAMPLES_PER_CAPSULE, EXPRESS_CAPSULE_SIZE),
+           AnswerType.ULTRA_CAPSULE: (ULTRA_SAMPLES_PER_CAPSULE, ULTRA_CAPSULE_SIZE),
+           AnswerType.DENSE_CAPSULE: (SAMPLES_PER_CAPSULE, CAPSULE_SIZE)}
 MODEL_S1M1 = 0x61
 HARDWARE = 18
 SERIAL_NUMBER = b'WCTLS-S1-EMULATR'
@@ -164,9 +189,15 @@ class S1Device:
     :param faults: shared fault settings
     :param firmware: (major, minor)
     :param rng: random generator (rotation phase, faults)
+    :param modes: its scan modes (mode i is ``modes[i]``; the first is Standard): the S1's, or
+        e.g. :data:`A_SERIES_MODES`
+    :param typical_mode: the id of its typical mode
     """
 
-    def __init__(self, scene: Scene, faults: Faults, firmware: tuple, rng: np.random.Generator):
+    def __init__(self, scene: Scene, faults: Faults, firmware: tuple, rng: np.random.Generator,
+                 modes: tuple = MODES, typical_mode: int = TYPICAL_MODE):
+        self._modes = modes
+        self._typical_mode = typical_mode
         self._scene = scene
         self._faults = faults
         self._firmware = firmware
@@ -209,9 +240,9 @@ class S1Device:
         elif self._mode is not None:
             return b''      # busy streaming: only STOP, RESET and MOTOR_SPEED are heard
         elif command in (Command.SCAN, Command.FORCE_SCAN):
-            return self._start(MODES[0], now_s)
-        elif command == Command.EXPRESS_SCAN and payload and payload[0] < len(MODES):
-            return self._start(MODES[payload[0]], now_s)
+            return self._start(self._modes[0], now_s)
+        elif command == Command.EXPRESS_SCAN and payload and payload[0] < len(self._modes):
+            return self._start(self._modes[payload[0]], now_s)
         elif command == Command.GET_INFO:
             return encode_answer(AnswerType.DEVICE_INFO, DeviceInfo(
                 MODEL_S1M1, self._firmware[1], self._firmware[0], HARDWARE,
@@ -222,7 +253,8 @@ class S1Device:
                                  DeviceHealth(self._faults.health, code).encode())
         elif command == Command.GET_SAMPLERATE:
             return encode_answer(AnswerType.SAMPLE_RATE, SampleRate(
-                int(MODES[0].us_per_sample), int(MODES[1].us_per_sample)).encode())
+                int(self._modes[0].us_per_sample),
+                int(self._modes[min(1, len(self._modes) - 1)].us_per_sample)).encode())
         elif command == Command.GET_LIDAR_CONF and self._firmware >= CONF_COMMANDS_FIRMWARE:
             return self._conf_answer(payload)
         return b''
@@ -234,15 +266,16 @@ class S1Device:
         except ProtocolError:
             return b''
         if conf_type in MODE_CONF_TYPES:
-            if mode_id is None or mode_id >= len(MODES):
+            if mode_id is None or mode_id >= len(self._modes):
                 return encode_answer(AnswerType.LIDAR_CONF, encode_conf_value(conf_type, None))
-            mode = MODES[mode_id]
+            mode = self._modes[mode_id]
             value = {ConfType.US_PER_SAMPLE: mode.us_per_sample,
                      ConfType.MAX_DISTANCE: mode.max_distance_m,
                      ConfType.ANSWER_TYPE: mode.answer_type,
                      ConfType.MODE_NAME: mode.name}[conf_type]
         else:
-            value = {ConfType.MODE_COUNT: len(MODES), ConfType.TYPICAL_MODE: TYPICAL_MODE,
+            value = {ConfType.MODE_COUNT: len(self._modes),
+                     ConfType.TYPICAL_MODE: self._typical_mode,
                      ConfType.DESIRED_ROTATION: (DEFAULT_RPM, 0)}.get(conf_type)
         value = self._faults.conf_answers.get(conf_type, value)
         return encode_answer(AnswerType.LIDAR_CONF, encode_conf_value(conf_type, value))
@@ -252,14 +285,13 @@ class S1Device:
         self._mode = mode
         self._start_s = now_s
         self._sent = 0
-        self._samples_per_frame = (SAMPLES_PER_CAPSULE
-                                   if mode.answer_type == AnswerType.DENSE_CAPSULE else 1)
-        self._frame_size = CAPSULE_SIZE if self._samples_per_frame > 1 else NODE_SIZE
+        self._samples_per_frame, self._frame_size = _FRAMES[mode.answer_type]
         self._frame_s = self._samples_per_frame * mode.us_per_sample * 1e-6
         rpm = self._rpm or DEFAULT_RPM
         # Whole 1/64 degrees per frame keep every sample on one exact, uniform angle grid.
         self._step_q6 = round(rpm / 60.0 * FULL_TURN_Q6 * self._frame_s)
         self._previous_angle_q6 = None
+        self._next_ultra_mm = None          # the next ultra capsule's first distance, decided
         return ResponseDescriptor(self._frame_size, SendMode.MULTIPLE, mode.answer_type).encode()
 
     def _stop(self):
@@ -315,6 +347,10 @@ class S1Device:
         start_q6 = (self._phase_q6 + frames * self._step_q6) % FULL_TURN_Q6
         if self._mode.answer_type == AnswerType.DENSE_CAPSULE:
             data = self._capsules(frames, start_q6)
+        elif self._mode.answer_type == AnswerType.EXPRESS_CAPSULE:
+            data = self._express_capsules(frames, start_q6)
+        elif self._mode.answer_type == AnswerType.ULTRA_CAPSULE:
+            data = self._ultra_capsules(frames, start_q6)
         else:
             data = self._nodes(start_q6)
         return self._inject_faults(data)
@@ -327,6 +363,53 @@ class S1Device:
         distances[distances > 0xFFFF] = 0
         return encode_dense_capsules(start_q6, distances.reshape(angles.shape),
                                      frames == 0)
+
+    def _express_capsules(self, frames: np.ndarray, start_q6: np.ndarray) -> bytes:
+        """Encode express capsules: sample k of capsule i at start_i + k * step / 32 - dk."""
+        offsets = np.arange(EXPRESS_SAMPLES_PER_CAPSULE) / EXPRESS_SAMPLES_PER_CAPSULE
+        uniform = (start_q6[:, None] + self._step_q6 * offsets) / 64.0
+        ahead = np.maximum(self._scene.distances_mm(uniform.reshape(-1) % 360.0), 1.0)
+        correction_q3 = np.minimum(np.rint(8.0 * np.degrees(np.arctan(
+            TRIANGULATION_BASELINE_MM / ahead))), EXPRESS_MAX_CORRECTION_Q3).reshape(uniform.shape)
+        angles = (uniform - correction_q3 / 8.0) % 360.0
+        distances = np.rint(self._scene.distances_mm(angles.reshape(-1)))
+        distances[distances > EXPRESS_MAX_DISTANCE_MM] = 0
+        return encode_express_capsules(start_q6, distances.reshape(angles.shape), correction_q3,
+                                       frames == 0)
+
+    def _ultra_capsules(self, frames: np.ndarray, start_q6: np.ndarray) -> bytes:
+        """Encode ultra capsules: sample k of capsule i at start_i + k * step / 96 - offset."""
+        offsets = np.arange(ULTRA_SAMPLES_PER_CAPSULE) / ULTRA_SAMPLES_PER_CAPSULE
+        # The capsules' samples and the next capsule's first, whose major the last cabin needs.
+        uniform = np.append((start_q6[:, None] + self._step_q6 * offsets).reshape(-1),
+                            start_q6[-1] + self._step_q6) / 64.0
+        sent = np.zeros(uniform.size)
+        for _ in range(_ULTRA_PASSES):
+            distances = np.rint(self._scene.distances_mm((uniform - offset_deg(sent)) % 360.0))
+            distances[distances > ULTRA_MAX_DISTANCE_MM] = 0
+            if self._next_ultra_mm is not None:
+                distances[0] = self._next_ultra_mm
+            data, sent = self._encode_ultra(start_q6, frames == 0, distances)
+        # Where the offset of the distance sent keeps moving the sample (an edge, or a distance
+        # where the offset steps), the scene there may not show that distance: then the sample
+        # is sent as no return.
+        seen = self._scene.distances_mm((uniform - offset_deg(sent)) % 360.0)
+        step = 1 << varbitscale_decode(varbitscale_encode(sent))[1]
+        astray = (sent > 0) & (np.abs(seen - sent) > step / 2 + 1)
+        astray[0] &= self._next_ultra_mm is None
+        distances[astray] = 0
+        data, _ = self._encode_ultra(start_q6, frames == 0, distances)
+        self._next_ultra_mm = distances[-1]
+        return data
+
+    @staticmethod
+    def _encode_ultra(start_q6: np.ndarray, start_flag: np.ndarray, distances: np.ndarray):
+        """Encode capsules and the next one's first distance; return bytes, distances sent."""
+        data, sent = encode_ultra_capsules(
+            start_q6, distances[:-1].reshape(len(start_q6), ULTRA_SAMPLES_PER_CAPSULE),
+            start_flag, distances[-1])
+        return data, np.append(sent.reshape(-1),
+                               varbitscale_decode(varbitscale_encode(distances[-1]))[0])
 
     def _nodes(self, angle_q6: np.ndarray) -> bytes:
         """Encode standard nodes, S set on the first node of each turn."""

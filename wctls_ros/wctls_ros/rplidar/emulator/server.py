@@ -24,7 +24,7 @@ from typing import Optional
 
 import numpy as np
 
-from .device import Faults, S1Device, Scene
+from .device import Faults, MODES, S1Device, Scene, TYPICAL_MODE
 from ..protocol import HealthStatus
 
 _POLL_S = 0.001
@@ -104,10 +104,15 @@ class Emulator:
     :param seed: random seed
     :param pty_port: the pseudo-terminal (closed by :meth:`close`)
     :param listener: a listening TCP socket, or None (closed by :meth:`close`)
+    :param modes: the devices' scan modes (see :class:`~.device.S1Device`)
+    :param typical_mode: the id of their typical mode
     """
 
     def __init__(self, scene: Scene, faults: Faults, firmware: tuple, seed: int,
-                 pty_port: PtyPort, listener: Optional[socket.socket] = None):
+                 pty_port: PtyPort, listener: Optional[socket.socket] = None,
+                 modes: tuple = MODES, typical_mode: int = TYPICAL_MODE):
+        self._modes = modes
+        self._typical_mode = typical_mode
         self._scene = scene
         self._faults = faults
         self._firmware = firmware
@@ -119,7 +124,8 @@ class Emulator:
         self.commands = queue.Queue()
 
     def _new_device(self) -> S1Device:
-        return S1Device(self._scene, self._faults, self._firmware, self._rng)
+        return S1Device(self._scene, self._faults, self._firmware, self._rng, self._modes,
+                        self._typical_mode)
 
     def run(self):
         """Serve until a ``quit`` command (or a signal)."""

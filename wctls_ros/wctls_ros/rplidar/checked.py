@@ -1,0 +1,222 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""
+A capsule decoder that publishes only the samples a checksum vouches for (pure).
+
+Every capsule format shares the framing (:mod:`~wctls_ros.rplidar.framing`): the sync nibbles,
+the checksum (XOR of the bytes after the first two, its nibbles beside the sync nibbles) and the
+start angle. :class:`CheckedCapsuleDecoder` frames a stream of any of them, so that a capsule
+cut short is followed at once by the next one, and judges start angles by their sequence. It
+reads a capsule's samples with its format's :class:`CapsuleLayout` and publishes their
+distances only when the checksum passed on a line not otherwise damaged and the start angle is
+in sequence; other capsules placed in angle are published as no return (counted as rejected
+samples). Unlike the dense decoder it neither realigns the samples of a capsule that lost
+bytes nor keeps the plausible distances of one that failed its checksum.
+
+Sample k of N in a capsule lies at ``start + k * sweep / N - correction_k``: the sweep is the
+angle to the next capsule's start, and the correction, which formats without one leave at 0,
+is the layout's. A turn starts where the uncorrected angles fall back (the corrections may be
+larger than the step between samples).
+"""
+
+from typing import Optional
+
+import numpy as np
+
+from .framing import AngleTrack, CapsuleFramer, CapsulePlacer, placeable
+from .protocol import DENSE_RETURN_QUALITY, Samples, StreamCounts
+
+# The sweep assumed until one is measured: the turn at 10 Hz, degrees per second.
+_NOMINAL_DEG_PER_S = 3600.0
+_NO_ANGLE_FIELD = 0x7FFF       # a start angle field beyond 360 degrees: no angle
+
+
+class CapsuleLayout:
+    """
+    What a capsule format's bytes after the start angle mean (a subclass per format).
+
+    :cvar size: bytes per capsule
+    :cvar samples: samples per capsule
+    :cvar reads_successor: a capsule's last samples are read with its successor's first bytes
+    """
+
+    size = 0
+    samples = 0
+    reads_successor = False
+
+    def read(self, capsules: np.ndarray, successors: Optional[np.ndarray]) -> tuple:
+        """
+        Read the samples of intact capsules.
+
+        :param capsules: shape (n, size), uint8
+        :param successors: the capsule after each, shape (n, size), uint8, for a layout that
+            reads its successor; a row of zeros where the successor is unknown
+        :return: ``(distance_mm, correction_deg)``, each of shape (n, samples): distances
+            (0: no return; negative: unreadable) and angle corrections
+        """
+        raise NotImplementedError
+
+
+def checksum_passes(capsules: np.ndarray) -> np.ndarray:
+    """
+    Tell which capsules carry their sync nibbles and checksum.
+
+    :param capsules: shape (n, size), uint8
+    :return: shape (n,), bool
+    """
+    received = (capsules[:, 0] & 0x0F) | (capsules[:, 1] << 4)
+    return (((capsules[:, 0] >> 4) == 0xA) & ((capsules[:, 1] >> 4) == 0x5)
+            & (received == np.bitwise_xor.reduce(capsules[:, 2:], axis=1)))
+
+
+def with_checksum(capsules: np.ndarray) -> bytes:
+    """
+    Set the sync nibbles and checksum of capsules whose other bytes are laid out.
+
+    :param capsules: shape (n, size), uint8, changed in place
+    :return: their bytes
+    """
+    sums = np.bitwise_xor.reduce(capsules[:, 2:], axis=1)
+    capsules[:, 0] = 0xA0 | (sums & 0x0F)
+    capsules[:, 1] = 0x50 | (sums >> 4)
+    return capsules.tobytes()
+
+
+class _Frame:
+    """One capsule once framed (mutable working record of the decoder)."""
+
+    __slots__ = ('slot', 'angle_field', 'raw', 'clean', 'cut', 'end', 'placement', 'suspect')
+
+    def __init__(self, slot, angle_field, raw, clean, cut, end):
+        self.slot = slot
+        self.angle_field = angle_field
+        self.raw = raw                  # its bytes when it is whole, else None
+        self.clean = clean
+        self.cut = cut
+        self.end = end
+        self.placement = None
+        self.suspect = not clean
+
+
+class CheckedCapsuleDecoder:
+    """
+    Incremental decoder of one capsule format that resynchronises capsule by capsule.
+
+    A subclass per format names its ``FRAME_SIZE`` (bytes) and ``SAMPLES_PER_FRAME``.
+
+    :param layout: the format's layout
+    :param us_per_sample: the scan mode's microseconds per sample (sets the sweep limit)
+    :param max_distance_m: the mode's farthest range; distances beyond are rejected
+    """
+
+    def __init__(self, layout: CapsuleLayout, us_per_sample: float, max_distance_m: float):
+        self._layout = layout
+        # As the dense decoder's (the SDK's for dense capsules): a capsule's sweep at 100 Hz.
+        max_sweep_q8 = (360 * 100 * layout.samples
+                        // max(1000000 // max(int(us_per_sample), 1), 1)) << 8
+        nominal_q8 = round(_NOMINAL_DEG_PER_S * layout.samples * us_per_sample * 1e-6 * 256.0)
+        self._max_mm = int(max_distance_m * 1000.0)
+        self._counts = dict.fromkeys(StreamCounts.__dataclass_fields__, 0)
+        self._angles = AngleTrack(max_sweep_q8, min(max(nominal_q8, 1), max_sweep_q8))
+        self._framer = CapsuleFramer(layout.size, self._angles, self._counts)
+        self._placer = CapsulePlacer(self._angles, self._framer, self._counts)
+        self._pending = []              # a placed capsule waiting for its successor's bytes
+        self._last_uniform_deg = None
+        self._fractions = np.arange(layout.samples) / layout.samples
+
+    @property
+    def counts(self) -> StreamCounts:
+        """Return what the decoder has met so far (capsules, damage, losses)."""
+        return StreamCounts(**self._counts)
+
+    def feed(self, data: bytes) -> Samples:
+        """
+        Decode what the next received chunk completes.
+
+        A capsule is decoded once the header and start angle of the capsule after it have
+        arrived (with a layout that reads its successor, once the capsule after it is framed).
+
+        :param data: the next received bytes, any length
+        :return: the samples decoded, in stream order
+        """
+        raw, regions, offset = self._framer.split(data)
+        frames = self._frame(raw, regions, offset)
+        if frames:
+            after = regions[-1].end
+            self._placer.place(frames, int(raw[after + 2]) | int(raw[after + 3]) << 8)
+        placed = [f for f in frames if placeable(f.placement, f.clean, f.cut)]
+        self._counts['lost_frames'] += len(frames) - len(placed)
+        if not self._layout.reads_successor:
+            return self._samples(placed, [None] * len(placed))
+        placed = self._pending + placed
+        if not placed:
+            return Samples.concat([])
+        published, self._pending = placed[:-1], placed[-1:]
+        following = {f.slot: f for f in placed}
+        return self._samples(published, [following.get(f.slot + 1) for f in published])
+
+    def _frame(self, raw: np.ndarray, regions: list, offset: int) -> list:
+        """
+        Cut regions into capsules.
+
+        A capsule of a region that lost or gained bytes is unreadable; only the first one's
+        start angle, behind the header framing verified, is known.
+
+        :param raw: the bytes held by the framer
+        :param regions: the complete regions in them
+        :param offset: the stream offset of ``raw[0]``
+        :return: the capsules, a list of ``_Frame``
+        """
+        size = self._layout.size
+        frames = []
+        for pos, count, end, slot, lost, cut in regions:
+            for j in range(count):
+                at = pos + size * j
+                frame_end = offset + min(end, at + size)
+                if not lost:
+                    capsule = raw[at:at + size].copy()
+                    frames.append(_Frame(slot + j, int(capsule[2]) | int(capsule[3]) << 8,
+                                         capsule, bool(checksum_passes(capsule[None])[0]),
+                                         False, frame_end))
+                    continue
+                field = int(raw[pos + 2]) | int(raw[pos + 3]) << 8 if j == 0 else _NO_ANGLE_FIELD
+                frames.append(_Frame(slot + j, field, None, False, cut or lost < 0, frame_end))
+        self._counts['frames'] += len(frames)
+        self._counts['damaged_frames'] += sum(not f.clean for f in frames)
+        return frames
+
+    def _samples(self, frames: list, successors: list) -> Samples:
+        """Lay out the placed capsules' samples; reject those not vouched for."""
+        count, per = len(frames), self._layout.samples
+        if not count:
+            return Samples.concat([])
+        # A successor's first bytes count only when its checksum vouches for them.
+        blank = np.zeros(self._layout.size, np.uint8)
+        whole = [f.raw if f.raw is not None else blank for f in frames]
+        after = [s.raw if s is not None and s.raw is not None and s.clean else blank
+                 for s in successors]
+        distances, corrections = self._layout.read(
+            np.array(whole), np.array(after) if self._layout.reads_successor else None)
+        readable = np.array([f.raw is not None for f in frames])[:, None] & (distances >= 0)
+        vouched = readable & ~np.array([f.suspect for f in frames])[:, None]
+        keep = (vouched & (distances <= self._max_mm)) | (readable & (distances == 0))
+        self._counts['rejected_samples'] += int(np.count_nonzero(~keep))
+        distance = np.where(keep, distances, 0).reshape(-1).astype(np.float64)
+        starts = np.array([f.placement.start_q8 for f in frames], np.float64)
+        sweeps = np.array([f.placement.sweep_q8 for f in frames], np.float64)
+        uniform = np.mod((starts[:, None] + sweeps[:, None] * self._fractions).reshape(-1)
+                         / 256.0, 360.0)
+        previous = np.concatenate([[-np.inf if self._last_uniform_deg is None
+                                    else self._last_uniform_deg], uniform[:-1]])
+        self._last_uniform_deg = uniform[-1]
+        self._counts['samples'] += uniform.size
+        k = np.tile(np.arange(per), count)
+        return Samples(angle_deg=np.mod(uniform - np.where(readable, corrections, 0.0).reshape(-1),
+                                        360.0),
+                       distance_mm=distance,
+                       quality=np.where(distance > 0, DENSE_RETURN_QUALITY, 0).astype(np.uint8),
+                       start=uniform < previous,
+                       frame_end=np.repeat([f.end for f in frames], per),
+                       samples_after=per - 1 - k,
+                       slot=np.repeat([f.slot for f in frames], per) * per + k)

@@ -14,8 +14,8 @@ child's ru_maxrss, from wait4) and its wall time. Each child runs under an addre
 MemoryError instead of swapping the machine; the table says so.
 
 With ``--baseline SRC`` the same runs use the ``wctls_ros`` package of another source tree
-(e.g. ``git archive <commit> wctls_ros | tar -x -C /tmp/old``, then ``--baseline
-/tmp/old/wctls_ros``) in this tree's environment, for a before/after table in one run.
+(e.g. ``git archive <commit> wctls_ros | tar -x -C OLD``, then ``--baseline
+OLD/wctls_ros``) in this tree's environment, for a before/after table in one run.
 
 Usage: python bench_memory.py [--scans N ...] [--limit-gb G] [--baseline SRC]
 """

@@ -91,7 +91,8 @@ class FeatureConfig:
     max_beams: int = _setting(
         100000, 'refuse scans with more beams than this (a ScanError: the node drops the scan '
         'with a warning); the time per scan grows linearly, about 0.5-1 ms per 10 000 beams '
-        'with the compiled pipeline on a 2-core VM (bench_core.py), ten times that with numpy',
+        'with the compiled pipeline on a 2-core VM, about five times that with numpy '
+        '(bench_core.py)',
         Limits(1, 10 ** 7))
     range_min_m: float = _setting(
         0.0, 'ignore returns closer than this (besides the scan range_min), m',

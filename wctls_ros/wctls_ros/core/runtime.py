@@ -6,9 +6,9 @@ Which implementation of the feature pipeline runs: the compiled one (numba) or t
 
 Both compute the same features: the tests hold them to the same segments and corners, every
 value within 1e-9 relative, on every scan of the test corpus. The compiled one
-(:mod:`.numba_core`) takes about a tenth of the numpy one's time per scan (``SPEEDUP``), but it
-needs numba (``OLDEST_NUMBA`` or newer) and compiles once per machine, about 15 s on a 2-core VM,
-after which it loads from numba's disk cache in well under a second. The numpy one
+(:mod:`.numba_core`) takes about a twentieth of the numpy one's time per scan (``SPEEDUP``), but
+it needs numba (``OLDEST_NUMBA`` or newer) and compiles once per machine, 12-45 s on a 2-core VM,
+after which it loads from numba's disk cache in about a second. The numpy one
 (:mod:`.numpy_core`) needs numpy alone.
 
 The environment variable ``WCTLS_ROS_CORE`` chooses:
@@ -49,8 +49,9 @@ CHOICES = ('auto', 'numba', 'numpy')
 OLDEST_NUMBA = (0, 60, 0)
 INSTALL_NUMBA = f"pip install 'numba>={'.'.join(map(str, OLDEST_NUMBA))}'"
 # The numpy core's time per 1080-beam room scan over the compiled core's, measured side by side
-# by benchmark/bench_core.py --cores (docs/performance.md).
-SPEEDUP = 10
+# in alternating processes by benchmark/bench_core.py (18x; 11x at 4320 beams, 30x on 541-beam
+# SICK scans: docs/performance.md).
+SPEEDUP = 20
 
 
 class CoreUnavailable(RuntimeError):
@@ -90,7 +91,7 @@ class CoreStatus:
             meanwhile = (f'; the numpy one serves meanwhile (about {SPEEDUP}x slower per scan)'
                          if self.pending else '')
             return ('compiling the feature pipeline for this machine in another process, '
-                    f'about 15 s once per machine{meanwhile}')
+                    f'15-45 s once per machine{meanwhile}')
         if self.pending:
             return ('numpy feature pipeline for now: the compiled one is loading in the '
                     'background')

@@ -31,7 +31,8 @@ OLDEST_TESTS := $(addprefix wctls_ros/test/,test_core_compiled_pipeline.py test_
 STOCK_VENV := .venv-stock
 STOCK_STAMP := $(STOCK_VENV)/.deps.stamp
 STOCK_TESTS := $(addprefix wctls_ros/test/,stock_install_checks.py test_stock_install.py \
-                 test_feature_node.py test_params.py test_rplidar_node.py \
+                 test_core_pipeline.py \
+                 test_feature_node.py test_node_startup.py test_params.py test_rplidar_node.py \
                  test_rplidar_emulator.py test_rplidar_protocol.py test_rplidar_capsules.py \
                  test_rplidar_scan.py)
 

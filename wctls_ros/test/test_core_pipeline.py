@@ -12,8 +12,6 @@ import numpy as np
 import pytest
 from wctls_ros.core import (extract_features, FeatureConfig, fit_lines, nees, scan_to_points,
                             ScanError, segment_returns)
-from wctls_ros.core.numba_core.segmentation import (breakpoints_of, pass_budget, split_iepf,
-                                                    trim_ambiguous)
 from wctls_ros.simulation import (floor_plan_from_dict, full_turn_bearings, NOISELESS,
                                   NoiseModel, simulate_ranges)
 from wctls_ros.simulation.adversarial import peeling_wall
@@ -23,6 +21,11 @@ ROOM = {'name': 'room', 'polylines': [
     'boxes': [{'center': [2.6, 2.0], 'size': [0.4, 0.4]}]}
 SMALL_NOISE = NoiseModel(range_sigma_m=0.01, bearing_sigma_rad=math.radians(0.05))
 SMALL_NOISE_CONFIG = FeatureConfig(range_sigma_m=0.01, bearing_sigma_rad=math.radians(0.05))
+
+
+def compiled_segmentation():
+    """Return the compiled segmentation kernels (skipped where numba is missing: a stock run)."""
+    return pytest.importorskip('wctls_ros.core.numba_core.segmentation')
 
 
 def room_scan(pose=(1.6, 1.1, 0.3), noise=SMALL_NOISE, seed=0, beams=1080, plan=ROOM):
@@ -238,9 +241,11 @@ def test_a_peeling_wall_would_need_a_level_per_two_returns_and_gets_the_budget()
     x = ranges * np.cos(angle_min + increment * np.arange(2000))
     y = ranges * np.sin(angle_min + increment * np.arange(2000))
     # The crafted scan really is the worst case: unbounded, IEPF would split ~1000 times deep.
-    assert levels_of_textbook_iepf(x, y, 0.04) > 900 > pass_budget(2000) == 30
-    starts, stops, _, cut_short = split_iepf(x, y, np.array([0]), np.array([2000]), np.array([0]),
-                                             np.full(2000, 0.04), pass_budget(2000))
+    segmentation = compiled_segmentation()
+    budget = segmentation.pass_budget(2000)
+    assert levels_of_textbook_iepf(x, y, 0.04) > 900 > budget == 30
+    starts, stops, _, cut_short = segmentation.split_iepf(
+        x, y, np.array([0]), np.array([2000]), np.array([0]), np.full(2000, 0.04), budget)
     assert cut_short
     # What is left is straight: every kept piece lies within the threshold of its chord.
     for start, stop in zip(starts, stops):
@@ -387,9 +392,9 @@ def breaks_of(ranges, increment=math.radians(0.5), max_missing_beams=3):
     """Return the breakpoints of a scan centred on the x axis, 1 cm noise model."""
     bearing_min = -(len(ranges) // 2) * increment
     points = scan_to_points(ranges, bearing_min, increment)
-    return Breaks(*breakpoints_of(points.index, points.x_m, points.y_m, points.range_m,
-                                  points.beam_count, abs(increment), points.full_turn, 0.01, 0.0,
-                                  math.radians(10), max_missing_beams))
+    return Breaks(*compiled_segmentation().breakpoints_of(
+        points.index, points.x_m, points.y_m, points.range_m, points.beam_count, abs(increment),
+        points.full_turn, 0.01, 0.0, math.radians(10), max_missing_beams))
 
 
 def test_breakpoints_follow_the_adaptive_rule():
@@ -512,8 +517,8 @@ def test_trimming_a_segment_that_crosses_the_end_of_the_contour_keeps_it_in_rang
     along = np.where(position < 30, position + n, position)     # unwrapped positions
     x = np.where(along < 148, 1.0 - (148 - along) * 0.011, 1.0)
     y = np.where(along < 148, 2.0, 2.0 + (along - 148) * 0.011)
-    start, stop, _ = trim_ambiguous(np.array([30, 149]), np.array([148, 180]), np.array([0, 0]),
-                                    True, x, y, np.array([math.pi / 2, 0.0]), np.array([2.0, 1.0]),
-                                    0.01, 0.0, 8)
+    start, stop, _ = compiled_segmentation().trim_ambiguous(
+        np.array([30, 149]), np.array([148, 180]), np.array([0, 0]), True, x, y,
+        np.array([math.pi / 2, 0.0]), np.array([2.0, 1.0]), 0.01, 0.0, 8)
     assert start.tolist() == [30, 1]
     assert stop.tolist() == [146, 30]

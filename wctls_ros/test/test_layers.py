@@ -65,7 +65,7 @@ def package_files():
 def test_every_module_of_the_package_is_on_the_map():
     layers = map_layers()
     missing = sorted({unit_of(path) for path in package_files()} - set(layers))
-    assert not missing, f'not in docs/architecture.md\'s package map: {missing}'
+    assert not missing, f"not in docs/architecture.md's package map: {missing}"
 
 
 def test_no_import_runs_upward():

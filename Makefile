@@ -36,7 +36,7 @@ STOCK_TESTS := $(addprefix wctls_ros/test/,stock_install_checks.py test_stock_in
                  test_rplidar_emulator.py test_rplidar_protocol.py test_rplidar_capsules.py \
                  test_rplidar_scan.py)
 
-.PHONY: help deps build demo test test-fast lint bench results docs clean
+.PHONY: help deps build demo test test-fast lint bench results docs golden clean
 
 help:
 	@echo 'make demo   set up, then run the S1 emulator, driver and feature node live for ~20 s'
@@ -47,6 +47,7 @@ help:
 	@echo 'make bench  run the benchmarks and print their figures'
 	@echo 'make results  regenerate docs/results (evaluation of simulated and real static scans)'
 	@echo 'make docs   regenerate the parameter tables of docs/user_guide.md from the schema'
+	@echo 'make golden re-record the test corpus features (wctls_ros/test/golden/) after a rule change'
 	@echo 'make clean  remove the build, the install space and the outputs (keeps .venv)'
 
 deps: $(DEPS_STAMP)
@@ -111,6 +112,9 @@ results: $(BUILD_STAMP)
 
 docs: $(BUILD_STAMP)
 	$(WITH_ENV) python -m wctls_ros.params --write docs/user_guide.md
+
+golden: $(BUILD_STAMP)
+	$(WITH_ENV) python wctls_ros/test/golden_features.py --write
 
 clean:
 	rm -rf build install log out

@@ -129,6 +129,13 @@ print(json.dumps({'core': status().name, 'corners': corners, 'changes': changes,
 """
 
 
+AFTER_WARM_UP = """
+from wctls_ros.core import warm_up
+warm_up()
+print(json.dumps({'core': status().name, 'pending': status().pending}), flush=True)
+"""
+
+
 def test_a_cold_start_answers_with_numpy_at_once_then_switches_to_the_compiled_core(tmp_path):
     first, switched = run_first_scan(tmp_path, after=AFTER_SWITCH)
     # Answered by numpy while numba compiled in another process (which takes 10-200 s here).
@@ -142,6 +149,9 @@ def test_a_cold_start_answers_with_numpy_at_once_then_switches_to_the_compiled_c
     again, after = run_first_scan(tmp_path, after=AFTER_SWITCH)
     assert again['pending'] and after['core'] == 'numba' and not after['compiled_here']
     assert len(after['changes']) == 1 and 'loaded in' in after['changes'][0]
+    # warm_up() after a start in the background waits for it.
+    _, waited = run_first_scan(tmp_path, after=AFTER_WARM_UP)
+    assert waited == {'core': 'numba', 'pending': False}
 
 
 KEEP_RUNNING = """

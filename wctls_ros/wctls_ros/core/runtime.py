@@ -108,6 +108,8 @@ _extract: Callable[..., Features] = numpy_core.extract_features
 _status: Optional[CoreStatus] = None
 _compiler: Optional[subprocess.Popen] = None
 _listeners: List[Listener] = []
+# Set once nothing is pending any more (the background thread has ended, or there was none).
+_settled = threading.Event()
 
 
 def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
@@ -208,7 +210,8 @@ def start(wait: bool = False, on_change: Optional[Listener] = None,
     to fork workers, a build step. Ctrl-C and SIGTERM are honoured while waiting, and the
     compile process ends with this one, however this one ends.
 
-    :param wait: load or compile the compiled core before returning
+    :param wait: load or compile the compiled core before returning (also when an earlier call
+        started it in the background)
     :param on_change: called (from another thread) with each later status: when a compile
         starts, and when the compiled core serves or has failed
     :param give_up: with ``wait``, asked ten times a second during a compile whether to stop
@@ -222,29 +225,42 @@ def start(wait: bool = False, on_change: Optional[Listener] = None,
         if _status is not None:
             if _status.pending and on_change is not None:
                 _listeners.append(on_change)
+            if not (_status.pending and wait):
+                return _status
+        else:
+            _status = _choose(wait, on_change, give_up)
+            if not _status.pending:
+                _settled.set()
             return _status
-        asked = choice()
-        if asked == 'numpy':
-            _status = CoreStatus('numpy', f'{CORE_VARIABLE}=numpy')
-            return _status
-        problem = numba_problem()
-        if problem is not None:
-            if asked == 'numba':
-                raise CoreUnavailable(f'{CORE_VARIABLE}=numba, but {problem} ({INSTALL_NUMBA})')
-            _status = CoreStatus('numpy', problem, advice=INSTALL_NUMBA)
-            return _status
-        if wait or asked == 'numba':
-            def compiling() -> None:
-                if on_change is not None:
-                    on_change(CoreStatus('numpy', 'compiling the compiled core', compiling=True))
-            _status = _bring_in_compiled(asked, on_compile=compiling, give_up=give_up)
-            return _status
-        _status = CoreStatus('numpy', 'loading the compiled core', pending=True)
-        if on_change is not None:
-            _listeners.append(on_change)
-        threading.Thread(target=_bring_in_compiled_in_background, name='wctls_ros core',
-                         daemon=True).start()
-        return _status
+    # Started in the background before, waited for now.
+    while not _settled.wait(timeout=0.1):
+        if give_up is not None and give_up():
+            break
+    return _status
+
+
+def _choose(wait: bool, on_change: Optional[Listener],
+            give_up: Optional[Callable[[], bool]]) -> CoreStatus:
+    """Make :func:`start`'s first choice (called holding the lock); return the status."""
+    asked = choice()
+    if asked == 'numpy':
+        return CoreStatus('numpy', f'{CORE_VARIABLE}=numpy')
+    problem = numba_problem()
+    if problem is not None:
+        if asked == 'numba':
+            raise CoreUnavailable(f'{CORE_VARIABLE}=numba, but {problem} ({INSTALL_NUMBA})')
+        return CoreStatus('numpy', problem, advice=INSTALL_NUMBA)
+    if wait or asked == 'numba':
+        def compiling() -> None:
+            if on_change is not None:
+                on_change(CoreStatus('numpy', 'compiling the compiled core', compiling=True))
+        return _bring_in_compiled(asked, on_compile=compiling, give_up=give_up)
+    if on_change is not None:
+        _listeners.append(on_change)
+    # The thread's first status change waits for this lock, so it comes after this status.
+    threading.Thread(target=_bring_in_compiled_in_background, name='wctls_ros core',
+                     daemon=True).start()
+    return CoreStatus('numpy', 'loading the compiled core', pending=True)
 
 
 def warm_up() -> float:
@@ -311,6 +327,8 @@ def _tell(new: CoreStatus) -> None:
             _listeners.clear()
     for listener in listeners:
         listener(new)
+    if not new.pending:
+        _settled.set()
 
 
 def _first_line(error: BaseException) -> str:

@@ -100,8 +100,6 @@ class FeatureNode(Node):
         self._total, self._recent = ScanCounters(), ScanCounters()
         self._last_sequence = None
         self._frame_id = ''
-        # Never waits for a compile: the numpy pipeline serves until the compiled one is ready.
-        self.get_logger().info(start_core(on_change=self._on_core_change).describe())
         # The scan arrives as its CDR bytes, decoded with the same classes the outputs are
         # built with (rosbags' decode in about half the time rclpy's take).
         self._scans = self.create_subscription(
@@ -111,6 +109,9 @@ class FeatureNode(Node):
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
         self.get_logger().info(f'extracting features with {self._config.method} from '
                                f'{self.resolve_topic_name("scan")}')
+        # Last, so that its thread importing numba does not slow the node's own start. Never
+        # waits for a compile: the numpy pipeline serves until the compiled one is ready.
+        self.get_logger().info(start_core(on_change=self._on_core_change).describe())
 
     def _message_types(self) -> MessageTypes:
         """Choose the classes the scan is decoded and the outputs built with: rosbags' if fit."""

@@ -9,8 +9,8 @@ publishers both reach it) and publishes ``corners`` (wctls_msgs/CornerArray), ``
 (wctls_msgs/LineSegmentArray) and ``markers`` (visualization_msgs/MarkerArray), each with the
 scan's header. Topic names are relative, so they follow the node's namespace and remappings.
 The input queue holds one scan: a node that falls behind processes the newest scan and counts
-the ones it skipped, in a throttled warning and on ``/diagnostics`` (1 Hz); scans the transport
-lost (DDS's message-lost event) are counted apart.
+the ones it skipped (from the publisher's sequence numbers: skipped while busy or lost on the
+way), in a throttled warning and on ``/diagnostics`` (1 Hz), with DDS's own count of lost scans.
 
 The scan is taken as its CDR bytes and decoded, and the outputs are built, serialised and
 published as CDR bytes. With rosbags installed its message classes do it, in a fraction of the
@@ -61,9 +61,11 @@ class ScanCounters:
     What happened to the scans, since start-up and since the last diagnostics report.
 
     :ivar processed: scans turned into features and published
-    :ivar gaps: scans missing from the publisher's sequence numbers, skipped or lost (counted
-        while one publisher is matched: rclpy does not say which publisher sent a scan)
-    :ivar lost: scans the transport lost (DDS's message-lost event)
+    :ivar skipped: scans missing from the publisher's sequence numbers: overwritten in the
+        one-scan queue while the node was busy, or lost on the way (rclpy cannot tell which);
+        counted while one publisher is matched (rclpy does not say which publisher sent a scan)
+    :ivar lost: scans DDS reports lost (its message-lost event; Fast DDS counts a best-effort
+        scan replaced in the queue as lost too, so these overlap with ``skipped``)
     :ivar malformed: scans dropped because they cannot be interpreted (published empty) or
         not even decoded (not published: they have no header to publish with)
     :ivar work_limited: scans on which the per-scan work bound stopped splitting early
@@ -71,16 +73,11 @@ class ScanCounters:
     """
 
     processed: int = 0
-    gaps: int = 0
+    skipped: int = 0
     lost: int = 0
     malformed: int = 0
     work_limited: int = 0
     seconds: list = field(default_factory=list)
-
-    @property
-    def skipped(self) -> int:
-        """Return the scans overwritten in the one-scan queue (falling behind): gaps not lost."""
-        return max(0, self.gaps - self.lost)
 
 
 class FeatureNode(Node):
@@ -172,7 +169,7 @@ class FeatureNode(Node):
         self._count('lost', status.total_count_change)
 
     def _count_skipped(self, info: dict):
-        """Count the gaps in the publication sequence: scans skipped (falling behind) or lost."""
+        """Count the gaps in the publication sequence: scans skipped while busy, or lost."""
         sequence = info.get('publication_sequence_number')
         # Each publisher numbers its own messages, and rclpy does not say which one sent a
         # scan: with several, a gap is not a gap.
@@ -180,11 +177,12 @@ class FeatureNode(Node):
             self._last_sequence = None
             return
         if self._last_sequence is not None and sequence > self._last_sequence + 1:
-            self._count('gaps', sequence - self._last_sequence - 1)
+            self._count('skipped', sequence - self._last_sequence - 1)
             last = self._recent.seconds[-1:] or [0.0]
             self.get_logger().warning(
-                f'falling behind: {self._total.skipped} scans skipped so far (the last took '
-                f'{1e3 * last[0]:.1f} ms); the newest scan is processed, never a backlog',
+                f'falling behind or losing scans: {self._total.skipped} scans skipped so far '
+                f'(the last took {1e3 * last[0]:.1f} ms); the newest scan is processed, never a '
+                'backlog',
                 throttle_duration_sec=WARN_PERIOD_S)
         self._last_sequence = sequence
 
@@ -241,11 +239,10 @@ class FeatureNode(Node):
     def _publish_diagnostics(self):
         recent, self._recent = self._recent, ScanCounters()
         level, message = DiagnosticStatus.OK, 'extracting features'
-        if recent.skipped or recent.lost or recent.malformed or recent.work_limited:
+        if recent.skipped or recent.malformed or recent.work_limited:
             level = DiagnosticStatus.WARN
             message = ', '.join(f'{count} scans {what}' for count, what in (
-                (recent.skipped, 'skipped (falling behind)'),
-                (recent.lost, 'lost in transport'),
+                (recent.skipped, 'skipped (busy or lost)'),
                 (recent.malformed, 'dropped (malformed)'),
                 (recent.work_limited, 'over the work bound')) if count)
         elif not recent.processed:
@@ -256,8 +253,8 @@ class FeatureNode(Node):
             'method': self._config.method,
             'scans processed (last period)': recent.processed,
             'scans processed': self._total.processed,
-            'scans skipped (falling behind)': self._total.skipped,
-            'scans lost in transport': self._total.lost,
+            'scans skipped (busy or lost)': self._total.skipped,
+            'scans lost (DDS message-lost events)': self._total.lost,
             # Sequence gaps say nothing with several publishers on the topic (see above).
             'scan publishers': self._scans.get_publisher_count(),
             'scans dropped (malformed)': self._total.malformed,

@@ -24,6 +24,8 @@ import shutil
 import sys
 import tempfile
 
+from .stop_signals import held
+
 USER_ERROR = 2
 
 
@@ -81,14 +83,19 @@ def staged_folder(out_dir):
     """
     out = pathlib.Path(out_dir)
     out.parent.mkdir(parents=True, exist_ok=True)
-    staging = pathlib.Path(tempfile.mkdtemp(prefix=f'.partial-{out.name}-', dir=out.parent))
+    staging = None
     try:
+        # A stop signal between making the folder and naming it here would leave it behind.
+        with held():
+            staging = pathlib.Path(tempfile.mkdtemp(prefix=f'.partial-{out.name}-',
+                                                    dir=out.parent))
         yield staging
         out.mkdir(exist_ok=True)
         for item in sorted(staging.iterdir()):
             os.replace(item, out / item.name)
     finally:
-        shutil.rmtree(staging, ignore_errors=True)
+        if staging is not None:
+            shutil.rmtree(staging, ignore_errors=True)
 
 
 def start_core(prog: str, wait: bool = False, give_up=None):

@@ -14,6 +14,9 @@ import contextlib
 import signal
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+# Within :func:`held` a stop signal waits (its number here) and is raised when the block ends.
+_holding = 0
+_waiting: list = []
 
 
 class Stopped(Exception):
@@ -29,9 +32,35 @@ def raise_stopped(number: int, _frame) -> None:
     Raise :class:`Stopped` (a signal handler).
 
     :param number: the signal
-    :raises Stopped: always
+    :raises Stopped: at once, or when the :func:`held` block around it ends
     """
+    if _holding:
+        _waiting.append(number)
+        return
     raise Stopped(number)
+
+
+@contextlib.contextmanager
+def held():
+    """
+    Let a stop signal wait until the block has run, then raise :class:`Stopped`.
+
+    For a few steps that must happen together, e.g. creating a staging folder and remembering
+    it for its removal: a signal between the two would leave the folder behind.
+
+    :return: nothing (a context manager)
+    :raises Stopped: when a stop signal arrived during the block
+    """
+    global _holding
+    _holding += 1
+    try:
+        yield
+    finally:
+        _holding -= 1
+    if not _holding and _waiting:
+        number = _waiting[0]
+        _waiting.clear()
+        raise Stopped(number)
 
 
 @contextlib.contextmanager

@@ -94,18 +94,20 @@ def range_band(low_rad, high_rad):
             np.maximum(ends.max(axis=1), highest).reshape(low_rad.shape))
 
 
-def compensated_beam_bands():
+def compensated_beam_bands(multiple=3):
     """
-    Return the scene's range band of each beam of a 1080-beam (DenseBoost) compensated scan.
+    Return the scene's range band of each beam of a compensated scan of ``360 * multiple`` beams.
 
-    Beam i is bin b = 1079 - i, holding the last sample with raw angle in [(b - 2) / 3,
-    (b + 1) / 3) degrees; its laser bearing is pi - raw.
+    With k = ``multiple`` bins per degree (3 in DenseBoost: 1080 beams), beam i is bin
+    b = 360 k - 1 - i, holding the last sample with raw angle in [(b - k + 1) / k, (b + 1) / k)
+    degrees; its laser bearing is pi - raw.
 
+    :param multiple: bins per degree
     :return: (lowest, highest) range per beam, m
     """
-    raw_bin = 1079 - np.arange(1080)
-    return range_band(math.pi - np.radians((raw_bin + 1) / 3),
-                      math.pi - np.radians((raw_bin - 2) / 3))
+    raw_bin = 360 * multiple - 1 - np.arange(360 * multiple)
+    return range_band(math.pi - np.radians((raw_bin + 1) / multiple),
+                      math.pi - np.radians((raw_bin - multiple + 1) / multiple))
 
 
 def ros_minus_monotonic_s():

@@ -7,11 +7,14 @@ The RPLIDAR session on a background thread: handshake, scanning, turn assembly a
 A session stops any stale stream (STOP, then drain), reads the device info and health, lists the
 scan modes (GET_LIDAR_CONF; GET_SAMPLERATE on firmware older than 1.24), sets the motor speed and
 starts the requested mode (the typical one by default: DenseBoost on the S1). It then decodes the
-stream and hands every complete turn to a callback, on this thread.
+stream with the decoder of the mode's answer type (standard nodes 0x81, express capsules 0x82,
+ultra capsules 0x84, dense capsules 0x85) and hands every complete turn to a callback, on this
+thread.
 
 The handshake's answers carry no checksum: a scan mode's sample time and range and the number
-of modes are checked for plausibility, and an implausible value is replaced (the S1's own; the
-Standard mode every RPLIDAR has for an implausible mode list) with a warning, so that a damaged
+of modes are checked for plausibility, and an implausible value is replaced (the S1's own, an
+A-series device's sample time for express and ultra capsules; the Standard mode every RPLIDAR
+has for an implausible mode list) with a warning, so that a damaged
 answer neither stalls the driver nor empties its scans.
 
 Recovery, without ever ending the thread: a link that cannot be opened or breaks (unplugged
@@ -31,6 +34,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from .capsules import DenseCapsuleDecoder
+from .express import ExpressCapsuleDecoder
 from .protocol import (AnswerType, Command, CONF_COMMANDS_FIRMWARE, ConfType, decode_conf_value,
                        DESCRIPTOR_SIZE, DeviceHealth, DeviceInfo, encode_conf_request,
                        encode_express_scan, encode_motor_speed, encode_request, find_descriptor,
@@ -38,6 +42,7 @@ from .protocol import (AnswerType, Command, CONF_COMMANDS_FIRMWARE, ConfType, de
                        StandardNodeDecoder, StreamCounts)
 from .transport import drain, LinkError, SerialLink, TcpLink
 from .turns import TurnAssembler
+from .ultra import UltraCapsuleDecoder
 
 ANSWER_TIMEOUT_S = 1.0
 RESET_WAIT_S = 2.0             # an S1 is silent for about 2 s after RESET
@@ -59,11 +64,19 @@ LEGACY_MAX_DISTANCE_M = 16.0       # what the SDK assumes for devices without GE
 PLAUSIBLE_US_PER_SAMPLE = (10.0, 5000.0)
 PLAUSIBLE_MAX_DISTANCE_M = (1.0, 65.535)
 MAX_SCAN_MODES = 16
-# What replaces an implausible value: the S1's.
-S1_US_PER_SAMPLE = {AnswerType.MEASUREMENT: 244.0, AnswerType.DENSE_CAPSULE: 108.0}
+# What replaces an implausible sample time, by the mode's answer type: the S1's for standard
+# nodes and dense capsules; for the capsules an S1 does not stream, an A-series device's 4 kHz
+# Express and 8 kHz Boost. An implausible range is replaced by the S1's.
+FALLBACK_US_PER_SAMPLE = {AnswerType.MEASUREMENT: 244.0, AnswerType.DENSE_CAPSULE: 108.0,
+                          AnswerType.EXPRESS_CAPSULE: 250.0, AnswerType.ULTRA_CAPSULE: 125.0}
 S1_MAX_DISTANCE_M = 40.0
 _CHUNK_LOG_SIZE = 256
-_DECODED_ANSWERS = (AnswerType.MEASUREMENT, AnswerType.DENSE_CAPSULE)
+# The capsule decoder of each capsule answer type (started by EXPRESS_SCAN with the mode's id,
+# built with the mode's sample time and range); standard nodes are started by SCAN.
+CAPSULE_DECODERS = {AnswerType.EXPRESS_CAPSULE: ExpressCapsuleDecoder,
+                    AnswerType.ULTRA_CAPSULE: UltraCapsuleDecoder,
+                    AnswerType.DENSE_CAPSULE: DenseCapsuleDecoder}
+_DECODED_ANSWERS = (AnswerType.MEASUREMENT, *CAPSULE_DECODERS)
 
 
 @dataclass(frozen=True)
@@ -158,7 +171,7 @@ class GiveUp(Exception):
 
 def plausible_mode(mode: ScanMode) -> tuple:
     """
-    Replace a scan mode's implausible sample time or range with the S1's.
+    Replace a scan mode's implausible sample time (by its answer type) or range (the S1's).
 
     :param mode: the mode as the device described it
     :return: ``(mode, warnings)``: the mode to use and a line per value replaced
@@ -167,8 +180,8 @@ def plausible_mode(mode: ScanMode) -> tuple:
     us_per_sample, max_distance_m = mode.us_per_sample, mode.max_distance_m
     low, high = PLAUSIBLE_US_PER_SAMPLE
     if not low <= us_per_sample <= high:
-        us_per_sample = S1_US_PER_SAMPLE.get(mode.answer_type,
-                                             S1_US_PER_SAMPLE[AnswerType.MEASUREMENT])
+        us_per_sample = FALLBACK_US_PER_SAMPLE.get(
+            mode.answer_type, FALLBACK_US_PER_SAMPLE[AnswerType.MEASUREMENT])
         warnings.append(f'mode {mode.name!r}: {mode.us_per_sample:g} us/sample (plausible: '
                         f'{low:g}-{high:g}): using {us_per_sample:g}')
     low, high = PLAUSIBLE_MAX_DISTANCE_M
@@ -484,7 +497,7 @@ class RplidarDriver:
             request, decoder = encode_request(Command.SCAN), StandardNodeDecoder()
         else:
             request = encode_express_scan(mode.mode_id)
-            decoder = DenseCapsuleDecoder(mode.us_per_sample, mode.max_distance_m)
+            decoder = CAPSULE_DECODERS[mode.answer_type](mode.us_per_sample, mode.max_distance_m)
         descriptor, data = self._request(link, request, mode.answer_type,
                                          f'{mode.name} scan descriptor')
         if descriptor.send_mode != SendMode.MULTIPLE or descriptor.length != decoder.FRAME_SIZE:

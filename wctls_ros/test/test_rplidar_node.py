@@ -216,6 +216,37 @@ def test_an_unknown_scan_mode_is_a_clear_error_that_lists_the_modes(executor, ro
     assert not listener.scans
 
 
+def test_serial_baudrate_0_finds_the_rate_the_device_answers_at(executor, ros_context,
+                                                                own_emulator, capfd):
+    # The emulator hears only a client that set 460800 baud on its terminal.
+    device = own_emulator('--baudrate', '460800')
+    node, listener = start(executor, ros_context, serial_port=device.link, serial_baudrate=0,
+                           angle_compensate=False)
+    scan = collect(executor, listener, 2)[-1]
+    np.testing.assert_allclose(scan.ranges, true_ranges(bearings(scan)), atol=1e-3)
+    assert node.driver.status().link.endswith('@ 460800 baud')
+    assert 'answered GET_INFO at 460800 baud' in capfd.readouterr().err
+
+
+def test_serial_baudrate_0_without_an_answer_at_any_rate_says_so_in_one_line(
+        executor, ros_context, own_emulator, capfd):
+    device = own_emulator('--baudrate', '9600')
+    node, listener = start(executor, ros_context, serial_port=device.link, serial_baudrate=0)
+    assert spin_until(executor, lambda: 'at any rate' in node.driver.status().message, 5.0)
+    lines = [line for line in capfd.readouterr().err.splitlines() if 'at any rate' in line]
+    assert len(lines) == 1 and '115200, 256000, 460800, 1000000 baud' in lines[0]
+    assert not listener.scans
+
+
+def test_a_fixed_serial_baudrate_the_device_does_not_hear_gets_no_answer(executor, ros_context,
+                                                                         own_emulator):
+    device = own_emulator('--baudrate', '115200')
+    node, listener = start(executor, ros_context, serial_port=device.link)
+    assert spin_until(executor, lambda: 'no answer to GET_INFO' in node.driver.status().message,
+                      5.0)
+    assert not listener.scans
+
+
 def test_old_firmware_falls_back_to_the_standard_mode_from_get_samplerate(
         executor, ros_context, own_emulator):
     device = own_emulator('--firmware', '1.20')

@@ -9,6 +9,7 @@ builds the scene from :mod:`wctls_ros.simulation` and injects it. A sample at ra
 angle theta is the range along the laser-frame bearing pi - theta, so a driver publishing
 sllidar_ros2's angle = pi - theta sees the plan in REP-103 orientation.
 
+``--baudrate RATE`` answers on the pseudo-terminal only when its client set that rate.
 Faults for testing recovery: ``--corrupt-rate`` / ``--drop-rate`` (per streamed byte),
 ``--cut-rate`` (per streamed frame: a run of bytes lost from a random one to the frame's end),
 ``--silent-after``/``--silent-for``, ``--health warning|error``, ``--conf-answer ENTRY=VALUE``
@@ -116,6 +117,10 @@ def parser() -> argparse.ArgumentParser:
     probability = bounded(float, 0.0, 1.0)
     p.add_argument('--link', help='symlink to point at the pseudo-terminal, e.g. ttyS1 '
                                   '(default: none, only the pty path is printed)')
+    p.add_argument('--baudrate', type=bounded(int, 1),
+                   help='answer on the pseudo-terminal only when its client set this rate, '
+                        'bits per second, as a real device hears only its own (Linux) '
+                        '(default: any rate)')
     p.add_argument('--tcp-port', type=bounded(int, 0, 65535),
                    help='also serve on this TCP port (0 = any free port; S1 TCP: 20108) '
                         '(default: no TCP)')
@@ -213,9 +218,10 @@ def _serve(args):
     if args.link:
         _check_link(args.link)
     try:
-        pty_port = PtyPort(args.link)
+        pty_port = PtyPort(args.link, args.baudrate)
     except OSError as error:
-        raise UserError(f'--link {args.link}: {error.strerror or error}') from None
+        option = '--link' if args.baudrate is None else '--link/--baudrate'
+        raise UserError(f'{option} {args.link}: {error.strerror or error}') from None
     listener = None
     if args.tcp_port is not None:
         try:

@@ -45,6 +45,11 @@ from .turns import TurnAssembler
 from .ultra import UltraCapsuleDecoder
 
 ANSWER_TIMEOUT_S = 1.0
+# serial_baudrate 0: probe the rates of the RPLIDAR family with GET_INFO, answered within
+# milliseconds by a device at the right rate.
+AUTO_BAUDRATE = 0
+PROBED_BAUDRATES = (115200, 256000, 460800, 1000000)
+PROBE_TIMEOUT_S = 0.3
 RESET_WAIT_S = 2.0             # an S1 is silent for about 2 s after RESET
 BACKOFF_FIRST_S = 0.05
 BACKOFF_MAX_S = 2.0
@@ -86,7 +91,8 @@ class DriverConfig:
 
     :ivar channel_type: ``'serial'`` or ``'tcp'``
     :ivar serial_port: serial device path
-    :ivar serial_baudrate: bits per second (S1: 256000)
+    :ivar serial_baudrate: bits per second (S1: 256000); :data:`AUTO_BAUDRATE` (0) probes
+        :data:`PROBED_BAUDRATES`
     :ivar tcp_ip: address for ``'tcp'``
     :ivar tcp_port: port for ``'tcp'``
     :ivar scan_mode: scan mode name; ``''`` = the device's typical mode
@@ -287,8 +293,8 @@ class RplidarDriver:
     def _run(self):
         while not self._closing.is_set():
             try:
-                link = self._link_factory(self._config)
-            except LinkError as error:
+                link = self._open()
+            except (LinkError, DeviceError, ProtocolError) as error:
                 self._update(state=DriverState.CONNECTING, message=str(error))
                 self._log.warning(f'{error}; retrying', throttle_duration_sec=LOG_THROTTLE_S)
                 self._back_off()
@@ -315,6 +321,37 @@ class RplidarDriver:
                 link.close()
             if failed:
                 self._back_off()
+
+    def _open(self):
+        """
+        Open the configured link; with an automatic serial rate, the first rate that answers.
+
+        :return: the open link
+        :raises LinkError: when the port cannot be opened
+        :raises DeviceError: when no probed rate gets an answer to GET_INFO
+        """
+        config = self._config
+        if config.channel_type != 'serial' or config.serial_baudrate != AUTO_BAUDRATE:
+            return self._link_factory(config)
+        for baudrate in PROBED_BAUDRATES:
+            link = self._link_factory(replace(config, serial_baudrate=baudrate))
+            try:
+                self._stop_stream(link)
+                self._ask(link, Command.GET_INFO, AnswerType.DEVICE_INFO,
+                          timeout_s=PROBE_TIMEOUT_S)
+            except (DeviceError, ProtocolError):
+                link.close()
+                continue
+            except BaseException:
+                link.close()
+                raise
+            self._log.info(f'serial_baudrate 0: {config.serial_port} answered GET_INFO at '
+                           f'{baudrate} baud (probed {", ".join(map(str, PROBED_BAUDRATES))})')
+            return link
+        raise DeviceError(f'no answer to GET_INFO at any rate ('
+                          f'{", ".join(map(str, PROBED_BAUDRATES))} baud) on '
+                          f'{config.serial_port}: not an RPLIDAR, or not powered (a weak USB '
+                          'port cannot run it), or a wrong port or cable')
 
     def _back_off(self):
         """Wait before the next attempt after a failure; double the wait for the one after."""
@@ -385,20 +422,22 @@ class RplidarDriver:
         link.write(encode_request(Command.RESET))
         self._closing.wait(RESET_WAIT_S)
 
-    def _read_more(self, link, deadline: float, what: str) -> bytes:
-        """Read the next bytes before ``deadline`` or raise :class:`DeviceError`."""
+    def _read_more(self, link, deadline: float, what: str,
+                   timeout_s: float = ANSWER_TIMEOUT_S) -> bytes:
+        """Read the next bytes before ``deadline`` (``timeout_s`` after the request) or raise."""
         remaining = deadline - time.monotonic()
         data = link.read(remaining) if remaining > 0 else b''
         if not data:
-            raise DeviceError(f'no {what} within {ANSWER_TIMEOUT_S:g} s on {link.name}: check '
+            raise DeviceError(f'no {what} within {timeout_s:g} s on {link.name}: check '
                               'the port, serial_baudrate (S1: 256000), the cable and the power '
                               '(a weak USB port cannot run the S1)')
         return data
 
-    def _request(self, link, request: bytes, answer_type: int, what: str) -> tuple:
+    def _request(self, link, request: bytes, answer_type: int, what: str,
+                 timeout_s: float = ANSWER_TIMEOUT_S) -> tuple:
         """Send a request; return the answer's descriptor and the bytes received after it."""
         link.write(request)
-        deadline = time.monotonic() + ANSWER_TIMEOUT_S
+        deadline = time.monotonic() + timeout_s
         buffer = b''
         while True:
             descriptor, end = find_descriptor(buffer)
@@ -408,16 +447,17 @@ class RplidarDriver:
                 # Stale bytes that look like another answer: search on past their sync.
                 buffer = buffer[end - DESCRIPTOR_SIZE + 1:]
                 continue
-            buffer = buffer[end:] + self._read_more(link, deadline, what)
+            buffer = buffer[end:] + self._read_more(link, deadline, what, timeout_s)
 
-    def _ask(self, link, command: int, answer_type: int, request: bytes = b'') -> bytes:
-        """Send a request and return its single answer's payload."""
+    def _ask(self, link, command: int, answer_type: int, request: bytes = b'',
+             timeout_s: float = ANSWER_TIMEOUT_S) -> bytes:
+        """Send a request and return its single answer's payload (within ``timeout_s``, s)."""
         what = f'answer to {Command(command).name}'
         descriptor, payload = self._request(link, request or encode_request(command),
-                                            answer_type, what)
-        deadline = time.monotonic() + ANSWER_TIMEOUT_S
+                                            answer_type, what, timeout_s)
+        deadline = time.monotonic() + timeout_s
         while len(payload) < descriptor.length:
-            payload += self._read_more(link, deadline, what)
+            payload += self._read_more(link, deadline, what, timeout_s)
         return payload[:descriptor.length]
 
     def _conf(self, link, conf_type: int, mode: Optional[int] = None):

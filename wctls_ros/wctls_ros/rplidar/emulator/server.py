@@ -11,8 +11,15 @@ one more per TCP client. Control lines (``unplug``, ``replug``, ``silent SECONDS
 (the pty device's sample clock: when and at what angle each sample of its stream is measured),
 ``quit``) are queued on :attr:`Emulator.commands` and each is acknowledged with one line on
 standard output.
+
+A pseudo-terminal carries the line settings its client sets, the rate too: a port given a rate
+answers only a client that set it (the bytes at any other rate are ignored, as a device does not
+understand a request sent at the wrong rate). The rate is read with the termios2 ioctl, so only
+on Linux; elsewhere a port given a rate refuses to start.
 """
 
+import array
+import fcntl
 import os
 import pty
 import queue
@@ -28,6 +35,11 @@ from .device import Faults, MODES, S1Device, Scene, TYPICAL_MODE
 from ..protocol import HealthStatus
 
 _POLL_S = 0.001
+# Linux's TCGETS2 (asm-generic ioctls, as pyserial uses them) and the offset of c_ospeed in the
+# struct termios2 it fills: four flag words, c_line, 19 control characters, then c_ispeed.
+_TCGETS2 = 0x802C542A
+_TERMIOS2_WORDS = 11
+_OSPEED_WORD = 10
 
 
 class PtyPort:
@@ -39,12 +51,35 @@ class PtyPort:
     fail, as when a USB adapter is pulled); ``plug`` opens a new terminal behind the same link.
 
     :param link: symlink path to (re)point at the terminal, or None
+    :param baudrate: the only rate, bits per second, its client is heard at (None: any)
     """
 
-    def __init__(self, link: Optional[str]):
+    def __init__(self, link: Optional[str], baudrate: Optional[int] = None):
         self._link = link
+        self.baudrate = baudrate
         self.fd = None
         self.plug()
+        if baudrate is not None:
+            self.client_baudrate()      # fails at once where the rate cannot be read
+
+    def client_baudrate(self) -> int:
+        """
+        Return the rate the client set on the terminal.
+
+        :return: bits per second
+        :raises OSError: where the termios2 ioctl is missing (not Linux)
+        """
+        settings = array.array('I', [0] * _TERMIOS2_WORDS)
+        fcntl.ioctl(self.fd, _TCGETS2, settings)
+        return settings[_OSPEED_WORD]
+
+    def hears_client(self) -> bool:
+        """
+        Tell whether the client's bytes arrive at the port's rate.
+
+        :return: True without a rate of its own or when the client set it
+        """
+        return self.baudrate is None or self.client_baudrate() == self.baudrate
 
     def plug(self) -> str:
         """
@@ -156,7 +191,8 @@ class Emulator:
                 data = os.read(source, 4096)
             except (BlockingIOError, OSError):
                 return
-            self.pty.write(self._pty_device.receive(data, now_s))
+            if self.pty.hears_client():
+                self.pty.write(self._pty_device.receive(data, now_s))
             return
         try:
             data = source.recv(4096)

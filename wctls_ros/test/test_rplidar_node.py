@@ -205,15 +205,20 @@ def test_stop_motor_and_start_motor(executor, ros_context, emulator):
     collect(executor, listener, 2)
 
 
-def test_an_unknown_scan_mode_is_a_clear_error_that_lists_the_modes(executor, ros_context,
-                                                                    emulator):
-    node, listener = start(executor, ros_context, serial_port=emulator.link, scan_mode='Turbo')
+def test_an_unknown_scan_mode_falls_back_to_the_typical_one_with_a_warning_listing_the_modes(
+        executor, ros_context, emulator, capfd):
+    node, listener = start(executor, ros_context, serial_port=emulator.link, scan_mode='Turbo',
+                           angle_compensate=False)
+    scan = collect(executor, listener, 2)[-1]
+    assert len(scan.ranges) in (926, 927)              # DenseBoost, the S1's typical mode
+    np.testing.assert_allclose(scan.ranges, true_ranges(bearings(scan)), atol=1e-3)
+    assert node.driver.status().mode.name == 'DenseBoost'
+    warning = [line for line in capfd.readouterr().err.splitlines() if 'Turbo' in line]
+    assert warning and "'Turbo' is not supported" in warning[0]
+    assert "typical mode 'DenseBoost'" in warning[0] and 'Standard' in warning[0]
     assert spin_until(executor, lambda: any(
-        d.level == DiagnosticStatus.ERROR for d in listener.diagnostics), 3.0)
-    message = listener.diagnostics[-1].message
-    assert "'Turbo' is not supported" in message
-    assert 'Standard' in message and 'DenseBoost' in message
-    assert not listener.scans
+        'Turbo' in d.message and d.level == DiagnosticStatus.WARN
+        for d in listener.diagnostics), 2.0)
 
 
 def test_serial_baudrate_0_finds_the_rate_the_device_answers_at(executor, ros_context,

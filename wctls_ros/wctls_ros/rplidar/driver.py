@@ -6,7 +6,8 @@ The RPLIDAR session on a background thread: handshake, scanning, turn assembly a
 
 A session stops any stale stream (STOP, then drain), reads the device info and health, lists the
 scan modes (GET_LIDAR_CONF; GET_SAMPLERATE on firmware older than 1.24), sets the motor speed and
-starts the requested mode (the typical one by default: DenseBoost on the S1). It then decodes the
+starts the requested mode (the typical one by default, or when the device lacks the requested
+one, with a warning that lists its modes: DenseBoost on the S1). It then decodes the
 stream with the decoder of the mode's answer type (standard nodes 0x81, express capsules 0x82,
 ultra capsules 0x84, dense capsules 0x85) and hands every complete turn to a callback, on this
 thread.
@@ -149,6 +150,8 @@ class DriverStatus:
         failure up to its cap, back to the first once a turn is published)
     :ivar resets: RESETs sent after health errors
     :ivar handshake_warnings: the implausible handshake answers replaced in the last session
+    :ivar mode_fallback: why the typical mode streams instead of the configured one ('' when
+        it does not)
     """
 
     state: DriverState = DriverState.CONNECTING
@@ -165,6 +168,7 @@ class DriverStatus:
     backoff_s: float = BACKOFF_FIRST_S
     resets: int = 0
     handshake_warnings: tuple = ()
+    mode_fallback: str = ''
 
 
 class DeviceError(Exception):
@@ -509,14 +513,22 @@ class RplidarDriver:
         return [mode for mode, _ in checked], typical
 
     def _select_mode(self, modes: list, typical: int) -> ScanMode:
-        """Pick the configured mode (or the typical one); give up on an unusable choice."""
-        listing = '; '.join(m.describe() for m in modes)
+        """
+        Pick the configured mode (or the typical one); give up on an undecodable one.
+
+        A configured mode the device lacks is replaced by its typical mode, with a warning.
+        """
         wanted = self._config.scan_mode
-        chosen = [m for m in modes if (m.name == wanted if wanted else m.mode_id == typical)]
-        if not chosen:
-            raise GiveUp(f"scan_mode '{wanted or typical}' is not supported by this device; "
-                         f'supported modes: {listing}')
-        mode = chosen[0]
+        # The typical mode's id is one of the modes' (checked as the list was read).
+        typical_mode = next(m for m in modes if m.mode_id == typical)
+        mode = next((m for m in modes if wanted and m.name == wanted), typical_mode)
+        fallback = ''
+        if wanted and mode.name != wanted:
+            fallback = (f"scan_mode '{wanted}' is not supported by this device: scanning in its "
+                        f"typical mode '{mode.name}'; supported modes: "
+                        f"{'; '.join(m.describe() for m in modes)}")
+            self._log.warning(fallback, throttle_duration_sec=LOG_THROTTLE_S)
+        self._update(mode_fallback=fallback)
         if mode.answer_type not in _DECODED_ANSWERS:
             usable = [m.name for m in modes if m.answer_type in _DECODED_ANSWERS]
             raise GiveUp(f"scan mode '{mode.name}' streams answer type 0x{mode.answer_type:02X}, "

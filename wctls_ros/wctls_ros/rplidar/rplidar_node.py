@@ -147,6 +147,9 @@ class RplidarNode(Node):
             level = max(level, DiagnosticStatus.WARN)
             message = (f'{message}; the device reports a health warning (code '
                        f'0x{status.health.error_code:04X})')
+        if status.mode_fallback:
+            level = max(level, DiagnosticStatus.WARN)
+            message = f'{message}; {status.mode_fallback}'
         if status.handshake_warnings:
             # Scanning on values that replaced the device's own: never report it as OK.
             level = max(level, DiagnosticStatus.WARN)

@@ -252,6 +252,24 @@ def test_a_fixed_serial_baudrate_the_device_does_not_hear_gets_no_answer(executo
     assert not listener.scans
 
 
+@pytest.mark.parametrize('model, name, answer_type',
+                         [('a2', 'A2M8', 0x82), ('c1', 'C1M1', 0x85), ('s3', 'S3M1', 0x85)])
+def test_the_model_is_named_in_the_log_and_the_diagnostics(executor, ros_context, own_emulator,
+                                                           capfd, model, name, answer_type):
+    device = own_emulator('--model', model)
+    node, listener = start(executor, ros_context, serial_port=device.link)
+    collect(executor, listener, 2)
+    # The emulated A2 scans in its typical mode, Express.
+    assert node.driver.status().mode.answer_type == answer_type
+    assert f'RPLIDAR {name} (model 0x' in capfd.readouterr().err
+    assert spin_until(executor, lambda: any(
+        'Product Name' in {v.key for v in d.values} for d in listener.diagnostics), 2.0)
+    values = {v.key: v.value for v in listener.diagnostics[-1].values}
+    assert values['Vendor Name'] == 'SLAMTEC' and values['Product Name'] == f'RPLIDAR {name}'
+    assert values['Firmware Version'] == '1.28' and values['Serial Port'] == device.link
+    assert values['Serial Baud'] == '256000'
+
+
 def test_old_firmware_falls_back_to_the_standard_mode_from_get_samplerate(
         executor, ros_context, own_emulator):
     device = own_emulator('--firmware', '1.20')

@@ -136,6 +136,8 @@ class DriverStatus:
     :ivar state: :class:`DriverState`
     :ivar message: what happened last, in words
     :ivar link: the link's name
+    :ivar baudrate: the serial link's rate, bits per second (the probed one with
+        :data:`AUTO_BAUDRATE`; 0 for TCP or before a rate answered)
     :ivar device: the device info, once read
     :ivar health: the last health answer
     :ivar mode: the scan mode streaming (or last streamed)
@@ -157,6 +159,7 @@ class DriverStatus:
     state: DriverState = DriverState.CONNECTING
     message: str = 'starting'
     link: str = ''
+    baudrate: int = 0
     device: Optional[DeviceInfo] = None
     health: Optional[DeviceHealth] = None
     mode: Optional[ScanMode] = None
@@ -297,13 +300,13 @@ class RplidarDriver:
     def _run(self):
         while not self._closing.is_set():
             try:
-                link = self._open()
+                link, baudrate = self._open()
             except (LinkError, DeviceError, ProtocolError) as error:
                 self._update(state=DriverState.CONNECTING, message=str(error))
                 self._log.warning(f'{error}; retrying', throttle_duration_sec=LOG_THROTTLE_S)
                 self._back_off()
                 continue
-            self._update(link=link.name)
+            self._update(link=link.name, baudrate=baudrate)
             with self._motor_lock:
                 requests = self._motor_requests
             failed = True
@@ -330,13 +333,15 @@ class RplidarDriver:
         """
         Open the configured link; with an automatic serial rate, the first rate that answers.
 
-        :return: the open link
+        :return: ``(link, baudrate)``: the open link and its serial rate (0 for TCP)
         :raises LinkError: when the port cannot be opened
         :raises DeviceError: when no probed rate gets an answer to GET_INFO
         """
         config = self._config
-        if config.channel_type != 'serial' or config.serial_baudrate != AUTO_BAUDRATE:
-            return self._link_factory(config)
+        if config.channel_type == 'tcp':
+            return self._link_factory(config), 0
+        if config.serial_baudrate != AUTO_BAUDRATE:
+            return self._link_factory(config), config.serial_baudrate
         for baudrate in PROBED_BAUDRATES:
             link = self._link_factory(replace(config, serial_baudrate=baudrate))
             try:
@@ -351,7 +356,7 @@ class RplidarDriver:
                 raise
             self._log.info(f'serial_baudrate 0: {config.serial_port} answered GET_INFO at '
                            f'{baudrate} baud (probed {", ".join(map(str, PROBED_BAUDRATES))})')
-            return link
+            return link, baudrate
         raise DeviceError(f'no answer to GET_INFO at any rate ('
                           f'{", ".join(map(str, PROBED_BAUDRATES))} baud) on '
                           f'{config.serial_port}: not an RPLIDAR, or not powered (a weak USB '

@@ -31,7 +31,7 @@ from typing import Optional
 
 import numpy as np
 
-from .device import Faults, MODES, S1Device, Scene, TYPICAL_MODE
+from .device import Faults, MODEL_S1M1, MODES, S1Device, Scene, TYPICAL_MODE
 from ..protocol import HealthStatus
 
 _POLL_S = 0.001
@@ -141,11 +141,14 @@ class Emulator:
     :param listener: a listening TCP socket, or None (closed by :meth:`close`)
     :param modes: the devices' scan modes (see :class:`~.device.S1Device`)
     :param typical_mode: the id of their typical mode
+    :param model: the model byte they report
     """
 
     def __init__(self, scene: Scene, faults: Faults, firmware: tuple, seed: int,
                  pty_port: PtyPort, listener: Optional[socket.socket] = None,
-                 modes: tuple = MODES, typical_mode: int = TYPICAL_MODE):
+                 modes: tuple = MODES, typical_mode: int = TYPICAL_MODE,
+                 model: int = MODEL_S1M1):
+        self._model = model
         self._modes = modes
         self._typical_mode = typical_mode
         self._scene = scene
@@ -160,7 +163,7 @@ class Emulator:
 
     def _new_device(self) -> S1Device:
         return S1Device(self._scene, self._faults, self._firmware, self._rng, self._modes,
-                        self._typical_mode)
+                        self._typical_mode, self._model)
 
     def run(self):
         """Serve until a ``quit`` command (or a signal)."""

@@ -390,9 +390,14 @@ def test_a_failing_handshake_reconnects_with_a_capped_exponential_back_off(
     assert status.backoff_s == 0.05 and status.state == DriverState.SCANNING
 
 
-def test_unplug_and_replug_recover_within_two_seconds(executor, ros_context, own_emulator):
-    device = own_emulator()
-    node, listener = start(executor, ros_context, serial_port=device.link)
+@pytest.mark.parametrize('options, baudrate', [((), 256000),
+                                               (('--baudrate', '1000000'), 0)])
+def test_unplug_and_replug_recover_within_two_seconds(executor, ros_context, own_emulator,
+                                                      options, baudrate):
+    # With serial_baudrate 0 the rate probed at start-up is found again after the replug.
+    device = own_emulator(*options)
+    node, listener = start(executor, ros_context, serial_port=device.link,
+                           serial_baudrate=baudrate)
     collect(executor, listener, 2)
     device.command('unplug')
     spin_until(executor, lambda: False, 0.7)
@@ -402,6 +407,7 @@ def test_unplug_and_replug_recover_within_two_seconds(executor, ros_context, own
     assert spin_until(executor, lambda: len(listener.scans) > count, 2.0)
     assert time.monotonic() - replugged < 2.0
     assert node.driver.status().reconnects >= 1
+    assert node.driver.status().baudrate == (baudrate or 1000000)
 
 
 def test_silence_restarts_the_session(executor, ros_context, own_emulator):

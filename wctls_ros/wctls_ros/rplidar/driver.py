@@ -342,7 +342,9 @@ class RplidarDriver:
             return self._link_factory(config), 0
         if config.serial_baudrate != AUTO_BAUDRATE:
             return self._link_factory(config), config.serial_baudrate
-        for baudrate in PROBED_BAUDRATES:
+        # The rate that answered last is tried first: a reconnect costs no probe.
+        answered = self.status().baudrate
+        for baudrate in sorted(PROBED_BAUDRATES, key=lambda rate: rate != answered):
             link = self._link_factory(replace(config, serial_baudrate=baudrate))
             try:
                 self._stop_stream(link)

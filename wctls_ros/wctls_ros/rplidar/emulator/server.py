@@ -13,8 +13,8 @@ one more per TCP client. Control lines (``unplug``, ``replug``, ``silent SECONDS
 standard output.
 
 A pseudo-terminal carries the line settings its client sets, the rate too: a port given a rate
-answers only a client that set it (the bytes at any other rate are ignored, as a device does not
-understand a request sent at the wrong rate). The rate is read with the termios2 ioctl, so only
+serves only a client that set it; between the two ends at different rates every byte is lost
+(a device does not understand a request sent at another rate, nor its client the stream). The rate is read with the termios2 ioctl, so only
 on Linux; elsewhere a port given a rate refuses to start.
 """
 
@@ -177,7 +177,9 @@ class Emulator:
             for source in ready:
                 self._receive(source, now)
             if self.pty.fd is not None:
-                self.pty.write(self._pty_device.stream(now))
+                streamed = self._pty_device.stream(now)
+                if self.pty.hears_client():
+                    self.pty.write(streamed)
             for client, device in list(self._clients.items()):
                 self._send(client, device.stream(now))
 

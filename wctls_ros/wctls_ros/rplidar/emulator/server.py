@@ -14,8 +14,9 @@ standard output.
 
 A pseudo-terminal carries the line settings its client sets, the rate too: a port given a rate
 serves only a client that set it; between the two ends at different rates every byte is lost
-(a device does not understand a request sent at another rate, nor its client the stream). The rate is read with the termios2 ioctl, so only
-on Linux; elsewhere a port given a rate refuses to start.
+(a device does not understand a request sent at another rate, nor its client the stream). The
+rate is read with the termios2 ioctl, so only on Linux; elsewhere a port given a rate refuses
+to start.
 """
 
 import array

@@ -362,12 +362,12 @@ class DeviceInfo(_StructAnswer):
 
     @property
     def model_name(self) -> str:
-        """The model's name, e.g. ``'S1M1'`` (see :func:`model_name`)."""
+        """Return the model's name, e.g. ``'S1M1'`` (see :func:`model_name`)."""
         return model_name(self.model)
 
     @property
     def firmware_version(self) -> str:
-        """The firmware version as SLAMTEC writes it, e.g. ``'1.28'``."""
+        """Return the firmware version as SLAMTEC writes it, e.g. ``'1.28'``."""
         return f'{self.firmware_major}.{self.firmware_minor:02d}'
 
     def describe(self) -> str:

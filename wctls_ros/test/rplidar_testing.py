@@ -10,7 +10,7 @@ import threading
 import time
 
 import numpy as np
-from wctls_ros.rplidar.emulator.device import Faults, MODES, S1Device
+from wctls_ros.rplidar.emulator.device import EMULATED_MODELS, Faults, MODES, S1Device
 from wctls_ros.rplidar.emulator.process import EmulatorProcess
 from wctls_ros.rplidar.emulator.server import Emulator, PtyPort
 from wctls_ros.rplidar.protocol import encode_express_scan
@@ -182,18 +182,19 @@ def emulated_stream(modes, mode_id, plan='environment_a', seconds=3.0, noisy=Fal
 
 
 @contextlib.contextmanager
-def serving(modes, typical_mode):
+def serving(model, typical_mode):
     """
-    Serve a noiseless emulated device with ``modes`` on a pseudo-terminal, in a thread.
+    Serve a noiseless emulated device of ``model`` on a pseudo-terminal, in a thread.
 
-    :param modes: its scan modes (e.g. the emulator's ``A_SERIES_MODES``)
+    :param model: the emulator's model name (e.g. ``'a2'``: its model byte and scan modes)
     :param typical_mode: the id of its typical mode (the one the SDK starts)
     :return: a context manager yielding the terminal's path
     """
+    model_id, modes, _ = EMULATED_MODELS[model]
     scene = SimulatedScene(load_floor_plan('environment_a'), None, NOISELESS,
                            np.random.default_rng(0))
     emulator = Emulator(scene, Faults(), (1, 28), 0, PtyPort(None), modes=modes,
-                        typical_mode=typical_mode)
+                        typical_mode=typical_mode, model=model_id)
     thread = threading.Thread(target=emulator.run)
     thread.start()
     try:

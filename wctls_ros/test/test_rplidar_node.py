@@ -23,7 +23,6 @@ from sensor_msgs.msg import LaserScan  # noqa: E402
 from std_srvs.srv import Empty  # noqa: E402
 from wctls_ros.params import RPLIDAR_NODE  # noqa: E402
 from wctls_ros.rplidar.driver import DriverConfig, DriverState, RplidarDriver  # noqa: E402
-from wctls_ros.rplidar.emulator.device import A_SERIES_MODES  # noqa: E402
 from wctls_ros.rplidar.rplidar_node import RplidarNode  # noqa: E402
 from wctls_ros.rplidar.ultra import varbitscale_decode, varbitscale_encode  # noqa: E402
 import yaml  # noqa: E402
@@ -154,11 +153,12 @@ def test_a_series_express_and_boost_modes_scan_end_to_end(executor, ros_context,
                                                           answer_type):
     # An A-series device (Standard, Express 250 us, Boost 125 us; typical Standard): the driver
     # starts the requested mode and decodes the stream by the answer type the device reports.
-    with serving(A_SERIES_MODES, 0) as path:
+    with serving('a2', 0) as path:
         node, listener = start(executor, ros_context, serial_port=path, scan_mode=mode)
         scans = collect(executor, listener, 3, timeout_s=8.0)
         status = node.driver.status()
     assert status.mode.answer_type == answer_type and status.reconnects == 0
+    assert status.device.model_name == 'A2M8'
     low, high = compensated_beam_bands(multiple)
     for scan in scans:
         assert len(scan.ranges) == 360 * multiple and scan.range_max == 12.0

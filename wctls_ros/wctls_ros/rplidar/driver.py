@@ -440,8 +440,8 @@ class RplidarDriver:
         data = link.read(remaining) if remaining > 0 else b''
         if not data:
             raise DeviceError(f'no {what} within {timeout_s:g} s on {link.name}: check '
-                              'the port, serial_baudrate (S1: 256000), the cable and the power '
-                              '(a weak USB port cannot run the S1)')
+                              'the port, serial_baudrate (S1: 256000; 0 probes the rates), the '
+                              'cable and the power (a weak USB port cannot run the S1)')
         return data
 
     def _request(self, link, request: bytes, answer_type: int, what: str,

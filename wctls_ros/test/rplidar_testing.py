@@ -10,7 +10,7 @@ import threading
 import time
 
 import numpy as np
-from wctls_ros.rplidar.emulator.device import Faults, MODES, S1Device
+from wctls_ros.rplidar.emulator.device import EMULATED_MODELS, Faults, MODES, S1Device
 from wctls_ros.rplidar.emulator.process import EmulatorProcess
 from wctls_ros.rplidar.emulator.server import Emulator, PtyPort
 from wctls_ros.rplidar.protocol import encode_express_scan
@@ -94,18 +94,20 @@ def range_band(low_rad, high_rad):
             np.maximum(ends.max(axis=1), highest).reshape(low_rad.shape))
 
 
-def compensated_beam_bands():
+def compensated_beam_bands(multiple=3):
     """
-    Return the scene's range band of each beam of a 1080-beam (DenseBoost) compensated scan.
+    Return the scene's range band of each beam of a compensated scan of ``360 * multiple`` beams.
 
-    Beam i is bin b = 1079 - i, holding the last sample with raw angle in [(b - 2) / 3,
-    (b + 1) / 3) degrees; its laser bearing is pi - raw.
+    With k = ``multiple`` bins per degree (3 in DenseBoost: 1080 beams), beam i is bin
+    b = 360 k - 1 - i, holding the last sample with raw angle in [(b - k + 1) / k, (b + 1) / k)
+    degrees; its laser bearing is pi - raw.
 
+    :param multiple: bins per degree
     :return: (lowest, highest) range per beam, m
     """
-    raw_bin = 1079 - np.arange(1080)
-    return range_band(math.pi - np.radians((raw_bin + 1) / 3),
-                      math.pi - np.radians((raw_bin - 2) / 3))
+    raw_bin = 360 * multiple - 1 - np.arange(360 * multiple)
+    return range_band(math.pi - np.radians((raw_bin + 1) / multiple),
+                      math.pi - np.radians((raw_bin - multiple + 1) / multiple))
 
 
 def ros_minus_monotonic_s():
@@ -180,18 +182,19 @@ def emulated_stream(modes, mode_id, plan='environment_a', seconds=3.0, noisy=Fal
 
 
 @contextlib.contextmanager
-def serving(modes, typical_mode):
+def serving(model, typical_mode):
     """
-    Serve a noiseless emulated device with ``modes`` on a pseudo-terminal, in a thread.
+    Serve a noiseless emulated device of ``model`` on a pseudo-terminal, in a thread.
 
-    :param modes: its scan modes (e.g. the emulator's ``A_SERIES_MODES``)
+    :param model: the emulator's model name (e.g. ``'a2'``: its model byte and scan modes)
     :param typical_mode: the id of its typical mode (the one the SDK starts)
     :return: a context manager yielding the terminal's path
     """
+    model_id, modes, _ = EMULATED_MODELS[model]
     scene = SimulatedScene(load_floor_plan('environment_a'), None, NOISELESS,
                            np.random.default_rng(0))
     emulator = Emulator(scene, Faults(), (1, 28), 0, PtyPort(None), modes=modes,
-                        typical_mode=typical_mode)
+                        typical_mode=typical_mode, model=model_id)
     thread = threading.Thread(target=emulator.run)
     thread.start()
     try:

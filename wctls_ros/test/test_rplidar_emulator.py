@@ -188,7 +188,7 @@ def test_help_shows_every_default():
     options = result.stdout.split('options:')[1].split('Lines on standard input')[0]
     # One entry per option: its flags, then its help, possibly wrapped over several lines.
     entries = [' '.join(entry.split()) for entry in re.split(r'\n  (?=-)', options) if entry]
-    assert len(entries) == 20
+    assert len(entries) == 22
     for entry in entries[1:]:                                     # all but -h/--help
         assert '(default:' in entry, entry
     assert '(default: environment_a)' in result.stdout and '(default: 1.28;' in result.stdout

@@ -18,12 +18,13 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402,
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from rplidar_testing import (compensated_beam_bands, EMULATOR_TURN_S,  # noqa: E402
-                             first_sample_times, start_emulator, true_ranges)
+                             first_sample_times, serving, start_emulator, true_ranges)
 from sensor_msgs.msg import LaserScan  # noqa: E402
 from std_srvs.srv import Empty  # noqa: E402
 from wctls_ros.params import RPLIDAR_NODE  # noqa: E402
 from wctls_ros.rplidar.driver import DriverConfig, DriverState, RplidarDriver  # noqa: E402
 from wctls_ros.rplidar.rplidar_node import RplidarNode  # noqa: E402
+from wctls_ros.rplidar.ultra import varbitscale_decode, varbitscale_encode  # noqa: E402
 import yaml  # noqa: E402
 
 # One of the suite's slowest modules: make test-fast leaves it out.
@@ -146,6 +147,34 @@ def test_angle_compensation_bins_a_turn_into_1080_beams_within_a_bin_of_the_scen
         assert ((ranges >= low - 1e-3) & (ranges <= high + 1e-3))[filled].all()
 
 
+@pytest.mark.parametrize('mode, multiple, answer_type',
+                         [('Express', 2, 0x82), ('Boost', 3, 0x84)])
+def test_a_series_express_and_boost_modes_scan_end_to_end(executor, ros_context, mode, multiple,
+                                                          answer_type):
+    # An A-series device (Standard, Express 250 us, Boost 125 us; typical Standard): the driver
+    # starts the requested mode and decodes the stream by the answer type the device reports.
+    with serving('a2', 0) as path:
+        node, listener = start(executor, ros_context, serial_port=path, scan_mode=mode)
+        scans = collect(executor, listener, 3, timeout_s=8.0)
+        status = node.driver.status()
+    assert status.mode.answer_type == answer_type and status.reconnects == 0
+    assert status.device.model_name == 'A2M8'
+    low, high = compensated_beam_bands(multiple)
+    for scan in scans:
+        assert len(scan.ranges) == 360 * multiple and scan.range_max == 12.0
+        ranges = np.asarray(scan.ranges)
+        filled = np.isfinite(ranges)
+        # Boost samples 0.3 degrees apart fill every 1/3-degree bin but where the emulator sent
+        # no return (a sample its distance-dependent offset moves across an edge).
+        assert filled.mean() > 0.98
+        # Within 1 mm of the ranges the bin covers; ultra capsule distances beyond 2 m within
+        # half their scale's step (and the emulator's whole millimetres).
+        step_mm = 1 << varbitscale_decode(varbitscale_encode(np.rint(1000.0 * ranges[filled])))[1]
+        slack_m = 1e-3 * np.maximum(1.0, 0.5 * step_mm + 0.5)
+        assert ((ranges[filled] >= low[filled] - slack_m)
+                & (ranges[filled] <= high[filled] + slack_m)).all()
+
+
 def test_inverted_mirrors_the_scan(executor, ros_context, emulator):
     node, listener = start(executor, ros_context, serial_port=emulator.link,
                            angle_compensate=False, inverted=True)
@@ -176,15 +205,69 @@ def test_stop_motor_and_start_motor(executor, ros_context, emulator):
     collect(executor, listener, 2)
 
 
-def test_an_unknown_scan_mode_is_a_clear_error_that_lists_the_modes(executor, ros_context,
-                                                                    emulator):
-    node, listener = start(executor, ros_context, serial_port=emulator.link, scan_mode='Turbo')
+def test_an_unknown_scan_mode_falls_back_to_the_typical_one_with_a_warning_listing_the_modes(
+        executor, ros_context, emulator, capfd):
+    node, listener = start(executor, ros_context, serial_port=emulator.link, scan_mode='Turbo',
+                           angle_compensate=False)
+    scan = collect(executor, listener, 2)[-1]
+    assert len(scan.ranges) in (926, 927)              # DenseBoost, the S1's typical mode
+    np.testing.assert_allclose(scan.ranges, true_ranges(bearings(scan)), atol=1e-3)
+    assert node.driver.status().mode.name == 'DenseBoost'
+    warning = [line for line in capfd.readouterr().err.splitlines() if 'Turbo' in line]
+    assert warning and "'Turbo' is not supported" in warning[0]
+    assert "typical mode 'DenseBoost'" in warning[0] and 'Standard' in warning[0]
     assert spin_until(executor, lambda: any(
-        d.level == DiagnosticStatus.ERROR for d in listener.diagnostics), 3.0)
-    message = listener.diagnostics[-1].message
-    assert "'Turbo' is not supported" in message
-    assert 'Standard' in message and 'DenseBoost' in message
+        'Turbo' in d.message and d.level == DiagnosticStatus.WARN
+        for d in listener.diagnostics), 2.0)
+
+
+def test_serial_baudrate_0_finds_the_rate_the_device_answers_at(executor, ros_context,
+                                                                own_emulator, capfd):
+    # The emulator hears only a client that set 460800 baud on its terminal.
+    device = own_emulator('--baudrate', '460800')
+    node, listener = start(executor, ros_context, serial_port=device.link, serial_baudrate=0,
+                           angle_compensate=False)
+    scan = collect(executor, listener, 2)[-1]
+    np.testing.assert_allclose(scan.ranges, true_ranges(bearings(scan)), atol=1e-3)
+    assert node.driver.status().link.endswith('@ 460800 baud')
+    assert 'answered GET_INFO at 460800 baud' in capfd.readouterr().err
+
+
+def test_serial_baudrate_0_without_an_answer_at_any_rate_says_so_in_one_line(
+        executor, ros_context, own_emulator, capfd):
+    device = own_emulator('--baudrate', '9600')
+    node, listener = start(executor, ros_context, serial_port=device.link, serial_baudrate=0)
+    assert spin_until(executor, lambda: 'at any rate' in node.driver.status().message, 5.0)
+    lines = [line for line in capfd.readouterr().err.splitlines() if 'at any rate' in line]
+    assert len(lines) == 1 and '115200, 256000, 460800, 1000000 baud' in lines[0]
     assert not listener.scans
+
+
+def test_a_fixed_serial_baudrate_the_device_does_not_hear_gets_no_answer(executor, ros_context,
+                                                                         own_emulator):
+    device = own_emulator('--baudrate', '115200')
+    node, listener = start(executor, ros_context, serial_port=device.link)
+    assert spin_until(executor, lambda: 'no answer to GET_INFO' in node.driver.status().message,
+                      5.0)
+    assert not listener.scans
+
+
+@pytest.mark.parametrize('model, name, answer_type',
+                         [('a2', 'A2M8', 0x82), ('c1', 'C1M1', 0x85), ('s3', 'S3M1', 0x85)])
+def test_the_model_is_named_in_the_log_and_the_diagnostics(executor, ros_context, own_emulator,
+                                                           capfd, model, name, answer_type):
+    device = own_emulator('--model', model)
+    node, listener = start(executor, ros_context, serial_port=device.link)
+    collect(executor, listener, 2)
+    # The emulated A2 scans in its typical mode, Express.
+    assert node.driver.status().mode.answer_type == answer_type
+    assert f'RPLIDAR {name} (model 0x' in capfd.readouterr().err
+    assert spin_until(executor, lambda: any(
+        'Product Name' in {v.key for v in d.values} for d in listener.diagnostics), 2.0)
+    values = {v.key: v.value for v in listener.diagnostics[-1].values}
+    assert values['Vendor Name'] == 'SLAMTEC' and values['Product Name'] == f'RPLIDAR {name}'
+    assert values['Firmware Version'] == '1.28' and values['Serial Port'] == device.link
+    assert values['Serial Baud'] == '256000'
 
 
 def test_old_firmware_falls_back_to_the_standard_mode_from_get_samplerate(
@@ -307,9 +390,14 @@ def test_a_failing_handshake_reconnects_with_a_capped_exponential_back_off(
     assert status.backoff_s == 0.05 and status.state == DriverState.SCANNING
 
 
-def test_unplug_and_replug_recover_within_two_seconds(executor, ros_context, own_emulator):
-    device = own_emulator()
-    node, listener = start(executor, ros_context, serial_port=device.link)
+@pytest.mark.parametrize('options, baudrate', [((), 256000),
+                                               (('--baudrate', '1000000'), 0)])
+def test_unplug_and_replug_recover_within_two_seconds(executor, ros_context, own_emulator,
+                                                      options, baudrate):
+    # With serial_baudrate 0 the rate probed at start-up is found again after the replug.
+    device = own_emulator(*options)
+    node, listener = start(executor, ros_context, serial_port=device.link,
+                           serial_baudrate=baudrate)
     collect(executor, listener, 2)
     device.command('unplug')
     spin_until(executor, lambda: False, 0.7)
@@ -319,6 +407,7 @@ def test_unplug_and_replug_recover_within_two_seconds(executor, ros_context, own
     assert spin_until(executor, lambda: len(listener.scans) > count, 2.0)
     assert time.monotonic() - replugged < 2.0
     assert node.driver.status().reconnects >= 1
+    assert node.driver.status().baudrate == (baudrate or 1000000)
 
 
 def test_silence_restarts_the_session(executor, ros_context, own_emulator):

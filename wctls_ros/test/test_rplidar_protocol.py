@@ -12,8 +12,8 @@ from wctls_ros.rplidar.protocol import (
     AnswerType, Command, ConfType, decode_conf_request, decode_conf_value, DeviceHealth,
     DeviceInfo, encode_answer, encode_conf_request, encode_conf_value, encode_dense_capsules,
     encode_express_scan, encode_motor_speed, encode_request, encode_standard_nodes,
-    find_descriptor, ProtocolError, Request, RequestParser, ResponseDescriptor, SampleRate,
-    SendMode, StandardNodeDecoder)
+    find_descriptor, model_name, ProtocolError, Request, RequestParser, ResponseDescriptor,
+    SampleRate, SendMode, StandardNodeDecoder)
 
 
 def h(text):
@@ -194,3 +194,14 @@ def test_node_resync_is_the_sdk_state_machine(seed):
         p.angle_deg.tolist(), p.distance_mm.tolist(), p.quality.tolist(), p.start.tolist())]
     assert got == sdk_node_reference(data)
     assert decoder.counts.discarded_bytes > 0 and decoder.counts.resyncs > 0
+
+
+@pytest.mark.parametrize('model, name', [(0x18, 'A1M8'), (0x28, 'A2M8'), (0x31, 'A3M1'),
+                                         (0x41, 'C1M1'), (0x61, 'S1M1'), (0x71, 'S2M1'),
+                                         (0x81, 'S3M1'), (0x51, 'unknown (0x51)'),
+                                         (0x00, 'unknown (0x00)')])
+def test_models_are_named_by_their_major_id_as_slamtec_does(model, name):
+    assert model_name(model) == name
+    info = DeviceInfo(model, 28, 1, 18, bytes(16))
+    assert info.model_name == name and info.firmware_version == '1.28'
+    assert info.describe().startswith(f'RPLIDAR {name} (model 0x{model:02X}), firmware 1.28')

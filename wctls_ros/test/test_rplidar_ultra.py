@@ -237,7 +237,7 @@ def test_an_emulated_boost_stream_shows_the_scene_as_the_sdk_decodes_it():
 
 def test_the_official_sdk_reads_the_emulated_boost_stream_end_to_end():
     pytest.importorskip('pyrplidarsdk')
-    with serving(A_SERIES_MODES, 2) as path:
+    with serving('a2', 2) as path:
         result = subprocess.run([sys.executable, '-c', SDK_CLIENT, path], timeout=60,
                                 capture_output=True, text=True)
     assert result.returncode == 0, result.stderr

@@ -9,6 +9,8 @@ builds the scene from :mod:`wctls_ros.simulation` and injects it. A sample at ra
 angle theta is the range along the laser-frame bearing pi - theta, so a driver publishing
 sllidar_ros2's angle = pi - theta sees the plan in REP-103 orientation.
 
+``--model a1|a2|a3|c1|s1|s2|s3`` reports another model (the A-series with their scan modes);
+``--baudrate RATE`` answers on the pseudo-terminal only when its client set that rate.
 Faults for testing recovery: ``--corrupt-rate`` / ``--drop-rate`` (per streamed byte),
 ``--cut-rate`` (per streamed frame: a run of bytes lost from a random one to the frame's end),
 ``--silent-after``/``--silent-for``, ``--health warning|error``, ``--conf-answer ENTRY=VALUE``
@@ -36,9 +38,9 @@ import numpy as np
 import yaml
 
 from .cli import bounded, Parser, USER_ERROR, UserError
-from .rplidar.emulator.device import CONF_ENTRIES, Faults, parse_conf_answer
+from .rplidar.emulator.device import CONF_ENTRIES, EMULATED_MODELS, Faults, parse_conf_answer
 from .rplidar.emulator.server import Emulator, PtyPort
-from .rplidar.protocol import HealthStatus
+from .rplidar.protocol import HealthStatus, model_name
 from .simulation import (BUNDLED_PLANS, FloorPlan, load_floor_plan, NOISELESS, NoiseModel,
                          SENSOR_MODELS, simulate_scan)
 
@@ -116,6 +118,13 @@ def parser() -> argparse.ArgumentParser:
     probability = bounded(float, 0.0, 1.0)
     p.add_argument('--link', help='symlink to point at the pseudo-terminal, e.g. ttyS1 '
                                   '(default: none, only the pty path is printed)')
+    p.add_argument('--model', choices=tuple(EMULATED_MODELS), default='s1',
+                   help='the model it reports in GET_INFO; the A-series offer Standard, Express '
+                        "(typical) and Boost, the others the S1's modes (default: %(default)s)")
+    p.add_argument('--baudrate', type=bounded(int, 1),
+                   help='answer on the pseudo-terminal only when its client set this rate, '
+                        'bits per second, as a real device hears only its own (Linux) '
+                        '(default: any rate)')
     p.add_argument('--tcp-port', type=bounded(int, 0, 65535),
                    help='also serve on this TCP port (0 = any free port; S1 TCP: 20108) '
                         '(default: no TCP)')
@@ -213,9 +222,10 @@ def _serve(args):
     if args.link:
         _check_link(args.link)
     try:
-        pty_port = PtyPort(args.link)
+        pty_port = PtyPort(args.link, args.baudrate)
     except OSError as error:
-        raise UserError(f'--link {args.link}: {error.strerror or error}') from None
+        option = '--link' if args.baudrate is None else '--link/--baudrate'
+        raise UserError(f'{option} {args.link}: {error.strerror or error}') from None
     listener = None
     if args.tcp_port is not None:
         try:
@@ -224,7 +234,9 @@ def _serve(args):
             pty_port.unplug()
             raise UserError(f'--tcp-host/--tcp-port {args.tcp_host}:{args.tcp_port}: '
                             f'{error.strerror or error}') from None
-    emulator = Emulator(scene, faults, args.firmware, args.seed, pty_port, listener)
+    model, modes, typical_mode = EMULATED_MODELS[args.model]
+    emulator = Emulator(scene, faults, args.firmware, args.seed, pty_port, listener, modes,
+                        typical_mode, model)
     try:
         signal.signal(signal.SIGTERM, lambda *_: emulator.commands.put('quit'))
         # A shell starts a script's background jobs with SIGINT ignored, and Python then leaves
@@ -237,7 +249,8 @@ def _serve(args):
         if listener is not None:
             host, port = listener.getsockname()[:2]
             print(f'tcp {host}:{port}', flush=True)
-        print(f'ready: RPLIDAR S1 emulator, floor plan {plan_name}', flush=True)
+        print(f'ready: RPLIDAR {model_name(model)} emulator, floor plan {plan_name}',
+              flush=True)
         threading.Thread(target=_read_stdin_commands, args=(emulator.commands,),
                          daemon=True).start()
         emulator.run()

@@ -6,12 +6,16 @@ The RPLIDAR session on a background thread: handshake, scanning, turn assembly a
 
 A session stops any stale stream (STOP, then drain), reads the device info and health, lists the
 scan modes (GET_LIDAR_CONF; GET_SAMPLERATE on firmware older than 1.24), sets the motor speed and
-starts the requested mode (the typical one by default: DenseBoost on the S1). It then decodes the
-stream and hands every complete turn to a callback, on this thread.
+starts the requested mode (the typical one by default, or when the device lacks the requested
+one, with a warning that lists its modes: DenseBoost on the S1). It then decodes the
+stream with the decoder of the mode's answer type (standard nodes 0x81, express capsules 0x82,
+ultra capsules 0x84, dense capsules 0x85) and hands every complete turn to a callback, on this
+thread.
 
 The handshake's answers carry no checksum: a scan mode's sample time and range and the number
-of modes are checked for plausibility, and an implausible value is replaced (the S1's own; the
-Standard mode every RPLIDAR has for an implausible mode list) with a warning, so that a damaged
+of modes are checked for plausibility, and an implausible value is replaced (the S1's own, an
+A-series device's sample time for express and ultra capsules; the Standard mode every RPLIDAR
+has for an implausible mode list) with a warning, so that a damaged
 answer neither stalls the driver nor empties its scans.
 
 Recovery, without ever ending the thread: a link that cannot be opened or breaks (unplugged
@@ -31,6 +35,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from .capsules import DenseCapsuleDecoder
+from .express import ExpressCapsuleDecoder
 from .protocol import (AnswerType, Command, CONF_COMMANDS_FIRMWARE, ConfType, decode_conf_value,
                        DESCRIPTOR_SIZE, DeviceHealth, DeviceInfo, encode_conf_request,
                        encode_express_scan, encode_motor_speed, encode_request, find_descriptor,
@@ -38,8 +43,14 @@ from .protocol import (AnswerType, Command, CONF_COMMANDS_FIRMWARE, ConfType, de
                        StandardNodeDecoder, StreamCounts)
 from .transport import drain, LinkError, SerialLink, TcpLink
 from .turns import TurnAssembler
+from .ultra import UltraCapsuleDecoder
 
 ANSWER_TIMEOUT_S = 1.0
+# serial_baudrate 0: probe the rates of the RPLIDAR family with GET_INFO, answered within
+# milliseconds by a device at the right rate.
+AUTO_BAUDRATE = 0
+PROBED_BAUDRATES = (115200, 256000, 460800, 1000000)
+PROBE_TIMEOUT_S = 0.3
 RESET_WAIT_S = 2.0             # an S1 is silent for about 2 s after RESET
 BACKOFF_FIRST_S = 0.05
 BACKOFF_MAX_S = 2.0
@@ -59,11 +70,19 @@ LEGACY_MAX_DISTANCE_M = 16.0       # what the SDK assumes for devices without GE
 PLAUSIBLE_US_PER_SAMPLE = (10.0, 5000.0)
 PLAUSIBLE_MAX_DISTANCE_M = (1.0, 65.535)
 MAX_SCAN_MODES = 16
-# What replaces an implausible value: the S1's.
-S1_US_PER_SAMPLE = {AnswerType.MEASUREMENT: 244.0, AnswerType.DENSE_CAPSULE: 108.0}
+# What replaces an implausible sample time, by the mode's answer type: the S1's for standard
+# nodes and dense capsules; for the capsules an S1 does not stream, an A-series device's 4 kHz
+# Express and 8 kHz Boost. An implausible range is replaced by the S1's.
+FALLBACK_US_PER_SAMPLE = {AnswerType.MEASUREMENT: 244.0, AnswerType.DENSE_CAPSULE: 108.0,
+                          AnswerType.EXPRESS_CAPSULE: 250.0, AnswerType.ULTRA_CAPSULE: 125.0}
 S1_MAX_DISTANCE_M = 40.0
 _CHUNK_LOG_SIZE = 256
-_DECODED_ANSWERS = (AnswerType.MEASUREMENT, AnswerType.DENSE_CAPSULE)
+# The capsule decoder of each capsule answer type (started by EXPRESS_SCAN with the mode's id,
+# built with the mode's sample time and range); standard nodes are started by SCAN.
+CAPSULE_DECODERS = {AnswerType.EXPRESS_CAPSULE: ExpressCapsuleDecoder,
+                    AnswerType.ULTRA_CAPSULE: UltraCapsuleDecoder,
+                    AnswerType.DENSE_CAPSULE: DenseCapsuleDecoder}
+_DECODED_ANSWERS = (AnswerType.MEASUREMENT, *CAPSULE_DECODERS)
 
 
 @dataclass(frozen=True)
@@ -73,7 +92,8 @@ class DriverConfig:
 
     :ivar channel_type: ``'serial'`` or ``'tcp'``
     :ivar serial_port: serial device path
-    :ivar serial_baudrate: bits per second (S1: 256000)
+    :ivar serial_baudrate: bits per second (S1: 256000); :data:`AUTO_BAUDRATE` (0) probes
+        :data:`PROBED_BAUDRATES`
     :ivar tcp_ip: address for ``'tcp'``
     :ivar tcp_port: port for ``'tcp'``
     :ivar scan_mode: scan mode name; ``''`` = the device's typical mode
@@ -116,6 +136,8 @@ class DriverStatus:
     :ivar state: :class:`DriverState`
     :ivar message: what happened last, in words
     :ivar link: the link's name
+    :ivar baudrate: the serial link's rate, bits per second (the probed one with
+        :data:`AUTO_BAUDRATE`; 0 for TCP or before a rate answered)
     :ivar device: the device info, once read
     :ivar health: the last health answer
     :ivar mode: the scan mode streaming (or last streamed)
@@ -130,11 +152,14 @@ class DriverStatus:
         failure up to its cap, back to the first once a turn is published)
     :ivar resets: RESETs sent after health errors
     :ivar handshake_warnings: the implausible handshake answers replaced in the last session
+    :ivar mode_fallback: why the typical mode streams instead of the configured one ('' when
+        it does not)
     """
 
     state: DriverState = DriverState.CONNECTING
     message: str = 'starting'
     link: str = ''
+    baudrate: int = 0
     device: Optional[DeviceInfo] = None
     health: Optional[DeviceHealth] = None
     mode: Optional[ScanMode] = None
@@ -146,6 +171,7 @@ class DriverStatus:
     backoff_s: float = BACKOFF_FIRST_S
     resets: int = 0
     handshake_warnings: tuple = ()
+    mode_fallback: str = ''
 
 
 class DeviceError(Exception):
@@ -158,7 +184,7 @@ class GiveUp(Exception):
 
 def plausible_mode(mode: ScanMode) -> tuple:
     """
-    Replace a scan mode's implausible sample time or range with the S1's.
+    Replace a scan mode's implausible sample time (by its answer type) or range (the S1's).
 
     :param mode: the mode as the device described it
     :return: ``(mode, warnings)``: the mode to use and a line per value replaced
@@ -167,8 +193,8 @@ def plausible_mode(mode: ScanMode) -> tuple:
     us_per_sample, max_distance_m = mode.us_per_sample, mode.max_distance_m
     low, high = PLAUSIBLE_US_PER_SAMPLE
     if not low <= us_per_sample <= high:
-        us_per_sample = S1_US_PER_SAMPLE.get(mode.answer_type,
-                                             S1_US_PER_SAMPLE[AnswerType.MEASUREMENT])
+        us_per_sample = FALLBACK_US_PER_SAMPLE.get(
+            mode.answer_type, FALLBACK_US_PER_SAMPLE[AnswerType.MEASUREMENT])
         warnings.append(f'mode {mode.name!r}: {mode.us_per_sample:g} us/sample (plausible: '
                         f'{low:g}-{high:g}): using {us_per_sample:g}')
     low, high = PLAUSIBLE_MAX_DISTANCE_M
@@ -274,13 +300,13 @@ class RplidarDriver:
     def _run(self):
         while not self._closing.is_set():
             try:
-                link = self._link_factory(self._config)
-            except LinkError as error:
+                link, baudrate = self._open()
+            except (LinkError, DeviceError, ProtocolError) as error:
                 self._update(state=DriverState.CONNECTING, message=str(error))
                 self._log.warning(f'{error}; retrying', throttle_duration_sec=LOG_THROTTLE_S)
                 self._back_off()
                 continue
-            self._update(link=link.name)
+            self._update(link=link.name, baudrate=baudrate)
             with self._motor_lock:
                 requests = self._motor_requests
             failed = True
@@ -302,6 +328,41 @@ class RplidarDriver:
                 link.close()
             if failed:
                 self._back_off()
+
+    def _open(self):
+        """
+        Open the configured link; with an automatic serial rate, the first rate that answers.
+
+        :return: ``(link, baudrate)``: the open link and its serial rate (0 for TCP)
+        :raises LinkError: when the port cannot be opened
+        :raises DeviceError: when no probed rate gets an answer to GET_INFO
+        """
+        config = self._config
+        if config.channel_type == 'tcp':
+            return self._link_factory(config), 0
+        if config.serial_baudrate != AUTO_BAUDRATE:
+            return self._link_factory(config), config.serial_baudrate
+        # The rate that answered last is tried first: a reconnect costs no probe.
+        answered = self.status().baudrate
+        for baudrate in sorted(PROBED_BAUDRATES, key=lambda rate: rate != answered):
+            link = self._link_factory(replace(config, serial_baudrate=baudrate))
+            try:
+                self._stop_stream(link)
+                self._ask(link, Command.GET_INFO, AnswerType.DEVICE_INFO,
+                          timeout_s=PROBE_TIMEOUT_S)
+            except (DeviceError, ProtocolError):
+                link.close()
+                continue
+            except BaseException:
+                link.close()
+                raise
+            self._log.info(f'serial_baudrate 0: {config.serial_port} answered GET_INFO at '
+                           f'{baudrate} baud (probed {", ".join(map(str, PROBED_BAUDRATES))})')
+            return link, baudrate
+        raise DeviceError(f'no answer to GET_INFO at any rate ('
+                          f'{", ".join(map(str, PROBED_BAUDRATES))} baud) on '
+                          f'{config.serial_port}: not an RPLIDAR, or not powered (a weak USB '
+                          'port cannot run it), or a wrong port or cable')
 
     def _back_off(self):
         """Wait before the next attempt after a failure; double the wait for the one after."""
@@ -372,20 +433,22 @@ class RplidarDriver:
         link.write(encode_request(Command.RESET))
         self._closing.wait(RESET_WAIT_S)
 
-    def _read_more(self, link, deadline: float, what: str) -> bytes:
-        """Read the next bytes before ``deadline`` or raise :class:`DeviceError`."""
+    def _read_more(self, link, deadline: float, what: str,
+                   timeout_s: float = ANSWER_TIMEOUT_S) -> bytes:
+        """Read the next bytes before ``deadline`` (``timeout_s`` after the request) or raise."""
         remaining = deadline - time.monotonic()
         data = link.read(remaining) if remaining > 0 else b''
         if not data:
-            raise DeviceError(f'no {what} within {ANSWER_TIMEOUT_S:g} s on {link.name}: check '
-                              'the port, serial_baudrate (S1: 256000), the cable and the power '
-                              '(a weak USB port cannot run the S1)')
+            raise DeviceError(f'no {what} within {timeout_s:g} s on {link.name}: check '
+                              'the port, serial_baudrate (S1: 256000; 0 probes the rates), the '
+                              'cable and the power (a weak USB port cannot run the S1)')
         return data
 
-    def _request(self, link, request: bytes, answer_type: int, what: str) -> tuple:
+    def _request(self, link, request: bytes, answer_type: int, what: str,
+                 timeout_s: float = ANSWER_TIMEOUT_S) -> tuple:
         """Send a request; return the answer's descriptor and the bytes received after it."""
         link.write(request)
-        deadline = time.monotonic() + ANSWER_TIMEOUT_S
+        deadline = time.monotonic() + timeout_s
         buffer = b''
         while True:
             descriptor, end = find_descriptor(buffer)
@@ -395,16 +458,17 @@ class RplidarDriver:
                 # Stale bytes that look like another answer: search on past their sync.
                 buffer = buffer[end - DESCRIPTOR_SIZE + 1:]
                 continue
-            buffer = buffer[end:] + self._read_more(link, deadline, what)
+            buffer = buffer[end:] + self._read_more(link, deadline, what, timeout_s)
 
-    def _ask(self, link, command: int, answer_type: int, request: bytes = b'') -> bytes:
-        """Send a request and return its single answer's payload."""
+    def _ask(self, link, command: int, answer_type: int, request: bytes = b'',
+             timeout_s: float = ANSWER_TIMEOUT_S) -> bytes:
+        """Send a request and return its single answer's payload (within ``timeout_s``, s)."""
         what = f'answer to {Command(command).name}'
         descriptor, payload = self._request(link, request or encode_request(command),
-                                            answer_type, what)
-        deadline = time.monotonic() + ANSWER_TIMEOUT_S
+                                            answer_type, what, timeout_s)
+        deadline = time.monotonic() + timeout_s
         while len(payload) < descriptor.length:
-            payload += self._read_more(link, deadline, what)
+            payload += self._read_more(link, deadline, what, timeout_s)
         return payload[:descriptor.length]
 
     def _conf(self, link, conf_type: int, mode: Optional[int] = None):
@@ -456,14 +520,22 @@ class RplidarDriver:
         return [mode for mode, _ in checked], typical
 
     def _select_mode(self, modes: list, typical: int) -> ScanMode:
-        """Pick the configured mode (or the typical one); give up on an unusable choice."""
-        listing = '; '.join(m.describe() for m in modes)
+        """
+        Pick the configured mode (or the typical one); give up on an undecodable one.
+
+        A configured mode the device lacks is replaced by its typical mode, with a warning.
+        """
         wanted = self._config.scan_mode
-        chosen = [m for m in modes if (m.name == wanted if wanted else m.mode_id == typical)]
-        if not chosen:
-            raise GiveUp(f"scan_mode '{wanted or typical}' is not supported by this device; "
-                         f'supported modes: {listing}')
-        mode = chosen[0]
+        # The typical mode's id is one of the modes' (checked as the list was read).
+        typical_mode = next(m for m in modes if m.mode_id == typical)
+        mode = next((m for m in modes if wanted and m.name == wanted), typical_mode)
+        fallback = ''
+        if wanted and mode.name != wanted:
+            fallback = (f"scan_mode '{wanted}' is not supported by this device: scanning in its "
+                        f"typical mode '{mode.name}'; supported modes: "
+                        f"{'; '.join(m.describe() for m in modes)}")
+            self._log.warning(fallback, throttle_duration_sec=LOG_THROTTLE_S)
+        self._update(mode_fallback=fallback)
         if mode.answer_type not in _DECODED_ANSWERS:
             usable = [m.name for m in modes if m.answer_type in _DECODED_ANSWERS]
             raise GiveUp(f"scan mode '{mode.name}' streams answer type 0x{mode.answer_type:02X}, "
@@ -484,7 +556,7 @@ class RplidarDriver:
             request, decoder = encode_request(Command.SCAN), StandardNodeDecoder()
         else:
             request = encode_express_scan(mode.mode_id)
-            decoder = DenseCapsuleDecoder(mode.us_per_sample, mode.max_distance_m)
+            decoder = CAPSULE_DECODERS[mode.answer_type](mode.us_per_sample, mode.max_distance_m)
         descriptor, data = self._request(link, request, mode.answer_type,
                                          f'{mode.name} scan descriptor')
         if descriptor.send_mode != SendMode.MULTIPLE or descriptor.length != decoder.FRAME_SIZE:

@@ -317,6 +317,23 @@ class _StructAnswer:
         return cls(*struct.unpack(cls._FORMAT, payload))
 
 
+# The model families by the major id, the model byte's high nibble (its low nibble is the
+# sub-model: 0x61 is the S1M1), as SLAMTEC's SDK names them.
+MODEL_FAMILIES = {1: 'A1', 2: 'A2', 3: 'A3', 4: 'C1', 6: 'S1', 7: 'S2', 8: 'S3'}
+
+
+def model_name(model: int) -> str:
+    """
+    Name a device by its model byte, as SLAMTEC does.
+
+    :param model: the model byte of GET_INFO
+    :return: e.g. ``'S1M1'`` for 0x61, ``'A2M8'`` for 0x28; ``'unknown (0xNN)'`` for a major
+        id outside :data:`MODEL_FAMILIES`
+    """
+    family = MODEL_FAMILIES.get(model >> 4)
+    return f'{family}M{model & 0x0F}' if family else f'unknown (0x{model:02X})'
+
+
 @dataclass(frozen=True)
 class DeviceInfo(_StructAnswer):
     """
@@ -343,14 +360,24 @@ class DeviceInfo(_StructAnswer):
         """Firmware version as ``(major, minor)``."""
         return self.firmware_major, self.firmware_minor
 
+    @property
+    def model_name(self) -> str:
+        """Return the model's name, e.g. ``'S1M1'`` (see :func:`model_name`)."""
+        return model_name(self.model)
+
+    @property
+    def firmware_version(self) -> str:
+        """Return the firmware version as SLAMTEC writes it, e.g. ``'1.28'``."""
+        return f'{self.firmware_major}.{self.firmware_minor:02d}'
+
     def describe(self) -> str:
         """
         Describe the device in one line.
 
-        :return: model, firmware, hardware and serial number
+        :return: model name and id, firmware, hardware and serial number
         """
-        return (f'model 0x{self.model:02X}, firmware {self.firmware_major}.'
-                f'{self.firmware_minor:02d}, hardware {self.hardware}, serial '
+        return (f'RPLIDAR {self.model_name} (model 0x{self.model:02X}), firmware '
+                f'{self.firmware_version}, hardware {self.hardware}, serial '
                 f'{self.serial_number.hex().upper()}')
 
 

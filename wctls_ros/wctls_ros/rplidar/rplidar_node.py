@@ -61,6 +61,7 @@ class RplidarNode(Node):
         self._inverted = values['inverted']
         self._angle_compensate = values['angle_compensate']
         self._scan_frequency_hz = values['scan_frequency']
+        self._serial_port = values['serial_port'] if values['channel_type'] == 'serial' else ''
         config = DriverConfig(
             channel_type=values['channel_type'], serial_port=values['serial_port'],
             serial_baudrate=values['serial_baudrate'], tcp_ip=values['tcp_ip'],
@@ -147,6 +148,9 @@ class RplidarNode(Node):
             level = max(level, DiagnosticStatus.WARN)
             message = (f'{message}; the device reports a health warning (code '
                        f'0x{status.health.error_code:04X})')
+        if status.mode_fallback:
+            level = max(level, DiagnosticStatus.WARN)
+            message = f'{message}; {status.mode_fallback}'
         if status.handshake_warnings:
             # Scanning on values that replaced the device's own: never report it as OK.
             level = max(level, DiagnosticStatus.WARN)
@@ -190,6 +194,14 @@ class RplidarNode(Node):
         }
         if status.device is not None:
             values['device'] = status.device.describe()
+            # REP-138's hardware keys.
+            values['Vendor Name'] = 'SLAMTEC'
+            values['Product Name'] = f'RPLIDAR {status.device.model_name}'
+            values['Firmware Version'] = status.device.firmware_version
+        if self._serial_port:
+            values['Serial Port'] = self._serial_port
+        if status.baudrate:
+            values['Serial Baud'] = str(status.baudrate)
         if status.health is not None:
             values['health'] = (f'status {status.health.status}, '
                                 f'code 0x{status.health.error_code:04X}')

@@ -10,7 +10,8 @@ answer 0x81 and 1 DenseBoost, 108 us, answer 0x85, typical 1; no answer to RESET
 and streams what a :class:`Scene` shows in real time: every frame is due when its last byte would
 arrive over a 256000-baud line after its samples were measured. Dense capsule distances are
 whole millimetres and standard node distances quarter millimetres. Given other scan modes (such
-as :data:`A_SERIES_MODES`, an A-series device's) it streams express and ultra capsules too, whose
+as :data:`A_SERIES_MODES`, an A-series device's, and another model byte: :data:`EMULATED_MODELS`)
+it streams express and ultra capsules too, whose
 samples it measures a distance-dependent angle correction before their place on the capsule's
 grid, as a triangulating device does (for ultra capsules, the offset SLAMTEC's SDK applies to
 the distance sent, where a few passes find it; the distances sent are those the capsule's scale
@@ -60,6 +61,13 @@ _FRAMES = {AnswerType.MEASUREMENT: (1, NODE_SIZE),
            AnswerType.ULTRA_CAPSULE: (ULTRA_SAMPLES_PER_CAPSULE, ULTRA_CAPSULE_SIZE),
            AnswerType.DENSE_CAPSULE: (SAMPLES_PER_CAPSULE, CAPSULE_SIZE)}
 MODEL_S1M1 = 0x61
+# The models the emulator can report, by name: their model byte (major id << 4 | sub-model,
+# see the protocol's MODEL_FAMILIES) and scan modes with the typical one's id: an A-series
+# device's modes for the A-series (typical Express), the S1's for the dTOF C1 and S-series.
+EMULATED_MODELS = {'a1': (0x18, A_SERIES_MODES, 1), 'a2': (0x28, A_SERIES_MODES, 1),
+                   'a3': (0x31, A_SERIES_MODES, 1), 'c1': (0x41, MODES, TYPICAL_MODE),
+                   's1': (MODEL_S1M1, MODES, TYPICAL_MODE), 's2': (0x71, MODES, TYPICAL_MODE),
+                   's3': (0x81, MODES, TYPICAL_MODE)}
 HARDWARE = 18
 SERIAL_NUMBER = b'WCTLS-S1-EMULATR'
 DEFAULT_RPM = 600
@@ -192,10 +200,13 @@ class S1Device:
     :param modes: its scan modes (mode i is ``modes[i]``; the first is Standard): the S1's, or
         e.g. :data:`A_SERIES_MODES`
     :param typical_mode: the id of its typical mode
+    :param model: the model byte GET_INFO reports (the S1M1's by default)
     """
 
     def __init__(self, scene: Scene, faults: Faults, firmware: tuple, rng: np.random.Generator,
-                 modes: tuple = MODES, typical_mode: int = TYPICAL_MODE):
+                 modes: tuple = MODES, typical_mode: int = TYPICAL_MODE,
+                 model: int = MODEL_S1M1):
+        self._model = model
         self._modes = modes
         self._typical_mode = typical_mode
         self._scene = scene
@@ -245,7 +256,7 @@ class S1Device:
             return self._start(self._modes[payload[0]], now_s)
         elif command == Command.GET_INFO:
             return encode_answer(AnswerType.DEVICE_INFO, DeviceInfo(
-                MODEL_S1M1, self._firmware[1], self._firmware[0], HARDWARE,
+                self._model, self._firmware[1], self._firmware[0], HARDWARE,
                 SERIAL_NUMBER).encode())
         elif command == Command.GET_HEALTH:
             code = 0 if self._faults.health == HealthStatus.OK else HEALTH_ERROR_CODE

@@ -11,8 +11,16 @@ one more per TCP client. Control lines (``unplug``, ``replug``, ``silent SECONDS
 (the pty device's sample clock: when and at what angle each sample of its stream is measured),
 ``quit``) are queued on :attr:`Emulator.commands` and each is acknowledged with one line on
 standard output.
+
+A pseudo-terminal carries the line settings its client sets, the rate too: a port given a rate
+serves only a client that set it; between the two ends at different rates every byte is lost
+(a device does not understand a request sent at another rate, nor its client the stream). The
+rate is read with the termios2 ioctl, so only on Linux; elsewhere a port given a rate refuses
+to start.
 """
 
+import array
+import fcntl
 import os
 import pty
 import queue
@@ -24,10 +32,15 @@ from typing import Optional
 
 import numpy as np
 
-from .device import Faults, MODES, S1Device, Scene, TYPICAL_MODE
+from .device import Faults, MODEL_S1M1, MODES, S1Device, Scene, TYPICAL_MODE
 from ..protocol import HealthStatus
 
 _POLL_S = 0.001
+# Linux's TCGETS2 (asm-generic ioctls, as pyserial uses them) and the offset of c_ospeed in the
+# struct termios2 it fills: four flag words, c_line, 19 control characters, then c_ispeed.
+_TCGETS2 = 0x802C542A
+_TERMIOS2_WORDS = 11
+_OSPEED_WORD = 10
 
 
 class PtyPort:
@@ -39,12 +52,35 @@ class PtyPort:
     fail, as when a USB adapter is pulled); ``plug`` opens a new terminal behind the same link.
 
     :param link: symlink path to (re)point at the terminal, or None
+    :param baudrate: the only rate, bits per second, its client is heard at (None: any)
     """
 
-    def __init__(self, link: Optional[str]):
+    def __init__(self, link: Optional[str], baudrate: Optional[int] = None):
         self._link = link
+        self.baudrate = baudrate
         self.fd = None
         self.plug()
+        if baudrate is not None:
+            self.client_baudrate()      # fails at once where the rate cannot be read
+
+    def client_baudrate(self) -> int:
+        """
+        Return the rate the client set on the terminal.
+
+        :return: bits per second
+        :raises OSError: where the termios2 ioctl is missing (not Linux)
+        """
+        settings = array.array('I', [0] * _TERMIOS2_WORDS)
+        fcntl.ioctl(self.fd, _TCGETS2, settings)
+        return settings[_OSPEED_WORD]
+
+    def hears_client(self) -> bool:
+        """
+        Tell whether the client's bytes arrive at the port's rate.
+
+        :return: True without a rate of its own or when the client set it
+        """
+        return self.baudrate is None or self.client_baudrate() == self.baudrate
 
     def plug(self) -> str:
         """
@@ -106,11 +142,14 @@ class Emulator:
     :param listener: a listening TCP socket, or None (closed by :meth:`close`)
     :param modes: the devices' scan modes (see :class:`~.device.S1Device`)
     :param typical_mode: the id of their typical mode
+    :param model: the model byte they report
     """
 
     def __init__(self, scene: Scene, faults: Faults, firmware: tuple, seed: int,
                  pty_port: PtyPort, listener: Optional[socket.socket] = None,
-                 modes: tuple = MODES, typical_mode: int = TYPICAL_MODE):
+                 modes: tuple = MODES, typical_mode: int = TYPICAL_MODE,
+                 model: int = MODEL_S1M1):
+        self._model = model
         self._modes = modes
         self._typical_mode = typical_mode
         self._scene = scene
@@ -125,7 +164,7 @@ class Emulator:
 
     def _new_device(self) -> S1Device:
         return S1Device(self._scene, self._faults, self._firmware, self._rng, self._modes,
-                        self._typical_mode)
+                        self._typical_mode, self._model)
 
     def run(self):
         """Serve until a ``quit`` command (or a signal)."""
@@ -139,7 +178,9 @@ class Emulator:
             for source in ready:
                 self._receive(source, now)
             if self.pty.fd is not None:
-                self.pty.write(self._pty_device.stream(now))
+                streamed = self._pty_device.stream(now)
+                if self.pty.hears_client():
+                    self.pty.write(streamed)
             for client, device in list(self._clients.items()):
                 self._send(client, device.stream(now))
 
@@ -156,7 +197,8 @@ class Emulator:
                 data = os.read(source, 4096)
             except (BlockingIOError, OSError):
                 return
-            self.pty.write(self._pty_device.receive(data, now_s))
+            if self.pty.hears_client():
+                self.pty.write(self._pty_device.receive(data, now_s))
             return
         try:
             data = source.recv(4096)

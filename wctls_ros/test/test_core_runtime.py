@@ -152,6 +152,9 @@ def test_a_cold_start_answers_with_numpy_at_once_then_switches_to_the_compiled_c
     # warm_up() after a start in the background waits for it.
     _, waited = run_first_scan(tmp_path, after=AFTER_WARM_UP)
     assert waited == {'core': 'numba', 'pending': False}
+    # A batch tool loads a cached pipeline before its first scan (load_now).
+    loaded, = run_first_scan(tmp_path, start_arguments='load_now=True, ')
+    assert loaded['core'] == 'numba' and not loaded['pending']
 
 
 KEEP_RUNNING = """

@@ -102,10 +102,11 @@ def start_core(prog: str, wait: bool = False, give_up=None):
     """
     Choose the feature pipeline's implementation before a tool's first scan, and say so.
 
-    Silent when the compiled pipeline comes from numba's cache; otherwise a line on standard
+    Loads the compiled pipeline from numba's cache first, silently; otherwise a line on standard
     error says what happens: numba missing (the numpy pipeline serves), a compile starting (the
-    first run on a machine), its end. Done in the tool's own process, before any worker process
-    is forked, so that the workers inherit what serves then.
+    first run on a machine: the numpy pipeline serves meanwhile), its end. Done in the tool's
+    own process, before any worker process is forked, so that the workers inherit what serves
+    then.
 
     :param prog: the tool's name, for the messages
     :param wait: have the compiled pipeline now, compiling it if need be (a tool about to fork
@@ -121,7 +122,8 @@ def start_core(prog: str, wait: bool = False, give_up=None):
         if (status.name != 'numba' or status.compiled_here) and not stopping:
             print(f'{prog}: {status.describe()}', file=sys.stderr)
 
-    status = start(wait=wait, on_change=changed, give_up=give_up)
+    # A tool's results do not depend on when a load ended: it loads a cached pipeline first.
+    status = start(wait=wait, on_change=changed, give_up=give_up, load_now=True)
     if not status.pending:
         changed(status)
     return status

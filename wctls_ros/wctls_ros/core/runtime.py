@@ -199,7 +199,7 @@ def _version_tuple(text: str) -> tuple:
 
 
 def start(wait: bool = False, on_change: Optional[Listener] = None,
-          give_up: Optional[Callable[[], bool]] = None) -> CoreStatus:
+          give_up: Optional[Callable[[], bool]] = None, load_now: bool = False) -> CoreStatus:
     """
     Choose the implementation for this process, once; later calls return the choice.
 
@@ -217,6 +217,10 @@ def start(wait: bool = False, on_change: Optional[Listener] = None,
     :param give_up: with ``wait``, asked ten times a second during a compile whether to stop
         waiting (a tool's signal handler was called): then the compile is ended and the numpy
         core serves
+    :param load_now: load the compiled core before returning when numba's cache holds it
+        (about a second), compiling in the background only when it does not: a batch tool,
+        whose results should not depend on when a load ended (the two cores agree to 1e-9, not
+        bit for bit)
     :return: the status now
     :raises CoreUnavailable: when ``WCTLS_ROS_CORE=numba`` and numba cannot give the core
     """
@@ -228,7 +232,7 @@ def start(wait: bool = False, on_change: Optional[Listener] = None,
             if not (_status.pending and wait):
                 return _status
         else:
-            _status = _choose(wait, on_change, give_up)
+            _status = _choose(wait, on_change, give_up, load_now)
             if not _status.pending:
                 _settled.set()
             return _status
@@ -239,8 +243,8 @@ def start(wait: bool = False, on_change: Optional[Listener] = None,
     return _status
 
 
-def _choose(wait: bool, on_change: Optional[Listener],
-            give_up: Optional[Callable[[], bool]]) -> CoreStatus:
+def _choose(wait: bool, on_change: Optional[Listener], give_up: Optional[Callable[[], bool]],
+            load_now: bool) -> CoreStatus:
     """Make :func:`start`'s first choice (called holding the lock); return the status."""
     asked = choice()
     if asked == 'numpy':
@@ -250,6 +254,9 @@ def _choose(wait: bool, on_change: Optional[Listener],
         if asked == 'numba':
             raise CoreUnavailable(f'{CORE_VARIABLE}=numba, but {problem} ({INSTALL_NUMBA})')
         return CoreStatus('numpy', problem, advice=INSTALL_NUMBA)
+    if load_now and not wait:
+        from .numba_core import precompile
+        wait = precompile.pipeline_is_cached()
     if wait or asked == 'numba':
         def compiling() -> None:
             if on_change is not None:

@@ -214,3 +214,30 @@ def start_emulator(directory, *options):
     :return: the running :class:`EmulatorProcess` (a context manager)
     """
     return EmulatorProcess(['--noiseless', '--link', str(directory / 'ttyS1'), *options])
+
+
+def sdk_framed_capsules(data: bytes, size: int):
+    """
+    Frame capsules of ``size`` bytes as SLAMTEC's SDK does, one byte at a time.
+
+    What the SDK ports of the capsule tests share: a byte out of sync, or a capsule whose
+    checksum fails, makes the SDK drop the capsule it holds (yielded as None).
+
+    :param data: the stream
+    :param size: bytes per capsule (84 for dense and express, 132 for ultra)
+    :return: an iterator of capsules (bytes) and None where the SDK resets
+    """
+    buffer = []
+    for byte in data:
+        if (len(buffer) == 0 and byte >> 4 != 0xA) or (len(buffer) == 1 and byte >> 4 != 0x5):
+            buffer = []
+            yield None
+            continue
+        buffer.append(byte)
+        if len(buffer) < size:
+            continue
+        capsule, buffer = bytes(buffer), []
+        checksum = 0
+        for value in capsule[2:]:
+            checksum ^= value
+        yield capsule if checksum == (capsule[0] & 0xF) | ((capsule[1] << 4) & 0xFF) else None

@@ -8,7 +8,7 @@ import struct
 
 import numpy as np
 import pytest
-from rplidar_testing import denseboost_stream, true_ranges
+from rplidar_testing import denseboost_stream, sdk_framed_capsules, true_ranges
 from test_rplidar_protocol import damaged, feed_in_chunks
 from wctls_ros.rplidar.capsules import DenseCapsuleDecoder
 from wctls_ros.rplidar.emulator.device import Faults
@@ -19,23 +19,10 @@ STEP_Q6 = 995                    # the emulator's capsule sweep at 10 Hz, 1/64 d
 
 def sdk_capsule_reference(data, us_per_sample=108):
     """Port of the SDK's UnpackerHandler_DenseCapsuleNode::onData, one byte at a time."""
-    out, buffer, previous = [], [], None
+    out, previous = [], None
     limit_q8 = (360 * 100 * 40 // (1000000 // us_per_sample)) << 8
-    for byte in data:
-        if len(buffer) == 0 and byte >> 4 != 0xA:
-            previous = None
-            continue
-        if len(buffer) == 1 and byte >> 4 != 0x5:
-            buffer, previous = [], None
-            continue
-        buffer.append(byte)
-        if len(buffer) < 84:
-            continue
-        capsule, buffer = bytes(buffer), []
-        checksum = 0
-        for value in capsule[2:]:
-            checksum ^= value
-        if checksum != (capsule[0] & 0xF) | ((capsule[1] << 4) & 0xFF):
+    for capsule in sdk_framed_capsules(data, 84):
+        if capsule is None:
             previous = None
             continue
         start_field, *distances = struct.unpack('<41H', capsule[2:])

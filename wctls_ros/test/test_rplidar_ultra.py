@@ -12,7 +12,8 @@ import sys
 from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
-from rplidar_testing import emulated_stream, range_band, serving, true_ranges
+from rplidar_testing import (emulated_stream, range_band, sdk_framed_capsules, serving,
+                             true_ranges)
 from test_rplidar_emulator import SDK_CLIENT
 from test_rplidar_protocol import feed_in_chunks
 from wctls_ros.rplidar.emulator.device import A_SERIES_MODES
@@ -47,22 +48,9 @@ def sdk_ultra_reference(data):
     def signed10(value):
         return value - 1024 if value & 0x200 else value
 
-    out, buffer, previous = [], [], None
-    for byte in data:
-        if len(buffer) == 0 and byte >> 4 != 0xA:
-            previous = None
-            continue
-        if len(buffer) == 1 and byte >> 4 != 0x5:
-            buffer, previous = [], None
-            continue
-        buffer.append(byte)
-        if len(buffer) < 132:
-            continue
-        capsule, buffer = bytes(buffer), []
-        checksum = 0
-        for value in capsule[2:]:
-            checksum ^= value
-        if checksum != (capsule[0] & 0xF) | ((capsule[1] << 4) & 0xFF):
+    out, previous = [], None
+    for capsule in sdk_framed_capsules(data, 132):
+        if capsule is None:
             previous = None
             continue
         start_field, *cabins = struct.unpack('<H32I', capsule[2:])

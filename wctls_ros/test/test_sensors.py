@@ -33,12 +33,12 @@ def test_every_required_sensor_has_a_preset_whose_numbers_each_have_a_source():
 @pytest.mark.parametrize('text,reason', [
     ('parameters: {range_sigma_m: 0.01, bearing_sigma_deg: 0.1}\nsources: {}\n', 'exactly'),
     ('parameters: {range_sigma_m: 0.01, range_sigma_from_scan: false, bearing_sigma_deg: 0.1,'
-     ' common_range_sigma_m: 0}\n'
+     ' common_range_sigma_m: 0, model_error_sigma_m: 0.01, wall_flatness_sigma_m: 0}\n'
      'sources: {range_sigma_m: datasheet, bearing_sigma_deg: measured}\n', 'source of each'),
-    ('parameters: {range_sigma_m: -1, range_sigma_from_scan: false, bearing_sigma_deg: 0.1,'
-     ' common_range_sigma_m: 0}\n'
+    ('parameters: {range_sigma_m: 0.01, range_sigma_from_scan: false, bearing_sigma_deg: 0.1,'
+     ' common_range_sigma_m: 0, model_error_sigma_m: -1, wall_flatness_sigma_m: 0}\n'
      'sources: {range_sigma_m: a, range_sigma_from_scan: b, bearing_sigma_deg: c,'
-     ' common_range_sigma_m: d}\n', '>= 0'),
+     ' common_range_sigma_m: d, model_error_sigma_m: e, wall_flatness_sigma_m: f}\n', '>= 0'),
 ])
 def test_a_preset_without_a_number_or_its_source_is_refused(tmp_path, text, reason):
     path = tmp_path / 'mine.yaml'

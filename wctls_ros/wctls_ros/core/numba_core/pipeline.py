@@ -55,6 +55,7 @@ class _Settings(NamedTuple):
     merge_max_missing_beams: int
     end_offset_sigmas: float
     residual_scaling: bool
+    model_error_sigma_m: float
     wall_flatness_sigma_m: float
     min_segment_points: int
     min_segment_length_m: float
@@ -173,11 +174,14 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     if settings.range_sigma_from_scan:
         range_sigma = max(range_sigma, range_sigma_of_returns(index, range_m))
     bearing_sigma = settings.bearing_sigma_rad
+    # #decision-noise: every decision tolerates the model error on top of the sensor noise;
+    # the fits weigh the returns by the sensor noise alone.
+    deciding_sigma = math.hypot(range_sigma, settings.model_error_sigma_m)
     # #segmentation-statistics: breakpoints, chains in circular order, IEPF, merging, the size
     # rules, the end trims. From here on, positions index the returns in circular order.
     separated, joinable = breakpoints_of(
         index, x_m, y_m, range_m, ranges_m.size, abs(angle_increment_rad), full_turn,
-        range_sigma, bearing_sigma, settings.breakpoint_lambda_rad,
+        deciding_sigma, bearing_sigma, settings.breakpoint_lambda_rad,
         settings.merge_max_missing_beams)
     order, run_start, run_stop, run_chain = chains_of(range_m, x_m, y_m, separated)
     rho, theta, x, y = range_m[order], bearing_rad[order], x_m[order], y_m[order]
@@ -185,11 +189,11 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     budget = pass_budget(count)
     start, stop, chain, unsplit = split_iepf(
         x, y, run_start, run_stop, run_chain,
-        _split_threshold(rho, range_sigma, bearing_sigma, settings), budget)
+        _split_threshold(rho, deciding_sigma, bearing_sigma, settings), budget)
     if start.size == 0:
         return _nothing() + (unsplit,)
     start, stop, chain, angle, radius, unmerged = merge_segments(
-        x, y, start, stop, chain, full_turn, joinable[order], range_sigma, bearing_sigma,
+        x, y, start, stop, chain, full_turn, joinable[order], deciding_sigma, bearing_sigma,
         settings.merge_chi2, budget)
     work_limited = unsplit or unmerged
     keep = _large_enough(x, y, start, stop, settings)
@@ -198,9 +202,9 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     if start.size == 0:
         return _nothing() + (work_limited,)
     start, stop, chain = trim_ambiguous(start, stop, chain, full_turn, x, y, angle, radius,
-                                        range_sigma, bearing_sigma, settings.min_segment_points)
+                                        deciding_sigma, bearing_sigma, settings.min_segment_points)
     if settings.end_offset_sigmas > 0.0:
-        start, stop, chain = trim_offset(start, stop, chain, x, y, angle, radius, range_sigma,
+        start, stop, chain = trim_offset(start, stop, chain, x, y, angle, radius, deciding_sigma,
                                          bearing_sigma, settings.min_segment_points,
                                          settings.end_offset_sigmas)
     # #utls, #wtls, #wctls or #maximum-likelihood: the configured fit with its covariance, in
@@ -211,10 +215,10 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
      first, last, counts, chi2_dof) = walls
     if angle.size == 0:
         return _nothing() + (work_limited,)
-    # #corners: which pairs are corners is decided on the sensor noise alone; the published
-    # covariances add the model error (a rougher wall is less precise, not more of a corner).
+    # #corners: which pairs are corners is decided with the decision noise; the published
+    # covariances add the model error to the fits' (#model-error).
     first_wall, second_wall, corner_xy, corner_yaw, opening, end_seen = _corners(
-        x, y, walls, first, last, full_turn, abs(angle_increment_rad), range_sigma,
+        x, y, walls, first, last, full_turn, abs(angle_increment_rad), deciding_sigma,
         bearing_sigma, settings)
     # #model-error (D17), (D18), then #corners and #common-mode-range-offset, (D11)-(D16).
     normal_covariance, line_covariance = with_model_error(

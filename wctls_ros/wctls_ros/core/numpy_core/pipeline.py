@@ -64,24 +64,27 @@ def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float
         return nothing
     # #range-noise-from-the-scan
     config = _with_range_sigma_of_the_scan(config, points)
+    # #decision-noise: every decision tolerates the model error on top of the sensor noise;
+    # the fits weigh the returns by the sensor noise alone.
+    decisions = _deciding(config)
     # #segmentation-statistics: breakpoints, IEPF, merging, the size rules, the end trims.
-    contour = _Contour.of(points, config)
-    segments, unsplit = _split(contour, config)
+    contour = _Contour.of(points, decisions)
+    segments, unsplit = _split(contour, decisions)
     if not len(segments):
         return replace(nothing, work_limited=unsplit)
-    segments, angle, radius, unmerged = _merge(contour, segments, config)
+    segments, angle, radius, unmerged = _merge(contour, segments, decisions)
     segments, angle, radius = _large_enough(contour, segments, angle, radius, config)
     work_limited = unsplit or unmerged
     if not len(segments):
         return replace(nothing, work_limited=work_limited)
-    segments = _trim_ends(contour, segments, angle, radius, config)
+    segments = _trim_ends(contour, segments, angle, radius, decisions)
     # #utls, #wtls, #wctls or #maximum-likelihood: the configured fit with its covariance.
     walls, positions = _fit_walls(contour, segments, config)
     if not len(walls):
         return replace(nothing, work_limited=work_limited)
-    # #corners: which pairs are corners is decided on the sensor noise alone; the published
-    # covariances add the model error (a rougher wall is less precise, not more of a corner).
-    corners = _corners(contour, walls, positions, config)
+    # #corners: which pairs are corners is decided with the decision noise; the published
+    # covariances add the model error to the fits' (#model-error).
+    corners = _corners(contour, walls, positions, decisions)
     # #model-error (D17), (D18), then #corners and #common-mode-range-offset, (D11)-(D16).
     walls = _with_model_error(walls, config)
     return Features(config.method, walls, _corner_covariances(walls, corners, config),
@@ -93,6 +96,20 @@ def _with_range_sigma_of_the_scan(config: FeatureConfig, points: ScanPoints) -> 
     if not config.range_sigma_from_scan:
         return config
     return replace(config, range_sigma_m=max(config.range_sigma_m, scan_range_sigma(points)))
+
+
+def _deciding(config: FeatureConfig) -> FeatureConfig:
+    """
+    Return the config the decisions use: the model error added to the range noise.
+
+    A return strays from the ideal wall by its measurement noise and by the model error (a
+    bowed or rough wall, a rounded corner, a mixed return): each decision tolerates both, in
+    quadrature (docs/derivation.md#decision-noise).
+    """
+    if config.model_error_sigma_m == 0.0:
+        return config
+    return replace(config, range_sigma_m=math.hypot(config.range_sigma_m,
+                                                    config.model_error_sigma_m))
 
 
 @dataclass(frozen=True)

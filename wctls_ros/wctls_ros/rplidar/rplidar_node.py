@@ -15,13 +15,14 @@ ends (a transition, destroy_node after Ctrl-C, SIGTERM or an exception) the driv
 which stops the scan and the motor.
 
 Publishes sensor_msgs/LaserScan on ``scan`` (reliable, keep last 10, like sllidar_ros2; a
-lifecycle publisher: only while active) and diagnostic_msgs/DiagnosticArray on ``/diagnostics``
-(1 Hz, in every state); offers ``start_motor`` and ``stop_motor`` (std_srvs/Empty, while
-active). The device is read on a background thread
-(:class:`~wctls_ros.rplidar.driver.RplidarDriver`), which publishes each turn as soon as it is
-complete. Unlike sllidar_ros2, header.stamp is the measurement time of the turn's first sample
-(raw angle ~0, published angle ~+pi; the sensor sweeps toward -pi) and scan_time the measured
-rotation period.
+lifecycle publisher: only while active), with ``fixed_beams`` N > 0 the same turns as N fixed
+beams on ``scan_fixed`` (:func:`~wctls_ros.rplidar.laserscan.fixed_scan`), and
+diagnostic_msgs/DiagnosticArray on ``/diagnostics`` (1 Hz, in every state); offers
+``start_motor`` and ``stop_motor`` (std_srvs/Empty, while active). Angles, orientations and
+the time order of the beams: :mod:`wctls_ros.rplidar.laserscan`. The device is read on a
+background thread (:class:`~wctls_ros.rplidar.driver.RplidarDriver`), which publishes each turn
+as soon as it is complete. Unlike sllidar_ros2, header.stamp is the measurement time of the
+turn's first sample (raw angle ~0) and scan_time the measured rotation period.
 """
 
 import array
@@ -40,7 +41,8 @@ from sensor_msgs.msg import LaserScan
 from std_srvs.srv import Empty
 
 from .driver import DriverConfig, DriverState, RplidarDriver
-from .laserscan import compensation_multiple, RANGE_MIN_M, turn_to_scan
+from .laserscan import (compensation_multiple, fixed_scan, orientation_offset_rad, RANGE_MIN_M,
+                        ScanArrays, turn_to_scan)
 from .protocol import HealthStatus, StreamCounts
 from ..node_main import declare_parameters, run_node
 from ..params import RPLIDAR_NODE
@@ -81,6 +83,9 @@ class RplidarNode(LifecycleNode):
         self._angle_compensate = values['angle_compensate']
         self._scan_frequency_hz = values['scan_frequency']
         self._serial_port = values['serial_port'] if values['channel_type'] == 'serial' else ''
+        self._orientation = values['orientation']
+        orientation_offset_rad(self._orientation)        # refuses an unknown one at start
+        self._fixed_beams = values['fixed_beams']
         self._autostart = values['autostart']
         self._configure_timeout_s = values['configure_timeout']
         self._config = DriverConfig(
@@ -95,6 +100,8 @@ class RplidarNode(LifecycleNode):
         self._latencies_s = []
         self._last_report = (0, StreamCounts(), time.monotonic())
         self._scan_pub = self.create_lifecycle_publisher(LaserScan, 'scan', SCAN_QOS)
+        self._fixed_scan_pub = (self.create_lifecycle_publisher(LaserScan, 'scan_fixed', SCAN_QOS)
+                                if self._fixed_beams else None)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_service(Empty, 'start_motor', self._start_motor)
         self.create_service(Empty, 'stop_motor', self._stop_motor)
@@ -229,29 +236,39 @@ class RplidarNode(LifecycleNode):
         driver.close()
 
     def _publish_turn(self, turn, mode):
-        """Publish one turn as a LaserScan (called on the reader thread)."""
+        """Publish one turn as a LaserScan, and as a fixed-count one if asked (reader thread)."""
         if not self._active:
             return
-        scan = turn_to_scan(turn, self._angle_compensate, self._inverted,
-                            compensation_multiple(mode.us_per_sample, self._scan_frequency_hz))
+        stamp = Time(nanoseconds=_ros_minus_monotonic_ns(self.get_clock())
+                     + int(turn.first_sample_s * 1e9)).to_msg()
+        multiple = compensation_multiple(mode.us_per_sample, self._scan_frequency_hz)
+        self._scan_pub.publish(self._message(
+            turn_to_scan(turn, self._angle_compensate, self._inverted, multiple,
+                         self._orientation), stamp, mode.max_distance_m))
+        if self._fixed_scan_pub is not None:
+            self._fixed_scan_pub.publish(self._message(
+                fixed_scan(turn, self._fixed_beams, self._inverted, self._orientation), stamp,
+                mode.max_distance_m))
+        latency_s = time.monotonic() - turn.last_byte_s
+        with self._latency_lock:
+            self._latencies_s.append(latency_s)
+            del self._latencies_s[:-_LATENCY_WINDOW]
+
+    def _message(self, scan: ScanArrays, stamp, range_max_m: float) -> LaserScan:
+        """Return the LaserScan message of a laid-out turn."""
         msg = LaserScan()
         msg.header.frame_id = self._frame_id
-        msg.header.stamp = Time(nanoseconds=_ros_minus_monotonic_ns(self.get_clock())
-                                + int(turn.first_sample_s * 1e9)).to_msg()
+        msg.header.stamp = stamp
         msg.angle_min = scan.angle_min
         msg.angle_max = scan.angle_max
         msg.angle_increment = scan.angle_increment
         msg.time_increment = scan.time_increment
         msg.scan_time = scan.scan_time
         msg.range_min = RANGE_MIN_M
-        msg.range_max = mode.max_distance_m
+        msg.range_max = range_max_m
         msg.ranges = array.array('f', scan.ranges.tobytes())
         msg.intensities = array.array('f', scan.intensities.tobytes())
-        self._scan_pub.publish(msg)
-        latency_s = time.monotonic() - turn.last_byte_s
-        with self._latency_lock:
-            self._latencies_s.append(latency_s)
-            del self._latencies_s[:-_LATENCY_WINDOW]
+        return msg
 
     def _start_motor(self, request, response):
         if self._motor_request_refused('start_motor'):

@@ -2,6 +2,8 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
+Turns, and the LaserScan layouts of both outputs.
+
 Turn assembly and timing, sllidar_ros2's LaserScan layout (against a port of its loops), the
 fixed-count scan and the two laser frame orientations (against angles worked out by hand).
 """

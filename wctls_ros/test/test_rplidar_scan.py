@@ -89,10 +89,10 @@ def test_a_turn_without_returns_is_all_infinite():
 
 def wall_turn(wall_deg, count=360, wall_mm=1500.0, far_mm=8000.0):
     """
-    Return a turn of ``count`` evenly spaced samples, far everywhere but one sample nearest raw
-    angle ``wall_deg`` (clockwise, the device's own angle).
+    Return a turn of evenly spaced samples, far everywhere but at one wall sample.
 
-    The samples lie 0.2 degree past whole degrees: with 360 of them, one in each one-degree
+    The wall sample is the one nearest raw angle ``wall_deg`` (clockwise, the device's own
+    angle). The samples lie 0.2 degree past whole degrees: with 360 of them, one in each one-degree
     bin, never on a bin's edge.
     """
     angle = np.arange(count) * 360.0 / count + 0.2
@@ -117,8 +117,8 @@ WALL_BINS = [
 
 
 @pytest.mark.parametrize('wall_deg, orientation, beam', WALL_BINS)
-def test_a_wall_lands_in_the_right_fixed_beam_in_both_orientations(wall_deg, orientation,
-                                                                  beam):
+def test_a_wall_lands_in_the_right_fixed_beam_in_both_orientations(
+        wall_deg, orientation, beam):
     turn = wall_turn(wall_deg)
     scan = fixed_scan(turn, 360, inverted=False, orientation=orientation)
     assert len(scan.ranges) == 360

@@ -109,7 +109,7 @@ def test_the_rplidar_driver_is_started_as_a_lifecycle_node():
     assert transitions == {'TRANSITION_CONFIGURE', 'TRANSITION_ACTIVATE'}
     assert {call.func.id for call in ast.walk(function) if isinstance(call, ast.Call)
             and isinstance(call.func, ast.Name)} >= {'LifecycleNode', 'OnStateTransition',
-                                                     'ChangeState', 'load_parameters'}
+                                                     'ChangeState', '_file_value'}
 
 
 @launch_ros_missing

@@ -263,3 +263,13 @@ def test_an_exception_in_the_node_stops_the_motor(device):
     requests = heard(device)
     assert 'EXPRESS_SCAN=0x0100000000' in requests and stopped_last(requests), requests
     assert not streaming(device)
+
+
+def test_an_unknown_orientation_ends_the_node_in_one_line():
+    process = subprocess.run([str(NODE_EXECUTABLE), '--ros-args', '-p', 'orientation:=ned'],
+                             capture_output=True, text=True, timeout=30)
+    assert process.returncode == 1
+    lines = [line for line in process.stderr.splitlines() if 'orientation' in line]
+    assert len(lines) == 1 and "must be one of ('sllidar', 'rep103')" in lines[0], (
+        process.stderr)
+    assert 'Traceback' not in process.stderr

@@ -24,7 +24,7 @@ from launch_ros.events.lifecycle import ChangeState
 from launch_ros.substitutions import FindPackageShare
 from lifecycle_msgs.msg import Transition
 
-from .params import load_parameters, SCHEMAS
+from .params import ConfigError, defaults, load_parameters, SCHEMAS
 
 PACKAGE = 'wctls_ros'
 # Parameters every rclpy node has besides its schema's.
@@ -107,7 +107,7 @@ def lifecycle_node(executable: str, params_file,
         given = _given(context, executable, arguments)
         path = (params_file if isinstance(params_file, str)
                 else perform_substitutions(context, [params_file]))
-        autostart = given.get('autostart', load_parameters(path, executable)['autostart'])
+        autostart = given.get('autostart', _file_value(path, executable, 'autostart'))
         node = LifecycleNode(package=PACKAGE, executable=executable, name=executable,
                              namespace='', output='screen', parameters=[params_file, given])
         if autostart:
@@ -133,3 +133,17 @@ def _given(context, executable: str, arguments: Iterable[Tuple[str, str]]) -> di
         if text:
             given[parameter] = _typed(executable, parameter, text)
     return given
+
+
+
+def _file_value(path: str, executable: str, name: str):
+    """
+    Return a parameter's value in a node's parameter file, else its default.
+
+    A file the node would warn about (an unknown name) or refuse is the node's to report, in
+    its own log: the launch goes on with the default.
+    """
+    try:
+        return load_parameters(path, executable)[name]
+    except ConfigError:
+        return defaults(SCHEMAS[executable])[name]

@@ -194,11 +194,14 @@ def test_a_lost_port_that_comes_back_gets_the_stale_scan_stopped_first(
     executor.add_node(node)
     scans = scan_counter(ros_context, executor)
     assert spin_until(executor, lambda: len(scans) >= 1, 5.0)
+    heard(device)
     assert device.command('hangup').startswith('hung up')
     count = len(scans)
     assert spin_until(executor, lambda: len(scans) > count + 1, 5.0)
+    # On the new terminal, the first request stops the scan the device kept streaming.
     requests = heard(device)
     assert requests[0] == 'STOP' and 'EXPRESS_SCAN=0x0100000000' in requests, requests
+    assert requests.index('STOP') < requests.index('GET_INFO'), requests
     executor.remove_node(node)
     node.destroy_node()
     assert stopped_last(heard(device)) and not streaming(device)

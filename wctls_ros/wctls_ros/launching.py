@@ -135,7 +135,6 @@ def _given(context, executable: str, arguments: Iterable[Tuple[str, str]]) -> di
     return given
 
 
-
 def _file_value(path: str, executable: str, name: str):
     """
     Return a parameter's value in a node's parameter file, else its default.

@@ -16,7 +16,7 @@ BY_NAME = {parameter.name: parameter for parameter in FEATURE_NODE}
 BASES = re.compile(r'datasheet|measured|measurement|assumed|not published')
 # What the issue asks for, at least.
 REQUIRED = {'rplidar_s1', 'sick_lms1xx', 'sick_tim5xx_7xx', 'hokuyo_urg04lx', 'hokuyo_utm30lx',
-            'generic'}
+            'generic', 'rplidar_a1', 'rplidar_a2', 'rplidar_a3', 'rplidar_c1'}
 
 
 def test_every_required_sensor_has_a_preset_whose_numbers_each_have_a_source():
@@ -28,6 +28,15 @@ def test_every_required_sensor_has_a_preset_whose_numbers_each_have_a_source():
             BY_NAME[name].check(preset.parameters[name])      # within the node's ranges
             # Each source says what kind it is: a datasheet, our measurement, or an assumption.
             assert BASES.search(preset.sources[name]), (preset.name, name)
+
+
+def test_the_triangulating_rplidars_follow_their_range_noise_scan_by_scan():
+    # The core has one range sigma per scan: the nearest equivalent of the A-series' noise
+    # growing with distance is to estimate it from each scan, never a fixed figure.
+    presets = sensor_presets()
+    for name in ('rplidar_a1', 'rplidar_a2', 'rplidar_a3'):
+        assert presets[name].parameters['range_sigma_from_scan'] is True, name
+        assert 'distance' in presets[name].sources['range_sigma_from_scan'], name
 
 
 @pytest.mark.parametrize('text,reason', [

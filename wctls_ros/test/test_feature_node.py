@@ -203,6 +203,21 @@ def test_a_burst_of_malformed_scans_then_a_good_one(ros_context, executor):
     assert len(corners.corners) == 5
 
 
+def test_a_scan_of_garbage_is_published_empty_and_counted(ros_context, executor):
+    # Every other return a random short echo: the scan's own noise estimate is about a metre,
+    # beyond max_range_sigma_m; what it would give is walls fitted through noise.
+    harness = Harness(ros_context, executor)
+    garbage = room_scan_message()
+    ranges = np.array(garbage.ranges, np.float32)
+    ranges[::2] = np.random.default_rng(5).uniform(0.2, 1.0, ranges[::2].size)
+    garbage.ranges = ranges
+    corners, lines = harness.exchange(garbage, 1)
+    assert len(corners.corners) == len(lines.segments) == 0
+    assert harness.node.counters.implausible_noise == 1
+    corners, _ = harness.exchange(room_scan_message(), count=2)
+    assert len(corners.corners) == 5
+
+
 def test_bytes_that_are_no_scan_are_counted_and_the_next_is_processed(ros_context, executor):
     # The node takes scans as CDR bytes and decodes them itself: whatever a publisher sends
     # on scan (e.g. a raw publish with the wrong layout) must not stop it.

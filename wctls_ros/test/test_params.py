@@ -76,6 +76,12 @@ def test_a_parameter_value_passes_its_check_exactly_when_the_core_accepts_it(par
         changes = {parameter.setting: parameter.to_setting(value) if schema_ok else value}
         if parameter.name == 'range_max_m':
             changes['range_min_m'] = 0.0
+        # The range noise may not exceed its plausibility bound: each is checked with the
+        # other out of the way.
+        if parameter.name == 'range_sigma_m':
+            changes['max_range_sigma_m'] = 100.0
+        if parameter.name == 'max_range_sigma_m' and schema_ok:
+            changes['range_sigma_m'] = min(changes['max_range_sigma_m'], 0.001)
         try:
             FeatureConfig().replace(**changes)
             core_ok = True

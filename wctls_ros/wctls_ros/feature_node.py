@@ -69,6 +69,10 @@ class ScanCounters:
     :ivar malformed: scans dropped because they cannot be interpreted (published empty) or
         not even decoded (not published: they have no header to publish with)
     :ivar work_limited: scans on which the per-scan work bound stopped splitting early
+    :ivar implausible_noise: scans dropped because their range-noise estimate exceeded
+        max_range_sigma_m (published empty)
+    :ivar implausible_features: segments and corners left out because their position std was
+        beyond the plausibility bound for their range
     :ivar seconds: extraction and publishing time of each scan since the last report, s
     """
 
@@ -77,6 +81,8 @@ class ScanCounters:
     lost: int = 0
     malformed: int = 0
     work_limited: int = 0
+    implausible_noise: int = 0
+    implausible_features: int = 0
     seconds: list = field(default_factory=list)
 
 
@@ -199,6 +205,15 @@ class FeatureNode(Node):
                 f'a scan from {scan.header.frame_id!r} needed more splitting than the per-scan '
                 'work bound allows; its returns that are still not straight were left out',
                 throttle_duration_sec=WARN_PERIOD_S)
+        if features.noise_implausible:
+            self._count('implausible_noise')
+            self.get_logger().warning(
+                f'dropping a scan from {scan.header.frame_id!r}: its returns scatter '
+                f'{1e3 * features.range_sigma_m:.0f} mm about their neighbours, beyond '
+                f'max_range_sigma_m ({1e3 * self._config.max_range_sigma_m:.0f} mm)',
+                throttle_duration_sec=WARN_PERIOD_S)
+        if features.implausible_features:
+            self._count('implausible_features', features.implausible_features)
         return features
 
     def _on_scan(self, serialized: bytes, info: dict):
@@ -239,11 +254,12 @@ class FeatureNode(Node):
     def _publish_diagnostics(self):
         recent, self._recent = self._recent, ScanCounters()
         level, message = DiagnosticStatus.OK, 'extracting features'
-        if recent.skipped or recent.malformed or recent.work_limited:
+        if recent.skipped or recent.malformed or recent.work_limited or recent.implausible_noise:
             level = DiagnosticStatus.WARN
             message = ', '.join(f'{count} scans {what}' for count, what in (
                 (recent.skipped, 'skipped (busy or lost)'),
                 (recent.malformed, 'dropped (malformed)'),
+                (recent.implausible_noise, 'dropped (implausible noise)'),
                 (recent.work_limited, 'over the work bound')) if count)
         elif not recent.processed:
             message = 'no scans'
@@ -259,6 +275,8 @@ class FeatureNode(Node):
             'scan publishers': self._scans.get_publisher_count(),
             'scans dropped (malformed)': self._total.malformed,
             'scans over the work bound': self._total.work_limited,
+            'scans dropped (implausible noise)': self._total.implausible_noise,
+            'features dropped (implausible covariance)': self._total.implausible_features,
             'processing time median (ms)': f'{1e3 * statistics.median(seconds):.2f}',
             'processing time max (ms)': f'{1e3 * max(seconds):.2f}',
         }

@@ -84,6 +84,11 @@ class FeatureConfig:
     range_sigma_from_scan: bool = _setting(
         False, 'estimate the range noise of each scan from the scan itself (the second '
         'differences of neighbouring ranges); range_sigma_m is then its floor')
+    max_range_sigma_m: float = _setting(
+        0.1, 'a scan whose own range-noise estimate exceeds this is no scan of surfaces (returns '
+        'scattered at random, a wall interleaved with short echoes): it gives no features and '
+        'is counted; no 2D LiDAR we know of scatters 10 cm per return, m',
+        Limits(0.0, 100.0, low_open=True))
     common_range_sigma_m: float = _setting(
         0.0, 'std of a range offset shared by every return of one scan, m (some sensors drift '
         'as a whole, e.g. the SICK LMS111 by about 1 mm; calibrate measures it)',
@@ -228,6 +233,10 @@ def validation_errors(config: FeatureConfig):
             yield f'{name} must be a number, got {value!r}'
         elif not limits.holds(value):
             yield f'{name} must be in {limits.describe()}, got {value:g}'
+    if (_is_number(config.range_sigma_m) and _is_number(config.max_range_sigma_m)
+            and config.range_sigma_m > config.max_range_sigma_m):
+        yield (f'range_sigma_m ({config.range_sigma_m:g}) must not exceed max_range_sigma_m '
+               f'({config.max_range_sigma_m:g}): every scan would be dropped')
     if (_is_number(config.range_min_m) and _is_number(config.range_max_m)
             and not config.range_min_m < config.range_max_m):
         yield (f'range_min_m ({config.range_min_m:g}) must be below range_max_m '

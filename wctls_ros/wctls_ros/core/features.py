@@ -10,6 +10,7 @@ to convert to messages) and read one at a time as small records (``Segment``, ``
 """
 
 from dataclasses import dataclass
+import math
 
 import numpy as np
 
@@ -131,6 +132,15 @@ class SegmentSet(_Rows):
                        int(self.last_index[i]), int(self.num_points[i]),
                        float(self.residual_chi2_dof[i]))
 
+    def select(self, keep: np.ndarray) -> 'SegmentSet':
+        """
+        Return the segments where ``keep`` selects (a boolean or index array).
+
+        :param keep: selection over the segments
+        :return: the selected segments
+        """
+        return SegmentSet(*(getattr(self, name)[keep] for name in self.__dataclass_fields__))
+
     @staticmethod
     def empty() -> 'SegmentSet':
         """
@@ -204,12 +214,22 @@ class Features:
         that were still not straight after the allowed passes are left out, or neighbouring
         segments stayed apart (a scan no real scene gives; see
         :func:`wctls_ros.core.segmentation.pass_budget`)
+    :ivar range_sigma_m: the range noise the scan was processed with (its own estimate when
+        ``range_sigma_from_scan``, never below ``range_sigma_m``), m; NaN for a scan with too
+        few returns to process
+    :ivar noise_implausible: the scan's range-noise estimate exceeded ``max_range_sigma_m``:
+        no features (:mod:`wctls_ros.core.plausibility`)
+    :ivar implausible_features: segments and corners left out because their position std
+        exceeded the plausibility bound for their range
     """
 
     method: str
     segments: SegmentSet
     corners: CornerSet
     work_limited: bool = False
+    range_sigma_m: float = math.nan
+    noise_implausible: bool = False
+    implausible_features: int = 0
 
 
 @dataclass(frozen=True)

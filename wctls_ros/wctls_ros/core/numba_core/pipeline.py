@@ -28,6 +28,7 @@ from .segmentation import (breakpoints_of, chains_of, merge_segments, pass_budge
                            trim_ambiguous, trim_offset)
 from ..config import FeatureConfig, METHODS
 from ..features import CornerSet, Features, SegmentSet
+from ..plausibility import implausible_scan, noise_is_plausible, plausible
 from ..scan import beam_density, scan_geometry, ScanError
 
 _DEFAULT_CONFIG = FeatureConfig()
@@ -107,7 +108,15 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
         full_turn, _settings(config),
         _at_density(float(angle_increment_rad), ranges.size, config))
     segments, corners, work_limited = SegmentSet(*found[:12]), CornerSet(*found[12:19]), found[19]
-    return Features(config.method, segments, corners, bool(work_limited))
+    features = Features(config.method, segments, corners, bool(work_limited))
+    # #plausibility: nothing published that says "unknown" (a scan too few returns to process
+    # has no range noise: NaN).
+    range_sigma = found[20]
+    if math.isnan(range_sigma):
+        return features
+    if not noise_is_plausible(range_sigma, config):
+        return implausible_scan(config.method, range_sigma)
+    return plausible(features, config, range_sigma)
 
 
 def kernels_last_first():
@@ -178,14 +187,15 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     :param full_turn: the beams cover a full turn (the first and last are neighbours)
     :param settings: the configuration
     :param density: the rules that count returns, at this scan's beam spacing
-    :return: the twelve arrays of a SegmentSet, the seven of a CornerSet, and whether the work
-        bound stopped splitting or merging
+    :return: the twelve arrays of a SegmentSet, the seven of a CornerSet, whether the work
+        bound stopped splitting or merging, and the range noise the scan was processed with
+        (m; NaN when too few returns)
     """
     index, range_m, bearing_rad, x_m, y_m = valid_returns(
         ranges_m, cos, sin, angle_min_rad, angle_increment_rad, range_min_m, range_max_m)
     count = index.size
     if count < settings.min_segment_points:
-        return _nothing() + (False,)
+        return _nothing() + (False, math.nan)
     # #range-noise-from-the-scan
     range_sigma = settings.range_sigma_m
     if settings.range_sigma_from_scan:
@@ -209,7 +219,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
         _split_threshold(rho, deciding_sigma, bearing_sigma, settings.iepf_threshold_m,
                          density.iepf_noise_sigmas), budget)
     if start.size == 0:
-        return _nothing() + (unsplit,)
+        return _nothing() + (unsplit, range_sigma)
     start, stop, chain, angle, radius, unmerged = merge_segments(
         x, y, start, stop, chain, full_turn, joinable[order], deciding_sigma, bearing_sigma,
         settings.merge_chi2, budget)
@@ -218,7 +228,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     start, stop, chain, angle, radius = (start[keep], stop[keep], chain[keep], angle[keep],
                                          radius[keep])
     if start.size == 0:
-        return _nothing() + (work_limited,)
+        return _nothing() + (work_limited, range_sigma)
     start, stop, chain = trim_ambiguous(start, stop, chain, full_turn, x, y, angle, radius,
                                         deciding_sigma, bearing_sigma,
                                         settings.min_segment_points, density.end_window)
@@ -233,7 +243,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     (angle, radius, normal_covariance, line, line_covariance, line_offset, start_xy, end_xy,
      first, last, counts, chi2_dof) = walls
     if angle.size == 0:
-        return _nothing() + (work_limited,)
+        return _nothing() + (work_limited, range_sigma)
     # #corners: which pairs are corners is decided with the decision noise; the published
     # covariances add the model error to the fits' (#model-error).
     first_wall, second_wall, corner_xy, corner_yaw, opening, end_seen = _corners(
@@ -249,7 +259,8 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
         settings.common_range_sigma_m)[3]
     return (angle, radius, normal_covariance, line, line_covariance, line_offset, start_xy,
             end_xy, beam_order[first], beam_order[last], counts, chi2_dof, corner_xy, corner_yaw,
-            corner_covariance, opening, first_wall, second_wall, end_seen, work_limited)
+            corner_covariance, opening, first_wall, second_wall, end_seen, work_limited,
+            range_sigma)
 
 
 @jit
@@ -257,7 +268,8 @@ def _nothing():
     """
     Return the arrays of a scan without segments, in :func:`_features_of_scan`'s shape.
 
-    The caller appends whether the work bound stopped splitting or merging: as an argument, a
+    The caller appends whether the work bound stopped splitting or merging and the range noise:
+    as an argument, a
     literal False and a bool would compile this twice (0.5 s of the cold start).
     """
     no_index = np.zeros(0, np.intp)

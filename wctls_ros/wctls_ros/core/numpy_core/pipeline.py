@@ -18,6 +18,7 @@ from .segmentation import (breakpoints, Breaks, Chains, chains, iterative_end_po
 from ..config import FeatureConfig
 from ..features import (CornerSet, Features, LineFits, segment_returns, SegmentReturns,
                         SegmentSet)
+from ..plausibility import implausible_scan, noise_is_plausible, plausible
 from ..scan import beam_density, BeamDensity, scan_to_points, ScanError, ScanPoints
 
 _DEFAULT_CONFIG = FeatureConfig()
@@ -55,16 +56,25 @@ def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float
     points = scan_to_points(ranges_m, angle_min_rad, angle_increment_rad,
                             max(range_min_m, config.range_min_m),
                             min(range_max_m, config.range_max_m))
-    nothing = Features(config.method, SegmentSet.empty(), CornerSet.empty())
     if len(points) < config.min_segment_points:
-        return nothing
-    # #range-noise-from-the-scan
-    config = _with_range_sigma_of_the_scan(config, points)
+        return Features(config.method, SegmentSet.empty(), CornerSet.empty())
+    # #range-noise-from-the-scan, and #plausibility: nothing published that says "unknown".
+    range_sigma = _range_sigma_of_the_scan(config, points)
+    if not noise_is_plausible(range_sigma, config):
+        return implausible_scan(config.method, range_sigma)
+    config = replace(config, range_sigma_m=range_sigma)
+    return plausible(_features_of(points, angle_increment_rad, config), config, range_sigma)
+
+
+def _features_of(points: ScanPoints, angle_increment_rad: float,
+                 config: FeatureConfig) -> Features:
+    """Find the features of a scan's returns, its range noise in ``config`` (Algorithm 1)."""
+    nothing = Features(config.method, SegmentSet.empty(), CornerSet.empty())
     # #decision-noise: every decision tolerates the model error on top of the sensor noise;
     # the fits weigh the returns by the sensor noise alone.
     decisions = _deciding(config)
     # #density: the rules that count returns, at this scan's beam spacing.
-    density = beam_density(angle_increment_rad, np.size(ranges_m))
+    density = beam_density(angle_increment_rad, points.beam_count)
     # #segmentation-statistics: breakpoints, IEPF, merging, the size rules, the end trims.
     contour = _Contour.of(points, decisions, density)
     segments, unsplit = _split(contour, decisions, density)
@@ -89,11 +99,11 @@ def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float
                     work_limited)
 
 
-def _with_range_sigma_of_the_scan(config: FeatureConfig, points: ScanPoints) -> FeatureConfig:
-    """Return the config with range_sigma_m raised to the scan's own estimate, when enabled."""
+def _range_sigma_of_the_scan(config: FeatureConfig, points: ScanPoints) -> float:
+    """Return range_sigma_m, raised to the scan's own estimate when enabled, m."""
     if not config.range_sigma_from_scan:
-        return config
-    return replace(config, range_sigma_m=max(config.range_sigma_m, scan_range_sigma(points)))
+        return config.range_sigma_m
+    return max(config.range_sigma_m, scan_range_sigma(points))
 
 
 def _deciding(config: FeatureConfig) -> FeatureConfig:

@@ -26,7 +26,7 @@ With truth (a simulation's ``truth.yaml`` or hand labels, :mod:`.truth`), per sc
 
 On any static recording, with or without truth:
 
-- detections are clustered across scans by :func:`~.analysis.associate` (greedy seeds,
+- detections are clustered across scans by :func:`~.rules.associate` (greedy seeds,
   gate 5 predicted sigmas clamped to 2-25 cm, one detection per scan and cluster);
   **recurrence** = share of all detections that belong to a cluster present in at least 90 %
   of the scans (``min_presence``);
@@ -45,9 +45,10 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .analysis import assign, associate, corner_stats, corners_per_scan
+from .analysis import corner_stats, corners_per_scan
+from .rules import assign, associate, check_still
 from .samples import ScanCorners
-from .scans import check_still, StaticScans
+from .scans import StaticScans
 from .truth import Truth
 from ..core import ellipse, FeatureConfig, nees
 
@@ -330,7 +331,7 @@ def score_scans(scans: StaticScans, configs: Mapping[str, FeatureConfig],
     :param scans: the scans
     :param configs: label (usually the method's name) -> pipeline configuration
     :param truth: the true corners, aligned with the scans (see :meth:`Truth.select`), or None
-    :param static: measure recurrence; None: when :func:`~.scans.check_still` says still
+    :param static: measure recurrence; None: when :func:`~.rules.check_still` says still
     :param min_presence: share of the scans a recurring corner is found in, at least
     :return: the table
     :raises ValueError: when the truth does not have one row per scan where it needs one

@@ -24,7 +24,8 @@ import sys
 import time
 from typing import Dict, Optional
 
-from .scans import check_still, load_json_scans, load_scans, StaticScans
+from .rules import check_still, corners_per_scan_figure
+from .scans import load_json_scans, load_scans, StaticScans
 from .score import markdown_table, RECURRING_PRESENCE, score_scans, write_score
 from .truth import load_truth, Truth, TRUTH_FILE
 from ..cli import Parser, start_core, USER_ERROR, UserError
@@ -181,10 +182,10 @@ def run(args, argv) -> int:
     check = check_still(scans)
     still = {'auto': check.still, 'yes': True, 'no': False}[args.still]
     if truth is None and not still:
-        raise UserError(f'{args.bag}: nothing to score: no truth (--labels, or {TRUTH_FILE} '
-                        'beside the scans) and the sensor or scene is not still '
-                        f'({100 * check.drifted_fraction:.0f} % of the steady beams drifted; '
-                        'recurrence needs a static recording: --still yes to insist)')
+        raise UserError(f'{args.bag}: refused: nothing to score: no truth (--labels, or '
+                        f'{TRUTH_FILE} beside the scans) and the sensor or scene is not still '
+                        f'({check.describe()}); recurrence needs a static recording: --still '
+                        'yes to insist')
     started = time.monotonic()
     table = score_scans(scans, settings, truth, still, args.min_presence)
     elapsed = time.monotonic() - started
@@ -200,12 +201,16 @@ def run(args, argv) -> int:
                           f'({len(truth.ids)} corners)'),
              f'stillness check: {100 * check.drifted_fraction:.0f} % of '
              f'{check.steady_beams} steady beams drifted, median '
-             f'{1e3 * check.median_drift_m:.1f} mm ({"still" if check.still else "moved"}); '
+             f'{1e3 * check.median_drift_m:.1f} mm against a bound of '
+             f'{1e3 * check.median_bound_m:.1f} mm ({"still" if check.still else "moved"}); '
              + ('recurrence measured' if still else 'recurrence not measured')
              + (f' (--still {args.still})' if args.still != 'auto' else ''),
              f'scored in {elapsed:.1f} s']
     print('\n'.join(f'# {note}' for note in notes))
     print(markdown_table(table))
+    for scored in table.methods:
+        print(f'# {scored.method}: corners per scan '
+              f'{corners_per_scan_figure(scored.per_scan):.3f}')
     if args.out is not None:
         command = 'score ' + ' '.join(shlex.quote(a) for a in
                                       (sys.argv[1:] if argv is None else argv))

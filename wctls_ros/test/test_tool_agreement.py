@@ -126,3 +126,14 @@ def test_calibrate_without_a_stable_corner_cannot_validate_and_exits_non_zero(
     captured = capsys.readouterr()
     assert 'no stable corner' in captured.err and 'cannot be validated' in captured.err
     assert 'feature_node:' not in captured.out
+
+
+def test_score_tests_a_moving_sensors_re_observations_when_told_it_moves(carried_bag, capsys):
+    from wctls_ros.evaluation.score_cli import main
+    capsys.readouterr()
+    assert main([str(carried_bag), '--methods', 'wctls', '--still', 'no']) == 0
+    out = capsys.readouterr().out
+    assert 'recurrence refused: it needs a still sensor' in out
+    tested = re.search(r'corner distances [\d.]+ % of (\d+), line angles [\d.]+ % of (\d+), '
+                       r'corner-line distances [\d.]+ % of (\d+)', out)
+    assert tested and min(int(n) for n in tested.groups()) >= 100, out

@@ -11,7 +11,8 @@ same scans and configuration they agree:
   over the first third of the scans against its median over the last third, in standard errors
   of its own scan-to-scan noise. The noise is taken from the differences of consecutive scans,
   which a steady motion hardly changes, and not from the scatter within a third, which a motion
-  inflates until no drift stands out (a robot carried for 20 s drifted 20 cm and passed);
+  inflates until no drift stands out (a robot carried for 20 s drifted 20 cm and passed); a
+  scan-to-scan noise of several per cent of the range is a motion too (keyframes far apart);
 - **association** (:func:`associate`, :func:`assign`): corners of different scans are one
   corner when within a gate of 5 predicted sigmas of the major axis, clamped to 2-25 cm;
 - **corners per scan** (:func:`corners_per_scan_figure`): the mean number of corners the
@@ -35,6 +36,10 @@ from ..core import ellipse
 MOVING_FRACTION = 0.1
 # ... by more than this many standard errors between the first and the last third of the scans.
 MOVING_Z = 6.0
+# ... or when the steady beams' scan-to-scan noise is, at the median, more than this share of
+# their range: the still recordings of data/ show 0.3-0.9 %, keyframes of a moving robot
+# (scans 0.01-2.3 m apart) 8-30 %, too scattered for any drift between thirds to stand out.
+MOVING_NOISE_SHARE = 0.03
 # A beam is steady when it returns in at least this fraction of the scans.
 _STEADY_FRACTION = 0.95
 # The smallest scan-to-scan noise assumed, m: a quantised or noiseless beam (scatter 0) does
@@ -64,13 +69,17 @@ class StillnessCheck:
     :ivar median_drift_m: median over the steady beams of |median(last third) - median(first)|
     :ivar median_bound_m: median over the steady beams of the change the noise explains
         (MOVING_Z standard errors), m
-    :ivar still: whether the sensor counts as still (drifted_fraction at most MOVING_FRACTION)
+    :ivar noise_share: median over the steady beams of their scan-to-scan noise over their
+        range
+    :ivar still: whether the sensor counts as still: drifted_fraction at most MOVING_FRACTION
+        and noise_share at most MOVING_NOISE_SHARE
     """
 
     steady_beams: int
     drifted_fraction: float
     median_drift_m: float
     median_bound_m: float
+    noise_share: float
     still: bool
 
     def describe(self) -> str:
@@ -78,12 +87,14 @@ class StillnessCheck:
         Return the figures in one line.
 
         :return: e.g. '3 % of 450 steady beams drifted (bound 10 %), median drift 2.0 mm
-            against 9.1 mm'
+            against a bound of 9.1 mm, scan-to-scan noise 0.4 % of the range (bound 3 %)'
         """
         return (f'{100 * self.drifted_fraction:.0f} % of {self.steady_beams} steady beams '
                 f'drifted (bound {100 * MOVING_FRACTION:.0f} %), median drift '
                 f'{1e3 * self.median_drift_m:.1f} mm against a bound of '
-                f'{1e3 * self.median_bound_m:.1f} mm')
+                f'{1e3 * self.median_bound_m:.1f} mm, scan-to-scan noise '
+                f'{100 * self.noise_share:.1f} % of the range (bound '
+                f'{100 * MOVING_NOISE_SHARE:.0f} %)')
 
 
 def check_still(scans: StaticScans) -> StillnessCheck:
@@ -96,17 +107,20 @@ def check_still(scans: StaticScans) -> StillnessCheck:
     over sqrt(2): a steady motion adds little to one scan's change but accumulates over a
     third, so the drift stands out however large the motion. A still sensor leaves nearly every
     beam below MOVING_Z standard errors; a moving sensor or a changing scene moves most beams.
+    Scans far apart (a moving robot's keyframes) change by more than any sensor's noise from
+    one scan to the next: a median scan-to-scan noise above MOVING_NOISE_SHARE of the range is
+    a motion as well.
 
     :param scans: the scans (at least 6)
     :return: the check's figures
     """
     count = len(scans)
     if count < 6:
-        return StillnessCheck(0, 0.0, 0.0, 0.0, False)
+        return StillnessCheck(0, 0.0, 0.0, 0.0, 0.0, False)
     valid = scans.valid()
     steady = valid.mean(axis=0) >= _STEADY_FRACTION
     if not steady.any():
-        return StillnessCheck(0, 1.0, math.inf, 0.0, False)
+        return StillnessCheck(0, 1.0, math.inf, 0.0, math.inf, False)
     ranges = np.where(valid, scans.ranges, np.nan)[:, steady]
     third = count // 3
     first, last = ranges[:third], ranges[-third:]
@@ -117,12 +131,15 @@ def check_still(scans: StaticScans) -> StillnessCheck:
         # Standard error of a difference of two medians of `third` samples.
         bound = MOVING_Z * 1.2533 * np.maximum(noise, _NOISE_FLOOR_M) * math.sqrt(2.0 / third)
         drifted = drift > bound
-    measured = np.isfinite(drift) & np.isfinite(bound)
+        share = noise / np.nanmedian(ranges, axis=0)
+    measured = np.isfinite(drift) & np.isfinite(bound) & np.isfinite(share)
     if not measured.any():
-        return StillnessCheck(int(steady.sum()), 1.0, math.inf, 0.0, False)
+        return StillnessCheck(int(steady.sum()), 1.0, math.inf, 0.0, math.inf, False)
     fraction = float(np.mean(drifted[measured]))
+    noise_share = float(np.median(share[measured]))
     return StillnessCheck(int(steady.sum()), fraction, float(np.median(drift[measured])),
-                          float(np.median(bound[measured])), fraction <= MOVING_FRACTION)
+                          float(np.median(bound[measured])), noise_share,
+                          fraction <= MOVING_FRACTION and noise_share <= MOVING_NOISE_SHARE)
 
 
 def require_still(scans: StaticScans) -> StillnessCheck:

@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 from wctls_ros.core import FeatureConfig
 from wctls_ros.evaluation import StaticScans
-from wctls_ros.evaluation.reobservation import (load_poses, measure, PoseError, poses_at,
-                                                reobservation, to_world, write_poses)
+from wctls_ros.evaluation.poses import load_poses, PoseError, poses_at, write_poses
+from wctls_ros.evaluation.reobservation import measure, reobservation, to_world
 from wctls_ros.simulation import floor_plan_from_dict, NoiseModel, simulate_recording
 
 ROOM = {'name': 'room', 'polylines': [
@@ -159,29 +159,94 @@ def test_unknown_poses_leave_their_scans_out_of_the_tracks_only(moving):
     assert some.corner_distance == measure(landmarks).corner_distance
 
 
-def test_score_reads_the_pose_file_and_prints_the_same_figures(moving, tmp_path, capsys):
+def write_robot_bag(path, scans, base_poses):
+    """
+    Write the scans, the base's odometry and its TF (odom -> base_link) with rosbags.
+
+    The odometry and TF are stamped half a scan period after each scan, so that score has to
+    interpolate them to the scans' stamps.
+    """
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from wctls_ros.bags import typestore
+    store = typestore()
+    types = store.types
+
+    def header(stamp_ns, frame):
+        sec, nanosec = divmod(int(stamp_ns), 10 ** 9)
+        return types['std_msgs/msg/Header'](
+            stamp=types['builtin_interfaces/msg/Time'](sec=sec, nanosec=nanosec),
+            frame_id=frame)
+
+    def quaternion(yaw):
+        return types['geometry_msgs/msg/Quaternion'](x=0.0, y=0.0, z=math.sin(yaw / 2),
+                                                     w=math.cos(yaw / 2))
+
+    half_period_ns = 50_000_000
+    odometry_stamps = np.append(scans.stamps_ns - half_period_ns,
+                                scans.stamps_ns[-1] + half_period_ns)
+    odometry_poses = np.vstack([base_poses[0] - (base_poses[1] - base_poses[0]) / 2,
+                                (base_poses[:-1] + base_poses[1:]) / 2,
+                                base_poses[-1] + (base_poses[-1] - base_poses[-2]) / 2])
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as bag:
+        scan_topic = bag.add_connection('/scan', 'sensor_msgs/msg/LaserScan', typestore=store)
+        odom_topic = bag.add_connection('/odom', 'nav_msgs/msg/Odometry', typestore=store)
+        tf_topic = bag.add_connection('/tf', 'tf2_msgs/msg/TFMessage', typestore=store)
+        for ranges, stamp in zip(scans.ranges, scans.stamps_ns):
+            scan = types['sensor_msgs/msg/LaserScan'](
+                header=header(stamp, 'laser'), angle_min=scans.angle_min,
+                angle_max=scans.angle_min + (len(ranges) - 1) * scans.angle_increment,
+                angle_increment=scans.angle_increment, time_increment=0.0, scan_time=0.1,
+                range_min=0.05, range_max=40.0, ranges=ranges.astype(np.float32),
+                intensities=np.zeros(0, np.float32))
+            bag.write(scan_topic, int(stamp),
+                      store.serialize_cdr(scan, 'sensor_msgs/msg/LaserScan'))
+        for stamp, (x, y, yaw) in zip(odometry_stamps, odometry_poses):
+            point = types['geometry_msgs/msg/Point'](x=x, y=y, z=0.0)
+            pose = types['geometry_msgs/msg/PoseWithCovariance'](
+                pose=types['geometry_msgs/msg/Pose'](position=point, orientation=quaternion(yaw)),
+                covariance=np.zeros(36))
+            twist = types['geometry_msgs/msg/TwistWithCovariance'](
+                twist=types['geometry_msgs/msg/Twist'](
+                    linear=types['geometry_msgs/msg/Vector3'](x=0.0, y=0.0, z=0.0),
+                    angular=types['geometry_msgs/msg/Vector3'](x=0.0, y=0.0, z=0.0)),
+                covariance=np.zeros(36))
+            odometry = types['nav_msgs/msg/Odometry'](header=header(stamp, 'odom'),
+                                                      child_frame_id='base_link', pose=pose,
+                                                      twist=twist)
+            bag.write(odom_topic, int(stamp),
+                      store.serialize_cdr(odometry, 'nav_msgs/msg/Odometry'))
+            moved = types['geometry_msgs/msg/Transform'](
+                translation=types['geometry_msgs/msg/Vector3'](x=x, y=y, z=0.0),
+                rotation=quaternion(yaw))
+            # A transform of another pair of frames in the same message is left alone.
+            elsewhere = types['geometry_msgs/msg/Transform'](
+                translation=types['geometry_msgs/msg/Vector3'](x=5.0, y=-3.0, z=0.0),
+                rotation=quaternion(1.0))
+            other = types['geometry_msgs/msg/TransformStamped'](
+                header=header(stamp, 'map'), child_frame_id='odom', transform=elsewhere)
+            wanted = types['geometry_msgs/msg/TransformStamped'](
+                header=header(stamp, 'odom'), child_frame_id='base_link', transform=moved)
+            tf = types['tf2_msgs/msg/TFMessage'](transforms=[other, wanted])
+            bag.write(tf_topic, int(stamp), store.serialize_cdr(tf, 'tf2_msgs/msg/TFMessage'))
+    return path
+
+
+@pytest.mark.parametrize('source', ['file', '/odom', '/tf'])
+def test_score_takes_poses_from_a_file_odometry_or_tf_and_prints_the_same_figures(
+        moving, tmp_path, capsys, source):
     pytest.importorskip('rclpy')
-    from sensor_msgs.msg import LaserScan
-    from wctls_ros.bags import BagWriter
     from wctls_ros.evaluation.score_cli import main, node_config
     scans, poses = moving
-    bag = tmp_path / 'moving'
-    with BagWriter(bag) as writer:
-        for ranges, stamp in zip(scans.ranges, scans.stamps_ns):
-            scan = LaserScan(angle_min=scans.angle_min, angle_increment=scans.angle_increment,
-                             angle_max=scans.angle_min + (len(ranges) - 1)
-                             * scans.angle_increment, range_min=0.05, range_max=40.0,
-                             ranges=ranges.astype(np.float32))
-            scan.header.stamp.sec, scan.header.stamp.nanosec = divmod(int(stamp), 10 ** 9)
-            writer.write('/scan', int(stamp), scan)
     # The poses of the robot base, the sensor 0.1 m ahead of it: score composes the offset.
     base = poses - np.column_stack([0.1 * np.cos(poses[:, 2]), 0.1 * np.sin(poses[:, 2]),
                                     np.zeros(len(poses))])
-    pose_file = write_poses(tmp_path / 'poses.csv', scans.stamps_ns * 1e-9, base)
+    bag = write_robot_bag(tmp_path / 'moving', scans, base)
+    given = (['--poses', str(write_poses(tmp_path / 'poses.csv', scans.stamps_ns * 1e-9, base))]
+             if source == 'file' else ['--poses-topic', source])
     capsys.readouterr()
     assert main([str(bag), '--methods', 'wctls', '--range-sigma', str(RANGE_SIGMA_M),
-                 '--bearing-sigma-deg', '0.05', '--common-range-sigma', '0', '--poses',
-                 str(pose_file), '--laser-offset', '0.1', '0', '0', '--still', 'no']) == 0
+                 '--bearing-sigma-deg', '0.05', '--common-range-sigma', '0', '--laser-offset',
+                 '0.1', '0', '0', '--still', 'no'] + given) == 0
     out = capsys.readouterr().out
     config = node_config().replace(range_sigma_m=RANGE_SIGMA_M,
                                    bearing_sigma_rad=math.radians(0.05),
@@ -191,3 +256,19 @@ def test_score_reads_the_pose_file_and_prints_the_same_figures(moving, tmp_path,
     for line in expected.lines():
         assert line in out, (line, out)
     assert f'{SCANS} of {SCANS} scans covered' in out
+
+
+def test_a_pose_topic_the_bag_lacks_is_refused_with_the_topics_it_has(moving, tmp_path, capsys):
+    pytest.importorskip('rclpy')
+    from wctls_ros.evaluation.score_cli import main
+    scans, poses = moving
+    bag = write_robot_bag(tmp_path / 'moving', scans.part(0, 8), poses[:8])
+    capsys.readouterr()
+    assert main([str(bag), '--poses-topic', '/odometry', '--still', 'no']) == 2
+    error = capsys.readouterr().err.strip()
+    assert len(error.splitlines()) == 1 and error.startswith('score: error:')
+    assert 'no nav_msgs/msg/Odometry or tf2_msgs/msg/TFMessage topic /odometry' in error
+    assert '/odom (nav_msgs/msg/Odometry), /tf (tf2_msgs/msg/TFMessage)' in error
+    assert main([str(bag), '--poses-topic', '/tf', '--tf-frames', 'odom', 'base_footprint',
+                 '--still', 'no']) == 2
+    assert 'holds 0 poses' in capsys.readouterr().err

@@ -28,10 +28,8 @@ variances of the pose-free quantities; the pose-based test compares one landmark
 Pure numpy.
 """
 
-import csv
 from dataclasses import dataclass
 import math
-import pathlib
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -56,12 +54,6 @@ REOBSERVATION_KEYS = (
     'landmarks_per_scan', 'lines_per_scan', 'corner_distance_in_gate', 'line_angle_in_gate',
     'corner_line_distance_in_gate', 'corner_tracks_in_gate', 'line_tracks_in_gate',
     'corner_track_median', 'corner_track_p90', 'line_track_median', 'line_track_p90')
-# The pose file's columns.
-POSE_COLUMNS = ('stamp_s', 'x_m', 'y_m', 'yaw_rad')
-
-
-class PoseError(ValueError):
-    """A pose file that cannot be read or does not cover the scans."""
 
 
 @dataclass(frozen=True)
@@ -467,74 +459,3 @@ def measure(per_scan: Sequence[Landmarks], poses: Optional[np.ndarray] = None,
             [landmarks for landmarks, keep in zip(per_scan, known) if keep], poses[known],
             pose_cov)
     return Reobservation(**figures)
-
-
-def load_poses(path) -> np.ndarray:
-    """
-    Read a pose file: CSV with a header ``stamp_s,x_m,y_m,yaw_rad``, one row per pose.
-
-    :param path: the file
-    :return: shape (P, 4): stamp s, x m, y m, yaw rad, by stamp
-    :raises PoseError: on an unreadable file, missing columns or values that are not numbers
-    """
-    try:
-        with open(path, newline='') as stream:
-            reader = csv.DictReader(stream)
-            missing = [c for c in POSE_COLUMNS if c not in (reader.fieldnames or ())]
-            if missing:
-                raise PoseError(f'{path}: the pose file needs the columns '
-                                f'{",".join(POSE_COLUMNS)}; {",".join(missing)} missing')
-            rows = [[float(row[c]) for c in POSE_COLUMNS] for row in reader]
-    except OSError as error:
-        raise PoseError(f'{path}: cannot read the pose file: {error.strerror or error}') \
-            from error
-    except (TypeError, ValueError) as error:
-        if isinstance(error, PoseError):
-            raise
-        raise PoseError(f'{path}: a value of the pose file is not a number ({error})') \
-            from error
-    poses = np.array(rows, dtype=float).reshape(-1, 4)
-    if len(poses) < 2 or not np.isfinite(poses).all():
-        raise PoseError(f'{path}: the pose file needs at least 2 rows of finite numbers')
-    return poses[np.argsort(poses[:, 0], kind='stable')]
-
-
-def poses_at(poses: np.ndarray, stamps_s: np.ndarray, offset=(0.0, 0.0, 0.0)):
-    """
-    Interpolate the poses to the scans' stamps, and compose the sensor's offset.
-
-    :param poses: rows of stamp s, x m, y m, yaw rad, by stamp
-    :param stamps_s: the scans' stamps, s
-    :param offset: the sensor's pose in the posed frame (x m, y m, yaw rad)
-    :return: the sensor pose at each stamp (x m, y m, yaw rad), shape (T, 3); NaN where the
-        stamp is outside the poses' span
-    """
-    covered = (stamps_s >= poses[0, 0]) & (stamps_s <= poses[-1, 0])
-    at = stamps_s[covered]
-    yaw = np.interp(at, poses[:, 0], np.unwrap(poses[:, 3]))
-    x = np.interp(at, poses[:, 0], poses[:, 1])
-    y = np.interp(at, poses[:, 0], poses[:, 2])
-    dx, dy, dyaw = offset
-    sensor = np.full((len(stamps_s), 3), np.nan)
-    sensor[covered] = np.column_stack([x + np.cos(yaw) * dx - np.sin(yaw) * dy,
-                                       y + np.sin(yaw) * dx + np.cos(yaw) * dy,
-                                       _wrap(yaw + dyaw)])
-    return sensor
-
-
-def write_poses(path, stamps_s: np.ndarray, poses: np.ndarray) -> pathlib.Path:
-    """
-    Write a pose file as :func:`load_poses` reads it.
-
-    :param path: the file
-    :param stamps_s: stamps, s, shape (T,)
-    :param poses: x m, y m, yaw rad, shape (T, 3)
-    :return: the path
-    """
-    path = pathlib.Path(path)
-    with open(path, 'w', newline='') as stream:
-        writer = csv.writer(stream)
-        writer.writerow(POSE_COLUMNS)
-        writer.writerows([[f'{s:.9f}'] + [f'{v:.9f}' for v in pose]
-                          for s, pose in zip(stamps_s, poses)])
-    return path

@@ -32,7 +32,7 @@ from typing import Dict, Optional
 
 import numpy as np
 
-from .reobservation import load_poses, poses_at
+from .poses import load_poses, poses_at, poses_from_bag
 from .rules import check_still, corners_per_scan_figure
 from .scans import load_json_scans, load_scans, StaticScans
 from .score import (markdown_table, RECURRING_PRESENCE, REOBSERVATION_COLUMNS, score_scans,
@@ -96,6 +96,13 @@ def parser() -> argparse.ArgumentParser:
                    "interpolated to each scan's stamp: corners and lines are tracked in the "
                    'world frame and their re-observations tested (default: none; the pose-free '
                    'test runs in any case)')
+    p.add_argument('--poses-topic', default=None, metavar='TOPIC',
+                   help='like --poses, from a nav_msgs/msg/Odometry or tf2_msgs/msg/TFMessage '
+                   'topic of the bag (default: none)')
+    p.add_argument('--tf-frames', nargs=2, default=('odom', 'base_link'),
+                   metavar=('PARENT', 'CHILD'),
+                   help='with a TF --poses-topic: the transform that gives the robot pose '
+                   '(default: odom base_link)')
     p.add_argument('--laser-offset', type=float, nargs=3, default=(0.0, 0.0, 0.0),
                    metavar=('X_M', 'Y_M', 'YAW_DEG'),
                    help="the sensor's pose in the frame of the poses (default: 0 0 0)")
@@ -178,14 +185,18 @@ def _truth(args) -> Optional[Truth]:
 
 def _poses(args, scans: StaticScans):
     """Return the sensor pose of each scan (NaN rows where the poses do not reach), or None."""
-    if args.poses is None:
+    if args.poses is not None and args.poses_topic is not None:
+        raise UserError('give --poses or --poses-topic, not both')
+    if args.poses is None and args.poses_topic is None:
         return None
+    source = (load_poses(args.poses) if args.poses is not None else
+              poses_from_bag(args.bag, args.poses_topic, tuple(args.tf_frames)))
     x, y, yaw_deg = args.laser_offset
-    poses = poses_at(load_poses(args.poses), scans.stamps_ns * 1e-9,
-                     (x, y, math.radians(yaw_deg)))
+    poses = poses_at(source, scans.stamps_ns * 1e-9, (x, y, math.radians(yaw_deg)))
     covered = int(np.isfinite(poses).all(axis=1).sum())
     if covered < 2:
-        raise UserError(f'{args.poses}: the poses cover {covered} of the {len(scans)} scans '
+        raise UserError(f'{args.poses or args.poses_topic}: the poses cover {covered} of the '
+                        f'{len(scans)} scans '
                         f'(stamps {scans.stamps_ns[0] * 1e-9:.3f}-'
                         f'{scans.stamps_ns[-1] * 1e-9:.3f} s); at least 2 are needed')
     return poses
@@ -225,7 +236,7 @@ def run(args, argv) -> int:
                         f'({check.describe()}): recurrence needs a static recording and there '
                         f'is no truth (--labels, or {TRUTH_FILE} beside the scans); for a '
                         'moving sensor say so: --still no tests the re-observations without '
-                        'poses, --poses FILE with them')
+                        'poses, --poses FILE or --poses-topic TOPIC with them')
     started = time.monotonic()
     table = score_scans(scans, settings, truth, still, args.min_presence, poses,
                         args.pose_sigma_m, math.radians(args.pose_sigma_deg))
@@ -248,7 +259,8 @@ def run(args, argv) -> int:
                 'sensor')
              + (f' (--still {args.still})' if args.still != 'auto' else ''),
              'poses: ' + ('none' if poses is None else
-                          f'{args.poses}, {int(np.isfinite(poses).all(axis=1).sum())} of '
+                          f'{args.poses or args.poses_topic}, '
+                          f'{int(np.isfinite(poses).all(axis=1).sum())} of '
                           f'{len(scans)} scans covered, '
                           f'sigma {1e3 * args.pose_sigma_m:g} mm and {args.pose_sigma_deg:g} '
                           'deg'),
@@ -259,7 +271,7 @@ def run(args, argv) -> int:
     for scored in table.methods:
         print(f'# {scored.method}: corners per scan '
               f'{corners_per_scan_figure(scored.per_scan):.3f}')
-        print('\n'.join(f'#   {line}' for line in scored.reobservation.lines()))
+        print('\n'.join(f'# {scored.method}: {line}' for line in scored.reobservation.lines()))
     if args.out is not None:
         command = 'score ' + ' '.join(shlex.quote(a) for a in
                                       (sys.argv[1:] if argv is None else argv))

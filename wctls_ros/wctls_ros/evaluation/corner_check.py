@@ -165,7 +165,8 @@ def nees_of(per_scan: List[ScanCorners], corners: Sequence[TrackedCorner]) -> Li
         covariance = np.array([per_scan[t].covariance[assignment[t, k]]
                                for t in found_in]).reshape(-1, 2, 2)
         jumps = jumps_of(xy)
-        nees = corner_stats(xy[~jumps], covariance[~jumps]).nees
+        # A corner never found in a clear scan has no NEES (and no mean to take one against).
+        nees = corner_stats(xy[~jumps], covariance[~jumps]).nees if len(xy) else math.nan
         results.append(CornerNees(len(found_in), int(jumps.sum()), nees))
     return results
 

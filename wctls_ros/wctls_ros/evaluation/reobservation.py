@@ -18,8 +18,9 @@ distance):
   the share inside the 95 % gate (3.84) is 0.95 when the covariances are honest;
 - **with poses** (a pose per scan and a stated pose covariance): every landmark is moved into the
   world frame (its covariance with the pose's), associated to the track whose last observation
-  is nearest (Mahalanobis, within the 99.99 % gate), and the innovation against that observation
-  is tested in the 95 % gate (chi-square, 2 degrees of freedom: 5.99);
+  is nearest (Mahalanobis, within the 99.99 % gate; tracks unseen for 50 scans are closed), and
+  the innovation against that observation is tested in the 95 % gate (chi-square, 2 degrees of
+  freedom: 5.99);
 - **tracks and landmarks**: how many scans each track lasts (median and 90th percentile) and how
   many landmarks (corners + lines) each scan gives.
 
@@ -46,6 +47,8 @@ GATE_2DOF = 5.991
 # Tracks take an observation within this Mahalanobis distance squared (chi2, 2 dof, 99.99 %):
 # wider than the tested gate, so that the test measures the covariances, not the association.
 TRACK_GATE_2DOF = 18.42
+# A track not seen for more than this many scans takes no more observations.
+TRACK_MEMORY_SCANS = 50
 # Lines of consecutive scans are one line within these (the corners' widest gate).
 LINE_GATE_M = ASSOCIATION_GATE_MAX_M
 LINE_GATE_RAD = math.radians(5.0)
@@ -359,37 +362,39 @@ class _Tracks:
         self.angular = angular          # lines: the first coordinate is an angle
         self.last = np.zeros((0, 2))
         self.last_cov = np.zeros((0, 2, 2))
+        self.last_scan = np.zeros(0, dtype=np.intp)
         self.lengths: List[int] = []
         self.tested = 0
         self.inside = 0
 
-    def update(self, value: np.ndarray, cov: np.ndarray) -> None:
+    def update(self, scan: int, value: np.ndarray, cov: np.ndarray) -> None:
         """Associate one scan's observations, test the re-observations and extend the tracks."""
-        count = len(self.last)
-        taken = np.zeros(count, dtype=bool)
-        order = []
-        if count and len(value):
-            error = value[:, None, :] - self.last[None]
+        # Only tracks seen lately take observations: the others have left the view (and a long
+        # recording would otherwise compare every observation with every track it ever had).
+        active = np.flatnonzero(scan - self.last_scan <= TRACK_MEMORY_SCANS)
+        matched = np.full(len(value), -1, dtype=np.intp)
+        if len(active) and len(value):
+            error = value[:, None, :] - self.last[None, active]
             if self.angular:
                 error[..., 0] = _wrap(error[..., 0])
-            innovation = cov[:, None] + self.last_cov[None]
+            innovation = cov[:, None] + self.last_cov[None, active]
             squared = np.einsum('nki,nkij,nkj->nk', error, np.linalg.inv(innovation), error)
             pairs = np.argwhere(squared <= TRACK_GATE_2DOF)
-            order = pairs[np.argsort(squared[pairs[:, 0], pairs[:, 1]], kind='stable')]
-        matched = np.full(len(value), -1, dtype=np.intp)
-        for n, k in order:
-            if matched[n] < 0 and not taken[k]:
-                matched[n] = k
-                taken[k] = True
-                self.tested += 1
-                self.inside += int(squared[n, k] <= GATE_2DOF)
+            taken = np.zeros(len(active), dtype=bool)
+            for n, k in pairs[np.argsort(squared[pairs[:, 0], pairs[:, 1]], kind='stable')]:
+                if matched[n] < 0 and not taken[k]:
+                    matched[n] = active[k]
+                    taken[k] = True
+                    self.tested += 1
+                    self.inside += int(squared[n, k] <= GATE_2DOF)
         for n, k in enumerate(matched):
             if k >= 0:
-                self.last[k], self.last_cov[k] = value[n], cov[n]
+                self.last[k], self.last_cov[k], self.last_scan[k] = value[n], cov[n], scan
                 self.lengths[k] += 1
         new = matched < 0
         self.last = np.concatenate([self.last, value[new]])
         self.last_cov = np.concatenate([self.last_cov, cov[new]])
+        self.last_scan = np.concatenate([self.last_scan, np.full(int(new.sum()), scan)])
         self.lengths += [1] * int(new.sum())
 
 
@@ -403,10 +408,10 @@ def with_poses(per_scan: Sequence[Landmarks], poses: np.ndarray, pose_cov: np.nd
     :return: (corner GateShare, line GateShare, corner track lengths, line track lengths)
     """
     corners, lines = _Tracks(False), _Tracks(True)
-    for landmarks, pose in zip(per_scan, poses):
+    for scan, (landmarks, pose) in enumerate(zip(per_scan, poses)):
         xy, xy_cov, line, line_cov = to_world(landmarks, pose, pose_cov)
-        corners.update(xy, xy_cov)
-        lines.update(line, line_cov)
+        corners.update(scan, xy, xy_cov)
+        lines.update(scan, line, line_cov)
     return (GateShare(corners.tested, corners.inside), GateShare(lines.tested, lines.inside),
             tuple(corners.lengths), tuple(lines.lengths))
 

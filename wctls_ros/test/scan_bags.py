@@ -121,3 +121,24 @@ def real_bag(name):
     path = REAL_DATA / name
     assert path.exists(), f'{path} is missing from the repository'
     return path
+
+
+def real_scans_slice(name, first, stop, target):
+    """
+    Copy the LaserScans first to stop - 1 of a recording in data/ into a new mcap bag.
+
+    The messages are copied as they were recorded (their bytes and log times): a piece of a
+    real recording, e.g. the part of ``urg04lx_office`` where the sensor is carried.
+
+    :return: the new bag's path
+    """
+    from rosbags.highlevel import AnyReader
+    with AnyReader([real_bag(name)], default_typestore=typestore()) as reader, \
+            Writer(target, version=9, storage_plugin=StoragePlugin.MCAP) as bag:
+        scans = [c for c in reader.connections if c.msgtype == 'sensor_msgs/msg/LaserScan']
+        connection = bag.add_connection('/scan', 'sensor_msgs/msg/LaserScan',
+                                        typestore=typestore())
+        for index, (_, log_ns, raw) in enumerate(reader.messages(connections=scans)):
+            if first <= index < stop:
+                bag.write(connection, log_ns, raw)
+    return target

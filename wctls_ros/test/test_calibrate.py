@@ -182,3 +182,19 @@ def test_a_corner_whose_nees_dominates_makes_the_model_implausible(still_and_wal
     findings = calibration._calibration_findings(replace(still, final=final), 100)
     assert [f.text.split(':')[0] for f in findings if f.implausible] == [
         f'corner {worst + 1} dominates']
+
+
+def test_a_corner_never_clear_has_no_nees_and_prints_no_warning():
+    # The TiM781S still recording: something crosses a corner's walls in every scan.
+    import warnings
+    from wctls_ros.evaluation.corner_check import nees_of, TrackedCorner
+    from wctls_ros.evaluation.samples import ScanCorners
+    covariance = np.eye(2)[None] * 1e-4
+    per_scan = [ScanCorners(np.array([[1.0, 2.0]]), covariance, covariance, np.array([[0, 1]]))
+                for _ in range(6)]
+    corner = TrackedCorner(np.array([1.0, 2.0]), 0.05, np.ones(10, dtype=bool),
+                           np.zeros(6, dtype=bool))
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        result, = nees_of(per_scan, [corner])
+    assert result.found == 0 and math.isnan(result.nees)

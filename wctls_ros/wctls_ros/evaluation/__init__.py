@@ -14,25 +14,26 @@ corners on static recordings. The command-line tools are ``simulate``, ``evaluat
 ``calibrate`` and ``score``.
 """
 
-from .analysis import (assign, associate, corner_stats, corners_per_scan, CornerStats,
-                       evaluate_scans, Evaluation, PROPAGATIONS, run_methods)
+from .analysis import (corner_stats, corners_per_scan, CornerStats, evaluate_scans,
+                       Evaluation, PROPAGATIONS, run_methods)
 from .calibration import fit_noise, node_yaml, NoiseFit
 from .report import write_report
+from .rules import (assign, associate, check_still, corners_per_scan_figure,
+                    MovingSensorError, require_still, StillnessCheck)
 from .samples import NoiseParameters, PAPER_METHODS, scan_corners, ScanCorners
-from .scans import (check_still, load_json_scans, load_scans, MovingSensorError,
-                    require_still, StaticScans, StillnessCheck)
+from .scans import load_json_scans, load_scans, StaticScans
 from .score import (match_detections, MethodScore, RecurringCorner, score_detections,
                     score_scans, ScoreTable, TrueCornerRate, write_score)
 from .truth import (corner_from_beams, load_truth, median_scan, Truth, TRUTH_FILE,
                     truth_from_dict, truth_from_recording, truth_to_yaml, TruthError)
 
 __all__ = [
-    'CornerStats', 'Evaluation', 'MethodScore', 'MovingSensorError', 'NoiseFit',
-    'NoiseParameters', 'PAPER_METHODS', 'PROPAGATIONS', 'RecurringCorner', 'ScanCorners',
-    'ScoreTable', 'StaticScans', 'StillnessCheck', 'TRUTH_FILE', 'TrueCornerRate', 'Truth',
-    'TruthError', 'assign', 'associate', 'check_still', 'corner_from_beams', 'corner_stats',
-    'corners_per_scan', 'evaluate_scans', 'fit_noise', 'load_json_scans', 'load_scans',
-    'load_truth', 'match_detections', 'median_scan', 'node_yaml', 'require_still',
-    'run_methods', 'scan_corners', 'score_detections', 'score_scans', 'truth_from_dict',
-    'truth_from_recording', 'truth_to_yaml', 'write_report', 'write_score',
+    'CornerStats', 'Evaluation', 'MethodScore', 'MovingSensorError', 'NoiseFit', 'NoiseParameters',
+    'PAPER_METHODS', 'PROPAGATIONS', 'RecurringCorner', 'ScanCorners', 'ScoreTable', 'StaticScans',
+    'StillnessCheck', 'TRUTH_FILE', 'TrueCornerRate', 'Truth', 'TruthError', 'assign', 'associate',
+    'check_still', 'corner_from_beams', 'corner_stats', 'corners_per_scan',
+    'corners_per_scan_figure', 'evaluate_scans', 'fit_noise', 'load_json_scans', 'load_scans',
+    'load_truth', 'match_detections', 'median_scan', 'node_yaml', 'require_still', 'run_methods',
+    'scan_corners', 'score_detections', 'score_scans', 'truth_from_dict', 'truth_from_recording',
+    'truth_to_yaml', 'write_report', 'write_score',
 ]

@@ -16,9 +16,11 @@ Examples::
 The method and its thresholds are in :mod:`.calibration` and :mod:`.corner_check`; how to add
 a sensor with it, in docs/sensors.md. Offline: reads bags with rosbags and never starts ROS.
 Exit status: 0 the model is printed (warnings on stderr); 2 a user error (bad option, path,
-bag, parameter file, a sensor or scene that moved), one line on stderr; 3 the model is
-implausible (on the recording, the held-out scans or a --validate bag): the reasons on stderr,
-and no YAML (nor preset file) unless --accept-implausible.
+bag, parameter file, a sensor or scene that moved: the measured drift against its bound), one
+line on stderr; 3 the model is implausible or cannot be validated (on the recording, the
+held-out scans or a --validate bag: no stable corner, the extractor loses the corners with it,
+NEES or beam scatter out of bounds): the reasons on stderr, and no YAML (nor preset file)
+unless --accept-implausible.
 """
 
 import argparse
@@ -31,8 +33,9 @@ from typing import List, Optional, Sequence
 from .calibration import (calibrate, Calibration, Finding, node_yaml, noise_of, preset_yaml,
                           validate, Validation)
 from .corner_check import CornerNees, TrackedCorner
+from .rules import require_still
 from .samples import NoiseParameters
-from .scans import load_scans, require_still, StaticScans
+from .scans import load_scans, StaticScans
 from .score_cli import node_config
 from ..cli import bounded, Parser, start_core, USER_ERROR, UserError
 from ..core import FeatureConfig, METHODS
@@ -56,8 +59,10 @@ def parser() -> argparse.ArgumentParser:
         'from a static recording (robust to people walking through it), check it on the '
         "stable corners' NEES, and print the feature_node parameters. With --validate, check "
         'the model (or a --params file) on other recordings.',
-        epilog='Exit status: 0 the model is printed; 2 a user error (one line on stderr); '
-        '3 the model is implausible (reasons on stderr, no YAML unless --accept-implausible).')
+        epilog='Exit status: 0 the model is printed; 2 a user error or a moving sensor (one '
+        'line on stderr); 3 the model is implausible or cannot be validated: no stable '
+        'corner, or fewer corners per scan than before (reasons on stderr, no YAML unless '
+        '--accept-implausible).')
     p.add_argument('bag', nargs='?', default=None,
                    help='ROS 2 (mcap/sqlite3) or ROS 1 bag of scans from a still sensor to fit '
                    'the model on; without it, --validate checks the --params model only')
@@ -245,6 +250,8 @@ def _print_calibration(bag, scans: StaticScans, calibration: Calibration,
           f'{"on" if config.residual_scaling else "off"}, wall flatness '
           f'{1e3 * config.wall_flatness_sigma_m:g} mm; 2 = calibrated); before: {origin} '
           f'({_describe(noise_of(before))}{from_scan})')
+    print(f'# corners per scan {calibration.corners_per_scan_final:.3f} with the final model, '
+          f'{calibration.corners_per_scan_before:.3f} before ({origin})')
     _print_corners(calibration.corners, calibration.stable, calibration.fitted,
                    {'before': calibration.before, 'fitted': calibration.fitted,
                     'final': calibration.final})
@@ -263,6 +270,7 @@ def _print_validation(bag, scans: StaticScans, validation: Validation, what: str
     print(f'# validate {what} on {bag}: {len(scans)} scans; it predicts '
           f"{validation.beam_ratio:.2f} times the beams' scatter, which the recording's own fit "
           f'puts at {_describe(validation.fit.noise)}')
+    print(f'# corners per scan {validation.corners_per_scan:.3f} with {what}')
     _print_corners(validation.corners, validation.stable, validation.nees,
                    {'NEES': validation.nees})
     if any(validation.stable):

@@ -35,8 +35,10 @@ import warnings
 import numpy as np
 import yaml
 
-from .corner_check import (corner_nees, CornerNees, fit_flatness, is_stable, pooled_nees,
-                           track_corners, TrackedCorner)
+from .analysis import corners_per_scan
+from .corner_check import (corner_nees, CornerNees, fit_flatness, is_stable, nees_of,
+                           pooled_nees, track_corners, TrackedCorner)
+from .rules import corners_per_scan_figure
 from .samples import feature_config, NoiseParameters
 from .scans import StaticScans
 from ..core import extract_features, FeatureConfig
@@ -69,6 +71,10 @@ DOMINANCE = 3.0
 # recording, 0.5-5 at the least).
 VALIDATION_TARGET = (1.0, 3.0)
 VALIDATION_LIMITS = (0.5, 5.0)
+# A fitted model is implausible when the extractor finds fewer than this share of the corners
+# per scan that it finds with the model before calibration: a model that loses the corners
+# is of no use to the node, however well it explains the beams.
+KEPT_CORNERS_SHARE = 0.9
 
 
 @dataclass(frozen=True)
@@ -333,6 +339,9 @@ class Calibration:
     :ivar before: each corner's NEES under the model before calibration
     :ivar fitted: ... under the fitted noise model, with the flatness of ``config``
     :ivar final: ... under the final model: the fitted noise and the fitted flatness
+    :ivar corners_per_scan_before: corners the extractor reports per scan with the model
+        before calibration
+    :ivar corners_per_scan_final: ... with the final model
     :ivar findings: what makes the model implausible, and warnings
     """
 
@@ -345,6 +354,8 @@ class Calibration:
     before: List[CornerNees]
     fitted: List[CornerNees]
     final: List[CornerNees]
+    corners_per_scan_before: float
+    corners_per_scan_final: float
     findings: List[Finding]
 
     @property
@@ -432,9 +443,13 @@ def calibrate(scans: StaticScans, config: Optional[FeatureConfig] = None,
                 scans, model.replace(wall_flatness_sigma_m=sigma), chosen)),
             config.wall_flatness_sigma_m,
             pooled_nees([r for r, keep in zip(fitted, stable) if keep]), FLATNESS_UPPER_M)
-    final = corner_nees(scans, model.replace(wall_flatness_sigma_m=flatness), corners)
+    final_per_scan = corners_per_scan(scans, model.replace(wall_flatness_sigma_m=flatness))
+    before_per_scan = corners_per_scan(scans, before)
     calibration = Calibration(fit, config, flatness, converged, corners, stable,
-                              corner_nees(scans, before, corners), fitted, final, [])
+                              nees_of(before_per_scan, corners), fitted,
+                              nees_of(final_per_scan, corners),
+                              corners_per_scan_figure(before_per_scan),
+                              corners_per_scan_figure(final_per_scan), [])
     return replace(calibration, findings=_calibration_findings(calibration, len(scans)))
 
 
@@ -457,10 +472,19 @@ def _calibration_findings(calibration: Calibration, count: int) -> List[Finding]
         findings.append(Finding(True, f'the fitted model predicts {ratio:.2f} times the range '
                                 'scatter the wall beams show (median over them; allowed '
                                 f'{BEAM_RATIO_LIMITS[0]:g}-{BEAM_RATIO_LIMITS[1]:g})'))
+    kept = calibration.corners_per_scan_final
+    if not kept >= KEPT_CORNERS_SHARE * calibration.corners_per_scan_before:
+        findings.append(Finding(True, f'with the fitted model the extractor finds {kept:.2f} '
+                                'corners per scan against '
+                                f'{calibration.corners_per_scan_before:.2f} with the model '
+                                f'before calibration (at least {100 * KEPT_CORNERS_SHARE:.0f} % '
+                                'needed): the model loses the corners'))
     stable = [r for r, keep in zip(calibration.final, calibration.stable) if keep]
     if not stable:
-        findings.append(Finding(False, 'no stable corner: the model is checked on the wall '
-                                'beams only, and no wall flatness is fitted'))
+        findings.append(Finding(True, 'no stable corner: the model cannot be validated in the '
+                                'extractor (the corners of half of the scans check it; none '
+                                'was found there often enough), and no wall flatness is '
+                                'fitted'))
         return findings
     if calibration.excess > EXCESS_LIMIT:
         findings.append(Finding(True, f'the stable corners scatter {calibration.excess:.2f} '
@@ -492,6 +516,7 @@ class Validation:
     :ivar corners: the corners tracked across its scans (with the model under test)
     :ivar stable: which of them are stable
     :ivar nees: each corner's NEES under the model
+    :ivar corners_per_scan: corners the extractor reports per scan with the model
     :ivar findings: what makes the model implausible there, and warnings
     """
 
@@ -501,6 +526,7 @@ class Validation:
     corners: List[TrackedCorner]
     stable: List[bool]
     nees: List[CornerNees]
+    corners_per_scan: float
     findings: List[Finding]
 
     @property
@@ -533,7 +559,8 @@ def validate(scans: StaticScans, config: FeatureConfig) -> Validation:
     """
     fit = fit_noise(scans, config)
     corners = track_corners(scans, config, fit.crossed)
-    nees = corner_nees(scans, config, corners)
+    per_scan = corners_per_scan(scans, config)
+    nees = nees_of(per_scan, corners)
     stable = [is_stable(c, r) for c, r in zip(corners, nees)]
     ratio = fit.beam_ratio(noise_of(config))
     findings = _crossing_findings(fit, len(scans), 'the corner checks')
@@ -542,7 +569,8 @@ def validate(scans: StaticScans, config: FeatureConfig) -> Validation:
                                 'the wall beams show (median over them; allowed '
                                 f'{BEAM_RATIO_LIMITS[0]:g}-{BEAM_RATIO_LIMITS[1]:g})'))
     if not any(stable):
-        findings.append(Finding(False, 'no stable corner to check the model on'))
+        findings.append(Finding(True, 'no stable corner to check the model on: it cannot be '
+                                'validated on this recording'))
     for k, (result, keep) in enumerate(zip(nees, stable)):
         if not keep or VALIDATION_TARGET[0] <= result.nees <= VALIDATION_TARGET[1]:
             continue
@@ -552,4 +580,5 @@ def validate(scans: StaticScans, config: FeatureConfig) -> Validation:
                                    if outside else
                                    f'the target {VALIDATION_TARGET[0]:g}-'
                                    f'{VALIDATION_TARGET[1]:g}')))
-    return Validation(fit, config, ratio, corners, stable, nees, findings)
+    return Validation(fit, config, ratio, corners, stable, nees,
+                      corners_per_scan_figure(per_scan), findings)

@@ -4,7 +4,7 @@
 """
 The stable corners of a static recording, and their NEES under a noise model.
 
-A corner is tracked across the scans (associated by position, :func:`.analysis.associate`),
+A corner is tracked across the scans (associated by position, :func:`.rules.associate`),
 and the beams of its two walls are remembered. A scan in which something crossed one of those
 beams (:attr:`.calibration.NoiseFit.crossed`) does not count for the corner: its position there
 shows the scene's change, not the sensor's noise. Over the scans left (its *clear* scans):
@@ -28,7 +28,8 @@ from typing import Callable, List, Sequence, Tuple
 
 import numpy as np
 
-from .analysis import assign, associate, corner_stats, corners_per_scan, features_per_scan
+from .analysis import corner_stats, corners_per_scan, features_per_scan
+from .rules import assign, associate
 from .samples import ScanCorners
 from .scans import StaticScans
 from ..core import FeatureConfig
@@ -164,7 +165,8 @@ def nees_of(per_scan: List[ScanCorners], corners: Sequence[TrackedCorner]) -> Li
         covariance = np.array([per_scan[t].covariance[assignment[t, k]]
                                for t in found_in]).reshape(-1, 2, 2)
         jumps = jumps_of(xy)
-        nees = corner_stats(xy[~jumps], covariance[~jumps]).nees
+        # A corner never found in a clear scan has no NEES (and no mean to take one against).
+        nees = corner_stats(xy[~jumps], covariance[~jumps]).nees if len(xy) else math.nan
         results.append(CornerNees(len(found_in), int(jumps.sum()), nees))
     return results
 

@@ -11,6 +11,9 @@ Examples::
     evaluate out/env_a --out out/env_a_diag --propagation diagonal        # the paper's gap?
 
 The noise calibration that prints the node's parameters is ``calibrate`` (calibrate_cli).
+Exit status: 0 done; 2 a user error or a moving sensor (the measured drift against its bound),
+one line on stderr; 3 no corner was associated across the scans, so no NEES could be measured
+(one line on stderr, nothing written).
 """
 
 import argparse
@@ -20,13 +23,19 @@ import shlex
 import sys
 
 from .analysis import evaluate_scans, PROPAGATIONS
-from .calibration import fit_noise
+from .calibration import fit_noise, noise_of
+from .rules import corners_per_scan_figure, MovingSensorError, require_still
 from .samples import NoiseParameters
-from .scans import load_scans, MovingSensorError, require_still
+from .scans import load_scans
+from .score_cli import node_config
 from ..cli import bounded, Parser, start_core, USER_ERROR, UserError
 from ..core import METHODS
 from ..output_folders import claim, owned_folder
+from ..sensors import sensor_presets
 from ..stop_signals import raising, Stopped
+
+# Beyond the shared convention (0, 2 a user error): nothing to measure a NEES on.
+NO_CORNER_EXIT = 3
 
 
 def _methods(text: str) -> list:
@@ -48,7 +57,8 @@ def evaluate_parser() -> argparse.ArgumentParser:
         prog='evaluate', description='Per-corner sigma tables, ellipse figure, per-scan '
         'median area box plots and the propagated-versus-empirical check (NEES) of UTLS, WTLS, '
         'WCTLS (and ML) on repeated scans from a still sensor.',
-        epilog='Exit status: 0 done; 2 a user error or a moving sensor (one line on stderr).')
+        epilog='Exit status: 0 done; 2 a user error or a moving sensor (one line on stderr); '
+        '3 no corner associated across the scans (no NEES).')
     p.add_argument('bag', help='ROS 2 (mcap/sqlite3) or ROS 1 bag of scans from a still sensor')
     p.add_argument('--topic', default=None, help="LaserScan topic (default: the bag's only one)")
     p.add_argument('--limit', type=bounded(int, 1), default=None,
@@ -65,8 +75,16 @@ def evaluate_parser() -> argparse.ArgumentParser:
                    "the off-diagonal terms of each line's 3x3 covariance before the corner "
                    "(an analysis of the paper's results, never the node's behaviour) "
                    '(default: %(default)s)')
+    p.add_argument('--params', default=None, metavar='FILE',
+                   help='feature_node parameter file (as for --params-file): run the pipeline '
+                   "with the node's settings and noise model instead of the paper's settings "
+                   'and a fitted noise (default: none)')
+    p.add_argument('--sensor', default=None, choices=tuple(sensor_presets()),
+                   help="like --params, with this sensor preset over the file's (default: "
+                   'none)')
     p.add_argument('--range-sigma', type=bounded(float, 0.0), default=None,
-                   help='range noise std, m (default: fitted from the data)')
+                   help='range noise std, m (default: that of --params or --sensor, else '
+                   'fitted from the data)')
     p.add_argument('--bearing-sigma-deg', type=bounded(float, 0.0), default=None,
                    help='bearing noise std, deg (default: fitted with the range sigma)')
     p.add_argument('--common-range-sigma', type=bounded(float, 0.0), default=None,
@@ -78,8 +96,12 @@ def evaluate_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _noise(args, scans):
-    """Return the noise model (given or fitted) and a note on where it came from."""
+def _noise(args, scans, base):
+    """Return the noise model (given, the node's or fitted) and a note on where it came from."""
+    if args.range_sigma is None and base is not None:
+        noise = noise_of(base)
+        return noise, (f'noise model of {args.params or "the node"}'
+                       + (f' with sensor {args.sensor}' if args.sensor else ''))
     if args.range_sigma is None:
         fit = fit_noise(scans)
         noise = fit.noise
@@ -101,7 +123,8 @@ def main(argv=None) -> int:
     Run ``evaluate``.
 
     :param argv: arguments (default: sys.argv[1:])
-    :return: exit status: 0 done; 2 a user error, an unreadable bag or a moving sensor
+    :return: exit status: 0 done; 2 a user error, an unreadable bag or a moving sensor; 3 no
+        NEES measured
     """
     from ..bags import BagError
     args = evaluate_parser().parse_args(argv)
@@ -124,13 +147,23 @@ def _evaluate(args, methods, argv) -> int:
     claim(args.out, 'evaluate')            # refused now rather than after the analysis
     scans = load_scans(args.bag, args.topic, args.limit)
     still = require_still(scans)
-    noise, origin = _noise(args, scans)
-    evaluation = evaluate_scans(scans, noise, methods, args.propagation, args.min_presence)
+    base = (node_config(args.params, args.sensor) if args.params or args.sensor else None)
+    noise, origin = _noise(args, scans, base)
+    evaluation = evaluate_scans(scans, noise, methods, args.propagation, args.min_presence,
+                                base)
+    unmeasured = [m for m in methods if not math.isfinite(evaluation.pooled_nees(m))]
+    if unmeasured:
+        print(f'evaluate: error: no NEES for {", ".join(unmeasured)}: no corner was found in '
+              f'{100 * args.min_presence:.0f} % of the {len(scans)} scans (--min-presence; '
+              'corners per scan: ' + ', '.join(
+                  f'{m} {corners_per_scan_figure(evaluation.per_scan[m]):.3f}'
+                  for m in methods) + '), so none could be compared with its scatter; '
+              'nothing written', file=sys.stderr)
+        return NO_CORNER_EXIT
     from .report import summary_rows, write_report
     command = 'evaluate ' + ' '.join(shlex.quote(a) for a in
                                      (sys.argv[1:] if argv is None else argv))
-    notes = [origin, f'stillness check: {still.steady_beams} steady beams, '
-             f'{100 * still.drifted_fraction:.1f} % drifted (refused above 10 %)']
+    notes = [origin, f'stillness check: {still.describe()}']
     try:
         with owned_folder(args.out, 'evaluate') as staging:
             written = write_report(evaluation, staging, args.title or str(args.bag), command,
@@ -143,6 +176,9 @@ def _evaluate(args, methods, argv) -> int:
     for row in summary_rows(evaluation):
         print(f'  {row[0]:6s} pooled NEES {row[2]:7.2f}  median corner NEES {row[3]:7.2f}  '
               f'median area ratio {row[4]:6.2f}  per-scan median area {row[5]:9.1f} mm^2')
+    for method in methods:
+        print(f'  {method:6s} corners per scan '
+              f'{corners_per_scan_figure(evaluation.per_scan[method]):.3f}')
     print(f'evaluate: wrote {path}')
     return 0
 

@@ -2,10 +2,11 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-Repeated scans from a still sensor: loading them from a bag, and refusing a sensor that moved.
+Repeated scans of one sensor: loading them from a bag or from JSON scans.
 
 Pure numpy: the bag is read through :mod:`wctls_ros.bags`, and the scans are held as one
-(T, N) array of ranges with a common beam geometry.
+(T, N) array of ranges with a common beam geometry. Whether they come from a still sensor is
+decided by :func:`.rules.check_still`.
 """
 
 from dataclasses import dataclass
@@ -14,20 +15,8 @@ import math
 import pathlib
 import re
 from typing import Optional
-import warnings
 
 import numpy as np
-
-# The sensor counts as moving when more than this fraction of the steady beams drifted...
-_MOVING_FRACTION = 0.1
-# ... by more than this many standard errors between the first and the last third of the scans.
-_MOVING_Z = 6.0
-# A beam is steady when it returns in at least this fraction of the scans.
-_STEADY_FRACTION = 0.95
-
-
-class MovingSensorError(ValueError):
-    """The scans do not come from a still sensor (the analysis needs repeated static scans)."""
 
 
 @dataclass(frozen=True)
@@ -158,82 +147,3 @@ def load_json_scans(path) -> StaticScans:
         ranges.append(scan_ranges)
     return StaticScans(np.array(ranges), layout[1], layout[2], 0.0, math.inf,
                        np.arange(len(ranges), dtype=np.int64), str(path))
-
-
-@dataclass(frozen=True)
-class StillnessCheck:
-    """
-    How much the scene drifted between the first and the last third of the scans.
-
-    :ivar steady_beams: beams that return in (nearly) every scan
-    :ivar drifted_fraction: fraction of the steady beams whose median range moved by more
-        than the noise explains
-    :ivar median_drift_m: median over the steady beams of |median(last third) - median(first)|
-    :ivar still: whether the sensor counts as still
-    """
-
-    steady_beams: int
-    drifted_fraction: float
-    median_drift_m: float
-    still: bool
-
-
-def check_still(scans: StaticScans) -> StillnessCheck:
-    """
-    Test whether the scans come from a still sensor in a still scene.
-
-    Each steady beam's median range over the first third of the scans is compared with its
-    median over the last third, in units of its own standard error (from the within-third
-    scatter, so no noise model is assumed). A still sensor leaves nearly every beam below
-    6 standard errors (a slow common-mode range drift of a real sensor shifts them a little);
-    a moving sensor or a changing scene moves the range of most beams.
-
-    :param scans: the scans (at least 6)
-    :return: the check's figures
-    """
-    count = len(scans)
-    if count < 6:
-        return StillnessCheck(0, 0.0, 0.0, False)
-    valid = scans.valid()
-    steady = valid.mean(axis=0) >= _STEADY_FRACTION
-    ranges = np.where(valid, scans.ranges, np.nan)[:, steady]
-    third = count // 3
-    first, last = ranges[:third], ranges[-third:]
-    with np.errstate(invalid='ignore'), warnings.catch_warnings():
-        warnings.simplefilter('ignore', RuntimeWarning)      # all-NaN beams of a third
-        drift = np.abs(np.nanmedian(last, axis=0) - np.nanmedian(first, axis=0))
-        spread = 1.4826 * np.nanmedian(np.abs(np.concatenate(
-            [first - np.nanmedian(first, axis=0), last - np.nanmedian(last, axis=0)])), axis=0)
-        # Standard error of a difference of two medians of `third` samples; a floor keeps a
-        # quantised or noiseless beam (spread 0) from counting any change as a drift.
-        error = 1.2533 * np.maximum(spread, 1e-4) * math.sqrt(2.0 / third)
-        drifted = drift > _MOVING_Z * error
-    if not steady.any():
-        return StillnessCheck(0, 1.0, math.inf, False)
-    fraction = float(np.mean(drifted[np.isfinite(drift)])) if np.isfinite(drift).any() else 1.0
-    return StillnessCheck(int(steady.sum()), fraction, float(np.nanmedian(drift)),
-                          fraction <= _MOVING_FRACTION)
-
-
-def require_still(scans: StaticScans) -> StillnessCheck:
-    """
-    Refuse scans that do not come from a still sensor.
-
-    :param scans: the scans
-    :return: the check (when still)
-    :raises MovingSensorError: with the figures that show the motion
-    """
-    check = check_still(scans)
-    if not check.still:
-        if len(scans) < 6:
-            raise MovingSensorError(
-                f'{scans.source or "the scans"}: {len(scans)} scans are too few to tell a '
-                'still sensor (need at least 6 repeated scans)')
-        raise MovingSensorError(
-            f'{scans.source or "the scans"}: the sensor or the scene moved during the '
-            f'recording: {100 * check.drifted_fraction:.0f} % of {check.steady_beams} steady '
-            f'beams changed their range between the first and the last third of the '
-            f'{len(scans)} scans by more than noise explains (median change '
-            f'{1000 * check.median_drift_m:.1f} mm). This analysis needs repeated scans from a '
-            'still sensor in a still scene; cut the bag to a still interval.')
-    return check

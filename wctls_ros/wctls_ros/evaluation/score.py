@@ -26,7 +26,7 @@ With truth (a simulation's ``truth.yaml`` or hand labels, :mod:`.truth`), per sc
 
 On any static recording, with or without truth:
 
-- detections are clustered across scans by :func:`~.analysis.associate` (greedy seeds,
+- detections are clustered across scans by :func:`~.rules.associate` (greedy seeds,
   gate 5 predicted sigmas clamped to 2-25 cm, one detection per scan and cluster);
   **recurrence** = share of all detections that belong to a cluster present in at least 90 %
   of the scans (``min_presence``);
@@ -45,9 +45,11 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .analysis import assign, associate, corner_stats, corners_per_scan
+from .analysis import corner_stats, features_per_scan
+from .reobservation import landmarks_of, measure, Reobservation, REOBSERVATION_KEYS
+from .rules import assign, associate, check_still
 from .samples import ScanCorners
-from .scans import check_still, StaticScans
+from .scans import StaticScans
 from .truth import Truth
 from ..core import ellipse, FeatureConfig, nees
 
@@ -124,6 +126,8 @@ class MethodScore:
     :ivar per_scan: the detections of every scan
     :ivar labels: per scan, for each detection, the index of the true corner it matched (with
         truth) or of the recurring corner it belongs to (without), -1 for none
+    :ivar reobservation: the re-observation consistency of its corners and lines, and the
+        landmarks per scan (:mod:`.reobservation`), or None when not measured
     """
 
     method: str
@@ -137,6 +141,7 @@ class MethodScore:
     recurrent_detections: int
     per_scan: List[ScanCorners]
     labels: List[np.ndarray]
+    reobservation: Optional[Reobservation] = None
 
     @property
     def precision(self) -> float:
@@ -201,6 +206,8 @@ class MethodScore:
             'recurring_corners': len(recurring) if self.recurring is not None else math.nan,
             'nees_vs_mean_pooled': pooled,
             'nees_vs_mean_median': float(np.median(values)) if recurring else math.nan,
+            **(self.reobservation.summary() if self.reobservation is not None
+               else dict.fromkeys(REOBSERVATION_KEYS, math.nan)),
         }
 
 
@@ -297,8 +304,8 @@ def _recurrence(per_scan: List[ScanCorners], min_presence: float):
 
 
 def score_detections(method: str, per_scan: List[ScanCorners], truth: Optional[Truth] = None,
-                     static: bool = True,
-                     min_presence: float = RECURRING_PRESENCE) -> MethodScore:
+                     static: bool = True, min_presence: float = RECURRING_PRESENCE,
+                     reobservation: Optional[Reobservation] = None) -> MethodScore:
     """
     Score one method's detections.
 
@@ -308,6 +315,7 @@ def score_detections(method: str, per_scan: List[ScanCorners], truth: Optional[T
         or None
     :param static: measure recurrence (the scans come from a still sensor in a still scene)
     :param min_presence: share of the scans a recurring corner is found in, at least
+    :param reobservation: the re-observation figures of its corners and lines, or None
     :return: the score
     """
     detections = np.array([len(c) for c in per_scan], dtype=int)
@@ -315,23 +323,29 @@ def score_detections(method: str, per_scan: List[ScanCorners], truth: Optional[T
                                     else (None, None, 0))
     if truth is None:
         return MethodScore(method, detections, None, 0, 0, np.zeros(0), (), recurring,
-                           recurrent, per_scan, labels or [np.full(n, -1) for n in detections])
+                           recurrent, per_scan, labels or [np.full(n, -1) for n in detections],
+                           reobservation)
     labels, false, visible, found, nees_values, rates = _truth_scores(per_scan, truth)
     return MethodScore(method, detections, false, visible, found, nees_values, rates, recurring,
-                       recurrent, per_scan, labels)
+                       recurrent, per_scan, labels, reobservation)
 
 
 def score_scans(scans: StaticScans, configs: Mapping[str, FeatureConfig],
                 truth: Optional[Truth] = None, static: Optional[bool] = None,
-                min_presence: float = RECURRING_PRESENCE) -> ScoreTable:
+                min_presence: float = RECURRING_PRESENCE, poses: Optional[np.ndarray] = None,
+                pose_sigma_m: float = 0.0, pose_sigma_rad: float = 0.0) -> ScoreTable:
     """
-    Run every configuration over the scans and score its corners.
+    Run every configuration over the scans and score its corners and lines.
 
     :param scans: the scans
     :param configs: label (usually the method's name) -> pipeline configuration
     :param truth: the true corners, aligned with the scans (see :meth:`Truth.select`), or None
-    :param static: measure recurrence; None: when :func:`~.scans.check_still` says still
+    :param static: measure recurrence; None: when :func:`~.rules.check_still` says still
     :param min_presence: share of the scans a recurring corner is found in, at least
+    :param poses: the sensor pose of each scan (x m, y m, yaw rad), shape (T, 3), NaN rows
+        where unknown, or None: the re-observations are then tested without poses only
+    :param pose_sigma_m: the poses' position sigma (each axis), m
+    :param pose_sigma_rad: the poses' heading sigma, rad
     :return: the table
     :raises ValueError: when the truth does not have one row per scan where it needs one
     """
@@ -339,9 +353,15 @@ def score_scans(scans: StaticScans, configs: Mapping[str, FeatureConfig],
         raise ValueError(f'the truth covers scans {truth.first_scan}-{truth.last_scan} of '
                          f'{len(scans)}: score those (Truth.select) or give truth for all')
     static = check_still(scans).still if static is None else static
-    methods = tuple(score_detections(label, corners_per_scan(scans, config), truth, static,
-                                     min_presence) for label, config in configs.items())
-    return ScoreTable(methods, scans, truth, static)
+    methods = []
+    for label, config in configs.items():
+        extracted = features_per_scan(scans, config)
+        per_scan = [corners for _, corners in extracted]
+        landmarks = [landmarks_of(features, corners) for features, corners in extracted]
+        reobserved = measure(landmarks, poses, pose_sigma_m, pose_sigma_rad)
+        methods.append(score_detections(label, per_scan, truth, static, min_presence,
+                                        reobserved))
+    return ScoreTable(tuple(methods), scans, truth, static)
 
 
 # Columns of the table: key, heading, format.
@@ -349,6 +369,7 @@ COLUMNS = (
     ('method', 'method', '{}'),
     ('scans', 'scans', '{:d}'),
     ('detections_per_scan', 'detections / scan', '{:.2f}'),
+    ('landmarks_per_scan', 'landmarks (corners + lines) / scan', '{:.2f}'),
     ('false_per_scan', 'false / scan', '{:.2f}'),
     ('precision', 'precision', '{:.3f}'),
     ('recall', 'recall', '{:.3f}'),
@@ -360,6 +381,23 @@ COLUMNS = (
     ('recurring_corners', 'recurring corners', '{:d}'),
     ('nees_vs_mean_pooled', 'NEES vs mean pooled', '{:.2f}'),
     ('nees_vs_mean_median', 'NEES vs mean, median corner', '{:.2f}'),
+)
+
+
+# Columns of the re-observation table (:mod:`.reobservation`): key, heading, format.
+REOBSERVATION_COLUMNS = (
+    ('method', 'method', '{}'),
+    ('landmarks_per_scan', 'landmarks / scan', '{:.2f}'),
+    ('lines_per_scan', 'lines / scan', '{:.2f}'),
+    ('corner_distance_in_gate', 'corner distances in 95 % gate', '{:.3f}'),
+    ('line_angle_in_gate', 'line angles in 95 % gate', '{:.3f}'),
+    ('corner_line_distance_in_gate', 'corner-line distances in 95 % gate', '{:.3f}'),
+    ('corner_tracks_in_gate', 'corners in 95 % gate (poses)', '{:.3f}'),
+    ('line_tracks_in_gate', 'lines in 95 % gate (poses)', '{:.3f}'),
+    ('corner_track_median', 'corner track, median scans', '{:g}'),
+    ('corner_track_p90', 'corner track, p90 scans', '{:g}'),
+    ('line_track_median', 'line track, median scans', '{:g}'),
+    ('line_track_p90', 'line track, p90 scans', '{:g}'),
 )
 
 
@@ -382,17 +420,19 @@ def _cell(row: dict, key: str, fmt: str) -> str:
     return fmt.format(int(value) if fmt == '{:d}' else value)
 
 
-def markdown_table(table: ScoreTable) -> str:
+def markdown_table(table: ScoreTable, columns=COLUMNS) -> str:
     """
     Return the per-method table as Markdown.
 
     :param table: the score
+    :param columns: the columns (key, heading, format): COLUMNS, or REOBSERVATION_COLUMNS for
+        the re-observation table
     :return: the table's text
     """
-    lines = ['| ' + ' | '.join(heading for _, heading, _ in COLUMNS) + ' |',
-             '|' + '---|' * len(COLUMNS)]
+    lines = ['| ' + ' | '.join(heading for _, heading, _ in columns) + ' |',
+             '|' + '---|' * len(columns)]
     for row in table_rows(table):
-        lines.append('| ' + ' | '.join(_cell(row, key, fmt) for key, _, fmt in COLUMNS) + ' |')
+        lines.append('| ' + ' | '.join(_cell(row, key, fmt) for key, _, fmt in columns) + ' |')
     return '\n'.join(lines)
 
 
@@ -477,7 +517,7 @@ def draw_figure(table: ScoreTable, path, title: str = '') -> pathlib.Path:
 def write_score(table: ScoreTable, out, title: str, command: str,
                 notes: Sequence[str] = ()) -> pathlib.Path:
     """
-    Write table.md, table.csv, corners.csv and score.png into a folder.
+    Write table.md (the score and re-observation tables), table.csv, corners.csv and score.png.
 
     :param table: the score
     :param out: the folder (created)
@@ -492,6 +532,7 @@ def write_score(table: ScoreTable, out, title: str, command: str,
     with open(out / 'table.csv', 'w', newline='') as stream:
         writer = csv.writer(stream)
         keys = [key for key, _, _ in COLUMNS] + ['true_corners', 'matched']
+        keys += [key for key, _, _ in REOBSERVATION_COLUMNS if key not in keys]
         writer.writerow(keys)
         writer.writerows([[row[k] for k in keys] for row in rows])
     corners = corner_rows(table)
@@ -503,6 +544,8 @@ def write_score(table: ScoreTable, out, title: str, command: str,
     draw_figure(table, out / 'score.png', title)
     text = [f'# {title}', '', '    ' + command, '']
     text += [f'- {note}' for note in notes]
-    text += ['', markdown_table(table), '', '![scans](score.png)', '']
+    text += ['', markdown_table(table), '', 'Re-observations of the corners and lines '
+             '(wctls_ros.evaluation.reobservation):', '',
+             markdown_table(table, REOBSERVATION_COLUMNS), '', '![scans](score.png)', '']
     (out / 'table.md').write_text('\n'.join(text))
     return out / 'table.md'

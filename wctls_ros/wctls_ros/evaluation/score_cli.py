@@ -12,8 +12,14 @@ Examples::
     score data/lms111_building --labels data/labels/lms111_building.yaml  # 6 JSON scans
     score out/env_b --config my_feature_node.yaml --methods wtls --scans 0-49
 
-Offline: reads the bag with rosbags and never starts ROS. Exit status 0, or 2 with one line
-``score: error: ...`` on a bad path, bag, label file, configuration or option.
+    score data/urg04lx_office --still no                  # carried: the pose-free test only
+    score robot_bag --poses poses.csv --pose-sigma-m 0.02 --pose-sigma-deg 0.5
+
+Every run also tests the re-observations of corners and lines in consecutive scans
+(:mod:`.reobservation`), with poses in the world frame. Offline: reads the bag with rosbags
+and never starts ROS. Exit status 0, or 2 with one line ``score: error: ...`` on a bad path,
+bag, label file, pose file, configuration or option, or a moving sensor without truth, poses
+or --still no.
 """
 
 import argparse
@@ -24,10 +30,15 @@ import sys
 import time
 from typing import Dict, Optional
 
-from .scans import check_still, load_json_scans, load_scans, StaticScans
-from .score import markdown_table, RECURRING_PRESENCE, score_scans, write_score
+import numpy as np
+
+from .poses import load_poses, poses_at, poses_from_bag
+from .rules import check_still, corners_per_scan_figure
+from .scans import load_json_scans, load_scans, StaticScans
+from .score import (markdown_table, RECURRING_PRESENCE, REOBSERVATION_COLUMNS, score_scans,
+                    write_score)
 from .truth import load_truth, Truth, TRUTH_FILE
-from ..cli import Parser, start_core, USER_ERROR, UserError
+from ..cli import bounded, Parser, start_core, USER_ERROR, UserError
 from ..core import FeatureConfig, METHODS
 from ..output_folders import claim, owned_folder
 from ..params import feature_settings, load_parameters, SENSOR
@@ -75,10 +86,30 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--still', choices=('auto', 'yes', 'no'), default='auto',
                    help='measure recurrence: when the stillness check passes (auto), or treat '
                    'the scans as still or not whatever it says, e.g. for a hand-held sensor '
-                   'that drifts by a centimetre (default: %(default)s)')
+                   'that drifts by a centimetre; auto refuses a moving sensor without truth '
+                   'or poses, no scores its re-observations (default: %(default)s)')
     p.add_argument('--min-presence', type=float, default=RECURRING_PRESENCE,
                    help='a corner recurs when found in at least this share of the scans '
                    '(default: %(default)s)')
+    p.add_argument('--poses', default=None, metavar='FILE',
+                   help='poses of the sensor (CSV with the header stamp_s,x_m,y_m,yaw_rad), '
+                   "interpolated to each scan's stamp: corners and lines are tracked in the "
+                   'world frame and their re-observations tested (default: none; the pose-free '
+                   'test runs in any case)')
+    p.add_argument('--poses-topic', default=None, metavar='TOPIC',
+                   help='like --poses, from a nav_msgs/msg/Odometry or tf2_msgs/msg/TFMessage '
+                   'topic of the bag (default: none)')
+    p.add_argument('--tf-frames', nargs=2, default=('odom', 'base_link'),
+                   metavar=('PARENT', 'CHILD'),
+                   help='with a TF --poses-topic: the transform that gives the robot pose '
+                   '(default: odom base_link)')
+    p.add_argument('--laser-offset', type=float, nargs=3, default=(0.0, 0.0, 0.0),
+                   metavar=('X_M', 'Y_M', 'YAW_DEG'),
+                   help="the sensor's pose in the frame of the poses (default: 0 0 0)")
+    p.add_argument('--pose-sigma-m', type=bounded(float, 0.0), default=0.0,
+                   help='position sigma of the poses, each axis, m (default: %(default)s)')
+    p.add_argument('--pose-sigma-deg', type=bounded(float, 0.0), default=0.0,
+                   help='heading sigma of the poses, deg (default: %(default)s)')
     p.add_argument('--out', default=None, help='folder for table.md, table.csv, corners.csv, '
                    'score.png: a new or empty folder, or an earlier output of score, which is '
                    'replaced (default: print only)')
@@ -152,6 +183,25 @@ def _truth(args) -> Optional[Truth]:
     return load_truth(inside) if inside.is_file() else None
 
 
+def _poses(args, scans: StaticScans):
+    """Return the sensor pose of each scan (NaN rows where the poses do not reach), or None."""
+    if args.poses is not None and args.poses_topic is not None:
+        raise UserError('give --poses or --poses-topic, not both')
+    if args.poses is None and args.poses_topic is None:
+        return None
+    source = (load_poses(args.poses) if args.poses is not None else
+              poses_from_bag(args.bag, args.poses_topic, tuple(args.tf_frames)))
+    x, y, yaw_deg = args.laser_offset
+    poses = poses_at(source, scans.stamps_ns * 1e-9, (x, y, math.radians(yaw_deg)))
+    covered = int(np.isfinite(poses).all(axis=1).sum())
+    if covered < 2:
+        raise UserError(f'{args.poses or args.poses_topic}: the poses cover {covered} of the '
+                        f'{len(scans)} scans '
+                        f'(stamps {scans.stamps_ns[0] * 1e-9:.3f}-'
+                        f'{scans.stamps_ns[-1] * 1e-9:.3f} s); at least 2 are needed')
+    return poses
+
+
 def run(args, argv) -> int:
     """Load, score, print and write; raise on what the user gave wrong."""
     methods = [m.strip() for m in args.methods.split(',') if m.strip()]
@@ -178,15 +228,18 @@ def run(args, argv) -> int:
             raise UserError(f'the labels cover scans {truth_first}-{truth_last}, not '
                             f'{first}-{last}')
         truth = truth.select(first, len(scans))
+    poses = _poses(args, scans)
     check = check_still(scans)
     still = {'auto': check.still, 'yes': True, 'no': False}[args.still]
-    if truth is None and not still:
-        raise UserError(f'{args.bag}: nothing to score: no truth (--labels, or {TRUTH_FILE} '
-                        'beside the scans) and the sensor or scene is not still '
-                        f'({100 * check.drifted_fraction:.0f} % of the steady beams drifted; '
-                        'recurrence needs a static recording: --still yes to insist)')
+    if truth is None and poses is None and args.still == 'auto' and not still:
+        raise UserError(f'{args.bag}: refused: the sensor or scene is not still '
+                        f'({check.describe()}): recurrence needs a static recording and there '
+                        f'is no truth (--labels, or {TRUTH_FILE} beside the scans); for a '
+                        'moving sensor say so: --still no tests the re-observations without '
+                        'poses, --poses FILE or --poses-topic TOPIC with them')
     started = time.monotonic()
-    table = score_scans(scans, settings, truth, still, args.min_presence)
+    table = score_scans(scans, settings, truth, still, args.min_presence, poses,
+                        args.pose_sigma_m, math.radians(args.pose_sigma_deg))
     elapsed = time.monotonic() - started
     config = settings[methods[0]]
     notes = [f'scans {first}-{last} of {args.bag} ({len(scans)} scans, '
@@ -200,12 +253,25 @@ def run(args, argv) -> int:
                           f'({len(truth.ids)} corners)'),
              f'stillness check: {100 * check.drifted_fraction:.0f} % of '
              f'{check.steady_beams} steady beams drifted, median '
-             f'{1e3 * check.median_drift_m:.1f} mm ({"still" if check.still else "moved"}); '
-             + ('recurrence measured' if still else 'recurrence not measured')
+             f'{1e3 * check.median_drift_m:.1f} mm against a bound of '
+             f'{1e3 * check.median_bound_m:.1f} mm ({"still" if check.still else "moved"}); '
+             + ('recurrence measured' if still else 'recurrence refused: it needs a still '
+                'sensor')
              + (f' (--still {args.still})' if args.still != 'auto' else ''),
+             'poses: ' + ('none' if poses is None else
+                          f'{args.poses or args.poses_topic}, '
+                          f'{int(np.isfinite(poses).all(axis=1).sum())} of '
+                          f'{len(scans)} scans covered, '
+                          f'sigma {1e3 * args.pose_sigma_m:g} mm and {args.pose_sigma_deg:g} '
+                          'deg'),
              f'scored in {elapsed:.1f} s']
     print('\n'.join(f'# {note}' for note in notes))
     print(markdown_table(table))
+    print(markdown_table(table, REOBSERVATION_COLUMNS))
+    for scored in table.methods:
+        print(f'# {scored.method}: corners per scan '
+              f'{corners_per_scan_figure(scored.per_scan):.3f}')
+        print('\n'.join(f'# {scored.method}: {line}' for line in scored.reobservation.lines()))
     if args.out is not None:
         command = 'score ' + ' '.join(shlex.quote(a) for a in
                                       (sys.argv[1:] if argv is None else argv))

@@ -158,7 +158,7 @@ def run(args) -> int:
               f'{finding.text}', file=sys.stderr)
     if calibration is not None and (not implausible or args.accept_implausible):
         notes = [f'{"IMPLAUSIBLE" if f.implausible else "warning"}: {f.text}' for f in findings]
-        print(node_yaml(calibration.noise, calibration.final_config, notes))
+        print(node_yaml(calibration.noise, calibration.published_config, notes))
         if args.write_preset:
             preset = pathlib.Path(args.write_preset)
             refused = [f.text for f in findings if f.implausible]

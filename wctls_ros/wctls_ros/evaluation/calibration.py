@@ -239,7 +239,8 @@ def node_yaml(noise: NoiseParameters, config: FeatureConfig = None, comments=())
 
     The model-error settings it was checked under (``residual_scaling``,
     ``model_error_sigma_m``, ``wall_flatness_sigma_m``, the latter fitted by :func:`calibrate`)
-    are written too: the corner NEES and corner counts hold for them only. ``range_sigma_from_scan`` is off: the model is fixed.
+    are written too: the corner NEES and corner counts hold for them only.
+    ``range_sigma_from_scan`` is off: the model is fixed.
 
     :param noise: the fitted model
     :param config: the pipeline settings the model was checked under (default: the paper's)

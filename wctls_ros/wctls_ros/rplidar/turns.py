@@ -27,6 +27,9 @@ import numpy as np
 from .protocol import Samples
 
 _MISSED_START_DROP_DEG = 270.0
+# How far corrected angles scatter about their grid: express corrections reach 8 degrees, the
+# ultra capsules' distance-dependent offsets about as far.
+_CORRECTION_SPAN_DEG = 16.0
 
 
 class SampleClock:
@@ -160,20 +163,24 @@ class TurnAssembler:
         first = self._last_angle is None
         previous = np.concatenate([[angle[0] if first else self._last_angle], angle[:-1]])
         drop = previous - angle
-        boundary = (samples.start & (drop > 0.0)) | (drop > _MISSED_START_DROP_DEG)
+        # A corrected angle (express and ultra capsules) may lie a few degrees before the grid
+        # angle whose wrap the S flag marks: a flag just before 360 degrees starts a turn too.
+        flagged = samples.start & ((drop > 0.0) | (angle > 360.0 - _CORRECTION_SPAN_DEG))
+        boundary = flagged | (drop > _MISSED_START_DROP_DEG)
         if self._step_deg is not None and not first:
             swept_deg = np.diff(samples.slot, prepend=self._last_slot) * self._step_deg
             # Wraps between consecutive samples by their slots; a fall in angle already shows
             # one (and is judged above), so only wraps the angles cannot show count here.
             wraps = np.floor((swept_deg + drop) / 360.0 + 0.5)
             boundary |= wraps >= 1.0 + (drop > 0.0)
+        cuts = self._without_echoes(np.flatnonzero(boundary), flagged, angle)
         self._last_angle = angle[-1]
         self._last_slot = samples.slot[-1]
         self._clock.add(samples.slot, measured_s)
         columns = (angle, samples.distance_mm, samples.quality, samples.slot, received_s)
         turns = []
         begin = 0
-        for cut in np.flatnonzero(boundary):
+        for cut in cuts:
             self._append(columns, begin, cut)
             turn = self._close()
             if turn is not None:
@@ -181,6 +188,33 @@ class TurnAssembler:
             begin = cut
         self._append(columns, begin, len(angle))
         return turns
+
+    def _without_echoes(self, cuts: np.ndarray, flagged: np.ndarray, angle: np.ndarray) -> list:
+        """
+        Drop an unflagged turn boundary less than a quarter turn after the previous one.
+
+        Corrected angles scatter about the sample grid: near the wrap a turn's samples may
+        fall below 360 degrees and rise again (0.2, 359.6, 0.6), falls that are no new turn.
+
+        :param cuts: indices of the boundaries found in this chunk
+        :param flagged: True where the S flag marks a boundary
+        :param angle: the chunk's angles, degrees
+        :return: the indices kept
+        """
+        step_deg = self._step_deg
+        if step_deg is None:
+            rises = np.diff(angle)
+            rises = rises[(rises > 0.0) & (rises < _CORRECTION_SPAN_DEG)]
+            step_deg = float(np.median(rises)) if rises.size else None
+        if step_deg is None:
+            return list(cuts)
+        quarter = 90.0 / step_deg
+        kept, last = [], -self._size
+        for cut in cuts:
+            if flagged[cut] or cut - last >= quarter:
+                kept.append(cut)
+                last = cut
+        return kept
 
     def _append(self, columns: tuple, begin: int, end: int):
         """Add ``columns[begin:end]`` to the turn being assembled."""

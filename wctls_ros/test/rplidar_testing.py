@@ -336,19 +336,20 @@ class LogLines:
         self._keep('error', message)
 
 
-def emulated_device(model, firmware=None, seed=0):
+def emulated_device(model, firmware=None, seed=0, faults=None):
     """
     Return a noiseless emulated device of ``model`` and a :class:`DeviceLink` to it.
 
     :param model: the emulator's model name or a ``DeviceModel``
     :param firmware: (major, minor) (default: the model's)
     :param seed: random seed
+    :param faults: its fault settings (default: none)
     :return: ``(device, link)``
     """
     profile = EMULATED_MODELS[model] if isinstance(model, str) else model
     rng = np.random.default_rng(seed)
     scene = SimulatedScene(load_floor_plan('environment_a'), None, NOISELESS, rng)
-    device = S1Device(scene, Faults(), firmware or profile.firmware, rng, profile.modes,
+    device = S1Device(scene, faults or Faults(), firmware or profile.firmware, rng, profile.modes,
                       profile.typical_mode, profile)
     return device, DeviceLink(device, profile.baudrate)
 

@@ -13,10 +13,11 @@ import time
 import numpy as np
 import pytest
 from rplidar_testing import emulated_device, LogLines, serving, true_ranges, wait_for
+from wctls_ros.params import defaults, RPLIDAR_NODE
 from wctls_ros.rplidar.driver import DriverConfig, DriverState, RplidarDriver
-from wctls_ros.rplidar.emulator.device import EMULATED_MODELS
-from wctls_ros.rplidar.protocol import (encode_motor_speed, encode_request, MotorControl,
-                                        StandardNodeDecoder)
+from wctls_ros.rplidar.emulator.device import EMULATED_MODELS, Faults
+from wctls_ros.rplidar.protocol import (encode_motor_speed, encode_request, HealthStatus,
+                                        MotorControl, StandardNodeDecoder)
 from wctls_ros.rplidar.transport import LinkError, SerialLink
 
 # How each model's motor is driven, as SLAMTEC's SDK finds out.
@@ -55,9 +56,11 @@ def start_driver(link_or_port, **config):
 
 @pytest.mark.parametrize('name', list(EMULATED_MODELS))
 def test_every_model_scans_end_to_end_at_its_own_rate_found_by_probing(name):
+    # Neither the driver nor the node is told the rate: both default to probing.
+    assert defaults(RPLIDAR_NODE)['serial_baudrate'] == DriverConfig().serial_baudrate == 0
     model = EMULATED_MODELS[name]
     with serving(name, baudrate=model.baudrate) as path:
-        driver, turns, log = start_driver(path, serial_baudrate=0)
+        driver, turns, log = start_driver(path)
         try:
             wait_for(lambda: turns.count() >= 3, what=f'3 turns from the {name}')
             status = driver.status()
@@ -203,6 +206,29 @@ def test_a_missing_port_says_no_such_device(tmp_path):
     finally:
         driver.close()
     assert '\n' not in message and 'plugged in' in message
+
+
+def test_no_answer_at_any_rate_says_so_in_one_line():
+    with serving('s1', baudrate=57600) as path:
+        driver, _, _ = start_driver(path)
+        try:
+            message = wait_for(lambda: driver.status().message if 'at any rate'
+                               in driver.status().message else '', what='an error')
+        finally:
+            driver.close()
+    assert '\n' not in message and 'not powered' in message, message
+
+
+def test_a_lasting_health_error_names_its_code_in_one_line():
+    _, link = emulated_device('s1', faults=Faults(health=HealthStatus.ERROR, resets_to_clear=99))
+    driver, _, log = start_driver(link, health_reset_attempts=0)
+    try:
+        wait_for(lambda: driver.status().state == DriverState.FAILED, what='giving up')
+    finally:
+        driver.close()
+    message = [line for line in log.lines if line.startswith('error:')][-1]
+    assert 'health error (code 0x0001)' in message and '\n' not in message, message
+    assert 'power-cycle the device' in message
 
 
 def test_a_port_without_permission_names_the_dialout_group():

@@ -29,7 +29,7 @@ def _explain_serial_error(port: str, error: serial.SerialException) -> str:
     """Turn a pyserial failure into a message that says what to check."""
     code = getattr(error, 'errno', None)
     if code == errno.ENOENT:
-        hint = ('no such device: is the S1 plugged in and powered? Check serial_port '
+        hint = ('no such device: is the RPLIDAR plugged in and powered? Check serial_port '
                 '(ls -l /dev/ttyUSB* /dev/rplidar)')
     elif code == errno.EACCES:
         hint = ('permission denied: add the user to the dialout group (sudo usermod -aG dialout '
@@ -43,10 +43,10 @@ def _explain_serial_error(port: str, error: serial.SerialException) -> str:
 
 class SerialLink:
     """
-    A serial port at the S1's 8N1 line settings.
+    A serial port at the RPLIDARs' 8N1 line settings.
 
     :param port: device path, e.g. ``/dev/ttyUSB0``
-    :param baudrate: bits per second (256000 for the S1)
+    :param baudrate: bits per second (the model's: 115200 to 1000000)
     :raises LinkError: when the port cannot be opened
     """
 

@@ -67,6 +67,7 @@ class AnswerType(enum.IntEnum):
     EXPRESS_CAPSULE = 0x82
     ULTRA_CAPSULE = 0x84
     DENSE_CAPSULE = 0x85
+    ULTRA_DENSE_CAPSULE = 0x86
     ACC_BOARD_FLAG = 0xFF
 
 
@@ -605,6 +606,9 @@ class Samples:
     :ivar samples_after: samples measured after this one within the same frame
     :ivar slot: the sample's position in the stream, counting the frames sent before it by their
         bytes (so corrupted or lost frames still count): frame index x samples per frame + k
+    :ivar device_time_us: the timestamp of the sample's frame on the device's clock,
+        microseconds, for formats that carry one (ultra-dense capsules); -1 where the format
+        carries none or the frame's was unreadable (the default)
     """
 
     angle_deg: np.ndarray
@@ -614,6 +618,11 @@ class Samples:
     frame_end: np.ndarray
     samples_after: np.ndarray
     slot: np.ndarray
+    device_time_us: Optional[np.ndarray] = None
+
+    def __post_init__(self):
+        if self.device_time_us is None:
+            object.__setattr__(self, 'device_time_us', np.full(len(self.angle_deg), -1, np.int64))
 
     def __len__(self):
         return len(self.angle_deg)
@@ -629,7 +638,7 @@ class Samples:
         if len(parts) == 1:
             return parts[0]
         fields = ('angle_deg', 'distance_mm', 'quality', 'start', 'frame_end', 'samples_after',
-                  'slot')
+                  'slot', 'device_time_us')
         if not parts:
             dtypes = (np.float64, np.float64, np.uint8, bool, np.int64, np.int64, np.int64)
             return cls(*(np.empty(0, dtype) for dtype in dtypes))

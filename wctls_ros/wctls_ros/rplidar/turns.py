@@ -21,6 +21,7 @@ reader-thread delays, which a loaded machine makes long, do not leak into the st
 
 import collections
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 
@@ -105,6 +106,9 @@ class Turn:
     :ivar first_sample_s: estimated measurement time of the first sample, monotonic clock, s
     :ivar period_s: rotation period from the device's sample clock, s
     :ivar last_byte_s: receive time of the frame carrying the last sample, monotonic clock, s
+    :ivar device_time_us: the device's timestamp of the frame carrying the first sample,
+        microseconds on its clock (formats that carry one: ultra-dense capsules); None when
+        the format has none or that frame's was unreadable
     """
 
     angle_deg: np.ndarray
@@ -113,6 +117,7 @@ class Turn:
     first_sample_s: float
     period_s: float
     last_byte_s: float
+    device_time_us: Optional[int] = None
 
 
 class TurnAssembler:
@@ -177,7 +182,8 @@ class TurnAssembler:
         self._last_angle = angle[-1]
         self._last_slot = samples.slot[-1]
         self._clock.add(samples.slot, measured_s)
-        columns = (angle, samples.distance_mm, samples.quality, samples.slot, received_s)
+        columns = (angle, samples.distance_mm, samples.quality, samples.slot, received_s,
+                   samples.device_time_us)
         turns = []
         begin = 0
         for cut in cuts:
@@ -232,7 +238,8 @@ class TurnAssembler:
         self._parts, self._size, self._complete = [], 0, True
         if not complete or not parts:
             return None
-        angle, distance, quality, slot, received_s = (np.concatenate(c) for c in zip(*parts))
+        angle, distance, quality, slot, received_s, device_time_us = (
+            np.concatenate(c) for c in zip(*parts))
         steps = np.diff(angle)
         steps = steps[steps > 0.0]
         if not steps.size:
@@ -244,4 +251,5 @@ class TurnAssembler:
         self._turn_end_s = first_sample_s + (2.0 - angle[0] / 360.0) * period_s
         return Turn(angle_deg=angle, distance_mm=distance, quality=quality,
                     first_sample_s=first_sample_s, period_s=period_s,
-                    last_byte_s=float(received_s[-1]))
+                    last_byte_s=float(received_s[-1]),
+                    device_time_us=int(device_time_us[0]) if device_time_us[0] >= 0 else None)

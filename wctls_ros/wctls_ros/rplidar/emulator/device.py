@@ -37,11 +37,12 @@ from ..protocol import (AccBoardFlag, AnswerType, CAPSULE_SIZE, Command, ConfTyp
                         decode_conf_request, DeviceHealth, DeviceInfo, encode_answer,
                         encode_conf_value, encode_dense_capsules, encode_standard_nodes,
                         FULL_TURN_Q6, HealthStatus, MODE_CONF_TYPES, MotorControl, NODE_SIZE,
-                        ProtocolError,
-                        RequestParser, ResponseDescriptor, SampleRate, SAMPLES_PER_CAPSULE,
-                        ScanMode, SendMode)
+                        ProtocolError, RequestParser, ResponseDescriptor, SampleRate,
+                        SAMPLES_PER_CAPSULE, ScanMode, SendMode)
 from ..ultra import (encode_ultra_capsules, offset_deg, ULTRA_CAPSULE_SIZE, ULTRA_MAX_DISTANCE_MM,
                      ULTRA_SAMPLES_PER_CAPSULE, varbitscale_decode, varbitscale_encode)
+from ..ultradense import (encode_ultra_dense_capsules, ULTRA_DENSE_CAPSULE_SIZE,
+                          ULTRA_DENSE_MAX_DISTANCE_MM, ULTRA_DENSE_SAMPLES_PER_CAPSULE)
 
 MODES = (ScanMode(0, 'Standard', 244.0, 40.0, AnswerType.MEASUREMENT),
          ScanMode(1, 'DenseBoost', 108.0, 40.0, AnswerType.DENSE_CAPSULE))
@@ -63,7 +64,11 @@ TRIANGULATION_BASELINE_MM = 20.0
 _FRAMES = {AnswerType.MEASUREMENT: (1, NODE_SIZE),
            AnswerType.EXPRESS_CAPSULE: (EXPRESS_SAMPLES_PER_CAPSULE, EXPRESS_CAPSULE_SIZE),
            AnswerType.ULTRA_CAPSULE: (ULTRA_SAMPLES_PER_CAPSULE, ULTRA_CAPSULE_SIZE),
-           AnswerType.DENSE_CAPSULE: (SAMPLES_PER_CAPSULE, CAPSULE_SIZE)}
+           AnswerType.DENSE_CAPSULE: (SAMPLES_PER_CAPSULE, CAPSULE_SIZE),
+           AnswerType.ULTRA_DENSE_CAPSULE: (ULTRA_DENSE_SAMPLES_PER_CAPSULE,
+                                            ULTRA_DENSE_CAPSULE_SIZE)}
+# The quality the emulator reports for an ultra-dense return (0-255).
+ULTRA_DENSE_RETURN_QUALITY = 190
 SERIAL_NUMBER = b'WCTLS-S1-EMULATR'
 DEFAULT_RPM = 600
 MODEL_S1M1 = 0x61
@@ -535,6 +540,8 @@ class S1Device:
             data = self._express_capsules(frames, start_q6)
         elif self._mode.answer_type == AnswerType.ULTRA_CAPSULE:
             data = self._ultra_capsules(frames, start_q6)
+        elif self._mode.answer_type == AnswerType.ULTRA_DENSE_CAPSULE:
+            data = self._ultra_dense_capsules(frames, start_q6)
         else:
             data = self._nodes(start_q6)
         return self._inject_faults(data)
@@ -547,6 +554,23 @@ class S1Device:
         distances[distances > 0xFFFF] = 0
         return encode_dense_capsules(start_q6, distances.reshape(angles.shape),
                                      frames == 0)
+
+    def _ultra_dense_capsules(self, frames: np.ndarray, start_q6: np.ndarray) -> bytes:
+        """
+        Encode ultra-dense capsules: sample k of capsule i at start_i + k * step / 64.
+
+        A capsule's timestamp is when its first sample was measured, in microseconds of the
+        monotonic clock, the emulated device's own.
+        """
+        offsets = np.arange(ULTRA_DENSE_SAMPLES_PER_CAPSULE) / ULTRA_DENSE_SAMPLES_PER_CAPSULE
+        angles = (start_q6[:, None] + self._step_q6 * offsets) / 64.0 % 360.0
+        distances = self._scene.distances_mm(angles.reshape(-1)).reshape(angles.shape)
+        distances[distances > ULTRA_DENSE_MAX_DISTANCE_MM] = 0
+        quality = np.where(distances > 0, ULTRA_DENSE_RETURN_QUALITY, 0)
+        sample_s = self._frame_s / ULTRA_DENSE_SAMPLES_PER_CAPSULE
+        time_us = np.rint((self._start_s + frames * self._frame_s + sample_s) * 1e6)
+        return encode_ultra_dense_capsules(start_q6, distances, quality, frames == 0,
+                                           time_us.astype(np.int64))
 
     def _express_capsules(self, frames: np.ndarray, start_q6: np.ndarray) -> bytes:
         """Encode express capsules: sample k of capsule i at start_i + k * step / 32 - dk."""

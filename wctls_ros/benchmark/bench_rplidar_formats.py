@@ -39,6 +39,7 @@ GOOD_TURN_SHARE = 0.8
 FORMATS = (
     ('0x81 standard, S1 4.1 kHz', MODES, 0),
     ('0x82 express, A2 4 kHz', A_SERIES_MODES, 1),
+    ('0x83 HQ, 8 kHz', (ScanMode(0, 'HQ', 125.0, 25.0, AnswerType.HQ_CAPSULE),), 0),
     ('0x84 ultra, A2 Boost 8 kHz', A_SERIES_MODES, 2),
     ('0x84 ultra, A3 Sensitivity 16 kHz', EMULATED_MODELS['a3'].modes, 3),
     ('0x85 dense, S1 DenseBoost 9.3 kHz', MODES, 1),

@@ -12,8 +12,8 @@ firmware older than 1.24), starts the motor (at ``scan_frequency`` where the mod
 starts the requested mode (the typical one by default, or when the device lacks the requested
 one, with a warning that lists its modes: DenseBoost on the S1). It then decodes the
 stream with the decoder of the mode's answer type (standard nodes 0x81, express capsules 0x82,
-ultra capsules 0x84, dense capsules 0x85, ultra-dense capsules 0x86) and hands every complete
-turn to a callback, on this thread.
+HQ capsules 0x83, ultra capsules 0x84, dense capsules 0x85, ultra-dense capsules 0x86) and
+hands every complete turn to a callback, on this thread.
 
 The handshake's answers carry no checksum: a scan mode's sample time and range and the number
 of modes are checked for plausibility, and an implausible value is replaced (the S1's own, an
@@ -43,6 +43,7 @@ import numpy as np
 
 from .capsules import DenseCapsuleDecoder
 from .express import ExpressCapsuleDecoder
+from .hq import HqCapsuleDecoder
 from .protocol import (ACC_BOARD_MAJOR_IDS, AccBoardFlag, AnswerType, Command, ConfType,
                        decode_conf_value, DESCRIPTOR_SIZE, DeviceHealth, DeviceInfo,
                        encode_acc_board_flag_request, encode_conf_request, encode_express_scan,
@@ -89,16 +90,17 @@ PLAUSIBLE_MAX_DISTANCE_M = (1.0, 65.535)
 MAX_SCAN_MODES = 16
 # What replaces an implausible sample time, by the mode's answer type: the S1's for standard
 # nodes and dense capsules; for the capsules an S1 does not stream, an A-series device's 4 kHz
-# Express and 8 kHz Boost, and an S2/S3's 32 kHz for ultra-dense capsules. An implausible
-# range is replaced by the S1's.
+# Express and 8 kHz Boost (and HQ), and an S2/S3's 32 kHz for ultra-dense capsules. An
+# implausible range is replaced by the S1's.
 FALLBACK_US_PER_SAMPLE = {AnswerType.MEASUREMENT: 244.0, AnswerType.DENSE_CAPSULE: 108.0,
                           AnswerType.EXPRESS_CAPSULE: 250.0, AnswerType.ULTRA_CAPSULE: 125.0,
-                          AnswerType.ULTRA_DENSE_CAPSULE: 31.25}
+                          AnswerType.ULTRA_DENSE_CAPSULE: 31.25, AnswerType.HQ_CAPSULE: 125.0}
 S1_MAX_DISTANCE_M = 40.0
 _CHUNK_LOG_SIZE = 256
 # The capsule decoder of each capsule answer type (started by EXPRESS_SCAN with the mode's id,
 # built with the mode's sample time and range); standard nodes are started by SCAN.
 CAPSULE_DECODERS = {AnswerType.EXPRESS_CAPSULE: ExpressCapsuleDecoder,
+                    AnswerType.HQ_CAPSULE: HqCapsuleDecoder,
                     AnswerType.ULTRA_CAPSULE: UltraCapsuleDecoder,
                     AnswerType.DENSE_CAPSULE: DenseCapsuleDecoder,
                     AnswerType.ULTRA_DENSE_CAPSULE: UltraDenseCapsuleDecoder}

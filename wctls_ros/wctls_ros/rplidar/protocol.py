@@ -65,6 +65,7 @@ class AnswerType(enum.IntEnum):
     LIDAR_CONF = 0x20
     MEASUREMENT = 0x81
     EXPRESS_CAPSULE = 0x82
+    HQ_CAPSULE = 0x83
     ULTRA_CAPSULE = 0x84
     DENSE_CAPSULE = 0x85
     ULTRA_DENSE_CAPSULE = 0x86

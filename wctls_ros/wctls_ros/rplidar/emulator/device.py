@@ -33,6 +33,7 @@ import numpy as np
 from ..express import (encode_express_capsules, EXPRESS_CAPSULE_SIZE,
                        EXPRESS_MAX_CORRECTION_Q3, EXPRESS_MAX_DISTANCE_MM,
                        EXPRESS_SAMPLES_PER_CAPSULE)
+from ..hq import encode_hq_capsules, HQ_CAPSULE_SIZE, HQ_SAMPLES_PER_CAPSULE
 from ..protocol import (AccBoardFlag, AnswerType, CAPSULE_SIZE, Command, ConfType,
                         decode_conf_request, DeviceHealth, DeviceInfo, encode_answer,
                         encode_conf_value, encode_dense_capsules, encode_standard_nodes,
@@ -66,7 +67,8 @@ _FRAMES = {AnswerType.MEASUREMENT: (1, NODE_SIZE),
            AnswerType.ULTRA_CAPSULE: (ULTRA_SAMPLES_PER_CAPSULE, ULTRA_CAPSULE_SIZE),
            AnswerType.DENSE_CAPSULE: (SAMPLES_PER_CAPSULE, CAPSULE_SIZE),
            AnswerType.ULTRA_DENSE_CAPSULE: (ULTRA_DENSE_SAMPLES_PER_CAPSULE,
-                                            ULTRA_DENSE_CAPSULE_SIZE)}
+                                            ULTRA_DENSE_CAPSULE_SIZE),
+           AnswerType.HQ_CAPSULE: (HQ_SAMPLES_PER_CAPSULE, HQ_CAPSULE_SIZE)}
 # The quality the emulator reports for an ultra-dense return (0-255).
 ULTRA_DENSE_RETURN_QUALITY = 190
 SERIAL_NUMBER = b'WCTLS-S1-EMULATR'
@@ -542,6 +544,8 @@ class S1Device:
             data = self._ultra_capsules(frames, start_q6)
         elif self._mode.answer_type == AnswerType.ULTRA_DENSE_CAPSULE:
             data = self._ultra_dense_capsules(frames, start_q6)
+        elif self._mode.answer_type == AnswerType.HQ_CAPSULE:
+            data = self._hq_capsules(frames, start_q6)
         else:
             data = self._nodes(start_q6)
         return self._inject_faults(data)
@@ -571,6 +575,20 @@ class S1Device:
         time_us = np.rint((self._start_s + frames * self._frame_s + sample_s) * 1e6)
         return encode_ultra_dense_capsules(start_q6, distances, quality, frames == 0,
                                            time_us.astype(np.int64))
+
+    def _hq_capsules(self, frames: np.ndarray, start_q6: np.ndarray) -> bytes:
+        """Encode HQ capsules: sample k of capsule i at start_i + k * step / 96, stamped."""
+        offsets = np.arange(HQ_SAMPLES_PER_CAPSULE) / HQ_SAMPLES_PER_CAPSULE
+        angle_q6 = (start_q6[:, None] + self._step_q6 * offsets).reshape(-1) % FULL_TURN_Q6
+        previous = np.concatenate([[angle_q6[0] if self._previous_angle_q6 is None
+                                    else self._previous_angle_q6], angle_q6[:-1]])
+        self._previous_angle_q6 = angle_q6[-1]
+        distances = np.rint(self._scene.distances_mm(angle_q6 / 64.0) * 4.0) / 4.0
+        shape = (len(frames), HQ_SAMPLES_PER_CAPSULE)
+        time_us = np.rint((self._start_s + frames * self._frame_s) * 1e6).astype(np.int64)
+        return encode_hq_capsules((angle_q6 / 64.0).reshape(shape), distances.reshape(shape),
+                                  np.where(distances > 0, 47 << 2, 0).reshape(shape),
+                                  (angle_q6 < previous).reshape(shape), time_us)
 
     def _express_capsules(self, frames: np.ndarray, start_q6: np.ndarray) -> bytes:
         """Encode express capsules: sample k of capsule i at start_i + k * step / 32 - dk."""

@@ -4,8 +4,10 @@
 """
 Start an RPLIDAR S1 and the feature node: ros2 launch wctls_ros rplidar_s1.launch.py.
 
-Arguments: serial_port, channel_type, tcp_ip, frame_id and params_file (the driver's; each of
-the first four overrides the file only when given); with_feature_node (default true), sensor
+Arguments: serial_port, channel_type, tcp_ip, frame_id, autostart and params_file (the
+driver's; each of the first five overrides the file only when given: autostart false makes this
+file configure and then activate the lifecycle node rplidar_node); with_feature_node (default
+true), sensor
 (default rplidar_s1: the S1's noise model, over the file's preset; '' keeps the file's), method
 and feature_params_file (feature_node's).
 """
@@ -14,7 +16,7 @@ from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
-from wctls_ros.launching import config_file, node, optional_argument
+from wctls_ros.launching import config_file, lifecycle_node, node, optional_argument
 from wctls_ros.sensors import sensor_presets
 
 # Driver parameters a launch argument of the same name overrides when given.
@@ -23,6 +25,8 @@ DRIVER_ARGUMENTS = (
     ('channel_type', 'serial or tcp'),
     ('tcp_ip', 'device address for channel_type tcp'),
     ('frame_id', 'frame of the scans'),
+    ('autostart', 'true: rplidar_node activates itself; false: this launch file drives its '
+                  'lifecycle transitions (configure, then activate)'),
 )
 
 
@@ -41,8 +45,8 @@ def generate_launch_description():
         DeclareLaunchArgument('feature_params_file',
                               default_value=config_file('feature_node.yaml'),
                               description='feature_node parameter file'),
-        node('rplidar_node', LaunchConfiguration('params_file'),
-             arguments=[(name, name) for name, _ in DRIVER_ARGUMENTS]),
+        lifecycle_node('rplidar_node', LaunchConfiguration('params_file'),
+                       arguments=[(name, name) for name, _ in DRIVER_ARGUMENTS]),
         node('feature_node', LaunchConfiguration('feature_params_file'),
              arguments=[('sensor', 'sensor'), ('method', 'method')],
              condition=IfCondition(LaunchConfiguration('with_feature_node'))),

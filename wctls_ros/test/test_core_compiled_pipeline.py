@@ -80,7 +80,9 @@ def simulated_scans():
 def real_scans():
     """Yield (name, ranges, angle_min, angle_increment, range_min, range_max) of data/."""
     recordings = [load_scans(REAL_DATA / name) for name in
-                  ('sick_lms111_static', 'sick_lms1xx_static', 'urg04lx_office')]
+                  ('sick_lms111_static', 'sick_lms1xx_static', 'urg04lx_office',
+                   'sick_lms511_static', 'sick_tim781s_static', 'mrpt_malaga_moving',
+                   'tuw_gh25_moving', 'rplidar_c1_single_scans')]
     recordings.append(load_json_scans(REAL_DATA / 'lms111_building'))
     for recording in recordings:
         for k, ranges in enumerate(recording.ranges):

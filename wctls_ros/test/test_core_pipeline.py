@@ -394,7 +394,7 @@ def breaks_of(ranges, increment=math.radians(0.5), max_missing_beams=3):
     points = scan_to_points(ranges, bearing_min, increment)
     return Breaks(*compiled_segmentation().breakpoints_of(
         points.index, points.x_m, points.y_m, points.range_m, points.beam_count, abs(increment),
-        points.full_turn, 0.01, 0.0, math.radians(10), max_missing_beams))
+        points.full_turn, 0.01, 0.0, math.radians(10), max_missing_beams, 3.0))
 
 
 def test_breakpoints_follow_the_adaptive_rule():
@@ -519,6 +519,6 @@ def test_trimming_a_segment_that_crosses_the_end_of_the_contour_keeps_it_in_rang
     y = np.where(along < 148, 2.0, 2.0 + (along - 148) * 0.011)
     start, stop, _ = compiled_segmentation().trim_ambiguous(
         np.array([30, 149]), np.array([148, 180]), np.array([0, 0]), True, x, y,
-        np.array([math.pi / 2, 0.0]), np.array([2.0, 1.0]), 0.01, 0.0, 8)
+        np.array([math.pi / 2, 0.0]), np.array([2.0, 1.0]), 0.01, 0.0, 8, 8)
     assert start.tolist() == [30, 1]
     assert stop.tolist() == [146, 30]

@@ -122,7 +122,7 @@ def test_a_run_off_the_line_at_an_end_is_cut_exactly(at_start):
     off = slice(0, 5) if at_start else slice(count - 5, count)
     y[off] -= 2.5 * sigma
     one = (np.array([0]), np.array([count]), np.array([0]))
-    start, stop, _ = trim_offset(*one, x, y, *ON_THE_LINE, sigma, 0.0, 8, 4.0)
+    start, stop, _ = trim_offset(*one, x, y, *ON_THE_LINE, sigma, 0.0, 8, 4.0, 8)
     assert (start[0], stop[0]) == ((5, count) if at_start else (0, count - 5))
     # The run pulls the line of all 40 towards itself: tested against that line, as the rule
     # did before, it peaks at 3.3 and stays. As the frame, that line cuts the same 5.
@@ -131,11 +131,11 @@ def test_a_run_off_the_line_at_an_end_is_cut_exactly(at_start):
     ends = residual[:8] if at_start else residual[::-1][:8]
     assert np.max(np.abs(np.cumsum(ends)) / np.sqrt(np.arange(1, 9))) < 3.5
     start, stop, _ = trim_offset(*one, x, y, np.array([angle]), np.array([radius]), sigma,
-                                 0.0, 8, 4.0)
+                                 0.0, 8, 4.0, 8)
     assert (start[0], stop[0]) == ((5, count) if at_start else (0, count - 5))
     # A step of 2 sigma peaks at 10 / sqrt(8.6) = 3.4 < 4: kept.
     y[off] += 0.5 * sigma
-    start, stop, _ = trim_offset(*one, x, y, *ON_THE_LINE, sigma, 0.0, 8, 4.0)
+    start, stop, _ = trim_offset(*one, x, y, *ON_THE_LINE, sigma, 0.0, 8, 4.0, 8)
     assert (start[0], stop[0]) == (0, count)
 
 
@@ -144,7 +144,7 @@ def test_an_end_cuts_at_most_half_the_returns_beyond_the_minimum():
     x, y = np.linspace(-0.8, 0.8, 14), np.full(14, 1.5)
     y[-8:] += 10.0 * sigma                      # far off: the score peaks at the window's end
     start, stop, _ = trim_offset(np.array([0]), np.array([14]), np.array([0]), x, y,
-                                 *ON_THE_LINE, sigma, 0.0, 8, 4.0)
+                                 *ON_THE_LINE, sigma, 0.0, 8, 4.0, 8)
     assert (start[0], stop[0]) == (0, 11)                        # (14 - 8) // 2 = 3 cut
 
 
@@ -160,7 +160,7 @@ def test_straight_walls_are_rarely_cut():
     start = np.arange(walls) * count
     frame = np.full(walls, math.pi / 2), np.full(walls, 1.5)
     trimmed_start, trimmed_stop, _ = trim_offset(start, start + count, np.arange(walls), x, y,
-                                                 *frame, sigma, 0.0, 8, 4.0)
+                                                 *frame, sigma, 0.0, 8, 4.0, 8)
     cut_ends = np.count_nonzero(trimmed_start != start) + np.count_nonzero(
         trimmed_stop != start + count)
     assert cut_ends <= 8                        # 2 * 4000 * 5e-4 = 4 expected at most

@@ -24,13 +24,14 @@ CONSOLE_SCRIPTS = set(re.findall(r"'(\w+) = wctls_ros[\w.]*:\w+'",
 EXPECTED_ARGUMENTS = {
     'feature_node.launch.py': {'params_file', 'scan_topic', 'sensor', 'method', 'use_sim_time'},
     'replay.launch.py': {'bag', 'rate', 'loop', 'params_file', 'sensor', 'method'},
-    'rplidar_s1.launch.py': {'serial_port', 'channel_type', 'tcp_ip', 'frame_id', 'params_file',
-                             'sensor', 'method', 'feature_params_file', 'with_feature_node'},
+    'rplidar_s1.launch.py': {'serial_port', 'channel_type', 'tcp_ip', 'frame_id', 'autostart',
+                             'params_file', 'sensor', 'method', 'feature_params_file',
+                             'with_feature_node'},
 }
 # Launch arguments that set a parameter which the node's parameter file also sets: passed only
 # when given, so that a user's file is never silently overridden by a launch default...
 FILE_PARAMETERS = {'sensor', 'method', 'use_sim_time', 'serial_port', 'channel_type', 'tcp_ip',
-                   'frame_id'}
+                   'frame_id', 'autostart'}
 # ... except where the launch file is about one sensor (documented in its --show-args).
 DELIBERATE_DEFAULTS = {('rplidar_s1.launch.py', 'sensor'): 'rplidar_s1'}
 launch_ros_missing = pytest.mark.skipif(importlib.util.find_spec('launch_ros') is None,
@@ -86,12 +87,29 @@ def test_arguments_that_a_parameter_file_sets_are_passed_only_when_given(path):
 
 @pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda p: p.name)
 def test_starts_installed_executables_with_existing_files(path):
-    started = calls(path, 'node')
+    started = calls(path, 'node') + calls(path, 'lifecycle_node')
     assert started
     for call in started:
         assert call.args[0].value in CONSOLE_SCRIPTS
     for call in calls(path, 'config_file'):
         assert (PACKAGE / 'config' / call.args[0].value).is_file(), call.args[0].value
+
+
+def test_the_rplidar_driver_is_started_as_a_lifecycle_node():
+    # Its autostart false needs the launch file to drive the configure and activate transitions.
+    for path in (p for p in LAUNCH_FILES if 'rplidar' in p.name):
+        started = calls(path, 'lifecycle_node')
+        assert [call.args[0].value for call in started] == ['rplidar_node'], path.name
+        assert not [call for call in calls(path, 'node') if call.args[0].value == 'rplidar_node']
+    tree = ast.parse((PACKAGE / 'wctls_ros' / 'launching.py').read_text())
+    function = next(node for node in ast.walk(tree)
+                    if isinstance(node, ast.FunctionDef) and node.name == 'lifecycle_node')
+    transitions = {node.attr for node in ast.walk(function) if isinstance(node, ast.Attribute)
+                   and node.attr.startswith('TRANSITION_')}
+    assert transitions == {'TRANSITION_CONFIGURE', 'TRANSITION_ACTIVATE'}
+    assert {call.func.id for call in ast.walk(function) if isinstance(call, ast.Call)
+            and isinstance(call.func, ast.Name)} >= {'LifecycleNode', 'OnStateTransition',
+                                                     'ChangeState', '_file_value'}
 
 
 @launch_ros_missing

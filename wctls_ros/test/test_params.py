@@ -130,7 +130,9 @@ def test_defaults_build_the_default_configuration_with_the_default_sensor_model(
     assert config == FeatureConfig(
         range_sigma_m=generic['range_sigma_m'], range_sigma_from_scan=generic[
             'range_sigma_from_scan'], common_range_sigma_m=generic[
-            'common_range_sigma_m'], bearing_sigma_rad=math.radians(generic['bearing_sigma_deg']))
+            'common_range_sigma_m'], bearing_sigma_rad=math.radians(generic['bearing_sigma_deg']),
+        model_error_sigma_m=generic['model_error_sigma_m'],
+        wall_flatness_sigma_m=generic['wall_flatness_sigma_m'])
     assert publish_markers
 
 

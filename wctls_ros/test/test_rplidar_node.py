@@ -18,7 +18,8 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402,
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from rplidar_testing import (compensated_beam_bands, EMULATOR_TURN_S,  # noqa: E402
-                             first_sample_times, serving, start_emulator, true_ranges)
+                             first_sample_times, range_band, serving, start_emulator,
+                             true_ranges)
 from sensor_msgs.msg import LaserScan  # noqa: E402
 from std_srvs.srv import Empty  # noqa: E402
 from wctls_ros.params import RPLIDAR_NODE  # noqa: E402
@@ -145,6 +146,39 @@ def test_angle_compensation_bins_a_turn_into_1080_beams_within_a_bin_of_the_scen
         filled = np.isfinite(ranges)
         assert filled[:-1].all()
         assert ((ranges >= low - 1e-3) & (ranges <= high + 1e-3))[filled].all()
+
+
+@pytest.mark.parametrize('orientation, frame_turn', [('sllidar', 0.0), ('rep103', math.pi)])
+def test_the_fixed_count_scan_bins_the_same_turns_within_a_bin_of_the_scene(
+        executor, ros_context, emulator, orientation, frame_turn):
+    # The emulator's scene frame is sllidar's laser frame; REP-103's is turned by pi from it
+    # (x toward the device's front, raw 0 degrees, not raw 180).
+    node, listener = start(executor, ros_context, serial_port=emulator.link,
+                           angle_compensate=False, fixed_beams=720, orientation=orientation)
+    fixed = []
+    listener.node.create_subscription(LaserScan, 'scan_fixed', fixed.append,
+                                      qos_profile_sensor_data)
+    scans = collect(executor, listener, 3)
+    assert spin_until(executor, lambda: len(fixed) >= 3, 2.0)
+    stamps = {(scan.header.stamp.sec, scan.header.stamp.nanosec) for scan in scans}
+    width = 2 * math.pi / 720
+    centres = -math.pi + width * (np.arange(720) + 0.5)
+    low, high = range_band(centres - width / 2 + frame_turn, centres + width / 2 + frame_turn)
+    for scan in fixed[:3]:
+        # The same turns as the per-sample scan, the same beams every turn.
+        assert (scan.header.stamp.sec, scan.header.stamp.nanosec) in stamps
+        assert len(scan.ranges) == 720
+        assert scan.angle_min == pytest.approx(centres[0], abs=1e-6)
+        assert scan.angle_increment == pytest.approx(width, abs=1e-7)
+        assert scan.time_increment == pytest.approx(scan.scan_time / 720, rel=1e-5)
+        ranges = np.asarray(scan.ranges)
+        # Samples 0.39 degrees apart: every half-degree bin holds one; the scene has walls
+        # all around.
+        assert np.isfinite(ranges).all()
+        assert ((ranges >= low - 2e-3) & (ranges <= high + 2e-3)).all()
+    # The per-sample scan in the same orientation agrees with the scene too.
+    raw = scans[-1]
+    np.testing.assert_allclose(raw.ranges, true_ranges(bearings(raw) + frame_turn), atol=1e-3)
 
 
 @pytest.mark.parametrize('mode, multiple, answer_type',

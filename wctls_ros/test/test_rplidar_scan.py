@@ -1,13 +1,18 @@
 # Copyright 2026 wctls_ros maintainers
 # SPDX-License-Identifier: Apache-2.0
 
-"""Turn assembly and timing, and sllidar_ros2's LaserScan layout (against a port of its loops)."""
+"""
+Turns, and the LaserScan layouts of both outputs.
+
+Turn assembly and timing, sllidar_ros2's LaserScan layout (against a port of its loops), the
+fixed-count scan and the two laser frame orientations (against angles worked out by hand).
+"""
 
 import math
 
 import numpy as np
 import pytest
-from wctls_ros.rplidar.laserscan import compensation_multiple, turn_to_scan
+from wctls_ros.rplidar.laserscan import compensation_multiple, fixed_scan, turn_to_scan
 from wctls_ros.rplidar.protocol import Samples
 from wctls_ros.rplidar.turns import SampleClock, Turn, TurnAssembler
 
@@ -80,6 +85,102 @@ def test_a_turn_without_returns_is_all_infinite():
     for compensate in (False, True):
         scan = turn_to_scan(turn, compensate, False, 3)
         assert np.isinf(scan.ranges).all() and len(scan.ranges) in (50, 1080)
+
+
+def wall_turn(wall_deg, count=360, wall_mm=1500.0, far_mm=8000.0):
+    """
+    Return a turn of evenly spaced samples, far everywhere but at one wall sample.
+
+    The wall sample is the one nearest raw angle ``wall_deg`` (clockwise, the device's own
+    angle). The samples lie 0.2 degree past whole degrees: with 360 of them, one in each one-degree
+    bin, never on a bin's edge.
+    """
+    angle = np.arange(count) * 360.0 / count + 0.2
+    distance = np.full(count, far_mm)
+    distance[np.argmin(np.abs(angle - wall_deg))] = wall_mm
+    return Turn(angle, distance, np.full(count, 40, np.uint8), 2.0, 0.1, 2.1)
+
+
+# Raw (clockwise) wall angle -> the beam it must land in among 360 one-degree bins from -180
+# degrees, worked out by hand: sllidar publishes 180 - raw, REP-103 -raw (both wrapped to
+# [-180, 180)); the bin is floor(published + 180).
+WALL_BINS = [
+    # raw 30.2: sllidar 149.8 -> bin 329; rep103 -30.2 -> bin 149
+    (30.2, 'sllidar', 329), (30.2, 'rep103', 149),
+    # raw 90.5 (the device's right): sllidar 89.5 -> 269; rep103 -90.5 -> 89
+    (90.5, 'sllidar', 269), (90.5, 'rep103', 89),
+    # raw 200.6: sllidar -20.6 -> 159; rep103 -200.6 = 159.4 -> 339
+    (200.6, 'sllidar', 159), (200.6, 'rep103', 339),
+    # raw 0.1 (the front): sllidar 179.9 -> 359; rep103 -0.1 -> 179
+    (0.1, 'sllidar', 359), (0.1, 'rep103', 179),
+]
+
+
+@pytest.mark.parametrize('wall_deg, orientation, beam', WALL_BINS)
+def test_a_wall_lands_in_the_right_fixed_beam_in_both_orientations(
+        wall_deg, orientation, beam):
+    turn = wall_turn(wall_deg)
+    scan = fixed_scan(turn, 360, inverted=False, orientation=orientation)
+    assert len(scan.ranges) == 360
+    assert np.flatnonzero(scan.ranges < 2.0).tolist() == [beam]
+    assert scan.ranges[beam] == pytest.approx(1.5)
+    # The beam's published angle is its bin centre: within half a degree of the wall's.
+    published = {'sllidar': 180.0 - wall_deg, 'rep103': -wall_deg}[orientation]
+    centre_deg = math.degrees(scan.angle_min + beam * scan.angle_increment)
+    assert (centre_deg - published + 180.0) % 360.0 - 180.0 == pytest.approx(0.0, abs=0.5)
+
+
+@pytest.mark.parametrize('orientation', ['sllidar', 'rep103'])
+def test_inverted_mirrors_the_fixed_beams(orientation):
+    upright = fixed_scan(wall_turn(30.2), 360, False, orientation)
+    inverted = fixed_scan(wall_turn(30.2), 360, True, orientation)
+    # A bin centred at a is centred at -a mirrored: beam i <-> beam 359 - i.
+    np.testing.assert_array_equal(inverted.ranges, upright.ranges[::-1])
+
+
+def test_the_fixed_scan_has_the_same_beams_every_turn_whatever_the_samples():
+    rng = np.random.default_rng(5)
+    for count in (411, 926, 1500, 2000):
+        scan = fixed_scan(random_turn(rng, count), 720, False, 'sllidar')
+        assert len(scan.ranges) == len(scan.intensities) == 720
+        assert scan.angle_increment == pytest.approx(math.pi / 360)
+        assert (scan.angle_min, scan.angle_max) == pytest.approx(
+            (-math.pi + math.pi / 720, math.pi - math.pi / 720))
+        assert scan.time_increment == pytest.approx(0.1 / 720) and scan.scan_time == 0.1
+
+
+def test_each_fixed_beam_holds_the_sample_nearest_its_centre():
+    # Bin 0 of 4 spans [-180, -90) degrees published, centre -135: in sllidar's frame raw
+    # 180 - published, so raw 315 is the centre, raw 300 and 340 off by 15 and 25 degrees.
+    turn = Turn(np.array([300.0, 340.0, 100.0, 101.0]), np.array([1000.0, 2000.0, 0.0, 3000.0]),
+                np.array([10, 20, 30, 40], np.uint8), 0.0, 0.1, 0.1)
+    scan = fixed_scan(turn, 4, False, 'sllidar')
+    assert scan.ranges[0] == pytest.approx(1.0) and scan.intensities[0] == 10
+    # Bin 2 spans [0, 90): raw (90, 180]; raw 101 is nearer its centre (raw 135) than raw 100,
+    # which had no return anyway.
+    assert scan.ranges[2] == pytest.approx(3.0)
+    # No sample in bins 1 ([-90, 0): raw (180, 270]) and 3 ([90, 180): raw (0, 90]): NaN, no
+    # measurement (REP-117); a sample without a return is +inf.
+    assert np.isnan(scan.ranges[[1, 3]]).all()
+    alone = Turn(np.array([100.0]), np.array([0.0]), np.array([5], np.uint8), 0.0, 0.1, 0.1)
+    assert np.isinf(fixed_scan(alone, 4, False, 'sllidar').ranges[2])
+
+
+def test_rep103_turns_the_per_sample_scan_by_pi_and_keeps_its_ranges():
+    turn = random_turn(np.random.default_rng(9), 926)
+    for compensate in (False, True):
+        sllidar = turn_to_scan(turn, compensate, False, 3, 'sllidar')
+        rep103 = turn_to_scan(turn, compensate, False, 3, 'rep103')
+        assert rep103.angle_min == pytest.approx(sllidar.angle_min - math.pi)
+        assert rep103.angle_max == pytest.approx(sllidar.angle_max - math.pi)
+        np.testing.assert_array_equal(rep103.ranges, sllidar.ranges)
+
+
+def test_an_unknown_orientation_is_refused():
+    with pytest.raises(ValueError, match='orientation must be one of'):
+        fixed_scan(wall_turn(10.0), 360, False, 'ned')
+    with pytest.raises(ValueError, match='orientation must be one of'):
+        turn_to_scan(wall_turn(10.0), False, False, 3, 'ned')
 
 
 def stream(angles, start=None, slot=None):

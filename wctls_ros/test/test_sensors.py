@@ -16,7 +16,7 @@ BY_NAME = {parameter.name: parameter for parameter in FEATURE_NODE}
 BASES = re.compile(r'datasheet|measured|measurement|assumed|not published')
 # What the issue asks for, at least.
 REQUIRED = {'rplidar_s1', 'sick_lms1xx', 'sick_tim5xx_7xx', 'hokuyo_urg04lx', 'hokuyo_utm30lx',
-            'generic'}
+            'generic', 'rplidar_a1', 'rplidar_a2', 'rplidar_a3', 'rplidar_c1'}
 
 
 def test_every_required_sensor_has_a_preset_whose_numbers_each_have_a_source():
@@ -30,15 +30,24 @@ def test_every_required_sensor_has_a_preset_whose_numbers_each_have_a_source():
             assert BASES.search(preset.sources[name]), (preset.name, name)
 
 
+def test_the_triangulating_rplidars_follow_their_range_noise_scan_by_scan():
+    # The core has one range sigma per scan: the nearest equivalent of the A-series' noise
+    # growing with distance is to estimate it from each scan, never a fixed figure.
+    presets = sensor_presets()
+    for name in ('rplidar_a1', 'rplidar_a2', 'rplidar_a3'):
+        assert presets[name].parameters['range_sigma_from_scan'] is True, name
+        assert 'distance' in presets[name].sources['range_sigma_from_scan'], name
+
+
 @pytest.mark.parametrize('text,reason', [
     ('parameters: {range_sigma_m: 0.01, bearing_sigma_deg: 0.1}\nsources: {}\n', 'exactly'),
     ('parameters: {range_sigma_m: 0.01, range_sigma_from_scan: false, bearing_sigma_deg: 0.1,'
-     ' common_range_sigma_m: 0}\n'
+     ' common_range_sigma_m: 0, model_error_sigma_m: 0.01, wall_flatness_sigma_m: 0}\n'
      'sources: {range_sigma_m: datasheet, bearing_sigma_deg: measured}\n', 'source of each'),
-    ('parameters: {range_sigma_m: -1, range_sigma_from_scan: false, bearing_sigma_deg: 0.1,'
-     ' common_range_sigma_m: 0}\n'
+    ('parameters: {range_sigma_m: 0.01, range_sigma_from_scan: false, bearing_sigma_deg: 0.1,'
+     ' common_range_sigma_m: 0, model_error_sigma_m: -1, wall_flatness_sigma_m: 0}\n'
      'sources: {range_sigma_m: a, range_sigma_from_scan: b, bearing_sigma_deg: c,'
-     ' common_range_sigma_m: d}\n', '>= 0'),
+     ' common_range_sigma_m: d, model_error_sigma_m: e, wall_flatness_sigma_m: f}\n', '>= 0'),
 ])
 def test_a_preset_without_a_number_or_its_source_is_refused(tmp_path, text, reason):
     path = tmp_path / 'mine.yaml'

@@ -14,12 +14,17 @@ only the launch files use this module.
 
 from typing import Dict, Iterable, Tuple
 
-from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.actions import DeclareLaunchArgument, EmitEvent, OpaqueFunction, RegisterEventHandler
+from launch.events import matches_action
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
-from launch_ros.actions import Node
+from launch.utilities import perform_substitutions
+from launch_ros.actions import LifecycleNode, Node
+from launch_ros.event_handlers import OnStateTransition
+from launch_ros.events.lifecycle import ChangeState
 from launch_ros.substitutions import FindPackageShare
+from lifecycle_msgs.msg import Transition
 
-from .params import SCHEMAS
+from .params import ConfigError, defaults, load_parameters, SCHEMAS
 
 PACKAGE = 'wctls_ros'
 # Parameters every rclpy node has besides its schema's.
@@ -75,12 +80,69 @@ def node(executable: str, params_file, arguments: Iterable[Tuple[str, str]] = ()
     :return: the action
     """
     def start(context):
-        given = {}
-        for argument, parameter in arguments:
-            text = LaunchConfiguration(argument).perform(context)
-            if text:
-                given[parameter] = _typed(executable, parameter, text)
+        given = _given(context, executable, arguments)
         return [Node(package=PACKAGE, executable=executable, name=executable, output='screen',
                      parameters=[params_file, {**given, **(fixed or {})}],
                      remappings=list(remappings), **options)]
     return OpaqueFunction(function=start)
+
+
+def lifecycle_node(executable: str, params_file,
+                   arguments: Iterable[Tuple[str, str]] = ()) -> OpaqueFunction:
+    """
+    Start one of the package's lifecycle nodes; drive it to active when it does not itself.
+
+    The node's ``autostart`` (the launch argument mapped to it when given, else its parameter
+    file's) decides: true, the node configures and activates itself; false, the launch emits
+    the configure transition, and activate once the node is inactive (as ros2/demos'
+    lifecycle launch files do), so a failed configure leaves it unconfigured, its reason in
+    its log.
+
+    :param executable: the node's executable, also its name and its schema's key
+    :param params_file: the parameter file (a path or a substitution)
+    :param arguments: (launch argument, parameter) pairs passed when the argument is not ''
+    :return: the action
+    """
+    def start(context):
+        given = _given(context, executable, arguments)
+        path = (params_file if isinstance(params_file, str)
+                else perform_substitutions(context, [params_file]))
+        autostart = given.get('autostart', _file_value(path, executable, 'autostart'))
+        node = LifecycleNode(package=PACKAGE, executable=executable, name=executable,
+                             namespace='', output='screen', parameters=[params_file, given])
+        if autostart:
+            return [node]
+
+        def change_state(transition: int) -> EmitEvent:
+            return EmitEvent(event=ChangeState(
+                lifecycle_node_matcher=matches_action(node), transition_id=transition))
+
+        return [node,
+                RegisterEventHandler(OnStateTransition(
+                    target_lifecycle_node=node, goal_state='inactive',
+                    entities=[change_state(Transition.TRANSITION_ACTIVATE)])),
+                change_state(Transition.TRANSITION_CONFIGURE)]
+    return OpaqueFunction(function=start)
+
+
+def _given(context, executable: str, arguments: Iterable[Tuple[str, str]]) -> dict:
+    """Return the node's parameters set by the launch arguments given (not ''), typed."""
+    given = {}
+    for argument, parameter in arguments:
+        text = LaunchConfiguration(argument).perform(context)
+        if text:
+            given[parameter] = _typed(executable, parameter, text)
+    return given
+
+
+def _file_value(path: str, executable: str, name: str):
+    """
+    Return a parameter's value in a node's parameter file, else its default.
+
+    A file the node would warn about (an unknown name) or refuse is the node's to report, in
+    its own log: the launch goes on with the default.
+    """
+    try:
+        return load_parameters(path, executable)[name]
+    except ConfigError:
+        return defaults(SCHEMAS[executable])[name]

@@ -206,6 +206,17 @@ RPLIDAR_NODE = tuple(_read_only(*row) for row in (
      'session is restarted', Limits(0.1, 10.0)),
     ('health_reset_attempts', 3, 'RESETs tried on a device health error before giving up',
      Limits(0, 10)),
+    ('autostart', True, 'Configure and activate at start (a plain ros2 run scans at once); '
+     'false waits for a lifecycle manager or launch file to drive the transitions'),
+    ('configure_timeout', 5.0, 'Seconds configure waits for the device info and health before '
+     'it fails naming the likely cause (without autostart; autostart keeps retrying)',
+     Limits(0.5, 60.0)),
+    ('orientation', 'sllidar', "Laser frame of both scans: 'sllidar' (x toward the raw 180 deg "
+     "side, as sllidar_ros2) or 'rep103' (x toward the device's front, raw 0 deg); both "
+     'counter-clockwise', None, ('sllidar', 'rep103')),
+    ('fixed_beams', 0, 'Also publish scan_fixed: every turn in this many fixed angular bins '
+     'from -pi (the sample nearest each bin centre; NaN for a bin no sample fell in), for '
+     'slam_toolbox and AMCL; 0 = off', Limits(0, 8192)),
 ))
 
 BAG_REPLAY = (

@@ -8,7 +8,8 @@ A preset is a YAML file ``config/sensors/<name>.yaml`` of the wctls_ros package:
 
     description: what the sensor is and where the numbers come from
     parameters: {range_sigma_m: ..., range_sigma_from_scan: ..., bearing_sigma_deg: ...,
-                 common_range_sigma_m: ...}
+                 common_range_sigma_m: ..., model_error_sigma_m: ...,
+                 wall_flatness_sigma_m: ...}
     sources: {range_sigma_m: datasheet or our measurement, ...}
 
 It sets exactly the :data:`PRESET_PARAMETERS` of feature_node (the parameter ``sensor`` picks
@@ -25,7 +26,7 @@ from .plain_yaml import load_without_aliases
 
 # The feature_node parameters a preset sets: the sensor's noise model.
 PRESET_PARAMETERS = ('range_sigma_m', 'range_sigma_from_scan', 'bearing_sigma_deg',
-                     'common_range_sigma_m')
+                     'common_range_sigma_m', 'model_error_sigma_m', 'wall_flatness_sigma_m')
 _FROM_SCAN = 'range_sigma_from_scan'
 # The preset feature_node uses unless told otherwise (docs/sensors.md says why).
 DEFAULT_SENSOR = 'generic'

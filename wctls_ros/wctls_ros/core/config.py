@@ -128,6 +128,13 @@ class FeatureConfig:
         True, "scale each line's covariance by its residual chi2 per degree of freedom when "
         'above 1 (an a-posteriori variance factor: a wall rougher, or returns noisier, than '
         'the noise model are reported less precise)')
+    model_error_sigma_m: float = _setting(
+        0.0, 'how far a return may stray from the ideal model beyond its measurement noise '
+        '(a bowed or rough wall, a rounded corner, a mixed return at an edge), m: every '
+        'decision (breakpoints, splitting, merging, the end trims, the corner tests) tolerates '
+        'it in quadrature with the range noise; the fits and their covariances do not use it '
+        '(wall_flatness_sigma_m carries the model error into the covariances)',
+        Limits(0.0, 1.0))
     wall_flatness_sigma_m: float = _setting(
         0.0, 'each end of a wall may lie this far off its fitted line (walls straight only to '
         "a few mm): added to every line's covariance, it does not shrink with the number of "

@@ -2,17 +2,29 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-A turn as sllidar_ros2 publishes it: the LaserScan geometry, ranges and intensities (pure).
+A turn as sllidar_ros2 publishes it, and as a fixed-count scan: LaserScan fields (pure).
 
-- Published angle = pi - raw clockwise angle (counter-clockwise, REP-103); the arrays ascend in
-  published angle (``inverted`` mirrors the array order, as sllidar does for a sensor mounted
-  upside down).
+- Published angle = offset - raw clockwise angle, counter-clockwise (REP-103) in both
+  orientations: offset pi in the ``sllidar`` orientation (x toward the raw 180 deg side, as
+  sllidar_ros2), 0 in the ``rep103`` one (x toward the device's front, raw 0 deg). The arrays
+  ascend in published angle (``inverted`` mirrors the array order, as sllidar does for a sensor
+  mounted upside down).
 - ``angle_compensate``: the turn is binned into ``360 * k`` bins, bin ``floor(raw_deg * k)``;
   each sample fills its bin and the next ``k - 1`` (later samples overwrite), empty bins stay
-  +inf, angle_min = -pi, angle_max = +pi, increment = 2 pi / (N - 1).
+  +inf, angle_min = offset - 2 pi, angle_max = offset, increment = 2 pi / (N - 1).
 - Otherwise every sample is a beam between the first and the last sample with a return, so the
   beam count and angle_min/max change from turn to turn.
 - No return -> +inf; intensities = the 6-bit quality (sllidar's ``quality >> 2``).
+- :func:`fixed_scan`: N bins of 2 pi / N from -pi, each holding the sample nearest its centre
+  (+inf for a sample without a return); a bin no sample fell in is NaN (no measurement,
+  REP-117). The same N every turn, angles in [-pi, pi) whatever the orientation.
+
+Time order: the sensor sweeps clockwise, so published angles fall as time goes on and the
+arrays, ascending in angle, run backwards in time. header.stamp is the measurement time of the
+turn's first sample (raw angle ~0: the last beam of the per-sample scan, published angle
+offset); beam i of an N-beam per-sample scan was measured ``(N - 1 - i) * time_increment``
+after it. In the fixed-count scan the turn starts and ends at the bin holding raw angle 0
+(published angle offset: the array's ends for ``sllidar``, its middle for ``rep103``).
 
 The timing fields are this driver's own, honest ones: scan_time is the measured rotation period
 and time_increment the time the sensor takes to sweep one angle_increment.
@@ -26,6 +38,8 @@ import numpy as np
 from .turns import Turn
 
 RANGE_MIN_M = 0.05
+# Published angle = offset - raw angle, per laser frame orientation, rad.
+ORIENTATION_OFFSETS_RAD = {'sllidar': math.pi, 'rep103': 0.0}
 
 
 @dataclass(frozen=True)
@@ -79,8 +93,22 @@ def _binned(angle_deg: np.ndarray, ranges: np.ndarray, intensities: np.ndarray,
     return binned_ranges, binned_intensities
 
 
-def turn_to_scan(turn: Turn, angle_compensate: bool, inverted: bool,
-                 multiple: int) -> ScanArrays:
+def orientation_offset_rad(orientation: str) -> float:
+    """
+    Return the published angle of raw angle 0 in a laser frame orientation.
+
+    :param orientation: ``'sllidar'`` or ``'rep103'``
+    :return: rad
+    :raises ValueError: on another orientation
+    """
+    if orientation not in ORIENTATION_OFFSETS_RAD:
+        raise ValueError(f'orientation must be one of {tuple(ORIENTATION_OFFSETS_RAD)}, got '
+                         f'{orientation!r}')
+    return ORIENTATION_OFFSETS_RAD[orientation]
+
+
+def turn_to_scan(turn: Turn, angle_compensate: bool, inverted: bool, multiple: int,
+                 orientation: str = 'sllidar') -> ScanArrays:
     """
     Lay one turn out as sllidar_ros2 does.
 
@@ -88,8 +116,11 @@ def turn_to_scan(turn: Turn, angle_compensate: bool, inverted: bool,
     :param angle_compensate: bin into ``360 * multiple`` fixed beams
     :param inverted: the sensor is mounted upside down (mirror the array order)
     :param multiple: bins per degree for ``angle_compensate`` (see :func:`compensation_multiple`)
+    :param orientation: the laser frame, ``'sllidar'`` or ``'rep103'``
     :return: the LaserScan fields
+    :raises ValueError: on an unknown orientation
     """
+    offset = orientation_offset_rad(orientation)
     order = np.argsort(turn.angle_deg, kind='stable')
     angle = turn.angle_deg[order]
     ranges = np.where(turn.distance_mm[order] > 0, turn.distance_mm[order] / 1000.0, np.inf)
@@ -108,8 +139,8 @@ def turn_to_scan(turn: Turn, angle_compensate: bool, inverted: bool,
         count = len(ranges)
         raw_min, raw_max = 0.0, math.radians(359.0)
     forward = raw_max > raw_min
-    angle_min, angle_max = (math.pi - raw_max, math.pi - raw_min) if forward else (
-        math.pi - raw_min, math.pi - raw_max)
+    angle_min, angle_max = (offset - raw_max, offset - raw_min) if forward else (
+        offset - raw_min, offset - raw_max)
     increment = (angle_max - angle_min) / (count - 1) if count > 1 else 0.0
     if forward != inverted:
         ranges, intensities = ranges[::-1], intensities[::-1]
@@ -118,3 +149,41 @@ def turn_to_scan(turn: Turn, angle_compensate: bool, inverted: bool,
                       scan_time=turn.period_s,
                       ranges=np.ascontiguousarray(ranges, dtype=np.float32),
                       intensities=np.ascontiguousarray(intensities, dtype=np.float32))
+
+
+def fixed_scan(turn: Turn, beams: int, inverted: bool, orientation: str) -> ScanArrays:
+    """
+    Lay one turn out as ``beams`` fixed angular bins: the same beams every turn.
+
+    Bin i spans published angles [-pi + i w, -pi + (i + 1) w), w = 2 pi / beams, and holds the
+    range of the sample nearest its centre (the smallest bearing error, whatever the sample
+    density); +inf where that sample had no return, NaN where no sample fell in the bin.
+
+    :param turn: the assembled turn
+    :param beams: the number of bins, at least 1
+    :param inverted: the sensor is mounted upside down (mirror the angles)
+    :param orientation: the laser frame, ``'sllidar'`` or ``'rep103'``
+    :return: the LaserScan fields, angle_min = -pi + w / 2, increment w
+    :raises ValueError: on an unknown orientation or no bins
+    """
+    if beams < 1:
+        raise ValueError(f'a fixed-count scan needs at least 1 beam, got {beams}')
+    offset = orientation_offset_rad(orientation)
+    width = 2.0 * math.pi / beams
+    angle = offset - np.radians(turn.angle_deg)
+    if inverted:
+        angle = -angle
+    position = np.mod(angle + math.pi, 2.0 * math.pi) / width
+    index = np.minimum(position.astype(np.int64), beams - 1)
+    off_centre = np.abs(position - index - 0.5)
+    order = np.lexsort((off_centre, index))
+    owners, first = np.unique(index[order], return_index=True)
+    nearest = order[first]
+    ranges = np.full(beams, np.nan, np.float32)
+    intensities = np.zeros(beams, np.float32)
+    distance_mm = turn.distance_mm[nearest]
+    ranges[owners] = np.where(distance_mm > 0, distance_mm / 1000.0, np.inf)
+    intensities[owners] = turn.quality[nearest]
+    return ScanArrays(angle_min=-math.pi + 0.5 * width, angle_max=math.pi - 0.5 * width,
+                      angle_increment=width, time_increment=turn.period_s / beams,
+                      scan_time=turn.period_s, ranges=ranges, intensities=intensities)

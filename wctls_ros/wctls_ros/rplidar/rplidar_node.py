@@ -2,15 +2,27 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-``rplidar_node``: the RPLIDAR S1 as a ROS 2 node, with sllidar_ros2's parameters and conventions.
+``rplidar_node``: an RPLIDAR as a ROS 2 lifecycle node, with sllidar_ros2's parameters.
 
-Publishes sensor_msgs/LaserScan on ``scan`` (reliable, keep last 10, like sllidar_ros2) and
-diagnostic_msgs/DiagnosticArray on ``/diagnostics`` (1 Hz); offers ``start_motor`` and
-``stop_motor`` (std_srvs/Empty). The device is read on a background thread
-(:class:`~wctls_ros.rplidar.driver.RplidarDriver`), which publishes each turn as soon as it is
-complete. Unlike sllidar_ros2, header.stamp is the measurement time of the turn's first sample
-(raw angle ~0, published angle ~+pi; the sensor sweeps toward -pi) and scan_time the measured
-rotation period.
+Lifecycle (rclpy.lifecycle): configure opens the port and reads the device info and health
+(the motor stays idle), activate starts the motor and the scan, deactivate stops them, cleanup
+closes the port, shutdown (from any state) stops the motor and closes the port. With
+``autostart`` (the default) the node configures and activates itself at start, so a plain
+``ros2 run`` scans at once and, with no device yet, keeps retrying until one answers; without it
+a lifecycle manager or the launch file drives the transitions, and configure fails, naming the
+likely cause, when the device has not answered within ``configure_timeout``. However the node
+ends (a transition, destroy_node after Ctrl-C, SIGTERM or an exception) the driver is closed,
+which stops the scan and the motor.
+
+Publishes sensor_msgs/LaserScan on ``scan`` (reliable, keep last 10, like sllidar_ros2; a
+lifecycle publisher: only while active), with ``fixed_beams`` N > 0 the same turns as N fixed
+beams on ``scan_fixed`` (:func:`~wctls_ros.rplidar.laserscan.fixed_scan`), and
+diagnostic_msgs/DiagnosticArray on ``/diagnostics`` (1 Hz, in every state); offers
+``start_motor`` and ``stop_motor`` (std_srvs/Empty, while active). Angles, orientations and
+the time order of the beams: :mod:`wctls_ros.rplidar.laserscan`. The device is read on a
+background thread (:class:`~wctls_ros.rplidar.driver.RplidarDriver`), which publishes each turn
+as soon as it is complete. Unlike sllidar_ros2, header.stamp is the measurement time of the
+turn's first sample (raw angle ~0) and scan_time the measured rotation period.
 """
 
 import array
@@ -19,15 +31,18 @@ import sys
 import threading
 import time
 
+from typing import Optional
+
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from sensor_msgs.msg import LaserScan
 from std_srvs.srv import Empty
 
 from .driver import DriverConfig, DriverState, RplidarDriver
-from .laserscan import compensation_multiple, RANGE_MIN_M, turn_to_scan
+from .laserscan import (compensation_multiple, fixed_scan, orientation_offset_rad, RANGE_MIN_M,
+                        ScanArrays, turn_to_scan)
 from .protocol import HealthStatus, StreamCounts
 from ..node_main import declare_parameters, run_node
 from ..params import RPLIDAR_NODE
@@ -35,6 +50,11 @@ from ..params import RPLIDAR_NODE
 SCAN_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                       reliability=ReliabilityPolicy.RELIABLE)
 DIAGNOSTICS_PERIOD_S = 1.0
+# How often configure and close look whether the device has answered, s.
+_POLL_S = 0.02
+# Longest wait at close for a scanning device to take the motor stop (STOP, then the motor
+# idled after a new handshake: tens of milliseconds), s.
+MOTOR_STOP_WAIT_S = 1.0
 # A report period with this share of frames damaged or lost, or of samples rejected, is WARN.
 DAMAGED_LINK_SHARE = 0.01
 _LATENCY_WINDOW = 1000
@@ -46,11 +66,12 @@ _LEVELS = {DriverState.SCANNING: DiagnosticStatus.OK,
            DriverState.CLOSED: DiagnosticStatus.STALE}
 
 
-class RplidarNode(Node):
+class RplidarNode(LifecycleNode):
     """
     The RPLIDAR driver node.
 
-    :param kwargs: passed to ``Node.__init__`` (e.g. ``context``, ``parameter_overrides``)
+    :param kwargs: passed to ``LifecycleNode.__init__`` (e.g. ``context``,
+        ``parameter_overrides``)
     :raises ValueError: on an invalid channel_type
     """
 
@@ -62,26 +83,36 @@ class RplidarNode(Node):
         self._angle_compensate = values['angle_compensate']
         self._scan_frequency_hz = values['scan_frequency']
         self._serial_port = values['serial_port'] if values['channel_type'] == 'serial' else ''
-        config = DriverConfig(
+        self._orientation = values['orientation']
+        orientation_offset_rad(self._orientation)        # refuses an unknown one at start
+        self._fixed_beams = values['fixed_beams']
+        self._autostart = values['autostart']
+        self._configure_timeout_s = values['configure_timeout']
+        self._config = DriverConfig(
             channel_type=values['channel_type'], serial_port=values['serial_port'],
             serial_baudrate=values['serial_baudrate'], tcp_ip=values['tcp_ip'],
             tcp_port=values['tcp_port'], scan_mode=values['scan_mode'],
             scan_frequency_hz=self._scan_frequency_hz, data_timeout_s=values['data_timeout'],
             health_reset_attempts=values['health_reset_attempts'])
+        self._driver: Optional[RplidarDriver] = None
+        self._active = False
         self._latency_lock = threading.Lock()
         self._latencies_s = []
         self._last_report = (0, StreamCounts(), time.monotonic())
-        self._scan_pub = self.create_publisher(LaserScan, 'scan', SCAN_QOS)
+        self._scan_pub = self.create_lifecycle_publisher(LaserScan, 'scan', SCAN_QOS)
+        self._fixed_scan_pub = (self.create_lifecycle_publisher(LaserScan, 'scan_fixed', SCAN_QOS)
+                                if self._fixed_beams else None)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_service(Empty, 'start_motor', self._start_motor)
         self.create_service(Empty, 'stop_motor', self._stop_motor)
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
-        self._driver = RplidarDriver(config, self._publish_turn, self.get_logger())
-        self._driver.start()
+        if self._autostart:
+            if self.trigger_configure() == TransitionCallbackReturn.SUCCESS:
+                self.trigger_activate()
 
     @property
-    def driver(self) -> RplidarDriver:
-        """Give access to the RPLIDAR reader: its status and CPU time."""
+    def driver(self) -> Optional[RplidarDriver]:
+        """Give access to the RPLIDAR reader: its status and CPU time (None unconfigured)."""
         return self._driver
 
     def publish_latencies_s(self) -> list:
@@ -93,46 +124,181 @@ class RplidarNode(Node):
         with self._latency_lock:
             return list(self._latencies_s)
 
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """
+        Open the port and read the device info and health, the motor idle.
+
+        With ``autostart`` the driver is left trying in the background (a device plugged in
+        later is found); otherwise the transition fails, naming the likely cause, when the
+        device has not answered within ``configure_timeout``.
+
+        :param state: the state transitioned from
+        :return: SUCCESS, or FAILURE without an answer
+        """
+        driver = RplidarDriver(self._config, self._publish_turn, self.get_logger())
+        driver.set_motor(False)
+        driver.start()
+        self._driver = driver
+        if self._autostart:
+            return TransitionCallbackReturn.SUCCESS
+        deadline = time.monotonic() + self._configure_timeout_s
+        while time.monotonic() < deadline:
+            status = driver.status()
+            if status.state == DriverState.MOTOR_STOPPED:
+                self.get_logger().info(f'configured: {status.device.describe()}, health '
+                                       f'status {status.health.status}')
+                return TransitionCallbackReturn.SUCCESS
+            if status.state == DriverState.FAILED:
+                break
+            time.sleep(_POLL_S)
+        reason = driver.status().message or 'no answer'
+        self._close_driver()
+        self.get_logger().error(f'configure failed: {reason}')
+        return TransitionCallbackReturn.FAILURE
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """
+        Start the motor and the scan; publish.
+
+        :param state: the state transitioned from
+        :return: SUCCESS
+        """
+        self._active = True
+        self._driver.set_motor(True)
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """
+        Stop publishing, the scan and the motor (the port stays open).
+
+        :param state: the state transitioned from
+        :return: SUCCESS
+        """
+        self._active = False
+        self._driver.set_motor(False)
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """
+        Close the port.
+
+        :param state: the state transitioned from
+        :return: SUCCESS
+        """
+        self._close_driver()
+        return super().on_cleanup(state)
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """
+        Stop the motor and close the port, from any state.
+
+        :param state: the state transitioned from
+        :return: SUCCESS
+        """
+        self._active = False
+        self._close_driver()
+        return super().on_shutdown(state)
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """
+        Stop the motor and close the port after a failed transition.
+
+        :param state: the state transitioned from
+        :return: SUCCESS (back to unconfigured)
+        """
+        self._active = False
+        self._close_driver()
+        return super().on_error(state)
+
     def destroy_node(self):
-        """Stop the reader thread, then destroy the node."""
-        self._driver.close()
+        """Stop the motor and close the port, whatever the state, then destroy the node."""
+        self._active = False
+        self._close_driver()
         super().destroy_node()
 
+    def _close_driver(self):
+        """
+        Stop the motor, then close the driver.
+
+        A scanning device is first asked to idle its motor (what deactivate does) and given
+        :data:`MOTOR_STOP_WAIT_S` to do so: closing alone stops the scan, which on some models
+        leaves the motor spinning.
+        """
+        driver, self._driver = self._driver, None
+        if driver is None:
+            return
+        if driver.status().state == DriverState.SCANNING:
+            driver.set_motor(False)
+            deadline = time.monotonic() + MOTOR_STOP_WAIT_S
+            while (driver.status().state != DriverState.MOTOR_STOPPED
+                   and time.monotonic() < deadline):
+                time.sleep(_POLL_S)
+        driver.close()
+
     def _publish_turn(self, turn, mode):
-        """Publish one turn as a LaserScan (called on the reader thread)."""
-        scan = turn_to_scan(turn, self._angle_compensate, self._inverted,
-                            compensation_multiple(mode.us_per_sample, self._scan_frequency_hz))
+        """Publish one turn as a LaserScan, and as a fixed-count one if asked (reader thread)."""
+        if not self._active:
+            return
+        stamp = Time(nanoseconds=_ros_minus_monotonic_ns(self.get_clock())
+                     + int(turn.first_sample_s * 1e9)).to_msg()
+        multiple = compensation_multiple(mode.us_per_sample, self._scan_frequency_hz)
+        self._scan_pub.publish(self._message(
+            turn_to_scan(turn, self._angle_compensate, self._inverted, multiple,
+                         self._orientation), stamp, mode.max_distance_m))
+        if self._fixed_scan_pub is not None:
+            self._fixed_scan_pub.publish(self._message(
+                fixed_scan(turn, self._fixed_beams, self._inverted, self._orientation), stamp,
+                mode.max_distance_m))
+        latency_s = time.monotonic() - turn.last_byte_s
+        with self._latency_lock:
+            self._latencies_s.append(latency_s)
+            del self._latencies_s[:-_LATENCY_WINDOW]
+
+    def _message(self, scan: ScanArrays, stamp, range_max_m: float) -> LaserScan:
+        """Return the LaserScan message of a laid-out turn."""
         msg = LaserScan()
         msg.header.frame_id = self._frame_id
-        msg.header.stamp = Time(nanoseconds=_ros_minus_monotonic_ns(self.get_clock())
-                                + int(turn.first_sample_s * 1e9)).to_msg()
+        msg.header.stamp = stamp
         msg.angle_min = scan.angle_min
         msg.angle_max = scan.angle_max
         msg.angle_increment = scan.angle_increment
         msg.time_increment = scan.time_increment
         msg.scan_time = scan.scan_time
         msg.range_min = RANGE_MIN_M
-        msg.range_max = mode.max_distance_m
+        msg.range_max = range_max_m
         msg.ranges = array.array('f', scan.ranges.tobytes())
         msg.intensities = array.array('f', scan.intensities.tobytes())
-        self._scan_pub.publish(msg)
-        latency_s = time.monotonic() - turn.last_byte_s
-        with self._latency_lock:
-            self._latencies_s.append(latency_s)
-            del self._latencies_s[:-_LATENCY_WINDOW]
+        return msg
 
     def _start_motor(self, request, response):
+        if self._motor_request_refused('start_motor'):
+            return response
         self.get_logger().info('start_motor: starting the motor and the scan')
         self._driver.set_motor(True)
         return response
 
     def _stop_motor(self, request, response):
+        if self._motor_request_refused('stop_motor'):
+            return response
         self.get_logger().info('stop_motor: stopping the scan and idling the motor')
         self._driver.set_motor(False)
         return response
 
+    def _motor_request_refused(self, service: str) -> bool:
+        """Refuse a motor service call outside the active state (with a warning)."""
+        if self._active:
+            return False
+        self.get_logger().warning(f'{service}: ignored while the node is not active (the '
+                                  'lifecycle activate and deactivate transitions start and '
+                                  'stop the motor)')
+        return True
+
     def _publish_diagnostics(self):
-        status = self._driver.status()
+        driver = self._driver
+        if driver is None:
+            self._publish_unconfigured()
+            return
+        status = driver.status()
         now = time.monotonic()
         turns, stream, since = self._last_report
         rate_hz = (status.turns - turns) / max(now - since, 1e-9)
@@ -214,6 +380,16 @@ class RplidarNode(Node):
             hardware_id=(status.device.serial_number.hex().upper() if status.device
                          else status.link),
             values=[KeyValue(key=k, value=v) for k, v in values.items()])]
+        self._diagnostics_pub.publish(array_msg)
+
+    def _publish_unconfigured(self):
+        """Report that no device is open (lifecycle state unconfigured)."""
+        array_msg = DiagnosticArray()
+        array_msg.header.stamp = self.get_clock().now().to_msg()
+        array_msg.status = [DiagnosticStatus(
+            level=DiagnosticStatus.STALE, name=f'{self.get_name()}: RPLIDAR',
+            message='unconfigured: no device open', hardware_id=self._serial_port or 'tcp',
+            values=[KeyValue(key='state', value='unconfigured')])]
         self._diagnostics_pub.publish(array_msg)
 
 

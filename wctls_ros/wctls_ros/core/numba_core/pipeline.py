@@ -28,13 +28,9 @@ from .segmentation import (breakpoints_of, chains_of, merge_segments, pass_budge
                            trim_ambiguous, trim_offset)
 from ..config import FeatureConfig, METHODS
 from ..features import CornerSet, Features, SegmentSet
-from ..scan import scan_geometry, ScanError
+from ..scan import beam_density, scan_geometry, ScanError
 
 _DEFAULT_CONFIG = FeatureConfig()
-# Most returns between two walls that meet at a corner: the ones both trims leave out (8 at each
-# end), the IEPF split return, and pieces of a wall too short to be segments, cut off by
-# something in front of it (a leg). More, and something else stands between the walls.
-_CORNER_WINDOW = 40
 # A corner may sit one beam without a return beyond a wall's last return (a dropout there),
 # reported with that wall's end not seen; farther, it is an extrapolation, not a corner.
 _CORNER_MISSING_BEAMS = 1
@@ -55,6 +51,7 @@ class _Settings(NamedTuple):
     merge_max_missing_beams: int
     end_offset_sigmas: float
     residual_scaling: bool
+    model_error_sigma_m: float
     wall_flatness_sigma_m: float
     min_segment_points: int
     min_segment_length_m: float
@@ -62,6 +59,26 @@ class _Settings(NamedTuple):
     min_wall_beam_angle_rad: float
     corner_end_sigmas: float
     corner_end_floor_m: float
+
+
+class _AtDensity(NamedTuple):
+    """The rules that count returns at one scan's beam spacing (:func:`..scan.beam_density`)."""
+
+    breakpoint_sigmas: float
+    iepf_noise_sigmas: float
+    corner_end_sigmas: float
+    end_window: int
+    corner_window: int
+
+
+@functools.lru_cache(maxsize=64)
+def _at_density(angle_increment_rad: float, beam_count: int,
+                config: FeatureConfig) -> _AtDensity:
+    """Return the rules that count returns for a scan (one per spacing, size and config)."""
+    density = beam_density(angle_increment_rad, beam_count)
+    return _AtDensity(density.breakpoint_sigmas, density.rarer(config.iepf_noise_sigmas),
+                      density.rarer(config.corner_end_sigmas), density.end_window,
+                      density.corner_window)
 
 
 @functools.lru_cache(maxsize=64)
@@ -87,7 +104,8 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
     found = _features_of_scan(
         ranges, cos, sin, float(angle_min_rad), float(angle_increment_rad),
         float(max(range_min_m, config.range_min_m)), float(min(range_max_m, config.range_max_m)),
-        full_turn, _settings(config))
+        full_turn, _settings(config),
+        _at_density(float(angle_increment_rad), ranges.size, config))
     segments, corners, work_limited = SegmentSet(*found[:12]), CornerSet(*found[12:19]), found[19]
     return Features(config.method, segments, corners, bool(work_limited))
 
@@ -112,9 +130,8 @@ def kernels_last_first():
         (with_model_error, (rows, values, stacks, stacks, rows, rows, rows, values, indices,
                             flag, real, real)),
         (walls_end_at, (rows, stacks, indices, indices, values, values, rows, values, values,
-                        indices, indices, real, real, real, real, real,
-                        types.literal(_CORNER_WINDOW), types.literal(_CORNER_MISSING_BEAMS),
-                        real)),
+                        indices, indices, real, real, real, real, real, integer,
+                        types.literal(_CORNER_MISSING_BEAMS), real)),
         (corner_candidates, (rows, stacks, rows, rows, indices, indices, real, rows, real)),
         (_usable, (values, rows, real, real, rows)),
         (_feet, (values, values, indices, values, values)),
@@ -123,18 +140,18 @@ def kernels_last_first():
         (fit_segments, (integer, values, values, values, values, indices, indices, real, real)),
         (_in_scan_order, (indices, integer, indices, indices)),
         (trim_offset, (indices, indices, indices, values, values, values, values, real, real,
-                       integer, real)),
+                       integer, real, integer)),
         (trim_ambiguous, (indices, indices, indices, flag, values, values, values, values, real,
-                          real, integer)),
+                          real, integer, integer)),
         (_large_enough, (values, values, indices, indices, settings)),
         (merge_segments, (values, values, indices, indices, indices, flag, flags, real, real,
                           real, integer)),
         (split_iepf, (values, values, indices, indices, indices, values, integer)),
-        (_split_threshold, (values, real, real, settings)),
+        (_split_threshold, (values, real, real, real, real)),
         (pass_budget, (integer,)),
         (chains_of, (values, values, values, flags)),
         (breakpoints_of, (indices, values, values, values, integer, real, flag, real, real, real,
-                          integer)),
+                          integer, real)),
         (range_sigma_of_returns, (indices, values)),
         (valid_returns, (values, read_only_values, read_only_values, real, real, real, real)),
         (_nothing, ()),
@@ -143,7 +160,7 @@ def kernels_last_first():
 
 @jit
 def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, range_min_m,
-                      range_max_m, full_turn, settings):
+                      range_max_m, full_turn, settings, density):
     """
     Run the steps of the paper's Algorithm 1 on one scan.
 
@@ -160,6 +177,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     :param range_max_m: farthest valid range, m
     :param full_turn: the beams cover a full turn (the first and last are neighbours)
     :param settings: the configuration
+    :param density: the rules that count returns, at this scan's beam spacing
     :return: the twelve arrays of a SegmentSet, the seven of a CornerSet, and whether the work
         bound stopped splitting or merging
     """
@@ -173,23 +191,27 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     if settings.range_sigma_from_scan:
         range_sigma = max(range_sigma, range_sigma_of_returns(index, range_m))
     bearing_sigma = settings.bearing_sigma_rad
+    # #decision-noise: every decision tolerates the model error on top of the sensor noise;
+    # the fits weigh the returns by the sensor noise alone.
+    deciding_sigma = math.hypot(range_sigma, settings.model_error_sigma_m)
     # #segmentation-statistics: breakpoints, chains in circular order, IEPF, merging, the size
     # rules, the end trims. From here on, positions index the returns in circular order.
     separated, joinable = breakpoints_of(
         index, x_m, y_m, range_m, ranges_m.size, abs(angle_increment_rad), full_turn,
-        range_sigma, bearing_sigma, settings.breakpoint_lambda_rad,
-        settings.merge_max_missing_beams)
+        deciding_sigma, bearing_sigma, settings.breakpoint_lambda_rad,
+        settings.merge_max_missing_beams, density.breakpoint_sigmas)
     order, run_start, run_stop, run_chain = chains_of(range_m, x_m, y_m, separated)
     rho, theta, x, y = range_m[order], bearing_rad[order], x_m[order], y_m[order]
     beam_order = index[order]
     budget = pass_budget(count)
     start, stop, chain, unsplit = split_iepf(
         x, y, run_start, run_stop, run_chain,
-        _split_threshold(rho, range_sigma, bearing_sigma, settings), budget)
+        _split_threshold(rho, deciding_sigma, bearing_sigma, settings.iepf_threshold_m,
+                         density.iepf_noise_sigmas), budget)
     if start.size == 0:
         return _nothing() + (unsplit,)
     start, stop, chain, angle, radius, unmerged = merge_segments(
-        x, y, start, stop, chain, full_turn, joinable[order], range_sigma, bearing_sigma,
+        x, y, start, stop, chain, full_turn, joinable[order], deciding_sigma, bearing_sigma,
         settings.merge_chi2, budget)
     work_limited = unsplit or unmerged
     keep = _large_enough(x, y, start, stop, settings)
@@ -198,11 +220,12 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     if start.size == 0:
         return _nothing() + (work_limited,)
     start, stop, chain = trim_ambiguous(start, stop, chain, full_turn, x, y, angle, radius,
-                                        range_sigma, bearing_sigma, settings.min_segment_points)
+                                        deciding_sigma, bearing_sigma,
+                                        settings.min_segment_points, density.end_window)
     if settings.end_offset_sigmas > 0.0:
-        start, stop, chain = trim_offset(start, stop, chain, x, y, angle, radius, range_sigma,
+        start, stop, chain = trim_offset(start, stop, chain, x, y, angle, radius, deciding_sigma,
                                          bearing_sigma, settings.min_segment_points,
-                                         settings.end_offset_sigmas)
+                                         settings.end_offset_sigmas, density.end_window)
     # #utls, #wtls, #wctls or #maximum-likelihood: the configured fit with its covariance, in
     # scan order of the walls' first returns.
     start, stop = _in_scan_order(beam_order, ranges_m.size, start, stop)
@@ -211,11 +234,11 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
      first, last, counts, chi2_dof) = walls
     if angle.size == 0:
         return _nothing() + (work_limited,)
-    # #corners: which pairs are corners is decided on the sensor noise alone; the published
-    # covariances add the model error (a rougher wall is less precise, not more of a corner).
+    # #corners: which pairs are corners is decided with the decision noise; the published
+    # covariances add the model error to the fits' (#model-error).
     first_wall, second_wall, corner_xy, corner_yaw, opening, end_seen = _corners(
-        x, y, walls, first, last, full_turn, abs(angle_increment_rad), range_sigma,
-        bearing_sigma, settings)
+        x, y, walls, first, last, full_turn, abs(angle_increment_rad), deciding_sigma,
+        bearing_sigma, settings, density)
     # #model-error (D17), (D18), then #corners and #common-mode-range-offset, (D11)-(D16).
     normal_covariance, line_covariance = with_model_error(
         line, angle, normal_covariance, line_covariance, line_offset, start_xy, end_xy,
@@ -245,19 +268,20 @@ def _nothing():
 
 
 @jit
-def _split_threshold(rho, range_sigma, bearing_sigma, settings):
+def _split_threshold(rho, range_sigma, bearing_sigma, threshold_m, noise_sigmas):
     """
     Return the IEPF split distance of every return, m.
 
-    The paper's split distance, but never within iepf_noise_sigmas of a return's noise: a
-    threshold of 2 sigma splits a straight wall at its noise in most scans.
+    The paper's split distance, but never within iepf_noise_sigmas of a return's noise (more on
+    dense scans, :meth:`~wctls_ros.core.scan.BeamDensity.rarer`): a threshold of 2 sigma splits
+    a straight wall at its noise in most scans.
     """
     threshold = np.empty(rho.size)
     for i in range(rho.size):
-        threshold[i] = settings.iepf_threshold_m
-        if settings.iepf_noise_sigmas > 0.0:
+        threshold[i] = threshold_m
+        if noise_sigmas > 0.0:
             noise = math.sqrt(range_sigma ** 2 + (rho[i] * bearing_sigma) ** 2)
-            threshold[i] = max(threshold[i], settings.iepf_noise_sigmas * noise)
+            threshold[i] = max(threshold[i], noise_sigmas * noise)
     return threshold
 
 
@@ -362,7 +386,7 @@ def _usable(line, line_covariance, angle, radius, normal_covariance):
 
 @jit_inline
 def _corners(x, y, walls, first, last, full_turn, step_rad, range_sigma, bearing_sigma,
-             settings):
+             settings, density):
     """
     Intersect neighbouring walls (across the seam on a full turn) and keep the real corners.
 
@@ -384,8 +408,8 @@ def _corners(x, y, walls, first, last, full_turn, step_rad, range_sigma, bearing
     first_wall, second_wall = first_wall[kept], second_wall[kept]
     keep, seen = walls_end_at(
         xy, covariance, first_wall, second_wall, angle, radius, 0.5 * (start_xy + end_xy), x, y,
-        last, first, step_rad, range_sigma, bearing_sigma, settings.corner_end_sigmas,
-        settings.corner_end_floor_m, _CORNER_WINDOW, _CORNER_MISSING_BEAMS,
+        last, first, step_rad, range_sigma, bearing_sigma, density.corner_end_sigmas,
+        settings.corner_end_floor_m, density.corner_window, _CORNER_MISSING_BEAMS,
         settings.end_offset_sigmas)
     return (first_wall[keep], second_wall[keep], xy[keep], yaw[keep], opening[keep],
             seen[keep])

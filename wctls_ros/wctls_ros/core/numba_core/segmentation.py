@@ -27,8 +27,6 @@ MIN_FIT_RETURNS = 3
 # The work bound of IEPF and merging: passes per scan of n returns (see :func:`pass_budget`).
 _BUDGET_LEVELS_PER_DOUBLING = 2
 _BUDGET_EXTRA_PASSES = 8
-# Returns examined (and trimmed) at each segment end by the end trims.
-_END_WINDOW = 8
 
 
 @jit
@@ -70,15 +68,16 @@ def _reach_factor(beams, step_rad, lambda_rad):
 
 @jit
 def breakpoints_of(index, x_m, y_m, range_m, beam_count, step_rad, full_turn, range_sigma_m,
-                   bearing_sigma_rad, lambda_rad, max_missing_beams):
+                   bearing_sigma_rad, lambda_rad, max_missing_beams, noise_sigmas):
     """
     Mark where the adaptive breakpoint rule of Borges and Aldon separates neighbouring returns.
 
     Neighbours i-1 and i are separated when their distance exceeds
-    ``r sin(dphi) / sin(lambda - dphi) + 3 sqrt(range_sigma^2 + (r bearing_sigma)^2)``
+    ``r sin(dphi) / sin(lambda - dphi) + k sqrt(range_sigma^2 + (r bearing_sigma)^2)``
     (r the smaller of the two ranges, dphi their bearing difference, so that missing beams widen
-    the allowance; the last term is 3 sigma of a return's position noise, where Borges and Aldon
-    have the range noise alone), when ``dphi >= lambda``, or when more than
+    the allowance; the last term is k sigma of a return's position noise, where Borges and Aldon
+    have the range noise alone; k = 3 up to 1080 beams per turn, more on denser scans,
+    :func:`~wctls_ros.core.scan.beam_density`), when ``dphi >= lambda``, or when more than
     ``max_missing_beams`` beams between them have no valid return (nothing is known of what
     lies there: two collinear surfaces either side of a dark or open gap are not one wall). The
     rule is symmetric, so reversing the beam order changes nothing. With 3 sigma, noise alone
@@ -97,6 +96,7 @@ def breakpoints_of(index, x_m, y_m, range_m, beam_count, step_rad, full_turn, ra
     :param bearing_sigma_rad: bearing noise std, rad
     :param lambda_rad: worst incidence angle still treated as one surface, rad
     :param max_missing_beams: most invalid beams between two returns of one chain
+    :param noise_sigmas: k, the allowance for noise in sigmas of a return's position noise
     :return: (separated (n,), joinable (n,)): return i against return i - 1 (entry 0 against
         the last return, across the seam)
     """
@@ -130,7 +130,7 @@ def breakpoints_of(index, x_m, y_m, range_m, beam_count, step_rad, full_turn, ra
         noise = math.sqrt(range_sigma_m ** 2 + (r * bearing_sigma_rad) ** 2)
         distance = math.sqrt(dx * dx + dy * dy)
         gap = beams - 1.0 >= max_missing_beams + 0.5
-        separated[i] = reach < 0.0 or gap or distance > surface + 3.0 * noise
+        separated[i] = reach < 0.0 or gap or distance > surface + noise_sigmas * noise
         joinable[i] = (separated[i] and reach >= 0.0 and not gap
                        and distance <= surface + _JOINABLE_SIGMAS * noise)
     if not full_turn or n == 1:
@@ -422,7 +422,7 @@ def _within(start, stop, n):
 
 @jit
 def trim_ambiguous(start, stop, chain, circular, x_m, y_m, angle_rad, radius_m, range_sigma_m,
-                   bearing_sigma_rad, min_returns):
+                   bearing_sigma_rad, min_returns, window):
     """
     Drop the returns at the meeting ends of two neighbouring segments that could fit both lines.
 
@@ -435,7 +435,7 @@ def trim_ambiguous(start, stop, chain, circular, x_m, y_m, angle_rad, radius_m, 
     meeting end inside that radius, in an unbroken run from the end, are left out of both
     segments. A segment keeps at least ``min_returns`` returns, shared evenly by its two ends
     when both meet a neighbour (so that the rule does not depend on the beam order). At most
-    8 returns are examined at each end.
+    ``window`` returns are examined at each end.
 
     :param start: first position of each segment, sorted, shape (S,)
     :param stop: one past the last position (modulo n), shape (S,)
@@ -448,9 +448,10 @@ def trim_ambiguous(start, stop, chain, circular, x_m, y_m, angle_rad, radius_m, 
     :param range_sigma_m: range noise std, m
     :param bearing_sigma_rad: bearing noise std, rad
     :param min_returns: never trim a segment below this many returns
+    :param window: most returns examined at each end
     :return: (start, stop, chain) of the trimmed segments
     """
-    n, count, window = x_m.size, start.size, _END_WINDOW
+    n, count = x_m.size, start.size
     if count < 2:
         return start, stop, chain
     meets = np.empty(count, np.bool_)
@@ -496,7 +497,7 @@ def trim_ambiguous(start, stop, chain, circular, x_m, y_m, angle_rad, radius_m, 
 
 @jit
 def trim_offset(start, stop, chain, x_m, y_m, angle_rad, radius_m, range_sigma_m,
-                bearing_sigma_rad, min_returns, threshold_sigmas):
+                bearing_sigma_rad, min_returns, threshold_sigmas, window):
     """
     Cut off the returns at segment ends that lie off the segment's line together.
 
@@ -517,7 +518,7 @@ def trim_offset(start, stop, chain, x_m, y_m, angle_rad, radius_m, range_sigma_m
     own error carried to the end). An end is cut after the k that maximises Z_k^2 / Var(Z_k),
     when that maximum exceeds ``threshold_sigmas`` squared. Each end cuts at most half of the
     returns a segment has beyond ``min_returns``, so that the rule does not depend on the beam
-    order. At most 8 returns are examined at each end.
+    order. At most ``window`` returns are examined at each end.
 
     :param start: first position of each segment, sorted, shape (S,)
     :param stop: one past the last position (modulo n), shape (S,)
@@ -530,13 +531,14 @@ def trim_offset(start, stop, chain, x_m, y_m, angle_rad, radius_m, range_sigma_m
     :param bearing_sigma_rad: bearing noise std, rad
     :param min_returns: never trim a segment below this many returns
     :param threshold_sigmas: cut where max_k |Z_k| / sqrt(Var(Z_k)) exceeds this
+    :param window: most returns examined at each end
     :return: (start, stop, chain) of the trimmed segments
     """
     n, count = x_m.size, start.size
     new_start, new_stop = start.copy(), stop.copy()
     limit = threshold_sigmas * threshold_sigmas
     for s in range(count):
-        reach = min((stop[s] - start[s] - min_returns) // 2, _END_WINDOW)
+        reach = min((stop[s] - start[s] - min_returns) // 2, window)
         if reach <= 0:
             continue
         c, sn = math.cos(angle_rad[s]), math.sin(angle_rad[s])

@@ -18,13 +18,9 @@ from .segmentation import (breakpoints, Breaks, Chains, chains, iterative_end_po
 from ..config import FeatureConfig
 from ..features import (CornerSet, Features, LineFits, segment_returns, SegmentReturns,
                         SegmentSet)
-from ..scan import scan_to_points, ScanError, ScanPoints
+from ..scan import beam_density, BeamDensity, scan_to_points, ScanError, ScanPoints
 
 _DEFAULT_CONFIG = FeatureConfig()
-# Most returns between two walls that meet at a corner: the ones both trims leave out (8 at each
-# end), the IEPF split return, and pieces of a wall too short to be segments, cut off by
-# something in front of it (a leg). More, and something else stands between the walls.
-_CORNER_WINDOW = 40
 # A corner may sit one beam without a return beyond a wall's last return (a dropout there),
 # reported with that wall's end not seen; farther, it is an extrapolation, not a corner.
 _CORNER_MISSING_BEAMS = 1
@@ -64,24 +60,29 @@ def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float
         return nothing
     # #range-noise-from-the-scan
     config = _with_range_sigma_of_the_scan(config, points)
+    # #decision-noise: every decision tolerates the model error on top of the sensor noise;
+    # the fits weigh the returns by the sensor noise alone.
+    decisions = _deciding(config)
+    # #density: the rules that count returns, at this scan's beam spacing.
+    density = beam_density(angle_increment_rad, np.size(ranges_m))
     # #segmentation-statistics: breakpoints, IEPF, merging, the size rules, the end trims.
-    contour = _Contour.of(points, config)
-    segments, unsplit = _split(contour, config)
+    contour = _Contour.of(points, decisions, density)
+    segments, unsplit = _split(contour, decisions, density)
     if not len(segments):
         return replace(nothing, work_limited=unsplit)
-    segments, angle, radius, unmerged = _merge(contour, segments, config)
+    segments, angle, radius, unmerged = _merge(contour, segments, decisions)
     segments, angle, radius = _large_enough(contour, segments, angle, radius, config)
     work_limited = unsplit or unmerged
     if not len(segments):
         return replace(nothing, work_limited=work_limited)
-    segments = _trim_ends(contour, segments, angle, radius, config)
+    segments = _trim_ends(contour, segments, angle, radius, decisions, density)
     # #utls, #wtls, #wctls or #maximum-likelihood: the configured fit with its covariance.
     walls, positions = _fit_walls(contour, segments, config)
     if not len(walls):
         return replace(nothing, work_limited=work_limited)
-    # #corners: which pairs are corners is decided on the sensor noise alone; the published
-    # covariances add the model error (a rougher wall is less precise, not more of a corner).
-    corners = _corners(contour, walls, positions, config)
+    # #corners: which pairs are corners is decided with the decision noise; the published
+    # covariances add the model error to the fits' (#model-error).
+    corners = _corners(contour, walls, positions, decisions, density)
     # #model-error (D17), (D18), then #corners and #common-mode-range-offset, (D11)-(D16).
     walls = _with_model_error(walls, config)
     return Features(config.method, walls, _corner_covariances(walls, corners, config),
@@ -93,6 +94,20 @@ def _with_range_sigma_of_the_scan(config: FeatureConfig, points: ScanPoints) -> 
     if not config.range_sigma_from_scan:
         return config
     return replace(config, range_sigma_m=max(config.range_sigma_m, scan_range_sigma(points)))
+
+
+def _deciding(config: FeatureConfig) -> FeatureConfig:
+    """
+    Return the config the decisions use: the model error added to the range noise.
+
+    A return strays from the ideal wall by its measurement noise and by the model error (a
+    bowed or rough wall, a rounded corner, a mixed return): each decision tolerates both, in
+    quadrature (docs/derivation.md#decision-noise).
+    """
+    if config.model_error_sigma_m == 0.0:
+        return config
+    return replace(config, range_sigma_m=math.hypot(config.range_sigma_m,
+                                                    config.model_error_sigma_m))
 
 
 @dataclass(frozen=True)
@@ -118,10 +133,11 @@ class _Contour:
     y: np.ndarray
 
     @staticmethod
-    def of(points: ScanPoints, config: FeatureConfig) -> '_Contour':
+    def of(points: ScanPoints, config: FeatureConfig, density: BeamDensity) -> '_Contour':
         """Cut the returns into chains at breakpoints (Borges and Aldon) and order them."""
         breaks = breakpoints(points, config.range_sigma_m, config.bearing_sigma_rad,
-                             config.breakpoint_lambda_rad, config.merge_max_missing_beams)
+                             config.breakpoint_lambda_rad, config.merge_max_missing_beams,
+                             density.breakpoint_sigmas)
         runs = chains(points, breaks.separated)
         order = runs.order
         return _Contour(points, breaks, runs, points.range_m[order], points.bearing_rad[order],
@@ -131,12 +147,13 @@ class _Contour:
         return len(self.x)
 
 
-def _split(contour: _Contour, config: FeatureConfig):
+def _split(contour: _Contour, config: FeatureConfig, density: BeamDensity):
     """
     Split the chains into straight segments by Iterative End Point Fit.
 
-    The paper's split distance, but never within iepf_noise_sigmas of a return's noise: a
-    threshold of 2 sigma splits a straight wall at its noise in most scans. Every pass is O(n):
+    The paper's split distance, but never within iepf_noise_sigmas of a return's noise (more on
+    dense scans, :meth:`~wctls_ros.core.scan.BeamDensity.rarer`): a threshold of 2 sigma splits
+    a straight wall at its noise in most scans. Every pass is O(n):
     a bounded number of them (:func:`~.segmentation.pass_budget`) bounds the work on any scan.
 
     :return: (the segments, positions in the contour; whether the work bound stopped splitting)
@@ -145,7 +162,7 @@ def _split(contour: _Contour, config: FeatureConfig):
     if config.iepf_noise_sigmas > 0.0:
         noise = np.sqrt(config.range_sigma_m ** 2
                         + (contour.rho * config.bearing_sigma_rad) ** 2)
-        threshold = np.maximum(threshold, config.iepf_noise_sigmas * noise)
+        threshold = np.maximum(threshold, density.rarer(config.iepf_noise_sigmas) * noise)
     runs = contour.chains
     return iterative_end_point_fit(contour.x, contour.y, runs.start, runs.stop, runs.chain,
                                    threshold, pass_budget(len(contour)))
@@ -187,7 +204,8 @@ def _large_enough(contour: _Contour, segments: SegmentRanges, angle: np.ndarray,
 
 
 def _trim_ends(contour: _Contour, segments: SegmentRanges, angle: np.ndarray,
-               radius: np.ndarray, config: FeatureConfig) -> SegmentRanges:
+               radius: np.ndarray, config: FeatureConfig,
+               density: BeamDensity) -> SegmentRanges:
     """
     Leave out the returns at segment ends that fit both walls, and runs off the line together.
 
@@ -196,11 +214,11 @@ def _trim_ends(contour: _Contour, segments: SegmentRanges, angle: np.ndarray,
     n, x, y = len(contour), contour.x, contour.y
     segments = trim_ambiguous_ends(segments, contour.points.full_turn, n, x, y, angle, radius,
                                    config.range_sigma_m, config.bearing_sigma_rad,
-                                   config.min_segment_points)
+                                   config.min_segment_points, density.end_window)
     if config.end_offset_sigmas > 0.0:
         segments = trim_offset_ends(segments, n, x, y, angle, radius, config.range_sigma_m,
                                     config.bearing_sigma_rad, config.min_segment_points,
-                                    config.end_offset_sigmas)
+                                    config.end_offset_sigmas, density.end_window)
     return segments
 
 
@@ -308,7 +326,7 @@ def _residual_chi2_dof(returns: SegmentReturns, fits: LineFits, usable: np.ndarr
 
 
 def _corners(contour: _Contour, walls: SegmentSet, positions: np.ndarray,
-             config: FeatureConfig) -> CornerSet:
+             config: FeatureConfig, density: BeamDensity) -> CornerSet:
     """
     Intersect neighbouring walls (across the seam on a full turn) and keep the real corners.
 
@@ -329,7 +347,7 @@ def _corners(contour: _Contour, walls: SegmentSet, positions: np.ndarray,
         candidates, walls.angle_rad, walls.radius_m, 0.5 * (walls.start_xy_m + walls.end_xy_m),
         contour.x, contour.y, positions[1], positions[0],
         abs(contour.points.angle_increment_rad), config.range_sigma_m, config.bearing_sigma_rad,
-        config.corner_end_sigmas, config.corner_end_floor_m, _CORNER_WINDOW,
+        density.rarer(config.corner_end_sigmas), config.corner_end_floor_m, density.corner_window,
         _CORNER_MISSING_BEAMS, config.end_offset_sigmas)
     kept = candidates.select(keep)
     return CornerSet(kept.xy_m, kept.yaw_rad, kept.covariance, kept.opening_angle_rad,

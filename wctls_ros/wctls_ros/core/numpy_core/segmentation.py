@@ -237,15 +237,16 @@ class Breaks(NamedTuple):
 
 
 def breakpoints(points: ScanPoints, range_sigma_m: float, bearing_sigma_rad: float,
-                lambda_rad: float, max_missing_beams: int) -> Breaks:
+                lambda_rad: float, max_missing_beams: int, noise_sigmas: float) -> Breaks:
     """
     Mark where the adaptive breakpoint rule of Borges and Aldon separates neighbouring returns.
 
     Neighbours i-1 and i are separated when their distance exceeds
-    ``r sin(dphi) / sin(lambda - dphi) + 3 sqrt(range_sigma^2 + (r bearing_sigma)^2)``
+    ``r sin(dphi) / sin(lambda - dphi) + k sqrt(range_sigma^2 + (r bearing_sigma)^2)``
     (r the smaller of the two ranges, dphi their bearing difference, so that missing beams widen
-    the allowance; the last term is 3 sigma of a return's position noise, where Borges and Aldon
-    have the range noise alone), when ``dphi >= lambda``, or when more than
+    the allowance; the last term is k sigma of a return's position noise, where Borges and Aldon
+    have the range noise alone; k = 3 up to 1080 beams per turn, more on denser scans,
+    :func:`~wctls_ros.core.scan.beam_density`), when ``dphi >= lambda``, or when more than
     ``max_missing_beams`` beams between them have no valid return (nothing is known of what
     lies there: two collinear surfaces either side of a dark or open gap are not one wall). The
     rule is symmetric, so reversing the beam order changes nothing. With 3 sigma, noise alone
@@ -258,6 +259,7 @@ def breakpoints(points: ScanPoints, range_sigma_m: float, bearing_sigma_rad: flo
     :param bearing_sigma_rad: bearing noise std, rad
     :param lambda_rad: worst incidence angle still treated as one surface, rad
     :param max_missing_beams: most invalid beams between two returns of one chain
+    :param noise_sigmas: k, the allowance for noise in sigmas of a return's position noise
     :return: the separations
     """
     n = len(points)
@@ -291,7 +293,7 @@ def breakpoints(points: ScanPoints, range_sigma_m: float, bearing_sigma_rad: flo
     distance = np.sqrt(dx * dx + dy * dy)
     missing = beams - 1.0                       # fractional across the seam of a full turn
     gap = missing >= max_missing_beams + 0.5
-    separated = (reach < 0.0) | gap | (distance > surface + 3.0 * noise)
+    separated = (reach < 0.0) | gap | (distance > surface + noise_sigmas * noise)
     joinable = (separated & (reach >= 0.0) & ~gap
                 & (distance <= surface + _JOINABLE_SIGMAS * noise))
     if not points.full_turn or n == 1:
@@ -482,7 +484,7 @@ def merge_collinear(segments: SegmentRanges, circular: bool, contour_length: int
 def trim_ambiguous_ends(segments: SegmentRanges, circular: bool, contour_length: int,
                         x_m: np.ndarray, y_m: np.ndarray, angle_rad: np.ndarray,
                         radius_m: np.ndarray, range_sigma_m: float, bearing_sigma_rad: float,
-                        min_returns: int, window: int = 8) -> SegmentRanges:
+                        min_returns: int, window: int) -> SegmentRanges:
     """
     Drop the returns at the meeting ends of two neighbouring segments that could fit both lines.
 
@@ -551,7 +553,7 @@ def trim_ambiguous_ends(segments: SegmentRanges, circular: bool, contour_length:
 def trim_offset_ends(segments: SegmentRanges, contour_length: int, x_m: np.ndarray,
                      y_m: np.ndarray, angle_rad: np.ndarray, radius_m: np.ndarray,
                      range_sigma_m: float, bearing_sigma_rad: float, min_returns: int,
-                     threshold_sigmas: float, window: int = 8) -> SegmentRanges:
+                     threshold_sigmas: float, window: int) -> SegmentRanges:
     """
     Cut off the returns at segment ends that lie off the line of the segment's other returns.
 

@@ -5,7 +5,12 @@
 Emulated S1 devices served on a pseudo-terminal and TCP, with live control commands.
 
 One device answers on the pseudo-terminal (reachable through a symlink, like a udev name) and
-one more per TCP client. Control lines (``unplug``, ``replug``, ``silent SECONDS``,
+one more per TCP client. Control lines (``unplug``, ``replug``, ``hangup`` (the terminal is
+closed and a new one opened behind the link at once while the device, powered on its own, goes
+on with what it was doing: a USB adapter that drops off the bus and comes back),
+``requests`` (the requests the pty device heard since the last ``requests``, in order, each
+command's name with its payload: ``MOTOR_SPEED=0``; how tests see a client stop the motor),
+``silent SECONDS``,
 ``health ok|warning|error [RESETS]``, ``corrupt RATE``, ``drop RATE``, ``cut RATE``,
 ``conf ENTRY=VALUE`` (a GET_LIDAR_CONF value reported instead of the device's own), ``clock``
 (the pty device's sample clock: when and at what angle each sample of its stream is measured),
@@ -33,7 +38,7 @@ from typing import Optional
 import numpy as np
 
 from .device import Faults, MODEL_S1M1, MODES, S1Device, Scene, TYPICAL_MODE
-from ..protocol import HealthStatus
+from ..protocol import Command, HealthStatus, RequestParser
 
 _POLL_S = 0.001
 # Linux's TCGETS2 (asm-generic ioctls, as pyserial uses them) and the offset of c_ospeed in the
@@ -160,6 +165,8 @@ class Emulator:
         self._pty_device = self._new_device()
         self._listener = listener
         self._clients = {}
+        self._request_parser = RequestParser()
+        self._heard = []
         self.commands = queue.Queue()
 
     def _new_device(self) -> S1Device:
@@ -198,6 +205,8 @@ class Emulator:
             except (BlockingIOError, OSError):
                 return
             if self.pty.hears_client():
+                self._heard.extend(_request_name(request)
+                                   for request in self._request_parser.feed(data))
                 self.pty.write(self._pty_device.receive(data, now_s))
             return
         try:
@@ -249,8 +258,17 @@ class Emulator:
         if verb == 'replug':
             if self.pty.fd is None:
                 self.pty.plug()
+                self._request_parser = RequestParser()
                 self._pty_device = self._new_device()
             return f'replugged {self.pty.path}'
+        if verb == 'hangup':
+            self.pty.unplug()
+            self.pty.plug()
+            self._request_parser = RequestParser()
+            return f'hung up, device still running, new terminal {self.pty.path}'
+        if verb == 'requests':
+            heard, self._heard = self._heard, []
+            return f'requests {" ".join(heard) or "none"}'
         if verb == 'silent':
             self._faults.silent_from_s = time.monotonic()
             self._faults.silent_until_s = self._faults.silent_from_s + float(args[0])
@@ -272,8 +290,9 @@ class Emulator:
             return (f'clock start {clock.start_s:.9f} s, {clock.sample_s * 1e6:.6f} us per '
                     f'sample, first at {clock.first_angle_deg:.9f} deg, '
                     f'{clock.step_deg:.9f} deg per sample')
-        raise ValueError('unknown command (unplug, replug, silent S, health STATUS [RESETS], '
-                         'corrupt RATE, drop RATE, cut RATE, conf ENTRY=VALUE, clock, quit)')
+        raise ValueError('unknown command (unplug, replug, hangup, requests, silent S, '
+                         'health STATUS [RESETS], corrupt RATE, drop RATE, cut RATE, '
+                         'conf ENTRY=VALUE, clock, quit)')
 
     def close(self):
         """Close everything (and remove the link)."""
@@ -282,3 +301,22 @@ class Emulator:
             self._drop_client(client)
         if self._listener is not None:
             self._listener.close()
+
+
+def _request_name(request) -> str:
+    """
+    Name a request: its command's name (or byte), with its payload as a number (up to 4 bytes).
+
+    :param request: a :class:`~wctls_ros.rplidar.protocol.Request`
+    :return: e.g. ``'STOP'``, ``'MOTOR_SPEED=600'``, ``'EXPRESS_SCAN=0x0100000000'``
+    """
+    try:
+        name = Command(request.command).name
+    except ValueError:
+        name = f'0x{request.command:02X}'
+    payload = request.payload
+    if not payload:
+        return name
+    if len(payload) <= 4:
+        return f'{name}={int.from_bytes(payload, "little")}'
+    return f'{name}=0x{payload.hex()}'

@@ -12,8 +12,8 @@ sllidar_ros2's angle = pi - theta sees the plan in REP-103 orientation.
 ``--model a1|a2|a3|c1|s1|s2|s3`` is that model: its model byte, firmware, scan modes, serial
 rate and motor control (the A1 on the DTR line, the A2 and A3 by PWM through their accessory
 board, by DTR with ``--no-accessory-board``, the S-series in rpm, the C1 on its own).
-``--baudrate RATE`` answers on the pseudo-terminal only when its client set that rate:
-``rplidar_emulator`` by default at the model's own rate (0: any), ``s1_emulator`` at any.
+It answers on the pseudo-terminal only when its client set the model's rate (the S1's 256000 by
+default), as a real device hears only its own; ``--baudrate RATE`` sets another, 0 any rate.
 Faults for testing recovery: ``--corrupt-rate`` / ``--drop-rate`` (per streamed byte),
 ``--cut-rate`` (per streamed frame: a run of bytes lost from a random one to the frame's end),
 ``--silent-after``/``--silent-for``, ``--health warning|error``, ``--conf-answer ENTRY=VALUE``
@@ -49,7 +49,6 @@ from .simulation import (BUNDLED_PLANS, FloorPlan, load_floor_plan, NOISELESS, N
 
 PROG = 's1_emulator'
 RPLIDAR_PROG = 'rplidar_emulator'
-ANY_BAUDRATE = 0
 EXIT_INTERRUPTED = 130
 
 
@@ -110,8 +109,7 @@ def parser(prog: str = PROG) -> argparse.ArgumentParser:
     """
     Return the command-line parser.
 
-    :param prog: ``s1_emulator`` (any serial rate by default) or ``rplidar_emulator`` (the
-        model's own)
+    :param prog: the program's name, ``s1_emulator`` or ``rplidar_emulator``
     :return: the parser
     """
     p = Parser(
@@ -131,13 +129,11 @@ def parser(prog: str = PROG) -> argparse.ArgumentParser:
     p.add_argument('--no-accessory-board', action='store_true',
                    help='an A2 or A3 without its accessory board: the motor on the DTR line, '
                         'not PWM (default: with the board)')
-    own_rate = prog == RPLIDAR_PROG
     p.add_argument('--baudrate', type=bounded(int, 0),
-                   default=None if own_rate else ANY_BAUDRATE,
                    help='answer on the pseudo-terminal only when its client set this rate, '
                         'bits per second, as a real device hears only its own (Linux); 0: any '
-                        'rate (default: ' + ("the model's own rate" if own_rate else 'any rate')
-                        + ')')
+                        "rate (default: the model's: A1, A2 115200, A3, S1 256000, C1 460800, "
+                        'S2, S3 1000000)')
     p.add_argument('--tcp-port', type=bounded(int, 0, 65535),
                    help='also serve on this TCP port (0 = any free port; S1 TCP: 20108) '
                         '(default: no TCP)')
@@ -297,7 +293,7 @@ def main(argv=None, prog: str = PROG) -> int:
 
 def rplidar_main(argv=None) -> int:
     """
-    Run ``rplidar_emulator``: :func:`main` answering at the model's own rate by default.
+    Run ``rplidar_emulator``: :func:`main` under that name.
 
     :param argv: command-line arguments (default: ``sys.argv[1:]``)
     :return: exit status (see :func:`main`)

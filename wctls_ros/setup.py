@@ -38,6 +38,7 @@ setup(
             'process_bag = wctls_ros.executables:process_bag',
             'rplidar_node = wctls_ros.executables:rplidar_node',
             's1_emulator = wctls_ros.executables:s1_emulator',
+            'rplidar_emulator = wctls_ros.executables:rplidar_emulator',
             'score = wctls_ros.executables:score',
             'simulate = wctls_ros.executables:simulate',
         ],

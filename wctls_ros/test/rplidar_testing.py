@@ -14,6 +14,7 @@ from wctls_ros.rplidar.emulator.device import EMULATED_MODELS, Faults, MODES, S1
 from wctls_ros.rplidar.emulator.process import EmulatorProcess
 from wctls_ros.rplidar.emulator.server import Emulator, PtyPort
 from wctls_ros.rplidar.protocol import encode_express_scan
+from wctls_ros.rplidar.transport import LinkError
 from wctls_ros.s1_emulator import SimulatedScene
 from wctls_ros.simulation import cast_rays, load_floor_plan, NOISELESS, NoiseModel
 
@@ -182,19 +183,25 @@ def emulated_stream(modes, mode_id, plan='environment_a', seconds=3.0, noisy=Fal
 
 
 @contextlib.contextmanager
-def serving(model, typical_mode):
+def serving(model, typical_mode=None, firmware=None, baudrate=None):
     """
     Serve a noiseless emulated device of ``model`` on a pseudo-terminal, in a thread.
 
-    :param model: the emulator's model name (e.g. ``'a2'``: its model byte and scan modes)
-    :param typical_mode: the id of its typical mode (the one the SDK starts)
+    :param model: the emulator's model name (e.g. ``'a2'``: its model byte, scan modes, motor)
+        or a :class:`~wctls_ros.rplidar.emulator.device.DeviceModel`
+    :param typical_mode: the id of its typical mode (the one the driver starts; default: the
+        model's)
+    :param firmware: (major, minor) (default: the model's)
+    :param baudrate: the only rate it hears its client at (default: any)
     :return: a context manager yielding the terminal's path
     """
-    model_id, modes, _ = EMULATED_MODELS[model]
+    profile = EMULATED_MODELS[model] if isinstance(model, str) else model
     scene = SimulatedScene(load_floor_plan('environment_a'), None, NOISELESS,
                            np.random.default_rng(0))
-    emulator = Emulator(scene, Faults(), (1, 28), 0, PtyPort(None), modes=modes,
-                        typical_mode=typical_mode, model=model_id)
+    emulator = Emulator(scene, Faults(), firmware or profile.firmware, 0,
+                        PtyPort(None, baudrate), modes=profile.modes,
+                        typical_mode=profile.typical_mode if typical_mode is None
+                        else typical_mode, model=profile)
     thread = threading.Thread(target=emulator.run)
     thread.start()
     try:
@@ -241,3 +248,123 @@ def sdk_framed_capsules(data: bytes, size: int):
         for value in capsule[2:]:
             checksum ^= value
         yield capsule if checksum == (capsule[0] & 0xF) | ((capsule[1] << 4) & 0xFF) else None
+
+
+class DeviceLink:
+    """
+    The driver's link to an emulated device in this process, its DTR line included.
+
+    A pseudo-terminal carries no modem lines, so the DTR motor control of an A1 is seen here:
+    the driver's writes, reads and DTR changes reach the device as a serial line would carry
+    them. :meth:`unplug` makes every later use fail as a pulled USB adapter does.
+
+    :param device: the emulated device
+    :param baudrate: the line's rate, bits per second (for the driver's byte time)
+    """
+
+    def __init__(self, device: S1Device, baudrate: int):
+        self.device = device
+        self.name = f'in-process device @ {baudrate} baud'
+        self.byte_time_s = 10.0 / baudrate
+        self.opened = 0
+        self._answers = b''
+        self._gone = False
+
+    def connect(self, config):
+        """
+        Serve as the driver's link factory: the same device every session.
+
+        :param config: the driver's configuration (unused)
+        :return: this link
+        """
+        self.opened += 1
+        return self
+
+    def unplug(self):
+        """Pull the device: every later write, read or DTR change fails."""
+        self._gone = True
+
+    def _check(self):
+        if self._gone:
+            raise LinkError(f'{self.name}: device unplugged')
+
+    def write(self, data: bytes):
+        """Deliver bytes to the device; keep its answers for :meth:`read`."""
+        self._check()
+        self._answers += self.device.receive(data, time.monotonic())
+
+    def set_dtr(self, asserted: bool) -> bool:
+        """Set or clear the device's DTR input; return True (the line exists)."""
+        self._check()
+        self.device.set_dtr(asserted, time.monotonic())
+        return True
+
+    def read(self, timeout_s: float) -> bytes:
+        """Return the answers and stream bytes due, waiting up to ``timeout_s``."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            self._check()
+            now = time.monotonic()
+            data, self._answers = self._answers + self.device.stream(now), b''
+            if data or now >= deadline:
+                return data
+            time.sleep(min(max(self.device.next_frame_in(now), 0.001), deadline - now, 0.02))
+
+    def close(self):
+        """Nothing to release."""
+
+
+class LogLines:
+    """An rclpy-style logger keeping its lines (``info``, ``warning``, ``error``)."""
+
+    def __init__(self):
+        self.lines = []
+
+    def _keep(self, level: str, message: str, **_):
+        self.lines.append(f'{level}: {message}')
+
+    def info(self, message: str, **kwargs):
+        """Keep an info line."""
+        self._keep('info', message)
+
+    def warning(self, message: str, **kwargs):
+        """Keep a warning line."""
+        self._keep('warning', message)
+
+    def error(self, message: str, **kwargs):
+        """Keep an error line."""
+        self._keep('error', message)
+
+
+def emulated_device(model, firmware=None, seed=0, faults=None):
+    """
+    Return a noiseless emulated device of ``model`` and a :class:`DeviceLink` to it.
+
+    :param model: the emulator's model name or a ``DeviceModel``
+    :param firmware: (major, minor) (default: the model's)
+    :param seed: random seed
+    :param faults: its fault settings (default: none)
+    :return: ``(device, link)``
+    """
+    profile = EMULATED_MODELS[model] if isinstance(model, str) else model
+    rng = np.random.default_rng(seed)
+    scene = SimulatedScene(load_floor_plan('environment_a'), None, NOISELESS, rng)
+    device = S1Device(scene, faults or Faults(), firmware or profile.firmware, rng, profile.modes,
+                      profile.typical_mode, profile)
+    return device, DeviceLink(device, profile.baudrate)
+
+
+def wait_for(predicate, timeout_s=20.0, what='the condition'):
+    """
+    Wait until ``predicate()`` is true.
+
+    :param predicate: the condition
+    :param timeout_s: deadline, s
+    :param what: what is waited for, for the failure message
+    :return: the predicate's last value
+    """
+    deadline = time.monotonic() + timeout_s
+    while not (value := predicate()):
+        assert time.monotonic() < deadline, f'no {what} within {timeout_s} s'
+        time.sleep(0.01)
+    return value

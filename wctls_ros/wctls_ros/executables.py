@@ -21,13 +21,14 @@ NODE_INTERRUPTED = 0
 TOOL_INTERRUPTED = 128 + signal.SIGINT
 
 
-def _run(prog: str, module: str, interrupted: int) -> int:
+def _run(prog: str, module: str, interrupted: int, function: str = 'main') -> int:
     """
     Import a program's module and run its main(), handling Ctrl-C and missing packages.
 
     :param prog: the program's name, for messages
     :param module: its module, relative to wctls_ros
     :param interrupted: the exit status of a Ctrl-C during the imports
+    :param function: the module's function that runs the program
     :return: the program's exit status
     """
     def quietly(signal_number, frame):
@@ -37,7 +38,7 @@ def _run(prog: str, module: str, interrupted: int) -> int:
     try:
         program = importlib.import_module(f'wctls_ros.{module}')
         signal.signal(signal.SIGINT, previous)
-        return program.main()
+        return getattr(program, function)()
     except ImportError as error:
         from .extras import missing_extra
         reason = missing_extra(error)
@@ -65,6 +66,11 @@ def bag_replay() -> int:
 def s1_emulator() -> int:
     """Run the s1_emulator tool (:mod:`wctls_ros.s1_emulator`)."""
     return _run('s1_emulator', 's1_emulator', TOOL_INTERRUPTED)
+
+
+def rplidar_emulator() -> int:
+    """Run the rplidar_emulator tool (:func:`wctls_ros.s1_emulator.rplidar_main`)."""
+    return _run('rplidar_emulator', 's1_emulator', TOOL_INTERRUPTED, 'rplidar_main')
 
 
 def calibrate() -> int:

@@ -188,8 +188,9 @@ RPLIDAR_NODE = tuple(_read_only(*row) for row in (
      ('serial', 'tcp')),
     ('serial_port', '/dev/ttyUSB0', 'Serial device of the S1 (a udev symlink such as '
      '/dev/rplidar is steadier)'),
-    ('serial_baudrate', 256000, 'Serial bits per second; the S1 needs 256000; 0 probes '
-     '115200, 256000, 460800 and 1000000 and keeps the one that answers', Limits(0, 4000000)),
+    ('serial_baudrate', 0, 'Serial bits per second (A1, A2M8 115200; A3, S1 256000; C1 '
+     '460800; S2, S3 1000000); 0 probes these rates and keeps the one that answers',
+     Limits(0, 4000000)),
     ('tcp_ip', '192.168.0.7', "Device address when channel_type is 'tcp'"),
     ('tcp_port', 20108, "Device TCP port when channel_type is 'tcp'", Limits(1, 65535)),
     ('frame_id', 'laser', 'Frame of the scans (x toward the raw 180 deg side, as '

@@ -2,15 +2,18 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-``s1_emulator``: an RPLIDAR S1 on a pseudo-terminal (and TCP) that sees a simulated floor plan.
+``rplidar_emulator``, ``s1_emulator``: an RPLIDAR on a pseudo-terminal (and TCP), seeing a plan.
 
 The device, its server and its faults are :mod:`wctls_ros.rplidar.emulator`; this executable
 builds the scene from :mod:`wctls_ros.simulation` and injects it. A sample at raw (clockwise)
 angle theta is the range along the laser-frame bearing pi - theta, so a driver publishing
 sllidar_ros2's angle = pi - theta sees the plan in REP-103 orientation.
 
-``--model a1|a2|a3|c1|s1|s2|s3`` reports another model (the A-series with their scan modes);
-``--baudrate RATE`` answers on the pseudo-terminal only when its client set that rate.
+``--model a1|a2|a3|c1|s1|s2|s3`` is that model: its model byte, firmware, scan modes, serial
+rate and motor control (the A1 on the DTR line, the A2 and A3 by PWM through their accessory
+board, by DTR with ``--no-accessory-board``, the S-series in rpm, the C1 on its own).
+It answers on the pseudo-terminal only when its client set the model's rate (the S1's 256000 by
+default), as a real device hears only its own; ``--baudrate RATE`` sets another, 0 any rate.
 Faults for testing recovery: ``--corrupt-rate`` / ``--drop-rate`` (per streamed byte),
 ``--cut-rate`` (per streamed frame: a run of bytes lost from a random one to the frame's end),
 ``--silent-after``/``--silent-for``, ``--health warning|error``, ``--conf-answer ENTRY=VALUE``
@@ -45,6 +48,7 @@ from .simulation import (BUNDLED_PLANS, FloorPlan, load_floor_plan, NOISELESS, N
                          SENSOR_MODELS, simulate_scan)
 
 PROG = 's1_emulator'
+RPLIDAR_PROG = 'rplidar_emulator'
 EXIT_INTERRUPTED = 130
 
 
@@ -101,16 +105,17 @@ def _conf_answer(text: str) -> str:
     return text
 
 
-def parser() -> argparse.ArgumentParser:
+def parser(prog: str = PROG) -> argparse.ArgumentParser:
     """
     Return the command-line parser.
 
+    :param prog: the program's name, ``s1_emulator`` or ``rplidar_emulator``
     :return: the parser
     """
     p = Parser(
-        prog=PROG,
-        description='An RPLIDAR S1 speaking the real byte protocol on a pseudo-terminal (and '
-                    'TCP), streaming a simulated floor plan in real time.',
+        prog=prog,
+        description='An RPLIDAR (an S1 by default) speaking the real byte protocol on a '
+                    'pseudo-terminal (and TCP), streaming a simulated floor plan in real time.',
         epilog='Lines on standard input control it while it runs: unplug, replug, silent SECONDS, '
                'health ok|warning|error [RESETS], corrupt RATE, drop RATE, cut RATE, conf '
                'ENTRY=VALUE, clock, quit. Exit status: 0 after quit or SIGTERM, 2 on a user '
@@ -119,12 +124,16 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--link', help='symlink to point at the pseudo-terminal, e.g. ttyS1 '
                                   '(default: none, only the pty path is printed)')
     p.add_argument('--model', choices=tuple(EMULATED_MODELS), default='s1',
-                   help='the model it reports in GET_INFO; the A-series offer Standard, Express '
-                        "(typical) and Boost, the others the S1's modes (default: %(default)s)")
-    p.add_argument('--baudrate', type=bounded(int, 1),
+                   help='the model it is: its model byte, firmware, scan modes, serial rate '
+                        'and motor control (default: %(default)s)')
+    p.add_argument('--no-accessory-board', action='store_true',
+                   help='an A2 or A3 without its accessory board: the motor on the DTR line, '
+                        'not PWM (default: with the board)')
+    p.add_argument('--baudrate', type=bounded(int, 0),
                    help='answer on the pseudo-terminal only when its client set this rate, '
-                        'bits per second, as a real device hears only its own (Linux) '
-                        '(default: any rate)')
+                        'bits per second, as a real device hears only its own (Linux); 0: any '
+                        "rate (default: the model's: A1, A2 115200, A3, S1 256000, C1 460800, "
+                        'S2, S3 1000000)')
     p.add_argument('--tcp-port', type=bounded(int, 0, 65535),
                    help='also serve on this TCP port (0 = any free port; S1 TCP: 20108) '
                         '(default: no TCP)')
@@ -145,9 +154,10 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--noiseless', action='store_true',
                    help='exact ranges, no noise (default: off)')
     p.add_argument('--seed', type=int, default=0, help='random seed (default: %(default)s)')
-    p.add_argument('--firmware', type=_firmware, default='1.28',
-                   help='firmware version MAJOR.MINOR (default: %(default)s; before 1.24 '
-                        'there is no GET_LIDAR_CONF)')
+    p.add_argument('--firmware', type=_firmware,
+                   help="firmware version MAJOR.MINOR; an A-series' before 1.24 has no "
+                        "GET_LIDAR_CONF, only GET_SAMPLERATE (default: the model's: A1 1.29, "
+                        'A2 1.27, A3 1.29, S1 1.28, C1, S2 and S3 1.02)')
     p.add_argument('--corrupt-rate', type=probability, default=0.0,
                    help='probability that a streamed byte is corrupted (default: '
                         '%(default)s)')
@@ -221,10 +231,14 @@ def _serve(args):
         faults.silent_until_s = faults.silent_from_s + args.silent_for
     if args.link:
         _check_link(args.link)
+    model = EMULATED_MODELS[args.model]
+    if args.no_accessory_board:
+        model = model.without_accessory_board()
+    baudrate = model.baudrate if args.baudrate is None else args.baudrate or None
     try:
-        pty_port = PtyPort(args.link, args.baudrate)
+        pty_port = PtyPort(args.link, baudrate)
     except OSError as error:
-        option = '--link' if args.baudrate is None else '--link/--baudrate'
+        option = '--link' if baudrate is None else '--link/--baudrate'
         raise UserError(f'{option} {args.link}: {error.strerror or error}') from None
     listener = None
     if args.tcp_port is not None:
@@ -234,9 +248,8 @@ def _serve(args):
             pty_port.unplug()
             raise UserError(f'--tcp-host/--tcp-port {args.tcp_host}:{args.tcp_port}: '
                             f'{error.strerror or error}') from None
-    model, modes, typical_mode = EMULATED_MODELS[args.model]
-    emulator = Emulator(scene, faults, args.firmware, args.seed, pty_port, listener, modes,
-                        typical_mode, model)
+    emulator = Emulator(scene, faults, args.firmware or model.firmware, args.seed, pty_port,
+                        listener, model.modes, model.typical_mode, model)
     try:
         signal.signal(signal.SIGTERM, lambda *_: emulator.commands.put('quit'))
         # A shell starts a script's background jobs with SIGINT ignored, and Python then leaves
@@ -249,8 +262,10 @@ def _serve(args):
         if listener is not None:
             host, port = listener.getsockname()[:2]
             print(f'tcp {host}:{port}', flush=True)
-        print(f'ready: RPLIDAR {model_name(model)} emulator, floor plan {plan_name}',
-              flush=True)
+        rate = f'{baudrate} baud' if baudrate else 'any rate'
+        print(f'ready: RPLIDAR {model_name(model.model)} emulator ({rate}, motor '
+              f'{model.motor.value if model.motor else "run by itself"}), floor plan '
+              f'{plan_name}', flush=True)
         threading.Thread(target=_read_stdin_commands, args=(emulator.commands,),
                          daemon=True).start()
         emulator.run()
@@ -258,21 +273,32 @@ def _serve(args):
         emulator.close()
 
 
-def main(argv=None) -> int:
+def main(argv=None, prog: str = PROG) -> int:
     """
     Run the emulator until ``quit`` on standard input, SIGTERM or Ctrl-C.
 
     :param argv: command-line arguments (default: ``sys.argv[1:]``)
+    :param prog: the program's name, ``s1_emulator`` or ``rplidar_emulator`` (see :func:`parser`)
     :return: exit status: 0 after quit or SIGTERM, 2 on a user error, 130 on Ctrl-C
     """
     try:
-        _serve(parser().parse_args(argv))
+        _serve(parser(prog).parse_args(argv))
     except UserError as error:
-        print(f'{PROG}: error: {error}', file=sys.stderr)
+        print(f'{prog}: error: {error}', file=sys.stderr)
         return USER_ERROR
     except KeyboardInterrupt:
         return EXIT_INTERRUPTED
     return 0
+
+
+def rplidar_main(argv=None) -> int:
+    """
+    Run ``rplidar_emulator``: :func:`main` under that name.
+
+    :param argv: command-line arguments (default: ``sys.argv[1:]``)
+    :return: exit status (see :func:`main`)
+    """
+    return main(argv, RPLIDAR_PROG)
 
 
 if __name__ == '__main__':

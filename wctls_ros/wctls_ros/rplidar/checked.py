@@ -39,11 +39,13 @@ class CapsuleLayout:
     :cvar size: bytes per capsule
     :cvar samples: samples per capsule
     :cvar reads_successor: a capsule's last samples are read with its successor's first bytes
+    :cvar angle_at: the start angle's offset, bytes
     """
 
     size = 0
     samples = 0
     reads_successor = False
+    angle_at = 2
 
     def read(self, capsules: np.ndarray, successors: Optional[np.ndarray]) -> tuple:
         """
@@ -56,6 +58,15 @@ class CapsuleLayout:
             (0: no return; negative: unreadable) and angle corrections
         """
         raise NotImplementedError
+
+    def device_times_us(self, capsules: np.ndarray) -> Optional[np.ndarray]:
+        """
+        Read the device's timestamps of intact capsules, for a format that carries one.
+
+        :param capsules: shape (n, size), uint8
+        :return: shape (n,), microseconds on the device's clock; None without
+        """
+        return None
 
 
 def checksum_passes(capsules: np.ndarray) -> np.ndarray:
@@ -119,7 +130,7 @@ class CheckedCapsuleDecoder:
         self._max_mm = int(max_distance_m * 1000.0)
         self._counts = dict.fromkeys(StreamCounts.__dataclass_fields__, 0)
         self._angles = AngleTrack(max_sweep_q8, min(max(nominal_q8, 1), max_sweep_q8))
-        self._framer = CapsuleFramer(layout.size, self._angles, self._counts)
+        self._framer = CapsuleFramer(layout.size, self._angles, self._counts, layout.angle_at)
         self._placer = CapsulePlacer(self._angles, self._framer, self._counts)
         self._pending = []              # a placed capsule waiting for its successor's bytes
         self._last_uniform_deg = None
@@ -144,7 +155,7 @@ class CheckedCapsuleDecoder:
         frames = self._frame(raw, regions, offset)
         if frames:
             after = regions[-1].end
-            self._placer.place(frames, int(raw[after + 2]) | int(raw[after + 3]) << 8)
+            self._placer.place(frames, self._framer.angle_field(raw, after))
         placed = [f for f in frames if placeable(f.placement, f.clean, f.cut)]
         self._counts['lost_frames'] += len(frames) - len(placed)
         if not self._layout.reads_successor:
@@ -176,11 +187,11 @@ class CheckedCapsuleDecoder:
                 frame_end = offset + min(end, at + size)
                 if not lost:
                     capsule = raw[at:at + size].copy()
-                    frames.append(_Frame(slot + j, int(capsule[2]) | int(capsule[3]) << 8,
+                    frames.append(_Frame(slot + j, self._framer.angle_field(capsule, 0),
                                          capsule, bool(checksum_passes(capsule[None])[0]),
                                          False, frame_end))
                     continue
-                field = int(raw[pos + 2]) | int(raw[pos + 3]) << 8 if j == 0 else _NO_ANGLE_FIELD
+                field = self._framer.angle_field(raw, pos) if j == 0 else _NO_ANGLE_FIELD
                 frames.append(_Frame(slot + j, field, None, False, cut or lost < 0, frame_end))
         self._counts['frames'] += len(frames)
         self._counts['damaged_frames'] += sum(not f.clean for f in frames)
@@ -212,6 +223,9 @@ class CheckedCapsuleDecoder:
         self._last_uniform_deg = uniform[-1]
         self._counts['samples'] += uniform.size
         k = np.tile(np.arange(per), count)
+        times = self._layout.device_times_us(np.array(whole))
+        if times is not None:
+            times = np.repeat(np.where([f.raw is not None for f in frames], times, -1), per)
         return Samples(angle_deg=np.mod(uniform - np.where(readable, corrections, 0.0).reshape(-1),
                                         360.0),
                        distance_mm=distance,
@@ -219,4 +233,5 @@ class CheckedCapsuleDecoder:
                        start=uniform < previous,
                        frame_end=np.repeat([f.end for f in frames], per),
                        samples_after=per - 1 - k,
-                       slot=np.repeat([f.slot for f in frames], per) * per + k)
+                       slot=np.repeat([f.slot for f in frames], per) * per + k,
+                       device_time_us=times)

@@ -4,13 +4,16 @@
 """
 The RPLIDAR session on a background thread: handshake, scanning, turn assembly and recovery.
 
-A session stops any stale stream (STOP, then drain), reads the device info and health, lists the
-scan modes (GET_LIDAR_CONF; GET_SAMPLERATE on firmware older than 1.24), sets the motor speed and
+A session stops any stale stream (STOP, then drain), reads the device info and health, learns
+how the model's motor is driven (as SLAMTEC's SDK does: the S-series in rpm with MOTOR_SPEED;
+an A2, A3 or C1 whose accessory board says so by PWM with SET_MOTOR_PWM; otherwise the serial
+DTR line, cleared to run), lists the scan modes (GET_LIDAR_CONF; GET_SAMPLERATE on an A-series
+firmware older than 1.24), starts the motor (at ``scan_frequency`` where the model can) and
 starts the requested mode (the typical one by default, or when the device lacks the requested
 one, with a warning that lists its modes: DenseBoost on the S1). It then decodes the
 stream with the decoder of the mode's answer type (standard nodes 0x81, express capsules 0x82,
-ultra capsules 0x84, dense capsules 0x85) and hands every complete turn to a callback, on this
-thread.
+HQ capsules 0x83, ultra capsules 0x84, dense capsules 0x85, ultra-dense capsules 0x86) and
+hands every complete turn to a callback, on this thread.
 
 The handshake's answers carry no checksum: a scan mode's sample time and range and the number
 of modes are checked for plausibility, and an implausible value is replaced (the S1's own, an
@@ -24,6 +27,10 @@ valid frame restart the session after an exponential back-off (50 ms doubling to
 50 ms once a turn is published), counted as reconnects; a health warning is logged; a health
 error gets a RESET, a ~2 s wait and a new session, and after ``health_reset_attempts`` failed
 resets the driver gives up with a clear error until the motor is started again.
+
+:meth:`RplidarDriver.close` ends scanning and stops the motor the model's way (STOP, then
+MOTOR_SPEED 0, SET_MOTOR_PWM 0 or DTR set); it may be called from a signal handler and after the
+port is gone.
 """
 
 from dataclasses import dataclass, replace
@@ -36,16 +43,27 @@ import numpy as np
 
 from .capsules import DenseCapsuleDecoder
 from .express import ExpressCapsuleDecoder
-from .protocol import (AnswerType, Command, CONF_COMMANDS_FIRMWARE, ConfType, decode_conf_value,
-                       DESCRIPTOR_SIZE, DeviceHealth, DeviceInfo, encode_conf_request,
-                       encode_express_scan, encode_motor_speed, encode_request, find_descriptor,
-                       HealthStatus, ProtocolError, SampleRate, ScanMode, SendMode,
-                       StandardNodeDecoder, StreamCounts)
+from .hq import HqCapsuleDecoder
+from .protocol import (ACC_BOARD_MAJOR_IDS, AccBoardFlag, AnswerType, Command, ConfType,
+                       decode_conf_value, DESCRIPTOR_SIZE, DeviceHealth, DeviceInfo,
+                       encode_acc_board_flag_request, encode_conf_request, encode_express_scan,
+                       encode_motor_pwm, encode_motor_speed, encode_request, find_descriptor,
+                       HealthStatus, MotorControl, ProtocolError, RPM_MOTOR_MAJOR_ID,
+                       SampleRate, ScanMode, SendMode, StandardNodeDecoder, StreamCounts)
 from .transport import drain, LinkError, SerialLink, TcpLink
 from .turns import TurnAssembler
 from .ultra import UltraCapsuleDecoder
+from .ultradense import UltraDenseCapsuleDecoder
 
 ANSWER_TIMEOUT_S = 1.0
+# The SDK waits this long for GET_ACC_BOARD_FLAG; no answer means no accessory board.
+ACC_BOARD_TIMEOUT_S = 0.5
+# An accessory board's PWM for the device's desired rotation, when the device does not report
+# it (firmware without GET_LIDAR_CONF): the 1.x SDK's default PWM and the A-series' 600 rpm.
+DEFAULT_PWM_REFERENCE = (600, 660)
+# What each family's serial rate is (SLAMTEC's SDK and sllidar_ros2's launch files), for hints.
+BAUDRATE_HINT = ('A1, A2M8 115200; A2M7, A2M12, A3, S1 256000; C1 460800; S2, S3 1000000; '
+                 '0 probes them')
 # serial_baudrate 0: probe the rates of the RPLIDAR family with GET_INFO, answered within
 # milliseconds by a device at the right rate.
 AUTO_BAUDRATE = 0
@@ -72,16 +90,20 @@ PLAUSIBLE_MAX_DISTANCE_M = (1.0, 65.535)
 MAX_SCAN_MODES = 16
 # What replaces an implausible sample time, by the mode's answer type: the S1's for standard
 # nodes and dense capsules; for the capsules an S1 does not stream, an A-series device's 4 kHz
-# Express and 8 kHz Boost. An implausible range is replaced by the S1's.
+# Express and 8 kHz Boost (and HQ), and an S2/S3's 32 kHz for ultra-dense capsules. An
+# implausible range is replaced by the S1's.
 FALLBACK_US_PER_SAMPLE = {AnswerType.MEASUREMENT: 244.0, AnswerType.DENSE_CAPSULE: 108.0,
-                          AnswerType.EXPRESS_CAPSULE: 250.0, AnswerType.ULTRA_CAPSULE: 125.0}
+                          AnswerType.EXPRESS_CAPSULE: 250.0, AnswerType.ULTRA_CAPSULE: 125.0,
+                          AnswerType.ULTRA_DENSE_CAPSULE: 31.25, AnswerType.HQ_CAPSULE: 125.0}
 S1_MAX_DISTANCE_M = 40.0
 _CHUNK_LOG_SIZE = 256
 # The capsule decoder of each capsule answer type (started by EXPRESS_SCAN with the mode's id,
 # built with the mode's sample time and range); standard nodes are started by SCAN.
 CAPSULE_DECODERS = {AnswerType.EXPRESS_CAPSULE: ExpressCapsuleDecoder,
+                    AnswerType.HQ_CAPSULE: HqCapsuleDecoder,
                     AnswerType.ULTRA_CAPSULE: UltraCapsuleDecoder,
-                    AnswerType.DENSE_CAPSULE: DenseCapsuleDecoder}
+                    AnswerType.DENSE_CAPSULE: DenseCapsuleDecoder,
+                    AnswerType.ULTRA_DENSE_CAPSULE: UltraDenseCapsuleDecoder}
 _DECODED_ANSWERS = (AnswerType.MEASUREMENT, *CAPSULE_DECODERS)
 
 
@@ -92,19 +114,21 @@ class DriverConfig:
 
     :ivar channel_type: ``'serial'`` or ``'tcp'``
     :ivar serial_port: serial device path
-    :ivar serial_baudrate: bits per second (S1: 256000); :data:`AUTO_BAUDRATE` (0) probes
-        :data:`PROBED_BAUDRATES`
+    :ivar serial_baudrate: bits per second (the model's: :data:`BAUDRATE_HINT`);
+        :data:`AUTO_BAUDRATE` (0) probes :data:`PROBED_BAUDRATES`
     :ivar tcp_ip: address for ``'tcp'``
     :ivar tcp_port: port for ``'tcp'``
     :ivar scan_mode: scan mode name; ``''`` = the device's typical mode
-    :ivar scan_frequency_hz: requested rotation frequency, Hz (MOTOR_SPEED = 60 x this rpm)
+    :ivar scan_frequency_hz: requested rotation frequency, Hz: MOTOR_SPEED 60 x this rpm on the
+        S-series, the PWM scaled from the device's desired rotation with an accessory board;
+        a motor on the DTR line only turns on and off
     :ivar data_timeout_s: silence (or garbage) that restarts the session, s
     :ivar health_reset_attempts: RESETs tried on a health error before giving up
     """
 
     channel_type: str = 'serial'
     serial_port: str = '/dev/ttyUSB0'
-    serial_baudrate: int = 256000
+    serial_baudrate: int = AUTO_BAUDRATE
     tcp_ip: str = '192.168.0.7'
     tcp_port: int = 20108
     scan_mode: str = ''
@@ -139,6 +163,7 @@ class DriverStatus:
     :ivar baudrate: the serial link's rate, bits per second (the probed one with
         :data:`AUTO_BAUDRATE`; 0 for TCP or before a rate answered)
     :ivar device: the device info, once read
+    :ivar motor: how the device's motor is driven, once learned
     :ivar health: the last health answer
     :ivar mode: the scan mode streaming (or last streamed)
     :ivar turns: turns handed to the callback
@@ -161,6 +186,7 @@ class DriverStatus:
     link: str = ''
     baudrate: int = 0
     device: Optional[DeviceInfo] = None
+    motor: Optional[MotorControl] = None
     health: Optional[DeviceHealth] = None
     mode: Optional[ScanMode] = None
     turns: int = 0
@@ -241,8 +267,11 @@ class RplidarDriver:
         self._motor_lock = threading.Lock()
         self._motor_on = True
         self._motor_requests = 0
-        self._lock = threading.Lock()
+        # Writers of the status hold this lock; readers take the snapshot without it. Reentrant,
+        # and never held while waiting, so that close() in a signal handler cannot deadlock.
+        self._lock = threading.RLock()
         self._status = DriverStatus()
+        self._dtr_hint_logged = False
         self._thread = threading.Thread(target=self._run, name='rplidar_reader', daemon=True)
 
     def start(self):
@@ -251,12 +280,14 @@ class RplidarDriver:
 
     def close(self, timeout_s: float = 3.0):
         """
-        Stop the reader thread (the device is told to stop scanning if it is reachable).
+        Stop the reader thread, which stops scanning and the motor if the device is reachable.
+
+        Safe to call more than once, from a signal handler, and after the port is gone.
 
         :param timeout_s: longest wait for the thread, s
         """
         self._closing.set()
-        if self._thread.is_alive():
+        if self._thread.is_alive() and self._thread is not threading.current_thread():
             self._thread.join(timeout_s)
         self._update(state=DriverState.CLOSED, message='closed')
 
@@ -276,8 +307,7 @@ class RplidarDriver:
 
         :return: :class:`DriverStatus`
         """
-        with self._lock:
-            return self._status
+        return self._status
 
     def reader_cpu_s(self) -> float:
         """
@@ -325,6 +355,8 @@ class RplidarDriver:
                 self._log.error(f'unexpected {type(error).__name__} in the RPLIDAR reader: '
                                 f'{error}; reconnecting', throttle_duration_sec=LOG_THROTTLE_S)
             finally:
+                if self._closing.is_set():
+                    self._shut_down(link)
                 link.close()
             if failed:
                 self._back_off()
@@ -402,7 +434,7 @@ class RplidarDriver:
                 if failed_resets >= self._config.health_reset_attempts:
                     raise GiveUp('the device reports a health error (code '
                                  f'0x{health.error_code:04X}) after {failed_resets} resets: '
-                                 'power-cycle the S1')
+                                 'power-cycle the device')
                 failed_resets += 1
                 self._reset(link, health, failed_resets)
                 continue
@@ -411,11 +443,68 @@ class RplidarDriver:
                 self._log.warning(f'the device reports a health warning (status {health.status}, '
                                   f'code 0x{health.error_code:04X}); scanning anyway',
                                   throttle_duration_sec=LOG_THROTTLE_S)
+            self._update(motor=self._motor_control(link, device))
             mode = self._select_mode(*self._list_modes(link, device))
             if self._motor_on:
                 self._scan(link, device, mode)
             else:
                 self._idle(link)
+
+    def _motor_control(self, link, device: DeviceInfo) -> MotorControl:
+        """Learn how the device's motor is driven, as the SDK does (checkMotorCtrlSupport)."""
+        major = device.model >> 4
+        if major >= RPM_MOTOR_MAJOR_ID:
+            return MotorControl.RPM
+        if major not in ACC_BOARD_MAJOR_IDS:
+            return MotorControl.DTR
+        try:
+            flag = AccBoardFlag.decode(self._ask(
+                link, Command.GET_ACC_BOARD_FLAG, AnswerType.ACC_BOARD_FLAG,
+                encode_acc_board_flag_request(), timeout_s=ACC_BOARD_TIMEOUT_S))
+        except (DeviceError, ProtocolError):
+            return MotorControl.DTR        # no accessory board to answer
+        return MotorControl.PWM if flag.motor_pwm else MotorControl.DTR
+
+    def _start_motor(self, link, device: DeviceInfo):
+        """Run the motor the model's way, at ``scan_frequency`` where the model can."""
+        motor = self.status().motor
+        frequency_hz = self._config.scan_frequency_hz
+        if motor == MotorControl.RPM:
+            link.write(encode_motor_speed(round(60.0 * frequency_hz)))
+        elif motor == MotorControl.PWM:
+            rpm, pwm = DEFAULT_PWM_REFERENCE
+            if device.supports_conf:
+                rpm, pwm = self._conf(link, ConfType.DESIRED_ROTATION)
+                rpm, pwm = (rpm, pwm) if rpm and pwm else DEFAULT_PWM_REFERENCE
+            # The board's PWM sets the motor's voltage, not its speed: proportional is close.
+            link.write(encode_motor_pwm(min(round(pwm * 60.0 * frequency_hz / rpm), 0xFFFF)))
+        else:
+            wired = link.set_dtr(False)
+            if not self._dtr_hint_logged:
+                self._dtr_hint_logged = True
+                self._log.info(
+                    f'the {device.model_name} motor is switched by the DTR line: on and off only, '
+                    f'scan_frequency ({frequency_hz:g} Hz) is not applied'
+                    + ('' if wired else f'; {link.name} has no DTR line, the motor runs as the '
+                       'device leaves it'))
+
+    def _stop_motor(self, link):
+        """Stop the motor the model's way (nothing before the model is known)."""
+        motor = self.status().motor
+        if motor == MotorControl.RPM:
+            link.write(encode_motor_speed(0))
+        elif motor == MotorControl.PWM:
+            link.write(encode_motor_pwm(0))
+        elif motor == MotorControl.DTR:
+            link.set_dtr(True)
+
+    def _shut_down(self, link):
+        """On close: end scanning, then stop the motor; a link already gone is no error."""
+        try:
+            link.write(encode_request(Command.STOP))
+            self._stop_motor(link)
+        except LinkError as error:
+            self._log.info(f'closing: the motor could not be told to stop ({error})')
 
     def _stop_stream(self, link):
         """Stop any scan in progress and discard the bytes still arriving."""
@@ -440,8 +529,8 @@ class RplidarDriver:
         data = link.read(remaining) if remaining > 0 else b''
         if not data:
             raise DeviceError(f'no {what} within {timeout_s:g} s on {link.name}: check '
-                              'the port, serial_baudrate (S1: 256000; 0 probes the rates), the '
-                              'cable and the power (a weak USB port cannot run the S1)')
+                              f'the port, serial_baudrate ({BAUDRATE_HINT}), the cable and the '
+                              'power (a weak USB port cannot run the motor)')
         return data
 
     def _request(self, link, request: bytes, answer_type: int, what: str,
@@ -486,7 +575,7 @@ class RplidarDriver:
         warnings = []
         count = None
         max_distance_m = LEGACY_MAX_DISTANCE_M
-        if device.firmware >= CONF_COMMANDS_FIRMWARE:
+        if device.supports_conf:
             count = self._conf(link, ConfType.MODE_COUNT)
             if not 1 <= count <= MAX_SCAN_MODES:
                 warnings.append(f'{count} scan modes (plausible: 1-{MAX_SCAN_MODES}): using the '
@@ -544,14 +633,14 @@ class RplidarDriver:
 
     def _idle(self, link):
         """Keep the motor idle and the link watched until scanning is requested."""
-        link.write(encode_motor_speed(0))
+        self._stop_motor(link)
         self._update(state=DriverState.MOTOR_STOPPED, message='motor stopped on request')
         while not self._closing.is_set() and not self._motor_on:
             self._update(add_flushed_bytes=len(link.read(STREAM_READ_TIMEOUT_S)))
 
     def _scan(self, link, device: DeviceInfo, mode: ScanMode):
         """Start ``mode`` and stream turns until closing or a motor stop request."""
-        link.write(encode_motor_speed(round(60.0 * self._config.scan_frequency_hz)))
+        self._start_motor(link, device)
         if mode.answer_type == AnswerType.MEASUREMENT:
             request, decoder = encode_request(Command.SCAN), StandardNodeDecoder()
         else:
@@ -622,7 +711,7 @@ class RplidarDriver:
             if now - last_samples_s > self._config.data_timeout_s:
                 raise DeviceError(f'bytes arrive on {link.name} but no valid {mode.name} frame '
                                   f'for {self._config.data_timeout_s:g} s: wrong '
-                                  'serial_baudrate (S1: 256000) or a damaged link?')
+                                  f'serial_baudrate ({BAUDRATE_HINT}) or a damaged link?')
 
     def _hand_over(self, turn, mode: ScanMode):
         """Give a turn to the callback (a success: the back-off restarts); never fatal."""

@@ -103,10 +103,15 @@ class CapsuleFramer:
     :param angles: the stream's start angle track (its sweep tells a capsule arriving early)
     :param counts: the decoder's counters (``StreamCounts`` fields), updated in place: frames
         and lost frames in gaps, resyncs, discarded bytes
+    :param angle_at: the start angle's offset in the capsule, bytes (2; 8 in the ultra-dense
+        capsule, after its timestamp and status)
     """
 
-    def __init__(self, capsule_size: int, angles: 'AngleTrack', counts: dict):
+    def __init__(self, capsule_size: int, angles: 'AngleTrack', counts: dict,
+                 angle_at: int = 2):
         self._size = capsule_size
+        self._angle_at = angle_at
+        self._head = angle_at + 2       # bytes up to the end of the start angle
         self._max_shift = round(_MAX_SHIFT_PER_84 * capsule_size / 84)
         self._angles = angles
         self._counts = counts
@@ -163,6 +168,17 @@ class CapsuleFramer:
         self._offset += pos
         return raw, regions, offset
 
+    def angle_field(self, raw: np.ndarray, pos: int) -> int:
+        """
+        Read the start angle field (with the S flag) of the capsule whose header is at ``pos``.
+
+        :param raw: the received bytes
+        :param pos: the capsule's first byte
+        :return: the u16 field
+        """
+        at = pos + self._angle_at
+        return int(raw[at]) | int(raw[at + 1]) << 8
+
     def slip(self, capsules: int):
         """
         Count capsules the stream lost (or counted) without a trace in its bytes.
@@ -193,8 +209,8 @@ class CapsuleFramer:
         size = raw.size
         for count in range(1, _MAX_EXACT_REGION + 1):
             expected, reach = pos + count * self._size, count * self._max_shift
-            exact = expected + 4 <= size and headers[expected]
-            if count == 1 and expected + 4 <= size and not (
+            exact = expected + self._head <= size and headers[expected]
+            if count == 1 and expected + self._head <= size and not (
                     exact and self._follows(raw, pos, expected)):
                 # A header in sequence wins over one merely a capsule on, which may lie in the
                 # distances of a successor that arrived early. Two sweeps on, after a run of
@@ -209,10 +225,10 @@ class CapsuleFramer:
                 return count, expected
             if count > _MAX_REGION:
                 # Beyond a few capsules only an exact spacing is evidence enough.
-                if expected + 4 > size:
+                if expected + self._head > size:
                     return None
                 continue
-            if expected + reach + 4 > size:
+            if expected + reach + self._head > size:
                 return None
             near = np.flatnonzero(headers[expected - reach:expected + reach + 1])
             if near.size:
@@ -234,8 +250,8 @@ class CapsuleFramer:
         :param sweeps: capsules on
         :return: True when its start angle follows at the tracked sweep
         """
-        this = start_q8(int(raw[pos + 2]) | int(raw[pos + 3]) << 8)
-        following = start_q8(int(raw[at + 2]) | int(raw[at + 3]) << 8)
+        this = start_q8(self.angle_field(raw, pos))
+        following = start_q8(self.angle_field(raw, at))
         if this is None or following is None:
             return False
         sweep_q8 = self._angles.sweep_deg() * 256.0

@@ -52,6 +52,8 @@ class Command(enum.IntEnum):
     GET_SAMPLERATE = 0x59
     GET_LIDAR_CONF = 0x84
     MOTOR_SPEED = 0xA8
+    SET_MOTOR_PWM = 0xF0
+    GET_ACC_BOARD_FLAG = 0xFF
 
 
 class AnswerType(enum.IntEnum):
@@ -63,8 +65,11 @@ class AnswerType(enum.IntEnum):
     LIDAR_CONF = 0x20
     MEASUREMENT = 0x81
     EXPRESS_CAPSULE = 0x82
+    HQ_CAPSULE = 0x83
     ULTRA_CAPSULE = 0x84
     DENSE_CAPSULE = 0x85
+    ULTRA_DENSE_CAPSULE = 0x86
+    ACC_BOARD_FLAG = 0xFF
 
 
 class SendMode(enum.IntEnum):
@@ -146,6 +151,25 @@ def encode_motor_speed(rpm: int) -> bytes:
     :return: the request bytes
     """
     return encode_request(Command.MOTOR_SPEED, struct.pack('<H', rpm))
+
+
+def encode_motor_pwm(pwm: int) -> bytes:
+    """
+    Encode SET_MOTOR_PWM (0xF0): u16 duty of an A2/A3 accessory board's motor driver, 0 = off.
+
+    :param pwm: PWM value
+    :return: the request bytes
+    """
+    return encode_request(Command.SET_MOTOR_PWM, struct.pack('<H', pwm))
+
+
+def encode_acc_board_flag_request() -> bytes:
+    """
+    Encode GET_ACC_BOARD_FLAG (0xFF) with its reserved u32 (0).
+
+    :return: the request bytes
+    """
+    return encode_request(Command.GET_ACC_BOARD_FLAG, struct.pack('<I', 0))
 
 
 def encode_express_scan(working_mode: int, flags: int = 0, param: int = 0) -> bytes:
@@ -320,6 +344,36 @@ class _StructAnswer:
 # The model families by the major id, the model byte's high nibble (its low nibble is the
 # sub-model: 0x61 is the S1M1), as SLAMTEC's SDK names them.
 MODEL_FAMILIES = {1: 'A1', 2: 'A2', 3: 'A3', 4: 'C1', 6: 'S1', 7: 'S2', 8: 'S3'}
+# Major ids from which SLAMTEC's SDK (sl_lidar_driver.cpp) treats a device as a new design that
+# always answers GET_LIDAR_CONF (the C1 on), asks an A2/A3/C1 whether an accessory board drives
+# its motor by PWM (GET_ACC_BOARD_FLAG), and sets an S-series motor's speed in rpm (MOTOR_SPEED).
+NEW_DESIGN_MAJOR_ID = 4
+ACC_BOARD_MAJOR_IDS = range(2, 6)
+RPM_MOTOR_MAJOR_ID = 6
+
+
+class MotorControl(enum.Enum):
+    """How the host starts, stops and speeds a device's motor (the SDK's three ways)."""
+
+    DTR = 'DTR line'            # on/off only: DTR cleared runs the motor (A1; A2/A3 bare)
+    PWM = 'PWM (SET_MOTOR_PWM)'    # an A2/A3 accessory board's motor driver
+    RPM = 'rpm (MOTOR_SPEED)'      # the S-series' own speed control
+
+
+def native_baudrate(model: int, hardware: int) -> int:
+    """
+    Return a model's serial rate, as SLAMTEC's SDK reckons it (``_getNativeBaudRate``).
+
+    :param model: the model byte of GET_INFO
+    :param hardware: the hardware revision of GET_INFO
+    :return: bits per second; 0 for a model it does not know
+    """
+    major = model >> 4
+    if major in (1, 2, 3):
+        return 256000 if hardware >= 6 else 115200
+    if major == 8 and model == 0x82:
+        return 460800
+    return {4: 460800, 6: 256000, 7: 1000000, 8: 1000000}.get(major, 0)
 
 
 def model_name(model: int) -> str:
@@ -364,6 +418,11 @@ class DeviceInfo(_StructAnswer):
     def model_name(self) -> str:
         """Return the model's name, e.g. ``'S1M1'`` (see :func:`model_name`)."""
         return model_name(self.model)
+
+    @property
+    def supports_conf(self) -> bool:
+        """Tell whether it answers GET_LIDAR_CONF: a new design or firmware 1.24 on (the SDK's)."""
+        return self.model >> 4 >= NEW_DESIGN_MAJOR_ID or self.firmware >= CONF_COMMANDS_FIRMWARE
 
     @property
     def firmware_version(self) -> str:
@@ -411,6 +470,25 @@ class SampleRate(_StructAnswer):
 
     standard_us: int
     express_us: int
+
+
+@dataclass(frozen=True)
+class AccBoardFlag(_StructAnswer):
+    """
+    GET_ACC_BOARD_FLAG answer (type 0xFF, 4 bytes).
+
+    :ivar support_flag: bit 0 set: an accessory board drives the motor (SET_MOTOR_PWM)
+    """
+
+    _FORMAT = '<I'
+    ANSWER_TYPE = AnswerType.ACC_BOARD_FLAG
+
+    support_flag: int
+
+    @property
+    def motor_pwm(self) -> bool:
+        """Tell whether the motor takes SET_MOTOR_PWM."""
+        return bool(self.support_flag & 1)
 
 
 @dataclass(frozen=True)
@@ -529,6 +607,9 @@ class Samples:
     :ivar samples_after: samples measured after this one within the same frame
     :ivar slot: the sample's position in the stream, counting the frames sent before it by their
         bytes (so corrupted or lost frames still count): frame index x samples per frame + k
+    :ivar device_time_us: the timestamp of the sample's frame on the device's clock,
+        microseconds, for formats that carry one (ultra-dense capsules); -1 where the format
+        carries none or the frame's was unreadable (the default)
     """
 
     angle_deg: np.ndarray
@@ -538,6 +619,11 @@ class Samples:
     frame_end: np.ndarray
     samples_after: np.ndarray
     slot: np.ndarray
+    device_time_us: Optional[np.ndarray] = None
+
+    def __post_init__(self):
+        if self.device_time_us is None:
+            object.__setattr__(self, 'device_time_us', np.full(len(self.angle_deg), -1, np.int64))
 
     def __len__(self):
         return len(self.angle_deg)
@@ -553,7 +639,7 @@ class Samples:
         if len(parts) == 1:
             return parts[0]
         fields = ('angle_deg', 'distance_mm', 'quality', 'start', 'frame_end', 'samples_after',
-                  'slot')
+                  'slot', 'device_time_us')
         if not parts:
             dtypes = (np.float64, np.float64, np.uint8, bool, np.int64, np.int64, np.int64)
             return cls(*(np.empty(0, dtype) for dtype in dtypes))

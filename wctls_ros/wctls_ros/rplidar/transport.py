@@ -4,9 +4,11 @@
 """
 Byte links to an RPLIDAR: a serial port (pyserial) or a TCP socket.
 
-The serial port is opened with ``dsrdtr=False, rtscts=False`` and the driver never sets DTR or
-RTS: the S1 has no DTR motor control and a pseudo-terminal rejects the modem-line ioctls. Every
-failure is raised as :class:`LinkError` with a message that says what to check.
+The serial port is opened with ``dsrdtr=False, rtscts=False``; pyserial sets DTR on opening,
+which keeps the motor of an A1 (or of an A2/A3 without its accessory board) still until the
+driver clears it (:meth:`SerialLink.set_dtr`). A pseudo-terminal has no modem lines: there
+setting DTR reports False. Every failure is raised as :class:`LinkError` with a message that says
+what to check.
 """
 
 import errno
@@ -27,7 +29,7 @@ def _explain_serial_error(port: str, error: serial.SerialException) -> str:
     """Turn a pyserial failure into a message that says what to check."""
     code = getattr(error, 'errno', None)
     if code == errno.ENOENT:
-        hint = ('no such device: is the S1 plugged in and powered? Check serial_port '
+        hint = ('no such device: is the RPLIDAR plugged in and powered? Check serial_port '
                 '(ls -l /dev/ttyUSB* /dev/rplidar)')
     elif code == errno.EACCES:
         hint = ('permission denied: add the user to the dialout group (sudo usermod -aG dialout '
@@ -41,10 +43,10 @@ def _explain_serial_error(port: str, error: serial.SerialException) -> str:
 
 class SerialLink:
     """
-    A serial port at the S1's 8N1 line settings.
+    A serial port at the RPLIDARs' 8N1 line settings.
 
     :param port: device path, e.g. ``/dev/ttyUSB0``
-    :param baudrate: bits per second (256000 for the S1)
+    :param baudrate: bits per second (the model's: 115200 to 1000000)
     :raises LinkError: when the port cannot be opened
     """
 
@@ -70,6 +72,22 @@ class SerialLink:
         except serial.SerialException as error:
             raise LinkError(_explain_serial_error(self._port, error)) from error
 
+    def set_dtr(self, asserted: bool) -> bool:
+        """
+        Set or clear the DTR line (an A1's motor runs while it is cleared).
+
+        :param asserted: True to set DTR, False to clear it
+        :return: False when the port has no modem lines (a pseudo-terminal), else True
+        :raises LinkError: when the device is gone
+        """
+        try:
+            self._serial.dtr = asserted
+        except (serial.SerialException, OSError) as error:
+            if getattr(error, 'errno', None) in (errno.EINVAL, errno.ENOTTY):
+                return False
+            raise LinkError(_explain_serial_error(self._port, error)) from error
+        return True
+
     def read(self, timeout_s: float) -> bytes:
         """
         Wait for bytes and return all that have arrived.
@@ -89,8 +107,11 @@ class SerialLink:
             raise LinkError(_explain_serial_error(self._port, error)) from error
 
     def close(self):
-        """Close the port."""
-        self._serial.close()
+        """Close the port (a port whose device is gone closes without an error)."""
+        try:
+            self._serial.close()
+        except (serial.SerialException, OSError):
+            pass
 
 
 class TcpLink:
@@ -143,6 +164,15 @@ class TcpLink:
         if not data:
             raise LinkError(f'{self.name}: the peer closed the connection')
         return data
+
+    def set_dtr(self, asserted: bool) -> bool:
+        """
+        Report that a TCP link has no DTR line.
+
+        :param asserted: ignored
+        :return: False
+        """
+        return False
 
     def close(self):
         """Close the connection."""

@@ -21,12 +21,16 @@ reader-thread delays, which a loaded machine makes long, do not leak into the st
 
 import collections
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 
 from .protocol import Samples
 
 _MISSED_START_DROP_DEG = 270.0
+# How far corrected angles scatter about their grid: express corrections reach 8 degrees, the
+# ultra capsules' distance-dependent offsets about as far.
+_CORRECTION_SPAN_DEG = 16.0
 
 
 class SampleClock:
@@ -102,6 +106,9 @@ class Turn:
     :ivar first_sample_s: estimated measurement time of the first sample, monotonic clock, s
     :ivar period_s: rotation period from the device's sample clock, s
     :ivar last_byte_s: receive time of the frame carrying the last sample, monotonic clock, s
+    :ivar device_time_us: the device's timestamp of the frame carrying the first sample,
+        microseconds on its clock (formats that carry one: ultra-dense capsules); None when
+        the format has none or that frame's was unreadable
     """
 
     angle_deg: np.ndarray
@@ -110,6 +117,7 @@ class Turn:
     first_sample_s: float
     period_s: float
     last_byte_s: float
+    device_time_us: Optional[int] = None
 
 
 class TurnAssembler:
@@ -160,20 +168,25 @@ class TurnAssembler:
         first = self._last_angle is None
         previous = np.concatenate([[angle[0] if first else self._last_angle], angle[:-1]])
         drop = previous - angle
-        boundary = (samples.start & (drop > 0.0)) | (drop > _MISSED_START_DROP_DEG)
+        # A corrected angle (express and ultra capsules) may lie a few degrees before the grid
+        # angle whose wrap the S flag marks: a flag just before 360 degrees starts a turn too.
+        flagged = samples.start & ((drop > 0.0) | (angle > 360.0 - _CORRECTION_SPAN_DEG))
+        boundary = flagged | (drop > _MISSED_START_DROP_DEG)
         if self._step_deg is not None and not first:
             swept_deg = np.diff(samples.slot, prepend=self._last_slot) * self._step_deg
             # Wraps between consecutive samples by their slots; a fall in angle already shows
             # one (and is judged above), so only wraps the angles cannot show count here.
             wraps = np.floor((swept_deg + drop) / 360.0 + 0.5)
             boundary |= wraps >= 1.0 + (drop > 0.0)
+        cuts = self._without_echoes(np.flatnonzero(boundary), flagged, angle)
         self._last_angle = angle[-1]
         self._last_slot = samples.slot[-1]
         self._clock.add(samples.slot, measured_s)
-        columns = (angle, samples.distance_mm, samples.quality, samples.slot, received_s)
+        columns = (angle, samples.distance_mm, samples.quality, samples.slot, received_s,
+                   samples.device_time_us)
         turns = []
         begin = 0
-        for cut in np.flatnonzero(boundary):
+        for cut in cuts:
             self._append(columns, begin, cut)
             turn = self._close()
             if turn is not None:
@@ -181,6 +194,33 @@ class TurnAssembler:
             begin = cut
         self._append(columns, begin, len(angle))
         return turns
+
+    def _without_echoes(self, cuts: np.ndarray, flagged: np.ndarray, angle: np.ndarray) -> list:
+        """
+        Drop an unflagged turn boundary less than a quarter turn after the previous one.
+
+        Corrected angles scatter about the sample grid: near the wrap a turn's samples may
+        fall below 360 degrees and rise again (0.2, 359.6, 0.6), falls that are no new turn.
+
+        :param cuts: indices of the boundaries found in this chunk
+        :param flagged: True where the S flag marks a boundary
+        :param angle: the chunk's angles, degrees
+        :return: the indices kept
+        """
+        step_deg = self._step_deg
+        if step_deg is None:
+            rises = np.diff(angle)
+            rises = rises[(rises > 0.0) & (rises < _CORRECTION_SPAN_DEG)]
+            step_deg = float(np.median(rises)) if rises.size else None
+        if step_deg is None:
+            return list(cuts)
+        quarter = 90.0 / step_deg
+        kept, last = [], -self._size
+        for cut in cuts:
+            if flagged[cut] or cut - last >= quarter:
+                kept.append(cut)
+                last = cut
+        return kept
 
     def _append(self, columns: tuple, begin: int, end: int):
         """Add ``columns[begin:end]`` to the turn being assembled."""
@@ -198,7 +238,8 @@ class TurnAssembler:
         self._parts, self._size, self._complete = [], 0, True
         if not complete or not parts:
             return None
-        angle, distance, quality, slot, received_s = (np.concatenate(c) for c in zip(*parts))
+        angle, distance, quality, slot, received_s, device_time_us = (
+            np.concatenate(c) for c in zip(*parts))
         steps = np.diff(angle)
         steps = steps[steps > 0.0]
         if not steps.size:
@@ -210,4 +251,5 @@ class TurnAssembler:
         self._turn_end_s = first_sample_s + (2.0 - angle[0] / 360.0) * period_s
         return Turn(angle_deg=angle, distance_mm=distance, quality=quality,
                     first_sample_s=first_sample_s, period_s=period_s,
-                    last_byte_s=float(received_s[-1]))
+                    last_byte_s=float(received_s[-1]),
+                    device_time_us=int(device_time_us[0]) if device_time_us[0] >= 0 else None)

@@ -23,7 +23,7 @@ silences the device, sets the health it reports and replaces the values of GET_L
 entries it reports (:func:`parse_conf_answer`).
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 import struct
 from typing import Optional, Protocol
@@ -33,23 +33,29 @@ import numpy as np
 from ..express import (encode_express_capsules, EXPRESS_CAPSULE_SIZE,
                        EXPRESS_MAX_CORRECTION_Q3, EXPRESS_MAX_DISTANCE_MM,
                        EXPRESS_SAMPLES_PER_CAPSULE)
-from ..protocol import (AnswerType, CAPSULE_SIZE, Command, CONF_COMMANDS_FIRMWARE, ConfType,
+from ..hq import encode_hq_capsules, HQ_CAPSULE_SIZE, HQ_SAMPLES_PER_CAPSULE
+from ..protocol import (AccBoardFlag, AnswerType, CAPSULE_SIZE, Command, ConfType,
                         decode_conf_request, DeviceHealth, DeviceInfo, encode_answer,
                         encode_conf_value, encode_dense_capsules, encode_standard_nodes,
-                        FULL_TURN_Q6, HealthStatus, MODE_CONF_TYPES, NODE_SIZE, ProtocolError,
-                        RequestParser, ResponseDescriptor, SampleRate, SAMPLES_PER_CAPSULE,
-                        ScanMode, SendMode)
+                        FULL_TURN_Q6, HealthStatus, MODE_CONF_TYPES, MotorControl, NODE_SIZE,
+                        ProtocolError, RequestParser, ResponseDescriptor, SampleRate,
+                        SAMPLES_PER_CAPSULE, ScanMode, SendMode)
 from ..ultra import (encode_ultra_capsules, offset_deg, ULTRA_CAPSULE_SIZE, ULTRA_MAX_DISTANCE_MM,
                      ULTRA_SAMPLES_PER_CAPSULE, varbitscale_decode, varbitscale_encode)
+from ..ultradense import (encode_ultra_dense_capsules, ULTRA_DENSE_CAPSULE_SIZE,
+                          ULTRA_DENSE_MAX_DISTANCE_MM, ULTRA_DENSE_SAMPLES_PER_CAPSULE)
 
 MODES = (ScanMode(0, 'Standard', 244.0, 40.0, AnswerType.MEASUREMENT),
          ScanMode(1, 'DenseBoost', 108.0, 40.0, AnswerType.DENSE_CAPSULE))
 TYPICAL_MODE = 1
-# An A-series device's modes (the S1's have no express or ultra capsules): Standard, Express
-# (0x82) and Boost (0x84).
+# An A2M8's modes as its firmware 1.2x lists them (Standard 2 kHz, Express 4 kHz, Boost and
+# Sensitivity 8 kHz, Stability 4 kHz: SLAMTEC's protocol notes and the A2 datasheet; 12 m, the
+# A2M8's datasheet range). Boost, Sensitivity and Stability stream ultra capsules (0x84).
 A_SERIES_MODES = (ScanMode(0, 'Standard', 500.0, 12.0, AnswerType.MEASUREMENT),
                   ScanMode(1, 'Express', 250.0, 12.0, AnswerType.EXPRESS_CAPSULE),
-                  ScanMode(2, 'Boost', 125.0, 12.0, AnswerType.ULTRA_CAPSULE))
+                  ScanMode(2, 'Boost', 125.0, 12.0, AnswerType.ULTRA_CAPSULE),
+                  ScanMode(3, 'Sensitivity', 125.0, 12.0, AnswerType.ULTRA_CAPSULE),
+                  ScanMode(4, 'Stability', 250.0, 12.0, AnswerType.ULTRA_CAPSULE))
 # Passes measuring each ultra capsule sample where the offset of the distance it sends puts it.
 _ULTRA_PASSES = 3
 # A triangulating device's laser sits beside its lens: the angle it measures at lies
@@ -59,23 +65,117 @@ TRIANGULATION_BASELINE_MM = 20.0
 _FRAMES = {AnswerType.MEASUREMENT: (1, NODE_SIZE),
            AnswerType.EXPRESS_CAPSULE: (EXPRESS_SAMPLES_PER_CAPSULE, EXPRESS_CAPSULE_SIZE),
            AnswerType.ULTRA_CAPSULE: (ULTRA_SAMPLES_PER_CAPSULE, ULTRA_CAPSULE_SIZE),
-           AnswerType.DENSE_CAPSULE: (SAMPLES_PER_CAPSULE, CAPSULE_SIZE)}
-MODEL_S1M1 = 0x61
-# The models the emulator can report, by name: their model byte (major id << 4 | sub-model,
-# see the protocol's MODEL_FAMILIES) and scan modes with the typical one's id: an A-series
-# device's modes for the A-series (typical Express), the S1's for the dTOF C1 and S-series.
-EMULATED_MODELS = {'a1': (0x18, A_SERIES_MODES, 1), 'a2': (0x28, A_SERIES_MODES, 1),
-                   'a3': (0x31, A_SERIES_MODES, 1), 'c1': (0x41, MODES, TYPICAL_MODE),
-                   's1': (MODEL_S1M1, MODES, TYPICAL_MODE), 's2': (0x71, MODES, TYPICAL_MODE),
-                   's3': (0x81, MODES, TYPICAL_MODE)}
-HARDWARE = 18
+           AnswerType.DENSE_CAPSULE: (SAMPLES_PER_CAPSULE, CAPSULE_SIZE),
+           AnswerType.ULTRA_DENSE_CAPSULE: (ULTRA_DENSE_SAMPLES_PER_CAPSULE,
+                                            ULTRA_DENSE_CAPSULE_SIZE),
+           AnswerType.HQ_CAPSULE: (HQ_SAMPLES_PER_CAPSULE, HQ_CAPSULE_SIZE)}
+# The quality the emulator reports for an ultra-dense return (0-255).
+ULTRA_DENSE_RETURN_QUALITY = 190
 SERIAL_NUMBER = b'WCTLS-S1-EMULATR'
 DEFAULT_RPM = 600
-SERIAL_BAUD = 256000
+MODEL_S1M1 = 0x61
 RESET_SILENCE_S = 1.5
 HEALTH_ERROR_CODE = 0x0001
 MAX_NODE_DISTANCE_Q2 = 0xFFFF
 _CATCH_UP_LIMIT_S = 0.5
+
+
+@dataclass(frozen=True)
+class DeviceModel:
+    """
+    What tells one RPLIDAR model from another on the wire, and how its motor is driven.
+
+    :ivar model: the model byte of GET_INFO (major id << 4 | sub-model)
+    :ivar firmware: default firmware (major, minor)
+    :ivar hardware: hardware revision of GET_INFO
+    :ivar baudrate: its serial rate, bits per second
+    :ivar modes: scan modes (mode i is ``modes[i]``; the first is Standard)
+    :ivar typical_mode: the id of the typical mode
+    :ivar motor: how the host drives the motor; None: the device runs it itself while it
+        scans and ignores the host (the C1)
+    :ivar own_rpm: the speed a motor the host only switches (DTR) or does not drive runs at,
+        rpm
+    :ivar accessory_board: GET_ACC_BOARD_FLAG is answered (the SDK asks the A2, A3 and C1),
+        with bit 0 set when :attr:`motor` is PWM
+    """
+
+    model: int
+    firmware: tuple
+    hardware: int
+    baudrate: int
+    modes: tuple
+    typical_mode: int
+    motor: Optional[MotorControl]
+    own_rpm: int = DEFAULT_RPM
+    accessory_board: bool = False
+
+    def without_accessory_board(self) -> 'DeviceModel':
+        """
+        Return the model as it is without an accessory board: its motor on the DTR line.
+
+        :return: the bare model (unchanged for a model without one)
+        """
+        if self.motor != MotorControl.PWM:
+            return self
+        return replace(self, motor=MotorControl.DTR)
+
+
+# The emulated models. Model bytes, firmware and hardware revisions are what units report (the
+# S3's 1.02 and 18: Slamtec/rplidar_ros#155); the rates are SLAMTEC's SDK's
+# (sl_lidar_driver.cpp, _getNativeBaudRate: A-series 115200, 256000 from hardware revision 6;
+# C1 460800; S1 256000; S2, S3 1000000) and those of sllidar_ros2's launch files (A1, A2M8
+# 115200; A3 256000; C1 460800; S1 256000; S2, S3 1000000). Motors are driven as the SDK's
+# checkMotorCtrlSupport and setMotorSpeed drive them: the A1 by the DTR line (running at its
+# datasheet's typical 5.5 Hz), the A2 and A3 by PWM through their accessory board (by DTR
+# without), the S-series in rpm; the SDK asks the C1 for an accessory board too and, told there
+# is none, toggles a DTR line the C1 ignores: it runs its 10 Hz while it scans. Modes: the A1's
+# firmware lists Standard 2K, Express 4K and Boost 8K at 12 m (robopeak/rplidar_ros#68); the
+# A3's 16 kHz Boost and Sensitivity and 10 kHz Stability at 25 m are its datasheet's; the C1
+# samples at 5 kHz out to 12 m; the S2 and S3 at 32 kHz in DenseBoost (30 m and 40 m) and in
+# Standard at what a 1 Mbaud line carries in 5-byte nodes (the S3's 16 kHz and 16 m:
+# Slamtec/rplidar_ros#150).
+_A3_MODES = (ScanMode(0, 'Standard', 500.0, 25.0, AnswerType.MEASUREMENT),
+             ScanMode(1, 'Express', 250.0, 25.0, AnswerType.EXPRESS_CAPSULE),
+             ScanMode(2, 'Boost', 62.5, 25.0, AnswerType.ULTRA_CAPSULE),
+             ScanMode(3, 'Sensitivity', 62.5, 25.0, AnswerType.ULTRA_CAPSULE),
+             ScanMode(4, 'Stability', 100.0, 25.0, AnswerType.ULTRA_CAPSULE))
+_C1_MODES = (ScanMode(0, 'Standard', 200.0, 12.0, AnswerType.MEASUREMENT),
+             ScanMode(1, 'DenseBoost', 200.0, 12.0, AnswerType.DENSE_CAPSULE))
+_S2_MODES = (ScanMode(0, 'Standard', 100.0, 30.0, AnswerType.MEASUREMENT),
+             ScanMode(1, 'DenseBoost', 31.25, 30.0, AnswerType.DENSE_CAPSULE))
+_S3_MODES = (ScanMode(0, 'Standard', 62.5, 16.0, AnswerType.MEASUREMENT),
+             ScanMode(1, 'DenseBoost', 31.25, 40.0, AnswerType.DENSE_CAPSULE))
+EMULATED_MODELS = {
+    'a1': DeviceModel(0x18, (1, 29), 5, 115200, A_SERIES_MODES[:3], 2, MotorControl.DTR,
+                      own_rpm=330),
+    'a2': DeviceModel(0x28, (1, 27), 5, 115200, A_SERIES_MODES, 3, MotorControl.PWM,
+                      accessory_board=True),
+    'a3': DeviceModel(0x31, (1, 29), 6, 256000, _A3_MODES, 3, MotorControl.PWM,
+                      accessory_board=True),
+    'c1': DeviceModel(0x41, (1, 2), 18, 460800, _C1_MODES, 0, None, accessory_board=True),
+    's1': DeviceModel(MODEL_S1M1, (1, 28), 18, 256000, MODES, TYPICAL_MODE, MotorControl.RPM),
+    's2': DeviceModel(0x71, (1, 2), 18, 1000000, _S2_MODES, 1, MotorControl.RPM),
+    's3': DeviceModel(0x81, (1, 2), 18, 1000000, _S3_MODES, 1, MotorControl.RPM),
+}
+# The PWM an accessory board runs the motor at 10 Hz with (the desired rotation's PWM
+# reference the device reports; the 1.x SDK's default PWM).
+PWM_AT_DEFAULT_RPM = 660
+
+
+def device_model(model) -> DeviceModel:
+    """
+    Return an emulated model, or the one of a model byte's family with that byte.
+
+    :param model: a :class:`DeviceModel`, or a model byte (the S1's family when unknown)
+    :return: the model
+    """
+    if isinstance(model, DeviceModel):
+        return model
+    family = next((m for m in EMULATED_MODELS.values() if m.model >> 4 == model >> 4),
+                  EMULATED_MODELS['s1'])
+    return replace(family, model=model)
+
+
 # The GET_LIDAR_CONF entries whose reported value a fault can replace, by name.
 CONF_ENTRIES = {'mode_count': ConfType.MODE_COUNT, 'typical_mode': ConfType.TYPICAL_MODE,
                 'us_per_sample': ConfType.US_PER_SAMPLE, 'max_distance': ConfType.MAX_DISTANCE,
@@ -191,22 +291,29 @@ class StreamClock:
 
 class S1Device:
     """
-    One emulated S1 behind one link: answers requests and produces the scan stream.
+    One emulated RPLIDAR behind one link: answers requests and produces the scan stream.
+
+    Its motor runs only as its model's own control says (:class:`DeviceModel`): while the DTR
+    line is cleared (DTR models; a pseudo-terminal carries no modem lines, so there it stays
+    cleared unless :meth:`set_dtr` is called), at a SET_MOTOR_PWM duty (PWM models, off until
+    the first), from the start of a scan at the MOTOR_SPEED rpm until MOTOR_SPEED 0 (rpm
+    models: STOP ends the stream, not the motor) or while scanning (the C1). It streams only
+    while the motor runs. :attr:`motor_rpm` is its speed now.
 
     :param scene: what the device sees
     :param faults: shared fault settings
     :param firmware: (major, minor)
     :param rng: random generator (rotation phase, faults)
-    :param modes: its scan modes (mode i is ``modes[i]``; the first is Standard): the S1's, or
-        e.g. :data:`A_SERIES_MODES`
+    :param modes: its scan modes (mode i is ``modes[i]``; the first is Standard)
     :param typical_mode: the id of its typical mode
-    :param model: the model byte GET_INFO reports (the S1M1's by default)
+    :param model: its :class:`DeviceModel`, or a model byte (its family's model)
     """
 
     def __init__(self, scene: Scene, faults: Faults, firmware: tuple, rng: np.random.Generator,
                  modes: tuple = MODES, typical_mode: int = TYPICAL_MODE,
-                 model: int = MODEL_S1M1):
-        self._model = model
+                 model=MODEL_S1M1):
+        self._profile = device_model(model)
+        self._model = self._profile.model
         self._modes = modes
         self._typical_mode = typical_mode
         self._scene = scene
@@ -215,9 +322,54 @@ class S1Device:
         self._rng = rng
         self._parser = RequestParser()
         self._rpm = DEFAULT_RPM
+        self._pwm = 0
+        self._dtr_asserted = False
+        self._rpm_motor_on = False
         self._mode: Optional[ScanMode] = None
         self._booting_until_s = 0.0
         self._phase_q6 = int(rng.integers(FULL_TURN_Q6))
+        self._running_rpm = 0
+
+    @property
+    def motor_rpm(self) -> int:
+        """Return the motor's speed now, rpm (0: stopped)."""
+        return self._running_rpm
+
+    @property
+    def scanning(self) -> bool:
+        """Tell whether a scan was started and not stopped (streaming while the motor runs)."""
+        return self._mode is not None
+
+    def _motor_speed_rpm(self) -> int:
+        """Return the speed the motor control asks for now, rpm."""
+        motor = self._profile.motor
+        if motor == MotorControl.DTR:
+            return 0 if self._dtr_asserted else self._profile.own_rpm
+        if motor == MotorControl.PWM:
+            return round(DEFAULT_RPM * self._pwm / PWM_AT_DEFAULT_RPM)
+        if motor == MotorControl.RPM:
+            return self._rpm if self._rpm_motor_on else 0
+        return self._profile.own_rpm if self._mode is not None else 0
+
+    def _motor_changed(self, now_s: float):
+        """Follow a change of the motor control: a running stream goes on at the new speed."""
+        rpm = self._motor_speed_rpm()
+        if rpm == self._running_rpm:
+            return
+        if self._mode is not None:
+            self._rebase(now_s, rpm)
+        self._running_rpm = rpm
+
+    def set_dtr(self, asserted: bool, now_s: float):
+        """
+        Set the DTR line as the host's serial port drives it.
+
+        :param asserted: True when the host sets DTR (the SDK's motor off), False when it
+            clears it (motor on)
+        :param now_s: monotonic time, s
+        """
+        self._dtr_asserted = asserted
+        self._motor_changed(now_s)
 
     def receive(self, data: bytes, now_s: float) -> bytes:
         """
@@ -232,6 +384,7 @@ class S1Device:
             if now_s < self._booting_until_s or self._faults.silent(now_s):
                 continue
             answers += self._answer(request.command, request.payload, now_s)
+            self._motor_changed(now_s)
         return answers
 
     def _answer(self, command: int, payload: bytes, now_s: float) -> bytes:
@@ -240,23 +393,30 @@ class S1Device:
             self._stop()
         elif command == Command.RESET:
             self._stop()
+            self._rpm_motor_on = False
+            self._pwm = 0
             self._booting_until_s = now_s + RESET_SILENCE_S
             self._faults.resets_to_clear -= 1
             if self._faults.resets_to_clear <= 0 and self._faults.health == HealthStatus.ERROR:
                 self._faults.health = HealthStatus.OK
         elif command == Command.MOTOR_SPEED and len(payload) == 2:
-            self._rpm = int.from_bytes(payload, 'little')
-            if self._rpm == 0:
-                self._stop()
+            if self._profile.motor == MotorControl.RPM:
+                self._rpm = int.from_bytes(payload, 'little')
+                self._rpm_motor_on = self._rpm > 0
+                if self._rpm == 0:
+                    self._stop()
+        elif command == Command.SET_MOTOR_PWM and len(payload) == 2:
+            if self._profile.motor == MotorControl.PWM:
+                self._pwm = int.from_bytes(payload, 'little')
         elif self._mode is not None:
-            return b''      # busy streaming: only STOP, RESET and MOTOR_SPEED are heard
+            return b''      # busy streaming: only STOP, RESET and the motor commands are heard
         elif command in (Command.SCAN, Command.FORCE_SCAN):
             return self._start(self._modes[0], now_s)
         elif command == Command.EXPRESS_SCAN and payload and payload[0] < len(self._modes):
             return self._start(self._modes[payload[0]], now_s)
         elif command == Command.GET_INFO:
             return encode_answer(AnswerType.DEVICE_INFO, DeviceInfo(
-                self._model, self._firmware[1], self._firmware[0], HARDWARE,
+                self._model, self._firmware[1], self._firmware[0], self._profile.hardware,
                 SERIAL_NUMBER).encode())
         elif command == Command.GET_HEALTH:
             code = 0 if self._faults.health == HealthStatus.OK else HEALTH_ERROR_CODE
@@ -266,9 +426,17 @@ class S1Device:
             return encode_answer(AnswerType.SAMPLE_RATE, SampleRate(
                 int(self._modes[0].us_per_sample),
                 int(self._modes[min(1, len(self._modes) - 1)].us_per_sample)).encode())
-        elif command == Command.GET_LIDAR_CONF and self._firmware >= CONF_COMMANDS_FIRMWARE:
+        elif command == Command.GET_ACC_BOARD_FLAG and self._profile.accessory_board:
+            return encode_answer(AnswerType.ACC_BOARD_FLAG, AccBoardFlag(
+                int(self._profile.motor == MotorControl.PWM)).encode())
+        elif command == Command.GET_LIDAR_CONF and self._supports_conf():
             return self._conf_answer(payload)
         return b''
+
+    def _supports_conf(self) -> bool:
+        """Tell whether GET_LIDAR_CONF is answered (as the SDK expects it)."""
+        return DeviceInfo(self._model, self._firmware[1], self._firmware[0],
+                          self._profile.hardware, SERIAL_NUMBER).supports_conf
 
     def _conf_answer(self, payload: bytes) -> bytes:
         """Answer GET_LIDAR_CONF (unknown entries: the type echo alone)."""
@@ -287,27 +455,39 @@ class S1Device:
         else:
             value = {ConfType.MODE_COUNT: len(self._modes),
                      ConfType.TYPICAL_MODE: self._typical_mode,
-                     ConfType.DESIRED_ROTATION: (DEFAULT_RPM, 0)}.get(conf_type)
+                     ConfType.DESIRED_ROTATION: (
+                         DEFAULT_RPM, PWM_AT_DEFAULT_RPM
+                         if self._profile.motor == MotorControl.PWM else 0)}.get(conf_type)
         value = self._faults.conf_answers.get(conf_type, value)
         return encode_answer(AnswerType.LIDAR_CONF, encode_conf_value(conf_type, value))
 
     def _start(self, mode: ScanMode, now_s: float) -> bytes:
         """Start streaming a mode; return its descriptor."""
         self._mode = mode
-        self._start_s = now_s
-        self._sent = 0
+        if self._profile.motor == MotorControl.RPM:
+            # An S-series device spins up when a scan starts, at the last speed asked for.
+            self._rpm = self._rpm or DEFAULT_RPM
+            self._rpm_motor_on = True
+        self._sent = self._step_q6 = 0
         self._samples_per_frame, self._frame_size = _FRAMES[mode.answer_type]
         self._frame_s = self._samples_per_frame * mode.us_per_sample * 1e-6
-        rpm = self._rpm or DEFAULT_RPM
-        # Whole 1/64 degrees per frame keep every sample on one exact, uniform angle grid.
-        self._step_q6 = round(rpm / 60.0 * FULL_TURN_Q6 * self._frame_s)
+        self._running_rpm = self._motor_speed_rpm()
+        self._rebase(now_s, self._running_rpm)
         self._previous_angle_q6 = None
         self._next_ultra_mm = None          # the next ultra capsule's first distance, decided
         return ResponseDescriptor(self._frame_size, SendMode.MULTIPLE, mode.answer_type).encode()
 
+    def _rebase(self, now_s: float, rpm: int):
+        """Restart the stream's clock at ``now_s``, turning at ``rpm`` (0: nothing streams)."""
+        self._phase_q6 = int((self._phase_q6 + self._sent * self._step_q6) % FULL_TURN_Q6)
+        self._start_s = now_s
+        self._sent = 0
+        # Whole 1/64 degrees per frame keep every sample on one exact, uniform angle grid.
+        self._step_q6 = round(rpm / 60.0 * FULL_TURN_Q6 * self._frame_s)
+
     def _stop(self):
         if self._mode is not None:
-            self._phase_q6 = int((self._phase_q6 + self._sent * self._step_q6) % FULL_TURN_Q6)
+            self._rebase(0.0, 0)        # keeps the angle reached for the next stream
         self._mode = None
 
     def clock(self) -> Optional[StreamClock]:
@@ -316,7 +496,7 @@ class S1Device:
 
         :return: the clock, or None when not streaming
         """
-        if self._mode is None:
+        if self._mode is None or not self._running_rpm:
             return None
         samples = self._samples_per_frame
         return StreamClock(self._start_s, self._frame_s / samples, self._phase_q6 / 64.0,
@@ -329,14 +509,14 @@ class S1Device:
         :param now_s: monotonic time, s
         :return: seconds (inf when not streaming)
         """
-        if self._mode is None:
+        if self._mode is None or not self._running_rpm:
             return math.inf
         return max(self._due_s(self._sent) - now_s, 0.0)
 
     def _due_s(self, frame: int) -> float:
         """When frame ``frame``'s last byte arrives at the host."""
         return (self._start_s + (frame + 1) * self._frame_s
-                + self._frame_size * 10.0 / SERIAL_BAUD)
+                + self._frame_size * 10.0 / self._profile.baudrate)
 
     def stream(self, now_s: float) -> bytes:
         """
@@ -345,7 +525,7 @@ class S1Device:
         :param now_s: monotonic time, s
         :return: bytes to send
         """
-        if self._mode is None:
+        if self._mode is None or not self._running_rpm:
             return b''
         due = int((now_s - self._due_s(0)) // self._frame_s) + 1
         first = max(self._sent, due - int(_CATCH_UP_LIMIT_S / self._frame_s))
@@ -362,6 +542,10 @@ class S1Device:
             data = self._express_capsules(frames, start_q6)
         elif self._mode.answer_type == AnswerType.ULTRA_CAPSULE:
             data = self._ultra_capsules(frames, start_q6)
+        elif self._mode.answer_type == AnswerType.ULTRA_DENSE_CAPSULE:
+            data = self._ultra_dense_capsules(frames, start_q6)
+        elif self._mode.answer_type == AnswerType.HQ_CAPSULE:
+            data = self._hq_capsules(frames, start_q6)
         else:
             data = self._nodes(start_q6)
         return self._inject_faults(data)
@@ -374,6 +558,37 @@ class S1Device:
         distances[distances > 0xFFFF] = 0
         return encode_dense_capsules(start_q6, distances.reshape(angles.shape),
                                      frames == 0)
+
+    def _ultra_dense_capsules(self, frames: np.ndarray, start_q6: np.ndarray) -> bytes:
+        """
+        Encode ultra-dense capsules: sample k of capsule i at start_i + k * step / 64.
+
+        A capsule's timestamp is when its first sample was measured, in microseconds of the
+        monotonic clock, the emulated device's own.
+        """
+        offsets = np.arange(ULTRA_DENSE_SAMPLES_PER_CAPSULE) / ULTRA_DENSE_SAMPLES_PER_CAPSULE
+        angles = (start_q6[:, None] + self._step_q6 * offsets) / 64.0 % 360.0
+        distances = self._scene.distances_mm(angles.reshape(-1)).reshape(angles.shape)
+        distances[distances > ULTRA_DENSE_MAX_DISTANCE_MM] = 0
+        quality = np.where(distances > 0, ULTRA_DENSE_RETURN_QUALITY, 0)
+        sample_s = self._frame_s / ULTRA_DENSE_SAMPLES_PER_CAPSULE
+        time_us = np.rint((self._start_s + frames * self._frame_s + sample_s) * 1e6)
+        return encode_ultra_dense_capsules(start_q6, distances, quality, frames == 0,
+                                           time_us.astype(np.int64))
+
+    def _hq_capsules(self, frames: np.ndarray, start_q6: np.ndarray) -> bytes:
+        """Encode HQ capsules: sample k of capsule i at start_i + k * step / 96, stamped."""
+        offsets = np.arange(HQ_SAMPLES_PER_CAPSULE) / HQ_SAMPLES_PER_CAPSULE
+        angle_q6 = (start_q6[:, None] + self._step_q6 * offsets).reshape(-1) % FULL_TURN_Q6
+        previous = np.concatenate([[angle_q6[0] if self._previous_angle_q6 is None
+                                    else self._previous_angle_q6], angle_q6[:-1]])
+        self._previous_angle_q6 = angle_q6[-1]
+        distances = np.rint(self._scene.distances_mm(angle_q6 / 64.0) * 4.0) / 4.0
+        shape = (len(frames), HQ_SAMPLES_PER_CAPSULE)
+        time_us = np.rint((self._start_s + frames * self._frame_s) * 1e6).astype(np.int64)
+        return encode_hq_capsules((angle_q6 / 64.0).reshape(shape), distances.reshape(shape),
+                                  np.where(distances > 0, 47 << 2, 0).reshape(shape),
+                                  (angle_q6 < previous).reshape(shape), time_us)
 
     def _express_capsules(self, frames: np.ndarray, start_q6: np.ndarray) -> bytes:
         """Encode express capsules: sample k of capsule i at start_i + k * step / 32 - dk."""

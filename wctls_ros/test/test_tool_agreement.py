@@ -65,16 +65,16 @@ def test_the_carried_part_of_the_office_recording_is_moving(carried_bag):
 
 def test_keyframes_far_apart_are_moving_though_no_drift_stands_out():
     from wctls_ros.evaluation import StaticScans
-    from wctls_ros.evaluation.rules import MOVING_FRACTION, MOVING_NOISE_SHARE
+    from wctls_ros.evaluation.rules import MOVING_FRACTION, MOVING_NOISE_RATIO
     office = load_scans(REAL_DATA / 'urg04lx_office')
     # Every 10th scan of the carried part: 22 keyframes, 10-40 cm apart.
     keyframes = StaticScans(office.ranges[30:250:10], office.angle_min, office.angle_increment,
                             office.range_min, office.range_max, office.stamps_ns[30:250:10])
     check = check_still(keyframes)
     assert check.drifted_fraction <= MOVING_FRACTION          # the drift alone would pass it
-    assert check.noise_share > 3 * MOVING_NOISE_SHARE and not check.still
+    assert check.noise_ratio > MOVING_NOISE_RATIO and not check.still
     for still in ('sick_lms1xx_static', 'sick_lms111_static'):
-        assert check_still(load_scans(REAL_DATA / still)).noise_share < MOVING_NOISE_SHARE / 3
+        assert check_still(load_scans(REAL_DATA / still)).noise_ratio < MOVING_NOISE_RATIO / 1.5
 
 
 @pytest.mark.parametrize('tool', ['calibrate', 'evaluate', 'score'])

@@ -4,7 +4,7 @@
 """
 demo: the whole system live on this machine, no sensor needed.
 
-Starts the S1 emulator on a pseudo-terminal (streaming a simulated floor plan), rplidar_node
+Starts an RPLIDAR emulator (the S1 unless ``--model`` says another) on a pseudo-terminal (streaming a simulated floor plan), rplidar_node
 reading it, and feature_node extracting corners, each as its own process like ``ros2 run``
 would; records ``scan``, ``corners``, ``lines`` and ``markers`` into an mcap bag; then prints a
 table (corners per scan, their sigmas, their error against the simulated truth, latency) and
@@ -44,6 +44,7 @@ from .cli import bounded, Parser, USER_ERROR, UserError
 from .core import METHODS, nees
 from .output_folders import claim, mark, remove_entries
 from .params import feature_settings, load_parameters
+from .rplidar.emulator.device import EMULATED_MODELS
 from .simulation import full_turn_bearings, load_floor_plan, S1_BEAMS_PER_TURN
 from .simulation.visibility import visible_corners
 from .stop_signals import raise_stopped, raising, SIGNALS, Stopped
@@ -369,6 +370,9 @@ def parser() -> argparse.ArgumentParser:
                    '(default: %(default)s)')
     p.add_argument('--method', default='wctls', choices=METHODS,
                    help="feature_node's line fit (default: %(default)s)")
+    p.add_argument('--model', default='s1', choices=tuple(EMULATED_MODELS),
+                   help='the emulated RPLIDAR: its modes, serial rate and motor control, which '
+                   'rplidar_node finds as it would on a real one (default: %(default)s)')
     return p
 
 
@@ -428,8 +432,9 @@ def _run(args) -> int:
     seen = Recording()
     late = []               # stop signals received while stopping
     try:
-        emulator = processes.start('s1_emulator', [
-            _executable('s1_emulator'), '--link', str(tty), '--floor-plan', args.floor_plan])
+        emulator = processes.start('rplidar_emulator', [
+            _executable('rplidar_emulator'), '--link', str(tty), '--floor-plan',
+            args.floor_plan, '--model', args.model])
         _wait_for(tty, emulator, 20.0)
         processes.start('rplidar_node', [
             _executable('rplidar_node'), '--ros-args', '--params-file',
@@ -438,7 +443,7 @@ def _run(args) -> int:
             _executable('feature_node'), '--ros-args', '--params-file',
             str(_config_file() / 'feature_node.yaml')]
             + [arg for k, v in parameters.items() for arg in ('-p', f'{k}:={v}')])
-        print(f'demo: S1 emulator on {tty} -> rplidar_node -> feature_node '
+        print(f'demo: {args.model.upper()} emulator on {tty} -> rplidar_node -> feature_node '
               f'(ROS_DOMAIN_ID {domain}, logs in {out / "logs"})', flush=True)
         seen = record(out / 'bag', args.seconds)
     except Stopped as stopped:

@@ -4,8 +4,8 @@
 """
 demo: the whole system live on this machine, no sensor needed.
 
-Starts an RPLIDAR emulator (the S1 unless ``--model`` says another) on a pseudo-terminal (streaming a simulated floor plan), rplidar_node
-reading it, and feature_node extracting corners, each as its own process like ``ros2 run``
+Starts an RPLIDAR emulator (the S1 unless ``--model`` says another) on a pseudo-terminal
+(streaming a simulated floor plan), rplidar_node reading it, and feature_node extracting corners, each as its own process like ``ros2 run``
 would; records ``scan``, ``corners``, ``lines`` and ``markers`` into an mcap bag; then prints a
 table (corners per scan, their sigmas, their error against the simulated truth, latency) and
 draws one scan.

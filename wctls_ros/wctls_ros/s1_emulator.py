@@ -69,17 +69,23 @@ class SimulatedScene:
         self._pose = pose
         self._noise = noise
         self._rng = rng
+        self._draws = rng.bit_generator.state       # the state before the last call's draws
         self._start_s = time.monotonic()
         # Without walkers the scene never changes: build it once.
         self._still = None if plan.walkers else plan.scene(pose)
 
-    def distances_mm(self, raw_angle_deg: np.ndarray) -> np.ndarray:
+    def distances_mm(self, raw_angle_deg: np.ndarray, fresh_noise: bool = True) -> np.ndarray:
         """
         Return the measured distance at each raw clockwise angle.
 
         :param raw_angle_deg: device angles, degrees clockwise from the front
+        :param fresh_noise: False: the same noise draws as the previous call (as many angles)
         :return: distances, mm (float); 0 where nothing returns
         """
+        if fresh_noise:
+            self._draws = self._rng.bit_generator.state
+        else:
+            self._rng.bit_generator.state = self._draws
         bearings = math.pi - np.radians(raw_angle_deg)
         scene = (self._plan.scene(self._pose, time.monotonic() - self._start_s)
                  if self._still is None else self._still)

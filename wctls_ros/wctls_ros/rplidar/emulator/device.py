@@ -211,11 +211,13 @@ def parse_conf_answer(text: str) -> tuple:
 class Scene(Protocol):
     """What the device sees: anything with this method (the CLI's is a simulated floor plan)."""
 
-    def distances_mm(self, raw_angle_deg: np.ndarray) -> np.ndarray:
+    def distances_mm(self, raw_angle_deg: np.ndarray, fresh_noise: bool = True) -> np.ndarray:
         """
         Return the measured distance at each raw clockwise angle.
 
         :param raw_angle_deg: device angles, degrees clockwise from the front
+        :param fresh_noise: False: the same noise draws as the previous call (as many angles),
+            for a sample whose angle depends on the distance it measures
         :return: distances, mm (float); 0 where nothing returns
         """
 
@@ -610,8 +612,11 @@ class S1Device:
         uniform = np.append((start_q6[:, None] + self._step_q6 * offsets).reshape(-1),
                             start_q6[-1] + self._step_q6) / 64.0
         sent = np.zeros(uniform.size)
-        for _ in range(_ULTRA_PASSES):
-            distances = np.rint(self._scene.distances_mm((uniform - offset_deg(sent)) % 360.0))
+        # One noise draw per sample: each pass and the check below measure it again at the
+        # angle its distance moves it to (with fresh noise no sample would ever settle).
+        for attempt in range(_ULTRA_PASSES):
+            distances = np.rint(self._scene.distances_mm((uniform - offset_deg(sent)) % 360.0,
+                                                         fresh_noise=attempt == 0))
             distances[distances > ULTRA_MAX_DISTANCE_MM] = 0
             if self._next_ultra_mm is not None:
                 distances[0] = self._next_ultra_mm
@@ -619,7 +624,7 @@ class S1Device:
         # Where the offset of the distance sent keeps moving the sample (an edge, or a distance
         # where the offset steps), the scene there may not show that distance: then the sample
         # is sent as no return.
-        seen = self._scene.distances_mm((uniform - offset_deg(sent)) % 360.0)
+        seen = self._scene.distances_mm((uniform - offset_deg(sent)) % 360.0, fresh_noise=False)
         step = 1 << varbitscale_decode(varbitscale_encode(sent))[1]
         astray = (sent > 0) & (np.abs(seen - sent) > step / 2 + 1)
         astray[0] &= self._next_ultra_mm is None

@@ -275,7 +275,7 @@ def test_hand_labels_are_the_intersections_of_their_listed_walls(name):
 
 
 @pytest.mark.parametrize('name,recurrence', [('sick_lms111_static', 0.5),
-                                              ('sick_lms1xx_static', 0.75)])
+                                             ('sick_lms1xx_static', 0.75)])
 def test_the_shipped_default_meets_the_real_static_targets(name, recurrence):
     # The corner targets on the real static recordings, with what a user gets out of the box: every
     # labelled visible corner in >= 95 % of the scans, and most detections on corners present

@@ -5,10 +5,10 @@
 demo: the whole system live on this machine, no sensor needed.
 
 Starts an RPLIDAR emulator (the S1 unless ``--model`` says another) on a pseudo-terminal
-(streaming a simulated floor plan), rplidar_node reading it, and feature_node extracting corners, each as its own process like ``ros2 run``
-would; records ``scan``, ``corners``, ``lines`` and ``markers`` into an mcap bag; then prints a
-table (corners per scan, their sigmas, their error against the simulated truth, latency) and
-draws one scan.
+(streaming a simulated floor plan), rplidar_node reading it, and feature_node extracting
+corners, each as its own process like ``ros2 run`` would; records ``scan``, ``corners``,
+``lines`` and ``markers`` into an mcap bag; then prints a table (corners per scan, their sigmas,
+their error against the simulated truth, latency) and draws one scan.
 
 Sealed: its processes talk on a ROS domain of their own, discovered on this machine only,
 whatever ROS_DOMAIN_ID and the DDS settings of the environment say, so that its emulated scans

@@ -20,10 +20,12 @@ is the layout's. A turn starts where the uncorrected angles fall back (the corre
 larger than the step between samples).
 """
 
+import math
 from typing import Optional
 
 import numpy as np
 
+from .capsules import RangeNoise, supported_by_neighbours
 from .framing import AngleTrack, CapsuleFramer, CapsulePlacer, placeable
 from .protocol import DENSE_RETURN_QUALITY, Samples, StreamCounts
 
@@ -58,6 +60,23 @@ class CapsuleLayout:
             (0: no return; negative: unreadable) and angle corrections
         """
         raise NotImplementedError
+
+    def plausible(self, distance_mm: np.ndarray, correction_deg: np.ndarray,
+                  usable: np.ndarray, sigma_mm: float, step_rad: float) -> np.ndarray:
+        """
+        Tell which samples of capsules that failed their checksum to believe.
+
+        By default a distance a neighbour pair of the same capsule predicts, as in dense
+        capsules: right for a layout whose samples share no bytes that carry a distance.
+
+        :param distance_mm: distances of damaged capsules, shape (n, samples), mm
+        :param correction_deg: their angle corrections, shape (n, samples), degrees
+        :param usable: which distances are readable and in range
+        :param sigma_mm: the range noise scale, mm
+        :param step_rad: angle between samples, rad
+        :return: shape (n, samples), bool
+        """
+        return supported_by_neighbours(distance_mm, usable, sigma_mm, step_rad)
 
     def device_times_us(self, capsules: np.ndarray) -> Optional[np.ndarray]:
         """
@@ -135,6 +154,7 @@ class CheckedCapsuleDecoder:
         self._pending = []              # a placed capsule waiting for its successor's bytes
         self._last_uniform_deg = None
         self._fractions = np.arange(layout.samples) / layout.samples
+        self._noise = RangeNoise(layout.samples)
 
     @property
     def counts(self) -> StreamCounts:
@@ -210,8 +230,16 @@ class CheckedCapsuleDecoder:
         distances, corrections = self._layout.read(
             np.array(whole), np.array(after) if self._layout.reads_successor else None)
         readable = np.array([f.raw is not None for f in frames])[:, None] & (distances >= 0)
-        vouched = readable & ~np.array([f.suspect for f in frames])[:, None]
-        keep = (vouched & (distances <= self._max_mm)) | (readable & (distances == 0))
+        suspect = np.array([f.suspect for f in frames])
+        self._noise.update(np.where(readable, distances, 0.0))
+        usable = readable & (distances <= self._max_mm)
+        vouched = usable & ~suspect[:, None]
+        if suspect.any():
+            step_rad = math.radians(self._angles.sweep_deg() / per)
+            vouched[suspect] = (usable[suspect] & (distances[suspect] > 0) & self._layout.plausible(
+                distances[suspect], corrections[suspect], usable[suspect], self._noise.sigma_mm,
+                step_rad))
+        keep = vouched | (readable & (distances == 0))
         self._counts['rejected_samples'] += int(np.count_nonzero(~keep))
         distance = np.where(keep, distances, 0).reshape(-1).astype(np.float64)
         starts = np.array([f.placement.start_q8 for f in frames], np.float64)

@@ -38,6 +38,7 @@ unreadable, as is a distance that decodes negative.
 
 import numpy as np
 
+from .capsules import supported_by_neighbours
 from .checked import CapsuleLayout, CheckedCapsuleDecoder, with_checksum
 
 ULTRA_CAPSULE_SIZE = 132
@@ -55,6 +56,8 @@ _OFFSET_K1 = 98361
 _OFFSET_CUBE_DIVISOR = 98304
 _OFFSET_NEAR_Q2 = 50 * 4
 _SDK_PI = 3.14159265
+# Noise sigmas a predicted sample of a damaged capsule may lie from its place between majors.
+_SIGMAS = 4.0
 
 
 def varbitscale_decode(scaled: np.ndarray) -> tuple:
@@ -202,6 +205,37 @@ class UltraLayout(CapsuleLayout):
                                | (successors[:, 5].astype(np.int64) & 0xF) << 8, -1)
         distances = decode_ultra_capsules(capsules, next_majors)
         return distances, offset_deg(np.maximum(distances, 0))
+
+    def plausible(self, distance_mm: np.ndarray, correction_deg: np.ndarray,
+                  usable: np.ndarray, sigma_mm: float, step_rad: float) -> np.ndarray:
+        """
+        Tell which samples of capsules that failed their checksum to believe.
+
+        A cabin's major is in three samples (its own, the next one predicted from it, and the
+        one before, predicted from the major after its own), so a damaged major moves them
+        together and they agree with each other: the majors, whose bytes are their cabins'
+        own, are checked against each other (a neighbour pair of majors predicts each), and a
+        predicted sample only against the two believed majors around it, at a third and two
+        thirds of the way. The last cabin's follow the next capsule's major: not believed.
+        The angle offset is the distance's, right when the distance is.
+        """
+        majors = distance_mm[:, 0::3]
+        believed = (majors > 0) & supported_by_neighbours(majors, usable[:, 0::3], sigma_mm,
+                                                          3 * step_rad)
+        following = np.concatenate([majors[:, 1:], np.zeros((len(majors), 1))], axis=1)
+        around = believed & np.concatenate(
+            [believed[:, 1:], np.zeros((len(majors), 1), bool)], axis=1)
+        centre = 0.5 * (majors + following)
+        # As the dense check's midpoint: the noise of the sample and of the interpolation, and
+        # the bend of a straight surface over the three samples between the majors.
+        tolerance = (_SIGMAS * np.sqrt(2.0) * sigma_mm + centre * (3 * step_rad) ** 2
+                     + 2.0 * (following - majors) ** 2 / np.maximum(centre, 1.0) / 9.0)
+        plausible = np.zeros(distance_mm.shape, bool)
+        plausible[:, 0::3] = believed
+        for k in (1, 2):
+            between = majors + k * (following - majors) / 3.0
+            plausible[:, k::3] = around & (np.abs(distance_mm[:, k::3] - between) <= tolerance)
+        return plausible & usable
 
 
 class UltraCapsuleDecoder(CheckedCapsuleDecoder):

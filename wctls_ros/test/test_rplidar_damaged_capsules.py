@@ -1,0 +1,45 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""Checksum-only capsule formats on a line that corrupts 5 % of the bytes, against the scene."""
+
+import math
+
+import numpy as np
+import pytest
+from rplidar_testing import emulated_stream, true_ranges
+from test_rplidar_protocol import feed_in_chunks
+from wctls_ros.rplidar.driver import CAPSULE_DECODERS
+from wctls_ros.rplidar.emulator.device import A_SERIES_MODES, EMULATED_MODELS, Faults
+from wctls_ros.rplidar.protocol import AnswerType, Samples, ScanMode
+
+ULTRA_DENSE_MODES = (ScanMode(0, 'UltraDense', 31.25, 40.0, AnswerType.ULTRA_DENSE_CAPSULE),)
+RIGHT_MM = 10.0
+WRONG_MM = 100.0
+
+
+def right_and_wrong(modes, mode_id, faults):
+    """Decode an emulated stream; return its returns within 1 cm and beyond 10 cm of the scene."""
+    mode = modes[mode_id]
+    data = emulated_stream(modes, mode_id, seconds=2.0, seed=3, faults=faults)[7:]
+    decoder = CAPSULE_DECODERS[mode.answer_type](mode.us_per_sample, mode.max_distance_m)
+    samples = Samples.concat(feed_in_chunks(decoder, data, np.random.default_rng(5)))
+    filled = samples.distance_mm > 0
+    truth_mm = 1000.0 * true_ranges(math.pi - np.radians(samples.angle_deg[filled]))
+    error = np.abs(samples.distance_mm[filled] - truth_mm)
+    return int(np.count_nonzero(error <= RIGHT_MM)), int(np.count_nonzero(error > WRONG_MM))
+
+
+@pytest.mark.parametrize('modes, mode_id, kept_share', [
+    (A_SERIES_MODES, 1, 0.7),                       # 0x82 express
+    (A_SERIES_MODES, 2, 0.6),                       # 0x84 ultra, A2 Boost
+    (EMULATED_MODELS['a3'].modes, 3, 0.7),          # 0x84 ultra, A3 Sensitivity
+    (ULTRA_DENSE_MODES, 0, 0.8),                    # 0x86 ultra-dense
+], ids=['express', 'ultra-boost', 'ultra-sensitivity', 'ultra-dense'])
+def test_five_percent_corrupted_bytes_keep_most_returns_and_almost_none_wrong(modes, mode_id,
+                                                                              kept_share):
+    intact, _ = right_and_wrong(modes, mode_id, None)
+    right, wrong = right_and_wrong(modes, mode_id, Faults(corrupt_rate=0.05))
+    # Almost no capsule of 84 to 170 bytes arrives intact: what is kept comes from damaged ones.
+    assert right >= kept_share * intact
+    assert wrong <= 0.001 * right, f'{wrong} of {right} returns wrong'

@@ -14,6 +14,7 @@ from wctls_ros.rplidar.emulator.device import A_SERIES_MODES, EMULATED_MODELS, F
 from wctls_ros.rplidar.protocol import AnswerType, Samples, ScanMode
 
 ULTRA_DENSE_MODES = (ScanMode(0, 'UltraDense', 31.25, 40.0, AnswerType.ULTRA_DENSE_CAPSULE),)
+HQ_MODES = (ScanMode(0, 'HQ', 125.0, 25.0, AnswerType.HQ_CAPSULE),)
 RIGHT_MM = 10.0
 WRONG_MM = 100.0
 
@@ -35,11 +36,13 @@ def right_and_wrong(modes, mode_id, faults):
     (A_SERIES_MODES, 2, 0.6),                       # 0x84 ultra, A2 Boost
     (EMULATED_MODELS['a3'].modes, 3, 0.7),          # 0x84 ultra, A3 Sensitivity
     (ULTRA_DENSE_MODES, 0, 0.8),                    # 0x86 ultra-dense
-], ids=['express', 'ultra-boost', 'ultra-sensitivity', 'ultra-dense'])
+    # 0x83 HQ: a node's own six bytes of angle and distance and its neighbours' must survive.
+    (HQ_MODES, 0, 0.5),
+], ids=['express', 'ultra-boost', 'ultra-sensitivity', 'ultra-dense', 'hq'])
 def test_five_percent_corrupted_bytes_keep_most_returns_and_almost_none_wrong(modes, mode_id,
                                                                               kept_share):
     intact, _ = right_and_wrong(modes, mode_id, None)
     right, wrong = right_and_wrong(modes, mode_id, Faults(corrupt_rate=0.05))
-    # Almost no capsule of 84 to 170 bytes arrives intact: what is kept comes from damaged ones.
+    # Almost no capsule of 84 to 781 bytes arrives intact: what is kept comes from damaged ones.
     assert right >= kept_share * intact
     assert wrong <= 0.001 * right, f'{wrong} of {right} returns wrong'

@@ -36,8 +36,8 @@ def right_and_wrong(modes, mode_id, faults):
     (A_SERIES_MODES, 2, 0.6),                       # 0x84 ultra, A2 Boost
     (EMULATED_MODELS['a3'].modes, 3, 0.7),          # 0x84 ultra, A3 Sensitivity
     (ULTRA_DENSE_MODES, 0, 0.8),                    # 0x86 ultra-dense
-    # 0x83 HQ: a node's own six bytes of angle and distance and its neighbours' must survive.
-    (HQ_MODES, 0, 0.5),
+    # 0x83 HQ: a node's own angle and distance bytes and its neighbours' must survive.
+    (HQ_MODES, 0, 0.65),
 ], ids=['express', 'ultra-boost', 'ultra-sensitivity', 'ultra-dense', 'hq'])
 def test_five_percent_corrupted_bytes_keep_most_returns_and_almost_none_wrong(modes, mode_id,
                                                                               kept_share):

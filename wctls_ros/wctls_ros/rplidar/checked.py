@@ -2,17 +2,21 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-A capsule decoder that publishes only the samples a checksum vouches for (pure).
+A capsule decoder that publishes the samples a checksum or their neighbours vouch for (pure).
 
 Every capsule format shares the framing (:mod:`~wctls_ros.rplidar.framing`): the sync nibbles,
 the checksum (XOR of the bytes after the first two, its nibbles beside the sync nibbles) and the
 start angle. :class:`CheckedCapsuleDecoder` frames a stream of any of them, so that a capsule
 cut short is followed at once by the next one, and judges start angles by their sequence. It
 reads a capsule's samples with its format's :class:`CapsuleLayout` and publishes their
-distances only when the checksum passed on a line not otherwise damaged and the start angle is
-in sequence; other capsules placed in angle are published as no return (counted as rejected
-samples). Unlike the dense decoder it neither realigns the samples of a capsule that lost
-bytes nor keeps the plausible distances of one that failed its checksum.
+distances when the checksum passed on a line not otherwise damaged and the start angle is in
+sequence. In a capsule that is suspect (it failed its checksum, its start angle was replaced, or
+most recent capsules fail: at 5 % corrupted bytes almost none of 84-170 bytes passes) a sample
+is published only where the layout finds it plausible (:meth:`CapsuleLayout.plausible`: by
+default a neighbour pair of the same capsule predicts its distance, as in dense capsules, with
+the range noise measured the same way); the others are published as no return (counted as
+rejected samples). Unlike the dense decoder it does not realign the samples of a capsule that
+lost bytes: they are all unreadable.
 
 Sample k of N in a capsule lies at ``start + k * sweep / N - correction_k``: the sweep is the
 angle to the next capsule's start, and the correction, which formats without one leave at 0,

@@ -14,8 +14,9 @@ The layout, as SLAMTEC's SDK reads it (sl_lidar_cmd.h, handler_hqnode.cpp), litt
 
 The SDK skips bytes until a sync byte, takes the next 780 bytes as a capsule and drops it
 whole when the CRC fails, searching again only after it. :class:`HqCapsuleDecoder` publishes
-the same samples from an intact stream; after a failed CRC it searches from the byte after
-the sync, so a capsule that lost bytes costs only itself and not the one after it too.
+the same samples from an intact stream. A capsule whose CRC fails is read node by node when it
+lies in sequence (see the class); otherwise it searches from the byte after the sync, so a
+capsule that lost bytes costs only itself and not the one after it too.
 """
 
 import math
@@ -87,12 +88,13 @@ class HqCapsuleDecoder:
     it is still read when it lies in sequence, 781 bytes after the one before and the sync byte
     of the next (or of the one after, if the next one's was hit) 781 bytes on: a line loses
     bytes, it does not add them, so its nodes are where they belong. Each node is then judged
-    by itself and its neighbours, whose bytes are their own: its flag must be one of the two
-    the device sends, its angle must continue its neighbours' steps (within a quarter step: a
-    damaged angle byte is a jump), and its distance must be predicted by a neighbour pair as in
-    dense capsules. Other nodes are published as no return, at the angle their believed
-    neighbours put them at. The timestamp is believed when it follows the capsule before by a
-    capsule's duration (within a tenth).
+    by itself and its neighbours, whose bytes are their own: its angle must continue its
+    neighbours' steps (within a quarter step: a damaged angle byte is a jump) and its distance
+    must be predicted by a neighbour pair as in dense capsules (its bits above the mode's range,
+    always clear, are cleared first: they can only carry damage); its start flag counts only
+    when the flag byte is one of the two the device sends. Other nodes are published as no
+    return, at the angle their believed neighbours put them at. The timestamp is believed
+    when it follows the capsule before by a capsule's duration (within a tenth).
 
     :param us_per_sample: the scan mode's microseconds per sample (a capsule's duration)
     :param max_distance_m: the mode's farthest range; distances beyond are published as no
@@ -183,6 +185,9 @@ class HqCapsuleDecoder:
         distance_q2 = nodes['distance_q2'].astype(np.int64)
         angle_deg = nodes['angle_z_q14'] * 90.0 / 16384.0
         start = (nodes['flag'] & 1).astype(bool)
+        # The distance's bits above the mode's range are always clear: in a damaged capsule
+        # they carry no information, only damage, and are cleared.
+        distance_q2[~clean] &= (1 << self._max_q2.bit_length()) - 1
         in_range = distance_q2 <= self._max_q2
         self._noise.update(np.where(in_range, distance_q2 / 4.0, 0.0))
         keep = in_range.copy()
@@ -190,10 +195,11 @@ class HqCapsuleDecoder:
         if not clean.all():
             damaged = ~clean
             believed_angle, step_deg = _continues_steps(angle_deg[damaged])
-            usable = believed_angle & in_range[damaged]
-            keep[damaged] = usable & ((distance_q2[damaged] == 0) | supported_by_neighbours(
-                distance_q2[damaged] / 4.0, usable, self._noise.sigma_mm,
-                math.radians(step_deg)))
+            # A neighbour's distance bytes are its own: they predict whatever its angle's are.
+            keep[damaged] = believed_angle & in_range[damaged] & (
+                (distance_q2[damaged] == 0) | supported_by_neighbours(
+                    distance_q2[damaged] / 4.0, in_range[damaged], self._noise.sigma_mm,
+                    math.radians(step_deg)))
             angle_deg[damaged] = _fill_angles(angle_deg[damaged], believed_angle)
             # A damaged flag byte spoils only the start flag, not the node.
             start[damaged] &= believed_angle & np.isin(nodes['flag'][damaged], _NODE_FLAGS)

@@ -215,26 +215,52 @@ class UltraLayout(CapsuleLayout):
         one before, predicted from the major after its own), so a damaged major moves them
         together and they agree with each other: the majors, whose bytes are their cabins'
         own, are checked against each other (a neighbour pair of majors predicts each), and a
-        predicted sample only against the two believed majors around it, at a third and two
-        thirds of the way. The last cabin's follow the next capsule's major: not believed.
-        The angle offset is the distance's, right when the distance is.
+        predicted sample only against believed majors: interpolated from the two around it, at
+        a third or two thirds of the way, or extrapolated from two on either side. The last
+        cabin's third sample follows the next capsule's major: not believed. The angle offset
+        is the distance's, right when the distance is.
         """
         majors = distance_mm[:, 0::3]
         believed = (majors > 0) & supported_by_neighbours(majors, usable[:, 0::3], sigma_mm,
                                                           3 * step_rad)
-        following = np.concatenate([majors[:, 1:], np.zeros((len(majors), 1))], axis=1)
-        around = believed & np.concatenate(
-            [believed[:, 1:], np.zeros((len(majors), 1), bool)], axis=1)
-        centre = 0.5 * (majors + following)
-        # As the dense check's midpoint: the noise of the sample and of the interpolation, and
-        # the bend of a straight surface over the three samples between the majors.
-        tolerance = (_SIGMAS * np.sqrt(2.0) * sigma_mm + centre * (3 * step_rad) ** 2
-                     + 2.0 * (following - majors) ** 2 / np.maximum(centre, 1.0) / 9.0)
+
+        def shifted(values, cabins):
+            # Cabin c + cabins's values at cabin c (zeros beyond the capsule).
+            out = np.zeros_like(values)
+            if cabins > 0:
+                out[:, :-cabins] = values[:, cabins:]
+            else:
+                out[:, -cabins:] = values[:, :cabins]
+            return out
+
+        def fits(sample, first, second, fraction, noise):
+            # A straight surface through majors ``first`` and ``second`` (3 samples apart), at
+            # ``fraction`` of the way from the first; the bend of a straight surface in polar
+            # coordinates over the samples spanned (as the dense check's).
+            predicted = first + fraction * (second - first)
+            centre = np.maximum(0.5 * (first + second), 1.0)
+            span = max(abs(fraction), abs(fraction - 1.0))
+            bend = span * (centre * (3 * step_rad) ** 2 + 2.0 * (second - first) ** 2 / 9.0
+                           / centre)
+            return np.abs(sample - predicted) <= noise + bend
+
+        # The noise of the sample and of the interpolation, as the dense check's midpoint; an
+        # extrapolation's is larger.
+        noise_between = _SIGMAS * np.sqrt(2.0) * sigma_mm
+        noise_beyond = _SIGMAS * np.sqrt(6.0) * sigma_mm
         plausible = np.zeros(distance_mm.shape, bool)
         plausible[:, 0::3] = believed
         for k in (1, 2):
-            between = majors + k * (following - majors) / 3.0
-            plausible[:, k::3] = around & (np.abs(distance_mm[:, k::3] - between) <= tolerance)
+            sample = distance_mm[:, k::3]
+            here, after = majors, shifted(majors, 1)
+            before, later = shifted(majors, -1), shifted(majors, 2)
+            ok_here, ok_after = believed, shifted(believed, 1)
+            ok_before, ok_later = shifted(believed, -1), shifted(believed, 2)
+            plausible[:, k::3] = (
+                (ok_here & ok_after & fits(sample, here, after, k / 3.0, noise_between))
+                | (ok_before & ok_here & fits(sample, before, here, 1.0 + k / 3.0, noise_beyond))
+                | (ok_after & ok_later & fits(sample, after, later, k / 3.0 - 1.0,
+                                              noise_beyond)))
         return plausible & usable
 
 

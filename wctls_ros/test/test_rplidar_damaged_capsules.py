@@ -33,8 +33,8 @@ def right_and_wrong(modes, mode_id, faults):
 
 @pytest.mark.parametrize('modes, mode_id, kept_share', [
     (A_SERIES_MODES, 1, 0.7),                       # 0x82 express
-    (A_SERIES_MODES, 2, 0.6),                       # 0x84 ultra, A2 Boost
-    (EMULATED_MODELS['a3'].modes, 3, 0.7),          # 0x84 ultra, A3 Sensitivity
+    (A_SERIES_MODES, 2, 0.7),                       # 0x84 ultra, A2 Boost
+    (EMULATED_MODELS['a3'].modes, 3, 0.75),         # 0x84 ultra, A3 Sensitivity
     (ULTRA_DENSE_MODES, 0, 0.8),                    # 0x86 ultra-dense
     # 0x83 HQ: a node's own angle and distance bytes and its neighbours' must survive.
     (HQ_MODES, 0, 0.65),

@@ -443,7 +443,7 @@ def _path_end(scores: np.ndarray, length: int, last_shift: int) -> tuple:
 
 
 def supported_by_neighbours(distances: np.ndarray, usable: np.ndarray, sigma_mm: float,
-               step_rad: float) -> np.ndarray:
+                            step_rad: float) -> np.ndarray:
     """
     Tell which distances a neighbour pair in the same capsule predicts (step 4).
 

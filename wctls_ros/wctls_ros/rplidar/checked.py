@@ -240,9 +240,9 @@ class CheckedCapsuleDecoder:
         vouched = usable & ~suspect[:, None]
         if suspect.any():
             step_rad = math.radians(self._angles.sweep_deg() / per)
-            vouched[suspect] = (usable[suspect] & (distances[suspect] > 0) & self._layout.plausible(
-                distances[suspect], corrections[suspect], usable[suspect], self._noise.sigma_mm,
-                step_rad))
+            plausible = self._layout.plausible(distances[suspect], corrections[suspect],
+                                               usable[suspect], self._noise.sigma_mm, step_rad)
+            vouched[suspect] = usable[suspect] & (distances[suspect] > 0) & plausible
         keep = vouched | (readable & (distances == 0))
         self._counts['rejected_samples'] += int(np.count_nonzero(~keep))
         distance = np.where(keep, distances, 0).reshape(-1).astype(np.float64)

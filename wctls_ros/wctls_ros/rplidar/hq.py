@@ -81,8 +81,7 @@ def encode_hq_capsules(angle_deg: np.ndarray, distance_mm: np.ndarray, quality: 
 
 class HqCapsuleDecoder:
     """
-    Incremental decoder of HQ capsules, checked by their CRC and, where it fails, by their
-    structure.
+    Incremental decoder of HQ capsules, checked by their CRC or, where it fails, their structure.
 
     At 5 % corrupted bytes almost no capsule of 781 bytes passes its CRC. A capsule that fails
     it is still read when it lies in sequence, 781 bytes after the one before and the sync byte

@@ -46,3 +46,24 @@ def test_five_percent_corrupted_bytes_keep_most_returns_and_almost_none_wrong(mo
     # Almost no capsule of 84 to 781 bytes arrives intact: what is kept comes from damaged ones.
     assert right >= kept_share * intact
     assert wrong <= 0.001 * right, f'{wrong} of {right} returns wrong'
+
+
+# A damaged capsule's timestamp is believed when it and the two before it arrived intact: 4 bytes
+# each (0.95^12 = 54 %), 8 in HQ capsules (29 %).
+@pytest.mark.parametrize('modes, believed_share', [(ULTRA_DENSE_MODES, 0.45), (HQ_MODES, 0.2)],
+                         ids=['ultra-dense', 'hq'])
+def test_device_timestamps_of_damaged_capsules_are_believed_only_when_right(modes,
+                                                                             believed_share):
+    mode = modes[0]
+    decoded = []
+    for faults in (None, Faults(corrupt_rate=0.05)):
+        data = emulated_stream(modes, 0, seconds=2.0, seed=3, faults=faults)
+        decoder = CAPSULE_DECODERS[mode.answer_type](mode.us_per_sample, mode.max_distance_m)
+        decoded.append(Samples.concat(feed_in_chunks(decoder, data, np.random.default_rng(5))))
+    intact, damaged = decoded
+    truth = dict(zip(intact.slot.tolist(), intact.device_time_us.tolist()))
+    believed = damaged.device_time_us >= 0
+    expected = np.array([truth[slot] for slot in damaged.slot[believed].tolist()])
+    # A damaged timestamp would shift every stamp the device clock gives (its lowest bound).
+    assert np.abs(damaged.device_time_us[believed] - expected).max() <= 1
+    assert believed.mean() >= believed_share

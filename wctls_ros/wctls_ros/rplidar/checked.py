@@ -36,6 +36,9 @@ from .protocol import DENSE_RETURN_QUALITY, Samples, StreamCounts
 # The sweep assumed until one is measured: the turn at 10 Hz, degrees per second.
 _NOMINAL_DEG_PER_S = 3600.0
 _NO_ANGLE_FIELD = 0x7FFF       # a start angle field beyond 360 degrees: no angle
+# How far a damaged capsule's timestamp may lie from continuing the step of the two before it,
+# microseconds (the device rounds each to a microsecond).
+STEADY_TIME_US = 2
 
 
 class CapsuleLayout:
@@ -46,12 +49,14 @@ class CapsuleLayout:
     :cvar samples: samples per capsule
     :cvar reads_successor: a capsule's last samples are read with its successor's first bytes
     :cvar angle_at: the start angle's offset, bytes
+    :cvar clock_bits: the bits of the device timestamp it carries, if any
     """
 
     size = 0
     samples = 0
     reads_successor = False
     angle_at = 2
+    clock_bits = 64
 
     def read(self, capsules: np.ndarray, successors: Optional[np.ndarray]) -> tuple:
         """
@@ -102,6 +107,50 @@ def checksum_passes(capsules: np.ndarray) -> np.ndarray:
     received = (capsules[:, 0] & 0x0F) | (capsules[:, 1] << 4)
     return (((capsules[:, 0] >> 4) == 0xA) & ((capsules[:, 1] >> 4) == 0x5)
             & (received == np.bitwise_xor.reduce(capsules[:, 2:], axis=1)))
+
+
+class SteadyDeviceTimes:
+    """
+    Tells which capsules' device timestamps to believe, capsule by capsule in stream order.
+
+    A timestamp a checksum vouches for is believed. Another is believed when the two capsules
+    just before it were read and it continues their step (within :data:`STEADY_TIME_US`): a
+    device's capsules last the same time, and a damaged byte moves one timestamp alone, by a
+    whole unit of that byte (at least a microsecond, and twice that in the step test).
+
+    :param clock_bits: the timestamp's bits (32: it wraps, and a step across the wrap counts)
+    """
+
+    def __init__(self, clock_bits: int):
+        self._wrap = 1 << clock_bits if clock_bits < 64 else None
+        self._recent = []           # (slot, timestamp) of the last two capsules read
+
+    def believe(self, slots: np.ndarray, times_us: np.ndarray, read: np.ndarray,
+                vouched: np.ndarray) -> np.ndarray:
+        """
+        Judge the timestamps of the next capsules.
+
+        :param slots: the capsules' stream indices (consecutive capsules: consecutive slots)
+        :param times_us: their timestamps as read, microseconds
+        :param read: which capsules' bytes were read (the others' timestamps are no evidence)
+        :param vouched: which capsules' checksums vouch for them
+        :return: the timestamps believed, -1 elsewhere
+        """
+        believed = np.where(read & vouched, np.asarray(times_us, np.int64), -1)
+        for i, (slot, time_us) in enumerate(zip(np.asarray(slots).tolist(),
+                                                np.asarray(times_us, np.int64).tolist())):
+            if not read[i]:
+                self._recent = []
+                continue
+            if believed[i] < 0 and len(self._recent) == 2:
+                (slot_2, time_2), (slot_1, time_1) = self._recent
+                second = time_us - 2 * time_1 + time_2
+                if self._wrap is not None:
+                    second = (second + self._wrap // 2) % self._wrap - self._wrap // 2
+                if slot - slot_1 == slot_1 - slot_2 == 1 and abs(second) <= STEADY_TIME_US:
+                    believed[i] = time_us
+            self._recent = self._recent[-1:] + [(slot, time_us)]
+        return believed
 
 
 def with_checksum(capsules: np.ndarray) -> bytes:
@@ -159,6 +208,7 @@ class CheckedCapsuleDecoder:
         self._last_uniform_deg = None
         self._fractions = np.arange(layout.samples) / layout.samples
         self._noise = RangeNoise(layout.samples)
+        self._device_times = SteadyDeviceTimes(layout.clock_bits)
 
     @property
     def counts(self) -> StreamCounts:
@@ -257,7 +307,9 @@ class CheckedCapsuleDecoder:
         k = np.tile(np.arange(per), count)
         times = self._layout.device_times_us(np.array(whole))
         if times is not None:
-            times = np.repeat(np.where([f.raw is not None for f in frames], times, -1), per)
+            times = np.repeat(self._device_times.believe(
+                np.array([f.slot for f in frames]), times,
+                np.array([f.raw is not None for f in frames]), ~suspect), per)
         return Samples(angle_deg=np.mod(uniform - np.where(readable, corrections, 0.0).reshape(-1),
                                         360.0),
                        distance_mm=distance,

@@ -25,6 +25,7 @@ import zlib
 import numpy as np
 
 from .capsules import RangeNoise, supported_by_neighbours
+from .checked import SteadyDeviceTimes
 from .protocol import Samples, StreamCounts
 
 HQ_SYNC = 0xA5
@@ -37,10 +38,8 @@ HQ_CAPSULE_SIZE = _CAPSULE_DTYPE.itemsize
 _CRC_PADDING = b'\0' * (4 - (HQ_CAPSULE_SIZE - 4) % 4)
 # The flags a node may carry: bit 0 the start of a turn, bit 1 its inverse.
 _NODE_FLAGS = (1, 2)
-# A damaged capsule's node angle may differ from its neighbours' step by this share of a step;
-# its timestamp from the one before plus a capsule's duration by this share of that.
+# A damaged capsule's node angle may differ from its neighbours' step by this share of a step.
 _ANGLE_STEP_SHARE = 0.25
-_TIME_TOLERANCE = 0.1
 
 
 def hq_crc(body: bytes) -> int:
@@ -92,10 +91,12 @@ class HqCapsuleDecoder:
     must be predicted by a neighbour pair as in dense capsules (its bits above the mode's range,
     always clear, are cleared first: they can only carry damage); its start flag counts only
     when the flag byte is one of the two the device sends. Other nodes are published as no
-    return, at the angle their believed neighbours put them at. The timestamp is believed
-    when it follows the capsule before by a capsule's duration (within a tenth).
+    return, at the angle their believed neighbours put them at. Its timestamp is believed when
+    it continues the step of the two capsules before it
+    (:class:`~wctls_ros.rplidar.checked.SteadyDeviceTimes`).
 
-    :param us_per_sample: the scan mode's microseconds per sample (a capsule's duration)
+    :param us_per_sample: the scan mode's microseconds per sample (unused: the samples carry
+        their angles)
     :param max_distance_m: the mode's farthest range; distances beyond are published as no
         return
     """
@@ -105,12 +106,11 @@ class HqCapsuleDecoder:
 
     def __init__(self, us_per_sample: float, max_distance_m: float = 40.0):
         self._max_q2 = int(max_distance_m * 4000.0)
-        self._capsule_us = us_per_sample * HQ_SAMPLES_PER_CAPSULE
         self._pending = b''
         self._offset = 0            # stream offset of _pending[0]
         self._synced = False        # _pending[0] is where the next capsule begins
-        self._last_time_us = None   # the timestamp read in the capsule before, if in sequence
         self._noise = RangeNoise(HQ_SAMPLES_PER_CAPSULE)
+        self._device_times = SteadyDeviceTimes(clock_bits=64)
         self._counts = dict.fromkeys(StreamCounts.__dataclass_fields__, 0)
 
     @property
@@ -204,17 +204,18 @@ class HqCapsuleDecoder:
             start[damaged] &= believed_angle & np.isin(nodes['flag'][damaged], _NODE_FLAGS)
             # A capsule without a believed angle cannot be placed: it is lost.
             published[damaged] = believed_angle.any(axis=1)
-        times = self._device_times_us(capsules['time_us'].astype(np.int64), clean,
-                                      [after for _, _, after in taken])
+        ends = self._offset + starts.astype(np.int64) + HQ_CAPSULE_SIZE
+        # Capsules in sequence lie a capsule apart: their slots are consecutive.
+        times = self._device_times.believe(ends // HQ_CAPSULE_SIZE - 1, capsules['time_us'],
+                                           np.ones(count, bool), clean)
         self._counts['frames'] += count
         self._counts['lost_frames'] += int(np.count_nonzero(~published))
         count = int(np.count_nonzero(published))
-        angle_deg, distance_q2, keep, start, nodes, times, starts = (
+        angle_deg, distance_q2, keep, start, nodes, times, ends = (
             column[published] for column in (angle_deg, distance_q2, keep, start, nodes, times,
-                                             starts))
+                                             ends))
         self._counts['samples'] += keep.size
         self._counts['rejected_samples'] += int(np.count_nonzero(~keep))
-        ends = self._offset + starts.astype(np.int64) + HQ_CAPSULE_SIZE
         k = np.tile(np.arange(HQ_SAMPLES_PER_CAPSULE), count)
         return Samples(angle_deg=angle_deg.reshape(-1),
                        distance_mm=np.where(keep, distance_q2, 0).reshape(-1) / 4.0,
@@ -226,25 +227,6 @@ class HqCapsuleDecoder:
                        slot=np.repeat(ends // HQ_CAPSULE_SIZE - 1, HQ_SAMPLES_PER_CAPSULE)
                        * HQ_SAMPLES_PER_CAPSULE + k,
                        device_time_us=np.repeat(times, HQ_SAMPLES_PER_CAPSULE))
-
-    def _device_times_us(self, read_us: np.ndarray, clean: np.ndarray, after: list) -> np.ndarray:
-        """
-        Return the capsules' timestamps to believe, -1 where none.
-
-        :param read_us: the timestamps as read
-        :param clean: which capsules passed their CRC
-        :param after: which capsules followed the one before in sequence
-        """
-        believed = []
-        for time_us, ok, follows in zip(read_us.tolist(), clean.tolist(), after):
-            expected = self._last_time_us + self._capsule_us if (
-                follows and self._last_time_us is not None) else None
-            plausible = expected is not None and (abs(time_us - expected)
-                                                  <= _TIME_TOLERANCE * self._capsule_us)
-            believed.append(time_us if ok or plausible else -1)
-            self._last_time_us = time_us
-        return np.array(believed, np.int64)
-
 
 def _continues_steps(angle_deg: np.ndarray) -> np.ndarray:
     """

@@ -52,8 +52,8 @@ def test_five_percent_corrupted_bytes_keep_most_returns_and_almost_none_wrong(mo
 # each (0.95^12 = 54 %), 8 in HQ capsules (29 %).
 @pytest.mark.parametrize('modes, believed_share', [(ULTRA_DENSE_MODES, 0.45), (HQ_MODES, 0.2)],
                          ids=['ultra-dense', 'hq'])
-def test_device_timestamps_of_damaged_capsules_are_believed_only_when_right(modes,
-                                                                             believed_share):
+def test_device_timestamps_of_damaged_capsules_are_believed_only_when_right(
+        modes, believed_share):
     mode = modes[0]
     decoded = []
     for faults in (None, Faults(corrupt_rate=0.05)):

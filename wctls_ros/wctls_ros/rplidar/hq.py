@@ -228,6 +228,7 @@ class HqCapsuleDecoder:
                        * HQ_SAMPLES_PER_CAPSULE + k,
                        device_time_us=np.repeat(times, HQ_SAMPLES_PER_CAPSULE))
 
+
 def _continues_steps(angle_deg: np.ndarray) -> np.ndarray:
     """
     Tell which nodes' angles continue their neighbours' steps, capsule by capsule.

@@ -162,17 +162,20 @@ def test_capsules_cut_short_lose_only_themselves_and_give_no_wrong_sample(cut_ra
     assert decoder.counts.damaged_frames > 0 and decoder.counts.rejected_samples > 0
 
 
-def test_corrupted_bytes_give_no_wrong_sample():
+def test_corrupted_bytes_keep_plausible_samples_and_give_almost_no_wrong_one():
     data = damaged(express_stream(seconds=3.0, seed=2), np.random.default_rng(4), corrupt=0.002,
                    drop=0.001)
     decoder = ExpressCapsuleDecoder(US_PER_SAMPLE, max_distance_m=12.0)
     samples = Samples.concat(feed_in_chunks(decoder, data, np.random.default_rng(5)))
     truth_mm = 1000.0 * true_ranges(math.pi - np.radians(samples.angle_deg))
     filled = samples.distance_mm > 0
-    assert filled.sum() > 0.6 * 3 * 4000 * 0.9
-    assert not (filled & (np.abs(samples.distance_mm - truth_mm) > 0.5 + 1e-6)).any()
+    error = np.abs(samples.distance_mm - truth_mm)
+    # A damaged capsule keeps the samples its neighbours vouch for; a corrupted low bit may
+    # pass (a few mm), a wrong return (10 cm off) almost never.
+    assert (filled & (error <= 0.5 + 1e-6)).sum() > 0.6 * 3 * 4000 * 0.9
+    assert (filled & (error > 100.0)).sum() <= 0.001 * filled.sum()
     counts = decoder.counts
-    assert counts.damaged_frames > 0 and counts.rejected_samples >= 32 * counts.damaged_frames // 2
+    assert counts.damaged_frames > 0 and counts.rejected_samples > 0
 
 
 @pytest.fixture

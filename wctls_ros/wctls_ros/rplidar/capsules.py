@@ -135,7 +135,7 @@ class DenseCapsuleDecoder:
         self._framer = CapsuleFramer(CAPSULE_SIZE, self._angles, self._counts)
         self._placer = CapsulePlacer(self._angles, self._framer, self._counts)
         self._last_angle = None
-        self._noise = _RangeNoise()
+        self._noise = RangeNoise()
 
     @property
     def counts(self) -> StreamCounts:
@@ -237,7 +237,7 @@ class DenseCapsuleDecoder:
         keep = readable & (distances <= self._max_mm)
         if suspect.any():
             step_rad = math.radians(self._angles.sweep_deg() / SAMPLES_PER_CAPSULE)
-            keep[suspect] &= (distances[suspect] == 0) | _supported(
+            keep[suspect] &= (distances[suspect] == 0) | supported_by_neighbours(
                 distances[suspect], keep[suspect], self._noise.sigma_mm, step_rad)
         self._counts['rejected_samples'] += int(np.count_nonzero(~keep[placed]))
         return np.where(keep, distances, 0.0)
@@ -267,16 +267,19 @@ class DenseCapsuleDecoder:
                        * SAMPLES_PER_CAPSULE + k)
 
 
-class _RangeNoise:
+class RangeNoise:
     """
     The range noise scale, from the median second difference along capsules.
 
     A damaged sample spoils three second differences: while fewer than half are, their median
     is the noise's. Until a capsule's worth is measured, the S1's datasheet accuracy.
+
+    :param samples_per_capsule: samples per capsule of the format measured
     """
 
-    def __init__(self):
+    def __init__(self, samples_per_capsule: int = SAMPLES_PER_CAPSULE):
         self.sigma_mm = _SIGMA_PRIOR_MM
+        self._first = samples_per_capsule
         self._window = []
         self._unmeasured = 0
         self._measured = False
@@ -285,13 +288,13 @@ class _RangeNoise:
         """
         Take the distances of more capsules.
 
-        :param distances: shape (capsules, 40), mm; 0 where there is no (readable) return
+        :param distances: shape (capsules, samples), mm; 0 where there is no (readable) return
         """
         second = distances[:, :-2] - 2.0 * distances[:, 1:-1] + distances[:, 2:]
         returns = (distances[:, :-2] > 0) & (distances[:, 1:-1] > 0) & (distances[:, 2:] > 0)
         self._window.append(np.abs(second[returns]))
         self._unmeasured += int(np.count_nonzero(returns))
-        if self._unmeasured < (_SIGMA_WINDOW // 4 if self._measured else SAMPLES_PER_CAPSULE):
+        if self._unmeasured < (_SIGMA_WINDOW // 4 if self._measured else self._first):
             return
         # A quarter of the window is new (a capsule's worth at first): take the median.
         window = np.concatenate(self._window)[-_SIGMA_WINDOW:]
@@ -439,12 +442,12 @@ def _path_end(scores: np.ndarray, length: int, last_shift: int) -> tuple:
     return end
 
 
-def _supported(distances: np.ndarray, usable: np.ndarray, sigma_mm: float,
-               step_rad: float) -> np.ndarray:
+def supported_by_neighbours(distances: np.ndarray, usable: np.ndarray, sigma_mm: float,
+                            step_rad: float) -> np.ndarray:
     """
     Tell which distances a neighbour pair in the same capsule predicts (step 4).
 
-    :param distances: distances of suspect capsules, shape (capsules, 40), mm
+    :param distances: distances of suspect capsules, shape (capsules, samples), mm
     :param usable: which distances may predict others (readable, in range)
     :param sigma_mm: range noise scale, mm
     :param step_rad: angle between samples, rad

@@ -39,6 +39,10 @@ EXPRESS_MAX_DISTANCE_MM = 0x3FFF
 EXPRESS_MAX_CORRECTION_Q3 = 0x3F
 
 _CABINS = EXPRESS_SAMPLES_PER_CAPSULE // 2
+# Angle corrections of neighbouring samples in a damaged capsule agree this well, 1/8 degree
+# (farther than any correction from one beyond the capsule's ends).
+_CORRECTION_AGREEMENT_Q3 = 1
+_FAR_Q3 = 1 << 8
 _CABIN_DTYPE = np.dtype([('fields', '<u2', (2,)), ('corrections', 'u1')])
 _CAPSULE_DTYPE = np.dtype([('sync1', 'u1'), ('sync2', 'u1'), ('start_angle', '<u2'),
                            ('cabins', _CABIN_DTYPE, (_CABINS,))])
@@ -97,6 +101,33 @@ class ExpressLayout(CapsuleLayout):
         """Return the distances (mm) and angle corrections (degrees) of intact capsules."""
         _, _, distance_mm, correction_q3 = decode_express_capsules(capsules)
         return distance_mm, correction_q3 / 8.0
+
+    def plausible(self, distance_mm: np.ndarray, correction_deg: np.ndarray,
+                  usable: np.ndarray, sigma_mm: float, step_rad: float) -> np.ndarray:
+        """
+        Tell which samples of capsules that failed their checksum to believe.
+
+        A distance as in every layout (a neighbour pair predicts it); its angle correction
+        only when it agrees with a neighbour's from another cabin, directly or through the
+        cabin's other sample: the two samples of a cabin share the byte of their low bits, so
+        they can be wrong together, and a wrong correction is a wrong angle that no distance
+        check sees. A triangulation device's correction changes with the distance, slowly
+        along a surface.
+        """
+        supported = super().plausible(distance_mm, correction_deg, usable, sigma_mm, step_rad)
+        correction_q3 = np.rint(correction_deg * 8.0).astype(np.int64)
+        pad = np.full((len(correction_q3), 1), -_FAR_Q3)
+        padded = np.concatenate([pad, correction_q3, pad], axis=1)
+        # Sample 2c's neighbour in another cabin is 2c - 1, sample 2c + 1's is 2c + 2.
+        outward = np.where(np.arange(EXPRESS_SAMPLES_PER_CAPSULE) % 2 == 0, -1, 1)
+        index = np.arange(EXPRESS_SAMPLES_PER_CAPSULE) + 1
+        other = padded[:, index + outward]
+        partner = padded[:, index - outward]
+        partner_other = padded[:, index - 2 * outward]
+        agrees = np.abs(correction_q3 - other) <= _CORRECTION_AGREEMENT_Q3
+        through_partner = ((np.abs(correction_q3 - partner) <= _CORRECTION_AGREEMENT_Q3)
+                           & (np.abs(partner - partner_other) <= _CORRECTION_AGREEMENT_Q3))
+        return supported & (agrees | through_partner)
 
 
 class ExpressCapsuleDecoder(CheckedCapsuleDecoder):

@@ -22,7 +22,8 @@ diagnostic_msgs/DiagnosticArray on ``/diagnostics`` (1 Hz, in every state); offe
 the time order of the beams: :mod:`wctls_ros.rplidar.laserscan`. The device is read on a
 background thread (:class:`~wctls_ros.rplidar.driver.RplidarDriver`), which publishes each turn
 as soon as it is complete. Unlike sllidar_ros2, header.stamp is the measurement time of the
-turn's first sample (raw angle ~0) and scan_time the measured rotation period.
+turn's first sample (raw angle ~0; on the device's clock for the formats that carry it,
+:class:`~wctls_ros.rplidar.turns.TurnAssembler`) and scan_time the measured rotation period.
 """
 
 import array

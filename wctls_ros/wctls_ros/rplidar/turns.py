@@ -16,7 +16,11 @@ Timing uses the device's own sample clock (:class:`SampleClock`): a turn's first
 stamped by its place in the stream, so consecutive turns lie exactly their samples apart and
 reader-thread delays, which a loaded machine makes long, do not leak into the stamps. With
 ``step`` the median angle between consecutive samples, the rotation period is
-``360 / step`` sample periods.
+``360 / step`` sample periods. Formats whose frames carry the device's timestamp (ultra-dense and
+HQ capsules) are stamped on that clock instead, read on the monotonic clock the same way
+(a :class:`SampleClock` whose slots are the device's microseconds): a sample's device time is its
+frame's timestamp (its first sample's) plus its place in the frame, so stamps follow the
+device's own timing, whatever its sample rate, and a frame counted wrongly does not shift them.
 """
 
 import collections
@@ -31,6 +35,8 @@ _MISSED_START_DROP_DEG = 270.0
 # How far corrected angles scatter about their grid: express corrections reach 8 degrees, the
 # ultra capsules' distance-dependent offsets about as far.
 _CORRECTION_SPAN_DEG = 16.0
+# The range of a 32-bit device clock (ultra-dense capsules' timestamps wrap after 72 minutes).
+_DEVICE_TIME_WRAP_US = 1 << 32
 
 
 class SampleClock:
@@ -66,7 +72,7 @@ class SampleClock:
         :param bounds_s: their measurement time bounds, monotonic clock, s
         """
         tightest = int(np.argmin(bounds_s - slots * self.period_s))
-        self._bounds.append((int(slots[tightest]), float(bounds_s[tightest])))
+        self._bounds.append((float(slots[tightest]), float(bounds_s[tightest])))
         while self._bounds[-1][1] - self._bounds[0][1] > self.SPAN_S:
             self._bounds.popleft()
         slots, bounds_s = np.array(self._bounds).T
@@ -82,7 +88,7 @@ class SampleClock:
         self.period_s = float(np.clip(rate, self._nominal_s * (1.0 - self.MAX_RATE_ERROR),
                                       self._nominal_s * (1.0 + self.MAX_RATE_ERROR)))
 
-    def time_s(self, slot: int) -> float:
+    def time_s(self, slot: float) -> float:
         """
         Return when the sample in a slot was measured.
 
@@ -106,9 +112,10 @@ class Turn:
     :ivar first_sample_s: estimated measurement time of the first sample, monotonic clock, s
     :ivar period_s: rotation period from the device's sample clock, s
     :ivar last_byte_s: receive time of the frame carrying the last sample, monotonic clock, s
-    :ivar device_time_us: the device's timestamp of the frame carrying the first sample,
-        microseconds on its clock (formats that carry one: ultra-dense capsules); None when
-        the format has none or that frame's was unreadable
+    :ivar device_time_us: the first sample's time on the device's clock, microseconds (its
+        frame's timestamp plus its place in the frame; a 32-bit clock unwrapped), for formats
+        that carry one (ultra-dense and HQ capsules), then also what ``first_sample_s`` is read
+        from; None when the format has none or none of the turn's frames had a readable one
     """
 
     angle_deg: np.ndarray
@@ -117,7 +124,7 @@ class Turn:
     first_sample_s: float
     period_s: float
     last_byte_s: float
-    device_time_us: Optional[int] = None
+    device_time_us: Optional[float] = None
 
 
 class TurnAssembler:
@@ -133,6 +140,8 @@ class TurnAssembler:
                  max_samples: int = 8192):
         self._sample_s = us_per_sample * 1e-6
         self._clock = SampleClock(self._sample_s)
+        self._device_clock = SampleClock(1e-6)     # slots: the device's microseconds
+        self._last_frame_us = None                  # the last frame timestamp, unwrapped
         self._transmission_s = frame_transmission_s
         self._max_samples = max_samples
         self._parts = []
@@ -182,8 +191,12 @@ class TurnAssembler:
         self._last_angle = angle[-1]
         self._last_slot = samples.slot[-1]
         self._clock.add(samples.slot, measured_s)
+        device_us = self._sample_device_times_us(samples)
+        timed = device_us >= 0
+        if timed.any():
+            self._device_clock.add(device_us[timed], measured_s[timed])
         columns = (angle, samples.distance_mm, samples.quality, samples.slot, received_s,
-                   samples.device_time_us)
+                   device_us)
         turns = []
         begin = 0
         for cut in cuts:
@@ -248,8 +261,45 @@ class TurnAssembler:
         self._step_deg = step_deg = float(np.median(steps))
         period_s = 360.0 / step_deg * self._clock.period_s
         first_sample_s = self._clock.time_s(int(slot[0]))
+        first_device_us = None
+        timed = np.flatnonzero(device_time_us >= 0)
+        if timed.size:
+            # The first sample with a device time, back to the turn's first by the samples
+            # between (its own frame's timestamp may have been unreadable).
+            j = timed[0]
+            first_device_us = float(device_time_us[j] - (slot[j] - slot[0]) * self._sample_s * 1e6)
+            first_sample_s = self._device_clock.time_s(first_device_us)
         self._turn_end_s = first_sample_s + (2.0 - angle[0] / 360.0) * period_s
         return Turn(angle_deg=angle, distance_mm=distance, quality=quality,
                     first_sample_s=first_sample_s, period_s=period_s,
-                    last_byte_s=float(received_s[-1]),
-                    device_time_us=int(device_time_us[0]) if device_time_us[0] >= 0 else None)
+                    last_byte_s=float(received_s[-1]), device_time_us=first_device_us)
+
+    def _sample_device_times_us(self, samples: Samples) -> np.ndarray:
+        """
+        Return each sample's time on the device's clock, -1 where its frame has none.
+
+        A frame's timestamp is its first sample's; a decoder publishes whole frames, so a
+        sample's place in its frame is the first's ``samples_after`` less its own.
+
+        :param samples: decoded samples in stream order
+        :return: microseconds on the device's clock, unwrapped
+        """
+        frame_us = samples.device_time_us
+        known = np.flatnonzero(frame_us >= 0)
+        if not known.size:
+            return np.full(len(frame_us), -1.0)
+        starts = np.flatnonzero(np.r_[True, np.diff(samples.frame_end) != 0])
+        first_after = np.repeat(np.maximum.reduceat(samples.samples_after, starts),
+                                np.diff(np.r_[starts, len(frame_us)]))
+        place = first_after - samples.samples_after
+        raw = frame_us[known].astype(np.int64)
+        last = int(raw[0]) if self._last_frame_us is None else self._last_frame_us
+        # Each timestamp continues the one before by their difference modulo the 32-bit
+        # clock's range (a 64-bit one's frames lie far less than that apart).
+        half = _DEVICE_TIME_WRAP_US // 2
+        steps = (np.diff(np.r_[last, raw]) + half) % _DEVICE_TIME_WRAP_US - half
+        unwrapped = last + np.cumsum(steps)
+        self._last_frame_us = int(unwrapped[-1])
+        device_us = np.full(len(frame_us), -1.0)
+        device_us[known] = unwrapped + place[known] * self._sample_s * 1e6
+        return device_us

@@ -55,6 +55,10 @@ _OFFSET_K1 = 98361
 _OFFSET_CUBE_DIVISOR = 98304
 _OFFSET_NEAR_Q2 = 50 * 4
 _SDK_PI = 3.14159265
+# Noise sigmas a predicted sample of a damaged capsule may lie from its place between majors.
+_SIGMAS = 4.0
+# Steepest surface a pair may describe: tan(80 degrees) of range per radian (the dense check's).
+_STEEPEST = np.tan(np.radians(80.0))
 
 
 def varbitscale_decode(scaled: np.ndarray) -> tuple:
@@ -202,6 +206,95 @@ class UltraLayout(CapsuleLayout):
                                | (successors[:, 5].astype(np.int64) & 0xF) << 8, -1)
         distances = decode_ultra_capsules(capsules, next_majors)
         return distances, offset_deg(np.maximum(distances, 0))
+
+    def plausible(self, distance_mm: np.ndarray, correction_deg: np.ndarray,
+                  usable: np.ndarray, sigma_mm: float, step_rad: float) -> np.ndarray:
+        """
+        Tell which samples of capsules that failed their checksum to believe.
+
+        A cabin's major is in three samples (its own, the next one predicted from it, and the
+        one before, predicted from the major after its own), so a damaged major moves them
+        together and they agree with each other. So a major is checked, as a dense capsule's
+        sample, against the nearest samples that do not read its bytes (interpolated from the
+        ones two samples either side, or extrapolated from the two beyond on either side), and
+        a predicted sample only against believed majors: interpolated from the two around it,
+        at a third or two thirds of the way, or extrapolated from two on either side. The last
+        cabin's third sample follows the next capsule's major: not believed. The angle offset
+        is the distance's, right when the distance is.
+        """
+        majors = distance_mm[:, 0::3]
+        # A major's nearest samples whose bytes are not its own: 3c - 2 (the cabin before's
+        # major and first prediction) and 3c + 2 (the next major and this cabin's second
+        # prediction), and beyond them 3c - 3 and 3c + 3.
+        evidence = np.pad(np.where(usable & (distance_mm > 0), distance_mm, np.nan),
+                          ((0, 0), (3, 3)), constant_values=np.nan)
+        at = 3 * np.arange(majors.shape[1]) + 3
+
+        def near(offset):
+            return evidence[:, at + offset]
+
+        # The noise of the sample and of a prediction between the pair (as the dense check's
+        # midpoint) or beyond it.
+        noise_mid = _SIGMAS * np.sqrt(1.5) * sigma_mm
+        noise_end = _SIGMAS * np.sqrt(6.0) * sigma_mm
+        with np.errstate(invalid='ignore'):
+            believed = (majors > 0) & (
+                _fits(majors, near(-2), near(2), 0.5, 4, noise_mid, step_rad)
+                | _fits(majors, near(-3), near(-2), 3.0, 1, noise_end, step_rad)
+                | _fits(majors, near(3), near(2), 3.0, 1, noise_end, step_rad))
+
+        def shifted(values, cabins):
+            # Cabin c + cabins's values at cabin c (zeros beyond the capsule).
+            out = np.zeros_like(values)
+            if cabins > 0:
+                out[:, :-cabins] = values[:, cabins:]
+            else:
+                out[:, -cabins:] = values[:, :cabins]
+            return out
+
+        plausible = np.zeros(distance_mm.shape, bool)
+        plausible[:, 0::3] = believed
+        here, after = majors, shifted(majors, 1)
+        before, later = shifted(majors, -1), shifted(majors, 2)
+        ok_here, ok_after = believed, shifted(believed, 1)
+        ok_before, ok_later = shifted(believed, -1), shifted(believed, 2)
+        for k in (1, 2):
+            sample = distance_mm[:, k::3]
+            plausible[:, k::3] = (
+                (ok_here & ok_after & _fits(sample, here, after, k / 3.0, 3, noise_mid,
+                                            step_rad))
+                | (ok_before & ok_here & _fits(sample, before, here, 1.0 + k / 3.0, 3,
+                                               noise_end, step_rad))
+                | (ok_after & ok_later & _fits(sample, after, later, k / 3.0 - 1.0, 3,
+                                               noise_end, step_rad)))
+        return plausible & usable
+
+
+def _fits(sample: np.ndarray, first: np.ndarray, second: np.ndarray, fraction: float,
+          spacing: int, noise: float, step_rad: float) -> np.ndarray:
+    """
+    Tell whether samples lie on the straight surfaces through pairs, as the dense check asks.
+
+    A pair that climbs faster than a surface seen at 80 degrees incidence predicts nothing; the
+    tolerance is the noise plus the bend of a straight surface in polar coordinates over the
+    samples spanned.
+
+    :param sample: the distances checked, mm
+    :param first: the pairs' first distances, mm (NaN: no pair)
+    :param second: their second distances, ``spacing`` samples on, mm (NaN: no pair)
+    :param fraction: where the sample lies, in spacings from the first (beyond 1: ahead)
+    :param spacing: samples between the pair's two
+    :param noise: the noise allowed, mm
+    :param step_rad: angle between samples, rad
+    :return: bool, shape of ``sample``
+    """
+    predicted = first + fraction * (second - first)
+    centre = np.maximum(0.5 * (first + second), 1.0)
+    span = max(abs(fraction), abs(fraction - 1.0))
+    rise = (second - first) / spacing
+    bend = span * spacing ** 2 * (centre * step_rad ** 2 + 2.0 * rise ** 2 / centre)
+    steep = np.abs(rise) > _STEEPEST * step_rad * centre + noise
+    return ~steep & (np.abs(sample - predicted) <= noise + bend)
 
 
 class UltraCapsuleDecoder(CheckedCapsuleDecoder):

@@ -111,6 +111,7 @@ class UltraDenseLayout(CapsuleLayout):
     size = ULTRA_DENSE_CAPSULE_SIZE
     samples = ULTRA_DENSE_SAMPLES_PER_CAPSULE
     angle_at = 8
+    clock_bits = 32
 
     def __init__(self):
         self._last_q2 = 0       # the last distance decoded, 1/4 mm (the SDK's _last_dist_q2)

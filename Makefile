@@ -87,7 +87,7 @@ $(BUILD_STAMP): $(DEPS_STAMP) $(SOURCES)
 	touch $@
 
 demo: $(BUILD_STAMP)
-	$(WITH_ENV) install/wctls_ros/lib/wctls_ros/demo
+	$(WITH_ENV) install/wctls_ros/lib/wctls_ros/demo $(DEMO_ARGS)
 
 test: $(BUILD_STAMP) $(OLDEST_STAMP) $(STOCK_STAMP)
 	$(WITH_ENV) python -m pytest $(PYTEST_ARGS)

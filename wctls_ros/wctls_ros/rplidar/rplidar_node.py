@@ -53,9 +53,6 @@ SCAN_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
 DIAGNOSTICS_PERIOD_S = 1.0
 # How often configure and close look whether the device has answered, s.
 _POLL_S = 0.02
-# Longest wait at close for a scanning device to take the motor stop (STOP, then the motor
-# idled after a new handshake: tens of milliseconds), s.
-MOTOR_STOP_WAIT_S = 1.0
 # A report period with this share of frames damaged or lost, or of samples rejected, is WARN.
 DAMAGED_LINK_SHARE = 0.01
 _LATENCY_WINDOW = 1000
@@ -219,22 +216,15 @@ class RplidarNode(LifecycleNode):
 
     def _close_driver(self):
         """
-        Stop the motor, then close the driver.
+        Close the driver, which ends the scan and stops the motor the model's way.
 
-        A scanning device is first asked to idle its motor (what deactivate does) and given
-        :data:`MOTOR_STOP_WAIT_S` to do so: closing alone stops the scan, which on some models
-        leaves the motor spinning.
+        The driver's close sends STOP and then the model's motor-off (MOTOR_SPEED 0, PWM 0 or
+        the DTR line) on the link it holds, without a new handshake: quick on every exit, and
+        no error when the device is already gone.
         """
         driver, self._driver = self._driver, None
-        if driver is None:
-            return
-        if driver.status().state == DriverState.SCANNING:
-            driver.set_motor(False)
-            deadline = time.monotonic() + MOTOR_STOP_WAIT_S
-            while (driver.status().state != DriverState.MOTOR_STOPPED
-                   and time.monotonic() < deadline):
-                time.sleep(_POLL_S)
-        driver.close()
+        if driver is not None:
+            driver.close()
 
     def _publish_turn(self, turn, mode):
         """Publish one turn as a LaserScan, and as a fixed-count one if asked (reader thread)."""

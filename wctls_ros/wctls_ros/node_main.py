@@ -3,7 +3,6 @@
 
 """The Jazzy ``main()`` every wctls_ros node shares, and its parameter declarations."""
 
-import contextlib
 import difflib
 import itertools
 import os
@@ -152,8 +151,7 @@ def run_node(name: str, make_node, spin=spin_forever, config_errors=(ValueError,
     try:
         # Made before the (slower) node, so a signal during start-up rarely meets it half-built.
         executor = SingleThreadedExecutor()
-        with _interrupts_deferred():
-            node = make_node()
+        node = make_node()
         executor.add_node(node)
         return spin(executor, node)
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -199,26 +197,6 @@ def _interrupt_once():
                 raise KeyboardInterrupt
 
         signal.signal(signal.SIGINT, interrupt)
-
-
-@contextlib.contextmanager
-def _interrupts_deferred():
-    """
-    Let a Ctrl-C wait until the block has run (main thread only), then raise as usual.
-
-    A node is built in a few hundred ms (a lifecycle node configures itself inside its
-    constructor); a KeyboardInterrupt in the middle of rclpy's constructors left a half-built
-    node whose clean-up raised again, a traceback on a loaded machine. SIGINT is blocked for the
-    block and delivered when it ends, where run_node catches it.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
 def _ignore_further_interrupts():

@@ -7,6 +7,7 @@ import importlib.util
 import os
 import signal
 import subprocess
+import sys
 import time
 
 from conftest import spin_until
@@ -89,3 +90,41 @@ def test_a_second_ctrl_c_during_the_clean_up_ends_the_node_cleanly(node, ros_con
             process.send_signal(signal.SIGINT)
             _, errors = process.communicate(timeout=30)
         assert (process.returncode, 'Traceback' in errors) == (0, False), (delay_s, errors)
+
+
+# A node being built when Ctrl-C comes: rclpy's handler shuts the context down at once (C code),
+# so the constructor fails with an RCLError, and Python runs the package's handler a few
+# bytecodes later, while run_node handles that error. A profile hook sends the SIGINT at the
+# moment that handler asks rclpy.ok(), the moment it hit by chance on loaded machines (a
+# KeyboardInterrupt traceback, status -2).
+_CTRL_C_WHILE_A_FAILED_START_IS_HANDLED = """
+import os
+import signal
+import sys
+
+import rclpy
+import rclpy.utilities
+
+from wctls_ros.node_main import run_node
+
+
+def sigint_when_rclpy_ok_is_asked(frame, event, argument):
+    if event == 'call' and frame.f_code is rclpy.utilities.ok.__code__:
+        sys.setprofile(None)
+        os.kill(os.getpid(), signal.SIGINT)
+
+
+def half_built_node():
+    rclpy.shutdown()                     # what rclpy's SIGINT handler does first
+    sys.setprofile(sigint_when_rclpy_ok_is_asked)
+    return rclpy.create_node('half_built')
+
+
+sys.exit(run_node('half_built', half_built_node))
+"""
+
+
+def test_ctrl_c_while_a_node_being_built_fails_ends_it_quietly():
+    result = subprocess.run([sys.executable, '-c', _CTRL_C_WHILE_A_FAILED_START_IS_HANDLED],
+                            capture_output=True, text=True, timeout=60)
+    assert (result.returncode, 'Traceback' in result.stderr) == (0, False), result.stderr

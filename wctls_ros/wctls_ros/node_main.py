@@ -149,19 +149,24 @@ def run_node(name: str, make_node, spin=spin_forever, config_errors=(ValueError,
         return 1
     node = executor = None
     try:
-        # Made before the (slower) node, so a signal during start-up rarely meets it half-built.
-        executor = SingleThreadedExecutor()
-        node = make_node()
-        executor.add_node(node)
-        return spin(executor, node)
+        # The one KeyboardInterrupt (:func:`_interrupt_once`) lands between any two bytecodes,
+        # also inside the handlers below: rclpy's own handler has already shut the context down
+        # (a node half-built then fails with an RCLError), and Python runs ours after it.
+        try:
+            # Made before the (slower) node, so a signal during start-up rarely meets it
+            # half-built.
+            executor = SingleThreadedExecutor()
+            node = make_node()
+            executor.add_node(node)
+            return spin(executor, node)
+        except (ParameterException, *config_errors) as error:
+            logger.fatal(str(error))
+            return 1
+        except Exception:  # noqa: B902 - a failure caused by the shutdown itself is no error
+            if rclpy.ok():
+                raise
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (ParameterException, *config_errors) as error:
-        logger.fatal(str(error))
-        return 1
-    except Exception:  # noqa: B902 - a failure caused by the shutdown itself is no error
-        if rclpy.ok():
-            raise
     finally:
         _ignore_further_interrupts()
         if executor is not None:

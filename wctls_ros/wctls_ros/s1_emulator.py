@@ -224,6 +224,21 @@ def _read_stdin_commands(commands: queue.Queue):
         commands.put(line)
 
 
+def _start_reading_commands(commands: queue.Queue):
+    """
+    Start the thread that forwards standard input to the command queue.
+
+    A Ctrl-C inside ``Thread.start()`` breaks its condition's lock (RuntimeError: release
+    unlocked lock: status 1 and a traceback instead of 130), so SIGINT waits, blocked, until the
+    thread has started; the thread keeps it blocked (Python handles signals in the main thread).
+    """
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        threading.Thread(target=_read_stdin_commands, args=(commands,), daemon=True).start()
+    finally:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 def _serve(args):
     """Start the emulator, announce it on standard output and serve until ``quit``."""
     scene, plan_name = _scene(args)
@@ -262,6 +277,7 @@ def _serve(args):
         # it so: the demo's SIGINT to its process group (or a test's) would not stop us. Whoever
         # sends it means it, as for the nodes (node_main installs its own SIGINT handler).
         signal.signal(signal.SIGINT, signal.default_int_handler)
+        _start_reading_commands(emulator.commands)
         print(f'pty {emulator.pty.path}', flush=True)
         if args.link:
             print(f'link {args.link}', flush=True)
@@ -272,8 +288,6 @@ def _serve(args):
         print(f'ready: RPLIDAR {model_name(model.model)} emulator ({rate}, motor '
               f'{model.motor.value if model.motor else "run by itself"}), floor plan '
               f'{plan_name}', flush=True)
-        threading.Thread(target=_read_stdin_commands, args=(emulator.commands,),
-                         daemon=True).start()
         emulator.run()
     finally:
         emulator.close()

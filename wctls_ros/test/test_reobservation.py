@@ -9,7 +9,9 @@ noise model the simulation used, the share of re-observations inside the 95 % ga
 about 0.95, for the pose-free quantities (corner-corner distance, line-line angle, corner-line
 distance) and in the world frame with the true poses; with every covariance halved it must
 fall clearly below (a test that can fail). ``score --poses`` must give the same figures as the
-function from a pose file.
+function from a pose file. A line track takes only segments on the stretch of wall it has seen
+(a cabinet before the wall, alike as an infinite line, is another landmark), and the pose
+Jacobian of a line's world (angle, radius) matches finite differences.
 """
 
 import math
@@ -19,7 +21,8 @@ import pytest
 from wctls_ros.core import FeatureConfig
 from wctls_ros.evaluation import StaticScans
 from wctls_ros.evaluation.poses import load_poses, PoseError, poses_at, write_poses
-from wctls_ros.evaluation.reobservation import measure, reobservation, to_world
+from wctls_ros.evaluation.reobservation import (
+    Landmarks, measure, reobservation, to_world, with_poses)
 from wctls_ros.simulation import floor_plan_from_dict, NoiseModel, simulate_recording
 
 ROOM = {'name': 'room', 'polylines': [
@@ -98,10 +101,10 @@ def test_a_wrong_pose_covariance_shows_in_the_pose_test_not_in_the_pose_free_one
 
 
 def test_world_frame_covariance_matches_monte_carlo():
-    from wctls_ros.evaluation.reobservation import Landmarks
     landmarks = Landmarks(np.array([[1.2, -0.4]]), np.diag([1e-4, 4e-4])[None],
                           np.array([[0, 1]]), np.array([[0.7, 1.5]]),
-                          np.array([[[1e-4, 2e-5], [2e-5, 9e-4]]]))
+                          np.array([[[1e-4, 2e-5], [2e-5, 9e-4]]]),
+                          np.array([[[1.4, 0.6], [0.8, 1.8]]]))
     pose = np.array([0.8, -1.1, 2.5])
     pose_cov = np.diag([0.03, 0.02, 0.05]) ** 2
     _, corner_cov, line, line_cov = to_world(landmarks, pose, pose_cov)
@@ -112,7 +115,7 @@ def test_world_frame_covariance_matches_monte_carlo():
                                                   landmarks.corner_cov[0], 50),
                           np.zeros((50, 2, 2)), np.zeros((50, 2), dtype=int),
                           rng.multivariate_normal(landmarks.line[0], landmarks.line_cov[0], 50),
-                          np.zeros((50, 2, 2)))
+                          np.zeros((50, 2, 2)), np.zeros((50, 2, 2)))
         xy, _, drawn_line, _ = to_world(drawn, pose_drawn, np.zeros((3, 3)))
         samples.append(np.column_stack([xy, drawn_line]))
     samples = np.concatenate(samples)
@@ -120,6 +123,61 @@ def test_world_frame_covariance_matches_monte_carlo():
     empirical = np.cov(samples.T)
     assert np.allclose(empirical[:2, :2], corner_cov[0], rtol=0.05, atol=1e-6)
     assert np.allclose(empirical[2:, 2:], line_cov[0], rtol=0.05, atol=1e-6)
+
+
+def wall_piece(start_xy, end_xy, sigma_m=0.01):
+    """Return the landmarks of a scan that sees one piece of wall (no corners)."""
+    start, end = np.asarray(start_xy, dtype=float), np.asarray(end_xy, dtype=float)
+    direction = (end - start) / np.linalg.norm(end - start)
+    normal = np.array([direction[1], -direction[0]])
+    if normal @ start < 0.0:                         # from the sensor towards the wall
+        normal = -normal
+    line = np.array([[math.atan2(normal[1], normal[0]), normal @ start]])
+    return Landmarks(np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros((0, 2), dtype=np.intp),
+                     line, np.diag([(sigma_m / 2.0) ** 2, sigma_m ** 2])[None],
+                     np.array([[start, end]]))
+
+
+def test_a_line_joins_a_track_only_where_its_segment_overlaps_the_tracks_last_one():
+    # A wall 2 m ahead, then a cabinet front 5 cm before it, 1 m further along: alike as
+    # infinite lines within the association gate (3.5 sigma apart), but two landmarks.
+    wall = wall_piece((2.0, -1.5), (2.0, -0.5))
+    cabinet = wall_piece((1.95, 0.5), (1.95, 1.2))
+    wall_again = wall_piece((2.0, -0.8), (2.0, 0.2))
+    poses = np.zeros((3, 3))
+    corners, lines, _, line_lengths = with_poses([wall, cabinet, wall_again], poses,
+                                                 np.zeros((3, 3)))
+    assert corners.tested == 0
+    # The cabinet starts a track of its own; the wall seen again joins the wall's.
+    assert (lines.tested, lines.inside) == (1, 1)
+    assert sorted(line_lengths) == [1, 2]
+
+
+def test_a_line_track_keeps_the_stretch_of_wall_it_has_seen():
+    # The whole wall, then only its left end (the rest hidden), then its right end: the third
+    # piece misses the second but lies on the stretch the track has seen.
+    pieces = [wall_piece((2.0, -1.5), (2.0, 0.5)), wall_piece((2.0, -1.0), (2.0, -0.5)),
+              wall_piece((2.0, 0.0), (2.0, 0.4))]
+    _, lines, _, line_lengths = with_poses(pieces, np.zeros((3, 3)), np.zeros((3, 3)))
+    assert (lines.tested, lines.inside) == (2, 2)
+    assert line_lengths == (3,)
+
+
+def test_the_line_pose_jacobian_matches_finite_differences():
+    landmarks = wall_piece((1.5, -0.4), (1.2, 0.9))
+    pose = np.array([0.8, -1.1, 2.5])
+    _, _, line, no_pose = to_world(landmarks, pose, np.zeros((3, 3)))
+    step = 1e-6
+    for axis in range(3):
+        moved = pose.copy()
+        moved[axis] += step
+        _, _, line_moved, _ = to_world(landmarks, moved, np.zeros((3, 3)))
+        derivative = (line_moved[0] - line[0]) / step
+        pose_cov = np.zeros((3, 3))
+        pose_cov[axis, axis] = 1.0
+        _, _, _, with_pose = to_world(landmarks, pose, pose_cov)
+        assert np.allclose(with_pose[0] - no_pose[0], np.outer(derivative, derivative),
+                           atol=1e-5), axis
 
 
 def test_poses_are_interpolated_to_the_stamps_with_the_laser_offset(tmp_path):

@@ -20,7 +20,10 @@ distance):
   world frame (its covariance with the pose's), associated to the track whose last observation
   is nearest (Mahalanobis, within the 99.99 % gate; tracks unseen for 50 scans are closed), and
   the innovation against that observation is tested in the 95 % gate (chi-square, 2 degrees of
-  freedom: 5.99);
+  freedom: 5.99). A line joins a track only when its segment overlaps the stretch of wall the
+  track has seen (the union of its segments along its line): the infinite lines of two pieces
+  of wall metres apart, or of a wall and a cabinet before it, are alike within the pose's wide
+  gate, but they are not one landmark;
 - **tracks and landmarks**: how many scans each track lasts (median and 90th percentile) and how
   many landmarks (corners + lines) each scan gives.
 
@@ -69,6 +72,7 @@ class Landmarks:
     :ivar corner_lines: the two segments each corner joins, shape (C, 2)
     :ivar line: (normal angle rad, distance m) of each segment's infinite line, shape (L, 2)
     :ivar line_cov: their covariances, shape (L, 2, 2)
+    :ivar line_ends: each segment's first and last end, shape (L, 2, 2), m
     """
 
     corner_xy: np.ndarray
@@ -76,6 +80,7 @@ class Landmarks:
     corner_lines: np.ndarray
     line: np.ndarray
     line_cov: np.ndarray
+    line_ends: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -204,7 +209,8 @@ def landmarks_of(features, corners: ScanCorners, covariance_scale: float = 1.0) 
     segments = features.segments
     return Landmarks(corners.xy, covariance_scale * corners.covariance, corners.segments,
                      np.column_stack([segments.angle_rad, segments.radius_m]).reshape(-1, 2),
-                     covariance_scale * np.asarray(segments.covariance).reshape(-1, 2, 2))
+                     covariance_scale * np.asarray(segments.covariance).reshape(-1, 2, 2),
+                     np.stack([segments.start_xy_m, segments.end_xy_m], axis=1).reshape(-1, 2, 2))
 
 
 def _wrap(angle):
@@ -322,9 +328,8 @@ def to_world(landmarks: Landmarks, pose: np.ndarray, pose_cov: np.ndarray):
     :return: (corner xy (C, 2), their covariances (C, 2, 2), lines (L, 2), theirs (L, 2, 2))
     """
     x, y, yaw = pose
-    cos, sin = math.cos(yaw), math.sin(yaw)
-    rotation = np.array([[cos, -sin], [sin, cos]])
-    xy = landmarks.corner_xy @ rotation.T + (x, y)
+    rotation = _rotation(yaw)
+    xy = _moved(landmarks.corner_xy, pose)
     # d(world xy) / d(x, y, yaw)
     pose_jacobian = np.zeros((len(xy), 2, 3))
     pose_jacobian[:, :, :2] = np.eye(2)
@@ -355,31 +360,90 @@ def to_world(landmarks: Landmarks, pose: np.ndarray, pose_cov: np.ndarray):
     return xy, corner_cov, np.column_stack([angle, radius]), line_cov
 
 
-class _Tracks:
-    """Tracks of one kind of landmark: the last observation of each, and its length."""
+def _rotation(yaw: float) -> np.ndarray:
+    """Return the 2D rotation by yaw (rad)."""
+    cos, sin = math.cos(yaw), math.sin(yaw)
+    return np.array([[cos, -sin], [sin, cos]])
 
-    def __init__(self, angular: bool):
-        self.angular = angular          # lines: the first coordinate is an angle
+
+def _moved(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """Return points of the sensor frame (..., 2) in the world frame of pose (x, y, yaw)."""
+    return points @ _rotation(pose[2]).T + pose[:2]
+
+
+def _overlapping(ends: np.ndarray, track_ends: np.ndarray) -> np.ndarray:
+    """
+    Return which segments overlap which tracks' stretches of wall, along each segment's line.
+
+    :param ends: the segments' ends, shape (N, 2, 2), m
+    :param track_ends: the ends of the stretch each track has seen, shape (K, 2, 2), m
+    :return: shape (N, K): the two extents share a stretch of positive length
+    """
+    direction = ends[:, 1] - ends[:, 0]
+    direction = direction / np.maximum(np.linalg.norm(direction, axis=1), 1e-12)[:, None]
+    own = np.sort(np.einsum('nei,ni->ne', ends, direction), axis=1)
+    other = np.sort(np.einsum('kei,ni->nke', track_ends, direction), axis=2)
+    return (np.minimum(own[:, None, 1], other[..., 1])
+            > np.maximum(own[:, None, 0], other[..., 0]))
+
+
+def _spanned(ends: np.ndarray, track_ends: np.ndarray) -> np.ndarray:
+    """
+    Return a segment's ends stretched over the stretch of its track seen before.
+
+    :param ends: the segment's ends, shape (2, 2), m
+    :param track_ends: the track's ends, shape (2, 2), m
+    :return: the ends of the union of both extents along the segment's line, shape (2, 2)
+    """
+    direction = ends[1] - ends[0]
+    direction = direction / max(float(np.linalg.norm(direction)), 1e-12)
+    along = np.concatenate([ends, track_ends]) @ direction
+    foot = ends[0] - along[0] * direction
+    return foot + np.array([along.min(), along.max()])[:, None] * direction
+
+
+class _Tracks:
+    """
+    Tracks of one kind of landmark: the last observation of each, and its length.
+
+    A line track also keeps the stretch of wall its segments have covered (their union along
+    its line), since a wall partly hidden in one scan is still the wall seen whole before.
+    """
+
+    def __init__(self, lines: bool):
+        self.lines = lines              # the first coordinate is an angle; segments must overlap
         self.last = np.zeros((0, 2))
         self.last_cov = np.zeros((0, 2, 2))
+        self.last_ends = np.zeros((0, 2, 2))
         self.last_scan = np.zeros(0, dtype=np.intp)
         self.lengths: List[int] = []
         self.tested = 0
         self.inside = 0
 
-    def update(self, scan: int, value: np.ndarray, cov: np.ndarray) -> None:
-        """Associate one scan's observations, test the re-observations and extend the tracks."""
+    def update(self, scan: int, value: np.ndarray, cov: np.ndarray, ends: np.ndarray) -> None:
+        """
+        Associate one scan's observations, test the re-observations and extend the tracks.
+
+        :param scan: the scan's number
+        :param value: the observations in the world frame, shape (N, 2)
+        :param cov: their covariances, shape (N, 2, 2)
+        :param ends: lines: their segments' ends in the world frame, shape (N, 2, 2), m (corners:
+            not used)
+        """
         # Only tracks seen lately take observations: the others have left the view (and a long
         # recording would otherwise compare every observation with every track it ever had).
         active = np.flatnonzero(scan - self.last_scan <= TRACK_MEMORY_SCANS)
         matched = np.full(len(value), -1, dtype=np.intp)
         if len(active) and len(value):
             error = value[:, None, :] - self.last[None, active]
-            if self.angular:
+            if self.lines:
                 error[..., 0] = _wrap(error[..., 0])
             innovation = cov[:, None] + self.last_cov[None, active]
             squared = np.einsum('nki,nkij,nkj->nk', error, np.linalg.inv(innovation), error)
-            pairs = np.argwhere(squared <= TRACK_GATE_2DOF)
+            gated = squared <= TRACK_GATE_2DOF
+            if self.lines:
+                gated &= _overlapping(ends, self.last_ends[active])
+            pairs = np.argwhere(gated)
             taken = np.zeros(len(active), dtype=bool)
             for n, k in pairs[np.argsort(squared[pairs[:, 0], pairs[:, 1]], kind='stable')]:
                 if matched[n] < 0 and not taken[k]:
@@ -390,10 +454,13 @@ class _Tracks:
         for n, k in enumerate(matched):
             if k >= 0:
                 self.last[k], self.last_cov[k], self.last_scan[k] = value[n], cov[n], scan
+                if self.lines:
+                    self.last_ends[k] = _spanned(ends[n], self.last_ends[k])
                 self.lengths[k] += 1
         new = matched < 0
         self.last = np.concatenate([self.last, value[new]])
         self.last_cov = np.concatenate([self.last_cov, cov[new]])
+        self.last_ends = np.concatenate([self.last_ends, ends[new]])
         self.last_scan = np.concatenate([self.last_scan, np.full(int(new.sum()), scan)])
         self.lengths += [1] * int(new.sum())
 
@@ -410,8 +477,8 @@ def with_poses(per_scan: Sequence[Landmarks], poses: np.ndarray, pose_cov: np.nd
     corners, lines = _Tracks(False), _Tracks(True)
     for scan, (landmarks, pose) in enumerate(zip(per_scan, poses)):
         xy, xy_cov, line, line_cov = to_world(landmarks, pose, pose_cov)
-        corners.update(scan, xy, xy_cov)
-        lines.update(scan, line, line_cov)
+        corners.update(scan, xy, xy_cov, np.stack([xy, xy], axis=1))
+        lines.update(scan, line, line_cov, _moved(landmarks.line_ends, pose))
     return (GateShare(corners.tested, corners.inside), GateShare(lines.tested, lines.inside),
             tuple(corners.lengths), tuple(lines.lengths))
 

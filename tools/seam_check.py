@@ -8,7 +8,7 @@ Run inside the built workspace (``source tools/env.sh``)::
 
     tools/seam_check.py data/rplidar_c1_single_scans --sensor rplidar_c1
     tools/seam_check.py MY_A2_BAG --sensor rplidar_a2
-    tools/seam_check.py --layout                # rplidar_node's angle_compensate layout
+    tools/seam_check.py --layout                # sllidar_ros2's and rplidar_node's layouts
 
 For a recording of full turns (docs/sensors.md#the-seam-of-a-turn):
 
@@ -20,11 +20,13 @@ For a recording of full turns (docs/sensors.md#the-seam-of-a-turn):
 3. the scans whose wall is split at the seam: a segment ending at the last beam and one starting
    at the first on the same line (normals within 3 deg, radii within 3 cm).
 
-With ``--layout``: exact ranges of one straight wall across the seam, laid out as rplidar_node
-and sllidar_ros2 do with ``angle_compensate`` (binned) and without it (per sample), for an A2
-(8000 samples a second) and a C1 (5000) at 10 Hz: how far the returns within 3 deg on one side
-of the seam lie off the line through those 3-15 deg beyond it on the other, the same probed away
-from the seam, and the segments the sensor's preset finds.
+With ``--layout``: exact ranges of one straight wall across the seam, laid out with
+``angle_compensate`` (binned) as sllidar_ros2 does (N = 360 k bins from -pi to pi in N - 1
+increments, each sample copied into the next k - 1 bins) and as rplidar_node does (each bin at
+its centre, 2 pi / N apart, each sample once), and without it (per sample, the same in both),
+for an A2 (8000 samples a second) and a C1 (5000) at 10 Hz: how far the returns within 3 deg on
+one side of the seam lie off the line through those 3-15 deg beyond it on the other, the same
+probed away from the seam, and the segments the sensor's preset finds.
 """
 
 import argparse
@@ -36,7 +38,7 @@ import numpy as np
 from wctls_ros.core import extract_features
 from wctls_ros.evaluation.scans import load_scans
 from wctls_ros.evaluation.score_cli import node_config
-from wctls_ros.rplidar.laserscan import compensation_multiple, turn_to_scan
+from wctls_ros.rplidar.laserscan import compensation_multiple, ScanArrays, turn_to_scan
 from wctls_ros.rplidar.turns import Turn
 
 NEIGHBOURS = 4                  # each side
@@ -226,31 +228,62 @@ def off_across(scan, probe_rad: float) -> float:
     return float(np.median(np.abs(off_line(x[near], y[near], line))))
 
 
+def sllidar_compensated_scan(turn: Turn, multiple: int) -> ScanArrays:
+    """
+    Return sllidar_ros2's ``angle_compensate`` layout of a turn (sllidar frame, upright).
+
+    Each sample with a return fills bin floor(raw deg * k) and the next k - 1 (later samples
+    overwrite), the other bins +inf; the bins are published from -pi to pi in N - 1 increments,
+    array reversed.
+
+    :param turn: the assembled turn
+    :param multiple: k, bins per degree
+    :return: the LaserScan fields (timing fields 0)
+    """
+    bins = 360 * multiple
+    ranges = np.full(bins, np.inf)
+    order = np.argsort(turn.angle_deg, kind='stable')
+    for angle_deg, distance_mm in zip(turn.angle_deg[order], turn.distance_mm[order]):
+        if distance_mm > 0:
+            first = int(angle_deg * multiple)
+            ranges[np.minimum(np.arange(first, first + multiple), bins - 1)] = distance_mm / 1e3
+    return ScanArrays(angle_min=-math.pi, angle_max=math.pi,
+                      angle_increment=2.0 * math.pi / (bins - 1), time_increment=0.0,
+                      scan_time=turn.period_s, ranges=ranges[::-1].astype(np.float32),
+                      intensities=np.zeros(bins, np.float32))
+
+
+def segment_count(scan, config) -> int:
+    """Return how many segments the pipeline finds in a laid-out turn."""
+    return len(extract_features(np.asarray(scan.ranges, dtype=float), scan.angle_min,
+                                scan.angle_increment, config, 0.05, 40.0).segments)
+
+
 def report_layout() -> None:
-    """Print what the angle_compensate layout does to one wall across the seam."""
-    print('| model | wall | binned: at the seam, mm | away from it, mm | per sample, mm '
-          '| segments binned | per sample |')
-    print('|---|---|---|---|---|---|---|')
+    """Print what each angle_compensate layout does to one wall across the seam."""
+    print('| model | wall | sllidar_ros2 binned: at the seam, mm | away from it, mm | segments '
+          '| rplidar_node binned: at the seam, mm | away from it, mm | segments '
+          '| per sample: at the seam, mm | segments |')
+    print('|---|---|---|---|---|---|---|---|---|---|')
     for model, us_per_sample, sensor in MODELS:
         samples = int(1e6 / us_per_sample / 10.0)
         multiple = compensation_multiple(us_per_sample, 10.0)
         config = node_config(sensor=sensor)
         for distance, angle_deg in WALLS:
-            cells, counts = [], []
-            for probe in (math.pi, 0.0):
-                turn = wall_turn(samples, distance, probe - math.radians(angle_deg))
-                binned = turn_to_scan(turn, True, False, multiple)
-                cells.append(off_across(binned, probe))
-                if probe == math.pi:
-                    per_sample = turn_to_scan(turn, False, False, multiple)
-                    cells.append(off_across(per_sample, probe))
-                    for scan in (binned, per_sample):
-                        counts.append(len(extract_features(
-                            np.asarray(scan.ranges, dtype=float), scan.angle_min,
-                            scan.angle_increment, config, 0.05, 40.0).segments))
-            print(f'| {model} (k = {multiple}) | {distance:g} m, {angle_deg:g} deg '
-                  f'| {1e3 * cells[0]:.1f} | {1e3 * cells[2]:.1f} | {1e3 * cells[1]:.1f} '
-                  f'| {counts[0]} | {counts[1]} |')
+            at_seam = wall_turn(samples, distance, math.pi - math.radians(angle_deg))
+            away = wall_turn(samples, distance, -math.radians(angle_deg))
+            cells = []
+            for binned in (lambda turn: sllidar_compensated_scan(turn, multiple),
+                           lambda turn: turn_to_scan(turn, True, False, multiple)):
+                scan = binned(at_seam)
+                cells += [f'{1e3 * off_across(scan, math.pi):.1f}',
+                          f'{1e3 * off_across(binned(away), 0.0):.1f}',
+                          str(segment_count(scan, config))]
+            per_sample = turn_to_scan(at_seam, False, False, multiple)
+            cells += [f'{1e3 * off_across(per_sample, math.pi):.1f}',
+                      str(segment_count(per_sample, config))]
+            print(f'| {model} (k = {multiple}) | {distance:g} m, {angle_deg:g} deg | '
+                  + ' | '.join(cells) + ' |')
 
 
 def main(argv=None) -> int:
@@ -259,7 +292,8 @@ def main(argv=None) -> int:
     parser.add_argument('recording', nargs='?', help='a bag of full turns, one scan layout')
     parser.add_argument('--sensor', default='generic', help='the sensor preset (segments)')
     parser.add_argument('--layout', action='store_true',
-                        help="simulate rplidar_node's angle_compensate layout instead")
+                        help="simulate sllidar_ros2's and rplidar_node's angle_compensate "
+                             'layouts instead')
     args = parser.parse_args(argv)
     if args.layout:
         report_layout()

@@ -9,6 +9,7 @@ Run inside the built workspace (``source tools/env.sh``)::
     tools/seam_check.py data/rplidar_c1_single_scans --sensor rplidar_c1
     tools/seam_check.py MY_A2_BAG --sensor rplidar_a2
     tools/seam_check.py --layout                # sllidar_ros2's and rplidar_node's layouts
+    tools/seam_check.py --copies                # what sllidar_ros2's copies do to features
 
 For a recording of full turns (docs/sensors.md#the-seam-of-a-turn):
 
@@ -30,6 +31,7 @@ probed away from the seam, and the segments the sensor's preset finds.
 """
 
 import argparse
+from dataclasses import replace
 import math
 import sys
 
@@ -40,6 +42,7 @@ from wctls_ros.evaluation.scans import load_scans
 from wctls_ros.evaluation.score_cli import node_config
 from wctls_ros.rplidar.laserscan import compensation_multiple, ScanArrays, turn_to_scan
 from wctls_ros.rplidar.turns import Turn
+from wctls_ros.simulation import load_floor_plan, SENSOR_MODELS, simulate_scan
 
 NEIGHBOURS = 4                  # each side
 STRAIGHT_RMS_M = 0.004          # the neighbours' rms off their line, for a straight wall
@@ -51,6 +54,12 @@ SAME_LINE_M = 0.03
 # the seam from the wall's normal).
 MODELS = (('A2', 125.0, 'rplidar_a2'), ('C1', 200.0, 'rplidar_c1'))
 WALLS = ((3.0, 45.0), (3.0, 60.0), (1.0, 45.0))
+# --copies: (model, samples a turn at 10 Hz, preset, the simulator's noise, its range sigma m),
+# turns per model, how far the sensor strays from the plan's pose, m; a true corner within.
+ROOM_SENSORS = (('A2', 800, 'rplidar_a2', '1cm', 0.02), ('S1', 926, 'rplidar_s1', 's1_like', None))
+ROOM_TURNS = 40
+ROOM_STRAY_M = 0.3
+TRUE_CORNER_M = 0.1
 
 
 def line_through(x, y):
@@ -286,6 +295,101 @@ def report_layout() -> None:
                   + ' | '.join(cells) + ' |')
 
 
+def room_turn(plan, samples: int, noise, rng) -> tuple:
+    """
+    Return one turn of a floor plan from a random pose near the plan's, and its true corners.
+
+    :param plan: the floor plan
+    :param samples: samples a turn, evenly spaced from a random phase
+    :param noise: the simulator's sensor model
+    :param rng: random generator
+    :return: (the turn, the true corners in the sensor frame (C, 2) m)
+    """
+    x, y, _ = plan.sensor_pose
+    pose = (x + rng.uniform(-ROOM_STRAY_M, ROOM_STRAY_M),
+            y + rng.uniform(-ROOM_STRAY_M, ROOM_STRAY_M), rng.uniform(-math.pi, math.pi))
+    raw_deg = (np.arange(samples) + rng.uniform()) * 360.0 / samples
+    ranges = simulate_scan(plan.scene(pose), math.pi - np.radians(raw_deg), noise, rng)
+    turn = Turn(angle_deg=raw_deg, distance_mm=np.where(np.isfinite(ranges), ranges * 1e3, 0.0),
+                quality=np.full(samples, 40), first_sample_s=0.0, period_s=0.1, last_byte_s=0.1)
+    return turn, plan.in_sensor_frame(pose)[1]
+
+
+def copied_bins(turn: Turn, multiple: int) -> np.ndarray:
+    """
+    Return how far each of sllidar_ros2's copies lies from its sample's bearing, in bins.
+
+    :param turn: the assembled turn
+    :param multiple: k, bins per degree
+    :return: one entry per bin holding a copy (not a sample of its own)
+    """
+    scan = sllidar_compensated_scan(turn, multiple)
+    bins = len(scan.ranges)
+    held = np.isfinite(scan.ranges[::-1])            # in bin order again
+    has_return = turn.distance_mm > 0
+    position = turn.angle_deg[has_return] * multiple
+    order = np.argsort(position, kind='stable')
+    position = position[order]
+    # Each bin's copy or sample: the last sample with a return at or before the bin's end.
+    holder = np.searchsorted(position, np.arange(1, bins + 1), side='left') - 1
+    copy = held & (holder >= 0) & (np.floor(position[np.maximum(holder, 0)])
+                                   < np.arange(bins))
+    return (np.arange(bins) + 0.5 - position[holder])[copy]
+
+
+def report_copies() -> None:
+    """Print what sllidar_ros2's copies do to the features of emulated room turns."""
+    plan = load_floor_plan('environment_a')
+    print(f'{ROOM_TURNS} turns per sensor of environment_a, within {ROOM_STRAY_M:g} m of its '
+          'pose, any heading\n')
+    print('| sensor | layout | copies a turn | copy off its sample, bins: median, largest '
+          '| segments a turn | range-noise estimate, mm | median chi2/dof | corners '
+          f'| not within {100 * TRUE_CORNER_M:g} cm of a true one | corner NEES (x, y) |')
+    print('|---|---|---|---|---|---|---|---|---|---|')
+    for model, samples, sensor, noise_name, range_sigma_m in ROOM_SENSORS:
+        noise = SENSOR_MODELS[noise_name]
+        if range_sigma_m is not None:
+            noise = replace(noise, range_sigma_m=range_sigma_m)
+        multiple = compensation_multiple(1e5 / samples, 10.0)
+        config = node_config(sensor=sensor)
+        layouts = {'sllidar_ros2 binned': lambda turn: sllidar_compensated_scan(turn, multiple),
+                   'rplidar_node binned': lambda turn: turn_to_scan(turn, True, False, multiple),
+                   'per sample': lambda turn: turn_to_scan(turn, False, False, multiple)}
+        rows = {name: {'segments': [], 'sigma': [], 'chi2': [], 'nees': [], 'corners': 0,
+                       'off': 0} for name in layouts}
+        copies, copy_off = [], []
+        rng = np.random.default_rng(0)
+        for _ in range(ROOM_TURNS):
+            turn, true_corners = room_turn(plan, samples, noise, rng)
+            off = copied_bins(turn, multiple)
+            copies.append(off.size)
+            copy_off.extend(off)
+            for name, layout in layouts.items():
+                scan = layout(turn)
+                features = extract_features(np.asarray(scan.ranges, dtype=float), scan.angle_min,
+                                            scan.angle_increment, config, 0.05, 40.0)
+                row = rows[name]
+                row['segments'].append(len(features.segments))
+                row['sigma'].append(features.range_sigma_m)
+                row['chi2'].extend(features.segments.residual_chi2_dof)
+                for xy, covariance in zip(features.corners.xy_m, features.corners.covariance):
+                    error = true_corners - xy
+                    nearest = np.argmin(np.hypot(error[:, 0], error[:, 1]))
+                    row['corners'] += 1
+                    if np.hypot(*error[nearest]) < TRUE_CORNER_M:
+                        row['nees'].append(float(error[nearest] @ np.linalg.solve(
+                            covariance[:2, :2], error[nearest])))
+                    else:
+                        row['off'] += 1
+        for name, row in rows.items():
+            copied = (f'{np.mean(copies):.0f} | {np.median(copy_off):.2f}, {np.max(copy_off):.2f}'
+                      if name.startswith('sllidar') else '0 | -')
+            print(f'| {model} (k = {multiple}) | {name} | {copied} '
+                  f'| {np.mean(row["segments"]):.1f} | {1e3 * np.mean(row["sigma"]):.1f} '
+                  f'| {np.median(row["chi2"]):.2f} | {row["corners"]} | {row["off"]} '
+                  f'| {np.mean(row["nees"]):.2f} |')
+
+
 def main(argv=None) -> int:
     """Run the measurement the arguments ask for."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
@@ -294,13 +398,17 @@ def main(argv=None) -> int:
     parser.add_argument('--layout', action='store_true',
                         help="simulate sllidar_ros2's and rplidar_node's angle_compensate "
                              'layouts instead')
+    parser.add_argument('--copies', action='store_true',
+                        help="measure what sllidar_ros2's copies do to emulated room turns")
     args = parser.parse_args(argv)
     if args.layout:
         report_layout()
+    elif args.copies:
+        report_copies()
     elif args.recording:
         report_recording(args.recording, args.sensor)
     else:
-        parser.error('give a recording or --layout')
+        parser.error('give a recording, --layout or --copies')
     return 0
 
 

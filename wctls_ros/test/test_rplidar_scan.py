@@ -132,6 +132,26 @@ def test_a_turn_without_returns_has_no_finite_range():
     assert len(binned) == 1080 and np.isinf(binned).sum() == 50 and np.isnan(binned).sum() == 1030
 
 
+@pytest.mark.parametrize('orientation', ['sllidar', 'rep103'])
+@pytest.mark.parametrize('inverted', [False, True])
+def test_each_binned_beam_is_published_at_its_samples_bearing(inverted, orientation):
+    # One sample at each bin's centre, told apart by its range: the beam holding it must be
+    # published at its bearing, offset - raw (raw - offset mirrored), whatever the array order.
+    multiple, bins = 3, 1080
+    raw_deg = (np.arange(bins) + 0.5) / multiple
+    turn = Turn(raw_deg, 1000.0 + np.arange(bins), np.full(bins, 40, np.uint8), 0.0, 0.1, 0.1)
+    scan = turn_to_scan(turn, True, inverted, multiple, orientation)
+    sample = np.rint(np.asarray(scan.ranges, float) * 1000.0 - 1000.0).astype(int)
+    assert sorted(sample) == list(range(bins))
+    offset = {'sllidar': math.pi, 'rep103': 0.0}[orientation]
+    true_rad = offset - np.radians(raw_deg[sample])
+    if inverted:
+        true_rad = -true_rad
+    published = scan.angle_min + scan.angle_increment * np.arange(bins)
+    bearing_error = np.angle(np.exp(1j * (published - true_rad)))
+    assert np.abs(bearing_error).max() < 0.1 * scan.angle_increment
+
+
 SEAM_WALL_M = 3.0
 
 

@@ -193,8 +193,8 @@ def _compensated_scan(turn: Turn, inverted: bool, multiple: int, offset_rad: flo
     return ScanArrays(angle_min=offset_rad - 2.0 * math.pi + 0.5 * width,
                       angle_max=offset_rad - 0.5 * width, angle_increment=width,
                       time_increment=turn.period_s / bins, scan_time=turn.period_s,
-                      ranges=np.ascontiguousarray(ranges), intensities=np.ascontiguousarray(
-                          intensities))
+                      ranges=np.ascontiguousarray(ranges),
+                      intensities=np.ascontiguousarray(intensities))
 
 
 def fixed_scan(turn: Turn, beams: int, inverted: bool, orientation: str) -> ScanArrays:

@@ -4,8 +4,10 @@
 """
 Turns, and the LaserScan layouts of both outputs.
 
-Turn assembly and timing, sllidar_ros2's LaserScan layout (against a port of its loops), the
-fixed-count scan and the two laser frame orientations (against angles worked out by hand).
+Turn assembly and timing, sllidar_ros2's LaserScan layout (against a port of its loops; the
+binned one keeps its beams and order but each at its own bearing, without copies: walls across
+the seam stay on their lines), the fixed-count scan and the two laser frame orientations
+(against angles worked out by hand).
 """
 
 import math

@@ -8,7 +8,8 @@ Run inside the built workspace (``source tools/env.sh``)::
 
     tools/seam_check.py data/rplidar_c1_single_scans --sensor rplidar_c1
     tools/seam_check.py MY_A2_BAG --sensor rplidar_a2
-    tools/seam_check.py --layout                # rplidar_node's angle_compensate layout
+    tools/seam_check.py --layout                # sllidar_ros2's and rplidar_node's layouts
+    tools/seam_check.py --copies                # what sllidar_ros2's copies do to features
 
 For a recording of full turns (docs/sensors.md#the-seam-of-a-turn):
 
@@ -20,14 +21,17 @@ For a recording of full turns (docs/sensors.md#the-seam-of-a-turn):
 3. the scans whose wall is split at the seam: a segment ending at the last beam and one starting
    at the first on the same line (normals within 3 deg, radii within 3 cm).
 
-With ``--layout``: exact ranges of one straight wall across the seam, laid out as rplidar_node
-and sllidar_ros2 do with ``angle_compensate`` (binned) and without it (per sample), for an A2
-(8000 samples a second) and a C1 (5000) at 10 Hz: how far the returns within 3 deg on one side
-of the seam lie off the line through those 3-15 deg beyond it on the other, the same probed away
-from the seam, and the segments the sensor's preset finds.
+With ``--layout``: exact ranges of one straight wall across the seam, laid out with
+``angle_compensate`` (binned) as sllidar_ros2 does (N = 360 k bins from -pi to pi in N - 1
+increments, each sample copied into the next k - 1 bins) and as rplidar_node does (each bin at
+its centre, 2 pi / N apart, each sample once), and without it (per sample, the same in both),
+for an A2 (8000 samples a second) and a C1 (5000) at 10 Hz: how far the returns within 3 deg on
+one side of the seam lie off the line through those 3-15 deg beyond it on the other, the same
+probed away from the seam, and the segments the sensor's preset finds.
 """
 
 import argparse
+from dataclasses import replace
 import math
 import sys
 
@@ -36,8 +40,9 @@ import numpy as np
 from wctls_ros.core import extract_features
 from wctls_ros.evaluation.scans import load_scans
 from wctls_ros.evaluation.score_cli import node_config
-from wctls_ros.rplidar.laserscan import compensation_multiple, turn_to_scan
+from wctls_ros.rplidar.laserscan import compensation_multiple, ScanArrays, turn_to_scan
 from wctls_ros.rplidar.turns import Turn
+from wctls_ros.simulation import load_floor_plan, SENSOR_MODELS, simulate_scan
 
 NEIGHBOURS = 4                  # each side
 STRAIGHT_RMS_M = 0.004          # the neighbours' rms off their line, for a straight wall
@@ -49,6 +54,12 @@ SAME_LINE_M = 0.03
 # the seam from the wall's normal).
 MODELS = (('A2', 125.0, 'rplidar_a2'), ('C1', 200.0, 'rplidar_c1'))
 WALLS = ((3.0, 45.0), (3.0, 60.0), (1.0, 45.0))
+# --copies: (model, samples a turn at 10 Hz, preset, the simulator's noise, its range sigma m),
+# turns per model, how far the sensor strays from the plan's pose, m; a true corner within.
+ROOM_SENSORS = (('A2', 800, 'rplidar_a2', '1cm', 0.02), ('S1', 926, 'rplidar_s1', 's1_like', None))
+ROOM_TURNS = 40
+ROOM_STRAY_M = 0.3
+TRUE_CORNER_M = 0.1
 
 
 def line_through(x, y):
@@ -226,31 +237,157 @@ def off_across(scan, probe_rad: float) -> float:
     return float(np.median(np.abs(off_line(x[near], y[near], line))))
 
 
+def sllidar_compensated_scan(turn: Turn, multiple: int) -> ScanArrays:
+    """
+    Return sllidar_ros2's ``angle_compensate`` layout of a turn (sllidar frame, upright).
+
+    Each sample with a return fills bin floor(raw deg * k) and the next k - 1 (later samples
+    overwrite), the other bins +inf; the bins are published from -pi to pi in N - 1 increments,
+    array reversed.
+
+    :param turn: the assembled turn
+    :param multiple: k, bins per degree
+    :return: the LaserScan fields (timing fields 0)
+    """
+    bins = 360 * multiple
+    ranges = np.full(bins, np.inf)
+    order = np.argsort(turn.angle_deg, kind='stable')
+    for angle_deg, distance_mm in zip(turn.angle_deg[order], turn.distance_mm[order]):
+        if distance_mm > 0:
+            first = int(angle_deg * multiple)
+            ranges[np.minimum(np.arange(first, first + multiple), bins - 1)] = distance_mm / 1e3
+    return ScanArrays(angle_min=-math.pi, angle_max=math.pi,
+                      angle_increment=2.0 * math.pi / (bins - 1), time_increment=0.0,
+                      scan_time=turn.period_s, ranges=ranges[::-1].astype(np.float32),
+                      intensities=np.zeros(bins, np.float32))
+
+
+def segment_count(scan, config) -> int:
+    """Return how many segments the pipeline finds in a laid-out turn."""
+    return len(extract_features(np.asarray(scan.ranges, dtype=float), scan.angle_min,
+                                scan.angle_increment, config, 0.05, 40.0).segments)
+
+
 def report_layout() -> None:
-    """Print what the angle_compensate layout does to one wall across the seam."""
-    print('| model | wall | binned: at the seam, mm | away from it, mm | per sample, mm '
-          '| segments binned | per sample |')
-    print('|---|---|---|---|---|---|---|')
+    """Print what each angle_compensate layout does to one wall across the seam."""
+    print('| model | wall | sllidar_ros2 binned: at the seam, mm | away from it, mm | segments '
+          '| rplidar_node binned: at the seam, mm | away from it, mm | segments '
+          '| per sample: at the seam, mm | segments |')
+    print('|---|---|---|---|---|---|---|---|---|---|')
     for model, us_per_sample, sensor in MODELS:
         samples = int(1e6 / us_per_sample / 10.0)
         multiple = compensation_multiple(us_per_sample, 10.0)
         config = node_config(sensor=sensor)
         for distance, angle_deg in WALLS:
-            cells, counts = [], []
-            for probe in (math.pi, 0.0):
-                turn = wall_turn(samples, distance, probe - math.radians(angle_deg))
-                binned = turn_to_scan(turn, True, False, multiple)
-                cells.append(off_across(binned, probe))
-                if probe == math.pi:
-                    per_sample = turn_to_scan(turn, False, False, multiple)
-                    cells.append(off_across(per_sample, probe))
-                    for scan in (binned, per_sample):
-                        counts.append(len(extract_features(
-                            np.asarray(scan.ranges, dtype=float), scan.angle_min,
-                            scan.angle_increment, config, 0.05, 40.0).segments))
-            print(f'| {model} (k = {multiple}) | {distance:g} m, {angle_deg:g} deg '
-                  f'| {1e3 * cells[0]:.1f} | {1e3 * cells[2]:.1f} | {1e3 * cells[1]:.1f} '
-                  f'| {counts[0]} | {counts[1]} |')
+            at_seam = wall_turn(samples, distance, math.pi - math.radians(angle_deg))
+            away = wall_turn(samples, distance, -math.radians(angle_deg))
+            cells = []
+            for binned in (lambda turn: sllidar_compensated_scan(turn, multiple),
+                           lambda turn: turn_to_scan(turn, True, False, multiple)):
+                scan = binned(at_seam)
+                cells += [f'{1e3 * off_across(scan, math.pi):.1f}',
+                          f'{1e3 * off_across(binned(away), 0.0):.1f}',
+                          str(segment_count(scan, config))]
+            per_sample = turn_to_scan(at_seam, False, False, multiple)
+            cells += [f'{1e3 * off_across(per_sample, math.pi):.1f}',
+                      str(segment_count(per_sample, config))]
+            print(f'| {model} (k = {multiple}) | {distance:g} m, {angle_deg:g} deg | '
+                  + ' | '.join(cells) + ' |')
+
+
+def room_turn(plan, samples: int, noise, rng) -> tuple:
+    """
+    Return one turn of a floor plan from a random pose near the plan's, and its true corners.
+
+    :param plan: the floor plan
+    :param samples: samples a turn, evenly spaced from a random phase
+    :param noise: the simulator's sensor model
+    :param rng: random generator
+    :return: (the turn, the true corners in the sensor frame (C, 2) m)
+    """
+    x, y, _ = plan.sensor_pose
+    pose = (x + rng.uniform(-ROOM_STRAY_M, ROOM_STRAY_M),
+            y + rng.uniform(-ROOM_STRAY_M, ROOM_STRAY_M), rng.uniform(-math.pi, math.pi))
+    raw_deg = (np.arange(samples) + rng.uniform()) * 360.0 / samples
+    ranges = simulate_scan(plan.scene(pose), math.pi - np.radians(raw_deg), noise, rng)
+    turn = Turn(angle_deg=raw_deg, distance_mm=np.where(np.isfinite(ranges), ranges * 1e3, 0.0),
+                quality=np.full(samples, 40), first_sample_s=0.0, period_s=0.1, last_byte_s=0.1)
+    return turn, plan.in_sensor_frame(pose)[1]
+
+
+def copied_bins(turn: Turn, multiple: int) -> np.ndarray:
+    """
+    Return how far each of sllidar_ros2's copies lies from its sample's bearing, in bins.
+
+    :param turn: the assembled turn
+    :param multiple: k, bins per degree
+    :return: one entry per bin holding a copy (not a sample of its own)
+    """
+    scan = sllidar_compensated_scan(turn, multiple)
+    bins = len(scan.ranges)
+    held = np.isfinite(scan.ranges[::-1])            # in bin order again
+    has_return = turn.distance_mm > 0
+    position = turn.angle_deg[has_return] * multiple
+    order = np.argsort(position, kind='stable')
+    position = position[order]
+    # Each bin's copy or sample: the last sample with a return at or before the bin's end.
+    holder = np.searchsorted(position, np.arange(1, bins + 1), side='left') - 1
+    copy = held & (holder >= 0) & (np.floor(position[np.maximum(holder, 0)])
+                                   < np.arange(bins))
+    return (np.arange(bins) + 0.5 - position[holder])[copy]
+
+
+def report_copies() -> None:
+    """Print what sllidar_ros2's copies do to the features of emulated room turns."""
+    plan = load_floor_plan('environment_a')
+    print(f'{ROOM_TURNS} turns per sensor of environment_a, within {ROOM_STRAY_M:g} m of its '
+          'pose, any heading\n')
+    print('| sensor | layout | copies a turn | copy off its sample, bins: median, largest '
+          '| segments a turn | range-noise estimate, mm | median chi2/dof | corners '
+          f'| not within {100 * TRUE_CORNER_M:g} cm of a true one | corner NEES (x, y) |')
+    print('|---|---|---|---|---|---|---|---|---|---|')
+    for model, samples, sensor, noise_name, range_sigma_m in ROOM_SENSORS:
+        noise = SENSOR_MODELS[noise_name]
+        if range_sigma_m is not None:
+            noise = replace(noise, range_sigma_m=range_sigma_m)
+        multiple = compensation_multiple(1e5 / samples, 10.0)
+        config = node_config(sensor=sensor)
+        layouts = {'sllidar_ros2 binned': lambda turn: sllidar_compensated_scan(turn, multiple),
+                   'rplidar_node binned': lambda turn: turn_to_scan(turn, True, False, multiple),
+                   'per sample': lambda turn: turn_to_scan(turn, False, False, multiple)}
+        rows = {name: {'segments': [], 'sigma': [], 'chi2': [], 'nees': [], 'corners': 0,
+                       'off': 0} for name in layouts}
+        copies, copy_off = [], []
+        rng = np.random.default_rng(0)
+        for _ in range(ROOM_TURNS):
+            turn, true_corners = room_turn(plan, samples, noise, rng)
+            off = copied_bins(turn, multiple)
+            copies.append(off.size)
+            copy_off.extend(off)
+            for name, layout in layouts.items():
+                scan = layout(turn)
+                features = extract_features(np.asarray(scan.ranges, dtype=float), scan.angle_min,
+                                            scan.angle_increment, config, 0.05, 40.0)
+                row = rows[name]
+                row['segments'].append(len(features.segments))
+                row['sigma'].append(features.range_sigma_m)
+                row['chi2'].extend(features.segments.residual_chi2_dof)
+                for xy, covariance in zip(features.corners.xy_m, features.corners.covariance):
+                    error = true_corners - xy
+                    nearest = np.argmin(np.hypot(error[:, 0], error[:, 1]))
+                    row['corners'] += 1
+                    if np.hypot(*error[nearest]) < TRUE_CORNER_M:
+                        row['nees'].append(float(error[nearest] @ np.linalg.solve(
+                            covariance[:2, :2], error[nearest])))
+                    else:
+                        row['off'] += 1
+        for name, row in rows.items():
+            copied = (f'{np.mean(copies):.0f} | {np.median(copy_off):.2f}, {np.max(copy_off):.2f}'
+                      if name.startswith('sllidar') else '0 | -')
+            print(f'| {model} (k = {multiple}) | {name} | {copied} '
+                  f'| {np.mean(row["segments"]):.1f} | {1e3 * np.mean(row["sigma"]):.1f} '
+                  f'| {np.median(row["chi2"]):.2f} | {row["corners"]} | {row["off"]} '
+                  f'| {np.mean(row["nees"]):.2f} |')
 
 
 def main(argv=None) -> int:
@@ -259,14 +396,19 @@ def main(argv=None) -> int:
     parser.add_argument('recording', nargs='?', help='a bag of full turns, one scan layout')
     parser.add_argument('--sensor', default='generic', help='the sensor preset (segments)')
     parser.add_argument('--layout', action='store_true',
-                        help="simulate rplidar_node's angle_compensate layout instead")
+                        help="simulate sllidar_ros2's and rplidar_node's angle_compensate "
+                             'layouts instead')
+    parser.add_argument('--copies', action='store_true',
+                        help="measure what sllidar_ros2's copies do to emulated room turns")
     args = parser.parse_args(argv)
     if args.layout:
         report_layout()
+    elif args.copies:
+        report_copies()
     elif args.recording:
         report_recording(args.recording, args.sensor)
     else:
-        parser.error('give a recording or --layout')
+        parser.error('give a recording, --layout or --copies')
     return 0
 
 

@@ -11,9 +11,10 @@ stream, and the delay from a turn's last byte to its LaserScan being published (
 Then DenseBoost with 0, 1 and 5 % of the streamed bytes corrupted, or dropped, and with 5 and
 20 % of the capsules cut short at a random byte (runs of lost bytes), against the emulator's
 noiseless scene: the turns published (of those the emulator streamed), the share of streamed
-turns published with >= 80 % of their 1080 beams correct (within 1 cm of the range band the
-beam's bin covers), the correct and the filled beams per published turn, the beams kept (correct
-beams of all the turns streamed), the published beams wrong by more than 10 cm, and the CPU.
+turns published with >= 80 % of their samples correct (within 1 cm of the range band of the
+1080 beams' bins; each of a turn's 926 samples has a bin of its own), the correct and the
+filled beams per published turn, the beams kept (correct beams of all the samples streamed),
+the published beams wrong by more than 10 cm, and the CPU. Shares are of a turn's samples.
 Usage: python bench_rplidar.py [seconds per run] (default 10).
 """
 
@@ -34,7 +35,7 @@ from wctls_ros.rplidar.rplidar_node import RplidarNode
 # The emulator harness and the scene oracle are the tests' own.
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'test'))
 from rplidar_testing import (compensated_beam_bands, EMULATOR_TURN_S,  # noqa: E402, I100
-                             start_emulator)
+                             EMULATOR_TURN_SAMPLES, start_emulator)
 
 WARM_UP_S = 1.5
 FAULTS = (('clean', ()), ('1% corrupted', ('--corrupt-rate', '0.01')),
@@ -92,12 +93,12 @@ def beam_figures(scans, wall_s, bands):
     filled = np.isfinite(ranges)
     good = filled & (ranges >= low - GOOD_TOLERANCE_M) & (ranges <= high + GOOD_TOLERANCE_M)
     wrong = filled & ((ranges < low - WRONG_M) | (ranges > high + WRONG_M))
-    good_share = good.mean(axis=1) if len(ranges) else np.zeros(0)
+    good_share = good.sum(axis=1) / EMULATOR_TURN_SAMPLES
     return {'published': len(ranges) / streamed,
             'good_turns': np.count_nonzero(good_share >= GOOD_TURN_SHARE) / streamed,
             'good': good_share.mean() if len(ranges) else 0.0,
-            'filled': filled.mean() if len(ranges) else 0.0,
-            'kept': good.sum() / (1080 * streamed),
+            'filled': filled.sum(axis=1).mean() / EMULATOR_TURN_SAMPLES if len(ranges) else 0.0,
+            'kept': good.sum() / (EMULATOR_TURN_SAMPLES * streamed),
             'wrong': int(wrong.sum()), 'filled_beams': int(filled.sum()), 'turns': len(ranges),
             'streamed': streamed}
 
@@ -134,8 +135,8 @@ def main():
                   f'{wrong:>13} {100 * b["wrong"] / max(b["filled_beams"], 1):>6.3f}% '
                   f'{100 * r["reader_cpu"]:>9.2f}% {100 * r["process_cpu"]:>11.2f}%')
         print('(published and >=80% ok: shares of the turns streamed; correct and filled: '
-              'shares of the beams of the published turns; kept: correct beams of all the turns '
-              'streamed; wrong: of the published (finite) beams)')
+              'shares of the samples of the published turns; kept: correct beams of all the '
+              'samples streamed; wrong: of the published (finite) beams)')
 
 
 if __name__ == '__main__':

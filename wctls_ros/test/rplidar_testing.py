@@ -20,8 +20,10 @@ from wctls_ros.simulation import cast_rays, load_floor_plan, NOISELESS, NoiseMod
 
 # The emulator's default scene: the bundled plan seen from its own sensor pose.
 WALLS, _ = load_floor_plan('environment_a').in_sensor_frame()
-# The emulator turns 995/64 degrees per DenseBoost capsule of 40 samples of 108 us: 100.03 ms.
-EMULATOR_TURN_S = 360.0 * 64 / 995 * 40 * 108e-6
+# The emulator turns 995/64 degrees per DenseBoost capsule of 40 samples of 108 us: 926.2
+# samples, 100.03 ms, a turn.
+EMULATOR_TURN_SAMPLES = 360.0 * 64 / 995 * 40
+EMULATOR_TURN_S = EMULATOR_TURN_SAMPLES * 108e-6
 
 
 def true_ranges(bearings_rad):
@@ -100,15 +102,15 @@ def compensated_beam_bands(multiple=3):
     Return the scene's range band of each beam of a compensated scan of ``360 * multiple`` beams.
 
     With k = ``multiple`` bins per degree (3 in DenseBoost: 1080 beams), beam i is bin
-    b = 360 k - 1 - i, holding the last sample with raw angle in [(b - k + 1) / k, (b + 1) / k)
-    degrees; its laser bearing is pi - raw.
+    b = 360 k - 1 - i, holding a sample with raw angle in [b / k, (b + 1) / k) degrees; its laser
+    bearing is pi - raw, within half a bin of the beam's published angle, the bin's centre.
 
     :param multiple: bins per degree
     :return: (lowest, highest) range per beam, m
     """
     raw_bin = 360 * multiple - 1 - np.arange(360 * multiple)
     return range_band(math.pi - np.radians((raw_bin + 1) / multiple),
-                      math.pi - np.radians((raw_bin - multiple + 1) / multiple))
+                      math.pi - np.radians(raw_bin / multiple))
 
 
 def ros_minus_monotonic_s():

@@ -4,21 +4,30 @@
 """
 Turns, and the LaserScan layouts of both outputs.
 
-Turn assembly and timing, sllidar_ros2's LaserScan layout (against a port of its loops), the
-fixed-count scan and the two laser frame orientations (against angles worked out by hand).
+Turn assembly and timing, sllidar_ros2's LaserScan layout (against a port of its loops; the
+binned one keeps its beams and order but each at its own bearing, without copies: walls across
+the seam stay on their lines), the fixed-count scan and the two laser frame orientations
+(against angles worked out by hand).
 """
 
 import math
 
 import numpy as np
 import pytest
+from wctls_ros.core import extract_features
+from wctls_ros.evaluation.score_cli import node_config
 from wctls_ros.rplidar.laserscan import compensation_multiple, fixed_scan, turn_to_scan
 from wctls_ros.rplidar.protocol import Samples
 from wctls_ros.rplidar.turns import SampleClock, Turn, TurnAssembler
 
 
 def sllidar_reference(angle_deg, dist_mm, quality, angle_compensate, inverted, multiple):
-    """Port of sllidar_node.cpp: ascend, bin (or trim), then publish_scan's layout."""
+    """
+    Port of sllidar_node.cpp: ascend, bin (or trim), then publish_scan's layout.
+
+    :return: angle_min, angle_max, angle_increment, ranges, intensities and the raw angle of the
+        sample each beam holds (deg; 0 for an empty bin)
+    """
     order = np.argsort(angle_deg, kind='stable')
     nodes = [(float(angle_deg[i]), float(dist_mm[i]), int(quality[i])) for i in order]
     if angle_compensate:
@@ -40,9 +49,10 @@ def sllidar_reference(angle_deg, dist_mm, quality, angle_compensate, inverted, m
         math.pi - angle_min, math.pi - angle_max)
     ranges = [math.inf if n[1] == 0 else n[1] / 1000.0 for n in nodes]
     intensities = [float(n[2]) for n in nodes]
+    sample_deg = [n[0] for n in nodes]
     if (not inverted and reversed_) or (inverted and not reversed_):
-        ranges, intensities = ranges[::-1], intensities[::-1]
-    return lo, hi, (hi - lo) / (len(nodes) - 1), ranges, intensities
+        ranges, intensities, sample_deg = ranges[::-1], intensities[::-1], sample_deg[::-1]
+    return lo, hi, (hi - lo) / (len(nodes) - 1), ranges, intensities, np.array(sample_deg)
 
 
 def random_turn(rng, count, gaps=0.1):
@@ -55,14 +65,13 @@ def random_turn(rng, count, gaps=0.1):
                 period_s=0.1, last_byte_s=1.1)
 
 
-@pytest.mark.parametrize('angle_compensate', [False, True])
 @pytest.mark.parametrize('inverted', [False, True])
 @pytest.mark.parametrize('count', [411, 926, 1500])
-def test_layout_matches_sllidar(angle_compensate, inverted, count):
+def test_per_sample_layout_matches_sllidar(inverted, count):
     turn = random_turn(np.random.default_rng(count), count)
-    scan = turn_to_scan(turn, angle_compensate, inverted, multiple=3)
-    lo, hi, increment, ranges, intensities = sllidar_reference(
-        turn.angle_deg, turn.distance_mm, turn.quality, angle_compensate, inverted, 3)
+    scan = turn_to_scan(turn, False, inverted, multiple=3)
+    lo, hi, increment, ranges, intensities, _ = sllidar_reference(
+        turn.angle_deg, turn.distance_mm, turn.quality, False, inverted, 3)
     assert (scan.angle_min, scan.angle_max) == pytest.approx((lo, hi), abs=1e-12)
     assert scan.angle_increment == pytest.approx(increment, rel=1e-12)
     np.testing.assert_array_equal(scan.ranges, np.float32(ranges))
@@ -71,20 +80,159 @@ def test_layout_matches_sllidar(angle_compensate, inverted, count):
     assert scan.time_increment == pytest.approx(increment / (2 * math.pi) * 0.1)
 
 
-def test_compensated_scan_is_1080_beams_from_minus_pi_to_pi_in_denseboost():
+@pytest.mark.parametrize('inverted', [False, True])
+@pytest.mark.parametrize('count', [411, 926, 1500])
+def test_compensated_layout_keeps_sllidars_beams_without_its_copies_or_drift(inverted, count):
+    # sllidar_ros2 spreads its 360 k bins over 2 pi in N - 1 increments (bearings drift by a bin
+    # along the turn) and copies each sample into the next k - 1 bins. rplidar_node keeps its
+    # beam count and array order (a sample alone in its bin is in the same beam) but publishes
+    # each bin at its centre, 2 pi / N apart, and each sample once: a bin without a sample of
+    # its own is NaN, no measurement (REP-117).
+    multiple = 3
+    turn = random_turn(np.random.default_rng(count), count)
+    scan = turn_to_scan(turn, True, inverted, multiple)
+    lo, _, _, ranges, intensities, sample_deg = sllidar_reference(
+        turn.angle_deg, turn.distance_mm, turn.quality, True, inverted, multiple)
+    bins = 360 * multiple
+    width = 2 * math.pi / bins
+    assert len(scan.ranges) == len(scan.intensities) == bins
+    assert scan.angle_increment == pytest.approx(width, rel=1e-12)
+    assert scan.angle_min == pytest.approx(lo + width / 2, abs=1e-12)
+    assert scan.angle_max == pytest.approx(scan.angle_min + (bins - 1) * width, abs=1e-12)
+    assert scan.time_increment == pytest.approx(0.1 / bins)
+    bin_of_beam = np.arange(bins) if inverted else bins - 1 - np.arange(bins)
+    samples_per_bin = np.bincount(np.floor(turn.angle_deg * multiple).astype(int),
+                                  minlength=bins)[bin_of_beam]
+    own = (np.floor(sample_deg * multiple) == bin_of_beam) & np.isfinite(ranges)
+    alone = own & (samples_per_bin == 1)
+    assert alone.sum() > 0.3 * min(count, bins)
+    np.testing.assert_array_equal(scan.ranges[alone], np.float32(ranges)[alone])
+    np.testing.assert_array_equal(scan.intensities[alone], np.float32(intensities)[alone])
+    # sllidar's copies: bins no sample fell in.
+    assert np.isnan(scan.ranges[samples_per_bin == 0]).all()
+    assert not np.isnan(scan.ranges[samples_per_bin > 0]).any()
+
+
+def test_compensated_scan_is_1080_beams_at_their_bin_centres_in_denseboost():
     multiple = compensation_multiple(108.0, 10.0)
     assert (multiple, compensation_multiple(244.0, 10.0)) == (3, 2)
     scan = turn_to_scan(random_turn(np.random.default_rng(1), 926), True, False, multiple)
     assert len(scan.ranges) == 1080
-    assert (scan.angle_min, scan.angle_max) == pytest.approx((-math.pi, math.pi))
-    assert scan.angle_increment == pytest.approx(2 * math.pi / 1079)
+    # Not sllidar_ros2's -pi to pi in 1079 increments: 1080 bins of 1/3 deg span 2 pi, so their
+    # centres run from -pi + 1/6 deg to pi - 1/6 deg in 1079 increments of 2 pi / 1080.
+    half_bin = math.pi / 1080
+    assert (scan.angle_min, scan.angle_max) == pytest.approx((-math.pi + half_bin,
+                                                              math.pi - half_bin))
+    assert scan.angle_increment == pytest.approx(2 * math.pi / 1080)
 
 
-def test_a_turn_without_returns_is_all_infinite():
+def test_a_turn_without_returns_has_no_finite_range():
     turn = Turn(np.linspace(0, 359, 50), np.zeros(50), np.zeros(50, np.uint8), 0.0, 0.1, 0.1)
-    for compensate in (False, True):
-        scan = turn_to_scan(turn, compensate, False, 3)
-        assert np.isinf(scan.ranges).all() and len(scan.ranges) in (50, 1080)
+    assert np.isinf(turn_to_scan(turn, False, False, 3).ranges).all()
+    binned = turn_to_scan(turn, True, False, 3).ranges
+    # +inf (no return) in the 50 bins holding a sample, NaN (no measurement) in the others.
+    assert len(binned) == 1080 and np.isinf(binned).sum() == 50 and np.isnan(binned).sum() == 1030
+
+
+@pytest.mark.parametrize('orientation', ['sllidar', 'rep103'])
+@pytest.mark.parametrize('inverted', [False, True])
+def test_each_binned_beam_is_published_at_its_samples_bearing(inverted, orientation):
+    # One sample at each bin's centre, told apart by its range: the beam holding it must be
+    # published at its bearing, offset - raw (raw - offset mirrored), whatever the array order.
+    multiple, bins = 3, 1080
+    raw_deg = (np.arange(bins) + 0.5) / multiple
+    turn = Turn(raw_deg, 1000.0 + np.arange(bins), np.full(bins, 40, np.uint8), 0.0, 0.1, 0.1)
+    scan = turn_to_scan(turn, True, inverted, multiple, orientation)
+    sample = np.rint(np.asarray(scan.ranges, float) * 1000.0 - 1000.0).astype(int)
+    assert sorted(sample) == list(range(bins))
+    offset = {'sllidar': math.pi, 'rep103': 0.0}[orientation]
+    true_rad = offset - np.radians(raw_deg[sample])
+    if inverted:
+        true_rad = -true_rad
+    published = scan.angle_min + scan.angle_increment * np.arange(bins)
+    bearing_error = np.angle(np.exp(1j * (published - true_rad)))
+    assert np.abs(bearing_error).max() < 0.1 * scan.angle_increment
+
+
+SEAM_WALL_M = 3.0
+
+
+def seam_wall_turn(samples, from_normal_deg, phase):
+    """
+    Return a turn of exact ranges to one flat wall SEAM_WALL_M away, across the seam.
+
+    The seam (raw angle 0, published angle pi in sllidar's frame) lies ``from_normal_deg`` from
+    the wall's normal; the wall returns where it is seen within 69 deg of its normal. Sample s
+    is at raw angle (s + ``phase``) 360 / ``samples`` deg.
+    """
+    raw_deg = (np.arange(samples) + phase) * 360.0 / samples
+    facing = np.cos(np.radians(from_normal_deg - raw_deg))
+    distance_mm = np.where(facing > 0.35, 1000.0 * SEAM_WALL_M / np.maximum(facing, 1e-9), 0.0)
+    return Turn(raw_deg, distance_mm, np.full(samples, 40, np.uint8), 0.0, 0.1, 0.1)
+
+
+def off_the_wall_m(scan, from_normal_deg):
+    """Return each finite return's distance from the wall of :func:`seam_wall_turn`, m."""
+    ranges = np.asarray(scan.ranges, float)
+    bearing = scan.angle_min + scan.angle_increment * np.arange(len(ranges))
+    valid = np.isfinite(ranges)
+    normal = math.pi - math.radians(from_normal_deg)
+    return np.abs(ranges[valid] * np.cos(bearing[valid] - normal) - SEAM_WALL_M)
+
+
+def one_segment_across_the_seam(scan):
+    """Return whether the rplidar_a2 preset finds one segment in the scan, across its seam."""
+    segments = extract_features(np.asarray(scan.ranges, float), scan.angle_min,
+                                scan.angle_increment, node_config(sensor='rplidar_a2'), 0.05,
+                                40.0).segments
+    return len(segments) == 1 and segments.first_index[0] > segments.last_index[0]
+
+
+@pytest.mark.parametrize('from_normal_deg', [45.0, 60.0])
+@pytest.mark.parametrize('multiple', [2, 3])
+def test_a_wall_sampled_at_the_bin_centres_lies_on_its_line_across_the_seam(
+        multiple, from_normal_deg):
+    # One sample at the centre of each bin: any bearing error is the layout's own. sllidar_ros2's
+    # increment of 2 pi / (N - 1) put the beams next to the seam a whole bin off, 1.7-3.0 cm off
+    # the wall at 3 m (docs/sensors.md#the-seam-of-a-turn), and split it at 60 deg.
+    bins = 360 * multiple
+    turn = seam_wall_turn(bins, from_normal_deg, phase=0.5)
+    scan = turn_to_scan(turn, True, False, multiple)
+    # Beam i holds bin N - 1 - i, whose only sample is sample N - 1 - i.
+    sample = bins - 1 - np.arange(bins)
+    np.testing.assert_array_equal(
+        scan.ranges, np.float32(np.where(turn.distance_mm > 0, turn.distance_mm / 1e3,
+                                         np.inf))[sample])
+    published = scan.angle_min + scan.angle_increment * np.arange(bins)
+    bearing_error = np.angle(np.exp(1j * (published - (math.pi - np.radians(
+        turn.angle_deg[sample])))))
+    assert np.abs(bearing_error).max() < 0.1 * scan.angle_increment
+    assert off_the_wall_m(scan, from_normal_deg).max() < 0.002
+    assert one_segment_across_the_seam(scan)
+
+
+@pytest.mark.parametrize('from_normal_deg', [45.0, 60.0])
+@pytest.mark.parametrize('samples, us_per_sample', [(800, 125.0), (500, 200.0)])
+def test_each_binned_beam_holds_the_sample_nearest_its_bearing_across_the_seam(
+        samples, us_per_sample, from_normal_deg):
+    # An A2 (8000 samples a second, k = 3) and a C1 (5000, k = 2) at 10 Hz: the samples fall
+    # anywhere in their bins, so each return is up to half a bin off its beam's bearing, and no
+    # more on either side of the seam.
+    multiple = compensation_multiple(us_per_sample, 10.0)
+    assert 360 * multiple > samples
+    turn = seam_wall_turn(samples, from_normal_deg, phase=0.3)
+    scan = turn_to_scan(turn, True, False, multiple)
+    ranges = np.asarray(scan.ranges)
+    published = scan.angle_min + scan.angle_increment * np.arange(len(ranges))
+    sample_bearing = math.pi - np.radians(turn.angle_deg)
+    apart = np.abs(np.angle(np.exp(1j * (published[:, None] - sample_bearing[None, :]))))
+    nearest = apart.argmin(axis=1)
+    held = ~np.isnan(ranges)
+    assert held.sum() == samples
+    assert (apart[held, nearest[held]] <= 0.5 * scan.angle_increment * (1 + 1e-9)).all()
+    sample_ranges = np.float32(np.where(turn.distance_mm > 0, turn.distance_mm / 1e3, np.inf))
+    np.testing.assert_array_equal(ranges[held], sample_ranges[nearest[held]])
+    assert one_segment_across_the_seam(scan)
 
 
 def wall_turn(wall_deg, count=360, wall_mm=1500.0, far_mm=8000.0):

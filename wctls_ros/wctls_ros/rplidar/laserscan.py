@@ -2,16 +2,23 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-A turn as sllidar_ros2 publishes it, and as a fixed-count scan: LaserScan fields (pure).
+A turn in sllidar_ros2's layout, and as a fixed-count scan: LaserScan fields (pure).
 
 - Published angle = offset - raw clockwise angle, counter-clockwise (REP-103) in both
   orientations: offset pi in the ``sllidar`` orientation (x toward the raw 180 deg side, as
   sllidar_ros2), 0 in the ``rep103`` one (x toward the device's front, raw 0 deg). The arrays
   ascend in published angle (``inverted`` mirrors the array order, as sllidar does for a sensor
   mounted upside down).
-- ``angle_compensate``: the turn is binned into ``360 * k`` bins, bin ``floor(raw_deg * k)``;
-  each sample fills its bin and the next ``k - 1`` (later samples overwrite), empty bins stay
-  +inf, angle_min = offset - 2 pi, angle_max = offset, increment = 2 pi / (N - 1).
+- ``angle_compensate``: the turn is binned into N = ``360 * k`` bins as sllidar_ros2 bins it
+  (bin j holds raw angles [j / k, (j + 1) / k) deg; beam i is bin N - 1 - i, or bin i when
+  ``inverted``), each beam published at its bin's centre: increment w = 2 pi / N, angle_min =
+  offset - 2 pi + w / 2, angle_max = angle_min + (N - 1) w. A bin holds the one sample nearest
+  its centre: +inf when that sample had no return, NaN (no measurement, REP-117) when no sample
+  fell in it, as in the fixed-count scan. sllidar_ros2 publishes the same bins from offset - 2 pi
+  to offset, increment 2 pi / (N - 1), so its bearings drift by up to a bin along the turn and
+  jump back by one across the seam; it also copies each sample into the next k - 1 bins (a
+  quarter of an A2's beams hold a copy 0.5-2.4 bins off its sample's bearing) and leaves the
+  bins left empty +inf.
 - Otherwise every sample is a beam between the first and the last sample with a return, so the
   beam count and angle_min/max change from turn to turn.
 - No return -> +inf; intensities = the 6-bit quality (sllidar's ``quality >> 2``).
@@ -21,10 +28,11 @@ A turn as sllidar_ros2 publishes it, and as a fixed-count scan: LaserScan fields
 
 Time order: the sensor sweeps clockwise, so published angles fall as time goes on and the
 arrays, ascending in angle, run backwards in time. header.stamp is the measurement time of the
-turn's first sample (raw angle ~0: the last beam of the per-sample scan, published angle
-offset); beam i of an N-beam per-sample scan was measured ``(N - 1 - i) * time_increment``
-after it. In the fixed-count scan the turn starts and ends at the bin holding raw angle 0
-(published angle offset: the array's ends for ``sllidar``, its middle for ``rep103``).
+turn's first sample (raw angle ~0: the last beam of the per-sample and binned scans, published
+angle offset, or offset - w / 2); beam i of an N-beam scan was measured about
+``(N - 1 - i) * time_increment`` after it. In the fixed-count scan the turn starts and ends at
+the bin holding raw angle 0 (published angle offset: the array's ends for ``sllidar``, its
+middle for ``rep103``).
 
 The timing fields are this driver's own, honest ones: scan_time is the measured rotation period
 and time_increment the time the sensor takes to sweep one angle_increment.
@@ -77,20 +85,32 @@ def compensation_multiple(us_per_sample: float, scan_frequency_hz: float) -> int
     return max(int(samples_per_turn / 360.0 + 1), 1)
 
 
-def _binned(angle_deg: np.ndarray, ranges: np.ndarray, intensities: np.ndarray,
-            multiple: int) -> tuple:
-    """Bin returns sorted by angle the sllidar way; return (ranges, intensities) per bin."""
-    bins = 360 * multiple
-    binned_ranges, binned_intensities = np.full(bins, np.inf), np.zeros(bins, np.float32)
-    index = np.minimum(np.floor(angle_deg * multiple).astype(np.int64), bins - 1)
-    # Bin b ends up holding the last sample whose own bin is in [b - k + 1, b].
-    bin_ids = np.arange(bins)
-    owner = np.searchsorted(index, bin_ids, side='right') - 1
-    filled = owner >= 0
-    filled[filled] = index[owner[filled]] > bin_ids[filled] - multiple
-    binned_ranges[filled] = ranges[owner[filled]]
-    binned_intensities[filled] = intensities[owner[filled]]
-    return binned_ranges, binned_intensities
+def _binned(turn: Turn, position: np.ndarray, bins: int) -> tuple:
+    """
+    Return (ranges m, intensities) of ``bins`` bins, each holding the sample nearest its centre.
+
+    The nearest sample has the smallest bearing error whatever the sample density; a sample is
+    never repeated into another bin (sllidar_ros2 copies each into the next k - 1 bins, where
+    it is up to a bin or more off its bearing).
+
+    :param turn: the assembled turn
+    :param position: each sample's place in bin widths from the first bin's start (bin i spans
+        [i, i + 1); places at or past ``bins`` go to the last bin)
+    :param bins: the number of bins
+    :return: float32 arrays in bin order: +inf where the sample had no return, NaN (no
+        measurement, REP-117; intensity 0) where no sample fell in the bin
+    """
+    index = np.minimum(position.astype(np.int64), bins - 1)
+    off_centre = np.abs(position - index - 0.5)
+    order = np.lexsort((off_centre, index))
+    owners, first = np.unique(index[order], return_index=True)
+    nearest = order[first]
+    ranges = np.full(bins, np.nan, np.float32)
+    intensities = np.zeros(bins, np.float32)
+    distance_mm = turn.distance_mm[nearest]
+    ranges[owners] = np.where(distance_mm > 0, distance_mm / 1000.0, np.inf)
+    intensities[owners] = turn.quality[nearest]
+    return ranges, intensities
 
 
 def orientation_offset_rad(orientation: str) -> float:
@@ -110,7 +130,7 @@ def orientation_offset_rad(orientation: str) -> float:
 def turn_to_scan(turn: Turn, angle_compensate: bool, inverted: bool, multiple: int,
                  orientation: str = 'sllidar') -> ScanArrays:
     """
-    Lay one turn out as sllidar_ros2 does.
+    Lay one turn out as sllidar_ros2 does, with every beam at its samples' bearing.
 
     :param turn: the assembled turn
     :param angle_compensate: bin into ``360 * multiple`` fixed beams
@@ -121,23 +141,20 @@ def turn_to_scan(turn: Turn, angle_compensate: bool, inverted: bool, multiple: i
     :raises ValueError: on an unknown orientation
     """
     offset = orientation_offset_rad(orientation)
+    if angle_compensate:
+        return _compensated_scan(turn, inverted, multiple, offset)
     order = np.argsort(turn.angle_deg, kind='stable')
     angle = turn.angle_deg[order]
     ranges = np.where(turn.distance_mm[order] > 0, turn.distance_mm[order] / 1000.0, np.inf)
     intensities = turn.quality[order].astype(np.float32)
     valid = np.isfinite(ranges)
-    if angle_compensate:
-        ranges, intensities = _binned(angle[valid], ranges[valid], intensities[valid], multiple)
-        count = len(ranges)
-        raw_min, raw_max = 0.0, 2.0 * math.pi
-    elif valid.any():
+    if valid.any():
         first, last = np.flatnonzero(valid)[[0, -1]]
         ranges, intensities = ranges[first:last + 1], intensities[first:last + 1]
-        count = len(ranges)
         raw_min, raw_max = math.radians(angle[first]), math.radians(angle[last])
     else:
-        count = len(ranges)
         raw_min, raw_max = 0.0, math.radians(359.0)
+    count = len(ranges)
     forward = raw_max > raw_min
     angle_min, angle_max = (offset - raw_max, offset - raw_min) if forward else (
         offset - raw_min, offset - raw_max)
@@ -151,13 +168,42 @@ def turn_to_scan(turn: Turn, angle_compensate: bool, inverted: bool, multiple: i
                       intensities=np.ascontiguousarray(intensities, dtype=np.float32))
 
 
+def _compensated_scan(turn: Turn, inverted: bool, multiple: int, offset_rad: float) -> ScanArrays:
+    """
+    Lay one turn out in ``360 * multiple`` bins of raw angle, each published at its centre.
+
+    Bin j holds raw angles [j / k, (j + 1) / k) deg, k = ``multiple``, as in sllidar_ros2;
+    their published angles offset - raw lie in (offset - (j + 1) w, offset - j w], w = 2 pi / N,
+    so bin j's centre is offset - (j + 1/2) w. Upright, the array ascends in published angle (beam
+    i holds bin N - 1 - i, sllidar's order): angle_min = offset - 2 pi + w / 2. Inverted, beam i
+    holds bin i, whose mirrored angle raw - offset is the same offset - 2 pi + (i + 1/2) w modulo
+    2 pi (offset 0 or pi): the same fields, the array reversed.
+
+    :param turn: the assembled turn
+    :param inverted: the sensor is mounted upside down (mirror the array order)
+    :param multiple: bins per degree
+    :param offset_rad: the published angle of raw angle 0
+    :return: the LaserScan fields, increment 2 pi / N
+    """
+    bins = 360 * multiple
+    width = 2.0 * math.pi / bins
+    ranges, intensities = _binned(turn, turn.angle_deg * multiple, bins)
+    if not inverted:
+        ranges, intensities = ranges[::-1], intensities[::-1]
+    return ScanArrays(angle_min=offset_rad - 2.0 * math.pi + 0.5 * width,
+                      angle_max=offset_rad - 0.5 * width, angle_increment=width,
+                      time_increment=turn.period_s / bins, scan_time=turn.period_s,
+                      ranges=np.ascontiguousarray(ranges),
+                      intensities=np.ascontiguousarray(intensities))
+
+
 def fixed_scan(turn: Turn, beams: int, inverted: bool, orientation: str) -> ScanArrays:
     """
     Lay one turn out as ``beams`` fixed angular bins: the same beams every turn.
 
     Bin i spans published angles [-pi + i w, -pi + (i + 1) w), w = 2 pi / beams, and holds the
-    range of the sample nearest its centre (the smallest bearing error, whatever the sample
-    density); +inf where that sample had no return, NaN where no sample fell in the bin.
+    range of the sample nearest its centre; +inf where that sample had no return, NaN where no
+    sample fell in the bin.
 
     :param turn: the assembled turn
     :param beams: the number of bins, at least 1
@@ -173,17 +219,7 @@ def fixed_scan(turn: Turn, beams: int, inverted: bool, orientation: str) -> Scan
     angle = offset - np.radians(turn.angle_deg)
     if inverted:
         angle = -angle
-    position = np.mod(angle + math.pi, 2.0 * math.pi) / width
-    index = np.minimum(position.astype(np.int64), beams - 1)
-    off_centre = np.abs(position - index - 0.5)
-    order = np.lexsort((off_centre, index))
-    owners, first = np.unique(index[order], return_index=True)
-    nearest = order[first]
-    ranges = np.full(beams, np.nan, np.float32)
-    intensities = np.zeros(beams, np.float32)
-    distance_mm = turn.distance_mm[nearest]
-    ranges[owners] = np.where(distance_mm > 0, distance_mm / 1000.0, np.inf)
-    intensities[owners] = turn.quality[nearest]
+    ranges, intensities = _binned(turn, np.mod(angle + math.pi, 2.0 * math.pi) / width, beams)
     return ScanArrays(angle_min=-math.pi + 0.5 * width, angle_max=math.pi - 0.5 * width,
                       angle_increment=width, time_increment=turn.period_s / beams,
                       scan_time=turn.period_s, ranges=ranges, intensities=intensities)

@@ -228,15 +228,20 @@ def _start_reading_commands(commands: queue.Queue):
     """
     Start the thread that forwards standard input to the command queue.
 
-    A Ctrl-C inside ``Thread.start()`` breaks its condition's lock (RuntimeError: release
-    unlocked lock: status 1 and a traceback instead of 130), so SIGINT waits, blocked, until the
-    thread has started; the thread keeps it blocked (Python handles signals in the main thread).
+    A KeyboardInterrupt inside ``Thread.start()`` breaks its condition's lock (RuntimeError:
+    release unlocked lock: status 1 and a traceback instead of 130), so a SIGINT meanwhile is
+    only noted, and raised once the thread has started. (Blocking SIGINT with pthread_sigmask
+    would not do: the kernel hands it to another thread of the process that does not block it,
+    and Python still runs the handler in this one.)
     """
-    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    interrupted = []
+    ctrl_c = signal.signal(signal.SIGINT, lambda *_: interrupted.append(True))
     try:
         threading.Thread(target=_read_stdin_commands, args=(commands,), daemon=True).start()
     finally:
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        signal.signal(signal.SIGINT, ctrl_c)
+    if interrupted:
+        raise KeyboardInterrupt
 
 
 def _serve(args):

@@ -26,6 +26,10 @@ from ._jit import jit
 from ._order import wrapped
 from ..features import CornerSet
 
+# A corner may sit one beam without a return beyond a wall's last return (a dropout there),
+# reported with that wall's end not seen; farther, it is an extrapolation, not a corner.
+CORNER_MISSING_BEAMS = 1
+
 
 def intersect(line_a: np.ndarray, cov_a: np.ndarray, line_b: np.ndarray,
               cov_b: np.ndarray):
@@ -269,10 +273,7 @@ def seen_through(corner_x_m, corner_y_m, normal_x, normal_y, radius_m, inward_x,
 
 
 @jit
-def walls_end_at(corner_xy_m, corner_covariance, first_segment, second_segment, wall_angle_rad,
-                 wall_radius_m, wall_middle_m, x_m, y_m, last_position, first_position, step_rad,
-                 range_sigma_m, bearing_sigma_rad, sigmas, floor_m, window, max_missing_beams,
-                 run_sigmas):
+def walls_end_at(candidates, walls, contour, step_rad, noise, rule):
     """
     Tell which corners both walls end at, and at which the end was seen.
 
@@ -301,29 +302,27 @@ def walls_end_at(corner_xy_m, corner_covariance, first_segment, second_segment, 
 
     A wall's end is seen when its reach is within one beam's spacing of that bound.
 
-    :param corner_xy_m: the candidate corners, shape (C, 2), m
-    :param corner_covariance: their (x, y, yaw) covariance, shape (C, 3, 3)
-    :param first_segment: the first wall of each corner, shape (C,)
-    :param second_segment: the second wall, shape (C,)
-    :param wall_angle_rad: normal angle of every segment's line, shape (S,), rad
-    :param wall_radius_m: radius of every segment's line, shape (S,), m
-    :param wall_middle_m: middle of every segment, shape (S, 2), m (tells its side of a corner)
-    :param x_m: x of the returns in position order, shape (n,), m
-    :param y_m: y of the returns in position order, shape (n,), m
-    :param last_position: position of every segment's last return, shape (S,)
-    :param first_position: position of every segment's first return, shape (S,)
+    :param candidates: the candidate corners
+    :param walls: the walls (their middles tell their side of a corner)
+    :param contour: the returns in circular order
     :param step_rad: bearing step between beams, rad
-    :param range_sigma_m: range noise std, m
-    :param bearing_sigma_rad: bearing noise std, rad
-    :param sigmas: tolerance in standard deviations
-    :param floor_m: tolerance floor, m
-    :param window: most returns between the two walls (more: not adjacent)
-    :param max_missing_beams: most beams without a return between a corner and a wall's reach
-    :param run_sigmas: largest sum of normalised residuals (in front) over sqrt(count) of the
-        returns a wall claims beyond its segment (0: no such test)
+    :param noise: the noise (the rule decides with its deciding_sigma_m)
+    :param rule: the rule's tolerances (``sigmas``, ``floor_m``, ``window``, ``run_sigmas``: the
+        largest sum of normalised residuals (in front) over sqrt(count) of the returns a wall
+        claims beyond its segment, 0: no such test); at most ``CORNER_MISSING_BEAMS`` beams
+        without a return lie between a corner and a wall's reach
     :return: (corners both walls end at (C,), whether each wall's end was seen (C, 2), column 0
         the first wall)
     """
+    corner_xy_m, corner_covariance = candidates.xy_m, candidates.covariance
+    first_segment, second_segment = candidates.first_wall, candidates.second_wall
+    wall_angle_rad, wall_radius_m = walls.angle_rad, walls.radius_m
+    wall_middle_m = 0.5 * (walls.start_xy_m + walls.end_xy_m)
+    x_m, y_m = contour.x_m, contour.y_m
+    last_position, first_position = walls.last_position, walls.first_position
+    range_sigma_m, bearing_sigma_rad = noise.deciding_sigma_m, noise.bearing_sigma_rad
+    sigmas, floor_m, window, run_sigmas = rule.sigmas, rule.floor_m, rule.window, rule.run_sigmas
+    max_missing_beams = CORNER_MISSING_BEAMS
     corners, count, width = corner_xy_m.shape[0], x_m.size, window + 2
     keep = np.zeros(corners, np.bool_)
     seen = np.zeros((corners, 2), np.bool_)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from wctls_ros.core import (extract_features, FeatureConfig, fit_lines, nees, scan_to_points,
                             ScanError, segment_returns)
-from wctls_ros.core.numba_core.records import BeamGrid, Lines, Noise, Returns, Segments
+from wctls_ros.core.records import BeamGrid, Lines, Noise, Returns, Segments
 from wctls_ros.simulation import (floor_plan_from_dict, full_turn_bearings, NOISELESS,
                                   NoiseModel, simulate_ranges)
 from wctls_ros.simulation.adversarial import peeling_wall

@@ -8,9 +8,9 @@ import math
 from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
-from wctls_ros.core.numba_core.records import Lines, Noise, Segments
 from wctls_ros.core.numba_core.segmentation import (merge_segments, moment_line, pass_budget,
                                                     split_iepf, trim_offset)
+from wctls_ros.core.records import Lines, Noise, Segments
 
 
 def recursive_end_point_fit(x, y, start, stop, threshold):

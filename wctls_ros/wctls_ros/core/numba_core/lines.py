@@ -25,9 +25,9 @@ import math
 import numpy as np
 
 from ._jit import jit
-from .records import Noise
 from ..config import METHODS
 from ..features import LineFits, SegmentReturns
+from ..records import Noise
 
 # Gauss-Newton of the maximum-likelihood fit stops once every step is below this (rad and m)...
 _ML_STEP_TOLERANCE = 1e-12

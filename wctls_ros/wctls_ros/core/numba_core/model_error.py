@@ -24,7 +24,7 @@ import numpy as np
 
 from ._jit import jit
 from .lines import normal_jacobians
-from .records import Walls
+from ..records import Walls
 
 
 @jit

@@ -19,18 +19,21 @@ import numpy as np
 
 from ._jit import jit, jit_inline
 from ._order import wrapped
-from .corners import corner_candidates, walls_end_at
+from .corners import (along_wall, blocked, corner_candidates, corner_zone, end_window, goes_on,
+                      reaches, seen_through, short_of_corner, wall_at_corner, walls_end_at,
+                      without_object_in_front)
 from .lines import fit_segments, residual_chi2_dof
 from .model_error import with_model_error
 from .noise import range_sigma_of_returns
-from .records import (BeamGrid, CornerArrays, CornerCandidates, CornerEndRule, Lines, Noise,
-                      Returns, ScanResult, SegmentArrays, Segments, Walls)
 from .scan import valid_returns
 from .segmentation import (breakpoints_of, chains_of, merge_segments, pass_budget, split_iepf,
                            trim_ambiguous, trim_offset)
 from ..config import FeatureConfig, METHODS
 from ..features import CornerSet, Features, SegmentSet
 from ..plausibility import implausible_scan, noise_is_plausible, plausible
+from ..records import (AlongWall, BeamGrid, CornerArrays, CornerCandidates, CornerEndRule,
+                       EndWindow, Lines, Noise, Returns, ScanResult, SegmentArrays, Segments,
+                       WallAtCorner, Walls)
 from ..scan import beam_density, scan_geometry, ScanError
 
 _DEFAULT_CONFIG = FeatureConfig()
@@ -142,11 +145,22 @@ def kernels_last_first():
     lines = record((values, values), Lines)
     walls = record((values, values, stacks, rows, stacks, rows, rows, rows, indices, indices,
                     indices, values), Walls)
-    candidates = record((rows, stacks, indices, indices), CornerCandidates)
     rule = record((real, real, integer, real), CornerEndRule)
+    window = record((values, values, values, values, flags, integer), EndWindow)
+    wall = record((real,) * 8, WallAtCorner)
+    placed = record((values, values, flags), AlongWall)
     return (
         (with_model_error, (walls, flag, real, real)),
-        (walls_end_at, (candidates, walls, returns, real, noise, rule)),
+        (seen_through, (real, real, wall, wall, returns, integer, integer, noise, rule)),
+        (short_of_corner, (wall, placed, flags, flags)),
+        (blocked, (window, wall, wall, placed, placed, flags, flags, flags)),
+        (goes_on, (wall, wall, placed, placed, flags, flags, flags)),
+        (reaches, (wall, placed, flags, flags)),
+        (without_object_in_front, (window, wall, placed, flags, rule)),
+        (corner_zone, (window, real, real, wall, wall, noise, rule)),
+        (along_wall, (window, wall, real, real)),
+        (wall_at_corner, (walls, integer, real, real, rows, real, rule)),
+        (end_window, (returns, integer, integer, noise, rule)),
         (corner_candidates, (rows, stacks, rows, rows, indices, indices, real, rows, real)),
         (_usable, (values, rows, real, real, rows)),
         (_feet, (values, values, indices, values, values)),

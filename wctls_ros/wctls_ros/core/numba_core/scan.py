@@ -6,7 +6,7 @@
 import numpy as np
 
 from ._jit import jit
-from .records import Returns
+from ..records import Returns
 from ..scan import _LARGEST_RANGE
 
 

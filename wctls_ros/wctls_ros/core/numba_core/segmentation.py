@@ -19,7 +19,7 @@ import numpy as np
 
 from ._jit import jit
 from ._order import stable_order, wrapped
-from .records import Lines, Segments
+from ..records import Lines, Segments
 
 # A chord shorter than this (m) has no usable direction: distances are measured from its start.
 _MIN_CHORD_M = 1e-9

@@ -2,14 +2,16 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-The named data the compiled kernels pass each other: typed named tuples, not numbered tuples.
+The named data the steps of the pipeline pass each other: typed named tuples, not numbered ones.
 
 numba compiles a ``typing.NamedTuple`` into a struct whose fields are read by name, as
 arguments and as results, also from its on-disk cache: a range sigma cannot take a bearing
 sigma's place, nothing is indexed by number, and a field added to a record reaches every kernel
 that reads the record without a change to the calls in between. A record of arrays holds
-references to them (no copy). These are plain Python classes: importing this module imports no
-numba.
+references to them (no copy). The compiled core (:mod:`.numba_core`) passes them between its
+kernels; the numpy core's corner end rule (:mod:`.numpy_core.corners`) passes the same records,
+their fields arrays over all candidate corners at once where the compiled one has a number per
+corner. Plain Python classes: importing this module imports no numba.
 """
 
 from typing import NamedTuple
@@ -199,3 +201,65 @@ class CornerEndRule(NamedTuple):
     floor_m: float
     window: int
     run_sigmas: float
+
+
+class EndWindow(NamedTuple):
+    """
+    The returns the corner end rule looks at between two walls, in the circular order.
+
+    Column 0 is the first wall's facing end (its last return), the last column the second
+    wall's (its first return); between them the returns that belong to neither segment, as
+    many as there are up to the rule's window.
+
+    :ivar x_m: x of each column's return, shape (W,), m
+    :ivar y_m: y of each column's return, shape (W,), m
+    :ivar sigma_m: its position noise, sqrt(range_sigma^2 + (r bearing_sigma)^2), shape (W,), m
+    :ivar line_tolerance_m: how far off a line it still lies on it, shape (W,), m
+    :ivar in_window: whether the column holds a facing end or a return between them, (W,)
+    :ivar between: how many returns lie between the two walls (also beyond the window)
+    """
+
+    x_m: np.ndarray
+    y_m: np.ndarray
+    sigma_m: np.ndarray
+    line_tolerance_m: np.ndarray
+    in_window: np.ndarray
+    between: int
+
+
+class WallAtCorner(NamedTuple):
+    """
+    One wall of a corner, seen from the corner.
+
+    :ivar normal_x: x of the unit normal of its line
+    :ivar normal_y: y of that normal
+    :ivar radius_m: its line's radius, m
+    :ivar inward_x: x of the unit direction from the corner into the wall (towards its middle)
+    :ivar inward_y: y of that direction
+    :ivar along_sigma_m: the corner's standard deviation along the wall, m
+    :ivar spacing_m: the spacing of the beams on the wall at the corner, m
+    :ivar tolerance_m: how far from the corner a return along the wall still reaches it, m
+    """
+
+    normal_x: float
+    normal_y: float
+    radius_m: float
+    inward_x: float
+    inward_y: float
+    along_sigma_m: float
+    spacing_m: float
+    tolerance_m: float
+
+
+class AlongWall(NamedTuple):
+    """
+    Where the returns of an end window lie with respect to one wall of the corner.
+
+    :ivar in_front_m: how far each lies in front of the wall's line (towards the sensor), m
+    :ivar along_m: how far from the corner into the wall, m (negative: past the corner)
+    :ivar on_line: whether it lies on the wall's line (within its line tolerance), (W,)
+    """
+
+    in_front_m: np.ndarray
+    along_m: np.ndarray
+    on_line: np.ndarray

@@ -19,6 +19,31 @@ from typing import NamedTuple
 import numpy as np
 
 
+class Settings(NamedTuple):
+    """The FeatureConfig fields the compiled pipeline reads, as plain int, float or bool."""
+
+    method_code: int
+    range_sigma_m: float
+    bearing_sigma_rad: float
+    range_sigma_from_scan: bool
+    common_range_sigma_m: float
+    breakpoint_lambda_rad: float
+    iepf_threshold_m: float
+    iepf_noise_sigmas: float
+    merge_chi2: float
+    merge_max_missing_beams: int
+    end_offset_sigmas: float
+    residual_scaling: bool
+    model_error_sigma_m: float
+    wall_flatness_sigma_m: float
+    min_segment_points: int
+    min_segment_length_m: float
+    min_corner_angle_rad: float
+    min_wall_beam_angle_rad: float
+    corner_end_sigmas: float
+    corner_end_floor_m: float
+
+
 class Noise(NamedTuple):
     """
     The noise one scan is processed with (docs/derivation.md#decision-noise).

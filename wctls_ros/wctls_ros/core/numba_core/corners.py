@@ -24,6 +24,8 @@ import numpy as np
 
 from ._jit import jit, jit_inline
 from ._order import wrapped
+from ._types import (FLAGS, INDICES, INTEGER, NOISE, PLACED, REAL, RETURNS, ROWS, RULE, STACKS,
+                     WALL, WALLS, WINDOW)
 from ..features import CornerSet
 from ..records import AlongWall, EndWindow, WallAtCorner
 
@@ -99,7 +101,7 @@ _UPPER_ROWS = (0, 0, 0, 1, 1, 2)
 _UPPER_COLUMNS = (0, 1, 2, 1, 2, 2)
 
 
-@jit
+@jit(ahead=(ROWS, STACKS, ROWS, ROWS, INDICES, INDICES, REAL, ROWS, REAL))
 def corner_candidates(line, line_covariance, start_xy_m, end_xy_m, first, second, min_angle_rad,
                       line_offset_jacobian, common_range_sigma_m):
     """
@@ -213,7 +215,7 @@ def corner_candidates(line, line_covariance, start_xy_m, end_xy_m, first, second
     return kept[:found], xy[:found], yaw[:found], covariance[:found], opening[:found]
 
 
-@jit
+@jit(ahead=(RETURNS, INTEGER, INTEGER, NOISE, RULE))
 def end_window(contour, after_first, before_second, noise, rule):
     """
     Gather the returns between two walls that the corner end rule looks at.
@@ -245,7 +247,7 @@ def end_window(contour, after_first, before_second, noise, rule):
     return EndWindow(x, y, sigma, line_tolerance, in_window, between)
 
 
-@jit
+@jit(ahead=(WALLS, INTEGER, REAL, REAL, ROWS, REAL, RULE))
 def wall_at_corner(walls, wall, corner_x_m, corner_y_m, corner_covariance, step_rad, rule):
     """
     Describe one wall of a corner as seen from the corner.
@@ -284,7 +286,7 @@ def wall_at_corner(walls, wall, corner_x_m, corner_y_m, corner_covariance, step_
                         rule.sigmas * along_sigma + rule.floor_m)
 
 
-@jit
+@jit(ahead=(WINDOW, WALL, REAL, REAL))
 def along_wall(window, wall, corner_x_m, corner_y_m):
     """
     Place the returns of an end window with respect to one wall of the corner.
@@ -310,7 +312,7 @@ def along_wall(window, wall, corner_x_m, corner_y_m):
     return AlongWall(in_front, along, on_line)
 
 
-@jit
+@jit(ahead=(WINDOW, REAL, REAL, WALL, WALL, NOISE, RULE))
 def corner_zone(window, corner_x_m, corner_y_m, first, second, noise, rule):
     """
     Tell which returns of an end window lie so close to the corner that they belong to either wall.
@@ -342,7 +344,7 @@ def corner_zone(window, corner_x_m, corner_y_m, first, second, noise, rule):
     return at_corner
 
 
-@jit
+@jit(ahead=(WINDOW, WALL, PLACED, FLAGS, RULE))
 def without_object_in_front(window, wall, placed, at_corner, rule):
     """
     Return which returns lie on a wall's line, less a run that lies in front of it together.
@@ -377,7 +379,7 @@ def without_object_in_front(window, wall, placed, at_corner, rule):
     return on_line
 
 
-@jit
+@jit(ahead=(WALL, PLACED, FLAGS, FLAGS))
 def reaches(wall, placed, on_line, at_corner):
     """
     Tell which returns of an end window the wall reaches: in the corner zone, or on its line.
@@ -397,7 +399,7 @@ def reaches(wall, placed, on_line, at_corner):
     return here
 
 
-@jit
+@jit(ahead=(WALL, WALL, PLACED, PLACED, FLAGS, FLAGS, FLAGS))
 def goes_on(first, second, first_placed, second_placed, first_on_line, second_on_line,
             at_corner):
     """
@@ -427,7 +429,7 @@ def goes_on(first, second, first_placed, second_placed, first_on_line, second_on
     return False
 
 
-@jit
+@jit(ahead=(WINDOW, WALL, WALL, PLACED, PLACED, FLAGS, FLAGS, FLAGS))
 def blocked(window, first, second, first_placed, second_placed, first_here, second_here,
             at_corner):
     """
@@ -466,7 +468,7 @@ def blocked(window, first, second, first_placed, second_placed, first_here, seco
     return False
 
 
-@jit
+@jit(ahead=(WALL, PLACED, FLAGS, FLAGS))
 def short_of_corner(wall, placed, on_line, here):
     """
     Return how far a wall's own returns stop short of the corner, in beams beyond its tolerance.
@@ -489,7 +491,7 @@ def short_of_corner(wall, placed, on_line, here):
     return max(gap - wall.tolerance_m, 0.0) / wall.spacing_m
 
 
-@jit
+@jit(ahead=(REAL, REAL, WALL, WALL, RETURNS, INTEGER, INTEGER, NOISE, RULE))
 def seen_through(corner_x_m, corner_y_m, wall, other, contour, start, stop, noise, rule):
     """
     Tell whether the other wall is seen through a wall's stretch between its segment and a corner.

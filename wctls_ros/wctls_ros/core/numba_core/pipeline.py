@@ -13,12 +13,11 @@ import functools
 import math
 from typing import NamedTuple
 
-import numba
-from numba import types
 import numpy as np
 
-from ._jit import jit, jit_inline
+from ._jit import argument_types, jit, jit_inline, use_disk_cache
 from ._order import wrapped
+from ._types import INDICES, INTEGER, NOISE, REAL, ROWS, SEGMENTS, SETTINGS, VALUES
 from .corners import (along_wall, blocked, corner_candidates, corner_zone, end_window, goes_on,
                       reaches, seen_through, short_of_corner, wall_at_corner, walls_end_at,
                       without_object_in_front)
@@ -31,37 +30,11 @@ from .segmentation import (breakpoints_of, chains_of, merge_segments, pass_budge
 from ..config import FeatureConfig, METHODS
 from ..features import CornerSet, Features, SegmentSet
 from ..plausibility import implausible_scan, noise_is_plausible, plausible
-from ..records import (AlongWall, BeamGrid, CornerArrays, CornerCandidates, CornerEndRule,
-                       EndWindow, Lines, Noise, Returns, ScanResult, SegmentArrays, Segments,
-                       WallAtCorner, Walls)
+from ..records import (BeamGrid, CornerArrays, CornerCandidates, CornerEndRule, Lines, Noise,
+                       Returns, ScanResult, SegmentArrays, Segments, Settings, Walls)
 from ..scan import beam_density, scan_geometry, ScanError
 
 _DEFAULT_CONFIG = FeatureConfig()
-
-
-class _Settings(NamedTuple):
-    """The FeatureConfig fields the compiled pipeline reads, as plain typed values."""
-
-    method_code: int
-    range_sigma_m: float
-    bearing_sigma_rad: float
-    range_sigma_from_scan: bool
-    common_range_sigma_m: float
-    breakpoint_lambda_rad: float
-    iepf_threshold_m: float
-    iepf_noise_sigmas: float
-    merge_chi2: float
-    merge_max_missing_beams: int
-    end_offset_sigmas: float
-    residual_scaling: bool
-    model_error_sigma_m: float
-    wall_flatness_sigma_m: float
-    min_segment_points: int
-    min_segment_length_m: float
-    min_corner_angle_rad: float
-    min_wall_beam_angle_rad: float
-    corner_end_sigmas: float
-    corner_end_floor_m: float
 
 
 class _AtDensity(NamedTuple):
@@ -85,11 +58,11 @@ def _at_density(angle_increment_rad: float, beam_count: int,
 
 
 @functools.lru_cache(maxsize=64)
-def _settings(config: FeatureConfig) -> _Settings:
+def _settings(config: FeatureConfig) -> Settings:
     """Return the compiled pipeline's view of a configuration (one per distinct config)."""
-    values = {name: getattr(config, name) for name in _Settings._fields if name != 'method_code'}
-    return _Settings(method_code=METHODS.index(config.method), **{
-        name: _Settings.__annotations__[name](value) for name, value in values.items()})
+    values = {name: getattr(config, name) for name in Settings._fields if name != 'method_code'}
+    return Settings(method_code=METHODS.index(config.method), **{
+        name: Settings.__annotations__[name](value) for name, value in values.items()})
 
 
 def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
@@ -100,6 +73,7 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
 
     :func:`wctls_ros.core.extract_features` states the arguments, the result and the errors.
     """
+    use_disk_cache()
     if np.size(ranges_m) > config.max_beams:
         raise ScanError(f'{np.size(ranges_m)} beams are more than max_beams '
                         f'({config.max_beams})')
@@ -125,62 +99,13 @@ def kernels_last_first():
     """
     Return the kernels the pipeline calls, last step first, with the types it passes them.
 
-    The reverse of :func:`_features_of_scan`'s calls, for compiling them in other processes
-    while this one compiles the pipeline (:mod:`.precompile`). numba compiles a kernel once for
-    each tuple of argument types, so these must be exactly the pipeline's, down to the constants
-    it passes as literals; a test holds them to the signatures of a compiled pipeline.
+    :data:`PIPELINE_KERNELS` backwards, for compiling them in other processes while this one
+    compiles the pipeline (:mod:`.precompile`); each kernel's types are declared where it is
+    defined (``@jit(ahead=...)``).
 
     :return: tuples (kernel, tuple of numba argument types)
     """
-    real, integer, flag = types.float64, types.intp, types.boolean
-    values, indices, flags = real[::1], integer[::1], flag[::1]
-    read_only_values = types.Array(real, 1, 'C', readonly=True)
-    rows, stacks = real[:, ::1], real[:, :, ::1]         # (K, m) and (K, m, m) float arrays
-    settings = numba.typeof(_settings(_DEFAULT_CONFIG))
-    noise = numba.typeof(Noise(0.0, 0.0, 0.0))
-    grid = numba.typeof(BeamGrid(1, 0.0, False))
-    record = types.BaseTuple.from_types          # (field types, NamedTuple class)
-    returns = record((indices, values, values, values, values), Returns)
-    segments = record((indices, indices, indices), Segments)
-    lines = record((values, values), Lines)
-    walls = record((values, values, stacks, rows, stacks, rows, rows, rows, indices, indices,
-                    indices, values), Walls)
-    rule = record((real, real, integer, real), CornerEndRule)
-    window = record((values, values, values, values, flags, integer), EndWindow)
-    wall = record((real,) * 8, WallAtCorner)
-    placed = record((values, values, flags), AlongWall)
-    return (
-        (with_model_error, (walls, flag, real, real)),
-        (seen_through, (real, real, wall, wall, returns, integer, integer, noise, rule)),
-        (short_of_corner, (wall, placed, flags, flags)),
-        (blocked, (window, wall, wall, placed, placed, flags, flags, flags)),
-        (goes_on, (wall, wall, placed, placed, flags, flags, flags)),
-        (reaches, (wall, placed, flags, flags)),
-        (without_object_in_front, (window, wall, placed, flags, rule)),
-        (corner_zone, (window, real, real, wall, wall, noise, rule)),
-        (along_wall, (window, wall, real, real)),
-        (wall_at_corner, (walls, integer, real, real, rows, real, rule)),
-        (end_window, (returns, integer, integer, noise, rule)),
-        (corner_candidates, (rows, stacks, rows, rows, indices, indices, real, rows, real)),
-        (_usable, (values, rows, real, real, rows)),
-        (_feet, (values, values, indices, values, values)),
-        (residual_chi2_dof, (values, values, values, indices, indices, lines, noise)),
-        (fit_segments, (integer, values, values, values, values, indices, indices, noise)),
-        (_in_scan_order, (indices, integer, indices, indices)),
-        (trim_offset, (segments, values, values, lines, noise, integer, real, integer)),
-        (trim_ambiguous, (segments, flag, values, values, lines, noise, integer, integer)),
-        (_large_enough, (values, values, segments, settings)),
-        (merge_segments, (values, values, segments, flag, flags, noise, real, integer)),
-        (split_iepf, (values, values, segments, values, integer)),
-        (_split_threshold, (values, noise, real, real)),
-        (pass_budget, (integer,)),
-        (chains_of, (returns, flags)),
-        (breakpoints_of, (returns, grid, noise, real, integer, real)),
-        (range_sigma_of_returns, (indices, values)),
-        (valid_returns, (values, read_only_values, read_only_values, real, real, real, real)),
-        (_no_corners, ()),
-        (_no_segments, ()),
-    )
+    return tuple((kernel, argument_types(kernel)) for kernel in reversed(PIPELINE_KERNELS))
 
 
 @jit
@@ -275,7 +200,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     return ScanResult(segments_found, corners_found, work_limited, range_sigma)
 
 
-@jit
+@jit(ahead=())
 def _no_segments():
     """
     Return the arrays of a SegmentSet without segments.
@@ -289,7 +214,7 @@ def _no_segments():
                          np.zeros((0, 2)), no_index, no_index, no_index, np.zeros(0))
 
 
-@jit
+@jit(ahead=())
 def _no_corners():
     """Return the arrays of a CornerSet without corners (as :meth:`..features.CornerSet.empty`)."""
     no_index = np.zeros(0, np.intp)
@@ -297,7 +222,7 @@ def _no_corners():
                         no_index, no_index, np.zeros((0, 2), np.bool_))
 
 
-@jit
+@jit(ahead=(VALUES, NOISE, REAL, REAL))
 def _split_threshold(rho, noise, threshold_m, noise_sigmas):
     """
     Return the IEPF split distance of every return, m.
@@ -316,7 +241,7 @@ def _split_threshold(rho, noise, threshold_m, noise_sigmas):
     return threshold
 
 
-@jit
+@jit(ahead=(VALUES, VALUES, SEGMENTS, SETTINGS))
 def _large_enough(x, y, segments, settings):
     """Return which segments have min_segment_points returns and min_segment_length."""
     count, start, stop = x.size, segments.start, segments.stop
@@ -329,7 +254,7 @@ def _large_enough(x, y, segments, settings):
     return keep
 
 
-@jit
+@jit(ahead=(INDICES, INTEGER, INDICES, INDICES))
 def _in_scan_order(beam_of_position, beam_count, start, stop):
     """
     Return the segments sorted by the beam index of their first return.
@@ -393,7 +318,7 @@ def _fit_walls(contour, start, stop, noise, settings):
                  start[keep], last[keep], counts[keep], chi2_dof[keep])
 
 
-@jit
+@jit(ahead=(VALUES, VALUES, INDICES, VALUES, VALUES))
 def _feet(x, y, position, angle, radius):
     """Return the feet of the perpendiculars from the returns at ``position`` to the lines, m."""
     foot = np.empty((position.size, 2))
@@ -404,7 +329,7 @@ def _feet(x, y, position, angle, radius):
     return foot
 
 
-@jit
+@jit(ahead=(VALUES, ROWS, REAL, REAL, ROWS))
 def _usable(line, line_covariance, angle, radius, normal_covariance):
     """Return whether a fit is finite everywhere with a positive-definite normal covariance."""
     total = line.sum() + line_covariance.sum() + angle + radius + normal_covariance.sum()
@@ -438,3 +363,15 @@ def _corners(contour, walls, grid, noise, settings, density):
                                             settings.end_offset_sigmas))
     return CornerArrays(xy[keep], yaw[keep], covariance[keep], opening[keep],
                         candidates.first_wall[keep], candidates.second_wall[keep], seen[keep])
+
+
+# Every kernel :func:`_features_of_scan` calls (with those of :func:`_fit_walls`, :func:`_corners`
+# and :func:`~.corners.walls_end_at`, inlined into it), in the order it calls them: the one list
+# of what :mod:`.precompile` compiles ahead, each with the types declared at its definition.
+PIPELINE_KERNELS = (
+    _no_segments, _no_corners, valid_returns, range_sigma_of_returns, breakpoints_of, chains_of,
+    pass_budget, _split_threshold, split_iepf, merge_segments, _large_enough, trim_ambiguous,
+    trim_offset, _in_scan_order, fit_segments, residual_chi2_dof, _feet, _usable,
+    corner_candidates, end_window, wall_at_corner, along_wall, corner_zone,
+    without_object_in_front, reaches, short_of_corner, goes_on, blocked, seen_through,
+    with_model_error)

@@ -14,9 +14,13 @@ their fields arrays over all candidate corners at once where the compiled one ha
 corner. Plain Python classes: importing this module imports no numba.
 """
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
+
+# A number of one corner in the compiled core, which takes the corners one at a time, and an
+# array of it over every corner in the numpy core's corner end rule.
+PerCorner = Any
 
 
 class Settings(NamedTuple):
@@ -63,14 +67,14 @@ class Returns(NamedTuple):
     """
     A scan's valid returns, in beam order or (the pipeline's contour) in circular order.
 
-    :ivar index: each return's beam index, shape (n,)
+    :ivar beam_index: each return's beam index, shape (n,)
     :ivar range_m: its range, shape (n,), m
     :ivar bearing_rad: its bearing, shape (n,), rad
     :ivar x_m: its x, shape (n,), m
     :ivar y_m: its y, shape (n,), m
     """
 
-    index: np.ndarray
+    beam_index: np.ndarray
     range_m: np.ndarray
     bearing_rad: np.ndarray
     x_m: np.ndarray
@@ -241,7 +245,8 @@ class EndWindow(NamedTuple):
     :ivar sigma_m: its position noise, sqrt(range_sigma^2 + (r bearing_sigma)^2), shape (W,), m
     :ivar line_tolerance_m: how far off a line it still lies on it, shape (W,), m
     :ivar in_window: whether the column holds a facing end or a return between them, (W,)
-    :ivar between: how many returns lie between the two walls (also beyond the window)
+    :ivar between: how many returns lie between the two walls (also beyond the window; the
+        numpy core: per corner)
     """
 
     x_m: np.ndarray
@@ -249,7 +254,7 @@ class EndWindow(NamedTuple):
     sigma_m: np.ndarray
     line_tolerance_m: np.ndarray
     in_window: np.ndarray
-    between: int
+    between: PerCorner
 
 
 class WallAtCorner(NamedTuple):
@@ -266,14 +271,14 @@ class WallAtCorner(NamedTuple):
     :ivar tolerance_m: how far from the corner a return along the wall still reaches it, m
     """
 
-    normal_x: float
-    normal_y: float
-    radius_m: float
-    inward_x: float
-    inward_y: float
-    along_sigma_m: float
-    spacing_m: float
-    tolerance_m: float
+    normal_x: PerCorner
+    normal_y: PerCorner
+    radius_m: PerCorner
+    inward_x: PerCorner
+    inward_y: PerCorner
+    along_sigma_m: PerCorner
+    spacing_m: PerCorner
+    tolerance_m: PerCorner
 
 
 class AlongWall(NamedTuple):

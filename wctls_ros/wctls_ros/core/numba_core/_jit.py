@@ -43,7 +43,7 @@ import glob
 import hashlib
 import os
 import threading
-from typing import Callable, Dict, Iterator, List, Optional, Tuple
+from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple
 
 import numba
 from numba.core.caching import FunctionCache
@@ -55,6 +55,9 @@ _CORE_SOURCES = os.path.join(os.path.dirname(_HERE), '**', '*.py')
 # ... but the one that chooses which implementation runs: no kernel reads it.
 _NOT_READ_BY_KERNELS = os.path.join(os.path.dirname(_HERE), 'runtime.py')
 _FINGERPRINT_FILE = 'wctls_ros_core.fingerprint'
+# numba makes its configuration's attributes when it reads its environment, so no type checker
+# knows them.
+_NUMBA_CONFIG: Any = numba.config
 
 # Every kernel of the core, in the order of definition, and the numba argument types the
 # pipeline passes those it compiles ahead in helper processes (:mod:`.precompile`).
@@ -81,13 +84,13 @@ def _chosen_cache_dir() -> Optional[str]:
 @contextlib.contextmanager
 def _numba_caching_in_our_folder() -> Iterator[None]:
     """Set numba's cache folder to the core's choice while the block runs, then restore it."""
-    chosen, before = _chosen_cache_dir(), numba.config.CACHE_DIR
+    chosen, before = _chosen_cache_dir(), _NUMBA_CONFIG.CACHE_DIR
     if chosen is not None:
-        numba.config.CACHE_DIR = chosen
+        _NUMBA_CONFIG.CACHE_DIR = chosen
     try:
         yield
     finally:
-        numba.config.CACHE_DIR = before
+        _NUMBA_CONFIG.CACHE_DIR = before
 
 
 def _located_here():

@@ -132,13 +132,13 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     """
     returns = valid_returns(ranges_m, cos, sin, angle_min_rad, angle_increment_rad,
                             range_min_m, range_max_m)
-    count = returns.index.size
+    count = returns.beam_index.size
     if count < settings.min_segment_points:
         return ScanResult(_no_segments(), _no_corners(), False, math.nan)
     # #range-noise-from-the-scan
     range_sigma = settings.range_sigma_m
     if settings.range_sigma_from_scan:
-        range_sigma = max(range_sigma, range_sigma_of_returns(returns.index, returns.range_m))
+        range_sigma = max(range_sigma, range_sigma_of_returns(returns.beam_index, returns.range_m))
     # #decision-noise: every decision tolerates the model error on top of the sensor noise;
     # the fits weigh the returns by the sensor noise alone.
     noise = Noise(range_sigma, settings.bearing_sigma_rad,
@@ -150,8 +150,8 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
                                          settings.merge_max_missing_beams,
                                          density.breakpoint_sigmas)
     order, runs = chains_of(returns, separated)
-    contour = Returns(returns.index[order], returns.range_m[order], returns.bearing_rad[order],
-                      returns.x_m[order], returns.y_m[order])
+    contour = Returns(returns.beam_index[order], returns.range_m[order],
+                      returns.bearing_rad[order], returns.x_m[order], returns.y_m[order])
     x, y = contour.x_m, contour.y_m
     budget = pass_budget(count)
     segments, unsplit = split_iepf(
@@ -174,7 +174,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
                                settings.end_offset_sigmas, density.end_window)
     # #utls, #wtls, #wctls or #maximum-likelihood: the configured fit with its covariance, in
     # scan order of the walls' first returns.
-    start, stop = _in_scan_order(contour.index, ranges_m.size, segments.start, segments.stop)
+    start, stop = _in_scan_order(contour.beam_index, ranges_m.size, segments.start, segments.stop)
     walls = _fit_walls(contour, start, stop, noise, settings)
     if walls.angle_rad.size == 0:
         return ScanResult(_no_segments(), _no_corners(), work_limited, range_sigma)
@@ -192,7 +192,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     segments_found = SegmentArrays(
         walls.angle_rad, walls.radius_m, normal_covariance, walls.line, line_covariance,
         walls.line_offset_jacobian, walls.start_xy_m, walls.end_xy_m,
-        contour.index[walls.first_position], contour.index[walls.last_position],
+        contour.beam_index[walls.first_position], contour.beam_index[walls.last_position],
         walls.num_points, walls.residual_chi2_dof)
     corners_found = CornerArrays(corners.xy_m, corners.yaw_rad, corner_covariance,
                                  corners.opening_angle_rad, corners.first_segment,

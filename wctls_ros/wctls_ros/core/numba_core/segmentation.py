@@ -95,7 +95,7 @@ def breakpoints_of(returns, grid, noise, lambda_rad, max_missing_beams, noise_si
     :return: (separated (n,), joinable (n,)): return i against return i - 1 (entry 0 against
         the last return, across the seam)
     """
-    index, x_m, y_m, range_m = returns.index, returns.x_m, returns.y_m, returns.range_m
+    index, x_m, y_m, range_m = returns.beam_index, returns.x_m, returns.y_m, returns.range_m
     beam_count, step_rad = grid.beam_count, grid.step_rad
     range_sigma_m, bearing_sigma_rad = noise.deciding_sigma_m, noise.bearing_sigma_rad
     n = index.size

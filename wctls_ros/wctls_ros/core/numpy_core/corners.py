@@ -469,7 +469,7 @@ def walls_end_at(candidates: CornerSet, walls: SegmentSet, positions: np.ndarray
         # The first wall's stretch is crossed by the sight lines after its last return up to the
         # second wall's last; the second's by those from the first wall's first return up to
         # its own first.
-        for c in np.flatnonzero(keep):
+        for c in np.flatnonzero(keep).tolist():
             first_c, second_c = _corner(first, c), _corner(second, c)
             keep[c] = not (
                 seen_through(corner_x[c], corner_y[c], first_c, second_c, x_m, y_m,

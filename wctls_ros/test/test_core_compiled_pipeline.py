@@ -18,9 +18,9 @@ import math
 from conftest import REAL_DATA
 import numpy as np
 import pytest
-from wctls_ros.core import FeatureConfig, METHODS, numpy_core
+from wctls_ros.core import CornerSet, FeatureConfig, METHODS, numpy_core, SegmentSet
 # The compiled pipeline itself, whatever wctls_ros.core.runtime would choose.
-from wctls_ros.core.numba_core.pipeline import extract_features
+from wctls_ros.core.numba_core.pipeline import _no_corners, _no_segments, extract_features
 from wctls_ros.evaluation.scans import load_json_scans, load_scans
 from wctls_ros.simulation import load_floor_plan, NoiseModel, simulate_recording
 from wctls_ros.simulation.adversarial import peeling_wall
@@ -143,3 +143,12 @@ def test_the_comparison_sees_a_difference_of_a_billionth():
     nudged = replace(reference.corners, xy_m=reference.corners.xy_m * (1.0 + 3.0 * RELATIVE))
     with pytest.raises(AssertionError):
         assert_same(replace(reference, corners=nudged), reference, 'nudged')
+
+
+def test_a_scan_without_segments_has_the_shapes_of_the_empty_sets():
+    # The compiled pipeline writes its empty arrays itself: they are the public sets' own.
+    for found, empty in ((_no_segments(), SegmentSet.empty()), (_no_corners(), CornerSet.empty())):
+        assert found._fields == tuple(empty.__dataclass_fields__)
+        for name in found._fields:
+            assert getattr(found, name).shape == getattr(empty, name).shape, name
+            assert getattr(found, name).dtype == getattr(empty, name).dtype, name

@@ -14,13 +14,20 @@ import math
 import numpy as np
 import pytest
 from wctls_ros.core import extract_features, FeatureConfig
-from wctls_ros.core.numba_core.corners import seen_through
+from wctls_ros.core.numba_core import corners as compiled
+from wctls_ros.core.numpy_core import corners as numpy_corners
+from wctls_ros.core.records import CornerEndRule, Noise, Returns, WallAtCorner
 from wctls_ros.params import feature_settings, load_parameters
 from wctls_ros.simulation import floor_plan_from_dict, NoiseModel, simulate_recording
 from wctls_ros.simulation.scanner import SENSOR_MODELS
 
 ONE_CM = NoiseModel(range_sigma_m=0.01, bearing_sigma_rad=math.radians(0.05))
 ONE_CM_CONFIG = FeatureConfig(range_sigma_m=0.01, bearing_sigma_rad=math.radians(0.05))
+# The stages of the corner end rule, unit by unit: 1 cm of range noise and no bearing noise, so
+# that every return's tolerance of "on a line" is 3 cm + 1 cm; a window of 4 returns between
+# the walls; runs tested against 4 sigma.
+ONE_CM_NOISE = Noise(0.01, 0.0, 0.01)
+RULE = CornerEndRule(3.0, 0.01, 4, 4.0)
 
 
 def scans_of(plan: dict, noise=ONE_CM, count=20, beams=1080, seed=0):
@@ -106,16 +113,23 @@ def test_a_wall_seen_behind_an_edge_where_the_face_would_go_on_makes_no_corner()
     assert scans_with_a_corner_at((1.35, -1.0), config, within=0.1) >= 95
 
 
-def test_seen_through_needs_the_other_walls_returns_behind_the_wall_together():
-    # Wall y = 1 (normal +y, radius 1) to the left of a corner at the origin's (0, 1); the
-    # other wall x + y = 1 goes on behind it, to the upper left.
-    normal, inward, other = (0.0, 1.0), (-1.0, 0.0), (math.sqrt(0.5), math.sqrt(0.5))
+@pytest.mark.parametrize('seen_through', [compiled.seen_through, numpy_corners.seen_through],
+                         ids=['numba', 'numpy'])
+def test_seen_through_needs_the_other_walls_returns_behind_the_wall_together(seen_through):
+    # Wall y = 1 (normal +y, radius 1) to the left of a corner at (0, 1), its tolerance along
+    # the wall 3 * 1/300 + 0.01 = 0.02 m; the other wall x + y = 1 goes on behind it, to the
+    # upper left.
+    wall = WallAtCorner(0.0, 1.0, 1.0, -1.0, 0.0, 1.0 / 300.0, 0.01, 0.02)
+    half = math.sqrt(0.5)
+    other = WallAtCorner(half, half, half, -half, half, 1.0 / 300.0, 0.01, 0.02)
     t = np.linspace(0.05, 0.15, 6)
 
     def test(x, y):
-        return seen_through(0.0, 1.0, *normal, 1.0, *inward, 0.02, *other, math.sqrt(0.5),
-                            np.asarray(x), np.asarray(y), 0, len(x) - 1, 0.01, 0.0, 3.0, 0.01,
-                            4.0)
+        x, y = np.asarray(x), np.asarray(y)
+        contour = Returns(np.arange(len(x)), np.hypot(x, y), np.arctan2(y, x), x, y)
+        return seen_through(0.0, 1.0, wall, other,
+                            *((contour,) if seen_through is compiled.seen_through else (x, y)),
+                            0, len(x) - 1, ONE_CM_NOISE, RULE)
 
     # Returns on the other wall, 5-15 cm behind the wall's line: seen through.
     assert test(-t, 1.0 + t)

@@ -8,9 +8,12 @@ Next to a writable install, else in $XDG_CACHE_HOME/wctls_ros, and wherever NUMB
 says when the user sets it.
 
 Each case runs a fresh interpreter on a copy of the package with a one-line compiled probe in
-its core/, so that numba's real cache locator decides, as it will for the pipeline.
+its core/, so that numba's real cache locator decides, as it will for the pipeline. The cache is
+set up by an explicit call before the first compile, as the pipeline's entry points make it:
+importing the core changes nothing outside it.
 """
 
+import json
 import os
 import pathlib
 import shutil
@@ -66,8 +69,9 @@ def run_probe(site: pathlib.Path, expected=4.0, **environment) -> None:
     env = {key: value for key, value in os.environ.items() if key != 'NUMBA_CACHE_DIR'}
     env.update(environment, PYTHONPATH=str(site))
     subprocess.run([sys.executable, '-c', 'from wctls_ros.core.numba_core.probe import twice; '
-                    f'assert twice(2.0) == {expected}, twice(2.0)'], env=env, check=True,
-                   timeout=120)
+                    'from wctls_ros.core.numba_core._jit import use_disk_cache; '
+                    f'use_disk_cache(); assert twice(2.0) == {expected}, twice(2.0)'], env=env,
+                   check=True, timeout=120)
 
 
 def cache_files(folder: pathlib.Path):
@@ -107,3 +111,44 @@ def test_a_changed_callee_in_another_file_is_not_served_from_the_cache(package, 
     (core / 'probe_factor.py').write_text(FACTOR.format(3.0))
     os.utime(caller, ns=(stamp.st_atime_ns, stamp.st_mtime_ns))
     run_probe(site, expected=6.0, XDG_CACHE_HOME=str(tmp_path / 'xdg'))
+
+
+IMPORT_EVERYTHING = """
+import json, os, sys
+import numba
+environment, cache_dir = dict(os.environ), numba.config.CACHE_DIR
+from wctls_ros.core.numba_core import (_jit, corners, lines, model_error, noise, pipeline,
+                                       precompile, scan, segmentation)
+print(json.dumps({'environment_kept': dict(os.environ) == environment,
+                  'numba_config_kept': numba.config.CACHE_DIR == cache_dir,
+                  'folder': _jit.cache_folder()}))
+if sys.argv[1:] == ['set up']:
+    _jit.use_disk_cache()
+"""
+
+
+def test_importing_the_core_changes_neither_the_environment_nor_the_cache(package, tmp_path):
+    # A read-only install, whose cache goes to the user's folder: the choice that used to be
+    # written into os.environ at import. A cached kernel there from before a core change (its
+    # fingerprint differs) is deleted only when the cache is set up, before the first compile.
+    site, core = package
+    make_read_only(core)
+    env = {key: value for key, value in os.environ.items() if key != 'NUMBA_CACHE_DIR'}
+    env.update(PYTHONPATH=str(site), XDG_CACHE_HOME=str(tmp_path / 'xdg'))
+
+    def run(*arguments):
+        return json.loads(subprocess.run(
+            [sys.executable, '-c', IMPORT_EVERYTHING, *arguments], env=env, check=True,
+            capture_output=True, text=True, timeout=120).stdout)
+
+    folder = pathlib.Path(run()['folder'])
+    assert folder.is_relative_to(tmp_path / 'xdg' / 'wctls_ros')
+    folder.mkdir(parents=True, exist_ok=True)
+    stale = folder / 'pipeline._features_of_scan-1.py311.nbi'
+    stale.write_text('compiled from an older core')
+    (folder / 'wctls_ros_core.fingerprint').write_text('an older core')
+    imported = run()
+    assert imported['environment_kept'] and imported['numba_config_kept']
+    assert stale.exists()
+    assert run('set up')['environment_kept']
+    assert not stale.exists()

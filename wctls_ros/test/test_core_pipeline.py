@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from wctls_ros.core import (extract_features, FeatureConfig, fit_lines, nees, scan_to_points,
                             ScanError, segment_returns)
+from wctls_ros.core.records import BeamGrid, Lines, Noise, Returns, Segments
 from wctls_ros.simulation import (floor_plan_from_dict, full_turn_bearings, NOISELESS,
                                   NoiseModel, simulate_ranges)
 from wctls_ros.simulation.adversarial import peeling_wall
@@ -244,8 +245,9 @@ def test_a_peeling_wall_would_need_a_level_per_two_returns_and_gets_the_budget()
     segmentation = compiled_segmentation()
     budget = segmentation.pass_budget(2000)
     assert levels_of_textbook_iepf(x, y, 0.04) > 900 > budget == 30
-    starts, stops, _, cut_short = segmentation.split_iepf(
-        x, y, np.array([0]), np.array([2000]), np.array([0]), np.full(2000, 0.04), budget)
+    (starts, stops, _), cut_short = segmentation.split_iepf(
+        x, y, Segments(np.array([0]), np.array([2000]), np.array([0])), np.full(2000, 0.04),
+        budget)
     assert cut_short
     # What is left is straight: every kept piece lies within the threshold of its chord.
     for start, stop in zip(starts, stops):
@@ -392,9 +394,10 @@ def breaks_of(ranges, increment=math.radians(0.5), max_missing_beams=3):
     """Return the breakpoints of a scan centred on the x axis, 1 cm noise model."""
     bearing_min = -(len(ranges) // 2) * increment
     points = scan_to_points(ranges, bearing_min, increment)
+    returns = Returns(points.index, points.range_m, points.bearing_rad, points.x_m, points.y_m)
     return Breaks(*compiled_segmentation().breakpoints_of(
-        points.index, points.x_m, points.y_m, points.range_m, points.beam_count, abs(increment),
-        points.full_turn, 0.01, 0.0, math.radians(10), max_missing_beams, 3.0))
+        returns, BeamGrid(points.beam_count, abs(increment), points.full_turn),
+        Noise(0.01, 0.0, 0.01), math.radians(10), max_missing_beams, 3.0))
 
 
 def test_breakpoints_follow_the_adaptive_rule():
@@ -518,7 +521,7 @@ def test_trimming_a_segment_that_crosses_the_end_of_the_contour_keeps_it_in_rang
     x = np.where(along < 148, 1.0 - (148 - along) * 0.011, 1.0)
     y = np.where(along < 148, 2.0, 2.0 + (along - 148) * 0.011)
     start, stop, _ = compiled_segmentation().trim_ambiguous(
-        np.array([30, 149]), np.array([148, 180]), np.array([0, 0]), True, x, y,
-        np.array([math.pi / 2, 0.0]), np.array([2.0, 1.0]), 0.01, 0.0, 8, 8)
+        Segments(np.array([30, 149]), np.array([148, 180]), np.array([0, 0])), True, x, y,
+        Lines(np.array([math.pi / 2, 0.0]), np.array([2.0, 1.0])), Noise(0.01, 0.0, 0.01), 8, 8)
     assert start.tolist() == [30, 1]
     assert stop.tolist() == [146, 30]

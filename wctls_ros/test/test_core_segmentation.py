@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from wctls_ros.core.numba_core.segmentation import (merge_segments, moment_line, pass_budget,
                                                     split_iepf, trim_offset)
+from wctls_ros.core.records import Lines, Noise, Segments
 
 
 def recursive_end_point_fit(x, y, start, stop, threshold):
@@ -44,8 +45,9 @@ def test_iepf_equals_the_recursive_textbook_version(seed, corners, noise, runs):
     x, y = xy[:, 0].copy(), xy[:, 1].copy()
     cuts = np.unique(rng.integers(0, len(x), runs - 1))
     start, stop = np.concatenate([[0], cuts]), np.concatenate([cuts, [len(x)]])
-    found_start, found_stop, found_chain, cut_short = split_iepf(
-        x, y, start, stop, np.arange(len(start)), np.full(len(x), 0.04), pass_budget(len(x)))
+    (found_start, found_stop, found_chain), cut_short = split_iepf(
+        x, y, Segments(start, stop, np.arange(len(start))), np.full(len(x), 0.04),
+        pass_budget(len(x)))
     assert not cut_short
     expected = [piece for s, e in zip(start, stop)
                 for piece in recursive_end_point_fit(x, y, s, e, 0.04) if piece[1] - piece[0] >= 3]
@@ -59,8 +61,9 @@ def test_iepf_splits_at_the_first_of_equally_far_returns():
     ridge_x = np.array([0.0, 1.0, 2.0, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0, 7.0])
     ridge_y = np.array([0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
     x, y = np.concatenate([ridge_x, ridge_x + 10]), np.concatenate([ridge_y, ridge_y])
-    start, stop, _, _ = split_iepf(x, y, np.array([0, 10]), np.array([10, 20]), np.array([0, 1]),
-                                   np.full(len(x), 0.04), pass_budget(len(x)))
+    (start, stop, _), _ = split_iepf(
+        x, y, Segments(np.array([0, 10]), np.array([10, 20]), np.array([0, 1])),
+        np.full(len(x), 0.04), pass_budget(len(x)))
     expected = [piece for s, e in ((0, 10), (10, 20))
                 for piece in recursive_end_point_fit(x, y, s, e, 0.04) if piece[1] - piece[0] >= 3]
     assert list(zip(start.tolist(), stop.tolist())) == expected == [
@@ -99,9 +102,10 @@ def test_merging_across_touching_chains_makes_them_one_chain():
     corner = np.linspace(0.05, 1.0, 20)
     x = np.concatenate([wall, np.full(20, 2.0)])
     y = np.concatenate([np.full(80, 1.0), 1.0 + corner])
-    start, stop, chain, angle, radius, cut_short = merge_segments(
-        x, y, np.array([0, 20, 40, 60, 80]), np.array([20, 40, 60, 80, 100]),
-        np.array([0, 1, 1, 2, 3]), False, np.ones(len(x), dtype=bool), 0.01, 0.0, 13.8, 10)
+    (start, stop, chain), (angle, radius), cut_short = merge_segments(
+        x, y, Segments(np.array([0, 20, 40, 60, 80]), np.array([20, 40, 60, 80, 100]),
+                       np.array([0, 1, 1, 2, 3])),
+        False, np.ones(len(x), dtype=bool), noise_of(0.01), 13.8, 10)
     assert not cut_short
     assert start.tolist() == [0, 80] and stop.tolist() == [80, 100]
     assert chain[0] != chain[1]
@@ -109,7 +113,12 @@ def test_merging_across_touching_chains_makes_them_one_chain():
 
 
 # The frame trim_offset measures returns in: the line y = 1.5 (normal angle pi / 2, radius 1.5).
-ON_THE_LINE = (np.array([math.pi / 2]), np.array([1.5]))
+ON_THE_LINE = Lines(np.array([math.pi / 2]), np.array([1.5]))
+
+
+def noise_of(range_sigma_m: float, bearing_sigma_rad: float = 0.0) -> Noise:
+    """Return the noise of a kernel's decisions: the range noise without model error."""
+    return Noise(range_sigma_m, bearing_sigma_rad, range_sigma_m)
 
 
 @pytest.mark.parametrize('at_start', [False, True])
@@ -121,8 +130,8 @@ def test_a_run_off_the_line_at_an_end_is_cut_exactly(at_start):
     x, y = np.linspace(-0.8, 0.8, count), np.full(count, 1.5)
     off = slice(0, 5) if at_start else slice(count - 5, count)
     y[off] -= 2.5 * sigma
-    one = (np.array([0]), np.array([count]), np.array([0]))
-    start, stop, _ = trim_offset(*one, x, y, *ON_THE_LINE, sigma, 0.0, 8, 4.0, 8)
+    one = Segments(np.array([0]), np.array([count]), np.array([0]))
+    start, stop, _ = trim_offset(one, x, y, ON_THE_LINE, noise_of(sigma), 8, 4.0, 8)
     assert (start[0], stop[0]) == ((5, count) if at_start else (0, count - 5))
     # The run pulls the line of all 40 towards itself: tested against that line, as the rule
     # did before, it peaks at 3.3 and stays. As the frame, that line cuts the same 5.
@@ -130,12 +139,12 @@ def test_a_run_off_the_line_at_an_end_is_cut_exactly(at_start):
     residual = (x * math.cos(angle) + y * math.sin(angle) - radius) / sigma
     ends = residual[:8] if at_start else residual[::-1][:8]
     assert np.max(np.abs(np.cumsum(ends)) / np.sqrt(np.arange(1, 9))) < 3.5
-    start, stop, _ = trim_offset(*one, x, y, np.array([angle]), np.array([radius]), sigma,
-                                 0.0, 8, 4.0, 8)
+    start, stop, _ = trim_offset(one, x, y, Lines(np.array([angle]), np.array([radius])),
+                                 noise_of(sigma), 8, 4.0, 8)
     assert (start[0], stop[0]) == ((5, count) if at_start else (0, count - 5))
     # A step of 2 sigma peaks at 10 / sqrt(8.6) = 3.4 < 4: kept.
     y[off] += 0.5 * sigma
-    start, stop, _ = trim_offset(*one, x, y, *ON_THE_LINE, sigma, 0.0, 8, 4.0, 8)
+    start, stop, _ = trim_offset(one, x, y, ON_THE_LINE, noise_of(sigma), 8, 4.0, 8)
     assert (start[0], stop[0]) == (0, count)
 
 
@@ -143,8 +152,8 @@ def test_an_end_cuts_at_most_half_the_returns_beyond_the_minimum():
     sigma = 0.01
     x, y = np.linspace(-0.8, 0.8, 14), np.full(14, 1.5)
     y[-8:] += 10.0 * sigma                      # far off: the score peaks at the window's end
-    start, stop, _ = trim_offset(np.array([0]), np.array([14]), np.array([0]), x, y,
-                                 *ON_THE_LINE, sigma, 0.0, 8, 4.0, 8)
+    start, stop, _ = trim_offset(Segments(np.array([0]), np.array([14]), np.array([0])), x, y,
+                                 ON_THE_LINE, noise_of(sigma), 8, 4.0, 8)
     assert (start[0], stop[0]) == (0, 11)                        # (14 - 8) // 2 = 3 cut
 
 
@@ -158,9 +167,10 @@ def test_straight_walls_are_rarely_cut():
     x = np.tile(np.linspace(-0.8, 0.8, count), walls)
     y = 1.5 + rng.normal(0.0, sigma, walls * count)
     start = np.arange(walls) * count
-    frame = np.full(walls, math.pi / 2), np.full(walls, 1.5)
-    trimmed_start, trimmed_stop, _ = trim_offset(start, start + count, np.arange(walls), x, y,
-                                                 *frame, sigma, 0.0, 8, 4.0, 8)
+    frame = Lines(np.full(walls, math.pi / 2), np.full(walls, 1.5))
+    trimmed_start, trimmed_stop, _ = trim_offset(
+        Segments(start, start + count, np.arange(walls)), x, y, frame, noise_of(sigma), 8, 4.0,
+        8)
     cut_ends = np.count_nonzero(trimmed_start != start) + np.count_nonzero(
         trimmed_stop != start + count)
     assert cut_ends <= 8                        # 2 * 4000 * 5e-4 = 4 expected at most

@@ -4,17 +4,28 @@
 """
 The compiler of the core's loops: numba's ``njit``, with its on-disk cache in a writable place.
 
-Every loop of the core is compiled once per machine and kept on disk (``cache=True``), next to the
-source when that is writable (a colcon install space), else in ``$XDG_CACHE_HOME/wctls_ros``
+Every loop of the core is compiled once per machine and kept on disk, next to the source when
+that is writable (a colcon install space), else in ``$XDG_CACHE_HOME/wctls_ros``
 (``~/.cache/wctls_ros``; an apt install under /opt is read-only). ``NUMBA_CACHE_DIR`` set by the
 user wins over both. numba checks a cached function against the time stamp of its own file only,
 not of the functions it calls from other files: after an upgrade that changed ``_order.py`` alone,
 ``pipeline.py``'s cached code would still hold the old sort. So the cache is tied to a fingerprint
 of every source file of the core: when that changes, the core's cached functions are deleted before
-any is loaded. The options are the same for every kernel: ``error_model='numpy'`` so that a
-division by zero gives inf or NaN as in numpy (degenerate segments and corners are dropped later,
-not raised on), and no fastmath, so that NaN compares and rounding are IEEE as in the numpy
-reference the tests hold the kernels to.
+any is loaded. None of this happens at import: importing the core changes neither the process's
+environment nor numba's configuration nor any file. numba fixes a function's cache folder when
+its caching is switched on, so the kernels are made without a cache, and :func:`use_disk_cache`
+(called by the pipeline's entry points, :mod:`.precompile` and so :mod:`..runtime`, before they
+compile anything) chooses the folder, sweeps stale kernels and switches the cache on for every
+kernel, with numba's cache folder set for just that moment. A kernel called on its own before
+that (a test of one step) compiles in memory.
+
+The options are the same for every kernel: ``error_model='numpy'`` so that a division by zero
+gives inf or NaN as in numpy (degenerate segments and corners are dropped later, not raised on),
+and no fastmath, so that NaN compares and rounding are IEEE as in the numpy reference the tests
+hold the kernels to. A kernel that :mod:`.precompile` compiles in a helper process names, where
+it is defined, the numba argument types the pipeline calls it with (``@jit(ahead=...)``, the
+types of :mod:`._types`); ``pipeline.PIPELINE_KERNELS`` is the one list of those kernels, in the
+order the pipeline calls them.
 
 The first run on a machine compiles every kernel (15-20 s of CPU on a 2-core EPYC VM; helper
 processes share it, :mod:`.precompile`), so the kernels avoid what costs compile time without need:
@@ -27,10 +38,15 @@ subtree built once more: such thin steps are inlined into their caller (:func:`j
 against 20.5 s: every kernel called at one place inlined 21.5 s, all of them 38 s).
 """
 
+import contextlib
 import glob
 import hashlib
 import os
-from typing import Optional
+import threading
+from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple
+
+import numba
+from numba.core.caching import FunctionCache
 
 _CACHE_VARIABLE = 'NUMBA_CACHE_DIR'
 _HERE = os.path.dirname(os.path.abspath(__file__))
@@ -39,6 +55,17 @@ _CORE_SOURCES = os.path.join(os.path.dirname(_HERE), '**', '*.py')
 # ... but the one that chooses which implementation runs: no kernel reads it.
 _NOT_READ_BY_KERNELS = os.path.join(os.path.dirname(_HERE), 'runtime.py')
 _FINGERPRINT_FILE = 'wctls_ros_core.fingerprint'
+# numba makes its configuration's attributes when it reads its environment, so no type checker
+# knows them.
+_NUMBA_CONFIG: Any = numba.config
+
+# Every kernel of the core, in the order of definition, and the numba argument types the
+# pipeline passes those it compiles ahead in helper processes (:mod:`.precompile`).
+_kernels: List[Callable] = []
+_ahead: Dict[int, Tuple[numba.types.Type, ...]] = {}
+_cache_on = False
+# The runtime's thread may set the cache up while the node's thread asks whether it is there.
+_setting_up = threading.Lock()
 
 
 def _user_cache_dir() -> str:
@@ -47,14 +74,23 @@ def _user_cache_dir() -> str:
     return os.path.join(base, 'wctls_ros')
 
 
-if _CACHE_VARIABLE not in os.environ and not os.access(os.path.dirname(__file__), os.W_OK):
-    os.environ[_CACHE_VARIABLE] = _user_cache_dir()
+def _chosen_cache_dir() -> Optional[str]:
+    """Return the folder numba is to cache in: the user's, ours, or None for next to the source."""
+    if _CACHE_VARIABLE in os.environ:
+        return os.environ[_CACHE_VARIABLE]
+    return None if os.access(_HERE, os.W_OK) else _user_cache_dir()
 
-import numba  # noqa: E402  (numba reads NUMBA_CACHE_DIR when imported)
-from numba.core.caching import FunctionCache  # noqa: E402
 
-# A user's script may have imported numba before us: it then re-reads its environment.
-numba.config.reload_config()
+@contextlib.contextmanager
+def _numba_caching_in_our_folder() -> Iterator[None]:
+    """Set numba's cache folder to the core's choice while the block runs, then restore it."""
+    chosen, before = _chosen_cache_dir(), _NUMBA_CONFIG.CACHE_DIR
+    if chosen is not None:
+        _NUMBA_CONFIG.CACHE_DIR = chosen
+    try:
+        yield
+    finally:
+        _NUMBA_CONFIG.CACHE_DIR = before
 
 
 def _located_here():
@@ -76,7 +112,8 @@ def _fingerprint() -> str:
 def cache_folder() -> Optional[str]:
     """Return the folder of the core's cached functions, or None when nothing can be cached."""
     try:
-        return FunctionCache(_located_here).cache_path
+        with _numba_caching_in_our_folder():
+            return FunctionCache(_located_here).cache_path
     except RuntimeError:          # no writable cache location: numba compiles in memory
         return None
 
@@ -109,17 +146,74 @@ def _forget_stale_kernels() -> None:
         pass
 
 
-_forget_stale_kernels()
+def _cache(kernel) -> None:
+    """Switch numba's on-disk cache on for a kernel, in the core's cache folder."""
+    try:
+        with _numba_caching_in_our_folder():
+            kernel.enable_caching()
+    except RuntimeError:          # no writable cache location: numba compiles in memory
+        pass
 
 
-def jit(function):
+def use_disk_cache() -> None:
     """
-    Compile a function of the core with numba, cached on disk.
+    Set up the kernels' on-disk cache: call it before the first compile (again: nothing).
 
-    :param function: a function written in numba's subset of Python and numpy
-    :return: the compiled dispatcher (callable from Python and from other compiled functions)
+    Chooses the cache folder, deletes the core's cached functions when a core source changed
+    since they were made, and switches the cache on for every kernel (those defined later get
+    it when they are made).
     """
-    return numba.njit(cache=True, error_model='numpy', nogil=True)(function)
+    global _cache_on
+    if _cache_on:
+        return
+    with _setting_up:
+        if _cache_on:
+            return
+        _forget_stale_kernels()
+        for kernel in _kernels:
+            _cache(kernel)
+        _cache_on = True
+
+
+def argument_types(kernel) -> Tuple[numba.types.Type, ...]:
+    """
+    Return the numba argument types the pipeline calls a kernel with (its ``ahead`` types).
+
+    :param kernel: a kernel made by :func:`jit` with ``ahead``
+    :return: the types
+    :raises KeyError: for a kernel made without them
+    """
+    return _ahead[id(kernel)]
+
+
+def _kernel(function, ahead: Optional[Tuple[numba.types.Type, ...]], **options):
+    """Make and register a kernel of the core (see :func:`jit`)."""
+    kernel = numba.njit(error_model='numpy', nogil=True, **options)(function)
+    _kernels.append(kernel)
+    if ahead is not None:
+        _ahead[id(kernel)] = tuple(ahead)
+    if _cache_on:
+        _cache(kernel)
+    return kernel
+
+
+def jit(function: Optional[Callable] = None, *, ahead=None):
+    """
+    Compile a function of the core with numba, cached on disk once :func:`use_disk_cache` ran.
+
+    Lazily, as numba does: nothing compiles at import.
+
+    :param function: a function written in numba's subset of Python and numpy (``@jit``)
+    :param ahead: the numba argument types the pipeline calls it with, for the kernels
+        :mod:`.precompile` compiles in helper processes (``@jit(ahead=(...))``): numba compiles
+        a kernel once for each tuple of argument types, so these must be exactly the
+        pipeline's; a test holds them to a compiled pipeline's signatures
+    :return: the compiled dispatcher (callable from Python and from other compiled functions),
+        or with ``ahead`` alone, the decorator
+    """
+    if function is None:
+        return lambda function: _kernel(function, ahead)
+    return _kernel(function, ahead)
 
 
 def jit_inline(function):
@@ -133,4 +227,4 @@ def jit_inline(function):
     :param function: a function written in numba's subset of Python and numpy
     :return: the dispatcher
     """
-    return numba.njit(cache=True, error_model='numpy', nogil=True, inline='always')(function)
+    return _kernel(function, None, inline='always')

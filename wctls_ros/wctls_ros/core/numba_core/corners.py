@@ -22,9 +22,16 @@ from typing import Optional
 
 import numpy as np
 
-from ._jit import jit
+from ._jit import jit, jit_inline
 from ._order import wrapped
+from ._types import (FLAGS, INDICES, INTEGER, NOISE, PLACED, REAL, RETURNS, ROWS, RULE, STACKS,
+                     WALL, WALLS, WINDOW)
 from ..features import CornerSet
+from ..records import AlongWall, EndWindow, WallAtCorner
+
+# A corner may sit one beam without a return beyond a wall's last return (a dropout there),
+# reported with that wall's end not seen; farther, it is an extrapolation, not a corner.
+CORNER_MISSING_BEAMS = 1
 
 
 def intersect(line_a: np.ndarray, cov_a: np.ndarray, line_b: np.ndarray,
@@ -94,7 +101,7 @@ _UPPER_ROWS = (0, 0, 0, 1, 1, 2)
 _UPPER_COLUMNS = (0, 1, 2, 1, 2, 2)
 
 
-@jit
+@jit(ahead=(ROWS, STACKS, ROWS, ROWS, INDICES, INDICES, REAL, ROWS, REAL))
 def corner_candidates(line, line_covariance, start_xy_m, end_xy_m, first, second, min_angle_rad,
                       line_offset_jacobian, common_range_sigma_m):
     """
@@ -208,242 +215,404 @@ def corner_candidates(line, line_covariance, start_xy_m, end_xy_m, first, second
     return kept[:found], xy[:found], yaw[:found], covariance[:found], opening[:found]
 
 
-@jit
-def seen_through(corner_x_m, corner_y_m, normal_x, normal_y, radius_m, inward_x, inward_y,
-                 along_tolerance_m, other_normal_x, other_normal_y, other_radius_m, x_m, y_m,
-                 start, stop, range_sigma_m, bearing_sigma_rad, sigmas, floor_m, run_sigmas):
+@jit(ahead=(RETURNS, INTEGER, INTEGER, NOISE, RULE))
+def end_window(contour, after_first, before_second, noise, rule):
+    """
+    Gather the returns between two walls that the corner end rule looks at.
+
+    docs/derivation.md#corners, "Corner end rule": the first wall's facing end, the returns
+    left out of both segments (at most ``rule.window``) and the second wall's facing end, each
+    with its position noise and the tolerance of "on a line", ``sigmas`` times that noise plus
+    ``floor_m``.
+
+    :param contour: the returns in circular order
+    :param after_first: position of the first wall's last return
+    :param before_second: position of the second wall's first return
+    :param noise: the noise (the rule decides with its deciding_sigma_m)
+    :param rule: the rule's tolerances
+    :return: the :class:`~.records.EndWindow`
+    """
+    count, width = contour.x_m.size, rule.window + 2
+    between = (before_second - after_first - 1) % count
+    x, y, sigma = np.empty(width), np.empty(width), np.empty(width)
+    line_tolerance = np.empty(width)
+    in_window = np.empty(width, np.bool_)
+    for s in range(width):
+        position = wrapped(before_second if s == width - 1 else after_first + s, count)
+        in_window[s] = s <= between or s == width - 1
+        x[s], y[s] = contour.x_m[position], contour.y_m[position]
+        sigma[s] = math.sqrt(noise.deciding_sigma_m ** 2 + (x[s] * x[s] + y[s] * y[s])
+                             * noise.bearing_sigma_rad ** 2)
+        line_tolerance[s] = rule.sigmas * sigma[s] + rule.floor_m
+    return EndWindow(x, y, sigma, line_tolerance, in_window, between)
+
+
+@jit(ahead=(WALLS, INTEGER, REAL, REAL, ROWS, REAL, RULE))
+def wall_at_corner(walls, wall, corner_x_m, corner_y_m, corner_covariance, step_rad, rule):
+    """
+    Describe one wall of a corner as seen from the corner.
+
+    docs/derivation.md#corners, "Corner end rule": its unit normal, the unit direction from the
+    corner into the wall (towards the middle of its returns), the corner's standard deviation
+    along that direction (from its position covariance), the spacing of the beams on the wall
+    at the corner (the range times the bearing step over the incidence, at most 1000 times the
+    step), and the tolerance along the wall, ``sigmas`` times that deviation plus ``floor_m``.
+
+    :param walls: the walls
+    :param wall: which wall
+    :param corner_x_m: x of the corner, m
+    :param corner_y_m: y of the corner, m
+    :param corner_covariance: the corner's (x, y, yaw) covariance, shape (3, 3)
+    :param step_rad: bearing step between beams, rad
+    :param rule: the rule's tolerances
+    :return: the :class:`~.records.WallAtCorner`
+    """
+    normal_x, normal_y = math.cos(walls.angle_rad[wall]), math.sin(walls.angle_rad[wall])
+    middle_x = 0.5 * (walls.start_xy_m[wall, 0] + walls.end_xy_m[wall, 0])
+    middle_y = 0.5 * (walls.start_xy_m[wall, 1] + walls.end_xy_m[wall, 1])
+    side = math.copysign(1.0, (middle_x - corner_x_m) * -normal_y
+                         + (middle_y - corner_y_m) * normal_x)
+    inward = np.empty(2)
+    inward[0], inward[1] = -normal_y * side, normal_x * side
+    variance = 0.0
+    for i in range(2):
+        for j in range(2):
+            variance += inward[i] * corner_covariance[i, j] * inward[j]
+    along_sigma = math.sqrt(variance)
+    corner_range = math.hypot(corner_x_m, corner_y_m)
+    incidence = abs(normal_x * corner_x_m + normal_y * corner_y_m) / corner_range
+    return WallAtCorner(normal_x, normal_y, walls.radius_m[wall], inward[0], inward[1],
+                        along_sigma, corner_range * step_rad / max(incidence, 1e-3),
+                        rule.sigmas * along_sigma + rule.floor_m)
+
+
+@jit(ahead=(WINDOW, WALL, REAL, REAL))
+def along_wall(window, wall, corner_x_m, corner_y_m):
+    """
+    Place the returns of an end window with respect to one wall of the corner.
+
+    docs/derivation.md#corners, "Corner end rule": each return's offset in front of the wall's
+    line, its distance from the corner into the wall, and whether it lies on the line (within
+    its line tolerance; only the window's own returns).
+
+    :param window: the end window
+    :param wall: the wall at the corner
+    :param corner_x_m: x of the corner, m
+    :param corner_y_m: y of the corner, m
+    :return: the :class:`~.records.AlongWall`
+    """
+    width = window.x_m.size
+    in_front, along = np.empty(width), np.empty(width)
+    on_line = np.empty(width, np.bool_)
+    for s in range(width):
+        x, y = window.x_m[s], window.y_m[s]
+        in_front[s] = wall.radius_m - (x * wall.normal_x + y * wall.normal_y)
+        along[s] = (x - corner_x_m) * wall.inward_x + (y - corner_y_m) * wall.inward_y
+        on_line[s] = window.in_window[s] and abs(in_front[s]) <= window.line_tolerance_m[s]
+    return AlongWall(in_front, along, on_line)
+
+
+@jit(ahead=(WINDOW, REAL, REAL, WALL, WALL, NOISE, RULE))
+def corner_zone(window, corner_x_m, corner_y_m, first, second, noise, rule):
+    """
+    Tell which returns of an end window lie so close to the corner that they belong to either wall.
+
+    docs/derivation.md#corners, "Corner end rule": there both lines are within the noise of each
+    other, and a beam's footprint on both walls returns a range in between (an inside corner
+    looks rounded): within ``sigmas`` times the corner's noise (its position noise and the
+    larger of its deviations along the walls) over the sine of the walls' angle, plus
+    ``floor_m``, plus the smaller beam spacing.
+
+    :param window: the end window
+    :param corner_x_m: x of the corner, m
+    :param corner_y_m: y of the corner, m
+    :param first: the first wall at the corner
+    :param second: the second wall
+    :param noise: the noise (the rule decides with its deciding_sigma_m)
+    :param rule: the rule's tolerances
+    :return: whether each return lies in the zone, shape (W,)
+    """
+    sine = abs(first.normal_x * second.normal_y - first.normal_y * second.normal_x)
+    corner_noise = math.sqrt(noise.deciding_sigma_m ** 2
+                             + (math.hypot(corner_x_m, corner_y_m) * noise.bearing_sigma_rad) ** 2)
+    zone = (rule.sigmas * math.hypot(corner_noise, max(first.along_sigma_m, second.along_sigma_m))
+            / sine + rule.floor_m + min(first.spacing_m, second.spacing_m))
+    at_corner = np.empty(window.x_m.size, np.bool_)
+    for s in range(at_corner.size):
+        at_corner[s] = window.in_window[s] and math.hypot(window.x_m[s] - corner_x_m,
+                                                          window.y_m[s] - corner_y_m) <= zone
+    return at_corner
+
+
+@jit(ahead=(WINDOW, WALL, PLACED, FLAGS, RULE))
+def without_object_in_front(window, wall, placed, at_corner, rule):
+    """
+    Return which returns lie on a wall's line, less a run that lies in front of it together.
+
+    docs/derivation.md#corners, "Corner end rule": a wall reaches as far towards the corner as
+    its returns do, also beyond something in front of it (e.g. a leg), unless the returns it
+    claims beyond its segment (on its line, not past the corner's tolerance, outside the corner
+    zone) lie in front of its line together: their residuals over the noise sum to more than
+    ``run_sigmas`` times the square root of their number, an object before the wall's end
+    (their line was fitted without them, so the plain sum is already a deleted-residual test,
+    as :func:`~.segmentation.trim_offset`'s). The facing ends are the wall's own.
+
+    :param window: the end window
+    :param wall: the wall at the corner
+    :param placed: the window's returns with respect to the wall
+    :param at_corner: which returns lie in the corner zone, shape (W,)
+    :param rule: the rule's tolerances (``run_sigmas`` 0: no such test)
+    :return: on the wall's line, shape (W,)
+    """
+    width = at_corner.size
+    on_line = placed.on_line.copy()
+    run, together = 0, 0.0
+    for s in range(1, width - 1):
+        if on_line[s] and placed.along_m[s] >= -wall.tolerance_m and not at_corner[s]:
+            run += 1
+            together += placed.in_front_m[s] / window.sigma_m[s]
+    together /= math.sqrt(max(run, 1))
+    if rule.run_sigmas > 0.0 and together > rule.run_sigmas:
+        for s in range(1, width - 1):
+            if on_line[s] and placed.along_m[s] >= -wall.tolerance_m and not at_corner[s]:
+                on_line[s] = False
+    return on_line
+
+
+@jit(ahead=(WALL, PLACED, FLAGS, FLAGS))
+def reaches(wall, placed, on_line, at_corner):
+    """
+    Tell which returns of an end window the wall reaches: in the corner zone, or on its line.
+
+    docs/derivation.md#corners, "Corner end rule": a return on the wall's line reaches the
+    corner when it lies no farther past it than the wall's tolerance along it.
+
+    :param wall: the wall at the corner
+    :param placed: the window's returns with respect to the wall
+    :param on_line: which lie on its line (:func:`without_object_in_front`), shape (W,)
+    :param at_corner: which lie in the corner zone, shape (W,)
+    :return: shape (W,)
+    """
+    here = np.empty(at_corner.size, np.bool_)
+    for s in range(here.size):
+        here[s] = at_corner[s] or (on_line[s] and placed.along_m[s] >= -wall.tolerance_m)
+    return here
+
+
+@jit(ahead=(WALL, WALL, PLACED, PLACED, FLAGS, FLAGS, FLAGS))
+def goes_on(first, second, first_placed, second_placed, first_on_line, second_on_line,
+            at_corner):
+    """
+    Tell whether a wall's line carries returns past the corner: the wall does not end there.
+
+    docs/derivation.md#corners, "Corner end rule": a return on one wall's line alone, outside
+    the corner zone, past the corner by more than that wall's tolerance along it.
+
+    :param first: the first wall at the corner
+    :param second: the second wall
+    :param first_placed: the window's returns with respect to the first wall
+    :param second_placed: ... to the second
+    :param first_on_line: which lie on the first wall's line, shape (W,)
+    :param second_on_line: ... on the second's
+    :param at_corner: which lie in the corner zone, shape (W,)
+    :return: whether one does
+    """
+    for s in range(at_corner.size):
+        if at_corner[s]:
+            continue
+        if (first_on_line[s] and not second_on_line[s]
+                and first_placed.along_m[s] < -first.tolerance_m):
+            return True
+        if (second_on_line[s] and not first_on_line[s]
+                and second_placed.along_m[s] < -second.tolerance_m):
+            return True
+    return False
+
+
+@jit(ahead=(WINDOW, WALL, WALL, PLACED, PLACED, FLAGS, FLAGS, FLAGS))
+def blocked(window, first, second, first_placed, second_placed, first_here, second_here,
+            at_corner):
+    """
+    Tell whether anything lies between the two walls' reaches: an occluder, or a view through.
+
+    docs/derivation.md#corners, "Corner end rule". Each wall's anchor is its last own return
+    short of the corner zone (its facing end if none). Between the anchors every return must be
+    reached by a wall; outside them (beyond something in front of a wall, where its own returns
+    go on) a return reached by neither is allowed only when it lies in front of both lines (an
+    occluder); a return behind them is a view through a gap where the walls do not meet.
+
+    :param window: the end window
+    :param first: the first wall at the corner
+    :param second: the second wall
+    :param first_placed: the window's returns with respect to the first wall
+    :param second_placed: ... to the second
+    :param first_here: which the first wall reaches (:func:`reaches`), shape (W,)
+    :param second_here: ... the second
+    :param at_corner: which lie in the corner zone, shape (W,)
+    :return: whether the view between the reaches is blocked
+    """
+    width = at_corner.size
+    first_anchor, second_anchor = 0, width - 1
+    for s in range(width):
+        if first_here[s] and not at_corner[s]:
+            first_anchor = max(first_anchor, s)
+        if second_here[s] and not at_corner[s]:
+            second_anchor = min(second_anchor, s)
+    for s in range(width):
+        occluder = (window.in_window[s] and first_placed.in_front_m[s] > window.line_tolerance_m[s]
+                    and second_placed.in_front_m[s] > window.line_tolerance_m[s])
+        interrupts = window.in_window[s] and not first_here[s] and not second_here[s]
+        outside = s < first_anchor or s > second_anchor
+        if interrupts and (not occluder or not outside):
+            return True
+    return False
+
+
+@jit(ahead=(WALL, PLACED, FLAGS, FLAGS))
+def short_of_corner(wall, placed, on_line, here):
+    """
+    Return how far a wall's own returns stop short of the corner, in beams beyond its tolerance.
+
+    docs/derivation.md#corners, "Corner end rule": the nearest return on its line that reaches
+    the corner, its distance from the corner into the wall less the wall's tolerance along it,
+    over the beam spacing there. More than ``1 + CORNER_MISSING_BEAMS``: the corner is an
+    extrapolation across an unseen stretch; at most 1: the wall's end was seen.
+
+    :param wall: the wall at the corner
+    :param placed: the window's returns with respect to the wall
+    :param on_line: which lie on its line, shape (W,)
+    :param here: which it reaches, shape (W,)
+    :return: beams (inf: none of its returns reaches the corner)
+    """
+    gap = np.inf
+    for s in range(here.size):
+        if on_line[s] and here[s]:
+            gap = min(gap, max(placed.along_m[s], 0.0))
+    return max(gap - wall.tolerance_m, 0.0) / wall.spacing_m
+
+
+@jit(ahead=(REAL, REAL, WALL, WALL, RETURNS, INTEGER, INTEGER, NOISE, RULE))
+def seen_through(corner_x_m, corner_y_m, wall, other, contour, start, stop, noise, rule):
     """
     Tell whether the other wall is seen through a wall's stretch between its segment and a corner.
 
-    If the wall ended at the corner it would stand between them, and no line of sight could
-    cross its line there to a return farther away. Returns on the other wall's line (within
-    ``sigmas`` standard deviations of their position noise plus ``floor_m``) whose line of
-    sight crosses this wall's line farther than ``along_tolerance_m`` from the corner, into
-    the wall, and not in front of it by more than that noise tolerance, are tested together
-    like :func:`~.segmentation.trim_offset`'s runs: the sum of their distances behind the line
-    over their noise, over the square root of their number, above ``run_sigmas`` means the
-    other wall goes on behind this one's end (the end is an edge: a pilaster, a wardrobe, a
-    door frame in front of a wall, whose line merely meets the wall behind). One return
-    behind by a few sigma is noise or a rounded corner; a run of them is not.
+    docs/derivation.md#corners, "Seen through". If the wall ended at the corner it would stand
+    between them, and no line of sight could cross its line there to a return farther away.
+    Returns on the other wall's line (within ``sigmas`` standard deviations of their position
+    noise plus ``floor_m``) whose line of sight crosses this wall's line farther than its
+    tolerance along it from the corner, into the wall, and not in front of it by more than
+    that noise tolerance, are tested together like :func:`~.segmentation.trim_offset`'s runs:
+    the sum of their distances behind the line over their noise, over the square root of their
+    number, above ``run_sigmas`` means the other wall goes on behind this one's end (the end
+    is an edge: a pilaster, a wardrobe, a door frame in front of a wall, whose line merely
+    meets the wall behind). One return behind by a few sigma is noise or a rounded corner; a
+    run of them is not.
 
     :param corner_x_m: x of the corner, m
     :param corner_y_m: y of the corner, m
-    :param normal_x: x of the wall's unit normal (towards its line from the sensor)
-    :param normal_y: y of the wall's unit normal
-    :param radius_m: the wall's radius, m (>= 0)
-    :param inward_x: x of the unit direction from the corner into the wall
-    :param inward_y: y of that direction
-    :param along_tolerance_m: how far from the corner a crossing is surely on the wall, m
-    :param other_normal_x: x of the other wall's unit normal
-    :param other_normal_y: y of the other wall's unit normal
-    :param other_radius_m: the other wall's radius, m
-    :param x_m: x of the returns in position order, shape (n,), m
-    :param y_m: y of the returns in position order, shape (n,), m
+    :param wall: the wall at the corner (radius >= 0)
+    :param other: the other wall
+    :param contour: the returns in circular order
     :param start: position of the first return to test (taken modulo n)
     :param stop: position of the last return to test (taken modulo n, after ``start``)
-    :param range_sigma_m: range noise std, m
-    :param bearing_sigma_rad: bearing noise std, rad
-    :param sigmas: tolerance in standard deviations
-    :param floor_m: tolerance floor, m
-    :param run_sigmas: largest sum of normalised residuals (behind) over sqrt(count)
+    :param noise: the noise (the rule decides with its deciding_sigma_m)
+    :param rule: the rule's tolerances
     :return: whether the wall is seen through
     """
-    count = x_m.size
+    count = contour.x_m.size
     run, behind = 0, 0.0
     for step in range((stop - start) % count + 1):
         position = wrapped(start + step, count)
-        x, y = x_m[position], y_m[position]
-        noise = math.sqrt(range_sigma_m ** 2 + (x * x + y * y) * bearing_sigma_rad ** 2)
-        line_tolerance = sigmas * noise + floor_m
-        offset = x * normal_x + y * normal_y
-        if (abs(other_radius_m - x * other_normal_x - y * other_normal_y) > line_tolerance
-                or offset <= 0.0 or radius_m - offset > line_tolerance):
+        x, y = contour.x_m[position], contour.y_m[position]
+        sigma = math.sqrt(noise.deciding_sigma_m ** 2
+                          + (x * x + y * y) * noise.bearing_sigma_rad ** 2)
+        line_tolerance = rule.sigmas * sigma + rule.floor_m
+        offset = x * wall.normal_x + y * wall.normal_y
+        if (abs(other.radius_m - x * other.normal_x - y * other.normal_y) > line_tolerance
+                or offset <= 0.0 or wall.radius_m - offset > line_tolerance):
             continue
         # Where the line of sight crosses the wall's line: the return scaled by radius/offset.
-        scale = radius_m / offset
-        along = ((scale * x - corner_x_m) * inward_x + (scale * y - corner_y_m) * inward_y)
-        if along > along_tolerance_m:
+        scale = wall.radius_m / offset
+        along = ((scale * x - corner_x_m) * wall.inward_x + (scale * y - corner_y_m)
+                 * wall.inward_y)
+        if along > wall.tolerance_m:
             run += 1
-            behind += (offset - radius_m) / noise
-    return run > 0 and behind / math.sqrt(run) > run_sigmas
+            behind += (offset - wall.radius_m) / sigma
+    return run > 0 and behind / math.sqrt(run) > rule.run_sigmas
 
 
-@jit
-def walls_end_at(corner_xy_m, corner_covariance, first_segment, second_segment, wall_angle_rad,
-                 wall_radius_m, wall_middle_m, x_m, y_m, last_position, first_position, step_rad,
-                 range_sigma_m, bearing_sigma_rad, sigmas, floor_m, window, max_missing_beams,
-                 run_sigmas):
+@jit_inline
+def walls_end_at(candidates, walls, contour, step_rad, noise, rule):
     """
     Tell which corners both walls end at, and at which the end was seen.
 
-    A corner is the point where two walls end; adjacent segments whose lines merely intersect
-    near their ends (across an occlusion, a gap, a T-junction seen from the side where one wall
-    goes on) are not corners. The returns between the first wall's last return and the second
-    wall's first one (left out of both segments) are sorted by where they lie: on one of the
-    two lines (within ``sigmas`` standard deviations of a return's position noise plus
-    ``floor_m``), around the corner (where both lines are within the noise of each other, and
-    a beam's footprint on both walls returns a range in between: an inside corner looks
-    rounded), in front of both lines (an occluder) or elsewhere. Each wall reaches as far
-    towards the corner as its returns do, also beyond something in front of it (e.g. a leg),
-    unless those returns lie in front of its line together (their residuals over the noise sum
-    to more than ``run_sigmas`` times the square root of their number): an object before the
-    wall's end.
-    The corner is rejected when
+    docs/derivation.md#corners, "Corner end rule" and "Seen through". A corner is the point
+    where two walls end; adjacent segments whose lines merely intersect near their ends (across
+    an occlusion, a gap, a T-junction seen from the side where one wall goes on) are not
+    corners. The returns between the first wall's last return and the second wall's first one
+    (:func:`end_window`) are sorted by where they lie: on one of the two lines
+    (:func:`along_wall`), around the corner (:func:`corner_zone`), in front of both lines (an
+    occluder) or elsewhere; each wall reaches as far towards the corner as its returns do
+    (:func:`reaches`), also beyond something in front of it, unless those returns lie in front
+    of its line together (:func:`without_object_in_front`). The corner is rejected when
 
-    - a wall's line carries returns past the corner: the wall goes on, it does not end there;
-    - anything lies between the two reaches: an occluder at the corner, or a view through a
-      gap where the walls do not meet;
-    - a wall's reach stops short of the corner by more than ``sigmas`` standard deviations of
-      the corner's position along that wall, plus ``floor_m``, plus ``1 + max_missing_beams``
-      beams' spacing on the wall: the corner is an extrapolation across an unseen stretch;
-    - a wall is seen through where it would have to stand (:func:`seen_through`): the other
-      wall goes on behind this wall's end, an edge in front of it, not a corner.
+    - more than ``rule.window`` returns lie between the walls: they are not neighbours;
+    - a facing end does not reach the corner;
+    - a wall's line carries returns past the corner (:func:`goes_on`);
+    - anything lies between the two reaches (:func:`blocked`);
+    - a wall's reach stops short of the corner by more than ``1 + CORNER_MISSING_BEAMS`` beams
+      beyond its tolerance (:func:`short_of_corner`): an extrapolation across an unseen stretch;
+    - a wall is seen through where it would have to stand (:func:`seen_through`, when
+      ``rule.run_sigmas`` > 0): the other wall goes on behind this wall's end, an edge in
+      front of it, not a corner.
 
     A wall's end is seen when its reach is within one beam's spacing of that bound.
 
-    :param corner_xy_m: the candidate corners, shape (C, 2), m
-    :param corner_covariance: their (x, y, yaw) covariance, shape (C, 3, 3)
-    :param first_segment: the first wall of each corner, shape (C,)
-    :param second_segment: the second wall, shape (C,)
-    :param wall_angle_rad: normal angle of every segment's line, shape (S,), rad
-    :param wall_radius_m: radius of every segment's line, shape (S,), m
-    :param wall_middle_m: middle of every segment, shape (S, 2), m (tells its side of a corner)
-    :param x_m: x of the returns in position order, shape (n,), m
-    :param y_m: y of the returns in position order, shape (n,), m
-    :param last_position: position of every segment's last return, shape (S,)
-    :param first_position: position of every segment's first return, shape (S,)
+    :param candidates: the candidate corners
+    :param walls: the walls
+    :param contour: the returns in circular order
     :param step_rad: bearing step between beams, rad
-    :param range_sigma_m: range noise std, m
-    :param bearing_sigma_rad: bearing noise std, rad
-    :param sigmas: tolerance in standard deviations
-    :param floor_m: tolerance floor, m
-    :param window: most returns between the two walls (more: not adjacent)
-    :param max_missing_beams: most beams without a return between a corner and a wall's reach
-    :param run_sigmas: largest sum of normalised residuals (in front) over sqrt(count) of the
-        returns a wall claims beyond its segment (0: no such test)
+    :param noise: the noise (the rule decides with its deciding_sigma_m)
+    :param rule: the rule's tolerances
     :return: (corners both walls end at (C,), whether each wall's end was seen (C, 2), column 0
         the first wall)
     """
-    corners, count, width = corner_xy_m.shape[0], x_m.size, window + 2
+    corners = candidates.xy_m.shape[0]
     keep = np.zeros(corners, np.bool_)
     seen = np.zeros((corners, 2), np.bool_)
-    present = np.empty(width, np.bool_)
-    x, y, noise = np.empty(width), np.empty(width), np.empty(width)
-    line_tolerance = np.empty(width)
-    in_front, along = np.empty((2, width)), np.empty((2, width))
-    on_line, here = np.empty((2, width), np.bool_), np.empty((2, width), np.bool_)
-    at_corner = np.empty(width, np.bool_)
-    normal, inward = np.empty((2, 2)), np.empty((2, 2))
-    along_sigma, spacing, tolerance = np.empty(2), np.empty(2), np.empty(2)
-    walls = np.empty(2, np.intp)
     for c in range(corners):
-        walls[0], walls[1] = first_segment[c], second_segment[c]
-        after_first, before_second = last_position[walls[0]], first_position[walls[1]]
-        between = (before_second - after_first - 1) % count
-        corner_x, corner_y = corner_xy_m[c, 0], corner_xy_m[c, 1]
-        corner_range = math.hypot(corner_x, corner_y)
-        # Column 0 is the first wall's facing end, the last column the second's; between them
-        # the returns that belong to neither segment (absent where there are fewer).
-        for s in range(width):
-            position = before_second if s == width - 1 else after_first + s
-            present[s] = s <= between or s == width - 1
-            position = wrapped(position, count)
-            x[s], y[s] = x_m[position], y_m[position]
-            noise[s] = math.sqrt(range_sigma_m ** 2 + (x[s] * x[s] + y[s] * y[s])
-                                 * bearing_sigma_rad ** 2)
-            line_tolerance[s] = sigmas * noise[s] + floor_m
-        for k in range(2):
-            wall = walls[k]
-            normal[k, 0] = math.cos(wall_angle_rad[wall])
-            normal[k, 1] = math.sin(wall_angle_rad[wall])
-            inward[k, 0], inward[k, 1] = -normal[k, 1], normal[k, 0]
-            towards_middle = ((wall_middle_m[wall, 0] - corner_x) * inward[k, 0]
-                              + (wall_middle_m[wall, 1] - corner_y) * inward[k, 1])
-            side = math.copysign(1.0, towards_middle)
-            inward[k, 0] *= side
-            inward[k, 1] *= side
-            for s in range(width):
-                offset = x[s] * normal[k, 0] + y[s] * normal[k, 1]
-                in_front[k, s] = wall_radius_m[wall] - offset
-                along[k, s] = (x[s] - corner_x) * inward[k, 0] + (y[s] - corner_y) * inward[k, 1]
-                on_line[k, s] = present[s] and abs(in_front[k, s]) <= line_tolerance[s]
-            # The corner's std along the wall, and how far apart the wall's returns are there.
-            variance = 0.0
-            for i in range(2):
-                for j in range(2):
-                    variance += inward[k, i] * corner_covariance[c, i, j] * inward[k, j]
-            along_sigma[k] = math.sqrt(variance)
-            incidence = abs(normal[k, 0] * corner_x + normal[k, 1] * corner_y) / corner_range
-            spacing[k] = corner_range * step_rad / max(incidence, 1e-3)
-            tolerance[k] = sigmas * along_sigma[k] + floor_m
-        # Returns this close to the corner belong to either wall.
-        sine = abs(normal[0, 0] * normal[1, 1] - normal[0, 1] * normal[1, 0])
-        corner_noise = math.sqrt(range_sigma_m ** 2 + (corner_range * bearing_sigma_rad) ** 2)
-        zone = (sigmas * math.hypot(corner_noise, max(along_sigma[0], along_sigma[1])) / sine
-                + floor_m + min(spacing[0], spacing[1]))
-        for s in range(width):
-            at_corner[s] = present[s] and math.hypot(x[s] - corner_x, y[s] - corner_y) <= zone
-        # Returns away from the corner that a wall claims beyond its segment must not lie in
-        # front of its line together. Its line was fitted without them, so their plain sum of
-        # normalised residuals is already a deleted-residual test (segmentation.trim_offset
-        # tests a segment's own returns, and so against the line of the others).
-        for k in range(2):
-            run, together = 0, 0.0
-            for s in range(1, width - 1):
-                if on_line[k, s] and along[k, s] >= -tolerance[k] and not at_corner[s]:
-                    run += 1
-                    together += in_front[k, s] / noise[s]
-            together /= math.sqrt(max(run, 1))
-            if run_sigmas > 0.0 and together > run_sigmas:
-                for s in range(1, width - 1):
-                    if on_line[k, s] and along[k, s] >= -tolerance[k] and not at_corner[s]:
-                        on_line[k, s] = False
-        goes_on = False
-        first_anchor, second_anchor = 0, width - 1
-        for s in range(width):
-            occluder = present[s] and in_front[0, s] > line_tolerance[s] and (
-                in_front[1, s] > line_tolerance[s])
-            for k in range(2):
-                reaches = along[k, s] >= -tolerance[k]
-                here[k, s] = at_corner[s] or (on_line[k, s] and reaches)
-                if (not at_corner[s] and on_line[k, s] and not on_line[1 - k, s]
-                        and along[k, s] < -tolerance[k]):
-                    goes_on = True
-            if on_line[0, s] and along[0, s] >= -tolerance[0] and not at_corner[s]:
-                first_anchor = max(first_anchor, s)
-            if on_line[1, s] and along[1, s] >= -tolerance[1] and not at_corner[s]:
-                second_anchor = min(second_anchor, s)
-            present[s] = present[s] and not occluder      # reused below: present, no occluder
-        blocked = False
-        for s in range(width):
-            visible = s <= between or s == width - 1
-            interrupts = visible and not here[0, s] and not here[1, s]
-            outside = s < first_anchor or s > second_anchor
-            if interrupts and ((present[s] and outside) or not outside):
-                blocked = True
-        # How far each wall's own returns stop short of the corner, beyond the tolerance, in
-        # beams.
-        short_ok, ends = True, np.zeros(2, np.bool_)
-        for k in range(2):
-            gap = np.inf
-            for s in range(width):
-                if on_line[k, s] and here[k, s]:
-                    gap = min(gap, max(along[k, s], 0.0))
-            short = max(gap - tolerance[k], 0.0) / spacing[k]
-            short_ok = short_ok and short <= 1.0 + max_missing_beams
-            ends[k] = short <= 1.0
-        keep[c] = (between <= window and here[0, 0] and here[1, width - 1] and not goes_on
-                   and not blocked and short_ok)
-        for k in range(2):
-            if keep[c] and run_sigmas > 0.0:
-                # Wall 0's stretch is crossed by the sight lines after its last return, up to
-                # wall 1's last; wall 1's by those from wall 0's first return to its own first.
-                start = after_first + 1 if k == 0 else first_position[walls[0]]
-                stop = last_position[walls[1]] if k == 0 else before_second - 1
-                keep[c] = not seen_through(
-                    corner_x, corner_y, normal[k, 0], normal[k, 1], wall_radius_m[walls[k]],
-                    inward[k, 0], inward[k, 1], tolerance[k], normal[1 - k, 0],
-                    normal[1 - k, 1], wall_radius_m[walls[1 - k]], x_m, y_m, start, stop,
-                    range_sigma_m, bearing_sigma_rad, sigmas, floor_m, run_sigmas)
-        seen[c, 0], seen[c, 1] = ends[0], ends[1]
+        one, two = candidates.first_wall[c], candidates.second_wall[c]
+        after_first, before_second = walls.last_position[one], walls.first_position[two]
+        corner_x, corner_y = candidates.xy_m[c, 0], candidates.xy_m[c, 1]
+        window = end_window(contour, after_first, before_second, noise, rule)
+        first = wall_at_corner(walls, one, corner_x, corner_y, candidates.covariance[c],
+                               step_rad, rule)
+        second = wall_at_corner(walls, two, corner_x, corner_y, candidates.covariance[c],
+                                step_rad, rule)
+        first_placed = along_wall(window, first, corner_x, corner_y)
+        second_placed = along_wall(window, second, corner_x, corner_y)
+        at_corner = corner_zone(window, corner_x, corner_y, first, second, noise, rule)
+        first_on_line = without_object_in_front(window, first, first_placed, at_corner, rule)
+        second_on_line = without_object_in_front(window, second, second_placed, at_corner, rule)
+        first_here = reaches(first, first_placed, first_on_line, at_corner)
+        second_here = reaches(second, second_placed, second_on_line, at_corner)
+        first_short = short_of_corner(first, first_placed, first_on_line, first_here)
+        second_short = short_of_corner(second, second_placed, second_on_line, second_here)
+        seen[c, 0], seen[c, 1] = first_short <= 1.0, second_short <= 1.0
+        keep[c] = (window.between <= rule.window and first_here[0] and second_here[-1]
+                   and not goes_on(first, second, first_placed, second_placed, first_on_line,
+                                   second_on_line, at_corner)
+                   and not blocked(window, first, second, first_placed, second_placed,
+                                   first_here, second_here, at_corner)
+                   and first_short <= 1.0 + CORNER_MISSING_BEAMS
+                   and second_short <= 1.0 + CORNER_MISSING_BEAMS)
+        if keep[c] and rule.run_sigmas > 0.0:
+            # The first wall's stretch is crossed by the sight lines after its last return, up
+            # to the second wall's last; the second's by those from the first wall's first
+            # return up to its own first.
+            keep[c] = not (
+                seen_through(corner_x, corner_y, first, second, contour, after_first + 1,
+                             walls.last_position[two], noise, rule)
+                or seen_through(corner_x, corner_y, second, first, contour,
+                                walls.first_position[one], before_second - 1, noise, rule))
     return keep, seen

@@ -25,8 +25,10 @@ import math
 import numpy as np
 
 from ._jit import jit
+from ._types import INDICES, INTEGER, LINES, NOISE, VALUES
 from ..config import METHODS
 from ..features import LineFits, SegmentReturns
+from ..records import Noise
 
 # Gauss-Newton of the maximum-likelihood fit stops once every step is below this (rad and m)...
 _ML_STEP_TOLERANCE = 1e-12
@@ -41,7 +43,8 @@ def _fits(method: str, returns: SegmentReturns, range_sigma: float,
     with np.errstate(divide='ignore', invalid='ignore'):
         return LineFits(*fit_segments(
             METHODS.index(method), returns.rho, returns.theta, returns.x, returns.y,
-            returns.offsets, returns.counts, float(range_sigma), float(bearing_sigma)))
+            returns.offsets, returns.counts,
+            Noise(float(range_sigma), float(bearing_sigma), float(range_sigma))))
 
 
 def utls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
@@ -266,8 +269,8 @@ def _times(jacobian, vector, out):
         out[r] = total
 
 
-@jit
-def fit_segments(method_code, rho, theta, x, y, offsets, counts, range_sigma, bearing_sigma):
+@jit(ahead=(INTEGER, VALUES, VALUES, VALUES, VALUES, INDICES, INDICES, NOISE))
+def fit_segments(method_code, rho, theta, x, y, offsets, counts, noise):
     """
     Fit every segment with one method, in its own form and in normal form (:func:`fit_lines`).
 
@@ -282,11 +285,12 @@ def fit_segments(method_code, rho, theta, x, y, offsets, counts, range_sigma, be
     :param y: rho sin(theta), shape (P,), m
     :param offsets: first return of each segment, shape (S,)
     :param counts: returns per segment, shape (S,)
-    :param range_sigma: range noise std, m
-    :param bearing_sigma: bearing noise std, rad
+    :param noise: the noise (the fits weigh the returns by its range_sigma_m and
+        bearing_sigma_rad)
     :return: (line (S, 3), its covariance (S, 3, 3), angle (S,) rad, radius (S,) m, covariance of
         (angle, radius) (S, 2, 2), d line / d offset (S, 3), d (angle, radius) / d offset (S, 2))
     """
+    range_sigma, bearing_sigma = noise.range_sigma_m, noise.bearing_sigma_rad
     count = offsets.size
     line = np.empty((count, 3))
     line_covariance = np.empty((count, 3, 3))
@@ -294,8 +298,8 @@ def fit_segments(method_code, rho, theta, x, y, offsets, counts, range_sigma, be
     normal_covariance = np.empty((count, 2, 2))
     line_offset, normal_offset = np.empty((count, 3)), np.empty((count, 2))
     if method_code == _ML:
-        _ml_fits(rho, theta, x, y, offsets, counts, range_sigma, bearing_sigma, angle, radius,
-                 normal_covariance, normal_offset)
+        angle, radius, normal_covariance, normal_offset = _ml_fits(rho, theta, x, y, offsets,
+                                                                   counts, noise)
         to_line = np.zeros((3, 2))                 # d line / d(angle, radius)
         to_line[2, 1] = -1.0
         for s in range(count):
@@ -389,10 +393,9 @@ def _ml_sums(x, y, rho, first, stop, angle, radius, range_sigma, bearing_sigma, 
 
 
 @jit
-def _ml_fits(rho, theta, x, y, offsets, counts, range_sigma, bearing_sigma, angle, radius,
-             covariance, normal_offset):
+def _ml_fits(rho, theta, x, y, offsets, counts, noise):
     """
-    Fill in the maximum-likelihood lines of every segment (Pfister et al. 2003), from WTLS.
+    Return the maximum-likelihood lines of every segment (Pfister et al. 2003), from WTLS.
 
     Minimises sum d_i^2 / s_i^2 by Gauss-Newton, the variances re-evaluated at each iterate;
     all segments iterate together until every step is below _ML_STEP_TOLERANCE (or
@@ -400,8 +403,14 @@ def _ml_fits(rho, theta, x, y, offsets, counts, range_sigma, bearing_sigma, angl
     [[C, B], [B, A]] / det F, and the offset Jacobian d(angle, radius) / d(offset of every
     range) is -F^-1 (sum iv g cos, -sum iv cos), from the estimating equations
     sum_i s_i^-2 (g_i, -1) d_i = 0 (first order).
+
+    :return: (angle (S,) rad, radius (S,) m, covariance of (angle, radius) (S, 2, 2),
+        d(angle, radius) / d offset (S, 2))
     """
+    range_sigma, bearing_sigma = noise.range_sigma_m, noise.bearing_sigma_rad
     count = offsets.size
+    angle, radius = np.empty(count), np.empty(count)
+    covariance, normal_offset = np.empty((count, 2, 2)), np.empty((count, 2))
     for s in range(count):
         s_x, s_y, s_xx, s_yy, s_xy = _moment_sums(x, y, rho, offsets[s], offsets[s] + counts[s],
                                                   True)
@@ -442,11 +451,11 @@ def _ml_fits(rho, theta, x, y, offsets, counts, range_sigma, bearing_sigma, angl
         covariance[s, 1, 1] = f[2] * inv_det
         covariance[s, 0, 1] = covariance[s, 1, 0] = f[1] * (inv_det * sign)
         radius[s] = abs(radius[s])
+    return angle, radius, covariance, normal_offset
 
 
-@jit
-def residual_chi2_dof(rho, x, y, offsets, counts, angle_rad, radius_m, range_sigma,
-                      bearing_sigma):
+@jit(ahead=(VALUES, VALUES, VALUES, INDICES, INDICES, LINES, NOISE))
+def residual_chi2_dof(rho, x, y, offsets, counts, lines, noise):
     """
     Return each fit's residual chi2 per degree of freedom (docs/derivation.md#model-error).
 
@@ -462,8 +471,12 @@ def residual_chi2_dof(rho, x, y, offsets, counts, angle_rad, radius_m, range_sig
     :param y: rho sin(theta), shape (P,), m
     :param offsets: first return of each segment, shape (S,)
     :param counts: returns per segment, shape (S,)
+    :param lines: each segment's fitted line
+    :param noise: the noise model (its range_sigma_m and bearing_sigma_rad)
     :return: shape (S,)
     """
+    angle_rad, radius_m = lines.angle_rad, lines.radius_m
+    range_sigma, bearing_sigma = noise.range_sigma_m, noise.bearing_sigma_rad
     chi2 = np.zeros(offsets.size)
     for s in range(offsets.size):
         cos, sin = math.cos(angle_rad[s]), math.sin(angle_rad[s])

@@ -23,7 +23,9 @@ import math
 import numpy as np
 
 from ._jit import jit
+from ._types import FLAG, REAL, WALLS
 from .lines import normal_jacobians
+from ..records import Walls
 
 
 @jit
@@ -83,11 +85,8 @@ def residual_factor(chi2_dof: float, returns: int) -> float:
     return max(chi2_dof - math.sqrt(2.0 / dof), 1.0)
 
 
-@jit
-def with_model_error(line: np.ndarray, angle_rad: np.ndarray, normal_covariance: np.ndarray,
-                     line_covariance: np.ndarray, line_offset_jacobian: np.ndarray,
-                     start_xy_m: np.ndarray, end_xy_m: np.ndarray, chi2_dof: np.ndarray,
-                     num_points: np.ndarray, residual_scaling: bool, flatness_sigma_m: float,
+@jit(ahead=(WALLS, FLAG, REAL, REAL))
+def with_model_error(walls: Walls, residual_scaling: bool, flatness_sigma_m: float,
                      common_range_sigma_m: float):
     """
     Return the walls' covariances with the model error (docs/derivation.md#model-error).
@@ -102,20 +101,16 @@ def with_model_error(line: np.ndarray, angle_rad: np.ndarray, normal_covariance:
     does not, since corners propagate that offset with its correlation between the two walls
     ((D15)-(D16)).
 
-    :param line: (a, b, c) of every wall, shape (S, 3)
-    :param angle_rad: normal angles, shape (S,), rad
-    :param normal_covariance: covariance of (angle, radius) from the sensor noise, (S, 2, 2)
-    :param line_covariance: covariance of (a, b, c) from the sensor noise, (S, 3, 3)
-    :param line_offset_jacobian: d(a, b, c) / d(common range offset), shape (S, 3), per m
-    :param start_xy_m: first end of each wall, shape (S, 2), m
-    :param end_xy_m: last end of each wall, shape (S, 2), m
-    :param chi2_dof: residual chi2 per degree of freedom of each fit, shape (S,)
-    :param num_points: returns of each fit, shape (S,)
+    :param walls: the walls, their covariances from the sensor noise alone
     :param residual_scaling: apply the variance factor of (D17)
     :param flatness_sigma_m: std of each wall end's offset from the line, m (0: none)
     :param common_range_sigma_m: std of the range offset common to the scan, m
     :return: (covariance of (angle, radius) (S, 2, 2), covariance of (a, b, c) (S, 3, 3))
     """
+    line, angle_rad, normal_covariance = walls.line, walls.angle_rad, walls.normal_covariance
+    line_covariance, line_offset_jacobian = walls.line_covariance, walls.line_offset_jacobian
+    start_xy_m, end_xy_m = walls.start_xy_m, walls.end_xy_m
+    chi2_dof, num_points = walls.residual_chi2_dof, walls.num_points
     count = angle_rad.size
     added = np.zeros((count, 2, 2))           # the model error in (angle, radius)
     for s in range(count):

@@ -15,6 +15,7 @@ import numpy as np
 
 from ._jit import jit
 from ._order import median
+from ._types import INDICES, VALUES
 from ..numpy_core.noise import (_CUT_SIGMAS, _CUT_VARIANCE, _MAD_TO_SIGMA, _REFINEMENTS,
                                 MIN_TRIPLES)
 from ..scan import ScanPoints
@@ -40,7 +41,7 @@ def scan_range_sigma(points: ScanPoints) -> float:
     return range_sigma_of_returns(points.index, points.range_m)
 
 
-@jit
+@jit(ahead=(INDICES, VALUES))
 def range_sigma_of_returns(index, range_m):
     """
     Return :func:`scan_range_sigma` of the returns with these beam indices and ranges.

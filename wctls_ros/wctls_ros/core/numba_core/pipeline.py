@@ -13,13 +13,14 @@ import functools
 import math
 from typing import NamedTuple
 
-import numba
-from numba import types
 import numpy as np
 
-from ._jit import jit, jit_inline
+from ._jit import argument_types, jit, jit_inline, use_disk_cache
 from ._order import wrapped
-from .corners import corner_candidates, walls_end_at
+from ._types import INDICES, INTEGER, NOISE, REAL, ROWS, SEGMENTS, SETTINGS, VALUES
+from .corners import (along_wall, blocked, corner_candidates, corner_zone, end_window, goes_on,
+                      reaches, seen_through, short_of_corner, wall_at_corner, walls_end_at,
+                      without_object_in_front)
 from .lines import fit_segments, residual_chi2_dof
 from .model_error import with_model_error
 from .noise import range_sigma_of_returns
@@ -29,37 +30,11 @@ from .segmentation import (breakpoints_of, chains_of, merge_segments, pass_budge
 from ..config import FeatureConfig, METHODS
 from ..features import CornerSet, Features, SegmentSet
 from ..plausibility import implausible_scan, noise_is_plausible, plausible
+from ..records import (BeamGrid, CornerArrays, CornerCandidates, CornerEndRule, Lines, Noise,
+                       Returns, ScanResult, SegmentArrays, Segments, Settings, Walls)
 from ..scan import beam_density, scan_geometry, ScanError
 
 _DEFAULT_CONFIG = FeatureConfig()
-# A corner may sit one beam without a return beyond a wall's last return (a dropout there),
-# reported with that wall's end not seen; farther, it is an extrapolation, not a corner.
-_CORNER_MISSING_BEAMS = 1
-
-
-class _Settings(NamedTuple):
-    """The FeatureConfig fields the compiled pipeline reads, as plain typed values."""
-
-    method_code: int
-    range_sigma_m: float
-    bearing_sigma_rad: float
-    range_sigma_from_scan: bool
-    common_range_sigma_m: float
-    breakpoint_lambda_rad: float
-    iepf_threshold_m: float
-    iepf_noise_sigmas: float
-    merge_chi2: float
-    merge_max_missing_beams: int
-    end_offset_sigmas: float
-    residual_scaling: bool
-    model_error_sigma_m: float
-    wall_flatness_sigma_m: float
-    min_segment_points: int
-    min_segment_length_m: float
-    min_corner_angle_rad: float
-    min_wall_beam_angle_rad: float
-    corner_end_sigmas: float
-    corner_end_floor_m: float
 
 
 class _AtDensity(NamedTuple):
@@ -83,11 +58,11 @@ def _at_density(angle_increment_rad: float, beam_count: int,
 
 
 @functools.lru_cache(maxsize=64)
-def _settings(config: FeatureConfig) -> _Settings:
+def _settings(config: FeatureConfig) -> Settings:
     """Return the compiled pipeline's view of a configuration (one per distinct config)."""
-    values = {name: getattr(config, name) for name in _Settings._fields if name != 'method_code'}
-    return _Settings(method_code=METHODS.index(config.method), **{
-        name: _Settings.__annotations__[name](value) for name, value in values.items()})
+    values = {name: getattr(config, name) for name in Settings._fields if name != 'method_code'}
+    return Settings(method_code=METHODS.index(config.method), **{
+        name: Settings.__annotations__[name](value) for name, value in values.items()})
 
 
 def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
@@ -98,6 +73,7 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
 
     :func:`wctls_ros.core.extract_features` states the arguments, the result and the errors.
     """
+    use_disk_cache()
     if np.size(ranges_m) > config.max_beams:
         raise ScanError(f'{np.size(ranges_m)} beams are more than max_beams '
                         f'({config.max_beams})')
@@ -107,11 +83,11 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
         float(max(range_min_m, config.range_min_m)), float(min(range_max_m, config.range_max_m)),
         full_turn, _settings(config),
         _at_density(float(angle_increment_rad), ranges.size, config))
-    segments, corners, work_limited = SegmentSet(*found[:12]), CornerSet(*found[12:19]), found[19]
-    features = Features(config.method, segments, corners, bool(work_limited))
+    features = Features(config.method, SegmentSet(**found.segments._asdict()),
+                        CornerSet(**found.corners._asdict()), bool(found.work_limited))
     # #plausibility: nothing published that says "unknown" (a scan too few returns to process
     # has no range noise: NaN).
-    range_sigma = found[20]
+    range_sigma = found.range_sigma_m
     if math.isnan(range_sigma):
         return features
     if not noise_is_plausible(range_sigma, config):
@@ -123,48 +99,13 @@ def kernels_last_first():
     """
     Return the kernels the pipeline calls, last step first, with the types it passes them.
 
-    The reverse of :func:`_features_of_scan`'s calls, for compiling them in other processes
-    while this one compiles the pipeline (:mod:`.precompile`). numba compiles a kernel once for
-    each tuple of argument types, so these must be exactly the pipeline's, down to the constants
-    it passes as literals; a test holds them to the signatures of a compiled pipeline.
+    :data:`PIPELINE_KERNELS` backwards, for compiling them in other processes while this one
+    compiles the pipeline (:mod:`.precompile`); each kernel's types are declared where it is
+    defined (``@jit(ahead=...)``).
 
     :return: tuples (kernel, tuple of numba argument types)
     """
-    real, integer, flag = types.float64, types.intp, types.boolean
-    values, indices, flags = real[::1], integer[::1], flag[::1]
-    read_only_values = types.Array(real, 1, 'C', readonly=True)
-    rows, stacks = real[:, ::1], real[:, :, ::1]         # (K, m) and (K, m, m) float arrays
-    settings = numba.typeof(_settings(_DEFAULT_CONFIG))
-    return (
-        (with_model_error, (rows, values, stacks, stacks, rows, rows, rows, values, indices,
-                            flag, real, real)),
-        (walls_end_at, (rows, stacks, indices, indices, values, values, rows, values, values,
-                        indices, indices, real, real, real, real, real, integer,
-                        types.literal(_CORNER_MISSING_BEAMS), real)),
-        (corner_candidates, (rows, stacks, rows, rows, indices, indices, real, rows, real)),
-        (_usable, (values, rows, real, real, rows)),
-        (_feet, (values, values, indices, values, values)),
-        (residual_chi2_dof, (values, values, values, indices, indices, values, values, real,
-                             real)),
-        (fit_segments, (integer, values, values, values, values, indices, indices, real, real)),
-        (_in_scan_order, (indices, integer, indices, indices)),
-        (trim_offset, (indices, indices, indices, values, values, values, values, real, real,
-                       integer, real, integer)),
-        (trim_ambiguous, (indices, indices, indices, flag, values, values, values, values, real,
-                          real, integer, integer)),
-        (_large_enough, (values, values, indices, indices, settings)),
-        (merge_segments, (values, values, indices, indices, indices, flag, flags, real, real,
-                          real, integer)),
-        (split_iepf, (values, values, indices, indices, indices, values, integer)),
-        (_split_threshold, (values, real, real, real, real)),
-        (pass_budget, (integer,)),
-        (chains_of, (values, values, values, flags)),
-        (breakpoints_of, (indices, values, values, values, integer, real, flag, real, real, real,
-                          integer, real)),
-        (range_sigma_of_returns, (indices, values)),
-        (valid_returns, (values, read_only_values, read_only_values, real, real, real, real)),
-        (_nothing, ()),
-    )
+    return tuple((kernel, argument_types(kernel)) for kernel in reversed(PIPELINE_KERNELS))
 
 
 @jit
@@ -187,100 +128,102 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     :param full_turn: the beams cover a full turn (the first and last are neighbours)
     :param settings: the configuration
     :param density: the rules that count returns, at this scan's beam spacing
-    :return: the twelve arrays of a SegmentSet, the seven of a CornerSet, whether the work
-        bound stopped splitting or merging, and the range noise the scan was processed with
-        (m; NaN when too few returns)
+    :return: the scan's :class:`~.records.ScanResult`
     """
-    index, range_m, bearing_rad, x_m, y_m = valid_returns(
-        ranges_m, cos, sin, angle_min_rad, angle_increment_rad, range_min_m, range_max_m)
-    count = index.size
+    returns = valid_returns(ranges_m, cos, sin, angle_min_rad, angle_increment_rad,
+                            range_min_m, range_max_m)
+    count = returns.beam_index.size
     if count < settings.min_segment_points:
-        return _nothing() + (False, math.nan)
+        return ScanResult(_no_segments(), _no_corners(), False, math.nan)
     # #range-noise-from-the-scan
     range_sigma = settings.range_sigma_m
     if settings.range_sigma_from_scan:
-        range_sigma = max(range_sigma, range_sigma_of_returns(index, range_m))
-    bearing_sigma = settings.bearing_sigma_rad
+        range_sigma = max(range_sigma, range_sigma_of_returns(returns.beam_index, returns.range_m))
     # #decision-noise: every decision tolerates the model error on top of the sensor noise;
     # the fits weigh the returns by the sensor noise alone.
-    deciding_sigma = math.hypot(range_sigma, settings.model_error_sigma_m)
+    noise = Noise(range_sigma, settings.bearing_sigma_rad,
+                  math.hypot(range_sigma, settings.model_error_sigma_m))
+    grid = BeamGrid(ranges_m.size, abs(angle_increment_rad), full_turn)
     # #segmentation-statistics: breakpoints, chains in circular order, IEPF, merging, the size
     # rules, the end trims. From here on, positions index the returns in circular order.
-    separated, joinable = breakpoints_of(
-        index, x_m, y_m, range_m, ranges_m.size, abs(angle_increment_rad), full_turn,
-        deciding_sigma, bearing_sigma, settings.breakpoint_lambda_rad,
-        settings.merge_max_missing_beams, density.breakpoint_sigmas)
-    order, run_start, run_stop, run_chain = chains_of(range_m, x_m, y_m, separated)
-    rho, theta, x, y = range_m[order], bearing_rad[order], x_m[order], y_m[order]
-    beam_order = index[order]
+    separated, joinable = breakpoints_of(returns, grid, noise, settings.breakpoint_lambda_rad,
+                                         settings.merge_max_missing_beams,
+                                         density.breakpoint_sigmas)
+    order, runs = chains_of(returns, separated)
+    contour = Returns(returns.beam_index[order], returns.range_m[order],
+                      returns.bearing_rad[order], returns.x_m[order], returns.y_m[order])
+    x, y = contour.x_m, contour.y_m
     budget = pass_budget(count)
-    start, stop, chain, unsplit = split_iepf(
-        x, y, run_start, run_stop, run_chain,
-        _split_threshold(rho, deciding_sigma, bearing_sigma, settings.iepf_threshold_m,
-                         density.iepf_noise_sigmas), budget)
-    if start.size == 0:
-        return _nothing() + (unsplit, range_sigma)
-    start, stop, chain, angle, radius, unmerged = merge_segments(
-        x, y, start, stop, chain, full_turn, joinable[order], deciding_sigma, bearing_sigma,
-        settings.merge_chi2, budget)
+    segments, unsplit = split_iepf(
+        x, y, runs, _split_threshold(contour.range_m, noise, settings.iepf_threshold_m,
+                                     density.iepf_noise_sigmas), budget)
+    if segments.start.size == 0:
+        return ScanResult(_no_segments(), _no_corners(), unsplit, range_sigma)
+    segments, lines, unmerged = merge_segments(x, y, segments, full_turn, joinable[order], noise,
+                                               settings.merge_chi2, budget)
     work_limited = unsplit or unmerged
-    keep = _large_enough(x, y, start, stop, settings)
-    start, stop, chain, angle, radius = (start[keep], stop[keep], chain[keep], angle[keep],
-                                         radius[keep])
-    if start.size == 0:
-        return _nothing() + (work_limited, range_sigma)
-    start, stop, chain = trim_ambiguous(start, stop, chain, full_turn, x, y, angle, radius,
-                                        deciding_sigma, bearing_sigma,
-                                        settings.min_segment_points, density.end_window)
+    keep = _large_enough(x, y, segments, settings)
+    segments = Segments(segments.start[keep], segments.stop[keep], segments.chain[keep])
+    lines = Lines(lines.angle_rad[keep], lines.radius_m[keep])
+    if segments.start.size == 0:
+        return ScanResult(_no_segments(), _no_corners(), work_limited, range_sigma)
+    segments = trim_ambiguous(segments, full_turn, x, y, lines, noise,
+                              settings.min_segment_points, density.end_window)
     if settings.end_offset_sigmas > 0.0:
-        start, stop, chain = trim_offset(start, stop, chain, x, y, angle, radius, deciding_sigma,
-                                         bearing_sigma, settings.min_segment_points,
-                                         settings.end_offset_sigmas, density.end_window)
+        segments = trim_offset(segments, x, y, lines, noise, settings.min_segment_points,
+                               settings.end_offset_sigmas, density.end_window)
     # #utls, #wtls, #wctls or #maximum-likelihood: the configured fit with its covariance, in
     # scan order of the walls' first returns.
-    start, stop = _in_scan_order(beam_order, ranges_m.size, start, stop)
-    walls = _fit_walls(rho, theta, x, y, start, stop, range_sigma, bearing_sigma, settings)
-    (angle, radius, normal_covariance, line, line_covariance, line_offset, start_xy, end_xy,
-     first, last, counts, chi2_dof) = walls
-    if angle.size == 0:
-        return _nothing() + (work_limited, range_sigma)
+    start, stop = _in_scan_order(contour.beam_index, ranges_m.size, segments.start, segments.stop)
+    walls = _fit_walls(contour, start, stop, noise, settings)
+    if walls.angle_rad.size == 0:
+        return ScanResult(_no_segments(), _no_corners(), work_limited, range_sigma)
     # #corners: which pairs are corners is decided with the decision noise; the published
     # covariances add the model error to the fits' (#model-error).
-    first_wall, second_wall, corner_xy, corner_yaw, opening, end_seen = _corners(
-        x, y, walls, first, last, full_turn, abs(angle_increment_rad), deciding_sigma,
-        bearing_sigma, settings, density)
+    corners = _corners(contour, walls, grid, noise, settings, density)
     # #model-error (D17), (D18), then #corners and #common-mode-range-offset, (D11)-(D16).
     normal_covariance, line_covariance = with_model_error(
-        line, angle, normal_covariance, line_covariance, line_offset, start_xy, end_xy,
-        chi2_dof, counts, settings.residual_scaling, settings.wall_flatness_sigma_m,
+        walls, settings.residual_scaling, settings.wall_flatness_sigma_m,
         settings.common_range_sigma_m)
     corner_covariance = corner_candidates(
-        line, line_covariance, start_xy, end_xy, first_wall, second_wall, 0.0, line_offset,
+        walls.line, line_covariance, walls.start_xy_m, walls.end_xy_m, corners.first_segment,
+        corners.second_segment, 0.0, walls.line_offset_jacobian,
         settings.common_range_sigma_m)[3]
-    return (angle, radius, normal_covariance, line, line_covariance, line_offset, start_xy,
-            end_xy, beam_order[first], beam_order[last], counts, chi2_dof, corner_xy, corner_yaw,
-            corner_covariance, opening, first_wall, second_wall, end_seen, work_limited,
-            range_sigma)
+    segments_found = SegmentArrays(
+        walls.angle_rad, walls.radius_m, normal_covariance, walls.line, line_covariance,
+        walls.line_offset_jacobian, walls.start_xy_m, walls.end_xy_m,
+        contour.beam_index[walls.first_position], contour.beam_index[walls.last_position],
+        walls.num_points, walls.residual_chi2_dof)
+    corners_found = CornerArrays(corners.xy_m, corners.yaw_rad, corner_covariance,
+                                 corners.opening_angle_rad, corners.first_segment,
+                                 corners.second_segment, corners.end_seen)
+    return ScanResult(segments_found, corners_found, work_limited, range_sigma)
 
 
-@jit
-def _nothing():
+@jit(ahead=())
+def _no_segments():
     """
-    Return the arrays of a scan without segments, in :func:`_features_of_scan`'s shape.
+    Return the arrays of a SegmentSet without segments.
 
-    The caller appends whether the work bound stopped splitting or merging and the range noise:
-    as an argument, a
-    literal False and a bool would compile this twice (0.5 s of the cold start).
+    The shapes and types of :meth:`~wctls_ros.core.features.SegmentSet.empty`, which a test
+    holds them to. (Flags passed in would compile it twice: a literal False and a bool.)
     """
     no_index = np.zeros(0, np.intp)
-    return (np.zeros(0), np.zeros(0), np.zeros((0, 2, 2)), np.zeros((0, 3)),
-            np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros((0, 2)), np.zeros((0, 2)), no_index,
-            no_index, no_index, np.zeros(0), np.zeros((0, 2)), np.zeros(0), np.zeros((0, 3, 3)),
-            np.zeros(0), no_index, no_index, np.zeros((0, 2), np.bool_))
+    return SegmentArrays(np.zeros(0), np.zeros(0), np.zeros((0, 2, 2)), np.zeros((0, 3)),
+                         np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros((0, 2)),
+                         np.zeros((0, 2)), no_index, no_index, no_index, np.zeros(0))
 
 
-@jit
-def _split_threshold(rho, range_sigma, bearing_sigma, threshold_m, noise_sigmas):
+@jit(ahead=())
+def _no_corners():
+    """Return the arrays of a CornerSet without corners (as :meth:`..features.CornerSet.empty`)."""
+    no_index = np.zeros(0, np.intp)
+    return CornerArrays(np.zeros((0, 2)), np.zeros(0), np.zeros((0, 3, 3)), np.zeros(0),
+                        no_index, no_index, np.zeros((0, 2), np.bool_))
+
+
+@jit(ahead=(VALUES, NOISE, REAL, REAL))
+def _split_threshold(rho, noise, threshold_m, noise_sigmas):
     """
     Return the IEPF split distance of every return, m.
 
@@ -292,15 +235,16 @@ def _split_threshold(rho, range_sigma, bearing_sigma, threshold_m, noise_sigmas)
     for i in range(rho.size):
         threshold[i] = threshold_m
         if noise_sigmas > 0.0:
-            noise = math.sqrt(range_sigma ** 2 + (rho[i] * bearing_sigma) ** 2)
-            threshold[i] = max(threshold[i], noise_sigmas * noise)
+            sigma = math.sqrt(noise.deciding_sigma_m ** 2
+                              + (rho[i] * noise.bearing_sigma_rad) ** 2)
+            threshold[i] = max(threshold[i], noise_sigmas * sigma)
     return threshold
 
 
-@jit
-def _large_enough(x, y, start, stop, settings):
+@jit(ahead=(VALUES, VALUES, SEGMENTS, SETTINGS))
+def _large_enough(x, y, segments, settings):
     """Return which segments have min_segment_points returns and min_segment_length."""
-    count = x.size
+    count, start, stop = x.size, segments.start, segments.stop
     keep = np.empty(start.size, np.bool_)
     for s in range(start.size):
         last = (stop[s] - 1) % count
@@ -310,7 +254,7 @@ def _large_enough(x, y, start, stop, settings):
     return keep
 
 
-@jit
+@jit(ahead=(INDICES, INTEGER, INDICES, INDICES))
 def _in_scan_order(beam_of_position, beam_count, start, stop):
     """
     Return the segments sorted by the beam index of their first return.
@@ -332,7 +276,7 @@ def _in_scan_order(beam_of_position, beam_count, start, stop):
 
 
 @jit_inline
-def _fit_walls(rho, theta, x, y, start, stop, range_sigma, bearing_sigma, settings):
+def _fit_walls(contour, start, stop, noise, settings):
     """
     Fit every segment with the configured method and keep the ones that are walls.
 
@@ -341,10 +285,9 @@ def _fit_walls(rho, theta, x, y, start, stop, range_sigma, bearing_sigma, settin
     returns strung along the beams are mixed pixels or grazing veils, not a wall. A segment
     crossing the seam of a full turn runs past the last position (positions wrap).
 
-    :return: (angle, radius, covariance of (angle, radius), line, its covariance, its offset
-        Jacobian, start and end projected on the line, first and last position, returns,
-        residual chi2 per degree of freedom), one row per kept wall
+    :return: the kept :class:`~.records.Walls`
     """
+    rho, theta, x, y = contour.range_m, contour.bearing_rad, contour.x_m, contour.y_m
     count, segments = x.size, start.size
     counts, offsets = np.empty(segments, np.intp), np.empty(segments, np.intp)
     total = 0
@@ -358,10 +301,8 @@ def _fit_walls(rho, theta, x, y, start, stop, range_sigma, bearing_sigma, settin
             at = offsets[s] + k
             rho_w[at], theta_w[at], x_w[at], y_w[at] = rho[i], theta[i], x[i], y[i]
     (line, line_covariance, angle, radius, normal_covariance, line_offset,
-     _) = fit_segments(settings.method_code, rho_w, theta_w, x_w, y_w, offsets, counts,
-                       range_sigma, bearing_sigma)
-    chi2_dof = residual_chi2_dof(rho_w, x_w, y_w, offsets, counts, angle, radius, range_sigma,
-                                 bearing_sigma)
+     _) = fit_segments(settings.method_code, rho_w, theta_w, x_w, y_w, offsets, counts, noise)
+    chi2_dof = residual_chi2_dof(rho_w, x_w, y_w, offsets, counts, Lines(angle, radius), noise)
     last = (stop - 1) % count
     start_xy, end_xy = _feet(x, y, start, angle, radius), _feet(x, y, last, angle, radius)
     min_along_beam = math.sin(settings.min_wall_beam_angle_rad)
@@ -372,12 +313,12 @@ def _fit_walls(rho, theta, x, y, start, stop, range_sigma, bearing_sigma, settin
         along_beam = abs(math.cos(math.atan2(middle_y, middle_x) - angle[s]))
         keep[s] = _usable(line[s], line_covariance[s], angle[s], radius[s],
                           normal_covariance[s]) and along_beam >= min_along_beam
-    return (angle[keep], radius[keep], normal_covariance[keep], line[keep],
-            line_covariance[keep], line_offset[keep], start_xy[keep], end_xy[keep],
-            start[keep], last[keep], counts[keep], chi2_dof[keep])
+    return Walls(angle[keep], radius[keep], normal_covariance[keep], line[keep],
+                 line_covariance[keep], line_offset[keep], start_xy[keep], end_xy[keep],
+                 start[keep], last[keep], counts[keep], chi2_dof[keep])
 
 
-@jit
+@jit(ahead=(VALUES, VALUES, INDICES, VALUES, VALUES))
 def _feet(x, y, position, angle, radius):
     """Return the feet of the perpendiculars from the returns at ``position`` to the lines, m."""
     foot = np.empty((position.size, 2))
@@ -388,7 +329,7 @@ def _feet(x, y, position, angle, radius):
     return foot
 
 
-@jit
+@jit(ahead=(VALUES, ROWS, REAL, REAL, ROWS))
 def _usable(line, line_covariance, angle, radius, normal_covariance):
     """Return whether a fit is finite everywhere with a positive-definite normal covariance."""
     total = line.sum() + line_covariance.sum() + angle + radius + normal_covariance.sum()
@@ -397,31 +338,40 @@ def _usable(line, line_covariance, angle, radius, normal_covariance):
 
 
 @jit_inline
-def _corners(x, y, walls, first, last, full_turn, step_rad, range_sigma, bearing_sigma,
-             settings, density):
+def _corners(contour, walls, grid, noise, settings, density):
     """
     Intersect neighbouring walls (across the seam on a full turn) and keep the real corners.
 
     A pair makes a corner when its walls are not close to parallel (min_corner_angle) and both
     end at the intersection (:func:`~.corners.walls_end_at`).
 
-    :return: (first wall, second wall, position (C, 2) m, yaw (C,) rad, opening angle (C,) rad,
-        whether each wall's end was seen (C, 2)) of the corners
+    :return: the corners, their covariance the walls' before the model error
+        (:class:`~.records.CornerArrays`)
     """
-    angle, radius, line, line_covariance, line_offset, start_xy, end_xy = (
-        walls[0], walls[1], walls[3], walls[4], walls[5], walls[6], walls[7])
-    count = angle.size
-    pairs = count if full_turn and count >= 3 else count - 1   # the last meets the first
+    count = walls.angle_rad.size
+    pairs = count if grid.full_turn and count >= 3 else count - 1   # the last meets the first
     first_wall = np.arange(max(pairs, 0))
     second_wall = (first_wall + 1) % max(count, 1)
     kept, xy, yaw, covariance, opening = corner_candidates(
-        line, line_covariance, start_xy, end_xy, first_wall, second_wall,
-        settings.min_corner_angle_rad, line_offset, settings.common_range_sigma_m)
-    first_wall, second_wall = first_wall[kept], second_wall[kept]
-    keep, seen = walls_end_at(
-        xy, covariance, first_wall, second_wall, angle, radius, 0.5 * (start_xy + end_xy), x, y,
-        last, first, step_rad, range_sigma, bearing_sigma, density.corner_end_sigmas,
-        settings.corner_end_floor_m, density.corner_window, _CORNER_MISSING_BEAMS,
-        settings.end_offset_sigmas)
-    return (first_wall[keep], second_wall[keep], xy[keep], yaw[keep], opening[keep],
-            seen[keep])
+        walls.line, walls.line_covariance, walls.start_xy_m, walls.end_xy_m, first_wall,
+        second_wall, settings.min_corner_angle_rad, walls.line_offset_jacobian,
+        settings.common_range_sigma_m)
+    candidates = CornerCandidates(xy, covariance, first_wall[kept], second_wall[kept])
+    keep, seen = walls_end_at(candidates, walls, contour, grid.step_rad, noise,
+                              CornerEndRule(density.corner_end_sigmas,
+                                            settings.corner_end_floor_m, density.corner_window,
+                                            settings.end_offset_sigmas))
+    return CornerArrays(xy[keep], yaw[keep], covariance[keep], opening[keep],
+                        candidates.first_wall[keep], candidates.second_wall[keep], seen[keep])
+
+
+# Every kernel :func:`_features_of_scan` calls (with those of :func:`_fit_walls`, :func:`_corners`
+# and :func:`~.corners.walls_end_at`, inlined into it), in the order it calls them: the one list
+# of what :mod:`.precompile` compiles ahead, each with the types declared at its definition.
+PIPELINE_KERNELS = (
+    _no_segments, _no_corners, valid_returns, range_sigma_of_returns, breakpoints_of, chains_of,
+    pass_budget, _split_threshold, split_iepf, merge_segments, _large_enough, trim_ambiguous,
+    trim_offset, _in_scan_order, fit_segments, residual_chi2_dof, _feet, _usable,
+    corner_candidates, end_window, wall_at_corner, along_wall, corner_zone,
+    without_object_in_front, reaches, short_of_corner, goes_on, blocked, seen_through,
+    with_model_error)

@@ -11,10 +11,11 @@ thread in. The kernels are separate units in the cache, though, and numba looks 
 compiles one: so helper processes compile kernels into the cache while this process compiles the
 pipeline, and this process loads theirs when it comes to them. It walks the pipeline from its
 first step; the helpers take the kernels from the last step back
-(:func:`.pipeline.kernels_last_first`, each helper every k-th), so that they meet in the middle
-and little is compiled twice. The pipeline function itself, which has every kernel linked into
-its module, is compiled here in any case (4-5 s of the 20). When this process is done, helpers
-still running are only compiling what it has already saved, and are stopped.
+(:data:`.pipeline.PIPELINE_KERNELS` backwards, each with the argument types declared at its
+definition: :func:`.pipeline.kernels_last_first`; each helper every k-th), so that they meet in
+the middle and little is compiled twice. The pipeline function itself, which has every kernel
+linked into its module, is compiled here in any case (4-5 s of the 20). When this process is
+done, helpers still running are only compiling what it has already saved, and are stopped.
 """
 
 import glob
@@ -27,7 +28,7 @@ from typing import List, Optional
 
 import numpy as np
 
-from ._jit import cache_folder
+from ._jit import cache_folder, use_disk_cache
 from .pipeline import _features_of_scan, extract_features, kernels_last_first
 
 # With three, the kernels' 11-12 s of a 2-core VM come to about 3 s per process, less than the
@@ -47,6 +48,7 @@ def warm_up(helpers: Optional[int] = None) -> float:
     :return: how long it took, s
     """
     started = time.perf_counter()
+    use_disk_cache()
     count = default_helpers() if helpers is None else helpers
     running = start_helpers(count) if count > 0 and not pipeline_is_cached() else []
     try:
@@ -77,7 +79,9 @@ def pipeline_is_cached() -> bool:
     Return whether numba's cache holds the compiled pipeline, or cannot hold anything.
 
     Either way helpers would not help: the pipeline loads, or nothing they compile is kept.
+    Sets up the cache first (:func:`._jit.use_disk_cache`): stale kernels are not the pipeline.
     """
+    use_disk_cache()
     folder = cache_folder()
     function = getattr(_features_of_scan, 'py_func', None)   # None: NUMBA_DISABLE_JIT is set
     if folder is None or function is None:
@@ -121,6 +125,7 @@ def compile_share(share: int, shares: int, parent_pid: int) -> None:
     :param shares: how many helpers share the kernels
     :param parent_pid: the process that started the helper
     """
+    use_disk_cache()
     for kernel, argument_types in kernels_last_first()[share::shares]:
         if os.getppid() != parent_pid:
             return

@@ -6,10 +6,12 @@
 import numpy as np
 
 from ._jit import jit
+from ._types import READ_ONLY_VALUES, REAL, VALUES
+from ..records import Returns
 from ..scan import _LARGEST_RANGE
 
 
-@jit
+@jit(ahead=(VALUES, READ_ONLY_VALUES, READ_ONLY_VALUES, REAL, REAL, REAL, REAL))
 def valid_returns(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, range_min_m,
                   range_max_m):
     """
@@ -25,7 +27,7 @@ def valid_returns(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, range_
     :param angle_increment_rad: bearing step, rad
     :param range_min_m: closest valid range, m
     :param range_max_m: farthest valid range, m
-    :return: (beam index (n,), range (n,) m, bearing (n,) rad, x (n,) m, y (n,) m)
+    :return: the returns (:class:`~.records.Returns`)
     """
     farthest = min(range_max_m, _LARGEST_RANGE)
     index = np.empty(ranges_m.size, np.intp)
@@ -44,4 +46,4 @@ def valid_returns(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, range_
         range_m[k] = ranges_m[i]
         bearing[k] = angle_min_rad + i * angle_increment_rad
         x[k], y[k] = range_m[k] * cos[i], range_m[k] * sin[i]
-    return index, range_m, bearing, x, y
+    return Returns(index, range_m, bearing, x, y)

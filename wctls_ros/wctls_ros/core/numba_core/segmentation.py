@@ -19,6 +19,8 @@ import numpy as np
 
 from ._jit import jit
 from ._order import stable_order, wrapped
+from ._types import FLAG, FLAGS, GRID, INTEGER, LINES, NOISE, REAL, RETURNS, SEGMENTS, VALUES
+from ..records import Lines, Segments
 
 # A chord shorter than this (m) has no usable direction: distances are measured from its start.
 _MIN_CHORD_M = 1e-9
@@ -29,7 +31,7 @@ _BUDGET_LEVELS_PER_DOUBLING = 2
 _BUDGET_EXTRA_PASSES = 8
 
 
-@jit
+@jit(ahead=(INTEGER,))
 def pass_budget(count: int) -> int:
     """
     Return how many whole-contour passes IEPF (and merging) may make on a scan.
@@ -66,9 +68,8 @@ def _reach_factor(beams, step_rad, lambda_rad):
     return math.sin(dphi) / math.sin(lambda_rad - dphi) if dphi < lambda_rad else -1.0
 
 
-@jit
-def breakpoints_of(index, x_m, y_m, range_m, beam_count, step_rad, full_turn, range_sigma_m,
-                   bearing_sigma_rad, lambda_rad, max_missing_beams, noise_sigmas):
+@jit(ahead=(RETURNS, GRID, NOISE, REAL, INTEGER, REAL))
+def breakpoints_of(returns, grid, noise, lambda_rad, max_missing_beams, noise_sigmas):
     """
     Mark where the adaptive breakpoint rule of Borges and Aldon separates neighbouring returns.
 
@@ -85,21 +86,18 @@ def breakpoints_of(index, x_m, y_m, range_m, beam_count, step_rad, full_turn, ra
     (merging may restore it) unless it is a gap or the distance exceeds the allowance by more
     than 5 sqrt(2) sigma: a discontinuity (an occlusion, a range jump).
 
-    :param index: beam index of every return, shape (n,)
-    :param x_m: x of every return, shape (n,), m
-    :param y_m: y of every return, shape (n,), m
-    :param range_m: range of every return, shape (n,), m
-    :param beam_count: beams of the scan, valid or not
-    :param step_rad: |angle_increment|, rad
-    :param full_turn: whether the beams cover a full turn
-    :param range_sigma_m: range noise std, m
-    :param bearing_sigma_rad: bearing noise std, rad
+    :param returns: the scan's valid returns in beam order
+    :param grid: the scan's beams
+    :param noise: the noise (the rule decides with its deciding_sigma_m)
     :param lambda_rad: worst incidence angle still treated as one surface, rad
     :param max_missing_beams: most invalid beams between two returns of one chain
     :param noise_sigmas: k, the allowance for noise in sigmas of a return's position noise
     :return: (separated (n,), joinable (n,)): return i against return i - 1 (entry 0 against
         the last return, across the seam)
     """
+    index, x_m, y_m, range_m = returns.beam_index, returns.x_m, returns.y_m, returns.range_m
+    beam_count, step_rad = grid.beam_count, grid.step_rad
+    range_sigma_m, bearing_sigma_rad = noise.deciding_sigma_m, noise.bearing_sigma_rad
     n = index.size
     separated = np.zeros(n, np.bool_)
     joinable = np.zeros(n, np.bool_)
@@ -127,19 +125,19 @@ def breakpoints_of(index, x_m, y_m, range_m, beam_count, step_rad, full_turn, ra
         r = min(range_m[i], range_m[before])
         dx, dy = x_m[i] - x_m[before], y_m[i] - y_m[before]
         surface = r * reach
-        noise = math.sqrt(range_sigma_m ** 2 + (r * bearing_sigma_rad) ** 2)
+        sigma = math.sqrt(range_sigma_m ** 2 + (r * bearing_sigma_rad) ** 2)
         distance = math.sqrt(dx * dx + dy * dy)
         gap = beams - 1.0 >= max_missing_beams + 0.5
-        separated[i] = reach < 0.0 or gap or distance > surface + noise_sigmas * noise
+        separated[i] = reach < 0.0 or gap or distance > surface + noise_sigmas * sigma
         joinable[i] = (separated[i] and reach >= 0.0 and not gap
-                       and distance <= surface + _JOINABLE_SIGMAS * noise)
-    if not full_turn or n == 1:
+                       and distance <= surface + _JOINABLE_SIGMAS * sigma)
+    if not grid.full_turn or n == 1:
         separated[0], joinable[0] = True, False
     return separated, joinable
 
 
-@jit
-def chains_of(range_m, x_m, y_m, separated):
+@jit(ahead=(RETURNS, FLAGS))
+def chains_of(returns, separated):
     """
     Group the returns into chains between breakpoints, in circular order.
 
@@ -147,13 +145,12 @@ def chains_of(range_m, x_m, y_m, separated):
     the return farthest from s, both left out like IEPF split points, into two arcs of one
     chain: a choice that depends neither on where the scan's seam lies nor on the beam order.
 
-    :param range_m: range of every return in beam order, shape (n,), m
-    :param x_m: x of every return, shape (n,), m
-    :param y_m: y of every return, shape (n,), m
+    :param returns: the scan's valid returns in beam order
     :param separated: where returns start a new chain (from :func:`breakpoints_of`), shape (n,)
-    :return: (the returns' indices in circular order (n,); each run's first position (K,), one
-        past its last (K,) and its chain (K,): the two arcs of a closed contour are one chain)
+    :return: (the returns' indices in circular order (n,); the runs between breakpoints, as
+        :class:`~.records.Segments`: the two arcs of a closed contour are one chain)
     """
+    range_m, x_m, y_m = returns.range_m, returns.x_m, returns.y_m
     n = range_m.size
     breaks = np.nonzero(separated)[0]
     if n and breaks.size == 0:
@@ -177,11 +174,11 @@ def chains_of(range_m, x_m, y_m, separated):
     order = np.empty(n, np.intp)
     for position in range(n):
         order[position] = wrapped(first + position, n)
-    return order, start, stop, chain
+    return order, Segments(start, stop, chain)
 
 
-@jit
-def split_iepf(x_m, y_m, start, stop, chain, threshold_m, max_levels):
+@jit(ahead=(VALUES, VALUES, SEGMENTS, VALUES, INTEGER))
+def split_iepf(x_m, y_m, runs, threshold_m, max_levels):
     """
     Split runs of returns where a return lies farther than a threshold from the run's chord.
 
@@ -195,14 +192,13 @@ def split_iepf(x_m, y_m, start, stop, chain, threshold_m, max_levels):
 
     :param x_m: x of the returns in circular order, shape (n,), m
     :param y_m: y of the returns in circular order, shape (n,), m
-    :param start: first position of each run, shape (K,)
-    :param stop: one past the last position of each run, shape (K,)
-    :param chain: the chain of each run, shape (K,)
+    :param runs: the runs between breakpoints
     :param threshold_m: split distance of every return, shape (n,), m
     :param max_levels: the most split passes
-    :return: (start (S,), stop (S,), chain (S,) of the straight pieces with at least
-        MIN_FIT_RETURNS returns; whether pieces were left out because the passes ran out)
+    :return: (the straight pieces with at least MIN_FIT_RETURNS returns; whether pieces were
+        left out because the passes ran out)
     """
+    start, stop, chain = runs.start, runs.stop, runs.chain
     n = x_m.size
     out_start = np.empty(n + 1, np.intp)
     out_stop = np.empty(n + 1, np.intp)
@@ -251,7 +247,7 @@ def split_iepf(x_m, y_m, start, stop, chain, threshold_m, max_levels):
             else:
                 out_start[found], out_stop[found], out_chain[found] = first, end, chain[run]
                 found += 1
-    return out_start[:found], out_stop[:found], out_chain[:found], unsplit
+    return Segments(out_start[:found], out_stop[:found], out_chain[:found]), unsplit
 
 
 @jit
@@ -302,9 +298,8 @@ def moment_line(x_m, y_m, first, stop, range_sigma_m, bearing_sigma_rad):
             scatter / count + offset * offset * var_angle)
 
 
-@jit
-def merge_segments(x_m, y_m, start, stop, chain, circular, joinable, range_sigma_m,
-                   bearing_sigma_rad, chi2_threshold, max_passes):
+@jit(ahead=(VALUES, VALUES, SEGMENTS, FLAG, FLAGS, NOISE, REAL, INTEGER))
+def merge_segments(x_m, y_m, segments, circular, joinable, noise, chi2_threshold, max_passes):
     """
     Merge neighbouring segments that are statistically the same line.
 
@@ -321,20 +316,18 @@ def merge_segments(x_m, y_m, start, stop, chain, circular, joinable, range_sigma
 
     :param x_m: x of the returns in circular order, shape (n,), m
     :param y_m: y of the returns in circular order, shape (n,), m
-    :param start: first position of each segment, sorted, shape (S,)
-    :param stop: one past the last position, shape (S,)
-    :param chain: the chain of each segment, shape (S,)
+    :param segments: the segments, sorted by start
     :param circular: whether the returns cover a full turn
     :param joinable: per position, whether a merge may cross the break before it, shape (n,)
-    :param range_sigma_m: range noise std, m
-    :param bearing_sigma_rad: bearing noise std, rad
+    :param noise: the noise (merging decides with its deciding_sigma_m)
     :param chi2_threshold: merge below this squared Mahalanobis distance (0: never)
     :param max_passes: the most merging passes
-    :return: (start, stop, chain, angle rad, radius m of the merged segments' fits; whether
-        the passes ran out)
+    :return: (the merged segments, their fits' :class:`~.records.Lines`, whether the passes
+        ran out)
     """
     n = x_m.size
-    start, stop, chain = start.copy(), stop.copy(), chain.copy()
+    range_sigma_m, bearing_sigma_rad = noise.deciding_sigma_m, noise.bearing_sigma_rad
+    start, stop, chain = segments.start.copy(), segments.stop.copy(), segments.chain.copy()
     angle, radius = np.empty(start.size), np.empty(start.size)
     for passes in range(max_passes + 1):
         count = start.size
@@ -371,7 +364,7 @@ def merge_segments(x_m, y_m, start, stop, chain, circular, joinable, range_sigma
         if candidates == 0:
             break
         if passes == max_passes:
-            return start, stop, chain, angle, radius, True
+            return Segments(start, stop, chain), Lines(angle, radius), True
         used = np.zeros(count, np.bool_)
         # Chains joined by a merged segment are one chain from now on: union by root.
         labels = 1
@@ -408,7 +401,7 @@ def merge_segments(x_m, y_m, start, stop, chain, circular, joinable, range_sigma
             new_start[out], new_stop[out], new_chain[out] = start[s], stop[s], label
             out += 1
         start, stop, chain = new_start, new_stop, new_chain
-    return start, stop, chain, angle, radius, False
+    return Segments(start, stop, chain), Lines(angle, radius), False
 
 
 @jit
@@ -420,9 +413,8 @@ def _within(start, stop, n):
             stop[s] -= n
 
 
-@jit
-def trim_ambiguous(start, stop, chain, circular, x_m, y_m, angle_rad, radius_m, range_sigma_m,
-                   bearing_sigma_rad, min_returns, window):
+@jit(ahead=(SEGMENTS, FLAG, VALUES, VALUES, LINES, NOISE, INTEGER, INTEGER))
+def trim_ambiguous(segments, circular, x_m, y_m, lines, noise, min_returns, window):
     """
     Drop the returns at the meeting ends of two neighbouring segments that could fit both lines.
 
@@ -437,23 +429,22 @@ def trim_ambiguous(start, stop, chain, circular, x_m, y_m, angle_rad, radius_m, 
     when both meet a neighbour (so that the rule does not depend on the beam order). At most
     ``window`` returns are examined at each end.
 
-    :param start: first position of each segment, sorted, shape (S,)
-    :param stop: one past the last position (modulo n), shape (S,)
-    :param chain: the chain of each segment, shape (S,)
+    :param segments: the segments, sorted by start (stop modulo n)
     :param circular: whether the returns cover a full turn (the last and first can meet)
     :param x_m: x of the returns in circular order, shape (n,), m
     :param y_m: y of the returns in circular order, shape (n,), m
-    :param angle_rad: normal angle of each segment's line, shape (S,), rad
-    :param radius_m: radius of each segment's line, shape (S,), m
-    :param range_sigma_m: range noise std, m
-    :param bearing_sigma_rad: bearing noise std, rad
+    :param lines: each segment's line
+    :param noise: the noise (the rule decides with its deciding_sigma_m)
     :param min_returns: never trim a segment below this many returns
     :param window: most returns examined at each end
-    :return: (start, stop, chain) of the trimmed segments
+    :return: the trimmed segments
     """
+    start, stop, chain = segments.start, segments.stop, segments.chain
+    angle_rad, radius_m = lines.angle_rad, lines.radius_m
+    range_sigma_m, bearing_sigma_rad = noise.deciding_sigma_m, noise.bearing_sigma_rad
     n, count = x_m.size, start.size
     if count < 2:
-        return start, stop, chain
+        return segments
     meets = np.empty(count, np.bool_)
     for k in range(count):
         j = k + 1 if k + 1 < count else 0
@@ -492,12 +483,11 @@ def trim_ambiguous(start, stop, chain, circular, x_m, y_m, angle_rad, radius_m, 
         new_stop[k] -= min(cut_end[k], allowance)
         new_start[k] += min(cut_start[k], allowance)
     _within(new_start, new_stop, n)
-    return new_start, new_stop, chain
+    return Segments(new_start, new_stop, chain)
 
 
-@jit
-def trim_offset(start, stop, chain, x_m, y_m, angle_rad, radius_m, range_sigma_m,
-                bearing_sigma_rad, min_returns, threshold_sigmas, window):
+@jit(ahead=(SEGMENTS, VALUES, VALUES, LINES, NOISE, INTEGER, REAL, INTEGER))
+def trim_offset(segments, x_m, y_m, lines, noise, min_returns, threshold_sigmas, window):
     """
     Cut off the returns at segment ends that lie off the segment's line together.
 
@@ -520,20 +510,19 @@ def trim_offset(start, stop, chain, x_m, y_m, angle_rad, radius_m, range_sigma_m
     returns a segment has beyond ``min_returns``, so that the rule does not depend on the beam
     order. At most ``window`` returns are examined at each end.
 
-    :param start: first position of each segment, sorted, shape (S,)
-    :param stop: one past the last position (modulo n), shape (S,)
-    :param chain: the chain of each segment, shape (S,)
+    :param segments: the segments, sorted by start (stop modulo n)
     :param x_m: x of the returns in circular order, shape (n,), m
     :param y_m: y of the returns in circular order, shape (n,), m
-    :param angle_rad: normal angle of each segment's line (the frame), shape (S,), rad
-    :param radius_m: radius of each segment's line, shape (S,), m
-    :param range_sigma_m: range noise std, m
-    :param bearing_sigma_rad: bearing noise std, rad
+    :param lines: each segment's line (the frame)
+    :param noise: the noise (the rule decides with its deciding_sigma_m)
     :param min_returns: never trim a segment below this many returns
     :param threshold_sigmas: cut where max_k |Z_k| / sqrt(Var(Z_k)) exceeds this
     :param window: most returns examined at each end
-    :return: (start, stop, chain) of the trimmed segments
+    :return: the trimmed segments
     """
+    start, stop, chain = segments.start, segments.stop, segments.chain
+    angle_rad, radius_m = lines.angle_rad, lines.radius_m
+    range_sigma_m, bearing_sigma_rad = noise.deciding_sigma_m, noise.bearing_sigma_rad
     n, count = x_m.size, start.size
     new_start, new_stop = start.copy(), stop.copy()
     limit = threshold_sigmas * threshold_sigmas
@@ -591,4 +580,4 @@ def trim_offset(start, stop, chain, x_m, y_m, angle_rad, radius_m, range_sigma_m
                 else:
                     new_start[s] += cut
     _within(new_start, new_stop, n)
-    return new_start, new_stop, chain
+    return Segments(new_start, new_stop, chain)

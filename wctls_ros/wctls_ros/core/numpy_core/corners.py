@@ -24,7 +24,12 @@ from typing import Optional
 
 import numpy as np
 
-from ..features import CornerSet
+from ..features import CornerSet, SegmentSet
+from ..records import AlongWall, CornerEndRule, EndWindow, Noise, WallAtCorner
+
+# A corner may sit one beam without a return beyond a wall's last return (a dropout there),
+# reported with that wall's end not seen; farther, it is an extrapolation, not a corner.
+CORNER_MISSING_BEAMS = 1
 
 # The upper triangle of the symmetric (x, y, yaw) covariance, row by row: (row, column) of each
 # of its six entries, and which of them each entry of the full matrix is.
@@ -120,7 +125,7 @@ def find_corners(line: np.ndarray, line_covariance: np.ndarray,
     Intersect the given pairs of segments that are not close to parallel.
 
     A pair is rejected when its lines are closer to parallel than ``min_angle_rad``; whether
-    both walls really end at the intersection is :func:`walls_end_at_corners`' question.
+    both walls really end at the intersection is :func:`walls_end_at`'s question.
 
     :param line: (a, b, c) of every segment in the method's form, shape (S, 3)
     :param line_covariance: covariance of (a, b, c), shape (S, 3, 3)
@@ -198,191 +203,282 @@ def find_corners(line: np.ndarray, line_covariance: np.ndarray,
                      np.ones((kept.size, 2), dtype=bool))
 
 
-def _wrapped(angle: np.ndarray) -> np.ndarray:
-    """Return angles wrapped to [-pi, pi)."""
-    return np.remainder(angle + np.pi, 2.0 * np.pi) - np.pi
-
-
-def walls_end_at_corners(corners: CornerSet, wall_angle_rad: np.ndarray,
-                         wall_radius_m: np.ndarray, wall_middle_m: np.ndarray,
-                         x_m: np.ndarray, y_m: np.ndarray, last_position: np.ndarray,
-                         first_position: np.ndarray, step_rad: float, range_sigma_m: float,
-                         bearing_sigma_rad: float, sigmas: float, floor_m: float, window: int,
-                         max_missing_beams: int, run_sigmas: float):
+def end_window(x_m: np.ndarray, y_m: np.ndarray, after_first: np.ndarray,
+               before_second: np.ndarray, noise: Noise, rule: CornerEndRule) -> EndWindow:
     """
-    Tell which corners both walls end at, and at which the end was seen.
+    Gather the returns between two walls that the corner end rule looks at, for every corner.
 
-    A corner is the point where two walls end; adjacent segments whose lines merely intersect
-    near their ends (across an occlusion, a gap, a T-junction seen from the side where one wall
-    goes on) are not corners. The returns between the first wall's last return and the second
-    wall's first one (left out of both segments) are sorted by where they lie: on one of the
-    two lines (within ``sigmas`` standard deviations of a return's position noise plus
-    ``floor_m``), around the corner (where both lines are within the noise of each other, and
-    a beam's footprint on both walls returns a range in between: an inside corner looks
-    rounded), in front of both lines (an occluder) or elsewhere. Each wall reaches as far
-    towards the corner as its returns do, also beyond something in front of it (e.g. a leg),
-    unless those returns lie in front of its line together (their residuals over the noise sum
-    to more than ``run_sigmas`` times the square root of their number, the test of
-    :func:`trim_offset_ends`): an object before the wall's end.
-    The corner is rejected when
+    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.end_window`).
 
-    - a wall's line carries returns past the corner: the wall goes on, it does not end there;
-    - anything lies between the two reaches: an occluder at the corner, or a view through a
-      gap where the walls do not meet;
-    - a wall's reach stops short of the corner by more than ``sigmas`` standard deviations of
-      the corner's position along that wall, plus ``floor_m``, plus ``1 + max_missing_beams``
-      beams' spacing on the wall: the corner is an extrapolation across an unseen stretch;
-    - a wall is seen through where it would have to stand (:func:`_seen_through`).
-
-    A wall's end is seen when its reach is within one beam's spacing of that bound.
-
-    :param corners: candidate corners
-    :param wall_angle_rad: normal angle of every segment's line, shape (S,), rad
-    :param wall_radius_m: radius of every segment's line, shape (S,), m
-    :param wall_middle_m: middle of every segment, shape (S, 2), m (tells its side of a corner)
     :param x_m: x of the returns in position order, shape (n,), m
     :param y_m: y of the returns in position order, shape (n,), m
-    :param last_position: position of every segment's last return, shape (S,)
-    :param first_position: position of every segment's first return, shape (S,)
-    :param step_rad: bearing step between beams, rad
-    :param range_sigma_m: range noise std, m
-    :param bearing_sigma_rad: bearing noise std, rad
-    :param sigmas: tolerance in standard deviations
-    :param floor_m: tolerance floor, m
-    :param window: most returns between the two walls (more: not adjacent)
-    :param max_missing_beams: most beams without a return between a corner and a wall's reach
-    :param run_sigmas: largest sum of normalised residuals (in front) over sqrt(count) of the
-        returns a wall claims beyond its segment (0: no such test)
-    :return: (corners both walls end at, shape (C,); whether each wall's end was seen, shape
-        (C, 2), column 0 the first wall)
+    :param after_first: position of each first wall's last return, shape (C,)
+    :param before_second: position of each second wall's first return, shape (C,)
+    :param noise: the noise (the rule decides with its deciding_sigma_m)
+    :param rule: the rule's tolerances
+    :return: the windows, each field shape (C, W) (``between`` (C,))
     """
-    count = len(x_m)
-    walls = np.stack([corners.first_segment, corners.second_segment])        # (2, C)
-    after_first, before_second = last_position[walls[0]], first_position[walls[1]]
-    between = (before_second - after_first - 1) % count
-    # Column 0 is the first wall's facing end, the last column the second's; between them the
-    # returns that belong to neither segment (absent where there are fewer).
-    steps = np.arange(window + 2)
+    steps = np.arange(rule.window + 2)
+    between = (before_second - after_first - 1) % len(x_m)
     position = after_first[:, None] + steps
     position[:, -1] = before_second
-    present = (steps <= between[:, None]) | (steps == window + 1)
     x, y = x_m.take(position, mode='wrap'), y_m.take(position, mode='wrap')
-    corner = corners.xy_m.T[:, :, None]                                     # (2, C, 1)
-    corner_range = np.hypot(*corners.xy_m.T)
-    noise = np.sqrt(range_sigma_m ** 2 + (x * x + y * y) * bearing_sigma_rad ** 2)
-    line_tolerance = sigmas * noise + floor_m
-    # Per wall: its unit normal and the unit direction from the corner into the wall.
-    normal = np.stack([np.cos(wall_angle_rad[walls]), np.sin(wall_angle_rad[walls])])
-    inward = np.stack([-normal[1], normal[0]])                              # (2, 2, C)
-    towards_middle = ((wall_middle_m[walls].transpose(2, 0, 1) - corner[:, None, :, 0])
-                      * inward).sum(axis=0)
-    inward *= np.copysign(1.0, towards_middle)
-    # Each return's offset in front of each line (towards the sensor) and along each wall.
-    offset = x * normal[0, :, :, None] + y * normal[1, :, :, None]
-    in_front = wall_radius_m[walls][:, :, None] - offset                   # (2, C, W)
-    along = ((x - corner[0]) * inward[0, :, :, None]
-             + (y - corner[1]) * inward[1, :, :, None])                     # (2, C, W)
-    on_line = present & (np.abs(in_front) <= line_tolerance)
-    occluder = present & (in_front > line_tolerance).all(axis=0)
-    # The corner's std along each wall, and how far apart the wall's returns are there.
-    along_sigma = np.sqrt(np.einsum('ikc,cij,jkc->kc', inward, corners.covariance[:, :2, :2],
-                                    inward))
-    incidence = np.abs((normal * corners.xy_m.T[:, None, :]).sum(axis=0)) / corner_range
-    spacing = corner_range * step_rad / np.maximum(incidence, 1e-3)
-    tolerance = sigmas * along_sigma + floor_m                              # (2, C)
-    # Returns this close to the corner belong to either wall (the lines are within the noise
-    # of each other there, and within a beam a footprint on both walls returns a range in
-    # between).
-    sine = np.abs(normal[0, 0] * normal[1, 1] - normal[1, 0] * normal[0, 1])
-    corner_noise = np.sqrt(range_sigma_m ** 2 + (corner_range * bearing_sigma_rad) ** 2)
-    zone = (sigmas * np.hypot(corner_noise, along_sigma.max(axis=0)) / sine + floor_m
-            + spacing.min(axis=0))
-    at_corner = present & (np.hypot(x - corner[0], y - corner[1]) <= zone[:, None])
-    # Returns away from the corner that a wall claims beyond its segment (past something in
-    # front of it) must not lie in front of its line together, by the test of
-    # trim_offset_ends: a run of returns each within the noise of the line but all nearer is
-    # an object standing before the wall. (All farther is the wall itself, a few mm off
-    # straight.)
-    claimed = on_line & (along >= -tolerance[:, :, None]) & ~at_corner
-    claimed[:, :, 0] = claimed[:, :, -1] = False
-    run = claimed.sum(axis=2)
-    together = np.where(claimed, in_front / noise, 0.0).sum(axis=2) / np.sqrt(np.maximum(run, 1))
-    if run_sigmas > 0.0:
-        claimed &= (together > run_sigmas)[:, :, None]
-        on_line &= ~claimed
-    here = at_corner | (on_line & (along >= -tolerance[:, :, None]))        # (2, C, W)
-    goes_on = (~at_corner & on_line & ~on_line[::-1]
-               & (along < -tolerance[:, :, None])).any(axis=(0, 2))
-    # Each wall's anchor: its last own return short of the corner zone (the facing end if
-    # none). Beyond something in front of a wall its own returns may go on; around the corner
-    # itself nothing may interrupt the run from one wall to the other.
-    own = on_line & (along >= -tolerance[:, :, None]) & ~at_corner
-    first_anchor = np.where(own[0], steps, 0).max(axis=1)
-    second_anchor = np.where(own[1], steps, window + 1).min(axis=1)
-    interrupts = present & ~here[0] & ~here[1]
-    before_first = steps < first_anchor[:, None]
-    after_second = steps > second_anchor[:, None]
-    blocked = ((interrupts & ~occluder & (before_first | after_second))
-               | (interrupts & ~before_first & ~after_second)).any(axis=1)
-    # How far each wall's own returns stop short of the corner, beyond the tolerance, in beams.
-    gap = np.where(on_line & here, np.maximum(along, 0.0), np.inf).min(axis=2)
-    short = np.maximum(gap - tolerance, 0.0) / spacing
-    keep = ((between <= window) & here[0, :, 0] & here[1, :, -1] & ~goes_on & ~blocked
-            & (short <= 1.0 + max_missing_beams).all(axis=0))
-    if run_sigmas > 0.0:
-        # Wall 0's stretch is crossed by the sight lines after its last return up to wall 1's
-        # last; wall 1's by those from wall 0's first return up to its own first.
-        spans = ((after_first + 1, last_position[walls[1]]),
-                 (first_position[walls[0]], before_second - 1))
-        for c in np.flatnonzero(keep):
-            for k, (start, stop) in enumerate(spans):
-                crossing = np.arange(start[c], start[c] + (stop[c] - start[c]) % count + 1)
-                if _seen_through(corners.xy_m[c], normal[:, k, c], wall_radius_m[walls[k, c]],
-                                 inward[:, k, c], tolerance[k, c], normal[:, 1 - k, c],
-                                 wall_radius_m[walls[1 - k, c]],
-                                 x_m.take(crossing, mode='wrap'), y_m.take(crossing, mode='wrap'),
-                                 range_sigma_m, bearing_sigma_rad, sigmas, floor_m, run_sigmas):
-                    keep[c] = False
-    return keep, (short <= 1.0).T
+    sigma = np.sqrt(noise.deciding_sigma_m ** 2 + (x * x + y * y) * noise.bearing_sigma_rad ** 2)
+    return EndWindow(x, y, sigma, rule.sigmas * sigma + rule.floor_m,
+                     (steps <= between[:, None]) | (steps == rule.window + 1), between)
 
 
-def _seen_through(corner_xy_m: np.ndarray, normal: np.ndarray, radius_m: float,
-                  inward: np.ndarray, along_tolerance_m: float, other_normal: np.ndarray,
-                  other_radius_m: float, x_m: np.ndarray, y_m: np.ndarray, range_sigma_m: float,
-                  bearing_sigma_rad: float, sigmas: float, floor_m: float,
-                  run_sigmas: float) -> bool:
+def wall_at_corner(walls: SegmentSet, wall: np.ndarray, corner_xy_m: np.ndarray,
+                   corner_covariance: np.ndarray, step_rad: float,
+                   rule: CornerEndRule) -> WallAtCorner:
+    """
+    Describe one wall of every corner as seen from the corner.
+
+    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.wall_at_corner`).
+
+    :param walls: the walls
+    :param wall: which wall of each corner, shape (C,)
+    :param corner_xy_m: the corners, shape (C, 2), m
+    :param corner_covariance: their (x, y, yaw) covariance, shape (C, 3, 3)
+    :param step_rad: bearing step between beams, rad
+    :param rule: the rule's tolerances
+    :return: the walls, each field shape (C,)
+    """
+    corner_x, corner_y = corner_xy_m[:, 0], corner_xy_m[:, 1]
+    normal_x, normal_y = np.cos(walls.angle_rad[wall]), np.sin(walls.angle_rad[wall])
+    middle = 0.5 * (walls.start_xy_m[wall] + walls.end_xy_m[wall])
+    inward = np.stack([-normal_y, normal_x])                                # (2, C)
+    inward *= np.copysign(1.0, ((middle.T - corner_xy_m.T) * inward).sum(axis=0))
+    along_sigma = np.sqrt(np.einsum('ic,cij,jc->c', inward, corner_covariance[:, :2, :2], inward))
+    corner_range = np.hypot(corner_x, corner_y)
+    incidence = np.abs(normal_x * corner_x + normal_y * corner_y) / corner_range
+    return WallAtCorner(normal_x, normal_y, walls.radius_m[wall], inward[0], inward[1],
+                        along_sigma, corner_range * step_rad / np.maximum(incidence, 1e-3),
+                        rule.sigmas * along_sigma + rule.floor_m)
+
+
+def along_wall(window: EndWindow, wall: WallAtCorner, corner_x_m: np.ndarray,
+               corner_y_m: np.ndarray) -> AlongWall:
+    """
+    Place the returns of every end window with respect to one wall of its corner.
+
+    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.along_wall`).
+
+    :param window: the end windows
+    :param wall: the wall of each corner
+    :param corner_x_m: x of the corners, shape (C,), m
+    :param corner_y_m: y of the corners, shape (C,), m
+    :return: each field shape (C, W)
+    """
+    offset = window.x_m * wall.normal_x[:, None] + window.y_m * wall.normal_y[:, None]
+    in_front = wall.radius_m[:, None] - offset
+    return AlongWall(in_front, ((window.x_m - corner_x_m[:, None]) * wall.inward_x[:, None]
+                                + (window.y_m - corner_y_m[:, None]) * wall.inward_y[:, None]),
+                     window.in_window & (np.abs(in_front) <= window.line_tolerance_m))
+
+
+def corner_zone(window: EndWindow, corner_x_m: np.ndarray, corner_y_m: np.ndarray,
+                first: WallAtCorner, second: WallAtCorner, noise: Noise,
+                rule: CornerEndRule) -> np.ndarray:
+    """
+    Tell which returns of every end window lie so close to the corner that they fit either wall.
+
+    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.corner_zone`).
+
+    :return: shape (C, W)
+    """
+    sine = np.abs(first.normal_x * second.normal_y - first.normal_y * second.normal_x)
+    corner_noise = np.sqrt(noise.deciding_sigma_m ** 2
+                           + (np.hypot(corner_x_m, corner_y_m) * noise.bearing_sigma_rad) ** 2)
+    zone = (rule.sigmas * np.hypot(corner_noise, np.maximum(first.along_sigma_m,
+                                                            second.along_sigma_m))
+            / sine + rule.floor_m + np.minimum(first.spacing_m, second.spacing_m))
+    return window.in_window & (np.hypot(window.x_m - corner_x_m[:, None],
+                                        window.y_m - corner_y_m[:, None]) <= zone[:, None])
+
+
+def without_object_in_front(window: EndWindow, wall: WallAtCorner, placed: AlongWall,
+                            at_corner: np.ndarray, rule: CornerEndRule) -> np.ndarray:
+    """
+    Return which returns lie on a wall's line, less a run that lies in front of it together.
+
+    docs/derivation.md#corners, "Corner end rule"
+    (:func:`..numba_core.corners.without_object_in_front`; the test of
+    :func:`.segmentation.trim_offset_ends`).
+
+    :return: shape (C, W)
+    """
+    claimed = placed.on_line & (placed.along_m >= -wall.tolerance_m[:, None]) & ~at_corner
+    claimed[:, 0] = claimed[:, -1] = False
+    run = claimed.sum(axis=1)
+    together = (np.where(claimed, placed.in_front_m / window.sigma_m, 0.0).sum(axis=1)
+                / np.sqrt(np.maximum(run, 1)))
+    if rule.run_sigmas <= 0.0:
+        return placed.on_line
+    return placed.on_line & ~(claimed & (together > rule.run_sigmas)[:, None])
+
+
+def reaches(wall: WallAtCorner, placed: AlongWall, on_line: np.ndarray,
+            at_corner: np.ndarray) -> np.ndarray:
+    """
+    Tell which returns of every end window the wall reaches: in the corner zone, or on its line.
+
+    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.reaches`).
+
+    :return: shape (C, W)
+    """
+    return at_corner | (on_line & (placed.along_m >= -wall.tolerance_m[:, None]))
+
+
+def goes_on(first: WallAtCorner, second: WallAtCorner, first_placed: AlongWall,
+            second_placed: AlongWall, first_on_line: np.ndarray, second_on_line: np.ndarray,
+            at_corner: np.ndarray) -> np.ndarray:
+    """
+    Tell at which corners a wall's line carries returns past the corner.
+
+    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.goes_on`).
+
+    :return: shape (C,)
+    """
+    first_past = (first_on_line & ~second_on_line
+                  & (first_placed.along_m < -first.tolerance_m[:, None]))
+    second_past = (second_on_line & ~first_on_line
+                   & (second_placed.along_m < -second.tolerance_m[:, None]))
+    return (~at_corner & (first_past | second_past)).any(axis=1)
+
+
+def blocked(window: EndWindow, first: WallAtCorner, second: WallAtCorner,
+            first_placed: AlongWall, second_placed: AlongWall, first_here: np.ndarray,
+            second_here: np.ndarray, at_corner: np.ndarray) -> np.ndarray:
+    """
+    Tell at which corners anything lies between the two walls' reaches.
+
+    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.blocked`): each
+    wall's anchor is its last own return short of the corner zone (its facing end if none).
+
+    :return: shape (C,)
+    """
+    steps = np.arange(at_corner.shape[1])
+    first_anchor = np.where(first_here & ~at_corner, steps, 0).max(axis=1)
+    second_anchor = np.where(second_here & ~at_corner, steps, steps[-1]).min(axis=1)
+    occluder = (window.in_window & (first_placed.in_front_m > window.line_tolerance_m)
+                & (second_placed.in_front_m > window.line_tolerance_m))
+    interrupts = window.in_window & ~first_here & ~second_here
+    outside = (steps < first_anchor[:, None]) | (steps > second_anchor[:, None])
+    return (interrupts & (~occluder | ~outside)).any(axis=1)
+
+
+def short_of_corner(wall: WallAtCorner, placed: AlongWall, on_line: np.ndarray,
+                    here: np.ndarray) -> np.ndarray:
+    """
+    Return how far a wall's own returns stop short of each corner, in beams beyond its tolerance.
+
+    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.short_of_corner`).
+
+    :return: shape (C,) (inf: none of its returns reaches the corner)
+    """
+    gap = np.where(on_line & here, np.maximum(placed.along_m, 0.0), np.inf).min(axis=1)
+    return np.maximum(gap - wall.tolerance_m, 0.0) / wall.spacing_m
+
+
+def seen_through(corner_x_m: float, corner_y_m: float, wall: WallAtCorner, other: WallAtCorner,
+                 x_m: np.ndarray, y_m: np.ndarray, start: int, stop: int, noise: Noise,
+                 rule: CornerEndRule) -> bool:
     """
     Tell whether the other wall is seen through a wall between its segment and the corner.
 
-    The returns on the other wall's line whose sight lines cross this wall's line farther than
-    ``along_tolerance_m`` into the wall (and that are not in front of it beyond the noise) lie
+    docs/derivation.md#corners, "Seen through" (:func:`..numba_core.corners.seen_through`): the
+    returns on the other wall's line whose sight lines cross this wall's line farther than its
+    tolerance along it into the wall (and that are not in front of it beyond the noise) lie
     behind it together: sum of (distance behind / noise) over sqrt(count) > ``run_sigmas``.
 
-    :param corner_xy_m: the corner, shape (2,), m
-    :param normal: the wall's unit normal, shape (2,)
-    :param radius_m: the wall's radius, m
-    :param inward: unit direction from the corner into the wall, shape (2,)
-    :param along_tolerance_m: how far from the corner a crossing is surely on the wall, m
-    :param other_normal: the other wall's unit normal, shape (2,)
-    :param other_radius_m: the other wall's radius, m
-    :param x_m: x of the returns whose sight lines may cross, shape (m,), m
-    :param y_m: y of those returns, shape (m,), m
-    :param range_sigma_m: range noise std, m
-    :param bearing_sigma_rad: bearing noise std, rad
-    :param sigmas: tolerance in standard deviations
-    :param floor_m: tolerance floor, m
-    :param run_sigmas: largest sum of normalised residuals (behind) over sqrt(count)
+    :param corner_x_m: x of the corner, m
+    :param corner_y_m: y of the corner, m
+    :param wall: the wall at the corner, each field a number
+    :param other: the other wall
+    :param x_m: x of the returns in position order, shape (n,), m
+    :param y_m: y of the returns in position order, shape (n,), m
+    :param start: position of the first return to test (taken modulo n)
+    :param stop: position of the last return to test (taken modulo n, after ``start``)
+    :param noise: the noise (the rule decides with its deciding_sigma_m)
+    :param rule: the rule's tolerances
     :return: whether the wall is seen through
     """
-    noise = np.sqrt(range_sigma_m ** 2 + (x_m ** 2 + y_m ** 2) * bearing_sigma_rad ** 2)
-    line_tolerance = sigmas * noise + floor_m
-    offset = x_m * normal[0] + y_m * normal[1]
-    on_other = np.abs(other_radius_m - x_m * other_normal[0] - y_m * other_normal[1])
+    crossing = np.arange(start, start + (stop - start) % len(x_m) + 1)
+    x, y = x_m.take(crossing, mode='wrap'), y_m.take(crossing, mode='wrap')
+    sigma = np.sqrt(noise.deciding_sigma_m ** 2 + (x ** 2 + y ** 2) * noise.bearing_sigma_rad ** 2)
+    line_tolerance = rule.sigmas * sigma + rule.floor_m
+    offset = x * wall.normal_x + y * wall.normal_y
+    on_other = np.abs(other.radius_m - x * other.normal_x - y * other.normal_y)
     with np.errstate(divide='ignore', invalid='ignore'):
-        crossing = np.column_stack([x_m, y_m]) * (radius_m / offset)[:, None]
-    along = (crossing - corner_xy_m) @ inward
+        sight = np.column_stack([x, y]) * (wall.radius_m / offset)[:, None]
+    inward = np.array([wall.inward_x, wall.inward_y])
+    along = (sight - np.array([corner_x_m, corner_y_m])) @ inward
     tested = ((on_other <= line_tolerance) & (offset > 0.0)
-              & (radius_m - offset <= line_tolerance) & (along > along_tolerance_m))
+              & (wall.radius_m - offset <= line_tolerance) & (along > wall.tolerance_m))
     run = np.count_nonzero(tested)
-    return bool(run) and ((offset - radius_m)[tested] / noise[tested]).sum() / np.sqrt(run) > (
-        run_sigmas)
+    return bool(run) and ((offset - wall.radius_m)[tested] / sigma[tested]).sum() / np.sqrt(
+        run) > rule.run_sigmas
+
+
+def walls_end_at(candidates: CornerSet, walls: SegmentSet, positions: np.ndarray,
+                 x_m: np.ndarray, y_m: np.ndarray, step_rad: float, noise: Noise,
+                 rule: CornerEndRule):
+    """
+    Tell which corners both walls end at, and at which the end was seen.
+
+    docs/derivation.md#corners, "Corner end rule" and "Seen through": the steps and the rule of
+    :func:`..numba_core.corners.walls_end_at`, each over every candidate corner at once (the
+    seen-through test corner by corner, on the corners left).
+
+    :param candidates: candidate corners
+    :param walls: the walls
+    :param positions: positions of every wall's first and last return, shape (2, S)
+    :param x_m: x of the returns in position order, shape (n,), m
+    :param y_m: y of the returns in position order, shape (n,), m
+    :param step_rad: bearing step between beams, rad
+    :param noise: the noise (the rule decides with its deciding_sigma_m)
+    :param rule: the rule's tolerances
+    :return: (corners both walls end at, shape (C,); whether each wall's end was seen, shape
+        (C, 2), column 0 the first wall)
+    """
+    one, two = candidates.first_segment, candidates.second_segment
+    first_position, last_position = positions
+    after_first, before_second = last_position[one], first_position[two]
+    corner_x, corner_y = candidates.xy_m[:, 0], candidates.xy_m[:, 1]
+    window = end_window(x_m, y_m, after_first, before_second, noise, rule)
+    first = wall_at_corner(walls, one, candidates.xy_m, candidates.covariance, step_rad, rule)
+    second = wall_at_corner(walls, two, candidates.xy_m, candidates.covariance, step_rad, rule)
+    first_placed = along_wall(window, first, corner_x, corner_y)
+    second_placed = along_wall(window, second, corner_x, corner_y)
+    at_corner = corner_zone(window, corner_x, corner_y, first, second, noise, rule)
+    first_on_line = without_object_in_front(window, first, first_placed, at_corner, rule)
+    second_on_line = without_object_in_front(window, second, second_placed, at_corner, rule)
+    first_here = reaches(first, first_placed, first_on_line, at_corner)
+    second_here = reaches(second, second_placed, second_on_line, at_corner)
+    first_short = short_of_corner(first, first_placed, first_on_line, first_here)
+    second_short = short_of_corner(second, second_placed, second_on_line, second_here)
+    keep = ((window.between <= rule.window) & first_here[:, 0] & second_here[:, -1]
+            & ~goes_on(first, second, first_placed, second_placed, first_on_line,
+                       second_on_line, at_corner)
+            & ~blocked(window, first, second, first_placed, second_placed, first_here,
+                       second_here, at_corner)
+            & (first_short <= 1.0 + CORNER_MISSING_BEAMS)
+            & (second_short <= 1.0 + CORNER_MISSING_BEAMS))
+    if rule.run_sigmas > 0.0:
+        # The first wall's stretch is crossed by the sight lines after its last return up to the
+        # second wall's last; the second's by those from the first wall's first return up to
+        # its own first.
+        for c in np.flatnonzero(keep).tolist():
+            first_c, second_c = _corner(first, c), _corner(second, c)
+            keep[c] = not (
+                seen_through(corner_x[c], corner_y[c], first_c, second_c, x_m, y_m,
+                             after_first[c] + 1, last_position[two[c]], noise, rule)
+                or seen_through(corner_x[c], corner_y[c], second_c, first_c, x_m, y_m,
+                                first_position[one[c]], before_second[c] - 1, noise, rule))
+    return keep, np.column_stack([first_short <= 1.0, second_short <= 1.0])
+
+
+def _corner(wall: WallAtCorner, c: int) -> WallAtCorner:
+    """Return one corner's wall of a WallAtCorner over every corner."""
+    return WallAtCorner(*(field[c] for field in wall))

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from .corners import find_corners, walls_end_at_corners
+from .corners import find_corners, walls_end_at
 from .lines import fit_lines, normal_jacobian
 from .model_error import flatness_covariance, line_from_normal_jacobian, residual_factor
 from .noise import scan_range_sigma
@@ -19,12 +19,10 @@ from ..config import FeatureConfig
 from ..features import (CornerSet, Features, LineFits, segment_returns, SegmentReturns,
                         SegmentSet)
 from ..plausibility import implausible_scan, noise_is_plausible, plausible
+from ..records import CornerEndRule, Noise
 from ..scan import beam_density, BeamDensity, scan_to_points, ScanError, ScanPoints
 
 _DEFAULT_CONFIG = FeatureConfig()
-# A corner may sit one beam without a return beyond a wall's last return (a dropout there),
-# reported with that wall's end not seen; farther, it is an extrapolation, not a corner.
-_CORNER_MISSING_BEAMS = 1
 
 
 def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
@@ -92,7 +90,8 @@ def _features_of(points: ScanPoints, angle_increment_rad: float,
         return replace(nothing, work_limited=work_limited)
     # #corners: which pairs are corners is decided with the decision noise; the published
     # covariances add the model error to the fits' (#model-error).
-    corners = _corners(contour, walls, positions, decisions, density)
+    noise = Noise(config.range_sigma_m, config.bearing_sigma_rad, decisions.range_sigma_m)
+    corners = _corners(contour, walls, positions, noise, decisions, density)
     # #model-error (D17), (D18), then #corners and #common-mode-range-offset, (D11)-(D16).
     walls = _with_model_error(walls, config)
     return Features(config.method, walls, _corner_covariances(walls, corners, config),
@@ -335,13 +334,13 @@ def _residual_chi2_dof(returns: SegmentReturns, fits: LineFits, usable: np.ndarr
     return chi2 / np.maximum(counts - 2, 1)
 
 
-def _corners(contour: _Contour, walls: SegmentSet, positions: np.ndarray,
+def _corners(contour: _Contour, walls: SegmentSet, positions: np.ndarray, noise: Noise,
              config: FeatureConfig, density: BeamDensity) -> CornerSet:
     """
     Intersect neighbouring walls (across the seam on a full turn) and keep the real corners.
 
     A pair makes a corner when its walls are not close to parallel (min_corner_angle) and both
-    end at the intersection (:func:`~.corners.walls_end_at_corners`).
+    end at the intersection (:func:`~.corners.walls_end_at`).
     """
     count = len(walls)
     first = np.arange(count - 1)
@@ -353,12 +352,11 @@ def _corners(contour: _Contour, walls: SegmentSet, positions: np.ndarray,
                               config.common_range_sigma_m)
     if not len(candidates):
         return candidates
-    keep, seen = walls_end_at_corners(
-        candidates, walls.angle_rad, walls.radius_m, 0.5 * (walls.start_xy_m + walls.end_xy_m),
-        contour.x, contour.y, positions[1], positions[0],
-        abs(contour.points.angle_increment_rad), config.range_sigma_m, config.bearing_sigma_rad,
-        density.rarer(config.corner_end_sigmas), config.corner_end_floor_m, density.corner_window,
-        _CORNER_MISSING_BEAMS, config.end_offset_sigmas)
+    keep, seen = walls_end_at(
+        candidates, walls, positions, contour.x, contour.y,
+        abs(contour.points.angle_increment_rad), noise,
+        CornerEndRule(density.rarer(config.corner_end_sigmas), config.corner_end_floor_m,
+                      density.corner_window, config.end_offset_sigmas))
     kept = candidates.select(keep)
     return CornerSet(kept.xy_m, kept.yaw_rad, kept.covariance, kept.opening_angle_rad,
                      kept.first_segment, kept.second_segment, seen[keep])

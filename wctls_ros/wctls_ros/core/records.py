@@ -1,0 +1,295 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""
+The named data the steps of the pipeline pass each other: typed named tuples, not numbered ones.
+
+numba compiles a ``typing.NamedTuple`` into a struct whose fields are read by name, as
+arguments and as results, also from its on-disk cache: a range sigma cannot take a bearing
+sigma's place, nothing is indexed by number, and a field added to a record reaches every kernel
+that reads the record without a change to the calls in between. A record of arrays holds
+references to them (no copy). The compiled core (:mod:`.numba_core`) passes them between its
+kernels; the numpy core's corner end rule (:mod:`.numpy_core.corners`) passes the same records,
+their fields arrays over all candidate corners at once where the compiled one has a number per
+corner. Plain Python classes: importing this module imports no numba.
+"""
+
+from typing import Any, NamedTuple
+
+import numpy as np
+
+# A number of one corner in the compiled core, which takes the corners one at a time, and an
+# array of it over every corner in the numpy core's corner end rule.
+PerCorner = Any
+
+
+class Settings(NamedTuple):
+    """The FeatureConfig fields the compiled pipeline reads, as plain int, float or bool."""
+
+    method_code: int
+    range_sigma_m: float
+    bearing_sigma_rad: float
+    range_sigma_from_scan: bool
+    common_range_sigma_m: float
+    breakpoint_lambda_rad: float
+    iepf_threshold_m: float
+    iepf_noise_sigmas: float
+    merge_chi2: float
+    merge_max_missing_beams: int
+    end_offset_sigmas: float
+    residual_scaling: bool
+    model_error_sigma_m: float
+    wall_flatness_sigma_m: float
+    min_segment_points: int
+    min_segment_length_m: float
+    min_corner_angle_rad: float
+    min_wall_beam_angle_rad: float
+    corner_end_sigmas: float
+    corner_end_floor_m: float
+
+
+class Noise(NamedTuple):
+    """
+    The noise one scan is processed with (docs/derivation.md#decision-noise).
+
+    :ivar range_sigma_m: the range noise the fits weigh the returns by, m
+    :ivar bearing_sigma_rad: the bearing noise, rad
+    :ivar deciding_sigma_m: the range noise and the model error in quadrature, m: what every
+        decision (breakpoints, splits, merges, trims, corners) tolerates
+    """
+
+    range_sigma_m: float
+    bearing_sigma_rad: float
+    deciding_sigma_m: float
+
+
+class Returns(NamedTuple):
+    """
+    A scan's valid returns, in beam order or (the pipeline's contour) in circular order.
+
+    :ivar beam_index: each return's beam index, shape (n,)
+    :ivar range_m: its range, shape (n,), m
+    :ivar bearing_rad: its bearing, shape (n,), rad
+    :ivar x_m: its x, shape (n,), m
+    :ivar y_m: its y, shape (n,), m
+    """
+
+    beam_index: np.ndarray
+    range_m: np.ndarray
+    bearing_rad: np.ndarray
+    x_m: np.ndarray
+    y_m: np.ndarray
+
+
+class BeamGrid(NamedTuple):
+    """
+    The beams of a scan, valid or not.
+
+    :ivar beam_count: how many
+    :ivar step_rad: |angle_increment|, the bearing step between neighbours, rad
+    :ivar full_turn: whether they cover a full turn (the first and last are neighbours)
+    """
+
+    beam_count: int
+    step_rad: float
+    full_turn: bool
+
+
+class Segments(NamedTuple):
+    """
+    Half-open runs [start, stop) of positions in the circular order (modulo its length).
+
+    :ivar start: first position of each, shape (S,)
+    :ivar stop: one past its last position, shape (S,)
+    :ivar chain: the chain (run between breakpoints) it lies on, shape (S,)
+    """
+
+    start: np.ndarray
+    stop: np.ndarray
+    chain: np.ndarray
+
+
+class Lines(NamedTuple):
+    """
+    One line x cos(angle) + y sin(angle) = radius per segment.
+
+    :ivar angle_rad: normal angle, shape (S,), rad
+    :ivar radius_m: radius, shape (S,), m
+    """
+
+    angle_rad: np.ndarray
+    radius_m: np.ndarray
+
+
+class Walls(NamedTuple):
+    """
+    The fitted segments that are walls (the fields of a SegmentSet, at positions).
+
+    :ivar angle_rad: normal angle of each line, shape (S,), rad
+    :ivar radius_m: radius of each line, shape (S,), m
+    :ivar normal_covariance: covariance of (angle, radius), shape (S, 2, 2)
+    :ivar line: (a, b, c) in the method's form, shape (S, 3)
+    :ivar line_covariance: covariance of (a, b, c), shape (S, 3, 3)
+    :ivar line_offset_jacobian: d(a, b, c) / d(range offset common to the scan), (S, 3), per m
+    :ivar start_xy_m: first return projected on the line, shape (S, 2), m
+    :ivar end_xy_m: last return projected on the line, shape (S, 2), m
+    :ivar first_position: position of the first return in the circular order, shape (S,)
+    :ivar last_position: position of the last return, shape (S,)
+    :ivar num_points: returns fitted, shape (S,)
+    :ivar residual_chi2_dof: residual chi2 per degree of freedom of the fit, shape (S,)
+    """
+
+    angle_rad: np.ndarray
+    radius_m: np.ndarray
+    normal_covariance: np.ndarray
+    line: np.ndarray
+    line_covariance: np.ndarray
+    line_offset_jacobian: np.ndarray
+    start_xy_m: np.ndarray
+    end_xy_m: np.ndarray
+    first_position: np.ndarray
+    last_position: np.ndarray
+    num_points: np.ndarray
+    residual_chi2_dof: np.ndarray
+
+
+class SegmentArrays(NamedTuple):
+    """The arrays of a :class:`~wctls_ros.core.features.SegmentSet`, its fields in its order."""
+
+    angle_rad: np.ndarray
+    radius_m: np.ndarray
+    covariance: np.ndarray
+    line: np.ndarray
+    line_covariance: np.ndarray
+    line_offset_jacobian: np.ndarray
+    start_xy_m: np.ndarray
+    end_xy_m: np.ndarray
+    first_index: np.ndarray
+    last_index: np.ndarray
+    num_points: np.ndarray
+    residual_chi2_dof: np.ndarray
+
+
+class CornerArrays(NamedTuple):
+    """The arrays of a :class:`~wctls_ros.core.features.CornerSet`, its fields in its order."""
+
+    xy_m: np.ndarray
+    yaw_rad: np.ndarray
+    covariance: np.ndarray
+    opening_angle_rad: np.ndarray
+    first_segment: np.ndarray
+    second_segment: np.ndarray
+    end_seen: np.ndarray
+
+
+class ScanResult(NamedTuple):
+    """
+    What the compiled pipeline finds in one scan.
+
+    :ivar segments: the walls
+    :ivar corners: the corners between them
+    :ivar work_limited: whether the work bound stopped splitting or merging
+    :ivar range_sigma_m: the range noise the scan was processed with, m (NaN: too few returns)
+    """
+
+    segments: SegmentArrays
+    corners: CornerArrays
+    work_limited: bool
+    range_sigma_m: float
+
+
+class CornerCandidates(NamedTuple):
+    """
+    Intersections of neighbouring walls that are not close to parallel.
+
+    :ivar xy_m: position, shape (C, 2), m
+    :ivar covariance: covariance of (x, y, yaw), shape (C, 3, 3)
+    :ivar first_wall: the earlier wall of each, shape (C,)
+    :ivar second_wall: the later wall, shape (C,)
+    """
+
+    xy_m: np.ndarray
+    covariance: np.ndarray
+    first_wall: np.ndarray
+    second_wall: np.ndarray
+
+
+class CornerEndRule(NamedTuple):
+    """
+    The tolerances of the corner end rule (docs/derivation.md#corners, "Corner end rule").
+
+    :ivar sigmas: tolerance in standard deviations
+    :ivar floor_m: tolerance floor, m
+    :ivar window: most returns between the two walls (more: not adjacent)
+    :ivar run_sigmas: largest sum of normalised residuals over sqrt(count) of a run of returns
+        in front of a wall (claimed beyond its segment) or behind it (seen through it); 0: no
+        such test
+    """
+
+    sigmas: float
+    floor_m: float
+    window: int
+    run_sigmas: float
+
+
+class EndWindow(NamedTuple):
+    """
+    The returns the corner end rule looks at between two walls, in the circular order.
+
+    Column 0 is the first wall's facing end (its last return), the last column the second
+    wall's (its first return); between them the returns that belong to neither segment, as
+    many as there are up to the rule's window.
+
+    :ivar x_m: x of each column's return, shape (W,), m
+    :ivar y_m: y of each column's return, shape (W,), m
+    :ivar sigma_m: its position noise, sqrt(range_sigma^2 + (r bearing_sigma)^2), shape (W,), m
+    :ivar line_tolerance_m: how far off a line it still lies on it, shape (W,), m
+    :ivar in_window: whether the column holds a facing end or a return between them, (W,)
+    :ivar between: how many returns lie between the two walls (also beyond the window; the
+        numpy core: per corner)
+    """
+
+    x_m: np.ndarray
+    y_m: np.ndarray
+    sigma_m: np.ndarray
+    line_tolerance_m: np.ndarray
+    in_window: np.ndarray
+    between: PerCorner
+
+
+class WallAtCorner(NamedTuple):
+    """
+    One wall of a corner, seen from the corner.
+
+    :ivar normal_x: x of the unit normal of its line
+    :ivar normal_y: y of that normal
+    :ivar radius_m: its line's radius, m
+    :ivar inward_x: x of the unit direction from the corner into the wall (towards its middle)
+    :ivar inward_y: y of that direction
+    :ivar along_sigma_m: the corner's standard deviation along the wall, m
+    :ivar spacing_m: the spacing of the beams on the wall at the corner, m
+    :ivar tolerance_m: how far from the corner a return along the wall still reaches it, m
+    """
+
+    normal_x: PerCorner
+    normal_y: PerCorner
+    radius_m: PerCorner
+    inward_x: PerCorner
+    inward_y: PerCorner
+    along_sigma_m: PerCorner
+    spacing_m: PerCorner
+    tolerance_m: PerCorner
+
+
+class AlongWall(NamedTuple):
+    """
+    Where the returns of an end window lie with respect to one wall of the corner.
+
+    :ivar in_front_m: how far each lies in front of the wall's line (towards the sensor), m
+    :ivar along_m: how far from the corner into the wall, m (negative: past the corner)
+    :ivar on_line: whether it lies on the wall's line (within its line tolerance), (W,)
+    """
+
+    in_front_m: np.ndarray
+    along_m: np.ndarray
+    on_line: np.ndarray

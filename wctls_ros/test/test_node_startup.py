@@ -8,6 +8,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 from conftest import spin_until
@@ -101,6 +102,7 @@ _CTRL_C_WHILE_A_FAILED_START_IS_HANDLED = """
 import os
 import signal
 import sys
+import threading
 
 import rclpy
 import rclpy.utilities
@@ -128,3 +130,33 @@ def test_ctrl_c_while_a_node_being_built_fails_ends_it_quietly():
     result = subprocess.run([sys.executable, '-c', _CTRL_C_WHILE_A_FAILED_START_IS_HANDLED],
                             capture_output=True, text=True, timeout=60)
     assert (result.returncode, 'Traceback' in result.stderr) == (0, False), result.stderr
+
+
+def test_a_shutdown_that_wakes_no_one_still_ends_the_spin_at_once(ros_context):
+    # What rclpy's signal thread does last: shut the context down in C, calling none of the
+    # Python callbacks that would wake the executor. A node without timers then slept for ever.
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from wctls_ros.node_main import SHUTDOWN_CHECK_S, spin_forever
+    node = rclpy.create_node('quiet', context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    endings = []
+
+    def spin():
+        try:
+            endings.append(spin_forever(executor, node))
+        except ExternalShutdownException:        # run_node's clean end too
+            endings.append('shutdown')
+
+    spinning = threading.Thread(target=spin, daemon=True)
+    spinning.start()
+    time.sleep(0.3)
+    assert spinning.is_alive()
+    with ros_context.handle:
+        ros_context.handle.shutdown()
+    shut_down = time.monotonic()
+    spinning.join(timeout=5.0)
+    assert not spinning.is_alive() and endings in ([0], ['shutdown'])
+    # A scheduling delay on a loaded machine aside, within one bounded wait.
+    assert time.monotonic() - shut_down < SHUTDOWN_CHECK_S + 1.0
+    node.destroy_node()

@@ -27,7 +27,7 @@ from sensor_msgs.msg import LaserScan
 
 from .bag_io import bag_info, BagError, choose_scan_topic, read_scans
 from ..conversions import laser_scan
-from ..node_main import declare_parameters, run_node
+from ..node_main import declare_parameters, run_node, spin_until_shutdown
 from ..params import BAG_REPLAY
 
 SCAN_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
@@ -222,7 +222,7 @@ class BagReplay(Node):
 
 def _play(executor, node) -> int:
     """Spin until the bag has been played (or shutdown); return the node's exit status."""
-    executor.spin_until_future_complete(node.done)
+    spin_until_shutdown(executor, node.done.done)
     node.wait_for_delivery()
     return node.done.result() if node.done.done() else 0
 

@@ -36,7 +36,8 @@ STOCK_TESTS := $(addprefix wctls_ros/test/,stock_install_checks.py test_stock_in
                  test_rplidar_emulator.py test_rplidar_protocol.py test_rplidar_capsules.py \
                  test_rplidar_scan.py)
 
-.PHONY: help deps build demo test test-fast lint bench results docs golden clean
+.PHONY: help deps build demo test test-oldest test-stock test-fast lint bench results docs golden \
+        clean
 
 help:
 	@echo 'make demo   set up, then run the S1 emulator, driver and feature node live for ~20 s'
@@ -90,11 +91,24 @@ demo: $(BUILD_STAMP)
 	$(WITH_ENV) install/wctls_ros/lib/wctls_ros/demo $(DEMO_ARGS)
 
 test: $(BUILD_STAMP) $(OLDEST_STAMP) $(STOCK_STAMP)
-	$(WITH_ENV) python -m pytest $(PYTEST_ARGS)
-	@# Its own JIT cache: code compiled against one numpy is not reused under another.
+	@# The oldest-versions and stock-install runs go on beside the main one (each test session
+	@# holds a ROS domain of its own); their summaries follow its output, their logs are in out/.
+	@mkdir -p out
+	$(MAKE) --no-print-directory test-oldest > out/test-oldest.log 2>&1 & oldest=$$!; \
+	$(MAKE) --no-print-directory test-stock > out/test-stock.log 2>&1 & stock=$$!; \
+	failed=0; ( $(WITH_ENV) python -m pytest $(PYTEST_ARGS) ) || failed=1; \
+	for run in oldest stock; do \
+	  if wait "$${!run}"; then echo "$$run run: $$(tail -n 1 out/test-$$run.log)"; \
+	  else failed=1; cat out/test-$$run.log; echo "$$run run failed (out/test-$$run.log)"; fi; \
+	done; exit $$failed
+
+# Its own JIT cache: code compiled against one numpy is not reused under another.
+test-oldest: $(OLDEST_STAMP)
 	WCTLS_ROS_CORE=numba NUMBA_CACHE_DIR=$(ROOT)/$(OLDEST_VENV)/numba-cache \
 	  PYTHONPATH=wctls_ros:wctls_ros/test $(OLDEST_VENV)/bin/python -m pytest -p no:cacheprovider \
 	  -o addopts='-ra --strict-markers' --junitxml=out/test-results-oldest.xml $(OLDEST_TESTS)
+
+test-stock: $(STOCK_STAMP)
 	WCTLS_VENV=$(STOCK_VENV) $(WITH_ENV) python -m pytest -p no:cacheprovider \
 	  -o addopts='-ra --strict-markers' --junitxml=out/test-results-stock.xml $(STOCK_TESTS)
 

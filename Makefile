@@ -18,10 +18,6 @@ SOURCES := $(shell find wctls_msgs wctls_ros -type f -not -path '*/__pycache__/*
 # Every recipe line that runs project code does so inside the venv + install overlay.
 WITH_ENV := source tools/env.sh &&
 PYTEST_ARGS ?=
-# PARALLEL_SUITES=1 runs the two smaller suites below beside the main one: about 6 minutes less
-# on an otherwise idle 2-core machine (CI). Not the default: beside other work, three suites at
-# once starve the tests that run nodes and emulators in real time.
-PARALLEL_SUITES ?= 0
 # Two more runs of some tests, each in a venv of its own. The oldest versions we support
 # (requirements/oldest.txt: numpy 1.26, numba 0.60) with the compiled core forced: it must build
 # and agree with the numpy core under them. And a stock ROS 2 Jazzy install on Ubuntu 24.04
@@ -95,22 +91,9 @@ demo: $(BUILD_STAMP)
 	$(WITH_ENV) install/wctls_ros/lib/wctls_ros/demo $(DEMO_ARGS)
 
 test: $(BUILD_STAMP) $(OLDEST_STAMP) $(STOCK_STAMP)
-	@mkdir -p out
-ifeq ($(PARALLEL_SUITES),1)
-	@# The oldest-versions and stock-install runs go on beside the main one (each test session
-	@# holds a ROS domain of its own); their summaries follow its output, their logs are in out/.
-	$(MAKE) --no-print-directory test-oldest > out/test-oldest.log 2>&1 & oldest=$$!; \
-	$(MAKE) --no-print-directory test-stock > out/test-stock.log 2>&1 & stock=$$!; \
-	failed=0; ( $(WITH_ENV) python -m pytest $(PYTEST_ARGS) ) || failed=1; \
-	for run in oldest stock; do \
-	  if wait "$${!run}"; then echo "$$run run: $$(tail -n 1 out/test-$$run.log)"; \
-	  else failed=1; cat out/test-$$run.log; echo "$$run run failed (out/test-$$run.log)"; fi; \
-	done; exit $$failed
-else
 	$(WITH_ENV) python -m pytest $(PYTEST_ARGS)
 	$(MAKE) --no-print-directory test-oldest
 	$(MAKE) --no-print-directory test-stock
-endif
 
 # Its own JIT cache: code compiled against one numpy is not reused under another.
 test-oldest: $(OLDEST_STAMP)

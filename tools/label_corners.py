@@ -15,7 +15,8 @@ Run inside the built workspace (``source tools/env.sh``)::
 
 A label file names its recording (``recording:``, relative to the label file) and the scans it
 covers (``scans: [first, last]``); a file with ``per_scan`` entries labels separate scans (a
-folder of JSON scans), each from its own ranges.
+folder of JSON scans, or a bag of single scans such as data/rplidar_c1_single_scans), each from
+its own ranges: plot them one at a time (``--scans 7-7``).
 """
 
 import argparse

@@ -105,5 +105,5 @@ def spin_until(executor, predicate, timeout_s=5.0):
     """
     deadline = time.monotonic() + timeout_s
     while not predicate() and time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.01)
+        executor.spin_once(timeout_sec=0.1)
     return predicate()

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from .corners import find_corners, walls_end_at
+from .corners import corner_candidates, walls_end_at
 from .lines import fit_lines, normal_jacobian
 from .model_error import flatness_covariance, line_from_normal_jacobian, residual_factor
 from .noise import scan_range_sigma
@@ -297,9 +297,8 @@ def _corner_covariances(walls: SegmentSet, corners: CornerSet,
     """Return the corners with covariances propagated from the walls' (model error included)."""
     if not len(corners):
         return corners
-    again = find_corners(walls.line, walls.line_covariance, walls.start_xy_m, walls.end_xy_m,
-                         corners.first_segment, corners.second_segment, 0.0,
-                         walls.line_offset_jacobian, config.common_range_sigma_m)
+    again = corner_candidates(walls, corners.first_segment, corners.second_segment, 0.0,
+                              config.common_range_sigma_m)
     return replace(corners, covariance=again.covariance)
 
 
@@ -342,20 +341,18 @@ def _corners(contour: _Contour, walls: SegmentSet, positions: np.ndarray, noise:
     first = np.arange(count - 1)
     if contour.points.full_turn and count >= 3:
         first = np.arange(count)               # the last wall meets the first at the seam
-    candidates = find_corners(walls.line, walls.line_covariance, walls.start_xy_m,
-                              walls.end_xy_m, first, (first + 1) % max(count, 1),
-                              config.min_corner_angle_rad, walls.line_offset_jacobian,
-                              config.common_range_sigma_m)
-    if not len(candidates):
-        return candidates
+    candidates = corner_candidates(walls, first, (first + 1) % max(count, 1),
+                                   config.min_corner_angle_rad, config.common_range_sigma_m)
+    if not candidates.yaw_rad.size:
+        return CornerSet.empty()
     keep, seen = walls_end_at(
         candidates, walls, positions, contour.x, contour.y,
         abs(contour.points.angle_increment_rad), noise,
         CornerEndRule(density.rarer(config.corner_end_sigmas), config.corner_end_floor_m,
                       density.corner_window, config.end_offset_sigmas))
-    kept = candidates.select(keep)
-    return CornerSet(kept.xy_m, kept.yaw_rad, kept.covariance, kept.opening_angle_rad,
-                     kept.first_segment, kept.second_segment, seen[keep])
+    return CornerSet(candidates.xy_m[keep], candidates.yaw_rad[keep], candidates.covariance[keep],
+                     candidates.opening_angle_rad[keep], candidates.first_wall[keep],
+                     candidates.second_wall[keep], seen[keep])
 
 
 def _project(x_m: np.ndarray, y_m: np.ndarray, first: np.ndarray, last: np.ndarray,

@@ -25,11 +25,8 @@ from ._jit import jit, jit_inline
 from ._order import wrapped
 from ._types import (FLAGS, INDICES, INTEGER, NOISE, PLACED, REAL, RETURNS, ROWS, RULE, WALL,
                      WALLS, WINDOW)
+from ..numpy_core.corners import CORNER_MISSING_BEAMS
 from ..records import AlongWall, CornerCandidates, EndWindow, WallAtCorner
-
-# A corner may sit one beam without a return beyond a wall's last return (a dropout there),
-# reported with that wall's end not seen; farther, it is an extrapolation, not a corner.
-CORNER_MISSING_BEAMS = 1
 
 # The upper triangle of the symmetric (x, y, yaw) covariance, row by row: (row, column) of each
 # of its six entries.

@@ -8,9 +8,8 @@ The numpy core batches over segments or corners where the compiled one loops, bu
 hands on records (Segments, Lines, Noise, Walls, CornerCandidates, the corner end rule's) takes
 them by the same names in the same order in both, and a change to one reads the same in the
 other. The steps listed are those that agree today; a step added to both belongs here. Not yet:
-end_window, seen_through and walls_end_at, which read the returns as x and y arrays in the numpy
-core and as the contour's Returns in the compiled one (walls_end_at also the walls' positions
-apart), and wall_at_corner, whose corners the numpy core takes batched as (x, y) rows.
+walls_end_at, whose walls in the numpy core (a SegmentSet) carry beam indices and so take their
+positions apart, and wall_at_corner, whose corners the numpy core takes batched as (x, y) rows.
 """
 
 import inspect
@@ -27,6 +26,7 @@ SAME_ARGUMENTS = [
     (numpy_segmentation, compiled_segmentation, 'trim_ambiguous'),
     (numpy_segmentation, compiled_segmentation, 'trim_offset'),
     (numpy_corners, compiled_corners, 'corner_candidates'),
+    (numpy_corners, compiled_corners, 'end_window'),
     (numpy_corners, compiled_corners, 'along_wall'),
     (numpy_corners, compiled_corners, 'corner_zone'),
     (numpy_corners, compiled_corners, 'without_object_in_front'),
@@ -34,6 +34,7 @@ SAME_ARGUMENTS = [
     (numpy_corners, compiled_corners, 'goes_on'),
     (numpy_corners, compiled_corners, 'blocked'),
     (numpy_corners, compiled_corners, 'short_of_corner'),
+    (numpy_corners, compiled_corners, 'seen_through'),
 ]
 
 

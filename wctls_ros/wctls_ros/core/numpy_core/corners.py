@@ -25,7 +25,8 @@ from typing import Optional
 import numpy as np
 
 from ..features import CornerSet, SegmentSet
-from ..records import AlongWall, CornerCandidates, CornerEndRule, EndWindow, Noise, WallAtCorner
+from ..records import (AlongWall, CornerCandidates, CornerEndRule, EndWindow, Noise, Returns,
+                       WallAtCorner)
 
 # A corner may sit one beam without a return beyond a wall's last return (a dropout there),
 # reported with that wall's end not seen; farther, it is an extrapolation, not a corner.
@@ -238,21 +239,21 @@ def corner_candidates(walls: SegmentSet, first_wall: np.ndarray, second_wall: np
                             opening[kept], pair[0][kept], pair[1][kept])
 
 
-def end_window(x_m: np.ndarray, y_m: np.ndarray, after_first: np.ndarray,
-               before_second: np.ndarray, noise: Noise, rule: CornerEndRule) -> EndWindow:
+def end_window(contour: Returns, after_first: np.ndarray, before_second: np.ndarray,
+               noise: Noise, rule: CornerEndRule) -> EndWindow:
     """
     Gather the returns between two walls that the corner end rule looks at, for every corner.
 
     docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.end_window`).
 
-    :param x_m: x of the returns in position order, shape (n,), m
-    :param y_m: y of the returns in position order, shape (n,), m
+    :param contour: the returns in circular order
     :param after_first: position of each first wall's last return, shape (C,)
     :param before_second: position of each second wall's first return, shape (C,)
     :param noise: the noise (the rule decides with its deciding_sigma_m)
     :param rule: the rule's tolerances
     :return: the windows, each field shape (C, W) (``between`` (C,))
     """
+    x_m, y_m = contour.x_m, contour.y_m
     steps = np.arange(rule.window + 2)
     between = (before_second - after_first - 1) % len(x_m)
     position = after_first[:, None] + steps
@@ -417,7 +418,7 @@ def short_of_corner(wall: WallAtCorner, placed: AlongWall, on_line: np.ndarray,
 
 
 def seen_through(corner_x_m: float, corner_y_m: float, wall: WallAtCorner, other: WallAtCorner,
-                 x_m: np.ndarray, y_m: np.ndarray, start: int, stop: int, noise: Noise,
+                 contour: Returns, start: int, stop: int, noise: Noise,
                  rule: CornerEndRule) -> bool:
     """
     Tell whether the other wall is seen through a wall between its segment and the corner.
@@ -431,14 +432,14 @@ def seen_through(corner_x_m: float, corner_y_m: float, wall: WallAtCorner, other
     :param corner_y_m: y of the corner, m
     :param wall: the wall at the corner, each field a number
     :param other: the other wall
-    :param x_m: x of the returns in position order, shape (n,), m
-    :param y_m: y of the returns in position order, shape (n,), m
+    :param contour: the returns in circular order
     :param start: position of the first return to test (taken modulo n)
     :param stop: position of the last return to test (taken modulo n, after ``start``)
     :param noise: the noise (the rule decides with its deciding_sigma_m)
     :param rule: the rule's tolerances
     :return: whether the wall is seen through
     """
+    x_m, y_m = contour.x_m, contour.y_m
     crossing = np.arange(start, start + (stop - start) % len(x_m) + 1)
     x, y = x_m.take(crossing, mode='wrap'), y_m.take(crossing, mode='wrap')
     sigma = np.sqrt(noise.deciding_sigma_m ** 2 + (x ** 2 + y ** 2) * noise.bearing_sigma_rad ** 2)
@@ -457,8 +458,7 @@ def seen_through(corner_x_m: float, corner_y_m: float, wall: WallAtCorner, other
 
 
 def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.ndarray,
-                 x_m: np.ndarray, y_m: np.ndarray, step_rad: float, noise: Noise,
-                 rule: CornerEndRule):
+                 contour: Returns, step_rad: float, noise: Noise, rule: CornerEndRule):
     """
     Tell which corners both walls end at, and at which the end was seen.
 
@@ -469,8 +469,7 @@ def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.
     :param candidates: candidate corners
     :param walls: the walls
     :param positions: positions of every wall's first and last return, shape (2, S)
-    :param x_m: x of the returns in position order, shape (n,), m
-    :param y_m: y of the returns in position order, shape (n,), m
+    :param contour: the returns in circular order
     :param step_rad: bearing step between beams, rad
     :param noise: the noise (the rule decides with its deciding_sigma_m)
     :param rule: the rule's tolerances
@@ -481,7 +480,7 @@ def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.
     first_position, last_position = positions
     after_first, before_second = last_position[one], first_position[two]
     corner_x, corner_y = candidates.xy_m[:, 0], candidates.xy_m[:, 1]
-    window = end_window(x_m, y_m, after_first, before_second, noise, rule)
+    window = end_window(contour, after_first, before_second, noise, rule)
     first = wall_at_corner(walls, one, candidates.xy_m, candidates.covariance, step_rad, rule)
     second = wall_at_corner(walls, two, candidates.xy_m, candidates.covariance, step_rad, rule)
     first_placed = along_wall(window, first, corner_x, corner_y)
@@ -507,9 +506,9 @@ def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.
         for c in np.flatnonzero(keep).tolist():
             first_c, second_c = _corner(first, c), _corner(second, c)
             keep[c] = not (
-                seen_through(corner_x[c], corner_y[c], first_c, second_c, x_m, y_m,
+                seen_through(corner_x[c], corner_y[c], first_c, second_c, contour,
                              after_first[c] + 1, last_position[two[c]], noise, rule)
-                or seen_through(corner_x[c], corner_y[c], second_c, first_c, x_m, y_m,
+                or seen_through(corner_x[c], corner_y[c], second_c, first_c, contour,
                                 first_position[one[c]], before_second[c] - 1, noise, rule))
     return keep, np.column_stack([first_short <= 1.0, second_short <= 1.0])
 

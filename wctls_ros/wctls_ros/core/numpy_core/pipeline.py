@@ -19,7 +19,7 @@ from ..config import FeatureConfig
 from ..features import (CornerSet, Features, LineFits, segment_returns, SegmentReturns,
                         SegmentSet)
 from ..plausibility import implausible_scan, noise_is_plausible, plausible
-from ..records import CornerEndRule, Lines, Noise
+from ..records import CornerEndRule, Lines, Noise, Returns
 from ..scan import beam_density, BeamDensity, scan_to_points, ScanError, ScanPoints
 
 _DEFAULT_CONFIG = FeatureConfig()
@@ -345,9 +345,10 @@ def _corners(contour: _Contour, walls: SegmentSet, positions: np.ndarray, noise:
                                    config.min_corner_angle_rad, config.common_range_sigma_m)
     if not candidates.yaw_rad.size:
         return CornerSet.empty()
+    returns = Returns(contour.points.index[contour.chains.order], contour.rho, contour.theta,
+                      contour.x, contour.y)
     keep, seen = walls_end_at(
-        candidates, walls, positions, contour.x, contour.y,
-        abs(contour.points.angle_increment_rad), noise,
+        candidates, walls, positions, returns, abs(contour.points.angle_increment_rad), noise,
         CornerEndRule(density.rarer(config.corner_end_sigmas), config.corner_end_floor_m,
                       density.corner_window, config.end_offset_sigmas))
     return CornerSet(candidates.xy_m[keep], candidates.yaw_rad[keep], candidates.covariance[keep],

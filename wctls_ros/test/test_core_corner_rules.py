@@ -127,9 +127,7 @@ def test_seen_through_needs_the_other_walls_returns_behind_the_wall_together(see
     def test(x, y):
         x, y = np.asarray(x), np.asarray(y)
         contour = Returns(np.arange(len(x)), np.hypot(x, y), np.arctan2(y, x), x, y)
-        return seen_through(0.0, 1.0, wall, other,
-                            *((contour,) if seen_through is compiled.seen_through else (x, y)),
-                            0, len(x) - 1, ONE_CM_NOISE, RULE)
+        return seen_through(0.0, 1.0, wall, other, contour, 0, len(x) - 1, ONE_CM_NOISE, RULE)
 
     # Returns on the other wall, 5-15 cm behind the wall's line: seen through.
     assert test(-t, 1.0 + t)

@@ -213,7 +213,7 @@ class Features:
     :ivar work_limited: the per-scan work bound stopped splitting or merging early: returns
         that were still not straight after the allowed passes are left out, or neighbouring
         segments stayed apart (a scan no real scene gives; see
-        :func:`wctls_ros.core.segmentation.pass_budget`)
+        :func:`wctls_ros.core.numpy_core.segmentation.pass_budget`)
     :ivar range_sigma_m: the range noise the scan was processed with (its own estimate when
         ``range_sigma_from_scan``, never below ``range_sigma_m``), m; NaN for a scan with too
         few returns to process

@@ -9,9 +9,10 @@ arguments and as results, also from its on-disk cache: a range sigma cannot take
 sigma's place, nothing is indexed by number, and a field added to a record reaches every kernel
 that reads the record without a change to the calls in between. A record of arrays holds
 references to them (no copy). The compiled core (:mod:`.numba_core`) passes them between its
-kernels; the numpy core's corner end rule (:mod:`.numpy_core.corners`) passes the same records,
-their fields arrays over all candidate corners at once where the compiled one has a number per
-corner. Plain Python classes: importing this module imports no numba.
+kernels; the numpy core's end trims (:mod:`.numpy_core.segmentation`), corner candidates and
+corner end rule (:mod:`.numpy_core.corners`) take the same records, the rule's fields arrays over
+all candidate corners at once where the compiled one has a number per corner. Plain Python
+classes: importing this module imports no numba.
 """
 
 from typing import Any, NamedTuple
@@ -203,13 +204,17 @@ class CornerCandidates(NamedTuple):
     Intersections of neighbouring walls that are not close to parallel.
 
     :ivar xy_m: position, shape (C, 2), m
+    :ivar yaw_rad: bisector of the walls, towards the open side the sensor sees, shape (C,), rad
     :ivar covariance: covariance of (x, y, yaw), shape (C, 3, 3)
+    :ivar opening_angle_rad: angle between the walls through the open side, shape (C,), rad
     :ivar first_wall: the earlier wall of each, shape (C,)
     :ivar second_wall: the later wall, shape (C,)
     """
 
     xy_m: np.ndarray
+    yaw_rad: np.ndarray
     covariance: np.ndarray
+    opening_angle_rad: np.ndarray
     first_wall: np.ndarray
     second_wall: np.ndarray
 

@@ -55,6 +55,7 @@ On an undamaged stream the output is exactly the SDK's, and nothing is rejected.
 """
 
 import math
+from typing import Optional
 
 import numpy as np
 
@@ -89,9 +90,7 @@ _MAD_TO_SIGMA = 1.4826 / math.sqrt(6.0)
 # Steepest surface a neighbour pair may describe: tan(80 degrees) of range per radian.
 _STEEPEST = math.tan(math.radians(80.0))
 
-_K = np.arange(SAMPLES_PER_CAPSULE)
-_FRACTIONS = _K / SAMPLES_PER_CAPSULE
-_DISTANCE_OFFSETS = 4 + 2 * _K
+_DISTANCE_OFFSETS = 4 + 2 * np.arange(SAMPLES_PER_CAPSULE)
 
 
 class _Frame:
@@ -134,7 +133,7 @@ class DenseCapsuleDecoder:
         self._angles = AngleTrack(self._max_sweep_q8, _NOMINAL_SWEEP_Q8)
         self._framer = CapsuleFramer(CAPSULE_SIZE, self._angles, self._counts)
         self._placer = CapsulePlacer(self._angles, self._framer, self._counts)
-        self._last_angle = None
+        self._stream = CapsuleSamples(SAMPLES_PER_CAPSULE, self._counts)
         self._noise = RangeNoise()
 
     @property
@@ -161,7 +160,8 @@ class DenseCapsuleDecoder:
         placed = np.array([placeable(f.placement, f.clean, f.cut) for f in frames])
         self._counts['lost_frames'] += int(np.count_nonzero(~placed))
         distances = self._check_distances(frames, placed)
-        return self._samples([f for f, ok in zip(frames, placed) if ok], distances[placed])
+        return self._stream.of([f for f, ok in zip(frames, placed) if ok],
+                               distances[placed].reshape(-1))
 
     def _frame(self, raw: np.ndarray, regions: list, offset: int) -> list:
         """
@@ -242,29 +242,58 @@ class DenseCapsuleDecoder:
         self._counts['rejected_samples'] += int(np.count_nonzero(~keep[placed]))
         return np.where(keep, distances, 0.0)
 
-    def _samples(self, frames: list, distances: np.ndarray) -> Samples:
-        """Lay out the placed capsules' samples."""
-        count = len(frames)
+
+class CapsuleSamples:
+    """
+    The samples of placed capsules in stream order, as every capsule format lays them out.
+
+    A capsule's samples spread evenly over its sweep (less each one's angle correction, in a
+    format that has one); a turn starts at the first sample whose evenly spread angle is below
+    its predecessor's.
+
+    :param samples_per_capsule: samples per capsule of the format
+    :param counts: the decoder's counts (``samples`` counts what is laid out)
+    """
+
+    def __init__(self, samples_per_capsule: int, counts: dict):
+        self._per = samples_per_capsule
+        self._k = np.arange(samples_per_capsule)
+        self._fractions = self._k / samples_per_capsule
+        self._counts = counts
+        self._last_uniform_deg = None
+
+    def of(self, frames: list, distance_mm: np.ndarray, correction_deg=None,
+           device_time_us: Optional[np.ndarray] = None) -> Samples:
+        """
+        Lay out the samples of placed capsules.
+
+        :param frames: the placed capsules, in stream order
+        :param distance_mm: their distances, shape (capsules x samples,), mm (0: none)
+        :param correction_deg: each sample's angle correction, degrees (None: none)
+        :param device_time_us: each sample's device timestamp, microseconds (None: none)
+        :return: the samples
+        """
+        count, per = len(frames), self._per
         if not count:
             return Samples.concat([])
         starts = np.array([f.placement.start_q8 for f in frames], np.float64)
         sweeps = np.array([f.placement.sweep_q8 for f in frames], np.float64)
-        angle = np.mod((starts[:, None] + sweeps[:, None] * _FRACTIONS).reshape(-1) / 256.0,
-                       360.0)
-        distance = distances.reshape(-1)
-        previous = np.concatenate([[-np.inf if self._last_angle is None else self._last_angle],
-                                   angle[:-1]])
-        self._last_angle = angle[-1]
-        self._counts['samples'] += angle.size
-        k = np.tile(_K, count)
-        return Samples(angle_deg=angle,
-                       distance_mm=distance,
-                       quality=np.where(distance > 0, DENSE_RETURN_QUALITY, 0).astype(np.uint8),
-                       start=angle < previous,
-                       frame_end=np.repeat([f.end for f in frames], SAMPLES_PER_CAPSULE),
-                       samples_after=SAMPLES_PER_CAPSULE - 1 - k,
-                       slot=np.repeat([f.slot for f in frames], SAMPLES_PER_CAPSULE)
-                       * SAMPLES_PER_CAPSULE + k)
+        uniform = np.mod((starts[:, None] + sweeps[:, None] * self._fractions).reshape(-1)
+                         / 256.0, 360.0)
+        previous = np.concatenate([[-np.inf if self._last_uniform_deg is None
+                                    else self._last_uniform_deg], uniform[:-1]])
+        self._last_uniform_deg = uniform[-1]
+        self._counts['samples'] += uniform.size
+        k = np.tile(self._k, count)
+        return Samples(angle_deg=(uniform if correction_deg is None
+                                  else np.mod(uniform - correction_deg, 360.0)),
+                       distance_mm=distance_mm,
+                       quality=np.where(distance_mm > 0, DENSE_RETURN_QUALITY, 0).astype(np.uint8),
+                       start=uniform < previous,
+                       frame_end=np.repeat([f.end for f in frames], per),
+                       samples_after=per - 1 - k,
+                       slot=np.repeat([f.slot for f in frames], per) * per + k,
+                       device_time_us=device_time_us)
 
 
 class RangeNoise:

@@ -29,9 +29,9 @@ from typing import Optional
 
 import numpy as np
 
-from .capsules import RangeNoise, supported_by_neighbours
+from .capsules import CapsuleSamples, RangeNoise, supported_by_neighbours
 from .framing import AngleTrack, CapsuleFramer, CapsulePlacer, placeable
-from .protocol import DENSE_RETURN_QUALITY, Samples, StreamCounts
+from .protocol import Samples, StreamCounts
 
 # The sweep assumed until one is measured: the turn at 10 Hz, degrees per second.
 _NOMINAL_DEG_PER_S = 3600.0
@@ -205,8 +205,7 @@ class CheckedCapsuleDecoder:
         self._framer = CapsuleFramer(layout.size, self._angles, self._counts, layout.angle_at)
         self._placer = CapsulePlacer(self._angles, self._framer, self._counts)
         self._pending = []              # a placed capsule waiting for its successor's bytes
-        self._last_uniform_deg = None
-        self._fractions = np.arange(layout.samples) / layout.samples
+        self._stream = CapsuleSamples(layout.samples, self._counts)
         self._noise = RangeNoise(layout.samples)
         self._device_times = SteadyDeviceTimes(layout.clock_bits)
 
@@ -296,26 +295,10 @@ class CheckedCapsuleDecoder:
         keep = vouched | (readable & (distances == 0))
         self._counts['rejected_samples'] += int(np.count_nonzero(~keep))
         distance = np.where(keep, distances, 0).reshape(-1).astype(np.float64)
-        starts = np.array([f.placement.start_q8 for f in frames], np.float64)
-        sweeps = np.array([f.placement.sweep_q8 for f in frames], np.float64)
-        uniform = np.mod((starts[:, None] + sweeps[:, None] * self._fractions).reshape(-1)
-                         / 256.0, 360.0)
-        previous = np.concatenate([[-np.inf if self._last_uniform_deg is None
-                                    else self._last_uniform_deg], uniform[:-1]])
-        self._last_uniform_deg = uniform[-1]
-        self._counts['samples'] += uniform.size
-        k = np.tile(np.arange(per), count)
         times = self._layout.device_times_us(np.array(whole))
         if times is not None:
             times = np.repeat(self._device_times.believe(
                 np.array([f.slot for f in frames]), times,
                 np.array([f.raw is not None for f in frames]), ~suspect), per)
-        return Samples(angle_deg=np.mod(uniform - np.where(readable, corrections, 0.0).reshape(-1),
-                                        360.0),
-                       distance_mm=distance,
-                       quality=np.where(distance > 0, DENSE_RETURN_QUALITY, 0).astype(np.uint8),
-                       start=uniform < previous,
-                       frame_end=np.repeat([f.end for f in frames], per),
-                       samples_after=per - 1 - k,
-                       slot=np.repeat([f.slot for f in frames], per) * per + k,
-                       device_time_us=times)
+        return self._stream.of(frames, distance,
+                               np.where(readable, corrections, 0.0).reshape(-1), times)

@@ -18,82 +18,15 @@ Compiled loops (numba), one pair of walls at a time.
 """
 
 import math
-from typing import Optional
 
 import numpy as np
 
 from ._jit import jit, jit_inline
 from ._order import wrapped
-from ._types import (FLAGS, INDICES, INTEGER, NOISE, PLACED, REAL, RETURNS, ROWS, RULE, STACKS,
-                     WALL, WALLS, WINDOW)
-from ..features import CornerSet
-from ..records import AlongWall, EndWindow, WallAtCorner
-
-# A corner may sit one beam without a return beyond a wall's last return (a dropout there),
-# reported with that wall's end not seen; farther, it is an extrapolation, not a corner.
-CORNER_MISSING_BEAMS = 1
-
-
-def intersect(line_a: np.ndarray, cov_a: np.ndarray, line_b: np.ndarray,
-              cov_b: np.ndarray):
-    """
-    Intersect pairs of lines and propagate their full covariances to the position.
-
-    :param line_a: (a, b, c) of the first lines, shape (C, 3)
-    :param cov_a: their covariances, shape (C, 3, 3)
-    :param line_b: (a, b, c) of the second lines, shape (C, 3)
-    :param cov_b: their covariances, shape (C, 3, 3)
-    :return: (position (C, 2) m, covariance (C, 2, 2) m^2, position Jacobians w.r.t. line_a
-        and line_b, each (C, 2, 3): -A^-1 e_k h^T with h = (x, y, 1))
-    """
-    count = len(line_a)
-    line = np.concatenate([line_a, line_b]).astype(float)
-    pairs = np.arange(count)
-    with np.errstate(all='ignore'):
-        _, xy, _, covariance, _ = corner_candidates(
-            line, np.concatenate([cov_a, cov_b]).astype(float), np.zeros((2 * count, 2)),
-            np.zeros((2 * count, 2)), pairs, pairs + count, -1.0, np.zeros_like(line), 0.0)
-        inverse = np.linalg.inv(np.stack([line[:count, :2], line[count:, :2]], axis=1))
-    h = np.column_stack([xy, np.ones(count)])
-    return (xy, covariance[:, :2, :2], -inverse[:, :, :1] * h[:, None, :],
-            -inverse[:, :, 1:] * h[:, None, :])
-
-
-def find_corners(line: np.ndarray, line_covariance: np.ndarray,
-                 start_xy_m: np.ndarray, end_xy_m: np.ndarray, first: np.ndarray,
-                 second: np.ndarray, min_angle_rad: float,
-                 line_offset_jacobian: Optional[np.ndarray] = None,
-                 common_range_sigma_m: float = 0.0) -> CornerSet:
-    """
-    Intersect the given pairs of segments that are not close to parallel.
-
-    A pair is rejected when its lines are closer to parallel than ``min_angle_rad``; whether
-    both walls really end at the intersection is :func:`walls_end_at`'s question.
-
-    :param line: (a, b, c) of every segment in the method's form, shape (S, 3)
-    :param line_covariance: covariance of (a, b, c), shape (S, 3, 3)
-    :param start_xy_m: first return of each segment projected on its line, shape (S, 2), m
-    :param end_xy_m: last return projected on its line, shape (S, 2), m
-    :param first: earlier segment of each candidate pair, shape (k,)
-    :param second: later segment of each candidate pair, shape (k,)
-    :param min_angle_rad: smallest angle between the two walls, rad
-    :param line_offset_jacobian: d(a, b, c) / d(range offset common to the scan), (S, 3), per m
-    :param common_range_sigma_m: std of that common offset, m: it moves both lines together, so
-        its part of the corner covariance is sigma^2 j j^T with j = J_1 g_1 + J_2 g_2
-    :return: the corners that pass the test
-    """
-    line = np.asarray(line, dtype=float)
-    first, second = np.asarray(first, dtype=np.intp), np.asarray(second, dtype=np.intp)
-    offset = (np.zeros_like(line) if line_offset_jacobian is None
-              else np.asarray(line_offset_jacobian, dtype=float))
-    with np.errstate(all='ignore'):
-        kept, xy, yaw, covariance, opening = corner_candidates(
-            line, np.asarray(line_covariance, dtype=float), np.asarray(start_xy_m, dtype=float),
-            np.asarray(end_xy_m, dtype=float), first, second, float(min_angle_rad), offset,
-            float(common_range_sigma_m))
-    return CornerSet(xy, yaw, covariance, opening, first[kept], second[kept],
-                     np.ones((kept.size, 2), dtype=bool))
-
+from ._types import (FLAGS, INDICES, INTEGER, NOISE, PLACED, REAL, RETURNS, ROWS, RULE, WALL,
+                     WALLS, WINDOW)
+from ..numpy_core.corners import CORNER_MISSING_BEAMS
+from ..records import AlongWall, CornerCandidates, EndWindow, WallAtCorner
 
 # The upper triangle of the symmetric (x, y, yaw) covariance, row by row: (row, column) of each
 # of its six entries.
@@ -101,9 +34,8 @@ _UPPER_ROWS = (0, 0, 0, 1, 1, 2)
 _UPPER_COLUMNS = (0, 1, 2, 1, 2, 2)
 
 
-@jit(ahead=(ROWS, STACKS, ROWS, ROWS, INDICES, INDICES, REAL, ROWS, REAL))
-def corner_candidates(line, line_covariance, start_xy_m, end_xy_m, first, second, min_angle_rad,
-                      line_offset_jacobian, common_range_sigma_m):
+@jit(ahead=(WALLS, INDICES, INDICES, REAL, REAL))
+def corner_candidates(walls, first_wall, second_wall, min_angle_rad, common_range_sigma_m):
     """
     Intersect pairs of walls that are not close to parallel.
 
@@ -115,35 +47,34 @@ def corner_candidates(line, line_covariance, start_xy_m, end_xy_m, first, second
     d yaw / dL_k = g_k = (-b_k, a_k, 0) / (2 (a_k^2 + b_k^2)); plus sigma^2 j j^T for the range
     offset common to the scan, j = sum_k J_k dL_k / d offset ((D15)-(D16)).
 
-    :param line: (a, b, c) of every wall, shape (S, 3)
-    :param line_covariance: covariance of (a, b, c), shape (S, 3, 3)
-    :param start_xy_m: first return of each wall projected on its line, shape (S, 2), m
-    :param end_xy_m: last return projected on its line, shape (S, 2), m
-    :param first: earlier wall of each pair, shape (k,)
-    :param second: later wall of each pair, shape (k,)
+    :param walls: the walls (their line, line_covariance, line_offset_jacobian, start_xy_m and
+        end_xy_m are read)
+    :param first_wall: earlier wall of each pair, shape (k,)
+    :param second_wall: later wall of each pair, shape (k,)
     :param min_angle_rad: smallest angle between the two walls, rad
-    :param line_offset_jacobian: d(a, b, c) / d(common range offset), shape (S, 3), per m
-    :param common_range_sigma_m: std of that common offset, m
-    :return: (which pairs passed (C,), position (C, 2) m, yaw (C,) rad, covariance of (x, y,
-        yaw) (C, 3, 3), opening angle (C,) rad)
+    :param common_range_sigma_m: std of the range offset common to the scan, m
+    :return: the :class:`~.records.CornerCandidates` of the pairs that passed
     """
-    pairs = first.size
-    kept = np.empty(pairs, np.intp)
+    line, line_covariance = walls.line, walls.line_covariance
+    start_xy_m, end_xy_m = walls.start_xy_m, walls.end_xy_m
+    line_offset_jacobian = walls.line_offset_jacobian
+    pairs = first_wall.size
+    first_kept, second_kept = np.empty(pairs, np.intp), np.empty(pairs, np.intp)
     xy = np.empty((pairs, 2))
     yaw = np.empty(pairs)
     covariance = np.empty((pairs, 3, 3))
     opening = np.empty(pairs)
     found = 0
     min_sine = math.sin(min_angle_rad)
-    walls = np.empty(2, np.intp)
+    pair = np.empty(2, np.intp)
     u, w = np.empty(2), np.empty(2)
     normal_x, normal_y, norm = np.empty(2), np.empty(2), np.empty(2)
     direction_x, direction_y = np.empty(2), np.empty(2)
     upper = np.empty(6)
     common = np.empty(3)
     for p in range(pairs):
-        walls[0], walls[1] = first[p], second[p]
-        one, two = line[walls[0]], line[walls[1]]
+        pair[0], pair[1] = first_wall[p], second_wall[p]
+        one, two = line[pair[0]], line[pair[1]]
         det = one[0] * two[1] - two[0] * one[1]
         inv_det = 1.0 / det
         x = (one[1] * two[2] - two[1] * one[2]) * inv_det
@@ -153,7 +84,7 @@ def corner_candidates(line, line_covariance, start_xy_m, end_xy_m, first, second
         u[0], w[0] = two[1] * inv_det, two[0] * inv_det
         u[1], w[1] = one[1] * (1.0 / -det), one[0] * (1.0 / -det)
         for k in range(2):
-            a, b = line[walls[k], 0], line[walls[k], 1]
+            a, b = line[pair[k], 0], line[pair[k], 1]
             norm[k] = math.hypot(a, b)
             normal_x[k], normal_y[k] = a / norm[k], b / norm[k]
         sine = abs(normal_x[0] * normal_y[1] - normal_y[0] * normal_x[1])
@@ -162,7 +93,7 @@ def corner_candidates(line, line_covariance, start_xy_m, end_xy_m, first, second
         # Unit vectors from the corner along each wall, towards the middle of its returns,
         # held as (-x, y).
         for k in range(2):
-            wall = walls[k]
+            wall = pair[k]
             middle_x = (x - start_xy_m[wall, 0]) + (x - end_xy_m[wall, 0])
             middle_y = (y - start_xy_m[wall, 1]) + (y - end_xy_m[wall, 1])
             side = math.copysign(1.0, normal_y[k] * middle_x - normal_x[k] * middle_y)
@@ -174,7 +105,7 @@ def corner_candidates(line, line_covariance, start_xy_m, end_xy_m, first, second
         # +bisector.
         concave = bisector_y * y - bisector_x * x < 0.0
         toward_sensor = 1.0 if concave else -1.0
-        kept[found] = p
+        first_kept[found], second_kept[found] = pair[0], pair[1]
         xy[found, 0], xy[found, 1] = x, y
         yaw[found] = math.atan2(bisector_y * toward_sensor, bisector_x * -toward_sensor)
         opening[found] = between if concave else 2.0 * np.pi - between
@@ -182,7 +113,7 @@ def corner_candidates(line, line_covariance, start_xy_m, end_xy_m, first, second
         upper[:] = 0.0
         common[:] = 0.0
         for k in range(2):
-            c = line_covariance[walls[k]]
+            c = line_covariance[pair[k]]
             half_inv_norm = 0.5 / norm[k]
             gradient_x, gradient_y = normal_y[k] * half_inv_norm, normal_x[k] * half_inv_norm
             moved_a = c[0, 0] * x + c[0, 1] * y + c[0, 2]
@@ -197,7 +128,7 @@ def corner_candidates(line, line_covariance, start_xy_m, end_xy_m, first, second
             upper[5] += (gradient_x * (gradient_x * c[0, 0] - gradient_y * c[0, 1])
                          + gradient_y * (gradient_y * c[1, 1] - gradient_x * c[1, 0]))
             if common_range_sigma_m > 0.0:
-                offset = line_offset_jacobian[walls[k]]
+                offset = line_offset_jacobian[pair[k]]
                 offset_along_h = x * offset[0] + y * offset[1] + offset[2]
                 common[0] += u[k] * offset_along_h
                 common[1] += -(w[k] * offset_along_h)
@@ -212,7 +143,8 @@ def corner_candidates(line, line_covariance, start_xy_m, end_xy_m, first, second
             row, column = _UPPER_ROWS[entry], _UPPER_COLUMNS[entry]
             covariance[found, row, column] = covariance[found, column, row] = upper[entry]
         found += 1
-    return kept[:found], xy[:found], yaw[:found], covariance[:found], opening[:found]
+    return CornerCandidates(xy[:found], yaw[:found], covariance[:found], opening[:found],
+                            first_kept[:found], second_kept[:found])
 
 
 @jit(ahead=(RETURNS, INTEGER, INTEGER, NOISE, RULE))

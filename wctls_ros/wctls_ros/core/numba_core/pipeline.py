@@ -30,8 +30,8 @@ from .segmentation import (breakpoints_of, chains_of, merge_segments, pass_budge
 from ..config import FeatureConfig, METHODS
 from ..features import CornerSet, Features, SegmentSet
 from ..plausibility import implausible_scan, noise_is_plausible, plausible
-from ..records import (BeamGrid, CornerArrays, CornerCandidates, CornerEndRule, Lines, Noise,
-                       Returns, ScanResult, SegmentArrays, Segments, Settings, Walls)
+from ..records import (BeamGrid, CornerArrays, CornerEndRule, Lines, Noise, Returns, ScanResult,
+                       SegmentArrays, Segments, Settings, Walls)
 from ..scan import beam_density, scan_geometry, ScanError
 
 _DEFAULT_CONFIG = FeatureConfig()
@@ -185,10 +185,13 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     normal_covariance, line_covariance = with_model_error(
         walls, settings.residual_scaling, settings.wall_flatness_sigma_m,
         settings.common_range_sigma_m)
-    corner_covariance = corner_candidates(
-        walls.line, line_covariance, walls.start_xy_m, walls.end_xy_m, corners.first_segment,
-        corners.second_segment, 0.0, walls.line_offset_jacobian,
-        settings.common_range_sigma_m)[3]
+    published = Walls(walls.angle_rad, walls.radius_m, normal_covariance, walls.line,
+                      line_covariance, walls.line_offset_jacobian, walls.start_xy_m,
+                      walls.end_xy_m, walls.first_position, walls.last_position,
+                      walls.num_points, walls.residual_chi2_dof)
+    corner_covariance = corner_candidates(published, corners.first_segment,
+                                          corners.second_segment, 0.0,
+                                          settings.common_range_sigma_m).covariance
     segments_found = SegmentArrays(
         walls.angle_rad, walls.radius_m, normal_covariance, walls.line, line_covariance,
         walls.line_offset_jacobian, walls.start_xy_m, walls.end_xy_m,
@@ -352,16 +355,14 @@ def _corners(contour, walls, grid, noise, settings, density):
     pairs = count if grid.full_turn and count >= 3 else count - 1   # the last meets the first
     first_wall = np.arange(max(pairs, 0))
     second_wall = (first_wall + 1) % max(count, 1)
-    kept, xy, yaw, covariance, opening = corner_candidates(
-        walls.line, walls.line_covariance, walls.start_xy_m, walls.end_xy_m, first_wall,
-        second_wall, settings.min_corner_angle_rad, walls.line_offset_jacobian,
-        settings.common_range_sigma_m)
-    candidates = CornerCandidates(xy, covariance, first_wall[kept], second_wall[kept])
+    candidates = corner_candidates(walls, first_wall, second_wall, settings.min_corner_angle_rad,
+                                   settings.common_range_sigma_m)
     keep, seen = walls_end_at(candidates, walls, contour, grid.step_rad, noise,
                               CornerEndRule(density.corner_end_sigmas,
                                             settings.corner_end_floor_m, density.corner_window,
                                             settings.end_offset_sigmas))
-    return CornerArrays(xy[keep], yaw[keep], covariance[keep], opening[keep],
+    return CornerArrays(candidates.xy_m[keep], candidates.yaw_rad[keep],
+                        candidates.covariance[keep], candidates.opening_angle_rad[keep],
                         candidates.first_wall[keep], candidates.second_wall[keep], seen[keep])
 
 

@@ -20,15 +20,9 @@ import numpy as np
 from ._jit import jit
 from ._order import stable_order, wrapped
 from ._types import FLAG, FLAGS, GRID, INTEGER, LINES, NOISE, REAL, RETURNS, SEGMENTS, VALUES
+from ..numpy_core.segmentation import (_BUDGET_EXTRA_PASSES, _BUDGET_LEVELS_PER_DOUBLING,
+                                       _JOINABLE_SIGMAS, _MIN_CHORD_M, MIN_FIT_RETURNS)
 from ..records import Lines, Segments
-
-# A chord shorter than this (m) has no usable direction: distances are measured from its start.
-_MIN_CHORD_M = 1e-9
-# A segment needs this many returns to be fitted (and so to take part in merging).
-MIN_FIT_RETURNS = 3
-# The work bound of IEPF and merging: passes per scan of n returns (see :func:`pass_budget`).
-_BUDGET_LEVELS_PER_DOUBLING = 2
-_BUDGET_EXTRA_PASSES = 8
 
 
 @jit(ahead=(INTEGER,))
@@ -36,24 +30,13 @@ def pass_budget(count: int) -> int:
     """
     Return how many whole-contour passes IEPF (and merging) may make on a scan.
 
-    Each pass costs O(n), so the bound makes the worst case O(n log n). Balanced splitting
-    needs about log2(n / 3) levels; real and simulated scans need at most 8 (clean walls) to
-    23 (5 cm noise against a 4 cm threshold, 8640 beams); twice log2(n) plus 8 leaves that
-    margin. Without a bound, a wall whose every other return lies a few cm behind it makes
-    IEPF peel two returns per level: n / 2 levels, a minute for 32 000 beams.
+    :func:`..numpy_core.segmentation.pass_budget` compiled, whose docstring says why the bound.
 
     :param count: number of returns in the scan
     :return: the number of passes, 2 ceil(log2 count) + 8
     """
     return (_BUDGET_LEVELS_PER_DOUBLING * math.ceil(math.log2(max(count, 2)))
             + _BUDGET_EXTRA_PASSES)
-
-
-# A break between two returns one surface could have given is one the noise made: their
-# distance exceeds the surface's allowance by at most this many sigma of the difference of two
-# returns (a pair on one surface goes beyond it with probability 6e-7). Beyond it, the break is
-# a discontinuity, which merging never crosses.
-_JOINABLE_SIGMAS = 5.0 * math.sqrt(2.0)
 
 
 @jit

@@ -25,7 +25,8 @@ from typing import Optional
 import numpy as np
 
 from ..features import CornerSet, SegmentSet
-from ..records import AlongWall, CornerEndRule, EndWindow, Noise, WallAtCorner
+from ..records import (AlongWall, CornerCandidates, CornerEndRule, EndWindow, Noise, Returns,
+                       WallAtCorner)
 
 # A corner may sit one beam without a return beyond a wall's last return (a dropout there),
 # reported with that wall's end not seen; farther, it is an extrapolation, not a corner.
@@ -125,7 +126,8 @@ def find_corners(line: np.ndarray, line_covariance: np.ndarray,
     Intersect the given pairs of segments that are not close to parallel.
 
     A pair is rejected when its lines are closer to parallel than ``min_angle_rad``; whether
-    both walls really end at the intersection is :func:`walls_end_at`'s question.
+    both walls really end at the intersection is :func:`walls_end_at`'s question. The corners
+    of :func:`corner_candidates`, for lines given as arrays.
 
     :param line: (a, b, c) of every segment in the method's form, shape (S, 3)
     :param line_covariance: covariance of (a, b, c), shape (S, 3, 3)
@@ -139,11 +141,46 @@ def find_corners(line: np.ndarray, line_covariance: np.ndarray,
         its part of the corner covariance is sigma^2 j j^T with j = J_1 g_1 + J_2 g_2
     :return: the corners that pass both tests
     """
-    pairs = np.array([first, second, first], dtype=np.intp)        # first again: see _solve
-    walls = pairs[:2]
+    count = len(line)
+    if line_offset_jacobian is None:                 # no common offset to propagate
+        line_offset_jacobian, common_range_sigma_m = np.zeros((count, 3)), 0.0
+    unread = np.full(count, np.nan)                  # fields corner_candidates does not read
+    no_index = np.zeros(count, np.intp)
+    walls = SegmentSet(unread, unread, np.full((count, 2, 2), np.nan), line, line_covariance,
+                       line_offset_jacobian, start_xy_m, end_xy_m, no_index, no_index, no_index,
+                       unread)
+    found = corner_candidates(walls, first, second, min_angle_rad, common_range_sigma_m)
+    return CornerSet(found.xy_m, found.yaw_rad, found.covariance, found.opening_angle_rad,
+                     found.first_wall, found.second_wall,
+                     np.ones((found.yaw_rad.size, 2), dtype=bool))
+
+
+def corner_candidates(walls: SegmentSet, first_wall: np.ndarray, second_wall: np.ndarray,
+                      min_angle_rad: float, common_range_sigma_m: float) -> CornerCandidates:
+    """
+    Intersect pairs of walls that are not close to parallel.
+
+    Whether both walls really end at the intersection is :func:`walls_end_at`'s question.
+    (D11)-(D16), as :func:`..numba_core.corners.corner_candidates` states them, for every pair
+    at once.
+
+    :param walls: the walls (their line, line_covariance, line_offset_jacobian, start_xy_m and
+        end_xy_m are read)
+    :param first_wall: earlier wall of each pair, shape (k,)
+    :param second_wall: later wall of each pair, shape (k,)
+    :param min_angle_rad: smallest angle between the two walls, rad
+    :param common_range_sigma_m: std of the range offset common to the scan, m: it moves both
+        lines together, so its part of the corner covariance is sigma^2 j j^T with
+        j = J_1 g_1 + J_2 g_2
+    :return: the candidates of the pairs that passed
+    """
+    line, line_covariance = walls.line, walls.line_covariance
+    start_xy_m, end_xy_m = walls.start_xy_m, walls.end_xy_m
+    pairs = np.array([first_wall, second_wall, first_wall], dtype=np.intp)   # see _solve
+    pair = pairs[:2]
     lines = line.T.take(pairs, 1)
-    start, end = start_xy_m.T.take(walls, 1), end_xy_m.T.take(walls, 1)
-    covariance = line_covariance.reshape(-1, 9).T.take(walls, 1)
+    start, end = start_xy_m.T.take(pair, 1), end_xy_m.T.take(pair, 1)
+    covariance = line_covariance.reshape(-1, 9).T.take(pair, 1)
     # Nearly parallel lines meet at inf / NaN: such pairs are carried along with the others and
     # dropped with the rest of the rejected ones at the end.
     with np.errstate(all='ignore'):
@@ -188,8 +225,8 @@ def find_corners(line: np.ndarray, line_covariance: np.ndarray,
         x_yaw, y_yaw = u * cross, w * cross
         upper = np.array([xx, xy, x_yaw[0] + x_yaw[1], yy, -(y_yaw[0] + y_yaw[1]),
                           yaw_variance[0] + yaw_variance[1]])
-        if common_range_sigma_m > 0.0 and line_offset_jacobian is not None:
-            offset_a, offset_b, offset_c = line_offset_jacobian.T.take(walls, 1)
+        if common_range_sigma_m > 0.0:
+            offset_a, offset_b, offset_c = walls.line_offset_jacobian.T.take(pair, 1)
             offset_along_h = x * offset_a + y * offset_b + offset_c
             # Each wall's share of -j = -sum_k (-A^-1 e_k h^T, g_k^T) dL_k / d offset (the sign
             # drops out of j j^T).
@@ -198,26 +235,25 @@ def find_corners(line: np.ndarray, line_covariance: np.ndarray,
             common = common_range_sigma_m * (shift[:, 0] + shift[:, 1])
             upper += common[_UPPER_ROW] * common[_UPPER_COLUMN]
     covariance = upper.take(kept, 1).T.take(_UPPER_TO_FULL, 1).reshape(-1, 3, 3)
-    return CornerSet(np.array([x[0], y[0]]).T.take(kept, 0), yaw[kept], covariance,
-                     opening[kept], walls[0][kept], walls[1][kept],
-                     np.ones((kept.size, 2), dtype=bool))
+    return CornerCandidates(np.array([x[0], y[0]]).T.take(kept, 0), yaw[kept], covariance,
+                            opening[kept], pair[0][kept], pair[1][kept])
 
 
-def end_window(x_m: np.ndarray, y_m: np.ndarray, after_first: np.ndarray,
-               before_second: np.ndarray, noise: Noise, rule: CornerEndRule) -> EndWindow:
+def end_window(contour: Returns, after_first: np.ndarray, before_second: np.ndarray,
+               noise: Noise, rule: CornerEndRule) -> EndWindow:
     """
     Gather the returns between two walls that the corner end rule looks at, for every corner.
 
     docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.end_window`).
 
-    :param x_m: x of the returns in position order, shape (n,), m
-    :param y_m: y of the returns in position order, shape (n,), m
+    :param contour: the returns in circular order
     :param after_first: position of each first wall's last return, shape (C,)
     :param before_second: position of each second wall's first return, shape (C,)
     :param noise: the noise (the rule decides with its deciding_sigma_m)
     :param rule: the rule's tolerances
     :return: the windows, each field shape (C, W) (``between`` (C,))
     """
+    x_m, y_m = contour.x_m, contour.y_m
     steps = np.arange(rule.window + 2)
     between = (before_second - after_first - 1) % len(x_m)
     position = after_first[:, None] + steps
@@ -382,7 +418,7 @@ def short_of_corner(wall: WallAtCorner, placed: AlongWall, on_line: np.ndarray,
 
 
 def seen_through(corner_x_m: float, corner_y_m: float, wall: WallAtCorner, other: WallAtCorner,
-                 x_m: np.ndarray, y_m: np.ndarray, start: int, stop: int, noise: Noise,
+                 contour: Returns, start: int, stop: int, noise: Noise,
                  rule: CornerEndRule) -> bool:
     """
     Tell whether the other wall is seen through a wall between its segment and the corner.
@@ -396,14 +432,14 @@ def seen_through(corner_x_m: float, corner_y_m: float, wall: WallAtCorner, other
     :param corner_y_m: y of the corner, m
     :param wall: the wall at the corner, each field a number
     :param other: the other wall
-    :param x_m: x of the returns in position order, shape (n,), m
-    :param y_m: y of the returns in position order, shape (n,), m
+    :param contour: the returns in circular order
     :param start: position of the first return to test (taken modulo n)
     :param stop: position of the last return to test (taken modulo n, after ``start``)
     :param noise: the noise (the rule decides with its deciding_sigma_m)
     :param rule: the rule's tolerances
     :return: whether the wall is seen through
     """
+    x_m, y_m = contour.x_m, contour.y_m
     crossing = np.arange(start, start + (stop - start) % len(x_m) + 1)
     x, y = x_m.take(crossing, mode='wrap'), y_m.take(crossing, mode='wrap')
     sigma = np.sqrt(noise.deciding_sigma_m ** 2 + (x ** 2 + y ** 2) * noise.bearing_sigma_rad ** 2)
@@ -421,9 +457,8 @@ def seen_through(corner_x_m: float, corner_y_m: float, wall: WallAtCorner, other
         run) > rule.run_sigmas
 
 
-def walls_end_at(candidates: CornerSet, walls: SegmentSet, positions: np.ndarray,
-                 x_m: np.ndarray, y_m: np.ndarray, step_rad: float, noise: Noise,
-                 rule: CornerEndRule):
+def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.ndarray,
+                 contour: Returns, step_rad: float, noise: Noise, rule: CornerEndRule):
     """
     Tell which corners both walls end at, and at which the end was seen.
 
@@ -434,19 +469,18 @@ def walls_end_at(candidates: CornerSet, walls: SegmentSet, positions: np.ndarray
     :param candidates: candidate corners
     :param walls: the walls
     :param positions: positions of every wall's first and last return, shape (2, S)
-    :param x_m: x of the returns in position order, shape (n,), m
-    :param y_m: y of the returns in position order, shape (n,), m
+    :param contour: the returns in circular order
     :param step_rad: bearing step between beams, rad
     :param noise: the noise (the rule decides with its deciding_sigma_m)
     :param rule: the rule's tolerances
     :return: (corners both walls end at, shape (C,); whether each wall's end was seen, shape
         (C, 2), column 0 the first wall)
     """
-    one, two = candidates.first_segment, candidates.second_segment
+    one, two = candidates.first_wall, candidates.second_wall
     first_position, last_position = positions
     after_first, before_second = last_position[one], first_position[two]
     corner_x, corner_y = candidates.xy_m[:, 0], candidates.xy_m[:, 1]
-    window = end_window(x_m, y_m, after_first, before_second, noise, rule)
+    window = end_window(contour, after_first, before_second, noise, rule)
     first = wall_at_corner(walls, one, candidates.xy_m, candidates.covariance, step_rad, rule)
     second = wall_at_corner(walls, two, candidates.xy_m, candidates.covariance, step_rad, rule)
     first_placed = along_wall(window, first, corner_x, corner_y)
@@ -472,9 +506,9 @@ def walls_end_at(candidates: CornerSet, walls: SegmentSet, positions: np.ndarray
         for c in np.flatnonzero(keep).tolist():
             first_c, second_c = _corner(first, c), _corner(second, c)
             keep[c] = not (
-                seen_through(corner_x[c], corner_y[c], first_c, second_c, x_m, y_m,
+                seen_through(corner_x[c], corner_y[c], first_c, second_c, contour,
                              after_first[c] + 1, last_position[two[c]], noise, rule)
-                or seen_through(corner_x[c], corner_y[c], second_c, first_c, x_m, y_m,
+                or seen_through(corner_x[c], corner_y[c], second_c, first_c, contour,
                                 first_position[one[c]], before_second[c] - 1, noise, rule))
     return keep, np.column_stack([first_short <= 1.0, second_short <= 1.0])
 

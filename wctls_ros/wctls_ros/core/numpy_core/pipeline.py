@@ -8,18 +8,18 @@ import math
 
 import numpy as np
 
-from .corners import find_corners, walls_end_at
+from .corners import corner_candidates, walls_end_at
 from .lines import fit_lines, normal_jacobian
 from .model_error import flatness_covariance, line_from_normal_jacobian, residual_factor
 from .noise import scan_range_sigma
 from .segmentation import (breakpoints, Breaks, Chains, chains, iterative_end_point_fit,
                            merge_collinear, moment_fit, moment_terms, pass_budget, piece_sums,
-                           SegmentRanges, trim_ambiguous_ends, trim_offset_ends)
+                           SegmentRanges, trim_ambiguous, trim_offset)
 from ..config import FeatureConfig
 from ..features import (CornerSet, Features, LineFits, segment_returns, SegmentReturns,
                         SegmentSet)
 from ..plausibility import implausible_scan, noise_is_plausible, plausible
-from ..records import CornerEndRule, Noise
+from ..records import CornerEndRule, Lines, Noise, Returns
 from ..scan import beam_density, BeamDensity, scan_to_points, ScanError, ScanPoints
 
 _DEFAULT_CONFIG = FeatureConfig()
@@ -71,6 +71,7 @@ def _features_of(points: ScanPoints, angle_increment_rad: float,
     # #decision-noise: every decision tolerates the model error on top of the sensor noise;
     # the fits weigh the returns by the sensor noise alone.
     decisions = _deciding(config)
+    noise = Noise(config.range_sigma_m, config.bearing_sigma_rad, decisions.range_sigma_m)
     # #density: the rules that count returns, at this scan's beam spacing.
     density = beam_density(angle_increment_rad, points.beam_count)
     # #segmentation-statistics: breakpoints, IEPF, merging, the size rules, the end trims.
@@ -78,19 +79,18 @@ def _features_of(points: ScanPoints, angle_increment_rad: float,
     segments, unsplit = _split(contour, decisions, density)
     if not len(segments):
         return replace(nothing, work_limited=unsplit)
-    segments, angle, radius, unmerged = _merge(contour, segments, decisions)
-    segments, angle, radius = _large_enough(contour, segments, angle, radius, config)
+    segments, lines, unmerged = _merge(contour, segments, decisions)
+    segments, lines = _large_enough(contour, segments, lines, config)
     work_limited = unsplit or unmerged
     if not len(segments):
         return replace(nothing, work_limited=work_limited)
-    segments = _trim_ends(contour, segments, angle, radius, decisions, density)
+    segments = _trim_ends(contour, segments, lines, noise, config, density)
     # #utls, #wtls, #wctls or #maximum-likelihood: the configured fit with its covariance.
     walls, positions = _fit_walls(contour, segments, config)
     if not len(walls):
         return replace(nothing, work_limited=work_limited)
     # #corners: which pairs are corners is decided with the decision noise; the published
     # covariances add the model error to the fits' (#model-error).
-    noise = Noise(config.range_sigma_m, config.bearing_sigma_rad, decisions.range_sigma_m)
     corners = _corners(contour, walls, positions, noise, decisions, density)
     # #model-error (D17), (D18), then #corners and #common-mode-range-offset, (D11)-(D16).
     walls = _with_model_error(walls, config)
@@ -185,8 +185,7 @@ def _merge(contour: _Contour, segments: SegmentRanges, config: FeatureConfig):
     (:func:`~.segmentation.moment_fit`) O(1) per segment, merged or not: merging works on
     piece ranges, with the same work bound as splitting.
 
-    :return: (merged segments, their merge fits' angle (S,) and radius (S,), whether the work
-        bound stopped merging)
+    :return: (merged segments, their merge fits' lines, whether the work bound stopped merging)
     """
     sums = piece_sums(moment_terms(contour.x, contour.y), segments)
 
@@ -198,36 +197,33 @@ def _merge(contour: _Contour, segments: SegmentRanges, config: FeatureConfig):
     pieces, (angle, radius, _), unmerged = merge_collinear(
         sums.pieces(segments), contour.points.full_turn, sums.edges.size - 1, quick,
         config.merge_chi2, pass_budget(len(contour)), joinable)
-    return sums.positions(pieces), angle, radius, unmerged
+    return sums.positions(pieces), Lines(angle, radius), unmerged
 
 
-def _large_enough(contour: _Contour, segments: SegmentRanges, angle: np.ndarray,
-                  radius: np.ndarray, config: FeatureConfig):
-    """Return the segments (and their angle, radius) of min_segment_points and length."""
+def _large_enough(contour: _Contour, segments: SegmentRanges, lines: Lines,
+                  config: FeatureConfig):
+    """Return the segments (and their lines) of min_segment_points and length."""
     x, y = contour.x, contour.y
     first, last = segments.start, (segments.stop - 1) % len(contour)
     dx, dy = x[last] - x[first], y[last] - y[first]
     keep = ((segments.stop - first >= config.min_segment_points)
             & (dx * dx + dy * dy >= config.min_segment_length_m ** 2))
-    return segments.select(keep), angle[keep], radius[keep]
+    return segments.select(keep), Lines(lines.angle_rad[keep], lines.radius_m[keep])
 
 
-def _trim_ends(contour: _Contour, segments: SegmentRanges, angle: np.ndarray,
-               radius: np.ndarray, config: FeatureConfig,
-               density: BeamDensity) -> SegmentRanges:
+def _trim_ends(contour: _Contour, segments: SegmentRanges, lines: Lines, noise: Noise,
+               config: FeatureConfig, density: BeamDensity) -> SegmentRanges:
     """
     Leave out the returns at segment ends that fit both walls, and runs off the line together.
 
-    The lines are the merge fits' (angle, radius).
+    The lines are the merge fits'.
     """
-    n, x, y = len(contour), contour.x, contour.y
-    segments = trim_ambiguous_ends(segments, contour.points.full_turn, n, x, y, angle, radius,
-                                   config.range_sigma_m, config.bearing_sigma_rad,
-                                   config.min_segment_points, density.end_window)
+    x, y = contour.x, contour.y
+    segments = trim_ambiguous(segments, contour.points.full_turn, x, y, lines, noise,
+                              config.min_segment_points, density.end_window)
     if config.end_offset_sigmas > 0.0:
-        segments = trim_offset_ends(segments, n, x, y, angle, radius, config.range_sigma_m,
-                                    config.bearing_sigma_rad, config.min_segment_points,
-                                    config.end_offset_sigmas, density.end_window)
+        segments = trim_offset(segments, x, y, lines, noise, config.min_segment_points,
+                               config.end_offset_sigmas, density.end_window)
     return segments
 
 
@@ -301,9 +297,8 @@ def _corner_covariances(walls: SegmentSet, corners: CornerSet,
     """Return the corners with covariances propagated from the walls' (model error included)."""
     if not len(corners):
         return corners
-    again = find_corners(walls.line, walls.line_covariance, walls.start_xy_m, walls.end_xy_m,
-                         corners.first_segment, corners.second_segment, 0.0,
-                         walls.line_offset_jacobian, config.common_range_sigma_m)
+    again = corner_candidates(walls, corners.first_segment, corners.second_segment, 0.0,
+                              config.common_range_sigma_m)
     return replace(corners, covariance=again.covariance)
 
 
@@ -346,20 +341,19 @@ def _corners(contour: _Contour, walls: SegmentSet, positions: np.ndarray, noise:
     first = np.arange(count - 1)
     if contour.points.full_turn and count >= 3:
         first = np.arange(count)               # the last wall meets the first at the seam
-    candidates = find_corners(walls.line, walls.line_covariance, walls.start_xy_m,
-                              walls.end_xy_m, first, (first + 1) % max(count, 1),
-                              config.min_corner_angle_rad, walls.line_offset_jacobian,
-                              config.common_range_sigma_m)
-    if not len(candidates):
-        return candidates
+    candidates = corner_candidates(walls, first, (first + 1) % max(count, 1),
+                                   config.min_corner_angle_rad, config.common_range_sigma_m)
+    if not candidates.yaw_rad.size:
+        return CornerSet.empty()
+    returns = Returns(contour.points.index[contour.chains.order], contour.rho, contour.theta,
+                      contour.x, contour.y)
     keep, seen = walls_end_at(
-        candidates, walls, positions, contour.x, contour.y,
-        abs(contour.points.angle_increment_rad), noise,
+        candidates, walls, positions, returns, abs(contour.points.angle_increment_rad), noise,
         CornerEndRule(density.rarer(config.corner_end_sigmas), config.corner_end_floor_m,
                       density.corner_window, config.end_offset_sigmas))
-    kept = candidates.select(keep)
-    return CornerSet(kept.xy_m, kept.yaw_rad, kept.covariance, kept.opening_angle_rad,
-                     kept.first_segment, kept.second_segment, seen[keep])
+    return CornerSet(candidates.xy_m[keep], candidates.yaw_rad[keep], candidates.covariance[keep],
+                     candidates.opening_angle_rad[keep], candidates.first_wall[keep],
+                     candidates.second_wall[keep], seen[keep])
 
 
 def _project(x_m: np.ndarray, y_m: np.ndarray, first: np.ndarray, last: np.ndarray,

@@ -18,6 +18,7 @@ from typing import Callable, NamedTuple, Tuple
 import numpy as np
 
 from ._linalg import mahalanobis_squared_2x2
+from ..records import Lines, Noise
 from ..scan import ScanPoints
 
 # A chord shorter than this (m) has no usable direction: distances are measured from its start.
@@ -481,10 +482,8 @@ def merge_collinear(segments: SegmentRanges, circular: bool, contour_length: int
     return segments, line_fit, False
 
 
-def trim_ambiguous_ends(segments: SegmentRanges, circular: bool, contour_length: int,
-                        x_m: np.ndarray, y_m: np.ndarray, angle_rad: np.ndarray,
-                        radius_m: np.ndarray, range_sigma_m: float, bearing_sigma_rad: float,
-                        min_returns: int, window: int) -> SegmentRanges:
+def trim_ambiguous(segments: SegmentRanges, circular: bool, x_m: np.ndarray, y_m: np.ndarray,
+                   lines: Lines, noise: Noise, min_returns: int, window: int) -> SegmentRanges:
     """
     Drop the returns at the meeting ends of two neighbouring segments that could fit both lines.
 
@@ -496,17 +495,15 @@ def trim_ambiguous_ends(segments: SegmentRanges, circular: bool, contour_length:
     r) within a distance t / sin(angle between them) of their intersection: the returns at a
     meeting end inside that radius, in an unbroken run from the end, are left out of both
     segments. A segment keeps at least ``min_returns`` returns, shared evenly by its two ends
-    when both meet a neighbour (so that the rule does not depend on the beam order).
+    when both meet a neighbour (so that the rule does not depend on the beam order). The rule
+    of :func:`..numba_core.segmentation.trim_ambiguous`, for every meeting end at once.
 
-    :param segments: segments sorted by start position (positions modulo contour_length)
+    :param segments: segments sorted by start position (positions modulo n)
     :param circular: whether the returns cover a full turn (the last and first can meet)
-    :param contour_length: number of returns n
     :param x_m: x of the returns in position order, shape (n,), m
     :param y_m: y of the returns in position order, shape (n,), m
-    :param angle_rad: normal angle of each segment's line, shape (S,), rad
-    :param radius_m: radius of each segment's line, shape (S,), m
-    :param range_sigma_m: range noise std, m
-    :param bearing_sigma_rad: bearing noise std, rad
+    :param lines: each segment's line
+    :param noise: the noise (the rule decides with its deciding_sigma_m)
     :param min_returns: never trim a segment below this many returns
     :param window: most returns examined (and trimmed) at each end
     :return: the trimmed segments
@@ -515,6 +512,9 @@ def trim_ambiguous_ends(segments: SegmentRanges, circular: bool, contour_length:
     if count < 2:
         return segments
     start, stop = segments.start, segments.stop
+    angle_rad, radius_m = lines.angle_rad, lines.radius_m
+    range_sigma_m, bearing_sigma_rad = noise.deciding_sigma_m, noise.bearing_sigma_rad
+    contour_length = len(x_m)
     second = np.arange(1, count + 1)
     second[-1] = 0
     meets = (start[second] - stop) % contour_length <= 1
@@ -550,25 +550,21 @@ def trim_ambiguous_ends(segments: SegmentRanges, circular: bool, contour_length:
     return _within_contour(start, stop, segments.chain, contour_length)
 
 
-def trim_offset_ends(segments: SegmentRanges, contour_length: int, x_m: np.ndarray,
-                     y_m: np.ndarray, angle_rad: np.ndarray, radius_m: np.ndarray,
-                     range_sigma_m: float, bearing_sigma_rad: float, min_returns: int,
-                     threshold_sigmas: float, window: int) -> SegmentRanges:
+def trim_offset(segments: SegmentRanges, x_m: np.ndarray, y_m: np.ndarray, lines: Lines,
+                noise: Noise, min_returns: int, threshold_sigmas: float,
+                window: int) -> SegmentRanges:
     """
     Cut off the returns at segment ends that lie off the line of the segment's other returns.
 
-    The reference of :func:`wctls_ros.core.segmentation.trim_offset`, whose docstring states the
-    deleted-residual test (and docs/derivation.md, "Offset ends"): the same sums, for every
-    segment end and every k at once.
+    The deleted-residual test of :func:`..numba_core.segmentation.trim_offset`, whose docstring
+    states it (and docs/derivation.md, "Offset ends"): the same sums, for every segment end and
+    every k at once.
 
-    :param segments: segments sorted by start position (positions modulo contour_length)
-    :param contour_length: number of returns n
+    :param segments: segments sorted by start position (positions modulo n)
     :param x_m: x of the returns in position order, shape (n,), m
     :param y_m: y of the returns in position order, shape (n,), m
-    :param angle_rad: normal angle of each segment's line (the frame), shape (S,), rad
-    :param radius_m: radius of each segment's line, shape (S,), m
-    :param range_sigma_m: range noise std, m
-    :param bearing_sigma_rad: bearing noise std, rad
+    :param lines: each segment's line (the frame)
+    :param noise: the noise (the rule decides with its deciding_sigma_m)
     :param min_returns: never cut a segment below this many returns
     :param threshold_sigmas: cut where max_k |Z_k| / sqrt(Var(Z_k)) exceeds this
     :param window: most returns examined (and cut) at each end
@@ -578,6 +574,8 @@ def trim_offset_ends(segments: SegmentRanges, contour_length: int, x_m: np.ndarr
     if not count:
         return segments
     start, stop = segments.start, segments.stop
+    angle_rad, radius_m = lines.angle_rad, lines.radius_m
+    range_sigma_m, bearing_sigma_rad = noise.deciding_sigma_m, noise.bearing_sigma_rad
     # Each segment's sums of t, t^2, e, t e and rho^2 in its line's frame, from its moment
     # sums (prefix sums over the contour walked twice).
     terms = moment_terms(np.tile(x_m, 2), np.tile(y_m, 2))
@@ -618,8 +616,7 @@ def trim_offset_ends(segments: SegmentRanges, contour_length: int, x_m: np.ndarr
     if not over.any():
         return segments
     cut = (score.argmax(axis=0) + 1) * over
-    return _within_contour(start + cut[count:], stop - cut[:count], segments.chain,
-                           contour_length)
+    return _within_contour(start + cut[count:], stop - cut[:count], segments.chain, len(x_m))
 
 
 def _end_windows(last: np.ndarray, first: np.ndarray, window: int) -> np.ndarray:

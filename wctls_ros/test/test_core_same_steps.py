@@ -1,0 +1,50 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""
+The steps both cores have by the same name take the same arguments, so a rule reads alike.
+
+The numpy core batches over segments or corners where the compiled one loops, but a step that
+hands on records (Segments, Lines, Noise, Walls, CornerCandidates, the corner end rule's) takes
+them by the same names in the same order in both, and a change to one reads the same in the
+other. The steps listed are those that agree today; a step added to both belongs here. Not yet:
+walls_end_at, whose walls in the numpy core (a SegmentSet) carry beam indices and so take their
+positions apart, and wall_at_corner, whose corners the numpy core takes batched as (x, y) rows.
+"""
+
+import inspect
+
+import pytest
+from wctls_ros.core.numpy_core import corners as numpy_corners
+from wctls_ros.core.numpy_core import segmentation as numpy_segmentation
+
+compiled_corners = pytest.importorskip('wctls_ros.core.numba_core.corners')
+compiled_segmentation = pytest.importorskip('wctls_ros.core.numba_core.segmentation')
+
+SAME_ARGUMENTS = [
+    (numpy_segmentation, compiled_segmentation, 'pass_budget'),
+    (numpy_segmentation, compiled_segmentation, 'trim_ambiguous'),
+    (numpy_segmentation, compiled_segmentation, 'trim_offset'),
+    (numpy_corners, compiled_corners, 'corner_candidates'),
+    (numpy_corners, compiled_corners, 'end_window'),
+    (numpy_corners, compiled_corners, 'along_wall'),
+    (numpy_corners, compiled_corners, 'corner_zone'),
+    (numpy_corners, compiled_corners, 'without_object_in_front'),
+    (numpy_corners, compiled_corners, 'reaches'),
+    (numpy_corners, compiled_corners, 'goes_on'),
+    (numpy_corners, compiled_corners, 'blocked'),
+    (numpy_corners, compiled_corners, 'short_of_corner'),
+    (numpy_corners, compiled_corners, 'seen_through'),
+]
+
+
+def arguments(function) -> list:
+    """Return a function's argument names (a compiled kernel's: its Python function's)."""
+    return list(inspect.signature(getattr(function, 'py_func', function)).parameters)
+
+
+@pytest.mark.parametrize('numpy_module, compiled_module, name', SAME_ARGUMENTS,
+                         ids=[name for _, _, name in SAME_ARGUMENTS])
+def test_a_step_takes_the_same_arguments_in_both_cores(numpy_module, compiled_module, name):
+    assert hasattr(numpy_module, name), f'the numpy core has no {name}'
+    assert arguments(getattr(numpy_module, name)) == arguments(getattr(compiled_module, name))

@@ -21,21 +21,15 @@ from wctls_ros.core.numpy_core import segmentation as numpy_segmentation
 compiled_corners = pytest.importorskip('wctls_ros.core.numba_core.corners')
 compiled_segmentation = pytest.importorskip('wctls_ros.core.numba_core.segmentation')
 
-SAME_ARGUMENTS = [
-    (numpy_segmentation, compiled_segmentation, 'pass_budget'),
-    (numpy_segmentation, compiled_segmentation, 'trim_ambiguous'),
-    (numpy_segmentation, compiled_segmentation, 'trim_offset'),
-    (numpy_corners, compiled_corners, 'corner_candidates'),
-    (numpy_corners, compiled_corners, 'end_window'),
-    (numpy_corners, compiled_corners, 'along_wall'),
-    (numpy_corners, compiled_corners, 'corner_zone'),
-    (numpy_corners, compiled_corners, 'without_object_in_front'),
-    (numpy_corners, compiled_corners, 'reaches'),
-    (numpy_corners, compiled_corners, 'goes_on'),
-    (numpy_corners, compiled_corners, 'blocked'),
-    (numpy_corners, compiled_corners, 'short_of_corner'),
-    (numpy_corners, compiled_corners, 'seen_through'),
+# (numpy module, compiled module, the steps of both that take the same arguments)
+STEPS = [
+    (numpy_segmentation, compiled_segmentation, ('pass_budget', 'trim_ambiguous', 'trim_offset')),
+    (numpy_corners, compiled_corners, (
+        'corner_candidates', 'end_window', 'along_wall', 'corner_zone', 'without_object_in_front',
+        'reaches', 'goes_on', 'blocked', 'short_of_corner', 'seen_through')),
 ]
+SAME_ARGUMENTS = [(numpy_module, compiled_module, name)
+                  for numpy_module, compiled_module, names in STEPS for name in names]
 
 
 def arguments(function) -> list:

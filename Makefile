@@ -29,15 +29,16 @@ OLDEST_TESTS := $(addprefix wctls_ros/test/,test_core_compiled_pipeline.py test_
                   test_core_pipeline.py test_core_precompile.py test_core_segmentation.py \
                   test_rplidar_scan.py test_simulation.py)
 STOCK_VENV := .venv-stock
-STOCK_STAMP := $(STOCK_VENV)/.deps.stamp
+STOCK_DEPS_STAMP := $(STOCK_VENV)/.deps.stamp
+STOCK_STAMP := $(STOCK_VENV)/.executables.stamp
 STOCK_TESTS := $(addprefix wctls_ros/test/,stock_install_checks.py test_stock_install.py \
                  test_core_pipeline.py \
                  test_feature_node.py test_node_startup.py test_params.py test_rplidar_node.py \
                  test_rplidar_emulator.py test_rplidar_protocol.py test_rplidar_capsules.py \
                  test_rplidar_scan.py)
 
-.PHONY: help deps build demo test test-oldest test-stock test-fast lint bench results docs golden \
-        clean
+.PHONY: help deps build demo test test-setup test-oldest test-oldest-quietly test-stock test-fast lint \
+        bench results docs golden clean
 
 help:
 	@echo 'make demo   set up, then run the S1 emulator, driver and feature node live for ~20 s'
@@ -70,10 +71,13 @@ $(OLDEST_STAMP): requirements/oldest.txt requirements/test.txt requirements/pyth
 	  $$(sed -n 's/ *#.*//; /^\(pytest\|hypothesis\|rosbags\)[=>]/p' requirements/*.txt)
 	touch $@
 
-$(STOCK_STAMP): requirements/stock.txt requirements/ros.txt requirements/test.txt \
-                tools/pip_install.sh $(BUILD_STAMP)
+$(STOCK_DEPS_STAMP): requirements/stock.txt requirements/ros.txt requirements/test.txt \
+                     tools/pip_install.sh
 	PYTHON=$(PYTHON) tools/pip_install.sh $(STOCK_VENV) -r requirements/stock.txt \
 	  -r requirements/ros.txt -r requirements/test.txt
+	touch $@
+
+$(STOCK_STAMP): $(STOCK_DEPS_STAMP) $(BUILD_STAMP) tools/stock_executables.sh
 	tools/stock_executables.sh $(STOCK_VENV)
 	touch $@
 
@@ -90,10 +94,18 @@ $(BUILD_STAMP): $(DEPS_STAMP) $(SOURCES)
 demo: $(BUILD_STAMP)
 	$(WITH_ENV) install/wctls_ros/lib/wctls_ros/demo $(DEMO_ARGS)
 
-test: $(BUILD_STAMP) $(OLDEST_STAMP) $(STOCK_STAMP)
+test:
+	$(MAKE) --no-print-directory -j3 test-setup
 	$(WITH_ENV) python -m pytest $(PYTEST_ARGS)
-	$(MAKE) --no-print-directory test-oldest
 	$(MAKE) --no-print-directory test-stock
+
+# What make test does before the main suite, three jobs at a time: the main venv and build, the
+# stock venv, and the whole oldest-versions suite, which needs nothing but its own venv and has
+# no test that times a node (its output is shown when it ends).
+test-setup: $(BUILD_STAMP) $(STOCK_STAMP) test-oldest-quietly
+
+test-oldest-quietly:
+	$(MAKE) --no-print-directory --output-sync=target test-oldest
 
 # Its own JIT cache: code compiled against one numpy is not reused under another.
 test-oldest: $(OLDEST_STAMP)

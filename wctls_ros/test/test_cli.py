@@ -4,6 +4,7 @@
 """The command-line tools as a user meets them: defaults in --help, one-line errors, status 2."""
 
 import importlib
+import os
 import subprocess
 
 import pytest
@@ -35,10 +36,11 @@ def test_every_option_of_every_tool_states_its_default_in_help(module, function)
     assert '%(' not in parser.format_help()
 
 
-def run(tool, *args, cwd=None):
-    """Run an installed tool as a user would; return the finished process."""
+def run(tool, *args, cwd=None, **environment):
+    """Run an installed tool as a user would, with ``environment`` added; return the process."""
     return subprocess.run([str(installed_executable(tool)), *map(str, args)], capture_output=True,
-                          text=True, timeout=120, stdin=subprocess.DEVNULL, cwd=cwd)
+                          text=True, timeout=120, stdin=subprocess.DEVNULL, cwd=cwd,
+                          env=dict(os.environ, **environment))
 
 
 def assert_one_line_error(result, tool, says):
@@ -131,3 +133,10 @@ def test_evaluate_refuses_what_it_cannot_use_in_one_line(tmp_path, make_args, sa
     result = run('evaluate', *make_args(tmp_path), '--out', tmp_path / 'out', cwd=tmp_path)
     assert_one_line_error(result, 'evaluate', says)
     assert not (tmp_path / 'out').exists() and result.stdout == ''
+
+
+@pytest.mark.parametrize('core', ['numpy', 'auto'])
+def test_a_user_error_stays_one_line_whichever_core_the_user_asked_for(tmp_path, core):
+    bag = write(tmp_path / 'bag' / 'metadata.yaml', 'x').parent
+    result = run('score', bag, '--out', tmp_path / 'out', cwd=tmp_path, WCTLS_ROS_CORE=core)
+    assert_one_line_error(result, 'score', 'cannot read')

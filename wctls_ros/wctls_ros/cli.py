@@ -104,9 +104,9 @@ def start_core(prog: str, wait: bool = False, give_up=None):
 
     Loads the compiled pipeline from numba's cache first, silently; otherwise a line on standard
     error says what happens: numba missing (the numpy pipeline serves), a compile starting (the
-    first run on a machine: the numpy pipeline serves meanwhile), its end. Done in the tool's
-    own process, before any worker process is forked, so that the workers inherit what serves
-    then.
+    first run on a machine: the numpy pipeline serves meanwhile), its end. Nothing is said when
+    ``WCTLS_ROS_CORE=numpy`` asked for the numpy pipeline. Done in the tool's own process, before
+    any worker process is forked, so that the workers inherit what serves then.
 
     :param prog: the tool's name, for the messages
     :param wait: have the compiled pipeline now, compiling it if need be (a tool about to fork
@@ -119,7 +119,10 @@ def start_core(prog: str, wait: bool = False, give_up=None):
 
     def changed(status) -> None:
         stopping = give_up is not None and give_up()
-        if (status.name != 'numba' or status.compiled_here) and not stopping:
+        # A cached compiled pipeline, or the numpy one the user asked for: nothing to learn, and a
+        # user error stays the one line on standard error.
+        quiet = not status.compiled_here if status.name == 'numba' else status.forced
+        if not quiet and not stopping:
             print(f'{prog}: {status.describe()}', file=sys.stderr)
 
     # A tool's results do not depend on when a load ended: it loads a cached pipeline first.

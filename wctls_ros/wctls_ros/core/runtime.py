@@ -82,6 +82,11 @@ class CoreStatus:
     compiled_here: bool = False
     advice: str = ''
 
+    @property
+    def forced(self) -> bool:
+        """Return whether the user chose this implementation (``WCTLS_ROS_CORE``)."""
+        return self.reason.startswith(CORE_VARIABLE)
+
     def describe(self) -> str:
         """Return one line for a log: which core runs, why, and what the other one would give."""
         if self.name == 'numba':
@@ -95,7 +100,7 @@ class CoreStatus:
         if self.pending:
             return ('numpy feature pipeline for now: the compiled one is loading in the '
                     'background')
-        if self.reason.startswith(CORE_VARIABLE):
+        if self.forced:
             return f'numpy feature pipeline ({self.reason})'
         advice = f'; {self.advice}' if self.advice else ''
         return (f'numpy feature pipeline: {self.reason} (the compiled one is about {SPEEDUP}x '

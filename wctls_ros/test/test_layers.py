@@ -25,7 +25,7 @@ def map_layers() -> dict:
         cells = [cell.strip() for cell in line.strip().strip('|').split('|')]
         if len(cells) != 3 or not cells[0].isdigit():
             continue
-        # The units are the backticked names outside parentheses: `core/` (5.7k): `config`, ...
+        # The units are the backticked names outside parentheses: `core/` (6.7k): `config`, ...
         outside = re.sub(r'\([^()]*(\([^()]*\)[^()]*)*\)', '', cells[1])
         for token in re.findall(r'`([^`]+)`', outside.split(':')[0] + ', ' + ', '.join(
                 re.findall(r'`[a-z_]+\.py`', outside))):
@@ -78,3 +78,36 @@ def test_no_import_runs_upward():
                 upward.append(f'{path.relative_to(PACKAGE)} (layer {layers[source]}) imports '
                               f'{target} (layer {layers[target]})')
     assert not upward, '\n'.join(upward)
+
+
+# A module's size on the map may lag its file by this fraction before the map must be redrawn.
+SIZE_SLACK = 0.1
+
+
+def map_sizes() -> dict:
+    """Return the package map's stated sizes: the unit's path -> lines (``core/ (5.7k)``)."""
+    text = ARCHITECTURE.read_text().split('## The package map', 1)[1].split('\n## ', 1)[0]
+    sizes = {}
+    for name, size, thousands in re.findall(r'`([a-z_0-9]+/?(?:\.py)?)` \((\d+(?:\.\d+)?)(k?)\)',
+                                            text):
+        sizes[name] = float(size) * (1000 if thousands else 1)
+    return sizes
+
+
+def lines_of(unit: str) -> int:
+    """Return the lines of a unit of the map (a file, or a folder's .py files), as wc -l counts."""
+    for root in (PACKAGE, PACKAGE.parent):          # benchmark/ and launch/ sit beside the package
+        path = root / unit
+        if path.exists():
+            files = sorted(path.rglob('*.py')) if path.is_dir() else [path]
+            return sum(len(file.read_text().splitlines()) for file in files)
+    raise AssertionError(f'docs/architecture.md names {unit}, which is not in the package')
+
+
+def test_the_map_states_each_units_size_as_it_is():
+    sizes = map_sizes()
+    assert len(sizes) >= 20, sizes            # the parser still reads the table
+    wrong = [f'{unit}: the map says {stated:.0f}, the code has {lines_of(unit)}'
+             for unit, stated in sizes.items()
+             if abs(lines_of(unit) - stated) > SIZE_SLACK * stated]
+    assert not wrong, '\n'.join(wrong)

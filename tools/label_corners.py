@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 # Copyright 2026 wctls_ros maintainers
 # SPDX-License-Identifier: Apache-2.0
-"""
+r"""
 Hand-label the true corners of a recording (data/labels/README.md describes the procedure).
 
 Run inside the built workspace (``source tools/env.sh``)::
@@ -25,11 +25,10 @@ import re
 import sys
 
 import numpy as np
-import yaml
-
 from wctls_ros.evaluation.score_cli import load_recording
 from wctls_ros.evaluation.truth import corner_from_beams, median_scan
 from wctls_ros.plotting import pyplot
+import yaml
 
 
 def _scans(recording, first, last):
@@ -37,6 +36,15 @@ def _scans(recording, first, last):
     last = len(recording) - 1 if last is None else last
     ranges = recording.ranges[first:last + 1]
     return median_scan(ranges, recording.valid()[first:last + 1]), recording.bearings
+
+
+def _labelled(document, first, last):
+    """Return the corner entries of a label file that belong to scans first..last."""
+    if 'per_scan' not in document:
+        return document.get('corners', [])
+    last = len(document['per_scan']) - 1 if last is None else last
+    return [corner for entry in document['per_scan'][first:last + 1]
+            for corner in entry['corners']]
 
 
 def plot(args) -> int:
@@ -52,7 +60,8 @@ def plot(args) -> int:
     for i in np.flatnonzero(ok & (np.arange(len(ranges)) % args.every == 0)):
         ax.annotate(str(i), (x[i], y[i]), fontsize=6)
     if args.labels:
-        for corner in yaml.safe_load(pathlib.Path(args.labels).read_text()).get('corners', []):
+        document = yaml.safe_load(pathlib.Path(args.labels).read_text())
+        for corner in _labelled(document, int(first), int(last) if last else None):
             ax.plot(corner['x_m'], corner['y_m'], 'o', mfc='none', mec='red', ms=12)
             ax.annotate(f"{corner['id']} {corner['kind']}", (corner['x_m'], corner['y_m']),
                         color='red', fontsize=8, xytext=(6, -10), textcoords='offset points')

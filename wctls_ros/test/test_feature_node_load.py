@@ -3,6 +3,7 @@
 
 """feature_node under load, as its own process: crafted scans, bursts, the one-scan queue."""
 
+import os
 import subprocess
 import time
 
@@ -21,8 +22,9 @@ from test_feature_node import installed_executable  # noqa: E402
 from wctls_msgs.msg import CornerArray  # noqa: E402
 from wctls_ros.simulation.adversarial import peeling_wall  # noqa: E402
 
-# One of the suite's slowest modules: make test-fast leaves it out.
-pytestmark = pytest.mark.slow
+# One of the suite's slowest modules (make test-fast leaves it out), and one that runs
+# nodes, emulators or signals against deadlines (make test runs it in its realtime group).
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 
 class NodeProcess:
@@ -62,6 +64,16 @@ class NodeProcess:
 
 # No output for this long: the node has caught up with what it was sent, s.
 QUIET_S = 2.0
+# How long a crafted scan's sender waits for the node's next answer, s (a node without the work
+# bound stayed blind for 90 s).
+WINDOW_S = 30.0
+
+
+def cpu_seconds(pid: int) -> float:
+    """Return the CPU time a process has used (user and system), s."""
+    with open(f'/proc/{pid}/stat') as stat:
+        fields = stat.read().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
 def scan_message(ranges, angle_min, increment, sec):
@@ -80,17 +92,20 @@ def test_a_crafted_scan_does_not_blind_the_node(ros_context, executor):
     node = NodeProcess(ros_context, executor, '-p', 'iepf_noise_sigmas:=0.0')
     try:
         crafted = scan_message(*peeling_wall(64000), sec=1)
-        sent = time.monotonic()
+        sent, cpu_at_send = time.monotonic(), cpu_seconds(node.process.pid)
         node.scans.publish(crafted)
         sec = 2
-        while time.monotonic() - sent < 5.0 and not any(s >= 2 for s in node.stamps()):
+        while time.monotonic() - sent < WINDOW_S and not any(s >= 2 for s in node.stamps()):
             node.scans.publish(room_scan_message(stamp=(sec, 0)))
             sec += 1
             spin_until(node.executor, lambda: False, timeout_s=0.1)
+        cpu_to_answer = cpu_seconds(node.process.pid) - cpu_at_send
         answered = [(arrival, message) for arrival, message in node.corners
                     if message.header.stamp.sec >= 2]
-        assert answered, f'no answer within 5 s of the crafted scan: {node.stamps()}'
-        assert answered[0][0] - sent < 2.0
+        assert answered, f'no answer within {WINDOW_S} s of the crafted scan: {node.stamps()}'
+        # The promise in the node's own CPU time (0.25 s here, idle or not): wall time also
+        # counts what a busy machine gave to others (2.1 s beside two CPU hogs).
+        assert cpu_to_answer < 1.0, (cpu_to_answer, answered[0][0] - sent)
         assert all(len(message.corners) == 0 for _, message in node.corners
                    if message.header.stamp.sec == 1)
     finally:
@@ -102,28 +117,30 @@ def test_a_node_that_falls_behind_processes_the_newest_scan_and_counts_the_rest(
     node = NodeProcess(ros_context, executor, '-p', 'range_sigma_m:=0.01',
                        '-p', 'bearing_sigma_deg:=0.05')
 
-    def report_of(processed):
-        """Wait for the diagnostics report that counts this many processed scans."""
-        def arrived():
-            return any(r['scans processed'] == str(processed) for r in node.diagnostics)
-        assert spin_until(node.executor, arrived, 5.0), node.diagnostics[-1:]
-        return next(r for r in node.diagnostics if r['scans processed'] == str(processed))
+    def settled_report(after):
+        """
+        Wait for two reports in a row, from the after-th on, of periods without a scan.
+
+        Return the second: one made before the node's last scan may arrive after that scan's
+        answer; the report that follows it then counts the scan.
+        """
+        def settled():
+            reports = node.diagnostics[after:]
+            return [second for first, second in zip(reports, reports[1:])
+                    if first['scans processed (last period)'] == '0'
+                    and second['scans processed (last period)'] == '0']
+        assert spin_until(node.executor, settled, 30.0), (node.diagnostics[-1:], node.stamps())
+        return settled()[0]
 
     try:
         # Skips are counted from the first scan received (the publisher's sequence numbers say
         # nothing about what it sent before the node listened): warm up, then take a baseline.
         warm_up = room_scan_message(stamp=(1, 0))
         assert spin_until(node.executor, lambda: node.stamps() or node.scans.publish(warm_up))
-
-        def idle():
-            """Tell whether the last report had no scans and counts every CornerArray received."""
-            last = node.diagnostics[-1] if node.diagnostics else {}
-            return (last.get('scans processed (last period)') == '0'
-                    and last.get('scans processed') == str(len(node.stamps())))
         # The warm-up scan went out until the first answer: copies of it may still be on
-        # their way or queued in the node. The baseline is taken once the node was idle.
-        assert spin_until(node.executor, idle, 30.0), (node.diagnostics[-1:], node.stamps())
-        before = node.diagnostics[-1]
+        # their way or queued in the node. The baseline is taken once the node was idle, from
+        # its own count: an answer it sent before it had matched our subscription never came.
+        before = settled_report(after=len(node.diagnostics))
         # 39 scans of 60000 beams at once: each takes the node far longer than it takes to send.
         heavy = [room_scan_message(beams=60000, stamp=(sec, 0)) for sec in range(2, 41)]
         for scan in heavy:
@@ -142,7 +159,7 @@ def test_a_node_that_falls_behind_processes_the_newest_scan_and_counts_the_rest(
         burst = [s for s in node.stamps() if 1 < s < 41]
         assert 1 <= len(burst) < 20, burst               # the queue held the newest scan only
         assert burst == sorted(burst)
-        after = report_of(len(node.stamps()))
+        after = settled_report(after=len(node.diagnostics))
         processed = int(after['scans processed']) - int(before['scans processed'])
         skipped = (int(after['scans skipped (busy or lost)'])
                    - int(before['scans skipped (busy or lost)']))

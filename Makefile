@@ -18,6 +18,9 @@ SOURCES := $(shell find wctls_msgs wctls_ros -type f -not -path '*/__pycache__/*
 # Every recipe line that runs project code does so inside the venv + install overlay.
 WITH_ENV := source tools/env.sh &&
 PYTEST_ARGS ?=
+# The main suite in two pytest-xdist workers: the modules marked realtime one after another in
+# one of them, every other module whole in either (wctls_ros/test/conftest.py).
+WORKERS := -n 2 --dist loadfile
 # Two more runs of some tests, each in a venv of its own. The oldest versions we support
 # (requirements/oldest.txt: numpy 1.26, numba 0.60) with the compiled core forced: it must build
 # and agree with the numpy core under them. And a stock ROS 2 Jazzy install on Ubuntu 24.04
@@ -84,7 +87,8 @@ $(STOCK_STAMP): $(STOCK_DEPS_STAMP) $(BUILD_STAMP) tools/stock_executables.sh
 build: $(BUILD_STAMP)
 
 $(BUILD_STAMP): $(DEPS_STAMP) $(SOURCES)
-	$(WITH_ENV) colcon build --event-handlers console_cohesion- summary+ \
+	@# Not make's job server: colcon's CMake build sizes its own jobs.
+	unset MAKEFLAGS MFLAGS && $(WITH_ENV) colcon build --event-handlers console_cohesion- summary+ \
 	  --cmake-args -DPython3_EXECUTABLE=$(ROOT)/$(VENV)/bin/python
 	@# Compile the feature pipeline into numba's cache now, not at the first scan.
 	$(WITH_ENV) python -c 'from wctls_ros.core import warm_up; \
@@ -96,7 +100,7 @@ demo: $(BUILD_STAMP)
 
 test:
 	$(MAKE) --no-print-directory -j3 test-setup
-	$(WITH_ENV) python -m pytest $(PYTEST_ARGS)
+	$(WITH_ENV) python -m pytest $(WORKERS) $(PYTEST_ARGS)
 	$(MAKE) --no-print-directory test-stock
 
 # What make test does before the main suite, three jobs at a time: the main venv and build, the
@@ -118,7 +122,7 @@ test-stock: $(STOCK_STAMP)
 	  -o addopts='-ra --strict-markers' --junitxml=out/test-results-stock.xml $(STOCK_TESTS)
 
 test-fast: $(BUILD_STAMP)
-	$(WITH_ENV) python -m pytest -m 'not slow' $(PYTEST_ARGS)
+	$(WITH_ENV) python -m pytest $(WORKERS) -m 'not slow' $(PYTEST_ARGS)
 
 lint: $(BUILD_STAMP)
 	$(WITH_ENV) python -m pytest -m linter $(PYTEST_ARGS)

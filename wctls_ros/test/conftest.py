@@ -3,6 +3,7 @@
 
 """Shared fixtures: a private ROS domain per test session and a per-test rclpy context."""
 
+import ast
 import fcntl
 import os
 import pathlib
@@ -39,9 +40,50 @@ def _free_domain_id() -> int:
 
 
 # Keep this session's DDS traffic away from anything else running on the machine (a demo, another
-# test run); subprocesses started by the tests inherit the variable.
-if 'ROS_DOMAIN_ID' not in os.environ:
-    os.environ['ROS_DOMAIN_ID'] = str(_free_domain_id())
+# test run); subprocesses started by the tests inherit the variable. A pytest-xdist worker
+# inherits its controller's environment too: it takes a domain of its own unless the user set one.
+_DOMAIN_CHOSEN_HERE = 'WCTLS_ROS_TEST_DOMAIN_ID'
+if 'ROS_DOMAIN_ID' not in os.environ or (
+        'PYTEST_XDIST_WORKER' in os.environ
+        and os.environ.get(_DOMAIN_CHOSEN_HERE) == os.environ['ROS_DOMAIN_ID']):
+    os.environ['ROS_DOMAIN_ID'] = os.environ[_DOMAIN_CHOSEN_HERE] = str(_free_domain_id())
+
+
+def _marked_realtime(module: pathlib.Path) -> bool:
+    """Tell whether a test module's ``pytestmark`` holds the ``realtime`` mark (read, not run)."""
+    for statement in ast.parse(module.read_text()).body:
+        if isinstance(statement, ast.Assign) and any(
+                isinstance(target, ast.Name) and target.id == 'pytestmark'
+                for target in statement.targets):
+            return any(isinstance(node, ast.Attribute) and node.attr == 'realtime'
+                       for node in ast.walk(statement.value))
+    return False
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """
+    Schedule for pytest-xdist (``make test`` runs two workers) one module at a time.
+
+    The modules marked ``realtime`` (they run nodes, emulators or signals against deadlines) form
+    one unit, run one after another in one worker; every other module is a unit of its own, so
+    its module fixtures are set up once. The scheduler sees test ids only, so it reads the marks
+    from the modules' source.
+    """
+    from xdist.scheduler import LoadScopeScheduling
+
+    realtime = {}
+
+    class RealtimeModulesTogether(LoadScopeScheduling):
+
+        def _split_scope(self, nodeid: str) -> str:
+            module = nodeid.split('::', 1)[0]
+            if module not in realtime:
+                realtime[module] = _marked_realtime(config.rootpath / module)
+            return 'realtime' if realtime[module] else module
+
+    return RealtimeModulesTogether(config, log)
+
 
 # The real recordings, with their licenses, in the repository's data/ folder. Tests that use them
 # never skip: a checkout without them fails.

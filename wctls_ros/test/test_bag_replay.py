@@ -29,8 +29,9 @@ from wctls_ros.bags import bag_info, BagError, read_scans  # noqa: E402
 from wctls_ros.bags.replay_node import BagReplay  # noqa: E402
 from wctls_ros.feature_node import FeatureNode  # noqa: E402
 
-# One of the suite's slowest modules: make test-fast leaves it out.
-pytestmark = pytest.mark.slow
+# One of the suite's slowest modules (make test-fast leaves it out), and one that runs
+# nodes, emulators or signals against deadlines (make test runs it in its realtime group).
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 PACKAGE = pathlib.Path(__file__).resolve().parents[1]
 # The peer keeps every scan and clock message it is sent (best effort, as the replay publishes

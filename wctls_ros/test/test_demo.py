@@ -15,8 +15,9 @@ from test_feature_node import installed_executable
 
 pytest.importorskip('rclpy')
 
-# One of the suite's slowest modules: make test-fast leaves it out.
-pytestmark = pytest.mark.slow
+# One of the suite's slowest modules (make test-fast leaves it out), and one that runs
+# nodes, emulators or signals against deadlines (make test runs it in its realtime group).
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 
 def own_domain():

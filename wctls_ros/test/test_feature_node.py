@@ -28,6 +28,9 @@ from wctls_msgs.msg import CornerArray, LineSegmentArray  # noqa: E402
 from wctls_ros.core import nees  # noqa: E402
 from wctls_ros.feature_node import FeatureNode  # noqa: E402
 
+# Runs nodes, emulators or signals against deadlines: make test runs it in its realtime group.
+pytestmark = pytest.mark.realtime
+
 PACKAGE = pathlib.Path(__file__).resolve().parents[1]
 
 

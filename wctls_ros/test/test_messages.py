@@ -13,6 +13,9 @@ pytest.importorskip('rclpy')
 from rclpy.node import Node  # noqa: E402
 from wctls_msgs.msg import Corner, CornerArray, LineSegment, LineSegmentArray  # noqa: E402
 
+# Runs nodes, emulators or signals against deadlines: make test runs it in its realtime group.
+pytestmark = pytest.mark.realtime
+
 
 def _corner(index):
     corner = Corner()

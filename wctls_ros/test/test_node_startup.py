@@ -18,8 +18,9 @@ rclpy = pytest.importorskip('rclpy')
 
 from test_feature_node import installed_executable  # noqa: E402
 
-# One of the suite's slowest modules: make test-fast leaves it out.
-pytestmark = pytest.mark.slow
+# One of the suite's slowest modules (make test-fast leaves it out), and one that runs
+# nodes, emulators or signals against deadlines (make test runs it in its realtime group).
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 
 @pytest.mark.parametrize('arguments,reason', [

@@ -19,6 +19,9 @@ from rplidar_testing import range_band, true_ranges
 import serial
 from wctls_ros.rplidar.protocol import StandardNodeDecoder
 
+# Runs nodes, emulators or signals against deadlines: make test runs it in its realtime group.
+pytestmark = pytest.mark.realtime
+
 
 def stop_stream(link, timeout_s=10.0):
     """

@@ -21,6 +21,9 @@ from wctls_ros.rplidar.express import (decode_express_capsules, encode_express_c
                                        ExpressCapsuleDecoder)
 from wctls_ros.rplidar.protocol import Samples
 
+# Runs nodes, emulators or signals against deadlines: make test runs it in its realtime group.
+pytestmark = pytest.mark.realtime
+
 US_PER_SAMPLE = 250.0            # the emulated Express mode's
 # Two capsules by hand from the SDK's layout: capsule 1 starts at 4 degrees (0x0100 in 1/64
 # degree); its cabin 0 holds 1000 mm (0x0FA2 = 1000 << 2 | 0b10) and 2000 mm (0x1F41 =

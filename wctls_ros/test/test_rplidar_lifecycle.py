@@ -28,7 +28,9 @@ from rplidar_testing import start_emulator  # noqa: E402
 from sensor_msgs.msg import LaserScan  # noqa: E402
 from wctls_ros.rplidar.rplidar_node import RplidarNode  # noqa: E402
 
-pytestmark = pytest.mark.slow
+# One of the suite's slowest modules (make test-fast leaves it out), and one that runs
+# nodes, emulators or signals against deadlines (make test runs it in its realtime group).
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 PACKAGE_DIR = pathlib.Path(__file__).resolve().parents[1]
 NODE_EXECUTABLE = (PACKAGE_DIR.parents[0] / 'install' / 'wctls_ros' / 'lib' / 'wctls_ros'

@@ -20,6 +20,9 @@ from wctls_ros.rplidar.protocol import (encode_motor_speed, encode_request, Heal
                                         MotorControl, StandardNodeDecoder)
 from wctls_ros.rplidar.transport import LinkError, SerialLink
 
+# Runs nodes, emulators or signals against deadlines: make test runs it in its realtime group.
+pytestmark = pytest.mark.realtime
+
 # How each model's motor is driven, as SLAMTEC's SDK finds out.
 MOTORS = {'a1': MotorControl.DTR, 'a2': MotorControl.PWM, 'a3': MotorControl.PWM,
           'c1': MotorControl.DTR, 's1': MotorControl.RPM, 's2': MotorControl.RPM,

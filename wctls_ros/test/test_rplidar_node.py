@@ -28,8 +28,9 @@ from wctls_ros.rplidar.rplidar_node import RplidarNode  # noqa: E402
 from wctls_ros.rplidar.ultra import varbitscale_decode, varbitscale_encode  # noqa: E402
 import yaml  # noqa: E402
 
-# One of the suite's slowest modules: make test-fast leaves it out.
-pytestmark = pytest.mark.slow
+# One of the suite's slowest modules (make test-fast leaves it out), and one that runs
+# nodes, emulators or signals against deadlines (make test runs it in its realtime group).
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 PACKAGE_DIR = pathlib.Path(__file__).resolve().parents[1]
 

@@ -21,6 +21,9 @@ from wctls_ros.rplidar.protocol import Samples
 from wctls_ros.rplidar.ultra import (encode_ultra_capsules, offset_deg, ULTRA_MAX_DISTANCE_MM,
                                      UltraCapsuleDecoder, varbitscale_decode, varbitscale_encode)
 
+# Runs nodes, emulators or signals against deadlines: make test runs it in its realtime group.
+pytestmark = pytest.mark.realtime
+
 US_PER_SAMPLE = 125.0            # an A2's or A3's Boost mode: 8000 samples per second
 STEP_Q6 = round(10 * 23040 * 96 * US_PER_SAMPLE * 1e-6)       # one capsule's sweep at 10 Hz
 # Capsule 1 by hand from the SDK's layout, starting at 4 degrees: cabin 0 is 0x017FD3E8, major

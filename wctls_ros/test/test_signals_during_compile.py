@@ -21,6 +21,9 @@ from test_feature_node import installed_executable
 
 pytest.importorskip('numba')
 
+# Runs nodes, emulators or signals against deadlines: make test runs it in its realtime group.
+pytestmark = pytest.mark.realtime
+
 REAL_DATA = pathlib.Path(__file__).resolve().parents[2] / 'data'
 DEADLINE_S = 2.0
 

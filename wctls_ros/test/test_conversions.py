@@ -29,13 +29,16 @@ from wctls_ros.bags import read_scans, typestore  # noqa: E402
 from wctls_ros.conversions import (copy_header, corner_array, laser_scan,  # noqa: E402
                                    line_segment_array, marker_array, MessageTypes,
                                    mismatched_types, scan_features)
-from wctls_ros.core import CornerSet, ellipse, Features, METHODS, SegmentSet  # noqa: E402
+from wctls_ros.core import (CornerSet, ellipse, Features, line_landmarks,  # noqa: E402
+                            METHODS, SegmentSet)
 from wctls_ros.params import feature_settings, load_parameters, MarkerStyle  # noqa: E402
 
 RECORDINGS = ('urg04lx_office', 'sick_lms111_static', 'sick_lms1xx_static',
               'ros1/sick_lms1xx_static.bag')
 # The rows and columns of x, y and yaw in a 6x6 (x, y, z, roll, pitch, yaw) covariance.
 POSE_ROWS = (0, 1, 5)
+# feature_node's default bound on a line landmark's angle std, deg.
+LANDMARK_SIGMA_DEG = 3.0
 
 
 def reference_corner_array(features, header, types):
@@ -78,7 +81,8 @@ def reference_line_segment_array(features, header, types):
                               z=0.0),
             end=types.Point(x=float(segment.end_xy_m[0]), y=float(segment.end_xy_m[1]), z=0.0),
             first_index=segment.first_index, last_index=segment.last_index,
-            num_points=segment.num_points, residual_chi2_dof=segment.residual_chi2_dof))
+            num_points=segment.num_points, residual_chi2_dof=segment.residual_chi2_dof,
+            landmark=math.sqrt(segment.covariance[0, 0]) <= math.radians(LANDMARK_SIGMA_DEG)))
     return types.LineSegmentArray(header=header, method=features.method, segments=segments)
 
 
@@ -182,7 +186,8 @@ def real_features(methods=('wctls',)):
 
 BUILDERS = [
     ('corners', corner_array, reference_corner_array),
-    ('lines', line_segment_array, reference_line_segment_array),
+    ('lines', lambda f, h, t: line_segment_array(f, h, t, is_landmark=line_landmarks(
+        f.segments, math.radians(LANDMARK_SIGMA_DEG))), reference_line_segment_array),
     ('markers', lambda f, h, t: marker_array(f, h, STYLE, t),
      lambda f, h, t: reference_marker_array(f, h, STYLE, t)),
     ('markers without ids', lambda f, h, t: marker_array(f, h, STYLE_WITHOUT_IDS, t),
@@ -200,7 +205,7 @@ def families():
 
 
 def test_the_builders_give_what_plain_builders_give_on_real_recordings(families):
-    counts = dict.fromkeys(['corners', 'segments', 'scans'], 0)
+    counts = dict.fromkeys(['corners', 'segments', 'landmarks', 'scans'], 0)
     for scan, features in real_features():
         for family, types in families.items():
             header = copy_header(scan.header, types)
@@ -210,7 +215,12 @@ def test_the_builders_give_what_plain_builders_give_on_real_recordings(families)
         counts['scans'] += 1
         counts['corners'] += len(features.corners)
         counts['segments'] += len(features.segments)
+        counts['landmarks'] += sum(math.sqrt(features.segments[i].covariance[0, 0])
+                                   <= math.radians(LANDMARK_SIGMA_DEG)
+                                   for i in range(len(features.segments)))
     assert counts['scans'] > 600 and counts['corners'] > 1000 and counts['segments'] > 3000
+    # Both kinds of segment were built: the flag was checked either way.
+    assert 0.5 * counts['segments'] < counts['landmarks'] < counts['segments']
 
 
 def test_every_method_builds_what_plain_builders_give(families):

@@ -332,29 +332,40 @@ def corner_array(features: Features, header, types: Optional[MessageTypes] = Non
     return types.CornerArray(header=header, method=features.method, corners=messages)
 
 
-def line_segment_array(features: Features, header, types: Optional[MessageTypes] = None):
+def line_segment_array(features: Features, header, types: Optional[MessageTypes] = None, *,
+                       is_landmark: np.ndarray):
     """
     Convert the segments of one scan to a LineSegmentArray (built as :func:`corner_array`).
+
+    Every segment goes in, in scan order, so that the corners' wall indices index it; each
+    carries its line landmark flag.
 
     :param features: output of ``extract_features``
     :param header: the scan's header, a ``types.Header`` (shared, not copied)
     :param types: the message classes to build with (None: rclpy's)
+    :param is_landmark: which segments are line landmarks, shape (S,), bool
+        (:func:`~wctls_ros.core.line_landmarks`)
     :return: the message
+    :raises ValueError: when is_landmark does not give one flag per segment
     """
     types = types or rclpy_types()
     LineSegment, Point = types.LineSegment, types.Point
     s = features.segments
+    is_landmark = np.asarray(is_landmark, dtype=bool)
+    if is_landmark.shape != (len(s),):
+        raise ValueError(f'{is_landmark.shape} landmark flags for {len(s)} segments')
     messages = [
         LineSegment(angle=angle, radius=radius, covariance=covariance,
                     start=Point(x=start_x, y=start_y, z=0.0), end=Point(x=end_x, y=end_y, z=0.0),
                     first_index=first, last_index=last, num_points=count,
-                    residual_chi2_dof=chi2_dof)
+                    residual_chi2_dof=chi2_dof, landmark=landmark)
         for angle, radius, covariance, (start_x, start_y), (end_x, end_y), first, last, count,
-        chi2_dof in zip(
+        chi2_dof, landmark in zip(
             s.angle_rad.tolist(), s.radius_m.tolist(),
             np.ascontiguousarray(s.covariance, dtype=float).reshape(-1, 4),
             s.start_xy_m.tolist(), s.end_xy_m.tolist(), s.first_index.tolist(),
-            s.last_index.tolist(), s.num_points.tolist(), s.residual_chi2_dof.tolist())]
+            s.last_index.tolist(), s.num_points.tolist(), s.residual_chi2_dof.tolist(),
+            is_landmark.tolist())]
     return types.LineSegmentArray(header=header, method=features.method, segments=messages)
 
 

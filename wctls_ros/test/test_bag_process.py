@@ -457,7 +457,8 @@ def test_the_output_bag_holds_what_feature_node_publishes(tmp_path):
                 ('/scan', scan, SCAN), ('/corners', corner_array(features, scan.header), CORNERS),
                 ('/lines', line_segment_array(features, scan.header, is_landmark=is_landmark),
                  LINES),
-                ('/markers', marker_array(features, scan.header, style), MARKERS)):
+                ('/markers', marker_array(features, scan.header, style, is_landmark=is_landmark),
+                 MARKERS)):
             published = plain(store.deserialize_cdr(serialize_message(message), kind))
             assert written[topic][index] == published, (topic, index)
             compared += 1

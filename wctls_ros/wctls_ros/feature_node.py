@@ -248,7 +248,7 @@ class FeatureNode(Node):
             # listener such as RViz.
             if self._publish_markers and self._markers.get_subscription_count():
                 self._markers.publish(types.serialize(
-                    marker_array(features, header, self._style, types)))
+                    marker_array(features, header, self._style, types, is_landmark=is_landmark)))
         except Exception:  # noqa: B902 - only a shutdown (Ctrl-C mid-callback) is expected here
             if self.context.ok():
                 raise

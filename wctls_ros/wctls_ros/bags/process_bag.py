@@ -275,7 +275,8 @@ class ScanWork:
                                                           is_landmark=is_landmark))))
             if self.publish_markers:
                 messages.append((markers_topic, MARKER_ARRAY, serialize(
-                    marker_array(features, header, self.style, types))))
+                    marker_array(features, header, self.style, types,
+                                 is_landmark=is_landmark))))
             rows = _corner_rows(features.corners, features.segments)
             csv_rows.extend([index, stamp, header.frame_id, method, *row] for row in rows)
             corners_of[method] = [dict(zip(CSV_COLUMNS[4:], row)) for row in rows]

@@ -6,6 +6,7 @@
 import csv
 import dataclasses
 import json
+import math
 import os
 import pathlib
 import resource
@@ -121,11 +122,21 @@ def test_real_bags_give_an_output_bag_with_every_scan_and_method(name, method, t
     with open(tmp_path / 'out' / 'corners.csv', newline='') as table:
         rows = list(csv.DictReader(table))
     assert {row['method'] for row in rows} == set(methods)
+    segments = {}
+    for topic, message in output_messages(tmp_path / 'out'):
+        if topic.startswith('/lines'):
+            segments.setdefault(topic, []).extend(message.segments)
+    bound_rad = math.radians(load_parameters(None)['max_landmark_angle_sigma_deg'])
     for m in methods:
         # Every scan of these recordings shows a corner (the LMS111 its room corner, and
         # hardly ever one of the two hidden beside the sensor).
         corners = sum(row['method'] == m for row in rows)
-        assert corners >= count and f'{m}: {corners} corners' in out
+        # Every segment is on the lines topic, flagged a line landmark by its angle std.
+        lines = segments[f'/lines/{m}' if method == 'all' else '/lines']
+        flags = [s.landmark for s in lines]
+        assert flags == [math.sqrt(s.covariance[0]) <= bound_rad for s in lines]
+        assert corners >= count and (f'{m}: {corners} corners, {len(lines)} segments '
+                                     f'({sum(flags)} line landmarks)') in out
 
 
 def test_config_file_is_checked_like_the_node_does(tmp_path, capsys):
@@ -426,6 +437,7 @@ def test_the_output_bag_holds_what_feature_node_publishes(tmp_path):
     from rclpy.serialization import serialize_message
     from wctls_ros.conversions import (corner_array, laser_scan, line_segment_array,
                                        marker_array, scan_features)
+    from wctls_ros.core import line_landmarks
     bag = real_bag('urg04lx_office')
     parameters = load_parameters(None)
     config, style, _ = feature_settings(parameters)
@@ -440,10 +452,13 @@ def test_the_output_bag_holds_what_feature_node_publishes(tmp_path):
     for index, record in enumerate(read_scans(bag)):
         scan = laser_scan(record.scan)            # as feature_node receives it
         features, _ = scan_features(scan, config)
+        is_landmark = line_landmarks(features.segments, config.max_landmark_angle_sigma_rad)
         for topic, message, kind in (
                 ('/scan', scan, SCAN), ('/corners', corner_array(features, scan.header), CORNERS),
-                ('/lines', line_segment_array(features, scan.header), LINES),
-                ('/markers', marker_array(features, scan.header, style), MARKERS)):
+                ('/lines', line_segment_array(features, scan.header, is_landmark=is_landmark),
+                 LINES),
+                ('/markers', marker_array(features, scan.header, style, is_landmark=is_landmark),
+                 MARKERS)):
             published = plain(store.deserialize_cdr(serialize_message(message), kind))
             assert written[topic][index] == published, (topic, index)
             compared += 1

@@ -29,13 +29,16 @@ from wctls_ros.bags import read_scans, typestore  # noqa: E402
 from wctls_ros.conversions import (copy_header, corner_array, laser_scan,  # noqa: E402
                                    line_segment_array, marker_array, MessageTypes,
                                    mismatched_types, scan_features)
-from wctls_ros.core import CornerSet, ellipse, Features, METHODS, SegmentSet  # noqa: E402
+from wctls_ros.core import (CornerSet, ellipse, Features, line_landmarks,  # noqa: E402
+                            METHODS, SegmentSet)
 from wctls_ros.params import feature_settings, load_parameters, MarkerStyle  # noqa: E402
 
 RECORDINGS = ('urg04lx_office', 'sick_lms111_static', 'sick_lms1xx_static',
               'ros1/sick_lms1xx_static.bag')
 # The rows and columns of x, y and yaw in a 6x6 (x, y, z, roll, pitch, yaw) covariance.
 POSE_ROWS = (0, 1, 5)
+# feature_node's default bound on a line landmark's angle std, deg.
+LANDMARK_SIGMA_DEG = 3.0
 
 
 def reference_corner_array(features, header, types):
@@ -78,8 +81,14 @@ def reference_line_segment_array(features, header, types):
                               z=0.0),
             end=types.Point(x=float(segment.end_xy_m[0]), y=float(segment.end_xy_m[1]), z=0.0),
             first_index=segment.first_index, last_index=segment.last_index,
-            num_points=segment.num_points, residual_chi2_dof=segment.residual_chi2_dof))
+            num_points=segment.num_points, residual_chi2_dof=segment.residual_chi2_dof,
+            landmark=is_landmark(segment)))
     return types.LineSegmentArray(header=header, method=features.method, segments=segments)
+
+
+def is_landmark(segment) -> bool:
+    """Return whether a segment is a line landmark under feature_node's default bound."""
+    return math.sqrt(segment.covariance[0, 0]) <= math.radians(LANDMARK_SIGMA_DEG)
 
 
 def reference_marker_array(features, header, style, types):
@@ -109,10 +118,13 @@ def reference_marker_array(features, header, style, types):
     markers = [marker('', 0, Marker.ARROW, (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
                       action=Marker.DELETEALL)]
     segments, corners = features.segments, features.corners
-    if len(segments):
-        ends = [end for segment in segments for end in (segment.start_xy_m, segment.end_xy_m)]
-        markers.append(marker('segments', 0, Marker.LINE_LIST, (0.1, 0.5, 1.0, 1.0),
-                              (style.line_width_m, 0.0, 0.0), points=ends))
+    # The line landmarks opaque, the other segments faint.
+    for marker_id, (landmark, alpha) in enumerate(((True, 1.0), (False, 0.35))):
+        ends = [end for segment in segments if is_landmark(segment) == landmark
+                for end in (segment.start_xy_m, segment.end_xy_m)]
+        if ends:
+            markers.append(marker('segments', marker_id, Marker.LINE_LIST, (0.1, 0.5, 1.0, alpha),
+                                  (style.line_width_m, 0.0, 0.0), points=ends))
     if not len(corners):
         return types.MarkerArray(markers=markers)
     size = style.corner_size_m
@@ -180,12 +192,19 @@ def real_features(methods=('wctls',)):
     yield record.scan, Features('wctls', SegmentSet.empty(), CornerSet.empty())
 
 
+def landmarks(features):
+    """Return the codec's landmark flags of a scan's segments (the core's rule)."""
+    return line_landmarks(features.segments, math.radians(LANDMARK_SIGMA_DEG))
+
+
 BUILDERS = [
     ('corners', corner_array, reference_corner_array),
-    ('lines', line_segment_array, reference_line_segment_array),
-    ('markers', lambda f, h, t: marker_array(f, h, STYLE, t),
+    ('lines', lambda f, h, t: line_segment_array(f, h, t, is_landmark=landmarks(f)),
+     reference_line_segment_array),
+    ('markers', lambda f, h, t: marker_array(f, h, STYLE, t, is_landmark=landmarks(f)),
      lambda f, h, t: reference_marker_array(f, h, STYLE, t)),
-    ('markers without ids', lambda f, h, t: marker_array(f, h, STYLE_WITHOUT_IDS, t),
+    ('markers without ids',
+     lambda f, h, t: marker_array(f, h, STYLE_WITHOUT_IDS, t, is_landmark=landmarks(f)),
      lambda f, h, t: reference_marker_array(f, h, STYLE_WITHOUT_IDS, t)),
 ]
 STYLE = MarkerStyle(ellipse_sigma=2.0, ellipse_scale=3.0, text_ids=True)
@@ -200,7 +219,7 @@ def families():
 
 
 def test_the_builders_give_what_plain_builders_give_on_real_recordings(families):
-    counts = dict.fromkeys(['corners', 'segments', 'scans'], 0)
+    counts = dict.fromkeys(['corners', 'segments', 'landmarks', 'scans'], 0)
     for scan, features in real_features():
         for family, types in families.items():
             header = copy_header(scan.header, types)
@@ -210,7 +229,10 @@ def test_the_builders_give_what_plain_builders_give_on_real_recordings(families)
         counts['scans'] += 1
         counts['corners'] += len(features.corners)
         counts['segments'] += len(features.segments)
+        counts['landmarks'] += sum(is_landmark(segment) for segment in features.segments)
     assert counts['scans'] > 600 and counts['corners'] > 1000 and counts['segments'] > 3000
+    # Both kinds of segment were built: the flag was checked either way.
+    assert 0.5 * counts['segments'] < counts['landmarks'] < counts['segments']
 
 
 def test_every_method_builds_what_plain_builders_give(families):

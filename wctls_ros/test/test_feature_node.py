@@ -117,6 +117,36 @@ def test_room_corners_arrive_with_header_covariance_and_indices(ros_context, exe
     assert all(m.header == scan.header for m in markers[-1].markers)
 
 
+def test_lines_carry_every_segment_flagged_landmark_and_corners_index_them_all(
+        ros_context, executor):
+    harness = Harness(ros_context, executor)
+    scan = room_scan_message()
+    corners, lines = harness.exchange(scan)
+    sigma_deg = np.degrees(np.sqrt([s.covariance[0] for s in lines.segments]))
+    # The default bound, 3 deg, applied to each segment's own covariance.
+    assert [s.landmark for s in lines.segments] == (sigma_deg <= 3.0).tolist()
+    # A bound between the corner walls' angle stds: some walls are landmarks, some are not.
+    walls = sorted({i for c in corners.corners for i in (c.first_line, c.second_line)})
+    bound = float(np.median(sigma_deg[walls]))
+    assert harness.node.set_parameters(
+        [Parameter('max_landmark_angle_sigma_deg', value=bound)])[0].successful
+    bounded_corners, bounded_lines = harness.exchange(scan, count=2)
+    # Every segment is still there, in the same order; only the flags follow the bound.
+    assert [s.first_index for s in bounded_lines.segments] == [
+        s.first_index for s in lines.segments]
+    flags = [s.landmark for s in bounded_lines.segments]
+    assert flags == (sigma_deg <= bound).tolist()
+    assert any(flags[i] for i in walls) and not all(flags[i] for i in walls)
+    # The corners and their wall indices do not change: they index every segment.
+    assert bounded_corners.corners == corners.corners
+    assert len(corners.corners) == len(room_truth())
+    for corner in bounded_corners.corners:
+        for side in ('first', 'second'):
+            wall = bounded_lines.segments[getattr(corner, f'{side}_line')]
+            assert getattr(corner, f'{side}_line_points') == wall.num_points
+            assert getattr(corner, f'{side}_line_chi2_dof') == wall.residual_chi2_dof
+
+
 @pytest.mark.parametrize('reliability', [ReliabilityPolicy.BEST_EFFORT,
                                          ReliabilityPolicy.RELIABLE])
 def test_best_effort_and_reliable_publishers_both_reach_the_node(ros_context, executor,

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 from wctls_ros.bags import read_scans, typestore
 from wctls_ros.conversions import laser_scan, marker_array, MessageTypes, scan_features
+from wctls_ros.core import line_landmarks
 from wctls_ros.params import feature_settings, load_parameters, MarkerStyle
 
 # One of the suite's slowest modules: make test-fast leaves it out.
@@ -67,13 +68,18 @@ def render(markers, axes) -> dict:
 
 
 def office_features(count=40):
-    """Yield (scan, features) for office scans with corners (a hand-held sensor, real noise)."""
+    """
+    Yield (scan, features, line landmark flags) for office scans with corners.
+
+    A hand-held sensor, real noise; the flags by feature_node's default bound.
+    """
     config, _, _ = feature_settings(load_parameters(None))
     for record in list(read_scans(REAL_DATA / 'urg04lx_office'))[:count]:
         features, problems = scan_features(record.scan, config)
         assert not problems
         if len(features.corners):
-            yield record.scan, features
+            yield record.scan, features, line_landmarks(features.segments,
+                                                        config.max_landmark_angle_sigma_rad)
 
 
 @pytest.mark.parametrize('kind', ['rosbags', 'rclpy'])
@@ -86,23 +92,32 @@ def test_each_ellipse_is_drawn_with_the_axes_and_orientation_of_its_covariance(
     else:
         types = MessageTypes.from_typestore(typestore())
     style = MarkerStyle(ellipse_sigma=2.0, ellipse_scale=10.0, text_ids=text_ids)
-    ellipses = 0
-    for scan, features in office_features():
+    ellipses = other_segments = 0
+    for scan, features, is_landmark in office_features():
         scan = laser_scan(scan, types)
         figure = Figure()
         axes = figure.add_subplot()
-        drawn = render(marker_array(features, scan.header, style, types), axes)
+        drawn = render(marker_array(features, scan.header, style, types,
+                                    is_landmark=is_landmark), axes)
         axes.set_aspect('equal')
         axes.autoscale_view()
         figure.savefig(tmp_path / 'markers.png')         # the picture renders
         corners, segments = features.corners, features.segments
-        expected = {('segments', 0), ('corners', 0)}
+        # The line landmarks opaque (id 0), the other segments faint (id 1, when there are).
+        kinds = [(0, is_landmark)] + ([(1, ~is_landmark)] if not is_landmark.all() else [])
+        expected = {('segments', marker_id) for marker_id, _ in kinds} | {('corners', 0)}
         expected |= {(namespace, i) for i in range(len(corners))
                      for namespace in ('ellipses',) + (('corner_ids',) if text_ids else ())}
         assert set(drawn) == expected
-        lines = drawn[('segments', 0)].get_segments()
-        assert np.allclose([line[0] for line in lines], segments.start_xy_m)
-        assert np.allclose([line[1] for line in lines], segments.end_xy_m)
+        for marker_id, kind in kinds:
+            lines = drawn[('segments', marker_id)]
+            # rclpy's ColorRGBA holds float32.
+            assert lines.get_colors()[0][3] == pytest.approx(1.0 if marker_id == 0 else 0.35,
+                                                             rel=1e-6)
+            ends = lines.get_segments()
+            assert np.allclose([line[0] for line in ends], segments.start_xy_m[kind])
+            assert np.allclose([line[1] for line in ends], segments.end_xy_m[kind])
+        other_segments += len(kinds) - 1
         assert np.allclose(drawn[('corners', 0)].get_offsets(), corners.xy_m)
         for i, (xy, covariance) in enumerate(zip(corners.xy_m, corners.covariance)):
             if text_ids:
@@ -116,4 +131,4 @@ def test_each_ellipse_is_drawn_with_the_axes_and_orientation_of_its_covariance(
             k = style.ellipse_sigma * style.ellipse_scale
             assert np.allclose(quadratic, k * k, rtol=1e-6), (i, quadratic, k * k)
             ellipses += 1
-    assert ellipses > 100
+    assert ellipses > 100 and other_segments > 0

@@ -69,10 +69,13 @@ def test_line_segment_array_round_trips(ros_context, executor):
     publisher = node.create_publisher(LineSegmentArray, 'lines', 10)
     segment = LineSegment(angle=-2.0, radius=3.5, covariance=[1e-4, 2e-6, 2e-6, 4e-4],
                           first_index=1070, last_index=12, num_points=22,
-                          residual_chi2_dof=1.25)
+                          residual_chi2_dof=1.25, landmark=True)
     segment.start.x, segment.end.y = 1.0, -2.0
-    sent = LineSegmentArray(method='ml', segments=[segment])
+    other = LineSegment(angle=0.5, radius=1.5, covariance=[4e-2, 0.0, 0.0, 1e-3],
+                        first_index=20, last_index=31, num_points=12, residual_chi2_dof=3.0)
+    sent = LineSegmentArray(method='ml', segments=[segment, other])
     sent.header.frame_id = 'laser'
 
     assert spin_until(executor, lambda: received or publisher.publish(sent), timeout_s=10.0)
     assert received[0] == sent
+    assert [s.landmark for s in received[0].segments] == [True, False]

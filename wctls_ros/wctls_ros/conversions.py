@@ -39,6 +39,8 @@ MESSAGE_PACKAGE = 'wctls_msgs'
 _POSE_INDEX = np.array([0, 1, 5])
 # Height of the flat cylinders that draw covariance ellipses, m.
 _ELLIPSE_THICKNESS_M = 0.005
+# Opacity of the segments that are not line landmarks among the markers (the landmarks: 1).
+_OTHER_SEGMENT_ALPHA = 0.35
 
 
 def _float32_array_for_rclpy(values) -> array.array:
@@ -332,29 +334,40 @@ def corner_array(features: Features, header, types: Optional[MessageTypes] = Non
     return types.CornerArray(header=header, method=features.method, corners=messages)
 
 
-def line_segment_array(features: Features, header, types: Optional[MessageTypes] = None):
+def line_segment_array(features: Features, header, types: Optional[MessageTypes] = None, *,
+                       is_landmark: np.ndarray):
     """
     Convert the segments of one scan to a LineSegmentArray (built as :func:`corner_array`).
+
+    Every segment goes in, in scan order, so that the corners' wall indices index it; each
+    carries its line landmark flag.
 
     :param features: output of ``extract_features``
     :param header: the scan's header, a ``types.Header`` (shared, not copied)
     :param types: the message classes to build with (None: rclpy's)
+    :param is_landmark: which segments are line landmarks, shape (S,), bool
+        (:func:`~wctls_ros.core.line_landmarks`)
     :return: the message
+    :raises ValueError: when is_landmark does not give one flag per segment
     """
     types = types or rclpy_types()
     LineSegment, Point = types.LineSegment, types.Point
     s = features.segments
+    is_landmark = np.asarray(is_landmark, dtype=bool)
+    if is_landmark.shape != (len(s),):
+        raise ValueError(f'{is_landmark.shape} landmark flags for {len(s)} segments')
     messages = [
         LineSegment(angle=angle, radius=radius, covariance=covariance,
                     start=Point(x=start_x, y=start_y, z=0.0), end=Point(x=end_x, y=end_y, z=0.0),
                     first_index=first, last_index=last, num_points=count,
-                    residual_chi2_dof=chi2_dof)
+                    residual_chi2_dof=chi2_dof, landmark=landmark)
         for angle, radius, covariance, (start_x, start_y), (end_x, end_y), first, last, count,
-        chi2_dof in zip(
+        chi2_dof, landmark in zip(
             s.angle_rad.tolist(), s.radius_m.tolist(),
             np.ascontiguousarray(s.covariance, dtype=float).reshape(-1, 4),
             s.start_xy_m.tolist(), s.end_xy_m.tolist(), s.first_index.tolist(),
-            s.last_index.tolist(), s.num_points.tolist(), s.residual_chi2_dof.tolist())]
+            s.last_index.tolist(), s.num_points.tolist(), s.residual_chi2_dof.tolist(),
+            is_landmark.tolist())]
     return types.LineSegmentArray(header=header, method=features.method, segments=messages)
 
 
@@ -371,12 +384,14 @@ def _unused_marker_fields(types: MessageTypes) -> dict:
 
 
 def marker_array(features: Features, header, style: MarkerStyle = MarkerStyle(),
-                 types: Optional[MessageTypes] = None):
+                 types: Optional[MessageTypes] = None, *, is_landmark: np.ndarray):
     """
     Draw one scan's features: segments, corners with ids, and covariance ellipses.
 
-    The array starts with a DELETEALL marker, so features of earlier scans never linger. All
-    segments are one LINE_LIST, all corners one SPHERE_LIST; each corner's k-sigma covariance
+    The array starts with a DELETEALL marker, so features of earlier scans never linger. The
+    line landmarks are one LINE_LIST (namespace ``segments``, id 0, opaque), the other segments
+    another (id 1, the same colour at :data:`_OTHER_SEGMENT_ALPHA`), all corners one
+    SPHERE_LIST; each corner's k-sigma covariance
     ellipse is one flat CYLINDER scaled to its axes and turned to its orientation (as RViz draws
     covariances) and, with ``style.text_ids``, its index one TEXT_VIEW_FACING marker. Markers
     of one array share sub-messages (header, colours, scales): change a copy, not them.
@@ -385,6 +400,8 @@ def marker_array(features: Features, header, style: MarkerStyle = MarkerStyle(),
     :param header: the scan's header, a ``types.Header`` (shared, not copied)
     :param style: sizes, the ellipse scale, whether corners get id labels
     :param types: the message classes to build with (None: rclpy's)
+    :param is_landmark: which segments are line landmarks, shape (S,), bool
+        (:func:`~wctls_ros.core.line_landmarks`)
     :return: the markers
     """
     types = types or rclpy_types()
@@ -399,12 +416,17 @@ def marker_array(features: Features, header, style: MarkerStyle = MarkerStyle(),
                       pose=at_origin, scale=no_scale, color=ColorRGBA(r=0.0, g=0.0, b=0.0, a=0.0),
                       points=[], text='')]
     segments, corners = features.segments, features.corners
-    if len(segments):
-        ends = np.stack([segments.start_xy_m, segments.end_xy_m], 1).reshape(-1, 2).tolist()
+    is_landmark = np.asarray(is_landmark, dtype=bool)
+    line_width = Vector3(x=style.line_width_m, y=0.0, z=0.0)
+    for marker_id, (drawn, alpha) in enumerate(((is_landmark, 1.0),
+                                                (~is_landmark, _OTHER_SEGMENT_ALPHA))):
+        if not drawn.any():
+            continue
+        ends = np.stack([segments.start_xy_m[drawn], segments.end_xy_m[drawn]],
+                        1).reshape(-1, 2).tolist()
         markers.append(Marker(
-            **alike, ns='segments', id=0, type=Marker.LINE_LIST, pose=at_origin,
-            scale=Vector3(x=style.line_width_m, y=0.0, z=0.0),
-            color=ColorRGBA(r=0.1, g=0.5, b=1.0, a=1.0),
+            **alike, ns='segments', id=marker_id, type=Marker.LINE_LIST, pose=at_origin,
+            scale=line_width, color=ColorRGBA(r=0.1, g=0.5, b=1.0, a=alpha),
             points=[Point(x=x, y=y, z=0.0) for x, y in ends], text=''))
     if not len(corners):
         return types.MarkerArray(markers=markers)

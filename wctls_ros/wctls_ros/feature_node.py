@@ -6,7 +6,8 @@ feature_node: LaserScan in; corners, line segments and RViz markers out, once pe
 
 Subscribes ``scan`` (sensor_msgs/LaserScan, best effort, so reliable and best-effort
 publishers both reach it) and publishes ``corners`` (wctls_msgs/CornerArray), ``lines``
-(wctls_msgs/LineSegmentArray) and ``markers`` (visualization_msgs/MarkerArray), each with the
+(wctls_msgs/LineSegmentArray: every segment, each flagged a line landmark or not,
+:mod:`wctls_ros.core.landmarks`) and ``markers`` (visualization_msgs/MarkerArray), each with the
 scan's header. Topic names are relative, so they follow the node's namespace and remappings.
 The input queue holds one scan: a node that falls behind processes the newest scan and counts
 the ones it skipped (from the publisher's sequence numbers: skipped while busy or lost on the
@@ -40,7 +41,8 @@ from wctls_msgs.msg import CornerArray, LineSegmentArray
 
 from .conversions import (copy_header, corner_array, line_segment_array, marker_array,
                           MessageTypes, mismatched_types, rclpy_types, scan_features, typestore)
-from .core import CoreStatus, CornerSet, Features, SegmentSet, start as start_core
+from .core import (CoreStatus, CornerSet, Features, line_landmarks, SegmentSet,
+                   start as start_core)
 from .extras import missing_extra
 from .node_main import declare_parameters, run_node
 from .params import FEATURE_NODE, feature_settings
@@ -238,12 +240,15 @@ class FeatureNode(Node):
         try:
             header = copy_header(scan.header, types)
             self._corners.publish(types.serialize(corner_array(features, header, types)))
-            self._lines.publish(types.serialize(line_segment_array(features, header, types)))
+            is_landmark = line_landmarks(features.segments,
+                                         self._config.max_landmark_angle_sigma_rad)
+            self._lines.publish(types.serialize(
+                line_segment_array(features, header, types, is_landmark=is_landmark)))
             # Markers are costly to build (a Marker per corner label and ellipse): only for a
             # listener such as RViz.
             if self._publish_markers and self._markers.get_subscription_count():
                 self._markers.publish(types.serialize(
-                    marker_array(features, header, self._style, types)))
+                    marker_array(features, header, self._style, types, is_landmark=is_landmark)))
         except Exception:  # noqa: B902 - only a shutdown (Ctrl-C mid-callback) is expected here
             if self.context.ok():
                 raise

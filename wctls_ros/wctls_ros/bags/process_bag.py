@@ -46,7 +46,7 @@ from .bag_io import (bag_info, BagError, BagWriter, choose_scan_topic, LASER_SCA
 from ..cli import start_core
 from ..conversions import (corner_array, laser_scan, line_segment_array, marker_array,
                            MessageTypes, scan_features)
-from ..core import CornerSet, METHODS, SegmentSet, start
+from ..core import CornerSet, line_landmarks, METHODS, SegmentSet, start
 from ..params import ConfigError, feature_settings, load_parameters, SENSOR
 from ..sensors import DEFAULT_SENSOR, sensor_presets
 
@@ -132,6 +132,8 @@ class Summary:
     :ivar malformed: scans whose features could not be extracted (written with no features)
     :ivar corners: method -> corners found in all scans
     :ivar segments: method -> segments found in all scans
+    :ivar line_landmarks: method -> of those, line landmarks (flagged ``landmark`` on the lines
+        topic)
     :ivar seconds: wall time of the run, s
     """
 
@@ -142,6 +144,7 @@ class Summary:
     malformed: int = 0
     corners: dict = field(default_factory=dict)
     segments: dict = field(default_factory=dict)
+    line_landmarks: dict = field(default_factory=dict)
     seconds: float = 0.0
 
 
@@ -198,6 +201,7 @@ class ScanOutput(NamedTuple):
     :ivar json_entry: its entry of corners.json, as JSON text
     :ivar corners: method -> corners found
     :ivar segments: method -> segments found
+    :ivar line_landmarks: method -> of those, line landmarks
     :ivar malformed: whether the scan was unusable (written with no features)
     """
 
@@ -206,6 +210,7 @@ class ScanOutput(NamedTuple):
     json_entry: str
     corners: dict
     segments: dict
+    line_landmarks: dict
     malformed: bool
 
 
@@ -257,27 +262,33 @@ class ScanWork:
         """
         header, types, serialize = scan.header, self.types, self.types.serialize
         stamp = f'{header.stamp.sec}.{header.stamp.nanosec:09d}'
-        messages, csv_rows, corners_of, corners, segments = [], [], {}, {}, {}
+        messages, csv_rows, corners_of, corners, segments, landmarks = [], [], {}, {}, {}, {}
         problems = []
         for method, (corners_topic, lines_topic, markers_topic) in self.topics.items():
             features, problems = scan_features(scan, self.configs[method])
+            is_landmark = line_landmarks(features.segments,
+                                         self.configs[method].max_landmark_angle_sigma_rad)
             messages.append((corners_topic, CORNER_ARRAY,
                              serialize(corner_array(features, header, types))))
             messages.append((lines_topic, LINE_SEGMENT_ARRAY,
-                             serialize(line_segment_array(features, header, types))))
+                             serialize(line_segment_array(features, header, types,
+                                                          is_landmark=is_landmark))))
             if self.publish_markers:
                 messages.append((markers_topic, MARKER_ARRAY, serialize(
-                    marker_array(features, header, self.style, types))))
+                    marker_array(features, header, self.style, types,
+                                 is_landmark=is_landmark))))
             rows = _corner_rows(features.corners, features.segments)
             csv_rows.extend([index, stamp, header.frame_id, method, *row] for row in rows)
             corners_of[method] = [dict(zip(CSV_COLUMNS[4:], row)) for row in rows]
             corners[method], segments[method] = len(features.corners), len(features.segments)
+            landmarks[method] = int(np.count_nonzero(is_landmark))
         table = io.StringIO()
         csv.writer(table).writerows(csv_rows)
         entry = json.dumps({'scan': index, 'stamp': stamp, 'frame_id': header.frame_id,
                             'log_time_ns': log_time_ns, 'problems': problems,
                             'corners': corners_of})
-        return ScanOutput(messages, table.getvalue(), entry, corners, segments, bool(problems))
+        return ScanOutput(messages, table.getvalue(), entry, corners, segments, landmarks,
+                          bool(problems))
 
 
 # The work of a worker process, inherited from the process that started it.
@@ -423,7 +434,8 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
     output = pathlib.Path(output)
     _refuse_to_replace(output, [bag], overwrite)
     summary = Summary(pathlib.Path(bag), output, topic, corners=dict.fromkeys(work.methods, 0),
-                      segments=dict.fromkeys(work.methods, 0))
+                      segments=dict.fromkeys(work.methods, 0),
+                      line_landmarks=dict.fromkeys(work.methods, 0))
     with BagWriter(output, overwrite=overwrite) as writer:
         writer.sidecar(MARKER_NAME).write_text(json.dumps({
             'written_by': 'process_bag of wctls_ros',
@@ -442,6 +454,7 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
                     for method in work.methods:
                         summary.corners[method] += scan_output.corners[method]
                         summary.segments[method] += scan_output.segments[method]
+                        summary.line_landmarks[method] += scan_output.line_landmarks[method]
                     summary.malformed += scan_output.malformed
                 summary.scans += len(batch)
                 if after_scans is not None:
@@ -571,7 +584,8 @@ def _report(summary: Summary) -> str:
              f'scans/s), with {CSV_NAME} and {JSON_NAME}']
     for method in summary.corners:
         lines.append(f'  {method}: {summary.corners[method]} corners, '
-                     f'{summary.segments[method]} segments')
+                     f'{summary.segments[method]} segments ({summary.line_landmarks[method]} '
+                     'line landmarks)')
     if summary.malformed:
         lines.append(f'  {summary.malformed} malformed scans kept without features')
     return '\n'.join(lines)

@@ -25,6 +25,7 @@ numba. The line fits and corner intersections offered on their own (:func:`fit_l
 from .config import FeatureConfig, METHODS, validation_errors
 from .features import (Corner, CornerSet, Features, LineFits, Segment, segment_returns,
                        SegmentReturns, SegmentSet)
+from .landmarks import angle_sigma_rad, line_landmarks
 from .numpy_core.corners import find_corners, intersect
 from .numpy_core.lines import fit_lines, normal_form
 from .runtime import CoreStatus, CoreUnavailable, extract_features, start, status, warm_up
@@ -34,7 +35,7 @@ from .uncertainty import confidence_scale, Ellipse, ellipse, nees
 __all__ = [
     'Corner', 'CoreStatus', 'CoreUnavailable', 'CornerSet', 'Ellipse', 'FeatureConfig',
     'Features', 'LineFits', 'METHODS', 'ScanError', 'ScanPoints', 'Segment', 'SegmentReturns',
-    'SegmentSet', 'confidence_scale', 'ellipse', 'extract_features', 'find_corners',
-    'fit_lines', 'intersect', 'nees', 'normal_form', 'scan_to_points', 'segment_returns',
-    'start', 'status', 'validation_errors', 'warm_up',
+    'SegmentSet', 'angle_sigma_rad', 'confidence_scale', 'ellipse', 'extract_features',
+    'find_corners', 'fit_lines', 'intersect', 'line_landmarks', 'nees', 'normal_form',
+    'scan_to_points', 'segment_returns', 'start', 'status', 'validation_errors', 'warm_up',
 ]

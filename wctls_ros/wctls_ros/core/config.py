@@ -164,6 +164,13 @@ class FeatureConfig:
         Limits(0.0, 100.0, low_open=True))
     corner_end_floor_m: float = _setting(
         0.01, 'the smallest tolerance of the corner end test, m', Limits(0.0, 1.0))
+    max_landmark_angle_sigma_rad: float = _setting(
+        math.radians(3.0), 'a segment is a line landmark (flagged landmark on lines, '
+        "re-observed by score) when its normal angle's std from its own covariance is at most "
+        'this; every segment is published and forms corners all the same (3 deg: lines of '
+        'moving robots inside their 95 % gate in 94-95 % of re-observations, '
+        'docs/results/score.md); 180 makes every segment a landmark, {unit}',
+        Limits(0.0, math.pi, low_open=True))
 
     def __post_init__(self):
         problems = list(validation_errors(self))

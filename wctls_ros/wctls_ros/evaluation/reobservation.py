@@ -6,7 +6,8 @@ Re-observation consistency of corners and lines from a moving sensor, as a SLAM 
 
 A landmark seen again from another viewpoint should move no more than its covariance says.
 Three measures, for corners and for lines (a segment's infinite line, normal angle and
-distance):
+distance; only the line landmarks, the segments feature_node flags ``landmark``,
+:func:`~wctls_ros.core.line_landmarks`, as a SLAM front end gates only those):
 
 - **pose-free** (no poses needed): landmarks of consecutive scans are associated nearest first,
   one to one (:func:`.rules.assign`), within the widest gate of the shared rule, 25 cm, since
@@ -25,7 +26,7 @@ distance):
   of wall metres apart, or of a wall and a cabinet before it, are alike within the pose's wide
   gate, but they are not one landmark;
 - **tracks and landmarks**: how many scans each track lasts (median and 90th percentile) and how
-  many landmarks (corners + lines) each scan gives.
+  many landmarks (corners + line landmarks) each scan gives.
 
 The within-scan correlation of landmarks (the common-mode range offset) is left out of the
 variances of the pose-free quantities; the pose-based test compares one landmark at a time.
@@ -42,7 +43,7 @@ from .analysis import features_per_scan
 from .rules import assign, ASSOCIATION_GATE_MAX_M
 from .samples import ScanCorners
 from .scans import StaticScans
-from ..core import FeatureConfig
+from ..core import FeatureConfig, line_landmarks
 
 # 95 % points of the chi-square distribution with 1 and 2 degrees of freedom.
 GATE_1DOF = 3.841
@@ -69,10 +70,12 @@ class Landmarks:
 
     :ivar corner_xy: corner positions, shape (C, 2), m
     :ivar corner_cov: their covariances, shape (C, 2, 2), m^2
-    :ivar corner_lines: the two segments each corner joins, shape (C, 2)
-    :ivar line: (normal angle rad, distance m) of each segment's infinite line, shape (L, 2)
+    :ivar corner_lines: the two walls each corner joins, as indices into the lines, shape
+        (C, 2) (-1: a wall that is not a line landmark)
+    :ivar line: (normal angle rad, distance m) of each line landmark's infinite line, shape
+        (L, 2)
     :ivar line_cov: their covariances, shape (L, 2, 2)
-    :ivar line_ends: each segment's first and last end, shape (L, 2, 2), m
+    :ivar line_ends: each line landmark's first and last end, shape (L, 2, 2), m
     """
 
     corner_xy: np.ndarray
@@ -120,7 +123,7 @@ class Reobservation:
 
     :ivar scans: scans measured (the tracks use those with a pose)
     :ivar corners_per_scan: mean corners per scan
-    :ivar lines_per_scan: mean lines (segments) per scan
+    :ivar lines_per_scan: mean line landmarks per scan
     :ivar corner_distance: pose-free test of corner-corner distances
     :ivar line_angle: pose-free test of line-line angles
     :ivar corner_line_distance: pose-free test of corner-line distances
@@ -144,7 +147,7 @@ class Reobservation:
     @property
     def landmarks_per_scan(self) -> float:
         """
-        Return the corners and lines per scan.
+        Return the landmarks per scan: corners and line landmarks.
 
         :return: their sum
         """
@@ -173,7 +176,7 @@ class Reobservation:
         :return: one line per figure
         """
         text = [f'landmarks per scan {self.landmarks_per_scan:.2f} (corners '
-                f'{self.corners_per_scan:.2f} + lines {self.lines_per_scan:.2f}) over '
+                f'{self.corners_per_scan:.2f} + line landmarks {self.lines_per_scan:.2f}) over '
                 f'{self.scans} scans',
                 'pose-free re-observation (consecutive scans) inside the 95 % gate: corner '
                 f'distances {self.corner_distance.describe()}, line angles '
@@ -196,18 +199,25 @@ def _percentile(lengths: Sequence[int], percent: float) -> float:
     return float(np.percentile(lengths, percent)) if len(lengths) else math.nan
 
 
-def landmarks_of(features, corners: ScanCorners, covariance_scale: float = 1.0) -> Landmarks:
+def landmarks_of(features, corners: ScanCorners, max_landmark_angle_sigma_rad: float,
+                 covariance_scale: float = 1.0) -> Landmarks:
     """
-    Return one scan's corners and lines as landmarks.
+    Return one scan's corners and line landmarks, as a front end of feature_node takes them.
 
     :param features: the core's Features of the scan
     :param corners: its corners (:func:`.samples.scan_corners`)
+    :param max_landmark_angle_sigma_rad: the bound of the line landmark rule, rad
+        (:func:`~wctls_ros.core.line_landmarks`): the other segments are no lines here
     :param covariance_scale: multiply every covariance by this (1: as the extractor gives them;
         a check that the tests can fail uses 0.5)
     :return: the landmarks
     """
-    segments = features.segments
-    return Landmarks(corners.xy, covariance_scale * corners.covariance, corners.segments,
+    is_landmark = line_landmarks(features.segments, max_landmark_angle_sigma_rad)
+    segments = features.segments.select(is_landmark)
+    # Each segment's index among the landmarks (-1 for the others), for the corners' walls.
+    line_index = np.where(is_landmark, np.cumsum(is_landmark) - 1, -1)
+    return Landmarks(corners.xy, covariance_scale * corners.covariance,
+                     line_index[corners.segments].reshape(-1, 2),
                      np.column_stack([segments.angle_rad, segments.radius_m]).reshape(-1, 2),
                      covariance_scale * np.asarray(segments.covariance).reshape(-1, 2, 2),
                      np.stack([segments.start_xy_m, segments.end_xy_m], axis=1).reshape(-1, 2, 2))
@@ -497,7 +507,8 @@ def reobservation(scans: StaticScans, config: FeatureConfig, poses: Optional[np.
     :param covariance_scale: multiply the landmark covariances by this (1: as extracted)
     :return: the figures
     """
-    per_scan = [landmarks_of(features, corners, covariance_scale)
+    per_scan = [landmarks_of(features, corners, config.max_landmark_angle_sigma_rad,
+                             covariance_scale)
                 for features, corners in features_per_scan(scans, config)]
     return measure(per_scan, poses, pose_sigma_m, pose_sigma_rad)
 

@@ -357,7 +357,8 @@ def score_scans(scans: StaticScans, configs: Mapping[str, FeatureConfig],
     for label, config in configs.items():
         extracted = features_per_scan(scans, config)
         per_scan = [corners for _, corners in extracted]
-        landmarks = [landmarks_of(features, corners) for features, corners in extracted]
+        landmarks = [landmarks_of(features, corners, config.max_landmark_angle_sigma_rad)
+                     for features, corners in extracted]
         reobserved = measure(landmarks, poses, pose_sigma_m, pose_sigma_rad)
         methods.append(score_detections(label, per_scan, truth, static, min_presence,
                                         reobserved))
@@ -369,7 +370,7 @@ COLUMNS = (
     ('method', 'method', '{}'),
     ('scans', 'scans', '{:d}'),
     ('detections_per_scan', 'detections / scan', '{:.2f}'),
-    ('landmarks_per_scan', 'landmarks (corners + lines) / scan', '{:.2f}'),
+    ('landmarks_per_scan', 'landmarks (corners + line landmarks) / scan', '{:.2f}'),
     ('false_per_scan', 'false / scan', '{:.2f}'),
     ('precision', 'precision', '{:.3f}'),
     ('recall', 'recall', '{:.3f}'),
@@ -388,12 +389,12 @@ COLUMNS = (
 REOBSERVATION_COLUMNS = (
     ('method', 'method', '{}'),
     ('landmarks_per_scan', 'landmarks / scan', '{:.2f}'),
-    ('lines_per_scan', 'lines / scan', '{:.2f}'),
+    ('lines_per_scan', 'line landmarks / scan', '{:.2f}'),
     ('corner_distance_in_gate', 'corner distances in 95 % gate', '{:.3f}'),
     ('line_angle_in_gate', 'line angles in 95 % gate', '{:.3f}'),
     ('corner_line_distance_in_gate', 'corner-line distances in 95 % gate', '{:.3f}'),
     ('corner_tracks_in_gate', 'corners in 95 % gate (poses)', '{:.3f}'),
-    ('line_tracks_in_gate', 'lines in 95 % gate (poses)', '{:.3f}'),
+    ('line_tracks_in_gate', 'line landmarks in 95 % gate (poses)', '{:.3f}'),
     ('corner_track_median', 'corner track, median scans', '{:g}'),
     ('corner_track_p90', 'corner track, p90 scans', '{:g}'),
     ('line_track_median', 'line track, median scans', '{:g}'),

@@ -104,6 +104,12 @@ run tuw_gh25_moving_poses data/tuw_gh25_moving --still no \
 run mrpt_malaga_moving_poses data/mrpt_malaga_moving --still no \
   --poses data/mrpt_malaga_moving/poses.csv --laser-offset 0.78 0 0 --pose-sigma-m 0.05 \
   --pose-sigma-deg 1
+run rplidar_barc_moving_poses data/rplidar_barc_moving --still no \
+  --poses data/rplidar_barc_moving/poses.csv --laser-offset -0.12 0 0 --pose-sigma-m 0.05 \
+  --pose-sigma-deg 1
+run rplidar_barc_moving_rplidar_a2_preset_poses data/rplidar_barc_moving --still no \
+  --poses data/rplidar_barc_moving/poses.csv --laser-offset -0.12 0 0 --pose-sigma-m 0.05 \
+  --pose-sigma-deg 1 --sensor rplidar_a2
 run rplidar_c1_single_scans_default_model data/rplidar_c1_single_scans --still no
 run rplidar_c1_single_scans_rplidar_c1_preset data/rplidar_c1_single_scans --still no \
   --sensor rplidar_c1

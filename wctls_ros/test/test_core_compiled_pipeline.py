@@ -82,7 +82,7 @@ def real_scans():
     recordings = [load_scans(REAL_DATA / name) for name in
                   ('sick_lms111_static', 'sick_lms1xx_static', 'urg04lx_office',
                    'sick_lms511_static', 'sick_tim781s_static', 'mrpt_malaga_moving',
-                   'tuw_gh25_moving', 'rplidar_c1_single_scans')]
+                   'tuw_gh25_moving', 'rplidar_c1_single_scans', 'rplidar_barc_moving')]
     recordings.append(load_json_scans(REAL_DATA / 'lms111_building'))
     for recording in recordings:
         for k, ranges in enumerate(recording.ranges):

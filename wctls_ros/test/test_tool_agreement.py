@@ -77,6 +77,14 @@ def test_keyframes_far_apart_are_moving_though_no_drift_stands_out():
         assert check_still(load_scans(REAL_DATA / still)).noise_ratio < MOVING_NOISE_RATIO / 1.5
 
 
+def test_a_car_driving_laps_has_no_beam_to_compare_and_says_so():
+    # The moving RPLIDAR: no beam returns in nearly every scan, so no drift can be measured;
+    # the figures of a comparison (100 % of 0 beams, an infinite median drift) would say nothing.
+    check = check_still(load_scans(REAL_DATA / 'rplidar_barc_moving'))
+    assert (check.steady_beams, check.still) == (0, False)
+    assert check.describe().endswith('not shown to be still') and 'inf' not in check.describe()
+
+
 @pytest.mark.parametrize('tool', ['calibrate', 'evaluate', 'score'])
 def test_every_tool_refuses_a_moving_sensor_with_the_drift_and_its_bound(carried_bag, tmp_path,
                                                                          capsys, tool):

@@ -93,6 +93,9 @@ class StillnessCheck:
         :return: e.g. '3 % of 450 steady beams drifted (bound 10 %), median drift 2.0 mm
             against a bound of 9.1 mm, scan-to-scan noise 1.1 times a beam's (bound 3)'
         """
+        if self.steady_beams == 0:
+            return ('no beam to compare (under 6 scans, or none returns in nearly every '
+                    'scan): not shown to be still')
         return (f'{100 * self.drifted_fraction:.0f} % of {self.steady_beams} steady beams '
                 f'drifted (bound {100 * MOVING_FRACTION:.0f} %), median drift '
                 f'{1e3 * self.median_drift_m:.1f} mm against a bound of '

@@ -251,10 +251,7 @@ def run(args, argv) -> int:
              'truth: ' + ('none' if truth is None else
                           f'{args.labels or pathlib.Path(args.bag) / TRUTH_FILE} '
                           f'({len(truth.ids)} corners)'),
-             f'stillness check: {100 * check.drifted_fraction:.0f} % of '
-             f'{check.steady_beams} steady beams drifted, median '
-             f'{1e3 * check.median_drift_m:.1f} mm against a bound of '
-             f'{1e3 * check.median_bound_m:.1f} mm ({"still" if check.still else "moved"}); '
+             f'stillness check: {check.describe()} ({"still" if check.still else "moved"}); '
              + ('recurrence measured' if still else 'recurrence refused: it needs a still '
                 'sensor')
              + (f' (--still {args.still})' if args.still != 'auto' else ''),

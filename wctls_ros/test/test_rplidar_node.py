@@ -25,6 +25,7 @@ from std_srvs.srv import Empty  # noqa: E402
 from wctls_ros.params import RPLIDAR_NODE  # noqa: E402
 from wctls_ros.rplidar.driver import DriverConfig, DriverState, RplidarDriver  # noqa: E402
 from wctls_ros.rplidar.rplidar_node import RplidarNode  # noqa: E402
+from wctls_ros.rplidar.transport import SerialLink  # noqa: E402
 from wctls_ros.rplidar.ultra import varbitscale_decode, varbitscale_encode  # noqa: E402
 import yaml  # noqa: E402
 
@@ -84,6 +85,14 @@ def collect(executor, listener, count, timeout_s=5.0):
     assert spin_until(executor, lambda: len(listener.scans) >= first + count, timeout_s), (
         f'{len(listener.scans) - first} of {count} scans')
     return [scan for scan, _ in listener.scans[first:first + count]]
+
+
+def wait_until(predicate, timeout_s):
+    """Poll ``predicate`` (no executor) until it holds or ``timeout_s`` passes; return it."""
+    deadline = time.monotonic() + timeout_s
+    while not predicate() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return predicate()
 
 
 def bearings(scan):
@@ -535,10 +544,38 @@ def test_a_start_motor_that_lands_as_the_driver_gives_up_is_not_lost(own_emulato
     finally:
         threading.settrace(None)
     try:
-        deadline = time.monotonic() + 6.0
-        while not turns and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert requested and turns, driver.status()
+        assert wait_until(lambda: turns, 6.0) and requested, driver.status()
+    finally:
+        driver.close()
+
+
+def test_a_reader_held_off_past_data_timeout_finds_the_bytes_waiting_not_a_silence(
+        own_emulator):
+    # A reader thread not scheduled for longer than data_timeout, as on a loaded machine: the
+    # device streamed on into the terminal's buffer meanwhile. Judged before those bytes were
+    # counted, the device looked silent and the session restarted.
+    device = own_emulator()
+    hold_off_s = []
+
+    class HeldOffLink(SerialLink):
+        def read(self, timeout_s):
+            if hold_off_s:
+                time.sleep(hold_off_s.pop())
+            return super().read(timeout_s)
+
+    turns = []
+    driver = RplidarDriver(
+        DriverConfig(serial_port=device.link, serial_baudrate=256000, data_timeout_s=0.5),
+        lambda turn, mode: turns.append(turn), rclpy.logging.get_logger('held_off'),
+        link_factory=lambda config: HeldOffLink(config.serial_port, config.serial_baudrate))
+    driver.start()
+    try:
+        assert wait_until(lambda: len(turns) >= 2, 10.0), driver.status()
+        hold_off_s.append(1.0)
+        assert wait_until(lambda: not hold_off_s, 10.0)
+        count = len(turns)
+        assert wait_until(lambda: len(turns) >= count + 3, 10.0), driver.status()
+        assert driver.status().reconnects == 0, driver.status()
     finally:
         driver.close()
 

@@ -33,6 +33,11 @@ import yaml  # noqa: E402
 # One of the suite's slowest modules: make test-fast leaves it out.
 pytestmark = pytest.mark.slow
 
+# The longest wait for what must happen (a scan, a report, a state): the node and this test's
+# executor share this process, which beside two CPU hogs on a 2-core machine hands scans over
+# seconds late. What a test times, it times on the device's or the driver's clock.
+LIVENESS_S = 15.0
+
 PACKAGE_DIR = pathlib.Path(__file__).resolve().parents[1]
 
 
@@ -65,9 +70,9 @@ class Listener:
 
     def call(self, executor, service):
         client = self.node.create_client(Empty, service)
-        assert client.wait_for_service(timeout_sec=2.0)
+        assert client.wait_for_service(timeout_sec=LIVENESS_S)
         future = client.call_async(Empty.Request())
-        assert spin_until(executor, future.done, 2.0)
+        assert spin_until(executor, future.done, LIVENESS_S)
 
 
 def start(executor, context, **parameters):
@@ -80,10 +85,10 @@ def start(executor, context, **parameters):
     return node, listener
 
 
-def collect(executor, listener, count, timeout_s=5.0):
+def collect(executor, listener, count):
     """Spin until ``count`` more scans arrived; return them."""
     first = len(listener.scans)
-    assert spin_until(executor, lambda: len(listener.scans) >= first + count, timeout_s), (
+    assert spin_until(executor, lambda: len(listener.scans) >= first + count, LIVENESS_S), (
         f'{len(listener.scans) - first} of {count} scans')
     return [scan for scan, _ in listener.scans[first:first + count]]
 
@@ -184,7 +189,7 @@ def test_the_fixed_count_scan_bins_the_same_turns_within_a_bin_of_the_scene(
     listener.node.create_subscription(LaserScan, 'scan_fixed', fixed.append,
                                       qos_profile_sensor_data)
     scans = collect(executor, listener, 3)
-    assert spin_until(executor, lambda: len(fixed) >= 3, 2.0)
+    assert spin_until(executor, lambda: len(fixed) >= 3, LIVENESS_S)
     stamps = {(scan.header.stamp.sec, scan.header.stamp.nanosec) for scan in scans}
     width = 2 * math.pi / 720
     centres = -math.pi + width * (np.arange(720) + 0.5)
@@ -214,7 +219,7 @@ def test_a_series_express_and_boost_modes_scan_end_to_end(executor, ros_context,
     # starts the requested mode and decodes the stream by the answer type the device reports.
     with serving('a2', 0) as path:
         node, listener = start(executor, ros_context, serial_port=path, scan_mode=mode)
-        scans = collect(executor, listener, 3, timeout_s=8.0)
+        scans = collect(executor, listener, 3)
         status = node.driver.status()
     assert status.mode.answer_type == answer_type and status.reconnects == 0
     assert status.device.model_name == 'A2M8'
@@ -260,11 +265,12 @@ def test_stop_motor_and_start_motor(executor, ros_context, emulator):
     node, listener = start(executor, ros_context, serial_port=emulator.link)
     collect(executor, listener, 1)
     listener.call(executor, 'stop_motor')
-    assert spin_until(executor, lambda: node.driver.status().state == DriverState.MOTOR_STOPPED)
-    spin_until(executor, lambda: False, 0.3)
-    count = len(listener.scans)
-    spin_until(executor, lambda: False, 0.5)
-    assert len(listener.scans) == count
+    assert spin_until(executor, lambda: node.driver.status().state == DriverState.MOTOR_STOPPED,
+                      LIVENESS_S)
+    stopped_s = time.monotonic() + ros_minus_monotonic_s()
+    # Turns still on their way may arrive late here; none measured after the stop may come.
+    spin_until(executor, lambda: False, 0.8)
+    assert all(stamp_s(scan) < stopped_s for scan, _ in listener.scans)
     listener.call(executor, 'start_motor')
     collect(executor, listener, 2)
 
@@ -282,7 +288,7 @@ def test_an_unknown_scan_mode_falls_back_to_the_typical_one_with_a_warning_listi
     assert "typical mode 'DenseBoost'" in warning[0] and 'Standard' in warning[0]
     assert spin_until(executor, lambda: any(
         'Turbo' in d.message and d.level == DiagnosticStatus.WARN
-        for d in listener.diagnostics), 2.0)
+        for d in listener.diagnostics), LIVENESS_S)
 
 
 def test_serial_baudrate_0_finds_the_rate_the_device_answers_at(executor, ros_context,
@@ -307,7 +313,7 @@ def test_serial_baudrate_0_without_an_answer_at_any_rate_says_so_in_one_line(
         logged.append(capfd.readouterr().err)
         return 'at any rate' in ''.join(logged)
 
-    assert spin_until(executor, warned, 5.0)
+    assert spin_until(executor, warned, LIVENESS_S)
     assert 'at any rate' in node.driver.status().message
     lines = [line for line in ''.join(logged).splitlines() if 'at any rate' in line]
     assert len(lines) == 1 and '115200, 256000, 460800, 1000000 baud' in lines[0]
@@ -319,7 +325,7 @@ def test_a_fixed_serial_baudrate_the_device_does_not_hear_gets_no_answer(executo
     device = own_emulator('--baudrate', '115200')
     node, listener = start(executor, ros_context, serial_port=device.link, serial_baudrate=256000)
     assert spin_until(executor, lambda: 'no answer to GET_INFO' in node.driver.status().message,
-                      5.0)
+                      LIVENESS_S)
     assert not listener.scans
 
 
@@ -338,7 +344,8 @@ def test_the_model_is_named_in_the_log_and_the_diagnostics(executor, ros_context
     assert node.driver.status().mode.answer_type == answer_type
     assert f'RPLIDAR {name} (model 0x' in capfd.readouterr().err
     assert spin_until(executor, lambda: any(
-        'Product Name' in {v.key for v in d.values} for d in listener.diagnostics), 2.0)
+        'Product Name' in {v.key for v in d.values} for d in listener.diagnostics),
+        LIVENESS_S)
     values = {v.key: v.value for v in listener.diagnostics[-1].values}
     assert values['Vendor Name'] == 'SLAMTEC' and values['Product Name'] == f'RPLIDAR {name}'
     assert values['Firmware Version'] == firmware and values['Serial Port'] == device.link
@@ -379,7 +386,7 @@ def test_a_damaged_link_still_publishes_turns_with_their_beams_right(
     node, listener = start(executor, ros_context, serial_port=device.link)
     collect(executor, listener, 1)
     first = len(listener.scans)
-    spin_until(executor, lambda: False, 3.0)
+    collect(executor, listener, 25)
     # The turns streamed from the first published turn to the last, counted by their stamps: a
     # turn not published leaves a gap of a whole turn. (Counted by the wall clock, the turn
     # still under way at the end was a turn lost: 1-3 % of the 30, the margin of the 1 % rows.)
@@ -392,7 +399,6 @@ def test_a_damaged_link_still_publishes_turns_with_their_beams_right(
     # samples a turn streams, not of the 1080 bins.
     low, high = compensated_beam_bands()
     ranges = np.array([scan.ranges for scan, _ in listener.scans[first:]])
-    assert len(ranges) >= 10
     right = np.isfinite(ranges) & (ranges >= low - 0.01) & (ranges <= high + 0.01)
     wrong = np.isfinite(ranges) & ((ranges < low - 0.1) | (ranges > high + 0.1))
     good_turns = np.mean(right.sum(axis=1) >= beam_share * EMULATOR_TURN_SAMPLES) * published
@@ -422,9 +428,9 @@ def test_a_stream_of_garbage_restarts_the_session_until_it_clears(executor, ros_
     node, listener = start(executor, ros_context, serial_port=device.link, data_timeout=0.5)
     collect(executor, listener, 1)
     device.command('corrupt 1.0')
-    assert spin_until(executor, lambda: 'no valid' in node.driver.status().message, 3.0)
+    assert spin_until(executor, lambda: 'no valid' in node.driver.status().message, LIVENESS_S)
     device.command('corrupt 0')
-    collect(executor, listener, 2, timeout_s=3.0)
+    collect(executor, listener, 2)
     assert node.driver.status().reconnects >= 1
 
 
@@ -447,7 +453,8 @@ def test_implausible_handshake_answers_are_replaced_and_scanning_goes_on(
     assert status.reconnects == 0 and len(status.handshake_warnings) == warnings
     assert all(replaced in warning for warning in status.handshake_warnings)
     assert spin_until(executor, lambda: any(
-        'implausible handshake answers' in d.message for d in listener.diagnostics), 2.0)
+        'implausible handshake answers' in d.message for d in listener.diagnostics),
+        LIVENESS_S)
     assert listener.diagnostics[-1].level == DiagnosticStatus.WARN
 
 
@@ -458,20 +465,20 @@ def test_a_failing_handshake_reconnects_with_a_capped_exponential_back_off(
     device = own_emulator('--conf-answer', 'us_per_sample=none')
     node, listener = start(executor, ros_context, serial_port=device.link)
     # Seven failures: waits of 0.05 s doubling to 1.6 s, then 2 s, the cap (3.2 s uncapped).
-    assert spin_until(executor, lambda: node.driver.status().reconnects >= 7, 30.0), (
+    assert spin_until(executor, lambda: node.driver.status().reconnects >= 7, 2 * LIVENESS_S), (
         node.driver.status())
     status = node.driver.status()
     assert status.backoff_s == 2.0 and 'GET_LIDAR_CONF' in status.message
     assert spin_until(executor, lambda: any(
         int({v.key: v.value for v in d.values}.get('reconnects', 0)) >= 6
-        for d in listener.diagnostics), 5.0)
+        for d in listener.diagnostics), LIVENESS_S)
     report = next(d for d in listener.diagnostics
                   if int({v.key: v.value for v in d.values}.get('reconnects', 0)) >= 6)
     assert report.level == DiagnosticStatus.WARN
     assert float({v.key: v.value for v in report.values}['next reconnect after (s)']) >= 1.6
     # Once the device answers, scanning resumes after the last wait and the back-off restarts.
     device.command('conf us_per_sample=real')
-    collect(executor, listener, 1, timeout_s=10.0)
+    collect(executor, listener, 1)
     status = node.driver.status()
     assert status.backoff_s == 0.05 and status.state == DriverState.SCANNING
     # The waits as the device saw them, from reading the failing request to the next session's
@@ -513,27 +520,30 @@ def test_unplug_and_replug_recover_within_two_seconds(executor, ros_context, own
         return [stamp_s(scan) - ros_minus_monotonic + scan.scan_time
                 for scan, _ in listener.scans if stamp_s(scan) - ros_minus_monotonic > replugged_s]
 
-    assert spin_until(executor, turns_measured_after_replug_s, 10.0)
+    assert spin_until(executor, turns_measured_after_replug_s, LIVENESS_S)
     arrived_s = time.monotonic() - replugged_s
     recovered_s = turns_measured_after_replug_s()[0] - replugged_s
-    assert recovered_s < 2.0, f'measured {recovered_s:.2f} s, here {arrived_s:.2f} s after the replug'
+    assert recovered_s < 2.0, f'measured {recovered_s:.2f} s, here {arrived_s:.2f} s after replug'
     assert node.driver.status().reconnects >= 1
     assert node.driver.status().baudrate == (baudrate or 1000000)
 
-def test_silence_restarts_the_session(executor, ros_context, own_emulator):
+
+def test_silence_restarts_the_session(executor, ros_context, own_emulator, capfd):
     device = own_emulator()
     node, listener = start(executor, ros_context, serial_port=device.link, data_timeout=0.5)
     collect(executor, listener, 1)
     device.command('silent 1.0')
-    spin_until(executor, lambda: node.driver.status().state == DriverState.CONNECTING, 2.0)
-    assert 'no scan data' in node.driver.status().message
-    collect(executor, listener, 2, timeout_s=4.0)
+    # The driver's own account (its status says so only until it has reconnected): the warning
+    # it logs, and the reconnect it counts.
+    collect(executor, listener, 2)
+    assert 'no scan data for 0.5 s' in capfd.readouterr().err
+    assert node.driver.status().reconnects >= 1
 
 
 def test_a_health_error_is_reset_and_scanning_resumes(executor, ros_context, own_emulator):
     device = own_emulator('--health', 'error')
     node, listener = start(executor, ros_context, serial_port=device.link)
-    collect(executor, listener, 2, timeout_s=8.0)
+    collect(executor, listener, 2)
     status = node.driver.status()
     assert status.resets == 1 and status.health.status == 0
 
@@ -543,14 +553,15 @@ def test_a_lasting_health_error_gives_up_clearly_until_start_motor(executor, ros
     device = own_emulator('--health', 'error', '--health-error-resets', '99')
     node, listener = start(executor, ros_context, serial_port=device.link,
                            health_reset_attempts=1)
-    assert spin_until(executor, lambda: node.driver.status().state == DriverState.FAILED, 8.0)
+    assert spin_until(executor, lambda: node.driver.status().state == DriverState.FAILED,
+                      LIVENESS_S)
     assert 'power-cycle' in node.driver.status().message
     assert spin_until(executor, lambda: any(
-        d.level == DiagnosticStatus.ERROR for d in listener.diagnostics), 2.0)
+        d.level == DiagnosticStatus.ERROR for d in listener.diagnostics), LIVENESS_S)
     assert not listener.scans
     device.command('health ok')
     listener.call(executor, 'start_motor')
-    collect(executor, listener, 1, timeout_s=4.0)
+    collect(executor, listener, 1)
 
 
 def test_a_start_motor_that_lands_as_the_driver_gives_up_is_not_lost(own_emulator):
@@ -615,7 +626,7 @@ def test_a_health_warning_is_reported_and_scanning_goes_on(executor, ros_context
     collect(executor, listener, 1)
     assert node.driver.status().health.status == 1 and node.driver.status().resets == 0
     first = len(listener.diagnostics)
-    assert spin_until(executor, lambda: len(listener.diagnostics) > first, 2.0)
+    assert spin_until(executor, lambda: len(listener.diagnostics) > first, LIVENESS_S)
     report = listener.diagnostics[-1]
     assert report.level == DiagnosticStatus.WARN and 'health warning' in report.message
     collect(executor, listener, 1)
@@ -630,4 +641,5 @@ def test_config_file_sets_every_parameter(executor, ros_context, tmp_path):
     for name, value in values.items():
         assert node.get_parameter(name).value == value
     assert values['serial_baudrate'] == 0 and values['frame_id'] == 'laser'
-    assert spin_until(executor, lambda: 'no such device' in node.driver.status().message, 2.0)
+    assert spin_until(executor, lambda: 'no such device' in node.driver.status().message,
+                      LIVENESS_S)

@@ -66,6 +66,20 @@ def test_answers_are_the_bytes_of_a_real_s1(port):
                                                                         'DenseBoost']
 
 
+def test_requests_timed_says_when_the_device_read_each_request(emulator, port):
+    emulator.command('requests')                  # forget the requests heard before
+    windows_s = []
+    for request_hex, answer_size in (('A5 52', 10), ('A5 50', 27)):
+        sent_s = time.monotonic()
+        assert len(ask(port, request_hex, answer_size).split()) == answer_size
+        windows_s.append((sent_s, time.monotonic()))
+    heard = [word.split('@') for word in emulator.command('requests timed').split()[1:]]
+    assert [name for name, _ in heard] == ['GET_HEALTH', 'GET_INFO']
+    # Read after it was sent and before its answer came back, on this machine's monotonic clock.
+    assert all(sent_s <= float(at_s) <= answered_s
+               for (_, at_s), (sent_s, answered_s) in zip(heard, windows_s))
+
+
 def test_reset_is_silent_and_the_device_reboots(port):
     port.write(bytes.fromhex('A5 40 A5 50'))            # RESET, then GET_INFO at once
     port.timeout = 1.0

@@ -18,19 +18,26 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402,
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from rplidar_testing import (compensated_beam_bands, EMULATOR_TURN_S,  # noqa: E402
-                             EMULATOR_TURN_SAMPLES, first_sample_times, range_band, serving,
-                             start_emulator, true_ranges)
+                             EMULATOR_TURN_SAMPLES, first_sample_times, range_band,
+                             ros_minus_monotonic_s, serving, start_emulator, true_ranges)
 from sensor_msgs.msg import LaserScan  # noqa: E402
 from std_srvs.srv import Empty  # noqa: E402
 from wctls_ros.params import RPLIDAR_NODE  # noqa: E402
 from wctls_ros.rplidar.driver import DriverConfig, DriverState, RplidarDriver  # noqa: E402
+from wctls_ros.rplidar.protocol import ConfType, encode_conf_request  # noqa: E402
 from wctls_ros.rplidar.rplidar_node import RplidarNode  # noqa: E402
+from wctls_ros.rplidar.transport import SerialLink  # noqa: E402
 from wctls_ros.rplidar.ultra import varbitscale_decode, varbitscale_encode  # noqa: E402
 import yaml  # noqa: E402
 
 # One of the suite's slowest modules (make test-fast leaves it out), and one that runs
 # nodes, emulators or signals against deadlines (make test runs it in its realtime group).
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]
+
+# The longest wait for what must happen (a scan, a report, a state): the node and this test's
+# executor share this process, which beside two CPU hogs on a 2-core machine hands scans over
+# seconds late. What a test times, it times on the device's or the driver's clock.
+LIVENESS_S = 15.0
 
 PACKAGE_DIR = pathlib.Path(__file__).resolve().parents[1]
 
@@ -64,9 +71,9 @@ class Listener:
 
     def call(self, executor, service):
         client = self.node.create_client(Empty, service)
-        assert client.wait_for_service(timeout_sec=2.0)
+        assert client.wait_for_service(timeout_sec=LIVENESS_S)
         future = client.call_async(Empty.Request())
-        assert spin_until(executor, future.done, 2.0)
+        assert spin_until(executor, future.done, LIVENESS_S)
 
 
 def start(executor, context, **parameters):
@@ -79,12 +86,25 @@ def start(executor, context, **parameters):
     return node, listener
 
 
-def collect(executor, listener, count, timeout_s=5.0):
+def collect(executor, listener, count):
     """Spin until ``count`` more scans arrived; return them."""
     first = len(listener.scans)
-    assert spin_until(executor, lambda: len(listener.scans) >= first + count, timeout_s), (
+    assert spin_until(executor, lambda: len(listener.scans) >= first + count, LIVENESS_S), (
         f'{len(listener.scans) - first} of {count} scans')
     return [scan for scan, _ in listener.scans[first:first + count]]
+
+
+def wait_until(predicate, timeout_s):
+    """Poll ``predicate`` (no executor) until it holds or ``timeout_s`` passes; return it."""
+    deadline = time.monotonic() + timeout_s
+    while not predicate() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return predicate()
+
+
+def stamp_s(scan):
+    """Return a scan's header stamp, s (ROS time)."""
+    return scan.header.stamp.sec + 1e-9 * scan.header.stamp.nanosec
 
 
 def bearings(scan):
@@ -121,7 +141,7 @@ def test_stamps_are_first_sample_times_on_the_devices_sample_clock(executor, ros
     collect(executor, listener, 10)          # the driver's clock settles within a second
     scans = collect(executor, listener, 6)
     received = np.array([at for _, at in listener.scans[-6:]])
-    stamps = np.array([s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec for s in scans])
+    stamps = np.array([stamp_s(scan) for scan in scans])
     # The emulator's truth: when it measured the sample at each scan's first raw angle (pi -
     # angle_max). Wall-clock receive times, which a loaded machine delays, only bound it.
     truth = first_sample_times(emulator.command('clock'), stamps,
@@ -170,7 +190,7 @@ def test_the_fixed_count_scan_bins_the_same_turns_within_a_bin_of_the_scene(
     listener.node.create_subscription(LaserScan, 'scan_fixed', fixed.append,
                                       qos_profile_sensor_data)
     scans = collect(executor, listener, 3)
-    assert spin_until(executor, lambda: len(fixed) >= 3, 2.0)
+    assert spin_until(executor, lambda: len(fixed) >= 3, LIVENESS_S)
     stamps = {(scan.header.stamp.sec, scan.header.stamp.nanosec) for scan in scans}
     width = 2 * math.pi / 720
     centres = -math.pi + width * (np.arange(720) + 0.5)
@@ -200,7 +220,7 @@ def test_a_series_express_and_boost_modes_scan_end_to_end(executor, ros_context,
     # starts the requested mode and decodes the stream by the answer type the device reports.
     with serving('a2', 0) as path:
         node, listener = start(executor, ros_context, serial_port=path, scan_mode=mode)
-        scans = collect(executor, listener, 3, timeout_s=8.0)
+        scans = collect(executor, listener, 3)
         status = node.driver.status()
     assert status.mode.answer_type == answer_type and status.reconnects == 0
     assert status.device.model_name == 'A2M8'
@@ -246,11 +266,12 @@ def test_stop_motor_and_start_motor(executor, ros_context, emulator):
     node, listener = start(executor, ros_context, serial_port=emulator.link)
     collect(executor, listener, 1)
     listener.call(executor, 'stop_motor')
-    assert spin_until(executor, lambda: node.driver.status().state == DriverState.MOTOR_STOPPED)
-    spin_until(executor, lambda: False, 0.3)
-    count = len(listener.scans)
-    spin_until(executor, lambda: False, 0.5)
-    assert len(listener.scans) == count
+    assert spin_until(executor, lambda: node.driver.status().state == DriverState.MOTOR_STOPPED,
+                      LIVENESS_S)
+    stopped_s = time.monotonic() + ros_minus_monotonic_s()
+    # Turns still on their way may arrive late here; none measured after the stop may come.
+    spin_until(executor, lambda: False, 0.8)
+    assert all(stamp_s(scan) < stopped_s for scan, _ in listener.scans)
     listener.call(executor, 'start_motor')
     collect(executor, listener, 2)
 
@@ -268,7 +289,7 @@ def test_an_unknown_scan_mode_falls_back_to_the_typical_one_with_a_warning_listi
     assert "typical mode 'DenseBoost'" in warning[0] and 'Standard' in warning[0]
     assert spin_until(executor, lambda: any(
         'Turbo' in d.message and d.level == DiagnosticStatus.WARN
-        for d in listener.diagnostics), 2.0)
+        for d in listener.diagnostics), LIVENESS_S)
 
 
 def test_serial_baudrate_0_finds_the_rate_the_device_answers_at(executor, ros_context,
@@ -293,7 +314,7 @@ def test_serial_baudrate_0_without_an_answer_at_any_rate_says_so_in_one_line(
         logged.append(capfd.readouterr().err)
         return 'at any rate' in ''.join(logged)
 
-    assert spin_until(executor, warned, 5.0)
+    assert spin_until(executor, warned, LIVENESS_S)
     assert 'at any rate' in node.driver.status().message
     lines = [line for line in ''.join(logged).splitlines() if 'at any rate' in line]
     assert len(lines) == 1 and '115200, 256000, 460800, 1000000 baud' in lines[0]
@@ -305,7 +326,7 @@ def test_a_fixed_serial_baudrate_the_device_does_not_hear_gets_no_answer(executo
     device = own_emulator('--baudrate', '115200')
     node, listener = start(executor, ros_context, serial_port=device.link, serial_baudrate=256000)
     assert spin_until(executor, lambda: 'no answer to GET_INFO' in node.driver.status().message,
-                      5.0)
+                      LIVENESS_S)
     assert not listener.scans
 
 
@@ -324,7 +345,8 @@ def test_the_model_is_named_in_the_log_and_the_diagnostics(executor, ros_context
     assert node.driver.status().mode.answer_type == answer_type
     assert f'RPLIDAR {name} (model 0x' in capfd.readouterr().err
     assert spin_until(executor, lambda: any(
-        'Product Name' in {v.key for v in d.values} for d in listener.diagnostics), 2.0)
+        'Product Name' in {v.key for v in d.values} for d in listener.diagnostics),
+        LIVENESS_S)
     values = {v.key: v.value for v in listener.diagnostics[-1].values}
     assert values['Vendor Name'] == 'SLAMTEC' and values['Product Name'] == f'RPLIDAR {name}'
     assert values['Firmware Version'] == firmware and values['Serial Port'] == device.link
@@ -365,12 +387,11 @@ def test_a_damaged_link_still_publishes_turns_with_their_beams_right(
     node, listener = start(executor, ros_context, serial_port=device.link)
     collect(executor, listener, 1)
     first = len(listener.scans)
-    spin_until(executor, lambda: False, 3.0)
+    collect(executor, listener, 25)
     # The turns streamed from the first published turn to the last, counted by their stamps: a
     # turn not published leaves a gap of a whole turn. (Counted by the wall clock, the turn
     # still under way at the end was a turn lost: 1-3 % of the 30, the margin of the 1 % rows.)
-    stamps = np.array([scan.header.stamp.sec + 1e-9 * scan.header.stamp.nanosec
-                       for scan, _ in listener.scans[first:]])
+    stamps = np.array([stamp_s(scan) for scan, _ in listener.scans[first:]])
     streamed = round((stamps[-1] - stamps[0]) / EMULATOR_TURN_S) + 1
     published = len(stamps)
     # Against the scene: a beam is right within 1 cm of the ranges its bin covers, wrong when
@@ -379,7 +400,6 @@ def test_a_damaged_link_still_publishes_turns_with_their_beams_right(
     # samples a turn streams, not of the 1080 bins.
     low, high = compensated_beam_bands()
     ranges = np.array([scan.ranges for scan, _ in listener.scans[first:]])
-    assert len(ranges) >= 10
     right = np.isfinite(ranges) & (ranges >= low - 0.01) & (ranges <= high + 0.01)
     wrong = np.isfinite(ranges) & ((ranges < low - 0.1) | (ranges > high + 0.1))
     good_turns = np.mean(right.sum(axis=1) >= beam_share * EMULATOR_TURN_SAMPLES) * published
@@ -409,9 +429,9 @@ def test_a_stream_of_garbage_restarts_the_session_until_it_clears(executor, ros_
     node, listener = start(executor, ros_context, serial_port=device.link, data_timeout=0.5)
     collect(executor, listener, 1)
     device.command('corrupt 1.0')
-    assert spin_until(executor, lambda: 'no valid' in node.driver.status().message, 3.0)
+    assert spin_until(executor, lambda: 'no valid' in node.driver.status().message, LIVENESS_S)
     device.command('corrupt 0')
-    collect(executor, listener, 2, timeout_s=3.0)
+    collect(executor, listener, 2)
     assert node.driver.status().reconnects >= 1
 
 
@@ -434,7 +454,8 @@ def test_implausible_handshake_answers_are_replaced_and_scanning_goes_on(
     assert status.reconnects == 0 and len(status.handshake_warnings) == warnings
     assert all(replaced in warning for warning in status.handshake_warnings)
     assert spin_until(executor, lambda: any(
-        'implausible handshake answers' in d.message for d in listener.diagnostics), 2.0)
+        'implausible handshake answers' in d.message for d in listener.diagnostics),
+        LIVENESS_S)
     assert listener.diagnostics[-1].level == DiagnosticStatus.WARN
 
 
@@ -444,23 +465,35 @@ def test_a_failing_handshake_reconnects_with_a_capped_exponential_back_off(
     # once (without a back-off the driver reconnected 38-42 times a second).
     device = own_emulator('--conf-answer', 'us_per_sample=none')
     node, listener = start(executor, ros_context, serial_port=device.link)
-    started = time.monotonic()
-    spin_until(executor, lambda: False, 3.5)
+    # Seven failures: waits of 0.05 s doubling to 1.6 s, then 2 s, the cap (3.2 s uncapped).
+    assert spin_until(executor, lambda: node.driver.status().reconnects >= 7, 2 * LIVENESS_S), (
+        node.driver.status())
     status = node.driver.status()
-    elapsed = time.monotonic() - started
-    # Waits of 0.05, 0.1, 0.2, 0.4, 0.8, 1.6 s after the failures: 5 or 6 of them in 3.5 s.
-    assert 4 <= status.reconnects <= 7, f'{status.reconnects} reconnects in {elapsed:.1f} s'
-    assert status.backoff_s in (1.6, 2.0) and 'GET_LIDAR_CONF' in status.message
-    report = listener.diagnostics[-1]
-    values = {value.key: value.value for value in report.values}
+    assert status.backoff_s == 2.0 and 'GET_LIDAR_CONF' in status.message
+    assert spin_until(executor, lambda: any(
+        int({v.key: v.value for v in d.values}.get('reconnects', 0)) >= 6
+        for d in listener.diagnostics), LIVENESS_S)
+    report = next(d for d in listener.diagnostics
+                  if int({v.key: v.value for v in d.values}.get('reconnects', 0)) >= 6)
     assert report.level == DiagnosticStatus.WARN
-    assert int(values['reconnects']) >= status.reconnects - 1
-    assert float(values['next reconnect after (s)']) >= 0.8
+    assert float({v.key: v.value for v in report.values}['next reconnect after (s)']) >= 1.6
     # Once the device answers, scanning resumes after the last wait and the back-off restarts.
     device.command('conf us_per_sample=real')
-    collect(executor, listener, 1, timeout_s=4.0)
+    collect(executor, listener, 1)
     status = node.driver.status()
     assert status.backoff_s == 0.05 and status.state == DriverState.SCANNING
+    # The waits as the device saw them, from reading the failing request to the next session's
+    # first request: at least the driver's wait, plus its answer, the failure and the port's
+    # reopening (0.05-0.1 s idle; up to a few tenths beside two CPU hogs on 2 cores).
+    failing = f'GET_LIDAR_CONF=0x{encode_conf_request(ConfType.US_PER_SAMPLE, 0)[3:-1].hex()}'
+    heard = [word.rsplit('@', 1) for word in device.command('requests timed').split()[1:]]
+    gaps_s = [float(heard[i + 1][1]) - float(at_s)
+              for i, (name, at_s) in enumerate(heard[:-1]) if name == failing]
+    gaps_s = gaps_s[:status.reconnects]         # the last session's request was answered
+    waits_s = [min(0.05 * 2 ** failure, 2.0) for failure in range(len(gaps_s))]
+    assert len(gaps_s) == status.reconnects >= 7, heard
+    assert all(wait_s <= gap_s < wait_s + 1.0 for gap_s, wait_s in zip(gaps_s, waits_s)), (
+        f'{np.round(gaps_s, 3)} s between sessions, waits {waits_s} s')
 
 
 @pytest.mark.parametrize('options, baudrate', [((), 256000),
@@ -474,29 +507,44 @@ def test_unplug_and_replug_recover_within_two_seconds(executor, ros_context, own
     collect(executor, listener, 2)
     device.command('unplug')
     spin_until(executor, lambda: False, 0.7)
+    replugged_s = time.monotonic()
     device.command('replug')
-    replugged = time.monotonic()
-    count = len(listener.scans)
-    assert spin_until(executor, lambda: len(listener.scans) > count, 2.0)
-    assert time.monotonic() - replugged < 2.0
+    # Timed on the device's clock: when the first turn after the replug was measured in full,
+    # from its stamp (a DenseBoost stamp is its first sample's measurement time; stamps lag the
+    # truth by the read latency, about a millisecond) and its scan time. Within 2 s: the
+    # back-off under way (at most 0.8 s, 0.7 s after the unplug), the handshake and a turn and
+    # a half. Its arrival here only has to happen: beside two CPU hogs on a 2-core machine,
+    # this process (the node and the test's executor) hands scans over up to seconds late.
+    ros_minus_monotonic = ros_minus_monotonic_s()
+
+    def turns_measured_after_replug_s():
+        return [stamp_s(scan) - ros_minus_monotonic + scan.scan_time
+                for scan, _ in listener.scans if stamp_s(scan) - ros_minus_monotonic > replugged_s]
+
+    assert spin_until(executor, turns_measured_after_replug_s, LIVENESS_S)
+    arrived_s = time.monotonic() - replugged_s
+    recovered_s = turns_measured_after_replug_s()[0] - replugged_s
+    assert recovered_s < 2.0, f'measured {recovered_s:.2f} s, here {arrived_s:.2f} s after replug'
     assert node.driver.status().reconnects >= 1
     assert node.driver.status().baudrate == (baudrate or 1000000)
 
 
-def test_silence_restarts_the_session(executor, ros_context, own_emulator):
+def test_silence_restarts_the_session(executor, ros_context, own_emulator, capfd):
     device = own_emulator()
     node, listener = start(executor, ros_context, serial_port=device.link, data_timeout=0.5)
     collect(executor, listener, 1)
     device.command('silent 1.0')
-    spin_until(executor, lambda: node.driver.status().state == DriverState.CONNECTING, 2.0)
-    assert 'no scan data' in node.driver.status().message
-    collect(executor, listener, 2, timeout_s=4.0)
+    # The driver's own account (its status says so only until it has reconnected): the warning
+    # it logs, and the reconnect it counts.
+    collect(executor, listener, 2)
+    assert 'no scan data for 0.5 s' in capfd.readouterr().err
+    assert node.driver.status().reconnects >= 1
 
 
 def test_a_health_error_is_reset_and_scanning_resumes(executor, ros_context, own_emulator):
     device = own_emulator('--health', 'error')
     node, listener = start(executor, ros_context, serial_port=device.link)
-    collect(executor, listener, 2, timeout_s=8.0)
+    collect(executor, listener, 2)
     status = node.driver.status()
     assert status.resets == 1 and status.health.status == 0
 
@@ -506,14 +554,15 @@ def test_a_lasting_health_error_gives_up_clearly_until_start_motor(executor, ros
     device = own_emulator('--health', 'error', '--health-error-resets', '99')
     node, listener = start(executor, ros_context, serial_port=device.link,
                            health_reset_attempts=1)
-    assert spin_until(executor, lambda: node.driver.status().state == DriverState.FAILED, 8.0)
+    assert spin_until(executor, lambda: node.driver.status().state == DriverState.FAILED,
+                      LIVENESS_S)
     assert 'power-cycle' in node.driver.status().message
     assert spin_until(executor, lambda: any(
-        d.level == DiagnosticStatus.ERROR for d in listener.diagnostics), 2.0)
+        d.level == DiagnosticStatus.ERROR for d in listener.diagnostics), LIVENESS_S)
     assert not listener.scans
     device.command('health ok')
     listener.call(executor, 'start_motor')
-    collect(executor, listener, 1, timeout_s=4.0)
+    collect(executor, listener, 1)
 
 
 def test_a_start_motor_that_lands_as_the_driver_gives_up_is_not_lost(own_emulator):
@@ -536,10 +585,38 @@ def test_a_start_motor_that_lands_as_the_driver_gives_up_is_not_lost(own_emulato
     finally:
         threading.settrace(None)
     try:
-        deadline = time.monotonic() + 6.0
-        while not turns and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert requested and turns, driver.status()
+        assert wait_until(lambda: turns, 6.0) and requested, driver.status()
+    finally:
+        driver.close()
+
+
+def test_a_reader_held_off_past_data_timeout_finds_the_bytes_waiting_not_a_silence(
+        own_emulator):
+    # A reader thread not scheduled for longer than data_timeout, as on a loaded machine: the
+    # device streamed on into the terminal's buffer meanwhile. Judged before those bytes were
+    # counted, the device looked silent and the session restarted.
+    device = own_emulator()
+    hold_off_s = []
+
+    class HeldOffLink(SerialLink):
+        def read(self, timeout_s):
+            if hold_off_s:
+                time.sleep(hold_off_s.pop())
+            return super().read(timeout_s)
+
+    turns = []
+    driver = RplidarDriver(
+        DriverConfig(serial_port=device.link, serial_baudrate=256000, data_timeout_s=0.5),
+        lambda turn, mode: turns.append(turn), rclpy.logging.get_logger('held_off'),
+        link_factory=lambda config: HeldOffLink(config.serial_port, config.serial_baudrate))
+    driver.start()
+    try:
+        assert wait_until(lambda: len(turns) >= 2, 10.0), driver.status()
+        hold_off_s.append(1.0)
+        assert wait_until(lambda: not hold_off_s, 10.0)
+        count = len(turns)
+        assert wait_until(lambda: len(turns) >= count + 3, 10.0), driver.status()
+        assert driver.status().reconnects == 0, driver.status()
     finally:
         driver.close()
 
@@ -550,7 +627,7 @@ def test_a_health_warning_is_reported_and_scanning_goes_on(executor, ros_context
     collect(executor, listener, 1)
     assert node.driver.status().health.status == 1 and node.driver.status().resets == 0
     first = len(listener.diagnostics)
-    assert spin_until(executor, lambda: len(listener.diagnostics) > first, 2.0)
+    assert spin_until(executor, lambda: len(listener.diagnostics) > first, LIVENESS_S)
     report = listener.diagnostics[-1]
     assert report.level == DiagnosticStatus.WARN and 'health warning' in report.message
     collect(executor, listener, 1)
@@ -565,4 +642,5 @@ def test_config_file_sets_every_parameter(executor, ros_context, tmp_path):
     for name, value in values.items():
         assert node.get_parameter(name).value == value
     assert values['serial_baudrate'] == 0 and values['frame_id'] == 'laser'
-    assert spin_until(executor, lambda: 'no such device' in node.driver.status().message, 2.0)
+    assert spin_until(executor, lambda: 'no such device' in node.driver.status().message,
+                      LIVENESS_S)

@@ -700,11 +700,8 @@ class RplidarDriver:
                             '(check the cable and the USB power)')
                     seen = counts
                 eta_s = assembler.turn_end_eta_s()
-            if eta_s is not None:
-                self._closing.wait(max(min(now + STREAM_READ_PERIOD_S,
-                                           eta_s - TURN_END_MARGIN_S) - time.monotonic(), 0.0))
-            data = link.read(STREAM_READ_TIMEOUT_S)
-            now = time.monotonic()
+            # Judged after the bytes just read are counted and decoded: a reader thread that
+            # was not scheduled for a while finds the device's bytes waiting, not a silence.
             if now - last_bytes_s > self._config.data_timeout_s:
                 raise DeviceError(f'no scan data for {self._config.data_timeout_s:g} s on '
                                   f'{link.name}')
@@ -712,6 +709,11 @@ class RplidarDriver:
                 raise DeviceError(f'bytes arrive on {link.name} but no valid {mode.name} frame '
                                   f'for {self._config.data_timeout_s:g} s: wrong '
                                   f'serial_baudrate ({BAUDRATE_HINT}) or a damaged link?')
+            if eta_s is not None:
+                self._closing.wait(max(min(now + STREAM_READ_PERIOD_S,
+                                           eta_s - TURN_END_MARGIN_S) - time.monotonic(), 0.0))
+            data = link.read(STREAM_READ_TIMEOUT_S)
+            now = time.monotonic()
 
     def _hand_over(self, turn, mode: ScanMode):
         """Give a turn to the callback (a success: the back-off restarts); never fatal."""

@@ -9,8 +9,9 @@ one more per TCP client. Control lines (``unplug``, ``replug``, ``hangup`` (the 
 closed and a new one opened behind the link at once while the device, powered on its own, goes
 on with what it was doing: a USB adapter that drops off the bus and comes back),
 ``requests`` (the requests the pty device heard since the last ``requests``, in order, each
-command's name with its payload: ``MOTOR_SPEED=0``; how tests see a client stop the motor),
-``silent SECONDS``,
+command's name with its payload: ``MOTOR_SPEED=0``; how tests see a client stop the motor;
+``requests timed``: each as ``NAME@SECONDS``, when it was read, on the machine's monotonic
+clock: how tests time a client's retries), ``silent SECONDS``,
 ``health ok|warning|error [RESETS]``, ``corrupt RATE``, ``drop RATE``, ``cut RATE``,
 ``conf ENTRY=VALUE`` (a GET_LIDAR_CONF value reported instead of the device's own), ``clock``
 (the pty device's sample clock: when and at what angle each sample of its stream is measured),
@@ -205,7 +206,7 @@ class Emulator:
             except (BlockingIOError, OSError):
                 return
             if self.pty.hears_client():
-                self._heard.extend(_request_name(request)
+                self._heard.extend((now_s, _request_name(request))
                                    for request in self._request_parser.feed(data))
                 self.pty.write(self._pty_device.receive(data, now_s))
             return
@@ -268,7 +269,10 @@ class Emulator:
             return f'hung up, device still running, new terminal {self.pty.path}'
         if verb == 'requests':
             heard, self._heard = self._heard, []
-            return f'requests {" ".join(heard) or "none"}'
+            # 'requests timed': each with when it was read (the machine's monotonic clock, s).
+            timed = args == ['timed']
+            return 'requests ' + (' '.join(f'{name}@{at_s:.6f}' if timed else name
+                                           for at_s, name in heard) or 'none')
         if verb == 'silent':
             self._faults.silent_from_s = time.monotonic()
             self._faults.silent_until_s = self._faults.silent_from_s + float(args[0])
@@ -290,7 +294,7 @@ class Emulator:
             return (f'clock start {clock.start_s:.9f} s, {clock.sample_s * 1e6:.6f} us per '
                     f'sample, first at {clock.first_angle_deg:.9f} deg, '
                     f'{clock.step_deg:.9f} deg per sample')
-        raise ValueError('unknown command (unplug, replug, hangup, requests, silent S, '
+        raise ValueError('unknown command (unplug, replug, hangup, requests [timed], silent S, '
                          'health STATUS [RESETS], corrupt RATE, drop RATE, cut RATE, '
                          'conf ENTRY=VALUE, clock, quit)')
 

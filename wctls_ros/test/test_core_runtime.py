@@ -22,6 +22,9 @@ import pytest
 import wctls_ros
 from wctls_ros.core import runtime
 
+# One of the suite's slowest modules: make test-fast leaves it out.
+pytestmark = pytest.mark.slow
+
 PACKAGE_PARENT = str(pathlib.Path(wctls_ros.__file__).resolve().parents[1])
 # A square room's full turn, and what the process reports: the core after its first scan.
 FIRST_SCAN = """

@@ -20,6 +20,9 @@ import pytest
 from wctls_ros.cli import UserError
 from wctls_ros.output_folders import claim, mark, owned_folder
 
+# One of the suite's slowest modules: make test-fast leaves it out.
+pytestmark = pytest.mark.slow
+
 STILL = REAL_DATA / 'sick_lms1xx_static'
 SCORE = ('wctls_ros.evaluation.score_cli', STILL, '--methods', 'wctls', '--scans', '0-9',
          '--still', 'yes')

@@ -21,8 +21,9 @@ from test_feature_node import installed_executable
 
 pytest.importorskip('numba')
 
-# Runs nodes, emulators or signals against deadlines: make test runs it in its realtime group.
-pytestmark = pytest.mark.realtime
+# One of the suite's slowest modules (make test-fast leaves it out), and one that runs
+# nodes, emulators or signals against deadlines (make test runs it in its realtime group).
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 REAL_DATA = pathlib.Path(__file__).resolve().parents[2] / 'data'
 DEADLINE_S = 2.0

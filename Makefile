@@ -18,8 +18,9 @@ SOURCES := $(shell find wctls_msgs wctls_ros -type f -not -path '*/__pycache__/*
 # Every recipe line that runs project code does so inside the venv + install overlay.
 WITH_ENV := source tools/env.sh &&
 PYTEST_ARGS ?=
-# The main suite in two pytest-xdist workers: the modules marked realtime one after another in
-# one of them, every other module whole in either (wctls_ros/test/conftest.py).
+# The main suite in two pytest-xdist workers: every module whole in either, and the modules
+# marked realtime one after another in one of them once the others are done
+# (wctls_ros/test/conftest.py).
 WORKERS := -n 2 --dist loadfile
 # Two more runs of some tests, each in a venv of its own. The oldest versions we support
 # (requirements/oldest.txt: numpy 1.26, numba 0.60) with the compiled core forced: it must build

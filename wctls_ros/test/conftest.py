@@ -49,6 +49,10 @@ if 'ROS_DOMAIN_ID' not in os.environ or (
     os.environ['ROS_DOMAIN_ID'] = os.environ[_DOMAIN_CHOSEN_HERE] = str(_free_domain_id())
 
 
+# The work unit of the modules marked realtime.
+REALTIME_UNIT = 'realtime'
+
+
 def _marked_realtime(module: pathlib.Path) -> bool:
     """Tell whether a test module's ``pytestmark`` holds the ``realtime`` mark (read, not run)."""
     for statement in ast.parse(module.read_text()).body:
@@ -65,24 +69,43 @@ def pytest_xdist_make_scheduler(config, log):
     """
     Schedule for pytest-xdist (``make test`` runs two workers) one module at a time.
 
-    The modules marked ``realtime`` (they run nodes, emulators or signals against deadlines) form
-    one unit, run one after another in one worker; every other module is a unit of its own, so
-    its module fixtures are set up once. The scheduler sees test ids only, so it reads the marks
-    from the modules' source.
+    Every module not marked ``realtime`` is a unit of its own, run whole by either worker, so
+    its module fixtures are set up once. The modules marked ``realtime`` (they run nodes,
+    emulators or signals against deadlines) form one unit, given out last and only once no
+    other worker has a test left: they run one after another with the machine to themselves,
+    as in a serial run. The scheduler sees test ids only, so it reads the marks from the
+    modules' source.
     """
     from xdist.scheduler import LoadScopeScheduling
 
     realtime = {}
 
-    class RealtimeModulesTogether(LoadScopeScheduling):
+    class RealtimeModulesLast(LoadScopeScheduling):
 
         def _split_scope(self, nodeid: str) -> str:
             module = nodeid.split('::', 1)[0]
             if module not in realtime:
                 realtime[module] = _marked_realtime(config.rootpath / module)
-            return 'realtime' if realtime[module] else module
+            return REALTIME_UNIT if realtime[module] else module
 
-    return RealtimeModulesTogether(config, log)
+        def _assign_work_unit(self, node) -> None:
+            if any(scope != REALTIME_UNIT for scope in self.workqueue):
+                if REALTIME_UNIT in self.workqueue:
+                    self.workqueue.move_to_end(REALTIME_UNIT)
+                super()._assign_work_unit(node)
+                return
+            # Only the realtime unit is left. A worker holds back its last test until it gets
+            # more work or is told to stop: the unit waits while another worker has more than
+            # that one test left, then goes to this worker, and the others are told to stop.
+            others = [other for other in self.nodes if other is not node]
+            if any(self._pending_of(self.assigned_work[other]) > 1 for other in others):
+                return
+            super()._assign_work_unit(node)
+            for other in others:
+                if not other.shutting_down:
+                    other.shutdown()
+
+    return RealtimeModulesLast(config, log)
 
 
 # The real recordings, with their licenses, in the repository's data/ folder. Tests that use them

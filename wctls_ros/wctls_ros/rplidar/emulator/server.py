@@ -42,6 +42,8 @@ from .device import Faults, MODEL_S1M1, MODES, S1Device, Scene, TYPICAL_MODE
 from ..protocol import Command, HealthStatus, RequestParser
 
 _POLL_S = 0.001
+# The reads of waiting requests before a command is answered, at most (4 KB each).
+_WAITING_READS_MAX = 16
 # Linux's TCGETS2 (asm-generic ioctls, as pyserial uses them) and the offset of c_ospeed in the
 # struct termios2 it fills: four flag words, c_line, 19 control characters, then c_ispeed.
 _TCGETS2 = 0x802C542A
@@ -240,6 +242,7 @@ class Emulator:
                 return True
             if not words:
                 continue
+            self._read_waiting_requests()
             verb, args = words[0], words[1:]
             try:
                 reply = self._command(verb, args)
@@ -248,6 +251,19 @@ class Emulator:
             if reply is None:
                 return False
             print(reply, flush=True)
+
+    def _read_waiting_requests(self):
+        """
+        Read what the client wrote before a command came, so that the command answers after it.
+
+        A command can come while the serving loop has not yet read a request the client wrote
+        before sending the command (a STOP, say, then ``requests``): on a busy machine the
+        answer missed it.
+        """
+        for _ in range(_WAITING_READS_MAX):     # a closed client's end stays readable (EIO)
+            if self.pty.fd is None or not select.select([self.pty.fd], [], [], 0)[0]:
+                return
+            self._receive(self.pty.fd, time.monotonic())
 
     def _command(self, verb: str, args: list) -> Optional[str]:
         """Apply one command; return the acknowledgement (None on quit)."""

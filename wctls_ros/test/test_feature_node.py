@@ -172,6 +172,25 @@ def test_two_publishers_taking_turns_are_not_counted_as_skipped_scans(ros_contex
     assert harness.node.counters.skipped == 0
 
 
+def test_diagnostics_say_which_feature_pipeline_serves_and_whether_it_is_settled(
+        ros_context, executor):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from wctls_ros.core import status
+    harness = Harness(ros_context, executor)
+    reports = []
+    harness.peer.create_subscription(DiagnosticArray, '/diagnostics', lambda array: reports.extend(
+        {value.key: value.value for value in report.values} for report in array.status), 10)
+    harness.exchange(room_scan_message())
+    # Asked of the runtime after the report: a load may end in between, never start again.
+    assert spin_until(executor, lambda: reports, 5.0)
+    served, now = reports[0], status()
+    assert served['feature pipeline'] in ('numba', 'numpy')
+    if served['feature pipeline settled'] == 'yes':
+        assert (served['feature pipeline'], now.pending) == (now.name, False)
+    else:
+        assert (served['feature pipeline'], served['feature pipeline settled']) == ('numpy', 'no')
+
+
 def test_parameter_changes_take_effect_on_the_next_scan(ros_context, executor):
     harness = Harness(ros_context, executor)
     corners, _ = harness.exchange(room_scan_message())

@@ -171,12 +171,16 @@ def _wait_for(path: pathlib.Path, process: subprocess.Popen, timeout_s: float) -
 
 def record(bag_path: pathlib.Path, seconds: float) -> Recording:
     """
-    Record the demo's topics into an mcap bag for ``seconds`` after the first corners arrive.
+    Record the demo's topics into an mcap bag for ``seconds`` once features flow.
+
+    Features flow once scans and corners arrive and feature_node's pipeline is settled (on
+    /diagnostics: the compiled one has taken over); nothing before that is recorded.
 
     :param bag_path: the bag folder to write
     :param seconds: how long to record once features flow, s
     :return: what was seen, for the summary (``stopped_by`` set on a stop signal)
     """
+    from diagnostic_msgs.msg import DiagnosticArray
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import qos_profile_sensor_data
@@ -202,7 +206,13 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
     executor.add_node(node)
     try:
         with BagWriter(bag_path) as bag:
+            arrived = set()
+            recording = threading.Event()
+
             def keep(topic, message):
+                arrived.add(topic)
+                if not recording.is_set():
+                    return
                 now = time.time_ns()
                 bag.write(topic, now, message)
                 if topic == '/scan':
@@ -216,15 +226,28 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
             for topic, kind in (('corners', CornerArray), ('lines', LineSegmentArray),
                                 ('markers', MarkerArray)):
                 node.create_subscription(kind, topic, lambda m, t=topic: keep(f'/{t}', m), 10)
+            settled = threading.Event()
+
+            def on_diagnostics(array):
+                for status in array.status:
+                    values = {value.key: value.value for value in status.values}
+                    if values.get('feature pipeline settled') == 'yes':
+                        settled.set()
+
+            node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
             # Discovery can match the recorder to feature_node before the driver (or the other
-            # way round) on a busy machine: start the clock once both scans and corners arrive.
+            # way round) on a busy machine: start the clock once both scans and corners arrive,
+            # and feature_node's pipeline is settled: the table measures the compiled pipeline
+            # (when numba is there), not the numpy one serving while it loads.
             start_deadline = time.monotonic() + 60.0
-            while not (seen.corners and seen.scans or stop.is_set()):
+            while not ({'/scan', '/corners'} <= arrived and settled.is_set() or stop.is_set()):
                 if time.monotonic() > start_deadline:
-                    raise RuntimeError('no scans and corners within 60 s (see the logs)')
+                    raise RuntimeError('no scans and corners from a settled feature pipeline '
+                                       'within 60 s (see the logs)')
                 executor.spin_once(timeout_sec=0.1)
             if not stop.is_set():
                 print(f'demo: features flowing; recording {seconds:g} s ...', flush=True)
+            recording.set()
             end = time.monotonic() + seconds
             while time.monotonic() < end and not stop.is_set():
                 executor.spin_once(timeout_sec=0.1)

@@ -42,7 +42,7 @@ from wctls_msgs.msg import CornerArray, LineSegmentArray
 from .conversions import (copy_header, corner_array, line_segment_array, marker_array,
                           MessageTypes, mismatched_types, rclpy_types, scan_features, typestore)
 from .core import (CoreStatus, CornerSet, Features, line_landmarks, SegmentSet,
-                   start as start_core)
+                   start as start_core, status as core_status)
 from .extras import missing_extra
 from .node_main import declare_parameters, run_node
 from .params import FEATURE_NODE, feature_settings
@@ -269,7 +269,12 @@ class FeatureNode(Node):
         elif not recent.processed:
             message = 'no scans'
         seconds = recent.seconds or [0.0]
+        core = core_status()
         values = {
+            # 'no' while the numpy pipeline serves until the compiled one is ready (a load of
+            # about a second, or a compile on a machine's first start).
+            'feature pipeline': core.name if core else 'none',
+            'feature pipeline settled': 'no' if core is None or core.pending else 'yes',
             'scan topic': self.resolve_topic_name('scan'),
             'method': self._config.method,
             'scans processed (last period)': recent.processed,

@@ -193,12 +193,11 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
     context = rclpy.context.Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     # A stop signal ends the recording between two spins. An exception raised at any moment
-    # could cut a bag write short, or surface from inside rclpy's take as a RuntimeError.
-    stop = threading.Event()
+    # could cut a bag write short, or surface from inside rclpy's take as a RuntimeError. The
+    # handler takes no lock: a second signal inside a handler holding one would wait for ever.
 
     def on_signal(number, _):
         seen.stopped_by = seen.stopped_by or number
-        stop.set()
 
     previous_handlers = {number: signal.signal(number, on_signal) for number in SIGNALS}
     node = rclpy.create_node('demo_recorder', context=context)
@@ -240,16 +239,16 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
             # and feature_node's pipeline is settled: the table measures the compiled pipeline
             # (when numba is there), not the numpy one serving while it loads.
             start_deadline = time.monotonic() + 60.0
-            while not ({'/scan', '/corners'} <= arrived and settled.is_set() or stop.is_set()):
+            while not ({'/scan', '/corners'} <= arrived and settled.is_set() or seen.stopped_by):
                 if time.monotonic() > start_deadline:
                     raise RuntimeError('no scans and corners from a settled feature pipeline '
                                        'within 60 s (see the logs)')
                 executor.spin_once(timeout_sec=0.1)
-            if not stop.is_set():
+            if not seen.stopped_by:
                 print(f'demo: features flowing; recording {seconds:g} s ...', flush=True)
             recording.set()
             end = time.monotonic() + seconds
-            while time.monotonic() < end and not stop.is_set():
+            while time.monotonic() < end and not seen.stopped_by:
                 executor.spin_once(timeout_sec=0.1)
     finally:
         executor.shutdown()

@@ -218,13 +218,13 @@ def _check_link(link: str):
         raise UserError(f'--link {link}: no such directory')
 
 
-def _read_stdin_commands(commands: queue.Queue):
+def _read_stdin_commands(commands: queue.SimpleQueue):
     """Forward standard input lines to the command queue (until EOF)."""
     for line in sys.stdin:
         commands.put(line)
 
 
-def _start_reading_commands(commands: queue.Queue):
+def _start_reading_commands(commands: queue.SimpleQueue):
     """
     Start the thread that forwards standard input to the command queue.
 

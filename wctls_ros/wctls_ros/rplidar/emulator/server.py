@@ -170,7 +170,9 @@ class Emulator:
         self._clients = {}
         self._request_parser = RequestParser()
         self._heard = []
-        self.commands = queue.Queue()
+        # A SimpleQueue: its put is reentrant, so the SIGTERM handler may put 'quit' while
+        # this thread is inside get_nowait (a Queue's lock deadlocked both threads there).
+        self.commands = queue.SimpleQueue()
 
     def _new_device(self) -> S1Device:
         return S1Device(self._scene, self._faults, self._firmware, self._rng, self._modes,

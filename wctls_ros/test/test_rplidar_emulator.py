@@ -330,3 +330,41 @@ def test_exit_status_after_quit_sigterm_and_ctrl_c(tmp_path, stop, status, sigin
         if process.poll() is None:
             process.kill()
         process.communicate()
+
+
+# SIGTERM at the moment the serving loop takes a command off its queue: a profile hook sends
+# it inside the queue's get (a queue.Queue holds its lock there: its _qsize; a SimpleQueue's
+# get_nowait is one C call). With a queue.Queue the handler's put waited for that lock for ever:
+# an emulator outlived the demo that had started it.
+_SIGTERM_WHILE_A_COMMAND_IS_TAKEN = """
+import os
+import signal
+import sys
+
+from wctls_ros.s1_emulator import main
+
+
+def sigterm_inside_the_queue(frame, event, argument):
+    if (event == 'call' and frame.f_code.co_name == '_qsize') or (
+            event == 'c_call' and getattr(argument, '__name__', '') == 'get_nowait'):
+        sys.setprofile(None)
+        os.kill(os.getpid(), signal.SIGTERM)
+
+
+sys.setprofile(sigterm_inside_the_queue)
+sys.exit(main(['--link', sys.argv[1]]))
+"""
+
+
+def test_sigterm_while_a_command_is_taken_ends_the_emulator(tmp_path):
+    process = subprocess.Popen([sys.executable, '-c', _SIGTERM_WHILE_A_COMMAND_IS_TAKEN,
+                                str(tmp_path / 'ttyS1')], stdin=subprocess.PIPE,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        returncode = process.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        pytest.fail('the emulator hung after SIGTERM')
+    finally:
+        _, errors = process.communicate()
+    assert (returncode, errors) == (0, '')

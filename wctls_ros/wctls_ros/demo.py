@@ -174,7 +174,7 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
     Record the demo's topics into an mcap bag for ``seconds`` once features flow.
 
     Features flow once scans and corners arrive and feature_node's pipeline is settled (on
-    /diagnostics: the compiled one has taken over); nothing before that is recorded.
+    /diagnostics: no compiled pipeline is still on its way); nothing before that is recorded.
 
     :param bag_path: the bag folder to write
     :param seconds: how long to record once features flow, s

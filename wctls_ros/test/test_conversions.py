@@ -247,6 +247,21 @@ def test_every_method_builds_what_plain_builders_give(families):
             break
 
 
+@pytest.mark.parametrize('wrong', ['one too few', 'one too many', 'a scalar', 'a column'])
+@pytest.mark.parametrize('build', [line_segment_array, marker_array])
+def test_landmark_flags_that_are_not_one_per_segment_are_refused(families, build, wrong):
+    scan, features = next((scan, features) for scan, features in real_features()
+                          if len(features.segments) >= 3)
+    count = len(features.segments)
+    flags = landmarks(features)
+    # Each of these once indexed the wrong segments, or all or none, without a word.
+    flags = {'one too few': flags[:-1], 'one too many': np.append(flags, True),
+             'a scalar': True, 'a column': flags[:, None]}[wrong]
+    types = families['rosbags']
+    with pytest.raises(ValueError, match=f'landmark flags for {count} segments'):
+        build(features, copy_header(scan.header, types), types, is_landmark=flags)
+
+
 def test_either_familys_bytes_read_back_alike_in_rclpy_and_rosbags(families):
     rclpy_types, rosbags_types = families['rclpy'], families['rosbags']
     store = typestore()

@@ -334,6 +334,22 @@ def corner_array(features: Features, header, types: Optional[MessageTypes] = Non
     return types.CornerArray(header=header, method=features.method, corners=messages)
 
 
+def _one_flag_per_segment(is_landmark: np.ndarray, segments: SegmentSet) -> np.ndarray:
+    """
+    Return the line landmark flags as one bool per segment.
+
+    :param is_landmark: the flags, shape (S,)
+    :param segments: the scan's segments (S of them)
+    :return: the flags, shape (S,), bool
+    :raises ValueError: when is_landmark does not give one flag per segment (a wrong length
+        would index the wrong segments, a scalar would select all or none)
+    """
+    flags = np.asarray(is_landmark, dtype=bool)
+    if flags.shape != (len(segments),):
+        raise ValueError(f'{flags.shape} landmark flags for {len(segments)} segments')
+    return flags
+
+
 def line_segment_array(features: Features, header, types: Optional[MessageTypes] = None, *,
                        is_landmark: np.ndarray):
     """
@@ -353,9 +369,7 @@ def line_segment_array(features: Features, header, types: Optional[MessageTypes]
     types = types or rclpy_types()
     LineSegment, Point = types.LineSegment, types.Point
     s = features.segments
-    is_landmark = np.asarray(is_landmark, dtype=bool)
-    if is_landmark.shape != (len(s),):
-        raise ValueError(f'{is_landmark.shape} landmark flags for {len(s)} segments')
+    is_landmark = _one_flag_per_segment(is_landmark, s)
     messages = [
         LineSegment(angle=angle, radius=radius, covariance=covariance,
                     start=Point(x=start_x, y=start_y, z=0.0), end=Point(x=end_x, y=end_y, z=0.0),
@@ -403,6 +417,7 @@ def marker_array(features: Features, header, style: MarkerStyle = MarkerStyle(),
     :param is_landmark: which segments are line landmarks, shape (S,), bool
         (:func:`~wctls_ros.core.line_landmarks`)
     :return: the markers
+    :raises ValueError: when is_landmark does not give one flag per segment
     """
     types = types or rclpy_types()
     Marker, Point, Pose, Quaternion = types.Marker, types.Point, types.Pose, types.Quaternion
@@ -416,7 +431,7 @@ def marker_array(features: Features, header, style: MarkerStyle = MarkerStyle(),
                       pose=at_origin, scale=no_scale, color=ColorRGBA(r=0.0, g=0.0, b=0.0, a=0.0),
                       points=[], text='')]
     segments, corners = features.segments, features.corners
-    is_landmark = np.asarray(is_landmark, dtype=bool)
+    is_landmark = _one_flag_per_segment(is_landmark, segments)
     line_width = Vector3(x=style.line_width_m, y=0.0, z=0.0)
     for marker_id, (drawn, alpha) in enumerate(((is_landmark, 1.0),
                                                 (~is_landmark, _OTHER_SEGMENT_ALPHA))):

@@ -10,9 +10,16 @@ the status it has later (0 for a node, 130 for a tool) instead of a traceback, a
 optional package is missing (rosbags, matplotlib, tqdm: :mod:`.extras`) ends with one line
 naming the install command and status 1, whether the package is needed at the tool's import or
 later.
+
+A Ctrl-C during the imports ends the process at once (``os._exit``) rather than raising: the
+handler runs in whatever Python code the main thread is in, and the imports run weakref and
+garbage-collector callbacks, in which Python prints an exception with its traceback and drops
+it. A raised exit was lost there once in a loaded test run, and the node went on to run. The
+imports have opened nothing a clean-up would close.
 """
 
 import importlib
+import os
 import signal
 import sys
 
@@ -27,18 +34,22 @@ def _run(prog: str, module: str, interrupted: int, function: str = 'main') -> in
 
     :param prog: the program's name, for messages
     :param module: its module, relative to wctls_ros
-    :param interrupted: the exit status of a Ctrl-C during the imports
+    :param interrupted: the exit status of a Ctrl-C the program does not handle itself
     :param function: the module's function that runs the program
     :return: the program's exit status
     """
-    def quietly(signal_number, frame):
-        sys.exit(interrupted)
+    def at_once(signal_number, frame):
+        os._exit(interrupted)
 
-    previous = signal.signal(signal.SIGINT, quietly)
+    previous = signal.signal(signal.SIGINT, at_once)
     try:
         program = importlib.import_module(f'wctls_ros.{module}')
         signal.signal(signal.SIGINT, previous)
         return getattr(program, function)()
+    except KeyboardInterrupt:
+        # A Ctrl-C the program did not handle (one before a node's run_node or a tool's stop
+        # signals take over, or in a tool without them): the finally blocks have run.
+        return interrupted
     except ImportError as error:
         from .extras import missing_extra
         reason = missing_extra(error)

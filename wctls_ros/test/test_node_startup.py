@@ -127,6 +127,43 @@ sys.exit(run_node('half_built', half_built_node))
 """
 
 
+# A Ctrl-C once the imports are done and before the node exists: as run_node starts (the
+# default handler is back, the node's not yet in place) and as rclpy.init starts (the node's
+# first KeyboardInterrupt, before rclpy has a handler). Each gave a KeyboardInterrupt traceback
+# and status -2 (the second in 1 of 60 random Ctrl-Cs during a start).
+_CTRL_C_AS_A_START_UP_STEP_BEGINS = """
+import os
+import signal
+import sys
+
+from wctls_ros import executables
+
+step, where = sys.argv[1:3]
+
+
+def sigint_as_the_step_begins(frame, event, argument):
+    code = frame.f_code
+    if event == 'call' and code.co_name == step and code.co_filename.endswith(where):
+        sys.setprofile(None)
+        print(f'signalled in {where}:{step}', file=sys.stderr, flush=True)
+        os.kill(os.getpid(), signal.SIGINT)
+
+
+sys.setprofile(sigint_as_the_step_begins)
+sys.argv = sys.argv[:1]
+sys.exit(executables.feature_node())
+"""
+
+
+@pytest.mark.parametrize('step, where', [('run_node', 'node_main.py'),
+                                         ('init', 'rclpy/__init__.py')])
+def test_ctrl_c_as_a_start_up_step_begins_ends_the_node_quietly(step, where):
+    result = subprocess.run([sys.executable, '-c', _CTRL_C_AS_A_START_UP_STEP_BEGINS, step,
+                             where], capture_output=True, text=True, timeout=60)
+    assert result.stderr.splitlines()[0] == f'signalled in {where}:{step}', result.stderr
+    assert (result.returncode, 'Traceback' in result.stderr) == (0, False), result.stderr
+
+
 def test_ctrl_c_while_a_node_being_built_fails_ends_it_quietly():
     result = subprocess.run([sys.executable, '-c', _CTRL_C_WHILE_A_FAILED_START_IS_HANDLED],
                             capture_output=True, text=True, timeout=60)

@@ -156,21 +156,22 @@ def run_node(name: str, make_node, spin=spin_forever, config_errors=(ValueError,
                      'folder, FIFO, device or socket)')
         return 1
     _interrupt_once()
-    try:
-        # Parsed once before rclpy.init, which would log an extra rcl line before raising.
-        remove_ros_args(args)
-        rclpy.init(args=args)
-    except _INIT_ERRORS as error:
-        reason = _SOURCE_LOCATION.sub('', str(error))
-        if isinstance(error, rclpy_implementation.UnknownROSArgsError):
-            reason = f'unknown ROS arguments {reason}'
-        logger.fatal(f'cannot start: {reason}')
-        return 1
     node = executor = None
     try:
-        # The one KeyboardInterrupt (:func:`_interrupt_once`) lands between any two bytecodes,
-        # also inside the handlers below: rclpy's own handler has already shut the context down
-        # (a node half-built then fails with an RCLError), and Python runs ours after it.
+        # The one KeyboardInterrupt (:func:`_interrupt_once`) lands between any two bytecodes:
+        # inside rclpy.init (try_shutdown below undoes a half-done init), or inside the
+        # handlers below, after rclpy's own handler has shut the context down (a node
+        # half-built then fails with an RCLError): Python runs ours after rclpy's.
+        try:
+            # Parsed once before rclpy.init, which would log an extra rcl line before raising.
+            remove_ros_args(args)
+            rclpy.init(args=args)
+        except _INIT_ERRORS as error:
+            reason = _SOURCE_LOCATION.sub('', str(error))
+            if isinstance(error, rclpy_implementation.UnknownROSArgsError):
+                reason = f'unknown ROS arguments {reason}'
+            logger.fatal(f'cannot start: {reason}')
+            return 1
         try:
             # Made before the (slower) node, so a signal during start-up rarely meets it
             # half-built.

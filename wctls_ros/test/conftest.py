@@ -10,6 +10,8 @@ import pathlib
 import tempfile
 import time
 
+# A failing test's report shows the stacks of the process's other threads.
+from failure_report import pytest_runtest_makereport  # noqa: F401
 import pytest
 
 # Test sessions take their ROS domain ids from here, one each.

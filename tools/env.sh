@@ -22,8 +22,8 @@ if [ -f "$_wctls_root/install/local_setup.bash" ]; then
   [ -n "$_wctls_nounset" ] && set -u
   unset _wctls_nounset
   # The installed executables by their bare names (process_bag, calibrate, score, ...), as
-  # `ros2 run wctls_ros <name>` would find them (the venv's own copies first, if it has any).
-  for _wctls_bin in "$_wctls_root/install/wctls_ros/lib/wctls_ros" "$_wctls_venv/lib/wctls_ros"; do
+  # `ros2 run <package> <name>` would find them (the venv's own copies first, if it has any).
+  for _wctls_bin in "$_wctls_root"/install/wctls_*/lib/wctls_* "$_wctls_venv"/lib/wctls_*; do
     case ":$PATH:" in
       *":$_wctls_bin:"*) ;;
       *) [ -d "$_wctls_bin" ] && export PATH="$_wctls_bin:$PATH" ;;

@@ -13,7 +13,6 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
-    package_data={'wctls_ros.simulation': ['plans/*.yaml']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
@@ -31,16 +30,8 @@ setup(
     entry_points={
         'console_scripts': [
             'bag_replay = wctls_ros.executables:bag_replay',
-            'calibrate = wctls_ros.executables:calibrate',
-            'evaluate = wctls_ros.executables:evaluate',
             'feature_node = wctls_ros.executables:feature_node',
-            'demo = wctls_ros.executables:demo',
             'process_bag = wctls_ros.executables:process_bag',
-            'rplidar_node = wctls_ros.executables:rplidar_node',
-            's1_emulator = wctls_ros.executables:s1_emulator',
-            'rplidar_emulator = wctls_ros.executables:rplidar_emulator',
-            'score = wctls_ros.executables:score',
-            'simulate = wctls_ros.executables:simulate',
         ],
     },
 )

@@ -4,20 +4,24 @@
 """
 Start an RPLIDAR S1 and the feature node: ros2 launch wctls_ros rplidar_s1.launch.py.
 
-Arguments: serial_port, channel_type, tcp_ip, frame_id, autostart and params_file (the
-driver's; each of the first five overrides the file only when given: autostart false makes this
-file configure and then activate the lifecycle node rplidar_node); with_feature_node (default
-true), sensor
+The driver is wctls_rplidar's rplidar.launch.py, included with its arguments: serial_port,
+channel_type, tcp_ip, frame_id, autostart and params_file (each of the first five overrides the
+file only when given: autostart false makes it configure and then activate the lifecycle node
+rplidar_node); with_feature_node (default true), sensor
 (default rplidar_s1: the S1's noise model, over the file's preset; '' keeps the file's), method
 and feature_params_file (feature_node's).
 """
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription
 from launch.conditions import IfCondition
-from launch.substitutions import LaunchConfiguration
-from wctls_ros.launching import config_file, lifecycle_node, node, optional_argument
+from launch.launch_description_sources import PythonLaunchDescriptionSource
+from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch_ros.substitutions import FindPackageShare
+from wctls_ros.launching import config_file, node, optional_argument
 from wctls_ros.sensors import sensor_presets
+
+DRIVER = 'wctls_rplidar'
 
 # Driver parameters a launch argument of the same name overrides when given.
 DRIVER_ARGUMENTS = (
@@ -34,8 +38,9 @@ def generate_launch_description():
     """Return the launch description: rplidar_node, and feature_node on its scans."""
     return LaunchDescription([
         *(optional_argument(name, description) for name, description in DRIVER_ARGUMENTS),
-        DeclareLaunchArgument('params_file', default_value=config_file('rplidar_s1.yaml'),
-                              description='rplidar_node parameter file'),
+        DeclareLaunchArgument('params_file', default_value=PathJoinSubstitution(
+            [FindPackageShare(DRIVER), 'config', 'rplidar_s1.yaml']),
+            description='rplidar_node parameter file'),
         DeclareLaunchArgument('with_feature_node', default_value='true',
                               description='also start feature_node on the scans'),
         DeclareLaunchArgument('sensor', default_value='rplidar_s1',
@@ -45,8 +50,11 @@ def generate_launch_description():
         DeclareLaunchArgument('feature_params_file',
                               default_value=config_file('feature_node.yaml'),
                               description='feature_node parameter file'),
-        lifecycle_node('rplidar_node', LaunchConfiguration('params_file'),
-                       arguments=[(name, name) for name, _ in DRIVER_ARGUMENTS]),
+        IncludeLaunchDescription(
+            PythonLaunchDescriptionSource(PathJoinSubstitution(
+                [FindPackageShare(DRIVER), 'launch', 'rplidar.launch.py'])),
+            launch_arguments=[(name, LaunchConfiguration(name))
+                              for name, _ in (*DRIVER_ARGUMENTS, ('params_file', ''))]),
         node('feature_node', LaunchConfiguration('feature_params_file'),
              arguments=[('sensor', 'sensor'), ('method', 'method')],
              condition=IfCondition(LaunchConfiguration('with_feature_node'))),

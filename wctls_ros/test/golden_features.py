@@ -21,10 +21,10 @@ import math
 import pathlib
 
 import numpy as np
+from wctls_lab.evaluation.scans import load_json_scans, load_scans
+from wctls_lab.simulation import load_floor_plan, NoiseModel, simulate_recording
 from wctls_ros.core import FeatureConfig
-from wctls_ros.evaluation.scans import load_json_scans, load_scans
 from wctls_ros.params import feature_settings, load_parameters
-from wctls_ros.simulation import load_floor_plan, NoiseModel, simulate_recording
 
 HERE = pathlib.Path(__file__).resolve().parent
 GOLDEN = HERE / 'golden'

@@ -31,7 +31,7 @@ def simulated_bag(folder, plan, scans, seed, sensor):
 
     :return: the bag's path
     """
-    from wctls_ros.evaluation.simulate_cli import main
+    from wctls_lab.evaluation.simulate_cli import main
     path = folder / plan
     assert main([plan, str(path), '--scans', str(scans), '--seed', str(seed),
                  '--sensor', sensor]) == 0

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 from sensor_msgs.msg import LaserScan
-from wctls_ros.simulation import (floor_plan_from_dict, full_turn_bearings, NoiseModel,
+from wctls_lab.simulation import (floor_plan_from_dict, full_turn_bearings, NoiseModel,
                                   simulate_ranges)
 
 ROOM = {'name': 'room', 'polylines': [

@@ -50,8 +50,8 @@ def test_the_numpy_core_serves_and_says_why():
 
 
 def test_feature_node_needs_nothing_optional():
-    code = ('import sys; import wctls_ros.feature_node, wctls_ros.rplidar.rplidar_node, '
-            'wctls_ros.s1_emulator; '
+    code = ('import sys; import wctls_ros.feature_node, wctls_rplidar.rplidar_node, '
+            'wctls_rplidar.emulator.cli; '
             "print(sorted(m for m in ('rosbags', 'matplotlib', 'tqdm', 'numba') "
             'if m in sys.modules))')
     result = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,

@@ -10,7 +10,7 @@ import pytest
 
 REPOSITORY = pathlib.Path(__file__).resolve().parents[2]
 # Where our own source lives (data/ holds other people's recordings under their licenses).
-SOURCE_ROOTS = ('wctls_ros', 'wctls_msgs', 'tools', '.ci')
+SOURCE_ROOTS = ('wctls_ros', 'wctls_rplidar', 'wctls_lab', 'wctls_msgs', 'tools', '.ci')
 SOURCE_SUFFIXES = ('.py', '.sh', '.msg', '.yaml', '.cfg', '.ini')
 SOURCE_NAMES = ('Makefile', 'CMakeLists.txt', 'run')
 # Build products and caches that may sit inside the source roots.
@@ -20,7 +20,7 @@ COPYRIGHT = re.compile(r'^(#!.*\n)?# Copyright \d{4}(-\d{4})? \S.*\n'
 
 
 def _source_files():
-    files = [REPOSITORY / 'Makefile', REPOSITORY / 'pytest.ini']
+    files = [REPOSITORY / 'Makefile', REPOSITORY / 'pytest.ini', REPOSITORY / 'conftest.py']
     for root in SOURCE_ROOTS:
         for path in sorted((REPOSITORY / root).rglob('*')):
             if (path.is_file() and not SKIPPED_PARTS & set(path.relative_to(REPOSITORY).parts)

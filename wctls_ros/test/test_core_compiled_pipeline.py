@@ -18,12 +18,12 @@ import math
 from conftest import REAL_DATA
 import numpy as np
 import pytest
+from wctls_lab.evaluation.scans import load_json_scans, load_scans
+from wctls_lab.simulation import load_floor_plan, NoiseModel, simulate_recording
+from wctls_lab.simulation.adversarial import peeling_wall
 from wctls_ros.core import CornerSet, FeatureConfig, METHODS, numpy_core, SegmentSet
 # The compiled pipeline itself, whatever wctls_ros.core.runtime would choose.
 from wctls_ros.core.numba_core.pipeline import _no_corners, _no_segments, extract_features
-from wctls_ros.evaluation.scans import load_json_scans, load_scans
-from wctls_ros.simulation import load_floor_plan, NoiseModel, simulate_recording
-from wctls_ros.simulation.adversarial import peeling_wall
 
 # One of the suite's slowest modules: make test-fast leaves it out.
 pytestmark = pytest.mark.slow

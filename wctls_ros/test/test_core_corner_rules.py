@@ -13,13 +13,13 @@ import math
 
 import numpy as np
 import pytest
+from wctls_lab.simulation import floor_plan_from_dict, NoiseModel, simulate_recording
+from wctls_lab.simulation.scanner import SENSOR_MODELS
 from wctls_ros.core import extract_features, FeatureConfig
 from wctls_ros.core.numba_core import corners as compiled
 from wctls_ros.core.numpy_core import corners as numpy_corners
 from wctls_ros.core.records import CornerEndRule, Noise, Returns, WallAtCorner
 from wctls_ros.params import feature_settings, load_parameters
-from wctls_ros.simulation import floor_plan_from_dict, NoiseModel, simulate_recording
-from wctls_ros.simulation.scanner import SENSOR_MODELS
 
 ONE_CM = NoiseModel(range_sigma_m=0.01, bearing_sigma_rad=math.radians(0.05))
 ONE_CM_CONFIG = FeatureConfig(range_sigma_m=0.01, bearing_sigma_rad=math.radians(0.05))

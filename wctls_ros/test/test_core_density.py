@@ -15,12 +15,12 @@ import math
 
 import numpy as np
 import pytest
+from wctls_lab.simulation import NoiseModel, simulate_recording
+from wctls_lab.simulation.floorplan import floor_plan_from_dict
 from wctls_ros.core import FeatureConfig
 from wctls_ros.core.numba_core.pipeline import extract_features as compiled
 from wctls_ros.core.numpy_core.pipeline import extract_features as in_numpy
 from wctls_ros.core.scan import beam_density
-from wctls_ros.simulation import NoiseModel, simulate_recording
-from wctls_ros.simulation.floorplan import floor_plan_from_dict
 
 pytestmark = pytest.mark.slow
 

@@ -12,9 +12,9 @@ landmark and a short face of a box far away is not, while both still make the bo
 import math
 
 import numpy as np
+from wctls_lab.simulation import floor_plan_from_dict, NoiseModel, simulate_recording
 from wctls_ros.core import (angle_sigma_rad, extract_features, FeatureConfig, line_landmarks,
                             SegmentSet)
-from wctls_ros.simulation import floor_plan_from_dict, NoiseModel, simulate_recording
 
 
 def segments_with_angle_sigmas(sigmas_rad) -> SegmentSet:

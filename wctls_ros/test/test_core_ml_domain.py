@@ -77,8 +77,8 @@ def test_grazing_returns_off_the_wall_pull_ml_and_not_wtls():
 def lms111():
     pytest.importorskip('rosbags.highlevel')
     from conftest import REAL_DATA
-    from wctls_ros.evaluation.scans import load_scans
-    from wctls_ros.evaluation.truth import load_truth
+    from wctls_lab.evaluation.scans import load_scans
+    from wctls_lab.evaluation.truth import load_truth
     truth = load_truth(REAL_DATA / 'labels' / 'sick_lms111_static.yaml')
     return load_scans(REAL_DATA / 'sick_lms111_static'), truth
 
@@ -93,7 +93,7 @@ def labelled_corner_nees(recording, method, label, **settings):
 
     :param settings: FeatureConfig fields to change from the node's defaults
     """
-    from wctls_ros.evaluation.score_cli import node_config
+    from wctls_lab.evaluation.score_cli import node_config
     scans, truth = recording
     target = truth.xy_m[0, label]
     config = node_config().replace(method=method, **settings)

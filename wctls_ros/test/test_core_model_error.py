@@ -12,9 +12,9 @@ import math
 
 import numpy as np
 import pytest
+from wctls_lab.simulation import floor_plan_from_dict, NoiseModel, simulate_recording
 from wctls_ros.core import extract_features, FeatureConfig, nees
 from wctls_ros.core.numba_core.model_error import flatness_covariance
-from wctls_ros.simulation import floor_plan_from_dict, NoiseModel, simulate_recording
 
 # One of the suite's slowest modules: make test-fast leaves it out.
 pytestmark = pytest.mark.slow

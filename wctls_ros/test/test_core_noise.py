@@ -8,11 +8,11 @@ import math
 from conftest import REAL_DATA
 import numpy as np
 import pytest
+from wctls_lab.evaluation import fit_noise, load_scans
+from wctls_lab.simulation import (full_turn_bearings, load_floor_plan, NoiseModel,
+                                  simulate_scan)
 from wctls_ros.core import extract_features, FeatureConfig, scan_to_points
 from wctls_ros.core.numba_core.noise import scan_range_sigma
-from wctls_ros.evaluation import fit_noise, load_scans
-from wctls_ros.simulation import (full_turn_bearings, load_floor_plan, NoiseModel,
-                                  simulate_scan)
 
 
 def estimates(plan, noise, scans=20):
@@ -35,7 +35,7 @@ def test_the_estimate_is_the_simulated_range_noise_despite_edges_and_clutter(pla
 
 def test_mixed_pixels_and_bins_raise_the_estimate_only_a_little():
     # The S1-like sensor: 2 cm, 1/3 deg bins, 0.4 deg footprints (mixed pixels), dropouts.
-    from wctls_ros.simulation import SENSOR_MODELS
+    from wctls_lab.simulation import SENSOR_MODELS
     found = estimates('environment_a_cluttered', SENSOR_MODELS['s1_like'])
     assert 0.02 < np.median(found) < 0.025
 

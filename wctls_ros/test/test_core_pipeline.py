@@ -10,12 +10,12 @@ import time
 from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
+from wctls_lab.simulation import (floor_plan_from_dict, full_turn_bearings, NOISELESS,
+                                  NoiseModel, simulate_ranges)
+from wctls_lab.simulation.adversarial import peeling_wall
 from wctls_ros.core import (extract_features, FeatureConfig, fit_lines, nees, scan_to_points,
                             ScanError, segment_returns)
 from wctls_ros.core.records import BeamGrid, Lines, Noise, Returns, Segments
-from wctls_ros.simulation import (floor_plan_from_dict, full_turn_bearings, NOISELESS,
-                                  NoiseModel, simulate_ranges)
-from wctls_ros.simulation.adversarial import peeling_wall
 
 ROOM = {'name': 'room', 'polylines': [
     {'closed': True, 'points': [[0.0, 0.0], [4.5, 0.0], [4.5, 2.5], [0.0, 2.5]]}],

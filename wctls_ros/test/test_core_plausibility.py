@@ -14,12 +14,12 @@ import math
 
 import numpy as np
 import pytest
+from wctls_lab.simulation import load_floor_plan, NoiseModel, simulate_recording
 from wctls_ros.core import FeatureConfig
 from wctls_ros.core.numba_core.pipeline import extract_features as compiled
 from wctls_ros.core.numpy_core.pipeline import extract_features as in_numpy
 from wctls_ros.core.plausibility import (corner_sigma_m, MAX_SIGMA_RATIO, plausible,
                                          segment_sigma_m)
-from wctls_ros.simulation import load_floor_plan, NoiseModel, simulate_recording
 
 PIPELINES = pytest.mark.parametrize('extract', [compiled, in_numpy], ids=['compiled', 'numpy'])
 # The generic preset's noise model.

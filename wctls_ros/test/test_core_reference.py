@@ -126,7 +126,7 @@ def test_corners_equal_the_plain_reference_on_random_wall_pairs(method):
 
 def real_segments(path, scans, config):
     """Return the returns of every segment the pipeline finds in the first `scans` scans."""
-    from wctls_ros.evaluation.score_cli import load_recording
+    from wctls_lab.evaluation.score_cli import load_recording
     recording = load_recording(path, None)
     segments = []
     for ranges in recording.ranges[:scans]:
@@ -148,7 +148,7 @@ def real_segments(path, scans, config):
 @pytest.mark.parametrize('method', METHODS)
 def test_fits_and_corners_equal_the_plain_reference_on_real_segments(recording, method):
     pytest.importorskip('rosbags.highlevel')
-    from wctls_ros.evaluation.score_cli import node_config
+    from wctls_lab.evaluation.score_cli import node_config
     segments = real_segments(REAL_DATA / recording, 6, node_config())
     assert len(segments) >= 10
     compare_corners(segments, method, 0.001)

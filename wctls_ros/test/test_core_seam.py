@@ -14,9 +14,9 @@ measured near the seam of these scans is in docs/sensors.md#the-seam-of-a-turn.
 from conftest import REAL_DATA
 import numpy as np
 import pytest
+from wctls_lab.evaluation.scans import load_scans
+from wctls_lab.evaluation.score_cli import node_config
 from wctls_ros.core import extract_features
-from wctls_ros.evaluation.scans import load_scans
-from wctls_ros.evaluation.score_cli import node_config
 
 C1_SCANS = REAL_DATA / 'rplidar_c1_single_scans'
 # The beams this close to the seam on either side (1.5 deg at the C1's 0.5 deg): when each side

@@ -24,7 +24,7 @@ REPOSITORY = pathlib.Path(__file__).resolve().parents[2]
 USER_GUIDE = REPOSITORY / 'docs' / 'user_guide.md'
 PAGES = sorted([REPOSITORY / 'README.md', REPOSITORY / 'CONTRIBUTING.md',
                 *(REPOSITORY / 'docs').glob('*.md')])
-PACKAGES = ('wctls_ros', 'wctls_msgs')
+PACKAGES = ('wctls_ros', 'wctls_rplidar', 'wctls_lab', 'wctls_msgs')
 README_MAX_LINES = 200
 
 # [text](target) and ![alt](target), the target without an optional "title".

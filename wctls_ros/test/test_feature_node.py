@@ -289,15 +289,18 @@ def test_bytes_that_are_no_scan_are_counted_and_the_next_is_processed(ros_contex
     assert harness.node.counters.processed == 1
 
 
+PACKAGES = ('wctls_ros', 'wctls_rplidar', 'wctls_lab')
+
+
 def installed_executable(name):
     """Return an installed executable: the one on PATH (tools/env.sh), else in a prefix."""
     on_path = shutil.which(name)
-    if on_path is not None and pathlib.Path(on_path).parent.name == 'wctls_ros':
+    if on_path is not None and pathlib.Path(on_path).parent.name in PACKAGES:
         return pathlib.Path(on_path)
-    prefix = pathlib.Path(sys.prefix).parent.parent / 'install' / 'wctls_ros'
-    candidates = [pathlib.Path(p) / 'lib' / 'wctls_ros' / name
-                  for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
-    for path in candidates + [prefix / 'lib' / 'wctls_ros' / name]:
+    install = pathlib.Path(sys.prefix).parent.parent / 'install'
+    prefixes = [pathlib.Path(p) for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep)
+                if p] + [install / package for package in PACKAGES]
+    for path in (prefix / 'lib' / package / name for prefix in prefixes for package in PACKAGES):
         if path.is_file():
             return path
     pytest.skip(f'{name} is not installed (run colcon build)')

@@ -19,8 +19,8 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 from scans import room_scan_message  # noqa: E402
 from sensor_msgs.msg import LaserScan  # noqa: E402
 from test_feature_node import installed_executable  # noqa: E402
+from wctls_lab.simulation.adversarial import peeling_wall  # noqa: E402
 from wctls_msgs.msg import CornerArray  # noqa: E402
-from wctls_ros.simulation.adversarial import peeling_wall  # noqa: E402
 
 # One of the suite's slowest modules (make test-fast leaves it out), and one that runs
 # nodes, emulators or signals against deadlines (make test runs it in its realtime group).

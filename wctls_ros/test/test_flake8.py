@@ -1,15 +1,16 @@
 # Copyright 2026 wctls_ros maintainers
 # SPDX-License-Identifier: Apache-2.0
 
-"""Lint the Python of both packages as ament_flake8 does in a ROS build farm."""
+"""Lint the Python of every package as ament_flake8 does in a ROS build farm."""
 
 import pathlib
 
 import pytest
 
-PACKAGE_DIR = pathlib.Path(__file__).resolve().parents[1]
-# The interface package's tests sit beside this package in the source tree.
-LINTED = [str(PACKAGE_DIR)] + [str(p) for p in [PACKAGE_DIR.parent / 'wctls_msgs'] if p.is_dir()]
+REPOSITORY = pathlib.Path(__file__).resolve().parents[2]
+# The four packages sit side by side in the source tree.
+LINTED = [str(REPOSITORY / path) for path in
+          ('wctls_ros', 'wctls_rplidar', 'wctls_lab', 'wctls_msgs', 'conftest.py')]
 # One of the suite's slowest modules: make test-fast leaves it out (make lint runs it).
 pytestmark = pytest.mark.slow
 

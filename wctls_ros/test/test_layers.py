@@ -2,112 +2,109 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-docs/architecture.md's package map is the code's: every module is in it, no import runs upward.
+docs/architecture.md's package maps are the code's: no import runs upward.
 
-The map's table gives each module or subpackage of ``wctls_ros`` a layer; a module may import
-its own layer and the layers below, never one above (imports inside functions count too).
+Every module is on its package's map, and no import runs upward, within a package or between
+packages.
+
+Each Python package's table gives each of its modules or subpackages a layer; a module may
+import its own layer and the layers below, never one above (imports inside functions count
+too). Between packages, the driver imports neither the features nor the lab, and the features
+do not import the lab or the driver.
 """
 
 import ast
 import pathlib
 import re
 
+import pytest
+
 REPOSITORY = pathlib.Path(__file__).resolve().parents[2]
-PACKAGE = REPOSITORY / 'wctls_ros' / 'wctls_ros'
 ARCHITECTURE = REPOSITORY / 'docs' / 'architecture.md'
+# Each package and the packages of ours it may import.
+PACKAGES = {'wctls_rplidar': set(), 'wctls_ros': set(),
+            'wctls_lab': {'wctls_ros', 'wctls_rplidar'}}
 
 
-def map_layers() -> dict:
-    """Return the package map's unit (a top-level module or subpackage name) -> its layer."""
-    text = ARCHITECTURE.read_text().split('## The package map', 1)[1].split('\n## ', 1)[0]
+def map_layers(package: str) -> dict:
+    """Return a package map's unit (a top-level module or subpackage name) -> its layer."""
+    maps = ARCHITECTURE.read_text().split('## The package maps', 1)[1].split('\n## ', 1)[0]
+    text = maps.split(f'### {package}\n', 1)[1].split('\n### ', 1)[0]
     layers = {}
     for line in text.splitlines():
         cells = [cell.strip() for cell in line.strip().strip('|').split('|')]
         if len(cells) != 3 or not cells[0].isdigit():
             continue
-        # The units are the backticked names outside parentheses: `core/` (6.7k): `config`, ...
-        outside = re.sub(r'\([^()]*(\([^()]*\)[^()]*)*\)', '', cells[1])
-        for token in re.findall(r'`([^`]+)`', outside.split(':')[0] + ', ' + ', '.join(
-                re.findall(r'`[a-z_]+\.py`', outside))):
+        # The units are the backticked names before any colon: `core/`: `config`, ...
+        for token in re.findall(r'`([^`]+)`', cells[1].split(':')[0]):
             layers[token.rstrip('/').removesuffix('.py')] = int(cells[0])
     return layers
 
 
-def unit_of(path: pathlib.Path) -> str:
+def unit_of(package: str, path: pathlib.Path) -> str:
     """Return the unit of a package file: its top-level module or subpackage."""
-    return path.relative_to(PACKAGE).parts[0].removesuffix('.py')
+    return path.relative_to(REPOSITORY / package / package).parts[0].removesuffix('.py')
 
 
-def imported_units(path: pathlib.Path) -> set:
-    """Return the units of wctls_ros a file imports (relative or absolute, anywhere in it)."""
-    parts = path.relative_to(PACKAGE).with_suffix('').parts
-    units = set()
+def imports_of(package: str, path: pathlib.Path):
+    """
+    Yield (package, unit) of every module of ours a file imports, anywhere in it.
+
+    :param package: the file's package
+    :param path: the file
+    """
+    parts = path.relative_to(REPOSITORY / package).with_suffix('').parts
     for node in ast.walk(ast.parse(path.read_text())):
-        names = []
         if isinstance(node, ast.ImportFrom) and node.level:
-            base = parts[:len(parts) - node.level]
-            module = list(base) + (node.module.split('.') if node.module else [])
-            names = [module + [alias.name] for alias in node.names] if not module else [module]
-        elif isinstance(node, ast.ImportFrom) and (node.module or '').startswith('wctls_ros.'):
-            names = [node.module.split('.')[1:]]
+            module = list(parts[:len(parts) - node.level]) + (
+                node.module.split('.') if node.module else [])
+            names = [module + [alias.name] for alias in node.names] if len(module) == 1 else [
+                module]
+        elif isinstance(node, ast.ImportFrom):
+            names = [(node.module or '').split('.')]
         elif isinstance(node, ast.Import):
-            names = [alias.name.split('.')[1:] for alias in node.names
-                     if alias.name.startswith('wctls_ros.')]
-        units.update(name[0] for name in names if name and name[0] != '__init__')
-    return units
+            names = [alias.name.split('.') for alias in node.names]
+        else:
+            continue
+        for name in names:
+            if name[0] in PACKAGES and len(name) > 1 and name[1] != '__init__':
+                yield name[0], name[1]
 
 
-def package_files():
-    return [path for path in sorted(PACKAGE.rglob('*.py')) if path.name != '__init__.py'
-            or path.parent != PACKAGE]
+def package_files(package: str):
+    """Return a package's Python files (its own __init__.py aside)."""
+    root = REPOSITORY / package / package
+    return [path for path in sorted(root.rglob('*.py')) if path.parent != root
+            or path.name != '__init__.py']
 
 
-def test_every_module_of_the_package_is_on_the_map():
-    layers = map_layers()
-    missing = sorted({unit_of(path) for path in package_files()} - set(layers))
-    assert not missing, f"not in docs/architecture.md's package map: {missing}"
+@pytest.mark.parametrize('package', PACKAGES)
+def test_every_module_of_the_package_is_on_its_map(package):
+    layers = map_layers(package)
+    assert layers
+    missing = sorted({unit_of(package, path) for path in package_files(package)} - set(layers))
+    assert not missing, f"not in docs/architecture.md's map of {package}: {missing}"
 
 
-def test_no_import_runs_upward():
-    layers = map_layers()
+@pytest.mark.parametrize('package', PACKAGES)
+def test_no_import_runs_upward(package):
+    layers = map_layers(package)
     upward = []
-    for path in package_files():
-        source = unit_of(path)
-        for target in imported_units(path):
-            if target in layers and layers[target] > layers.get(source, 0):
-                upward.append(f'{path.relative_to(PACKAGE)} (layer {layers[source]}) imports '
-                              f'{target} (layer {layers[target]})')
+    for path in package_files(package):
+        source = unit_of(package, path)
+        for other, target in imports_of(package, path):
+            if other != package and other not in PACKAGES[package]:
+                upward.append(f'{path.relative_to(REPOSITORY)} imports {other}.{target}')
+            elif other == package and layers.get(target, 0) > layers.get(source, 0):
+                upward.append(f'{path.relative_to(REPOSITORY)} (layer {layers[source]}) '
+                              f'imports {target} (layer {layers[target]})')
     assert not upward, '\n'.join(upward)
 
 
-# A module's size on the map may lag its file by this fraction before the map must be redrawn.
-SIZE_SLACK = 0.1
-
-
-def map_sizes() -> dict:
-    """Return the package map's stated sizes: the unit's path -> lines (``core/ (5.7k)``)."""
-    text = ARCHITECTURE.read_text().split('## The package map', 1)[1].split('\n## ', 1)[0]
-    sizes = {}
-    for name, size, thousands in re.findall(r'`([a-z_0-9]+/?(?:\.py)?)` \((\d+(?:\.\d+)?)(k?)\)',
-                                            text):
-        sizes[name] = float(size) * (1000 if thousands else 1)
-    return sizes
-
-
-def lines_of(unit: str) -> int:
-    """Return the lines of a unit of the map (a file, or a folder's .py files), as wc -l counts."""
-    for root in (PACKAGE, PACKAGE.parent):          # benchmark/ and launch/ sit beside the package
-        path = root / unit
-        if path.exists():
-            files = sorted(path.rglob('*.py')) if path.is_dir() else [path]
-            return sum(len(file.read_text().splitlines()) for file in files)
-    raise AssertionError(f'docs/architecture.md names {unit}, which is not in the package')
-
-
-def test_the_map_states_each_units_size_as_it_is():
-    sizes = map_sizes()
-    assert len(sizes) >= 20, sizes            # the parser still reads the table
-    wrong = [f'{unit}: the map says {stated:.0f}, the code has {lines_of(unit)}'
-             for unit, stated in sizes.items()
-             if abs(lines_of(unit) - stated) > SIZE_SLACK * stated]
-    assert not wrong, '\n'.join(wrong)
+def test_an_upward_import_is_found(tmp_path, monkeypatch):
+    # The check itself: a driver module importing the features is reported.
+    package = tmp_path / 'wctls_rplidar' / 'wctls_rplidar'
+    package.mkdir(parents=True)
+    (package / 'protocol.py').write_text('from wctls_ros.core import FeatureConfig\n')
+    monkeypatch.setattr(__import__(__name__), 'REPOSITORY', tmp_path, raising=False)
+    assert list(imports_of('wctls_rplidar', package / 'protocol.py')) == [('wctls_ros', 'core')]

@@ -24,9 +24,9 @@ from wctls_ros.output_folders import claim, mark, owned_folder
 pytestmark = pytest.mark.slow
 
 STILL = REAL_DATA / 'sick_lms1xx_static'
-SCORE = ('wctls_ros.evaluation.score_cli', STILL, '--methods', 'wctls', '--scans', '0-9',
+SCORE = ('wctls_lab.evaluation.score_cli', STILL, '--methods', 'wctls', '--scans', '0-9',
          '--still', 'yes')
-EVALUATE = ('wctls_ros.evaluation.evaluate_cli', STILL, '--methods', 'wctls', '--limit', '10')
+EVALUATE = ('wctls_lab.evaluation.evaluate_cli', STILL, '--methods', 'wctls', '--limit', '10')
 
 
 def tool(module, *arguments):
@@ -60,7 +60,7 @@ def assert_refused(done, prog, folder, before):
 
 
 @pytest.mark.parametrize('module, prog, names, arguments', [
-    ('wctls_ros.demo', 'demo', ('summary.md', 'scan.png'), ['--seconds', '1']),
+    ('wctls_lab.demo', 'demo', ('summary.md', 'scan.png'), ['--seconds', '1']),
     (SCORE[0], 'score', ('table.md', 'corners.csv'), SCORE[1:]),
     (EVALUATE[0], 'evaluate', ('report.md', 'summary.csv'), EVALUATE[1:]),
 ])
@@ -103,7 +103,7 @@ def test_calibrate_writes_a_new_preset_or_its_own_and_refuses_any_other_file(tmp
     from wctls_ros.sensors import SensorPreset
     preset = tmp_path / 'mine.yaml'
     preset.write_text("description: the user's own preset\n")
-    done = tool('wctls_ros.evaluation.calibrate_cli', STILL, '--limit', '20', '--write-preset',
+    done = tool('wctls_lab.evaluation.calibrate_cli', STILL, '--limit', '20', '--write-preset',
                 preset)
     assert done.returncode == 2 and len(done.stderr.splitlines()) == 1, done.stderr
     assert done.stderr.startswith('calibrate: error: --write-preset') and str(preset) in \
@@ -111,7 +111,7 @@ def test_calibrate_writes_a_new_preset_or_its_own_and_refuses_any_other_file(tmp
     assert preset.read_text() == "description: the user's own preset\n"
     written = tmp_path / 'measured.yaml'
     for _ in range(2):          # a new file, then calibrate's own earlier file
-        done = tool('wctls_ros.evaluation.calibrate_cli', STILL, '--limit', '20',
+        done = tool('wctls_lab.evaluation.calibrate_cli', STILL, '--limit', '20',
                     '--write-preset', written, '--accept-implausible')
         assert done.returncode == 0, done.stderr
         assert SensorPreset.from_file(written).parameters['range_sigma_m'] > 0.0

@@ -9,10 +9,10 @@ import time
 
 from conftest import REAL_DATA
 import pytest
-from wctls_ros.evaluation.truth import load_truth, TruthError
+from wctls_lab.evaluation.truth import load_truth, TruthError
+from wctls_lab.simulation import load_floor_plan
 from wctls_ros.params import ConfigError, load_parameters
 from wctls_ros.plain_yaml import load_without_aliases
-from wctls_ros.simulation import load_floor_plan
 import yaml
 
 
@@ -68,7 +68,7 @@ def test_a_deep_nesting_is_refused_in_one_line_that_says_where(tmp_path, load, e
 def test_a_deep_nesting_is_one_line_from_a_tool(tmp_path):
     labels = tmp_path / 'labels.yaml'
     labels.write_text('corners: ' + '[' * 20000 + ']' * 20000 + '\n')
-    done = subprocess.run([sys.executable, '-m', 'wctls_ros.evaluation.score_cli',
+    done = subprocess.run([sys.executable, '-m', 'wctls_lab.evaluation.score_cli',
                            str(REAL_DATA / 'sick_lms1xx_static'), '--labels', str(labels)],
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 2, done.stderr[-500:]
@@ -87,7 +87,7 @@ def test_an_eight_level_plan_fails_in_bounded_memory():
     assert len(text) < 500
     script = ('import resource, sys\n'
               'resource.setrlimit(resource.RLIMIT_AS, (2 ** 30, 2 ** 30))\n'
-              'from wctls_ros.simulation import floor_plan_from_dict\n'
+              'from wctls_lab.simulation import floor_plan_from_dict\n'
               'from wctls_ros.plain_yaml import load_without_aliases\n'
               'try:\n'
               '    floor_plan_from_dict(load_without_aliases(sys.stdin.read()))\n'

@@ -14,11 +14,11 @@ import math
 
 import numpy as np
 import pytest
+from wctls_lab.evaluation.score_cli import node_config
 from wctls_ros.core import extract_features
-from wctls_ros.evaluation.score_cli import node_config
-from wctls_ros.rplidar.laserscan import compensation_multiple, fixed_scan, turn_to_scan
-from wctls_ros.rplidar.protocol import Samples
-from wctls_ros.rplidar.turns import SampleClock, Turn, TurnAssembler
+from wctls_rplidar.laserscan import compensation_multiple, fixed_scan, turn_to_scan
+from wctls_rplidar.protocol import Samples
+from wctls_rplidar.turns import SampleClock, Turn, TurnAssembler
 
 
 def sllidar_reference(angle_deg, dist_mm, quality, angle_compensate, inverted, multiple):

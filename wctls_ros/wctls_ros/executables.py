@@ -64,51 +64,11 @@ def feature_node() -> int:
     return _run('feature_node', 'feature_node', NODE_INTERRUPTED)
 
 
-def rplidar_node() -> int:
-    """Run the rplidar_node node (:mod:`wctls_ros.rplidar.rplidar_node`)."""
-    return _run('rplidar_node', 'rplidar.rplidar_node', NODE_INTERRUPTED)
-
-
 def bag_replay() -> int:
     """Run the bag_replay node (:mod:`wctls_ros.bags.replay_node`)."""
     return _run('bag_replay', 'bags.replay_node', NODE_INTERRUPTED)
 
 
-def s1_emulator() -> int:
-    """Run the s1_emulator tool (:mod:`wctls_ros.s1_emulator`)."""
-    return _run('s1_emulator', 's1_emulator', TOOL_INTERRUPTED)
-
-
-def rplidar_emulator() -> int:
-    """Run the rplidar_emulator tool (:func:`wctls_ros.s1_emulator.rplidar_main`)."""
-    return _run('rplidar_emulator', 's1_emulator', TOOL_INTERRUPTED, 'rplidar_main')
-
-
-def calibrate() -> int:
-    """Run the calibrate tool (:mod:`wctls_ros.evaluation.calibrate_cli`)."""
-    return _run('calibrate', 'evaluation.calibrate_cli', TOOL_INTERRUPTED)
-
-
-def demo() -> int:
-    """Run the demo tool (:mod:`wctls_ros.demo`)."""
-    return _run('demo', 'demo', TOOL_INTERRUPTED)
-
-
-def evaluate() -> int:
-    """Run the evaluate tool (:mod:`wctls_ros.evaluation.evaluate_cli`)."""
-    return _run('evaluate', 'evaluation.evaluate_cli', TOOL_INTERRUPTED)
-
-
 def process_bag() -> int:
     """Run the process_bag tool (:mod:`wctls_ros.bags.process_bag`)."""
     return _run('process_bag', 'bags.process_bag', TOOL_INTERRUPTED)
-
-
-def score() -> int:
-    """Run the score tool (:mod:`wctls_ros.evaluation.score_cli`)."""
-    return _run('score', 'evaluation.score_cli', TOOL_INTERRUPTED)
-
-
-def simulate() -> int:
-    """Run the simulate tool (:mod:`wctls_ros.evaluation.simulate_cli`)."""
-    return _run('simulate', 'evaluation.simulate_cli', TOOL_INTERRUPTED)

@@ -177,49 +177,6 @@ FEATURE_NODE = (
 )
 
 
-def _read_only(name: str, default: Value, description: str, limits: Optional[Limits] = None,
-               choices: Tuple[str, ...] = ()) -> Parameter:
-    """Return a parameter fixed at start-up."""
-    return Parameter(name, default, description, limits, choices, read_only=True)
-
-
-RPLIDAR_NODE = tuple(_read_only(*row) for row in (
-    ('channel_type', 'serial', "Link to the device: 'serial' or 'tcp'", None,
-     ('serial', 'tcp')),
-    ('serial_port', '/dev/ttyUSB0', 'Serial device of the S1 (a udev symlink such as '
-     '/dev/rplidar is steadier)'),
-    ('serial_baudrate', 0, 'Serial bits per second (A1, A2M8 115200; A3, S1 256000; C1 '
-     '460800; S2, S3 1000000); 0 probes these rates and keeps the one that answers',
-     Limits(0, 4000000)),
-    ('tcp_ip', '192.168.0.7', "Device address when channel_type is 'tcp'"),
-    ('tcp_port', 20108, "Device TCP port when channel_type is 'tcp'", Limits(1, 65535)),
-    ('frame_id', 'laser', 'Frame of the scans (x toward the raw 180 deg side, as '
-     'sllidar_ros2)'),
-    ('inverted', False, 'The sensor is mounted upside down (mirror the beam order)'),
-    ('angle_compensate', True, 'Bin each turn into 360*k fixed beams (k from the sample '
-     'rate), each at its bin centre, NaN where no sample fell; false publishes every sample, '
-     'with a varying beam count'),
-    ('scan_mode', '', "Scan mode name, e.g. 'DenseBoost' or 'Standard'; '' = the device's "
-     'typical mode'),
-    ('scan_frequency', 10.0, 'Rotation frequency requested from the motor, Hz (sets the '
-     'angle_compensate bin count as in sllidar_ros2)', Limits(5.0, 20.0)),
-    ('data_timeout', 1.0, 'Seconds without scan data (or with only garbage) before the '
-     'session is restarted', Limits(0.1, 10.0)),
-    ('health_reset_attempts', 3, 'RESETs tried on a device health error before giving up',
-     Limits(0, 10)),
-    ('autostart', True, 'Configure and activate at start (a plain ros2 run scans at once); '
-     'false waits for a lifecycle manager or launch file to drive the transitions'),
-    ('configure_timeout', 5.0, 'Seconds configure waits for the device info and health before '
-     'it fails naming the likely cause (without autostart; autostart keeps retrying)',
-     Limits(0.5, 60.0)),
-    ('orientation', 'sllidar', "Laser frame of both scans: 'sllidar' (x toward the raw 180 deg "
-     "side, as sllidar_ros2) or 'rep103' (x toward the device's front, raw 0 deg); both "
-     'counter-clockwise', None, ('sllidar', 'rep103')),
-    ('fixed_beams', 0, 'Also publish scan_fixed: every turn in this many fixed angular bins '
-     'from -pi (the sample nearest each bin centre; NaN for a bin no sample fell in), for '
-     'slam_toolbox and AMCL; 0 = off', Limits(0, 8192)),
-))
-
 BAG_REPLAY = (
     Parameter('bag', '', 'ROS 2 bag folder (or its .mcap / .db3 file) or ROS 1 .bag file to '
               'play (required)', read_only=True),
@@ -238,8 +195,7 @@ BAG_REPLAY = (
               '(0: start at once)', Limits(0, 1000), read_only=True),
 )
 
-SCHEMAS = {'feature_node': FEATURE_NODE, 'rplidar_node': RPLIDAR_NODE,
-           'bag_replay': BAG_REPLAY}
+SCHEMAS = {'feature_node': FEATURE_NODE, 'bag_replay': BAG_REPLAY}
 
 
 class FeatureSettings(NamedTuple):

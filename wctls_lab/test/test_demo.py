@@ -1,0 +1,162 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""`make demo`'s program end to end: emulator -> driver -> feature_node -> bag, table, figure."""
+
+import os
+import random
+import signal
+import subprocess
+import time
+
+from conftest import spin_until
+import pytest
+from test_feature_node import installed_executable
+
+pytest.importorskip('rclpy')
+
+# One of the suite's slowest modules (make test-fast leaves it out), and one that runs
+# nodes, emulators or signals against deadlines (make test runs it in its realtime group).
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
+
+
+def own_domain():
+    """Return an environment with a DDS domain of the demo's own (away from other tests)."""
+    used = int(os.environ.get('ROS_DOMAIN_ID', '0'))
+    return {**os.environ, 'ROS_DOMAIN_ID': str(random.choice(
+        [d for d in range(1, 100) if d != used]))}
+
+
+def leftovers(marker):
+    """Return the processes whose command line names this test's output folder."""
+    found = subprocess.run(['pgrep', '-f', str(marker)], capture_output=True, text=True)
+    return found.stdout.split()
+
+
+def test_demo_records_a_bag_and_writes_the_table_and_the_figure(tmp_path):
+    out = tmp_path / 'demo'
+    result = subprocess.run([str(installed_executable('demo')), '--seconds', '3',
+                             '--out', str(out)], capture_output=True, text=True, timeout=180,
+                            env=own_domain())
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert 'corners per scan' in result.stdout and 'NEES against the truth' in result.stdout
+    from rosbags.highlevel import AnyReader
+    with AnyReader([out / 'bag']) as bag:
+        times = {topic: [] for topic in bag.topics}
+        for connection, log_time_ns, _ in bag.messages():
+            times[connection.topic].append(log_time_ns * 1e-9)
+    assert set(times) == {'/scan', '/corners', '/lines', '/markers'}
+    assert len(times['/scan']) >= 25                                # 10 Hz for 3 s
+    # Features flowed through the recording. Not one per scan: on a busy machine feature_node
+    # skips the scans that came while it was busy (17 CornerArrays for 51 scans once, beside
+    # the other test worker).
+    assert max(times['/corners']) - min(times['/corners']) >= 2.0, times['/corners']
+    assert (out / 'scan.png').stat().st_size > 10000
+    # The shipped default (generic preset) on the emulated S1: most corners are true, their
+    # covariance honest.
+    table = (out / 'summary.md').read_text().split('\n\n')[0]
+    rows = dict(line.strip('|').split('|')[:2] for line in table.splitlines()[2:])
+    rows = {name.strip(): value.strip() for name, value in rows.items()}
+    matched = float(rows['corners within 10 cm of a true one'].split('(')[1].split()[0])
+    assert matched > 90.0, rows
+    assert 0.5 < float(rows['NEES against the truth (mean; 2 = calibrated)'].split()[0]) < 5.0
+    assert not leftovers(out)
+
+
+def test_ctrl_c_stops_every_process_and_exits_130(tmp_path):
+    out = tmp_path / 'interrupted'
+    demo = subprocess.Popen([str(installed_executable('demo')), '--seconds', '60', '--out',
+                             str(out)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True, env=own_domain())
+    try:
+        for line in demo.stdout:
+            if 'recording' in line:
+                break
+        assert leftovers(out), 'the emulator and the driver should be running'
+        demo.send_signal(signal.SIGINT)
+        assert demo.wait(timeout=30) == 130          # 128 + SIGINT, as every tool
+    finally:
+        if demo.poll() is None:
+            demo.kill()
+    deadline = time.monotonic() + 5.0
+    while leftovers(out) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not leftovers(out)
+
+
+def alive(pid):
+    """Return whether a process runs (a zombie, ended but not reaped, does not)."""
+    try:
+        with open(f'/proc/{pid}/stat') as stat:
+            return stat.read().rsplit(')', 1)[1].split()[0] != 'Z'
+    except FileNotFoundError:
+        return False
+
+
+def test_the_demo_is_sealed_from_the_users_domain_and_its_processes_end_with_it(
+        tmp_path, ros_context, executor):
+    # Before, the demo published its emulated scans and corners into the environment's
+    # ROS_DOMAIN_ID (on a robot: into the live system), and SIGKILL (or a closed terminal) left
+    # its emulator, driver and feature_node running for ever.
+    import rclpy
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import LaserScan
+    from wctls_msgs.msg import CornerArray
+    heard = []
+    listener = rclpy.create_node('users_system', context=ros_context)
+    listener.create_subscription(LaserScan, 'scan', heard.append, qos_profile_sensor_data)
+    listener.create_subscription(CornerArray, 'corners', heard.append, 10)
+    executor.add_node(listener)
+    demo = subprocess.Popen([str(installed_executable('demo')), '--seconds', '60', '--out',
+                             str(tmp_path / 'demo')], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)     # the user's ROS_DOMAIN_ID
+    printed = []
+    try:
+        for line in demo.stdout:
+            printed.append(line)
+            if 'recording' in line:
+                break
+        assert f"ROS_DOMAIN_ID {os.environ['ROS_DOMAIN_ID']}," not in ''.join(printed)
+        spin_until(executor, lambda: heard, timeout_s=5.0)
+        assert not heard, 'the demo published into the domain of the environment'
+        children = [int(pid) for pid in subprocess.run(
+            ['pgrep', '-P', str(demo.pid)], capture_output=True, text=True).stdout.split()]
+        assert len(children) == 3, children         # emulator, rplidar_node, feature_node
+        demo.kill()
+        demo.wait(timeout=10)
+    finally:
+        if demo.poll() is None:
+            demo.kill()
+    deadline = time.monotonic() + 5.0
+    while any(alive(pid) for pid in children) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not [pid for pid in children if alive(pid)]
+
+
+def test_the_summary_explains_missing_corner_arrays_and_corners_beyond_those_in_view():
+    from types import SimpleNamespace
+    import numpy as np
+    from wctls_lab.demo import Recording, summarise
+
+    def corner_array(stamp_s, xy):
+        corners = [SimpleNamespace(pose=SimpleNamespace(
+            covariance=np.diag([1e-4, 1e-4, 0, 0, 0, 1e-3]).ravel(),
+            pose=SimpleNamespace(position=SimpleNamespace(x=x, y=y)))) for x, y in xy]
+        return (stamp_s * 10 ** 9 + 5_000_000, SimpleNamespace(
+            header=SimpleNamespace(stamp=SimpleNamespace(sec=stamp_s, nanosec=0)),
+            corners=corners))
+
+    in_view, hidden = np.array([[1.0, 0.0], [0.0, 1.0]]), np.array([[-1.0, 0.0]])
+    seen = Recording(scans={s * 10 ** 9: (s * 10 ** 9 + 1, None) for s in range(1, 7)})
+    # Scan 1 before the first answer, 4 skipped, 6 at the end; scan 3 has a corner at the
+    # hidden one and a false one besides the two in view.
+    seen.corners = [corner_array(2, [[1.0, 0.01], [0.0, 1.0]]),
+                    corner_array(3, [[1.0, 0.0], [0.0, 1.0], [-1.0, 0.02], [3.0, 3.0]]),
+                    corner_array(5, [[1.0, 0.0]])]
+    rows, notes = summarise(seen, in_view, hidden)
+    assert dict(rows)['corners per scan (mean, min-max)'] == '2.3 (1-4)'
+    assert notes[0].startswith('3 recorded scans have no CornerArray')
+    assert [int(part.split(';')[0].split(',')[0]) for part in notes[0].split(': ')[1:]] == [
+        1, 1, 1]                                     # before, at the end, skipped
+    assert 'more corners (4) than the 2 true corners in view. Of the 2 corners' in notes[1]
+    assert notes[1].endswith('thin evidence): 1; false: 1.')

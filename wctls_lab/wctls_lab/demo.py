@@ -1,0 +1,513 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""
+demo: the whole system live on this machine, no sensor needed.
+
+Starts an RPLIDAR emulator (the S1 unless ``--model`` says another) on a pseudo-terminal
+(streaming a simulated floor plan), rplidar_node reading it, and feature_node extracting
+corners, each as its own process like ``ros2 run`` would; records ``scan``, ``corners``,
+``lines`` and ``markers`` into an mcap bag; then prints a table (corners per scan, their sigmas,
+their error against the simulated truth, latency) and draws one scan.
+
+Sealed: its processes talk on a ROS domain of their own, discovered on this machine only,
+whatever ROS_DOMAIN_ID and the DDS settings of the environment say, so that its emulated scans
+never reach a live system. Every process it started is stopped at the end, also on Ctrl-C,
+SIGTERM or a closed terminal (SIGHUP); should the demo itself be killed (SIGKILL), the kernel
+ends them (``PR_SET_PDEATHSIG``). It writes only into a folder of its own
+(:mod:`wctls_ros.output_folders`).
+
+Exit status: 0 done; 1 the live run failed (a process did not start or no features came; one
+line, the logs say why); 2 a user error (one line ``demo: error: ...``); 128 + N stopped by
+signal N (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP), with one line and no traceback.
+"""
+
+import argparse
+import ctypes
+from dataclasses import dataclass, field
+import functools
+import os
+import pathlib
+import random
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+from typing import Dict, List
+
+import numpy as np
+from wctls_ros.bags import BagWriter
+from wctls_ros.cli import bounded, Parser, USER_ERROR, UserError
+from wctls_ros.core import METHODS, nees
+from wctls_ros.output_folders import claim, mark, remove_entries
+from wctls_ros.params import feature_settings, load_parameters
+from wctls_ros.stop_signals import raise_stopped, raising, SIGNALS, Stopped
+from wctls_rplidar.emulator.device import EMULATED_MODELS
+
+from .simulation import full_turn_bearings, load_floor_plan, S1_BEAMS_PER_TURN
+from .simulation.visibility import visible_corners
+
+# The driver and feature_node run with their shipped files and nothing else (feature_node with
+# the default sensor preset, generic: docs/sensors.md); the emulator simulates the S1 as we
+# expect a real one to look (its s1_like default).
+# A found corner is the true one when it is this close, m.
+MATCH_RADIUS_M = 0.1
+STOP_TIMEOUT_S = 10.0
+# What the demo writes into its output folder.
+OUTPUTS = ('bag', 'logs', 'scan.png', 'summary.md', 'ttyS1')
+# Its ROS domain is drawn from these (ROS 2's usable ids on Linux), never the environment's.
+DOMAIN_IDS = range(1, 102)
+# Settings that could take the demo's traffic off this machine or into a live system:
+# static peers, a discovery server, a DDS profile of the user's, the deprecated switch that the
+# discovery range replaces.
+FOREIGN_SETTINGS = ('ROS_STATIC_PEERS', 'ROS_DISCOVERY_SERVER', 'ROS_LOCALHOST_ONLY',
+                    'FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE',
+                    'CYCLONEDDS_URI')
+# prctl option: the signal a process gets when its parent dies (linux/prctl.h).
+_PR_SET_PDEATHSIG = 1
+# Loaded before any fork: a child must not load a library between fork and exec.
+_LIBC = ctypes.CDLL(None, use_errno=True)
+
+
+@dataclass
+class Recording:
+    """What the recorder saw, kept for the summary (times in ns)."""
+
+    scans: Dict[int, tuple] = field(default_factory=dict)    # stamp -> (receive time, msg)
+    corners: List[tuple] = field(default_factory=list)       # (receive time, CornerArray)
+    stopped_by: int = 0                 # the signal that ended the recording early, if any
+
+
+def _executable(package: str, name: str) -> str:
+    """Return an installed executable (what `ros2 run PACKAGE NAME` would start)."""
+    from ament_index_python.packages import get_package_prefix
+    return str(pathlib.Path(get_package_prefix(package)) / 'lib' / package / name)
+
+
+def _config_file(package: str) -> pathlib.Path:
+    """Return the folder of a package's installed configuration files."""
+    from ament_index_python.packages import get_package_share_directory
+    return pathlib.Path(get_package_share_directory(package)) / 'config'
+
+
+def _end_with_parent(parent_pid: int) -> None:
+    """
+    In a child, between fork and exec: be sent SIGTERM when the demo ends, however it ends.
+
+    :param parent_pid: the demo's process id
+    """
+    _LIBC.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+    if os.getppid() != parent_pid:      # the demo ended before the line above
+        os._exit(1)
+
+
+def private_network(environment: dict) -> int:
+    """
+    Seal a ROS environment: a domain of its own, discovery on this machine only.
+
+    :param environment: the environment to change (e.g. os.environ)
+    :return: the domain id chosen (never the one the environment had)
+    """
+    taken = environment.get('ROS_DOMAIN_ID', '').strip()
+    domain = random.choice([d for d in DOMAIN_IDS if str(d) != taken])
+    for name in FOREIGN_SETTINGS:
+        environment.pop(name, None)
+    environment['ROS_DOMAIN_ID'] = str(domain)
+    environment['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    return domain
+
+
+class Processes:
+    """
+    Child processes, each in its own session so that one signal stops all of its threads.
+
+    Each is sent SIGTERM by the kernel if the demo dies without stopping it.
+    """
+
+    def __init__(self, log_dir: pathlib.Path):
+        self.log_dir = log_dir
+        self.running = []
+
+    def start(self, name: str, command: List[str]) -> subprocess.Popen:
+        """
+        Start a child process with its output in ``<log_dir>/<name>.log``.
+
+        :param name: short name for the log file
+        :param command: the command line
+        :return: the process
+        """
+        log = open(self.log_dir / f'{name}.log', 'w')
+        process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
+                                   stdin=subprocess.DEVNULL, start_new_session=True,
+                                   preexec_fn=functools.partial(_end_with_parent, os.getpid()))
+        log.close()
+        self.running.append((name, process))
+        return process
+
+    def stop_all(self) -> None:
+        """Interrupt every child (as Ctrl-C would), and kill the ones that do not stop."""
+        for _, process in self.running:
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGINT)
+        deadline = time.monotonic() + STOP_TIMEOUT_S
+        for name, process in self.running:
+            try:
+                process.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                print(f'demo: {name} did not stop on SIGINT: killing it', file=sys.stderr)
+                os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
+        self.running.clear()
+
+
+def _wait_for(path: pathlib.Path, process: subprocess.Popen, timeout_s: float) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not path.exists():
+        if process.poll() is not None or time.monotonic() > deadline:
+            raise RuntimeError(f'the emulator did not create {path} (see its log)')
+        time.sleep(0.05)
+
+
+def record(bag_path: pathlib.Path, seconds: float) -> Recording:
+    """
+    Record the demo's topics into an mcap bag for ``seconds`` once features flow.
+
+    Features flow once scans and corners arrive and feature_node's pipeline is settled (on
+    /diagnostics: no compiled pipeline is still on its way); nothing before that is recorded.
+
+    :param bag_path: the bag folder to write
+    :param seconds: how long to record once features flow, s
+    :return: what was seen, for the summary (``stopped_by`` set on a stop signal)
+    """
+    from diagnostic_msgs.msg import DiagnosticArray
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import qos_profile_sensor_data
+    from rclpy.signals import SignalHandlerOptions
+    from sensor_msgs.msg import LaserScan
+    from visualization_msgs.msg import MarkerArray
+    from wctls_msgs.msg import CornerArray, LineSegmentArray
+
+    seen = Recording()
+    context = rclpy.context.Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    # A stop signal ends the recording between two spins. An exception raised at any moment
+    # could cut a bag write short, or surface from inside rclpy's take as a RuntimeError. The
+    # handler takes no lock: a second signal inside a handler holding one would wait for ever.
+
+    def on_signal(number, _):
+        seen.stopped_by = seen.stopped_by or number
+
+    previous_handlers = {number: signal.signal(number, on_signal) for number in SIGNALS}
+    node = rclpy.create_node('demo_recorder', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        with BagWriter(bag_path) as bag:
+            arrived = set()
+            recording = threading.Event()
+
+            def keep(topic, message):
+                arrived.add(topic)
+                if not recording.is_set():
+                    return
+                now = time.time_ns()
+                bag.write(topic, now, message)
+                if topic == '/scan':
+                    stamp = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
+                    seen.scans[stamp] = (now, message)
+                elif topic == '/corners':
+                    seen.corners.append((now, message))
+
+            node.create_subscription(LaserScan, 'scan', lambda m: keep('/scan', m),
+                                     qos_profile_sensor_data)
+            for topic, kind in (('corners', CornerArray), ('lines', LineSegmentArray),
+                                ('markers', MarkerArray)):
+                node.create_subscription(kind, topic, lambda m, t=topic: keep(f'/{t}', m), 10)
+            settled = threading.Event()
+
+            def on_diagnostics(array):
+                for status in array.status:
+                    values = {value.key: value.value for value in status.values}
+                    if values.get('feature pipeline settled') == 'yes':
+                        settled.set()
+
+            node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
+            # Discovery can match the recorder to feature_node before the driver (or the other
+            # way round) on a busy machine: start the clock once both scans and corners arrive,
+            # and feature_node's pipeline is settled: the table measures the compiled pipeline
+            # (when numba is there), not the numpy one serving while it loads.
+            start_deadline = time.monotonic() + 60.0
+            while not ({'/scan', '/corners'} <= arrived and settled.is_set() or seen.stopped_by):
+                if time.monotonic() > start_deadline:
+                    raise RuntimeError('no scans and corners from a settled feature pipeline '
+                                       'within 60 s (see the logs)')
+                executor.spin_once(timeout_sec=0.1)
+            if not seen.stopped_by:
+                print(f'demo: features flowing; recording {seconds:g} s ...', flush=True)
+            recording.set()
+            end = time.monotonic() + seconds
+            while time.monotonic() < end and not seen.stopped_by:
+                executor.spin_once(timeout_sec=0.1)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        for number, handler in previous_handlers.items():
+            if handler is not None:                # None: not installed from Python
+                signal.signal(number, handler)
+    return seen
+
+
+def summarise(seen: Recording, truth_xy: np.ndarray, hidden_xy: np.ndarray) -> tuple:
+    """
+    Compute the demo's table from what was recorded, and the notes that explain its counts.
+
+    :param seen: the recording
+    :param truth_xy: the corners the sensor can see, in the laser frame, shape (M, 2), m
+    :param hidden_xy: the plan's other corners (the visibility rule says not seen), shape
+        (H, 2), m
+    :return: (rows (measure, value), notes: sentences)
+    """
+    counts, sigmas, errors, latency, age = [], [], [], [], []
+    near_hidden = 0
+    for received, message in seen.corners:
+        stamp = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
+        counts.append(len(message.corners))
+        if stamp in seen.scans:
+            latency.append((received - seen.scans[stamp][0]) * 1e-6)
+        age.append((received - stamp) * 1e-6)
+        for corner in message.corners:
+            covariance = np.array(corner.pose.covariance).reshape(6, 6)[:2, :2]
+            sigmas.append(np.sqrt(np.diag(covariance)))
+            xy = np.array([corner.pose.pose.position.x, corner.pose.pose.position.y])
+            distance = np.hypot(*(truth_xy - xy).T) if len(truth_xy) else np.array([np.inf])
+            if distance.min() < MATCH_RADIUS_M:
+                errors.append(float(nees(xy - truth_xy[distance.argmin()], covariance)))
+            elif len(hidden_xy) and np.hypot(*(hidden_xy - xy).T).min() < MATCH_RADIUS_M:
+                near_hidden += 1
+    sigmas = np.array(sigmas).reshape(-1, 2)
+    counts = np.array(counts)
+    rows = [
+        ('scans recorded', f'{len(seen.scans)}'),
+        ('CornerArrays recorded', f'{len(seen.corners)}'),
+        ('corners per scan (mean, min-max)',
+         f'{counts.mean():.1f} ({counts.min()}-{counts.max()})' if counts.size else '-'),
+        ('true corners in view', f'{len(truth_xy)}'),
+        (f'corners within {MATCH_RADIUS_M * 100:.0f} cm of a true one',
+         f'{len(errors)} of {counts.sum()} ({100 * len(errors) / counts.sum():.1f} %)'
+         if counts.sum() else '-'),
+        ('mean corner sigma x, y (mm)',
+         f'{1e3 * sigmas[:, 0].mean():.1f}, {1e3 * sigmas[:, 1].mean():.1f}'
+         if sigmas.size else '-'),
+        ('NEES against the truth (mean; 2 = calibrated)',
+         f'{np.mean(errors):.2f} over {len(errors)} corners' if errors else '-'),
+        ('feature_node latency, scan in -> corners in (median, p99 ms)',
+         f'{np.median(latency):.1f}, {np.percentile(latency, 99):.1f}' if latency else '-'),
+        ('age of the corners since the first beam (median ms)',
+         f'{np.median(age):.0f}' if age else '-'),
+    ]
+    return rows, _notes(seen, counts, len(truth_xy), len(errors), near_hidden)
+
+
+def _notes(seen: Recording, counts: np.ndarray, in_view: int, matched: int,
+           near_hidden: int) -> List[str]:
+    """
+    Explain the counts a reader of the table would ask about.
+
+    :param seen: the recording
+    :param counts: corners in each CornerArray, shape (A,)
+    :param in_view: true corners in view
+    :param matched: corners within the match radius of one in view
+    :param near_hidden: other corners within it of a true corner not in view
+    :return: sentences
+    """
+    notes = []
+    answered = {message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
+                for _, message in seen.corners}
+    unanswered = sorted(set(seen.scans) - answered)
+    if unanswered and answered:
+        before = sum(stamp < min(answered) for stamp in unanswered)
+        after = sum(stamp > max(answered) for stamp in unanswered)
+        skipped = len(unanswered) - before - after
+        notes.append(
+            f"{len(unanswered)} recorded scans have no CornerArray (before feature_node's "
+            f'first answer: {before}; at the end, their corners after the recording stopped: '
+            f'{after}; skipped while feature_node was behind: {skipped}, as its one-scan queue '
+            'keeps the newest and /diagnostics counts them).')
+    if counts.size and counts.max() > in_view:
+        notes.append(
+            f'Some scans have more corners ({counts.max()}) than the {in_view} true corners '
+            f'in view. Of the {counts.sum() - matched} corners not within '
+            f'{MATCH_RADIUS_M * 100:.0f} cm of one in view: at a true corner the visibility '
+            'rule counts as not in view (a wall seen by fewer than 8 returns or over less than '
+            f'15 cm, thin evidence): {near_hidden}; '
+            f'false: {counts.sum() - matched - near_hidden}.')
+    return notes
+
+
+def draw(seen: Recording, config, truth_xy: np.ndarray, path: pathlib.Path) -> None:
+    """
+    Draw the scan with the median number of corners: segments, corners, ellipses x10, truth.
+
+    :param seen: the recording
+    :param config: the FeatureConfig feature_node ran with (to redraw the same features)
+    :param truth_xy: true corners in the laser frame, shape (M, 2), m
+    :param path: PNG to write
+    """
+    from wctls_ros.conversions import scan_features
+    from .plotting import draw_scan_features, pyplot
+    received = [message for _, message in seen.corners]
+    median = sorted(received, key=lambda m: len(m.corners))[len(received) // 2]
+    stamp = median.header.stamp.sec * 1_000_000_000 + median.header.stamp.nanosec
+    scan = seen.scans.get(stamp, next(iter(seen.scans.values())))[1]
+    features, _ = scan_features(scan, config)
+    ranges = np.asarray(scan.ranges, dtype=float)
+    bearings = scan.angle_min + np.arange(len(ranges)) * scan.angle_increment
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(8.0, 5.5), dpi=90)
+    draw_scan_features(ax, ranges, bearings, features)
+    ax.plot(truth_xy[:, 0], truth_xy[:, 1], 'x', color='tab:green', ms=6, label='true corners')
+    ax.set_title(f'make demo: one emulated S1 scan, {len(features.corners)} corners '
+                 f'({config.method}), 1-sigma ellipses x10', fontsize=9)
+    ax.legend(fontsize=7, loc='best')
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def parser() -> argparse.ArgumentParser:
+    """
+    Return the command-line parser.
+
+    :return: the parser
+    """
+    p = Parser(prog='demo', description=__doc__.strip().splitlines()[0])
+    p.add_argument('--seconds', type=bounded(float, 1.0), default=20.0,
+                   help='how long to record once features flow, s (default: %(default)s)')
+    p.add_argument('--out', default='out/demo', help='output folder (default: %(default)s)')
+    p.add_argument('--floor-plan', default='environment_a',
+                   help='emulated scene: environment_a, environment_b or a YAML file '
+                   '(default: %(default)s)')
+    p.add_argument('--method', default='wctls', choices=METHODS,
+                   help="feature_node's line fit (default: %(default)s)")
+    p.add_argument('--model', default='s1', choices=tuple(EMULATED_MODELS),
+                   help='the emulated RPLIDAR: its modes, serial rate and motor control, which '
+                   'rplidar_node finds as it would on a real one (default: %(default)s)')
+    return p
+
+
+def main(argv=None) -> int:
+    """
+    Run the demo.
+
+    :param argv: arguments (default: sys.argv[1:])
+    :return: exit status
+    """
+    args = parser().parse_args(argv)
+    try:
+        with raising():
+            return _run(args)
+    except Stopped as stopped:
+        print(f'demo: stopped by {stopped}', file=sys.stderr)
+        return 128 + stopped.signal_number
+
+
+def _prepare(out: pathlib.Path) -> None:
+    """
+    Make the output folder the demo's own: refuse anyone else's, clear an earlier demo's.
+
+    :param out: the output folder
+    :raises UserError: when the folder is not the demo's to write
+    :raises OSError: when it cannot be written
+    """
+    earlier = claim(out, 'demo')
+    remove_entries(out, earlier)
+    (out / 'logs').mkdir(parents=True)
+    mark(out, 'demo', OUTPUTS)
+
+
+def _run(args) -> int:
+    """Start, record, stop and summarise; the exit status."""
+    try:
+        plan = load_floor_plan(args.floor_plan)
+    except (OSError, ValueError) as error:
+        print(f'demo: error: --floor-plan: {" ".join(str(error).split())}', file=sys.stderr)
+        return USER_ERROR
+    out = pathlib.Path(args.out)
+    try:
+        _prepare(out)
+    except UserError as error:
+        print(f'demo: error: --out: {error}', file=sys.stderr)
+        return USER_ERROR
+    except OSError as error:
+        print(f'demo: error: --out: cannot write {out}: {error.strerror or error}',
+              file=sys.stderr)
+        return USER_ERROR
+    domain = private_network(os.environ)
+    tty = out.resolve() / 'ttyS1'
+    parameters = {'method': args.method}
+    config = feature_settings(
+        load_parameters(_config_file('wctls_ros') / 'feature_node.yaml', overrides=parameters))[0]
+    processes = Processes(out / 'logs')
+    seen = Recording()
+    late = []               # stop signals received while stopping
+    try:
+        emulator = processes.start('simulated_rplidar', [
+            _executable('wctls_lab', 'simulated_rplidar'), '--link', str(tty), '--floor-plan',
+            args.floor_plan, '--model', args.model])
+        _wait_for(tty, emulator, 20.0)
+        processes.start('rplidar_node', [
+            _executable('wctls_rplidar', 'rplidar_node'), '--ros-args', '--params-file',
+            str(_config_file('wctls_rplidar') / 'rplidar_s1.yaml'), '-p', f'serial_port:={tty}'])
+        processes.start('feature_node', [
+            _executable('wctls_ros', 'feature_node'), '--ros-args', '--params-file',
+            str(_config_file('wctls_ros') / 'feature_node.yaml')]
+            + [arg for k, v in parameters.items() for arg in ('-p', f'{k}:={v}')])
+        print(f'demo: {args.model.upper()} emulator on {tty} -> rplidar_node -> feature_node '
+              f'(ROS_DOMAIN_ID {domain}, logs in {out / "logs"})', flush=True)
+        seen = record(out / 'bag', args.seconds)
+    except Stopped as stopped:
+        seen.stopped_by = stopped.signal_number
+    except RuntimeError as error:
+        print(f'demo: {error}', file=sys.stderr)
+        return 1
+    finally:
+        # Stopping takes up to STOP_TIMEOUT_S: a signal meanwhile must not cut it short; it is
+        # honoured once every process has stopped.
+        for number in SIGNALS:
+            signal.signal(number, lambda number, _: late.append(number))
+        if seen.stopped_by:
+            print('demo: interrupted; stopping everything', file=sys.stderr)
+        processes.stop_all()
+        for number in SIGNALS:
+            signal.signal(number, raise_stopped)
+    if late and not seen.stopped_by:
+        print('demo: interrupted; every process stopped', file=sys.stderr)
+    if seen.stopped_by or late:
+        return 128 + (seen.stopped_by or late[0])
+    if not seen.corners:
+        print(f'demo: no corners recorded (see {out / "logs"})', file=sys.stderr)
+        return 1
+    walls, corners = plan.in_sensor_frame()
+    _, _, bearings = full_turn_bearings(S1_BEAMS_PER_TURN)
+    in_view = visible_corners(walls, corners, bearings)
+    truth = corners[in_view]
+    rows, notes = summarise(seen, truth, corners[~in_view])
+    width = max(len(name) for name, _ in rows)
+    table = '\n'.join(f'{name:<{width}}  {value}' for name, value in rows)
+    draw(seen, config, truth, out / 'scan.png')
+    (out / 'summary.md').write_text(
+        '| measure | value |\n|---|---|\n'
+        + '\n'.join(f'| {name} | {value} |' for name, value in rows) + '\n'
+        + ''.join(f'\n- {note}' for note in notes) + ('\n' if notes else ''))
+    print(f'\n{table}\n' + ''.join(f'\n{textwrap.fill(note, 99)}\n' for note in notes))
+    print(f'demo: wrote {out / "bag"} (mcap: open it in Foxglove), {out / "scan.png"} and '
+          f'{out / "summary.md"}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,491 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""
+Capsule framing shared by every RPLIDAR capsule format (pure).
+
+Where capsules begin, which arrived short, and which start angles to believe. The capsule
+answers (0x82 express and 0x85 dense, 84 bytes; 0x84 ultra and 0x86 ultra-dense,
+132 bytes) share their first four bytes: the sync nibbles A and 5, each beside a checksum
+nibble, and a u16 start angle (1/64 degree, bit 15 the S flag). A capsule's samples lie between
+its start angle and its successor's, so every format decodes a capsule once the next has
+arrived; only the bytes after the start angle differ. What lost bytes do to that layout is
+common to them all, and handled here:
+
+- :class:`CapsuleFramer` cuts the stream into regions between two headers. A capsule cut short
+  (a run of lost bytes up to its end: a lost USB packet, an overrun buffer) is followed at once
+  by the next one: a header within the capsule whose start angle lies one sweep on starts the
+  next capsule (a false header among the samples has a random angle). A region that lost a few
+  bytes per capsule lost them one by one, one that lost more lost a run (:attr:`Region.cut`),
+  and a region longer than its capsules was framed on a false header (:attr:`Region.overlong`):
+  a line loses bytes, it does not add them.
+- :class:`AngleTrack` decides each capsule's start angle from its field, its successor's and
+  the sweep of the capsules before, and counts capsules lost without a trace.
+- :func:`placeable`: a capsule whose start angle is out of sequence is not placed at the
+  predicted one when that may be wrong too.
+
+A decoder of a capsule format keeps a :class:`CapsuleFramer` and an :class:`AngleTrack`, reads
+the samples of each region (realigning those of a region that lost bytes, which depends on the
+format's layout; an overlong region's are unreadable), places each capsule with a
+:class:`CapsulePlacer` and publishes only what :func:`placeable` allows: see
+:class:`~wctls_rplidar.capsules.DenseCapsuleDecoder` and
+:class:`~wctls_rplidar.checked.CheckedCapsuleDecoder`.
+"""
+
+from dataclasses import dataclass
+from typing import NamedTuple, Optional
+
+import numpy as np
+
+from .protocol import FULL_TURN_Q6
+
+FULL_TURN_Q8 = FULL_TURN_Q6 << 2
+
+# Bytes per 84-byte capsule that framing and realignment follow (at 5 % lost bytes, 0.04 % of
+# the capsules lose more; a region that lost more lost a run of them), and capsules between two
+# headers: up to two damaged headers in a row when bytes were lost, up to seven when the
+# spacing is exact.
+_MAX_SHIFT_PER_84 = 12
+_MAX_REGION = 3
+_MAX_EXACT_REGION = 8
+# Angles: tolerance for a suspect start angle (1/8 degree), the share of a sweep allowed for one
+# whose checksum passed, and how far (capsules, about a turn) a prediction reaches.
+_ANGLE_TOLERANCE_Q8 = 32
+_CLEAN_ANGLE_SHARE = 8
+_PREDICTION_REACH = 24
+# A prediction this few capsules old outranks a run of two observed angles; after this many
+# start angles in a row not believed, the sweep is measured anew; measured sweeps refine the
+# tracked one with this weight.
+_FRESH_GAP = 2
+_RESTART_AFTER = 8
+_SWEEP_WEIGHT = 1.0 / 8.0
+# The line counts as damaged while this share of the recent capsules fails (weight 1/32).
+_DAMAGED_SHARE = 0.5
+_DAMAGE_WEIGHT = 1.0 / 32.0
+
+
+def wrap_q8(angle_q8: int) -> int:
+    """Return an angle difference in 1/256 degree wrapped into [-180, 180) degrees."""
+    return (angle_q8 + FULL_TURN_Q8 // 2) % FULL_TURN_Q8 - FULL_TURN_Q8 // 2
+
+
+class Region(NamedTuple):
+    """
+    Capsules between two headers.
+
+    :ivar pos: index of its first header in the bytes held
+    :ivar count: capsules it holds (headers between them may be damaged)
+    :ivar end: index of the header after it
+    :ivar slot: stream index of its first capsule
+    :ivar lost: bytes it lost: its capsules' bytes minus its length (negative: too long)
+    :ivar cut: it lost more bytes than scattered losses take (12 per 84-byte capsule, 6 per
+        further one: they average out over capsules): a run of them
+    """
+
+    pos: int
+    count: int
+    end: int
+    slot: int
+    lost: int
+    cut: bool
+
+    @property
+    def overlong(self) -> bool:
+        """Tell whether it is longer than its capsules: framed on a false header."""
+        return self.lost < 0
+
+
+class CapsuleFramer:
+    """
+    Cuts a capsule stream into regions between headers, resynchronising capsule by capsule.
+
+    :param capsule_size: bytes per capsule
+    :param angles: the stream's start angle track (its sweep tells a capsule arriving early)
+    :param counts: the decoder's counters (``StreamCounts`` fields), updated in place: frames
+        and lost frames in gaps, resyncs, discarded bytes
+    :param angle_at: the start angle's offset in the capsule, bytes (2; 8 in the ultra-dense
+        capsule, after its timestamp and status)
+    """
+
+    def __init__(self, capsule_size: int, angles: 'AngleTrack', counts: dict,
+                 angle_at: int = 2):
+        self._size = capsule_size
+        self._angle_at = angle_at
+        self._head = angle_at + 2       # bytes up to the end of the start angle
+        self._max_shift = round(_MAX_SHIFT_PER_84 * capsule_size / 84)
+        self._angles = angles
+        self._counts = counts
+        self._buffer = b''
+        self._offset = 0            # stream offset of _buffer[0]
+        self._synced = False        # _buffer[0] starts a capsule header
+        self._slot = 0              # capsule index of the capsule at _buffer[0]
+        self._gap_from = None       # stream offset where sync was lost
+
+    def split(self, data: bytes) -> tuple:
+        """
+        Take the next received chunk; return the regions it completes.
+
+        A region is complete once the header and start angle after it have arrived.
+
+        :param data: the next received bytes, any length
+        :return: ``(raw, regions, offset)``: the bytes held, ``raw[0]`` at stream offset
+            ``offset`` (the header and start angle after the last region included), and the
+            complete regions, a list of :class:`Region`
+        """
+        buffer = self._buffer + bytes(data)
+        raw = np.frombuffer(buffer, np.uint8)
+        headers = ((raw[:-1] >> 4) == 0xA) & ((raw[1:] >> 4) == 0x5)
+        regions = []
+        pos = 0
+        while True:
+            if not self._synced:
+                found = np.flatnonzero(headers[pos:])
+                if not found.size:
+                    keep = max(len(buffer) - 1, pos)      # a header may begin in the last byte
+                    self._counts['discarded_bytes'] += keep - pos
+                    pos = keep
+                    break
+                pos = self._regain_sync(pos, pos + int(found[0]))
+            step = self._next_header(raw, headers, pos)
+            if step is None:
+                break
+            count, end = step
+            if count == 0:
+                # No header where the next capsules should begin: this one leads nowhere.
+                self._synced = False
+                self._gap_from = self._offset + pos
+                self._counts['resyncs'] += 1
+                self._counts['discarded_bytes'] += 1
+                pos += 1
+                continue
+            lost = count * self._size - (end - pos)
+            regions.append(Region(pos, count, end, self._slot, lost,
+                                  2 * lost > (count + 1) * self._max_shift))
+            self._slot += count
+            pos = end
+        offset = self._offset
+        self._buffer = buffer[pos:]
+        self._offset += pos
+        return raw, regions, offset
+
+    def angle_field(self, raw: np.ndarray, pos: int) -> int:
+        """
+        Read the start angle field (with the S flag) of the capsule whose header is at ``pos``.
+
+        :param raw: the received bytes
+        :param pos: the capsule's first byte
+        :return: the u16 field
+        """
+        at = pos + self._angle_at
+        return int(raw[at]) | int(raw[at + 1]) << 8
+
+    def slip(self, capsules: int):
+        """
+        Count capsules the stream lost (or counted) without a trace in its bytes.
+
+        :param capsules: capsules to add to the stream index (negative: counted too many)
+        """
+        self._slot += capsules
+
+    def _regain_sync(self, pos: int, header: int) -> int:
+        """Skip to a header found byte by byte; count the capsules the gap held as lost."""
+        self._counts['discarded_bytes'] += header - pos
+        self._synced = True
+        if self._gap_from is not None:
+            lost = max(round((self._offset + header - self._gap_from) / self._size), 1)
+            self._slot += lost
+            self._counts['frames'] += lost
+            self._counts['lost_frames'] += lost
+            self._gap_from = None
+        return header
+
+    def _next_header(self, raw: np.ndarray, headers: np.ndarray, pos: int):
+        """
+        Find where the capsules after the one at ``pos`` end.
+
+        :return: ``(n, end)``: n capsules end at the header at ``end``; ``(0, None)`` when no
+            header lies where one should; None until enough bytes have arrived
+        """
+        size = raw.size
+        for count in range(1, _MAX_EXACT_REGION + 1):
+            expected, reach = pos + count * self._size, count * self._max_shift
+            exact = expected + self._head <= size and headers[expected]
+            if count == 1 and expected + self._head <= size and not (
+                    exact and self._follows(raw, pos, expected)):
+                # A header in sequence wins over one merely a capsule on, which may lie in the
+                # distances of a successor that arrived early. Two sweeps on, after a run of
+                # lost bytes, the successor was cut short within its own header.
+                early = np.flatnonzero(headers[pos + 1:expected]) + pos + 1
+                for sweeps, before in ((1, expected), (2, expected - reach)):
+                    following = [at for at in early
+                                 if at < before and self._follows(raw, pos, at, sweeps)]
+                    if following:
+                        return sweeps, int(following[0])
+            if exact:
+                return count, expected
+            if count > _MAX_REGION:
+                # Beyond a few capsules only an exact spacing is evidence enough.
+                if expected + self._head > size:
+                    return None
+                continue
+            if expected + reach + self._head > size:
+                return None
+            near = np.flatnonzero(headers[expected - reach:expected + reach + 1])
+            if near.size:
+                near += expected - reach
+                return count, int(near[np.argmin(np.abs(near - expected))])
+        return 0, None
+
+    def _follows(self, raw: np.ndarray, pos: int, at: int, sweeps: int = 1) -> bool:
+        """
+        Tell whether the header at ``at`` starts the capsule ``sweeps`` after the one at ``pos``.
+
+        Any run of lost bytes shortens a capsule, up to all but its first byte: a header
+        anywhere within it starts the next capsule when its start angle lies one sweep on (a
+        false header in the distances has a random one).
+
+        :param raw: the received bytes
+        :param pos: a capsule header
+        :param at: a later header
+        :param sweeps: capsules on
+        :return: True when its start angle follows at the tracked sweep
+        """
+        this = start_q8(self.angle_field(raw, pos))
+        following = start_q8(self.angle_field(raw, at))
+        if this is None or following is None:
+            return False
+        sweep_q8 = self._angles.sweep_deg() * 256.0
+        return (abs(wrap_q8(following - this - round(sweeps * sweep_q8)))
+                <= sweep_q8 / _CLEAN_ANGLE_SHARE)
+
+
+class CapsulePlacer:
+    """
+    Places a decoder's capsules in angle, in stream order, with its :class:`AngleTrack`.
+
+    It follows how damaged the line is: while most recent capsules fail their checksum, a
+    passing one vouches for nothing (1 in 256 damaged capsules passes the 8-bit checksum), and
+    every capsule is suspect.
+
+    :param angles: the stream's start angle track
+    :param framer: the stream's framer (told of capsules lost without a trace)
+    :param counts: the decoder's counters (``StreamCounts`` fields), updated in place: frames
+        and lost frames found from the start angles, replaced angles
+    """
+
+    def __init__(self, angles: 'AngleTrack', framer: CapsuleFramer, counts: dict):
+        self._angles = angles
+        self._framer = framer
+        self._counts = counts
+        self._damage = 0.0
+
+    def place(self, frames: list, next_field: int):
+        """
+        Place each capsule, in stream order.
+
+        :param frames: the capsules, records with ``slot``, ``angle_field`` and ``clean``
+            (checksum passed) read, ``placement`` (:class:`Placement`) set and ``suspect``
+            raised here; ``slot`` moves on by the capsules lost before it without a trace
+        :param next_field: the start angle field of the capsule after the last
+        """
+        slip = 0
+        for i, frame in enumerate(frames):
+            self._damage += _DAMAGE_WEIGHT * ((not frame.clean) - self._damage)
+            damaged_line = self._damage > _DAMAGED_SHARE
+            after = frames[i + 1] if i + 1 < len(frames) else None
+            frame.slot += slip
+            # On a damaged line a passing checksum does not vouch for a start angle either.
+            placement = self._angles.place(
+                frame.slot, frame.angle_field, frame.clean and not damaged_line,
+                after.slot + slip if after else frame.slot + 1,
+                after.angle_field if after else next_field,
+                bool(after) and after.clean and not damaged_line)
+            if placement.slip:
+                # Whole capsules the stream lost without a trace in its bytes (or that a
+                # resync counted wrongly): the start angles tell how many.
+                slip += placement.slip
+                frame.slot += placement.slip
+                self._counts['frames'] += max(placement.slip, 0)
+                self._counts['lost_frames'] += max(placement.slip, 0)
+            frame.placement = placement
+            self._counts['replaced_angles'] += placement.replaced
+            frame.suspect |= placement.replaced or damaged_line
+        self._framer.slip(slip)
+
+
+def placeable(placement: 'Placement', clean: bool, region_cut: bool) -> bool:
+    """
+    Tell whether a capsule may be published where :class:`AngleTrack` placed it.
+
+    A capsule whose start angle is out of sequence is placed at the predicted one, unless the
+    prediction may be wrong too: an intact capsule out of sequence says the prediction lost
+    count of capsules, and in a region that lost a run of bytes a capsule may be framed where
+    none began (a short one's bytes read as its successor's).
+
+    :param placement: the capsule's placement
+    :param clean: its checksum passed
+    :param region_cut: its region lost a run of bytes (:attr:`Region.cut`)
+    :return: True when its samples may be published there
+    """
+    return (placement.start_q8 is not None and placement.sweep_q8 is not None
+            and not (placement.replaced and (clean or region_cut)))
+
+
+@dataclass(frozen=True)
+class Placement:
+    """
+    A capsule's place in angle, as :class:`AngleTrack` decides it.
+
+    :ivar start_q8: start angle, 1/256 degree; None when the capsule cannot be placed
+    :ivar sweep_q8: angle its samples span, 1/256 degree; None when it cannot be placed
+    :ivar replaced: the start angle is the predicted one, not the received one
+    :ivar slip: capsules the stream lost unseen before this one (negative: counted too many)
+    """
+
+    start_q8: Optional[int]
+    sweep_q8: Optional[float]
+    replaced: bool
+    slip: int
+
+
+class AngleTrack:
+    """
+    The start angles of the capsules in sequence: which to believe and what to predict.
+
+    :param max_sweep_q8: the largest plausible sweep of one capsule, 1/256 degree (the SDK's)
+    :param nominal_sweep_q8: the sweep to expect until one is measured, 1/256 degree
+    """
+
+    def __init__(self, max_sweep_q8: int, nominal_sweep_q8: int):
+        self._max_sweep_q8 = max_sweep_q8
+        self._nominal_sweep_q8 = nominal_sweep_q8
+        self._reference = None      # (slot, start) of the last believed start angle
+        self._sweep = None          # one capsule's sweep, smoothed, 1/256 degree
+        self._previous = None       # (slot, observed start) of the capsule before
+        self._misses = 0            # start angles in a row not believed
+
+    def sweep_deg(self) -> float:
+        """Return one capsule's sweep, degrees (the nominal one until measured)."""
+        return (self._sweep or self._nominal_sweep_q8) / 256.0
+
+    def place(self, slot: int, field: int, clean: bool, next_slot: int, next_field: int,
+              next_clean: bool) -> tuple:
+        """
+        Decide a capsule's start angle and sweep from its field and its successor's.
+
+        :param slot: the capsule's index in the stream
+        :param field: its start angle field (bit 15: S)
+        :param clean: its checksum passed on a line not otherwise damaged
+        :param next_slot: the successor's index
+        :param next_field: the successor's start angle field
+        :param next_clean: the same of the successor (False when not known yet)
+        :return: the :class:`Placement`
+        """
+        if clean and field & 0x8000:
+            # The device (re)started its stream here, as the SDK takes the S flag.
+            self._reference = self._sweep = self._previous = None
+        observed, following = start_q8(field), start_q8(next_field)
+        tolerance = self._tolerance(clean)
+        consecutive = next_slot == slot + 1
+        ahead = None if observed is None or following is None or not consecutive else (
+            (following - observed) % FULL_TURN_Q8)
+        predicted, gap = self._predict(slot)
+        matches = (observed is not None and predicted is not None
+                   and abs(wrap_q8(observed - predicted)) <= tolerance)
+        slip = 0 if matches or predicted is None or observed is None else self._slip(
+            observed - predicted, gap, self._starts_run(slot, observed, ahead, clean, tolerance),
+            tolerance)
+        if slip:
+            slot, predicted, matches = slot + slip, observed, True
+        # Against a recent believed angle only the prediction counts; a run of two angles could
+        # be two damaged ones that happen to agree.
+        run = (not matches and (predicted is None or gap > _FRESH_GAP)
+               and self._starts_run(slot, observed, ahead, clean, tolerance))
+        self._previous = (slot, observed)
+        if matches or run:
+            self._believe(slot, observed, ahead if run else None)
+            start, replaced = observed, False
+        elif predicted is not None:
+            start, replaced = predicted, True
+        else:
+            return Placement(None, None, False, 0)
+        if not matches and not run:
+            self._misses += 1
+            if self._misses >= _RESTART_AFTER:
+                # Too long without a believed angle: start over from runs of start angles.
+                self._reference = self._sweep = None
+        step = None if following is None or not consecutive else (
+            (following - start) % FULL_TURN_Q8)
+        if step is not None and (abs(step - self._sweep) <= self._tolerance(next_clean)
+                                 if self._sweep is not None else 0 < step <= self._max_sweep_q8):
+            return Placement(start, step, replaced, slip)
+        if next_clean and next_field & 0x8000:
+            return Placement(start, None, replaced, slip)   # before a restart: dropped (SDK)
+        # The next start angle is damaged or far: sweep as the capsules before.
+        return Placement(start, self._sweep, replaced, slip)
+
+    def _slip(self, beyond_q8: int, gap: int, runs_on: bool, tolerance: float) -> int:
+        """
+        Tell how many capsules the stream lost unseen, from a start angle ahead of prediction.
+
+        :param beyond_q8: the observed start angle minus the predicted one, 1/256 degree
+        :param gap: capsules since the last believed start angle
+        :param runs_on: the successor's start angle follows on at the sweep
+        :param tolerance: how far the angle may lie from a whole number of sweeps
+        :return: capsules lost (negative: counted too many), 0 when it does not look like that
+        """
+        if not runs_on:
+            return 0
+        beyond = wrap_q8(beyond_q8)
+        lost = round(beyond / self._sweep)
+        if lost == 0 or gap + lost < 1 or abs(beyond - lost * self._sweep) > tolerance:
+            return 0
+        return lost
+
+    def _tolerance(self, clean: bool) -> float:
+        """Return how far a start angle may lie from its prediction, 1/256 degree."""
+        if not clean or self._sweep is None:
+            return _ANGLE_TOLERANCE_Q8
+        # A passing checksum makes a damaged angle unlikely: allow for the motor's speed.
+        return max(self._sweep / _CLEAN_ANGLE_SHARE, _ANGLE_TOLERANCE_Q8)
+
+    def _predict(self, slot: int) -> tuple:
+        """Return the predicted start angle (1/256 degree) and its distance in capsules."""
+        if self._reference is None or self._sweep is None:
+            return None, None
+        gap = slot - self._reference[0]
+        if not 0 < gap <= _PREDICTION_REACH:
+            return None, None
+        return round(self._reference[1] + gap * self._sweep) % FULL_TURN_Q8, gap
+
+    def _starts_run(self, slot: int, observed, ahead, clean: bool, tolerance: float) -> bool:
+        """Tell whether a start angle advances to its successor's like the capsules before."""
+        if ahead is None or not 0 < ahead <= self._max_sweep_q8:
+            return False
+        if self._sweep is not None:
+            return abs(ahead - self._sweep) <= tolerance
+        if self._previous is not None and self._previous[0] == slot - 1 and (
+                self._previous[1] is not None):
+            behind = (observed - self._previous[1]) % FULL_TURN_Q8
+            return abs(ahead - behind) <= _ANGLE_TOLERANCE_Q8 or clean
+        # At the start of a stream, nothing to compare with: the SDK's rule, for intact capsules.
+        return clean
+
+    def _believe(self, slot: int, start: int, run_sweep):
+        """Take a start angle as true: it becomes the reference and refines the sweep."""
+        self._misses = 0
+        if self._reference is not None and self._reference[0] == slot - 1:
+            measured = (start - self._reference[1]) % FULL_TURN_Q8
+            if self._sweep is None:
+                self._sweep = measured if 0 < measured <= self._max_sweep_q8 else None
+            elif abs(measured - self._sweep) <= self._sweep / _CLEAN_ANGLE_SHARE:
+                self._sweep += (measured - self._sweep) * _SWEEP_WEIGHT
+        elif self._sweep is None:
+            self._sweep = run_sweep
+        self._reference = (slot, start)
+
+
+def start_q8(field: int):
+    """Return a start angle field's angle in 1/256 degree, None when beyond 360 degrees."""
+    angle_q6 = field & 0x7FFF
+    return angle_q6 << 2 if angle_q6 < FULL_TURN_Q6 else None

@@ -4,6 +4,7 @@
 """Sensor presets: each number sourced, the preset sets defaults, and what a user sets wins."""
 
 import math
+import pathlib
 import re
 import subprocess
 
@@ -12,6 +13,7 @@ from wctls_ros.params import ConfigError, FEATURE_NODE, feature_settings, load_p
 from wctls_ros.sensors import (DEFAULT_SENSOR, PRESET_PARAMETERS, PresetError, sensor_presets,
                                SensorPreset)
 
+REPOSITORY = pathlib.Path(__file__).resolve().parents[2]
 BY_NAME = {parameter.name: parameter for parameter in FEATURE_NODE}
 BASES = re.compile(r'datasheet|measured|measurement|assumed|not published')
 # What the issue asks for, at least.
@@ -28,6 +30,39 @@ def test_every_required_sensor_has_a_preset_whose_numbers_each_have_a_source():
             BY_NAME[name].check(preset.parameters[name])      # within the node's ranges
             # Each source says what kind it is: a datasheet, our measurement, or an assumption.
             assert BASES.search(preset.sources[name]), (preset.name, name)
+
+
+def _listed(text: str, introduction: str, end: str) -> set:
+    """Return the names listed between ``introduction`` and ``end`` in a text."""
+    listed = text.split(introduction, 1)[1].split(end, 1)[0]
+    return set(re.findall(r'[a-z][a-z0-9_]+', listed.replace('#', ' ')))
+
+
+def test_the_preset_lists_of_the_readme_and_the_parameter_file_are_the_presets():
+    presets = set(sensor_presets())
+    readme = (REPOSITORY / 'README.md').read_text()
+    assert _listed(readme, 'noise model preset:', '([') == presets
+    node_file = (REPOSITORY / 'wctls_ros' / 'config' / 'feature_node.yaml').read_text()
+    assert _listed(node_file, 'a preset of config/sensors (', ')') == presets
+
+
+def test_the_preset_table_of_sensors_md_has_every_preset_with_its_numbers():
+    rows = {}
+    for line in (REPOSITORY / 'docs' / 'sensors.md').read_text().split(
+            '| preset | range sigma |', 1)[1].splitlines()[2:]:
+        if not line.startswith('| `'):
+            break
+        cells = [cell.strip() for cell in line.strip('|').split('|')]
+        rows[re.match(r'`(\w+)`', cells[0])[1]] = cells
+    presets = sensor_presets()
+    assert set(rows) == set(presets)
+    for name, (_, range_sigma, from_scan, bearing, common, _) in rows.items():
+        values = presets[name].parameters
+        assert float(range_sigma.split()[0]) == pytest.approx(1e3 * values['range_sigma_m']), name
+        assert (from_scan == 'yes') == values['range_sigma_from_scan'], name
+        assert float(bearing.split()[0]) == pytest.approx(values['bearing_sigma_deg']), name
+        common_mm = 0.0 if common == '0' else float(common.split()[0])
+        assert common_mm == pytest.approx(1e3 * values['common_range_sigma_m']), name
 
 
 def test_the_triangulating_rplidars_follow_their_range_noise_scan_by_scan():

@@ -118,7 +118,7 @@ def test_a_document_without_a_nodes_markers_is_a_user_error(tmp_path):
                         encoding='utf-8')
     result = _params_cli('--write', str(document))
     assert result.returncode == 2
-    assert 'rplidar_node' in result.stderr and 'Traceback' not in result.stderr
+    assert 'bag_replay' in result.stderr and 'Traceback' not in result.stderr
     assert result.stderr.count('\n') == 1
 
 

@@ -58,6 +58,8 @@ def declared_arguments(path):
     declared = {}
     for call in calls(path, 'DeclareLaunchArgument'):
         assert keyword(call, 'description') is not None, f'{path.name}: undocumented argument'
+        if not isinstance(call.args[0], ast.Constant):
+            continue                    # declared from a table, read below
         default = keyword(call, 'default_value')
         declared[call.args[0].value] = (default.value if isinstance(default, ast.Constant)
                                         else None if default is None else 'a substitution')
@@ -95,21 +97,21 @@ def test_starts_installed_executables_with_existing_files(path):
         assert (PACKAGE / 'config' / call.args[0].value).is_file(), call.args[0].value
 
 
-def test_the_rplidar_driver_is_started_as_a_lifecycle_node():
+def test_the_rplidar_driver_is_started_as_a_lifecycle_node_by_its_own_launch_file():
     # Its autostart false needs the launch file to drive the configure and activate transitions.
-    for path in (p for p in LAUNCH_FILES if 'rplidar' in p.name):
-        started = calls(path, 'lifecycle_node')
-        assert [call.args[0].value for call in started] == ['rplidar_node'], path.name
-        assert not [call for call in calls(path, 'node') if call.args[0].value == 'rplidar_node']
-    tree = ast.parse((PACKAGE / 'wctls_ros' / 'launching.py').read_text())
-    function = next(node for node in ast.walk(tree)
-                    if isinstance(node, ast.FunctionDef) and node.name == 'lifecycle_node')
-    transitions = {node.attr for node in ast.walk(function) if isinstance(node, ast.Attribute)
-                   and node.attr.startswith('TRANSITION_')}
+    driver = PACKAGE.parent / 'wctls_rplidar' / 'launch' / 'rplidar.launch.py'
+    started = calls(driver, 'LifecycleNode')
+    assert [keyword(call, 'executable').value for call in started] == ['rplidar_node']
+    transitions = {node.attr for node in ast.walk(ast.parse(driver.read_text()))
+                   if isinstance(node, ast.Attribute) and node.attr.startswith('TRANSITION_')}
     assert transitions == {'TRANSITION_CONFIGURE', 'TRANSITION_ACTIVATE'}
-    assert {call.func.id for call in ast.walk(function) if isinstance(call, ast.Call)
-            and isinstance(call.func, ast.Name)} >= {'LifecycleNode', 'OnStateTransition',
-                                                     'ChangeState', '_file_value'}
+    assert calls(driver, 'OnStateTransition') and calls(driver, 'ChangeState')
+    assert set(declared_arguments(driver)) == {name for name in EXPECTED_ARGUMENTS[
+        'rplidar_s1.launch.py'] if name not in ('sensor', 'method', 'feature_params_file',
+                                                'with_feature_node')}
+    # The S1 launch file includes it, passing the driver's arguments on.
+    included, = calls(PACKAGE / 'launch' / 'rplidar_s1.launch.py', 'IncludeLaunchDescription')
+    assert 'rplidar.launch.py' in ast.unparse(included)
 
 
 @launch_ros_missing

@@ -14,7 +14,7 @@ from hypothesis import given, settings, strategies
 import pytest
 from wctls_ros.core import FeatureConfig
 from wctls_ros.params import (BAG_REPLAY, ConfigError, FEATURE_NODE, feature_settings,
-                              load_parameters, markdown_table, RPLIDAR_NODE, SCHEMAS)
+                              load_parameters, markdown_table, SCHEMAS)
 from wctls_ros.sensors import DEFAULT_SENSOR, PRESET_PARAMETERS, sensor_presets
 import yaml
 
@@ -162,7 +162,7 @@ def test_a_parameter_file_is_read_from_its_node_section_over_wildcards(tmp_path)
     ('feature_node:\n  ros__parameters:\n    iepf_treshold_m: 0.04\n',
      "unknown feature_node parameters ['iepf_treshold_m']"),
     ('feature_node: 3\n', "section 'feature_node' has no ros__parameters mapping"),
-    ('rplidar_node:\n  ros__parameters:\n    frame_id: laser\n', 'has no parameters for'),
+    ('bag_replay:\n  ros__parameters:\n    rate: 2.0\n', 'has no parameters for'),
     ('[1, 2]\n', 'is not a ROS 2 parameter file'),
     ('feature_node: {ros__parameters: {method: [wctls\n', 'cannot read the parameter file'),
 ])
@@ -177,11 +177,10 @@ def test_a_parameter_file_the_node_would_refuse_is_refused_with_the_reason(tmp_p
 
 def test_the_other_nodes_files_are_checked_with_their_own_schemas(tmp_path):
     path = tmp_path / 'params.yaml'
-    path.write_text('rplidar_node:\n  ros__parameters:\n    serial_baudrate: 5000000\n')
-    with pytest.raises(ConfigError, match=r'serial_baudrate = 5000000 is outside its range'):
-        load_parameters(path, 'rplidar_node')
+    path.write_text('bag_replay:\n  ros__parameters:\n    rate: 500.0\n')
+    with pytest.raises(ConfigError, match=r'rate = 500.0 is outside its range'):
+        load_parameters(path, 'bag_replay')
     assert load_parameters(None, 'bag_replay')['rate'] == 1.0
-    assert all(p.read_only for p in RPLIDAR_NODE)
     assert {p.name for p in BAG_REPLAY if not p.read_only} == {'rate', 'loop'}
 
 
@@ -202,7 +201,6 @@ def test_the_schema_and_the_parameter_files_never_import_rclpy():
 
 
 @pytest.mark.parametrize('node_name,file_name', [('feature_node', 'feature_node.yaml'),
-                                                 ('rplidar_node', 'rplidar_s1.yaml'),
                                                  ('bag_replay', 'bag_replay.yaml')])
 def test_each_shipped_parameter_file_sets_every_parameter_at_its_default(node_name, file_name):
     # ... except the noise model, which the file leaves to its sensor preset (commented out).

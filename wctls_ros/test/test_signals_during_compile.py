@@ -102,7 +102,7 @@ def test_a_signal_during_the_compile_ends_it_within_two_seconds(command, signal_
 
 
 @pytest.mark.parametrize('program, arguments, status', [
-    ('feature_node', [], 0), ('rplidar_node', [], 0),
+    ('feature_node', [], 0),
     ('process_bag', [str(REAL_DATA / 'urg04lx_office'), '-d', '{out}'], 128 + signal.SIGINT)])
 def test_ctrl_c_while_a_program_imports_ends_it_quietly(program, arguments, status, tmp_path):
     # The imports take a second or more; a Ctrl-C then gave a KeyboardInterrupt traceback.

@@ -18,7 +18,7 @@ from wctls_ros.core import runtime
 from wctls_ros.extras import EXTRAS
 
 REPOSITORY = pathlib.Path(__file__).resolve().parents[2]
-PACKAGES = ('wctls_ros', 'wctls_msgs')
+PACKAGES = ('wctls_ros', 'wctls_rplidar', 'wctls_lab', 'wctls_msgs')
 DEPENDENCY_TAGS = ('depend', 'build_depend', 'buildtool_depend', 'exec_depend', 'test_depend',
                    'build_export_depend')
 TABLE_MARKER = '<!-- rosdep-keys: the test reads the rows of this table -->'

@@ -27,6 +27,8 @@ turn's first sample (raw angle ~0; on the device's clock for the formats that ca
 """
 
 import array
+import itertools
+import signal
 import statistics
 import sys
 import threading
@@ -414,14 +416,24 @@ def main(args=None) -> int:
     Run the node until Ctrl-C or SIGTERM, the way ros2/demos do on Jazzy.
 
     A bad start (bad ROS arguments, a parameter of the wrong type or out of range, an invalid
-    channel_type) is one fatal log line and status 1, never a traceback. The executor's waits
-    are bounded: rclpy's signal handler wakes it before it shuts the context down, and an
+    channel_type) is one fatal log line and status 1, never a traceback. The first Ctrl-C ends
+    the node; the ones after it are ignored (``ros2 launch`` forwards the terminal's again, and
+    users press it twice), so the clean-up that stops the motor runs to its end. The executor's
+    waits are bounded: rclpy's signal handler wakes it before it shuts the context down, and an
     unbounded wait would then sleep until the next message.
 
     :param args: command-line arguments for rclpy.init (default: sys.argv)
     :return: exit status: 0 on a clean end, 1 on a bad start
     """
     logger = rclpy.logging.get_logger('rplidar_node')
+    interrupts = itertools.count()
+
+    def interrupt_once(signal_number, frame):
+        if next(interrupts) == 0:       # one C call: no window between the test and the count
+            raise KeyboardInterrupt
+
+    # Installed before rclpy.init, which chains its own handler (waking the executor) to it.
+    signal.signal(signal.SIGINT, interrupt_once)
     try:
         rclpy.init(args=args)
     except (rclpy_implementation.RCLError, rclpy_implementation.UnknownROSArgsError) as error:
@@ -440,6 +452,7 @@ def main(args=None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

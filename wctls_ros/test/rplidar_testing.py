@@ -260,7 +260,12 @@ class DeviceLink:
 
     A pseudo-terminal carries no modem lines, so the DTR motor control of an A1 is seen here:
     the driver's writes, reads and DTR changes reach the device as a serial line would carry
-    them. :meth:`unplug` makes every later use fail as a pulled USB adapter does.
+    them. :meth:`unplug` makes every later use fail as a pulled USB adapter does;
+    :meth:`break_connection` only the open connection's, as a link that broke while the device
+    stayed powered (the next :meth:`connect` reaches it again). :attr:`on_write` and
+    :attr:`on_close`, when set, are called with each write's bytes and on each close (on the
+    driver's thread), to act at an exact point of a session; :attr:`read_error`, when set, is
+    raised once by the next read (a bug in the session).
 
     :param device: the emulated device
     :param baudrate: the line's rate, bits per second (for the driver's byte time)
@@ -271,8 +276,12 @@ class DeviceLink:
         self.name = f'in-process device @ {baudrate} baud'
         self.byte_time_s = 10.0 / baudrate
         self.opened = 0
+        self.on_write = None
+        self.on_close = None
+        self.read_error = None
         self._answers = b''
         self._gone = False
+        self._broken = False
 
     def connect(self, config):
         """
@@ -282,19 +291,28 @@ class DeviceLink:
         :return: this link
         """
         self.opened += 1
+        self._broken = False
         return self
 
     def unplug(self):
         """Pull the device: every later write, read or DTR change fails."""
         self._gone = True
 
+    def break_connection(self):
+        """Break the open connection; the device stays powered and a new connection reaches it."""
+        self._broken = True
+
     def _check(self):
         if self._gone:
             raise LinkError(f'{self.name}: device unplugged')
+        if self._broken:
+            raise LinkError(f'{self.name}: the connection broke')
 
     def write(self, data: bytes):
         """Deliver bytes to the device; keep its answers for :meth:`read`."""
         self._check()
+        if self.on_write is not None:
+            self.on_write(data)
         self._answers += self.device.receive(data, time.monotonic())
 
     def set_dtr(self, asserted: bool) -> bool:
@@ -306,6 +324,9 @@ class DeviceLink:
     def read(self, timeout_s: float) -> bytes:
         """Return the answers and stream bytes due, waiting up to ``timeout_s``."""
         deadline = time.monotonic() + timeout_s
+        if self.read_error is not None:
+            error, self.read_error = self.read_error, None
+            raise error
         while True:
             self._check()
             now = time.monotonic()
@@ -315,7 +336,9 @@ class DeviceLink:
             time.sleep(min(max(self.device.next_frame_in(now), 0.001), deadline - now, 0.02))
 
     def close(self):
-        """Nothing to release."""
+        """Call :attr:`on_close`, if set; nothing to release."""
+        if self.on_close is not None:
+            self.on_close()
 
 
 class LogLines:

@@ -29,8 +29,11 @@ error gets a RESET, a ~2 s wait and a new session, and after ``health_reset_atte
 resets the driver gives up with a clear error until the motor is started again.
 
 :meth:`RplidarDriver.close` ends scanning and stops the motor the model's way (STOP, then
-MOTOR_SPEED 0, SET_MOTOR_PWM 0 or DTR set); it may be called from a signal handler and after the
-port is gone.
+MOTOR_SPEED 0, SET_MOTOR_PWM 0 or DTR set; all three while the model is not yet known), in
+whatever state the driver is: scanning, in a handshake, backing off after a failed session or
+given up. When the session's link is gone (or there is none) it reopens the link briefly to
+send them: a device still powered behind a link that broke is stopped too. A driver that gives
+up stops the motor as well. close may be called from a signal handler and after the port is gone.
 """
 
 from dataclasses import dataclass, replace
@@ -208,6 +211,10 @@ class GiveUp(Exception):
     """Retrying cannot help: an unsupported scan mode or a health error that RESET does not fix."""
 
 
+class _Closing(Exception):
+    """close() was called: the handshake under way is abandoned."""
+
+
 def plausible_mode(mode: ScanMode) -> tuple:
     """
     Replace a scan mode's implausible sample time (by its answer type) or range (the S1's).
@@ -328,9 +335,12 @@ class RplidarDriver:
             self._status = replace(self._status, **changes)
 
     def _run(self):
+        stopped = False
         while not self._closing.is_set():
             try:
                 link, baudrate = self._open()
+            except _Closing:
+                break
             except (LinkError, DeviceError, ProtocolError) as error:
                 self._update(state=DriverState.CONNECTING, message=str(error))
                 self._log.warning(f'{error}; retrying', throttle_duration_sec=LOG_THROTTLE_S)
@@ -343,9 +353,11 @@ class RplidarDriver:
             try:
                 self._serve(link)
                 failed = False
+            except _Closing:
+                failed = False
             except GiveUp as error:
                 failed = False
-                self._give_up(str(error), requests)
+                self._give_up(link, str(error), requests)
             except (LinkError, DeviceError, ProtocolError) as error:
                 self._update(state=DriverState.CONNECTING, message=str(error), add_reconnects=1)
                 self._log.warning(f'{error}; reconnecting', throttle_duration_sec=LOG_THROTTLE_S)
@@ -356,10 +368,12 @@ class RplidarDriver:
                                 f'{error}; reconnecting', throttle_duration_sec=LOG_THROTTLE_S)
             finally:
                 if self._closing.is_set():
-                    self._shut_down(link)
+                    stopped = self._shut_down(link)
                 link.close()
             if failed:
                 self._back_off()
+        if not stopped:
+            self._shut_down_through_new_link()
 
     def _open(self):
         """
@@ -402,9 +416,9 @@ class RplidarDriver:
         self._closing.wait(backoff_s)
         self._update(backoff_s=min(2.0 * backoff_s, BACKOFF_MAX_S))
 
-    def _give_up(self, reason: str, requests_before: int):
+    def _give_up(self, link, reason: str, requests_before: int):
         """
-        Report a failure retrying cannot fix; wait until the motor is requested again.
+        Report a failure retrying cannot fix; stop the motor; wait until it is requested again.
 
         A start_motor that arrived after the failing session began is not swallowed: the driver
         tries once more instead of waiting.
@@ -418,6 +432,7 @@ class RplidarDriver:
             return
         self._update(state=DriverState.FAILED, message=reason)
         self._log.error(f'{reason} (call the start_motor service to retry)')
+        self._shut_down(link)
         while not self._closing.is_set() and not self._motor_on:
             self._closing.wait(STREAM_READ_TIMEOUT_S)
 
@@ -489,22 +504,56 @@ class RplidarDriver:
                        'device leaves it'))
 
     def _stop_motor(self, link):
-        """Stop the motor the model's way (nothing before the model is known)."""
+        """
+        Stop the motor the model's way; before the model is known, every way.
+
+        A device ignores the motor commands of the other families (SLAMTEC's SDK sends each
+        family its own), so an unknown model gets all three: STOP alone leaves an S-series motor
+        turning, an A2/A3 board's PWM and an A1's DTR line as they were.
+        """
         motor = self.status().motor
-        if motor == MotorControl.RPM:
+        if motor in (MotorControl.RPM, None):
             link.write(encode_motor_speed(0))
-        elif motor == MotorControl.PWM:
+        if motor in (MotorControl.PWM, None):
             link.write(encode_motor_pwm(0))
-        elif motor == MotorControl.DTR:
+        if motor in (MotorControl.DTR, None):
             link.set_dtr(True)
 
-    def _shut_down(self, link):
-        """On close: end scanning, then stop the motor; a link already gone is no error."""
+    def _shut_down(self, link) -> bool:
+        """
+        End scanning, then stop the motor; a link already gone is no error.
+
+        :return: whether the commands were sent
+        """
         try:
             link.write(encode_request(Command.STOP))
             self._stop_motor(link)
         except LinkError as error:
-            self._log.info(f'closing: the motor could not be told to stop ({error})')
+            self._log.info(f'the motor could not be told to stop ({error})')
+            return False
+        return True
+
+    def _shut_down_through_new_link(self):
+        """
+        On close without a link that took the stop: open one briefly and stop through it.
+
+        With an automatic serial rate not yet found, every probed rate is tried (bytes at a
+        wrong rate are garbage the device discards).
+        """
+        config = self._config
+        baudrates = [config.serial_baudrate]
+        if config.channel_type == 'serial' and config.serial_baudrate == AUTO_BAUDRATE:
+            baudrates = [self.status().baudrate] if self.status().baudrate else PROBED_BAUDRATES
+        for baudrate in baudrates:
+            try:
+                link = self._link_factory(replace(config, serial_baudrate=baudrate))
+            except LinkError as error:
+                self._log.info(f'closing: the motor could not be told to stop ({error})')
+                return
+            try:
+                self._shut_down(link)
+            finally:
+                link.close()
 
     def _stop_stream(self, link):
         """Stop any scan in progress and discard the bytes still arriving."""
@@ -525,6 +574,8 @@ class RplidarDriver:
     def _read_more(self, link, deadline: float, what: str,
                    timeout_s: float = ANSWER_TIMEOUT_S) -> bytes:
         """Read the next bytes before ``deadline`` (``timeout_s`` after the request) or raise."""
+        if self._closing.is_set():
+            raise _Closing()
         remaining = deadline - time.monotonic()
         data = link.read(remaining) if remaining > 0 else b''
         if not data:

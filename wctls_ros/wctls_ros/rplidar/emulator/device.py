@@ -237,6 +237,8 @@ class Faults:
     :ivar resets_to_clear: RESETs still needed before an error health clears
     :ivar conf_answers: GET_LIDAR_CONF values reported instead of the device's own, by
         :class:`ConfType` (for every mode); None: the type echo alone
+    :ivar answer_type: the answer type every answer's descriptor carries instead of its own
+        (None: its own), as a device of another protocol generation answers
     """
 
     corrupt_rate: float = 0.0
@@ -247,6 +249,7 @@ class Faults:
     health: int = HealthStatus.OK
     resets_to_clear: int = 1
     conf_answers: dict = field(default_factory=dict)
+    answer_type: Optional[int] = None
 
     def replace_conf_answer(self, text: str):
         """
@@ -385,7 +388,11 @@ class S1Device:
         for request in self._parser.feed(data):
             if now_s < self._booting_until_s or self._faults.silent(now_s):
                 continue
-            answers += self._answer(request.command, request.payload, now_s)
+            answer = self._answer(request.command, request.payload, now_s)
+            if answer and self._faults.answer_type is not None:
+                # The descriptor's last byte is its answer type.
+                answer = answer[:6] + bytes([self._faults.answer_type]) + answer[7:]
+            answers += answer
             self._motor_changed(now_s)
         return answers
 

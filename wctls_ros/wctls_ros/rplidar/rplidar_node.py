@@ -14,6 +14,12 @@ likely cause, when the device has not answered within ``configure_timeout``. How
 ends (a transition, destroy_node after Ctrl-C, SIGTERM or an exception) the driver is closed,
 which stops the scan and the motor.
 
+A change_state request the current state does not allow (configure while active, cleanup while
+unconfigured) is refused with ``success: false`` and a warning, and the node goes on: the rclpy
+of Jazzy raises on it inside the service and ends the node (ros2/rclpy#1209, fixed upstream by
+ros2/rclpy#1319). A shutdown request names whichever of the three shutdown transitions; the
+current state's is taken. Requests are handled one at a time.
+
 Publishes sensor_msgs/LaserScan on ``scan`` (reliable, keep last 10, like sllidar_ros2; a
 lifecycle publisher: only while active), with ``fixed_beams`` N > 0 the same turns as N fixed
 beams on ``scan_fixed`` (:func:`~wctls_ros.rplidar.laserscan.fixed_scan`), and
@@ -35,6 +41,8 @@ import time
 from typing import Optional
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from lifecycle_msgs.msg import Transition
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
@@ -56,6 +64,10 @@ _POLL_S = 0.02
 # A report period with this share of frames damaged or lost, or of samples rejected, is WARN.
 DAMAGED_LINK_SHARE = 0.01
 _LATENCY_WINDOW = 1000
+# The shutdown transitions, one per primary state it leaves.
+_SHUTDOWN_TRANSITIONS = (Transition.TRANSITION_UNCONFIGURED_SHUTDOWN,
+                         Transition.TRANSITION_INACTIVE_SHUTDOWN,
+                         Transition.TRANSITION_ACTIVE_SHUTDOWN)
 _LEVELS = {DriverState.SCANNING: DiagnosticStatus.OK,
            DriverState.MOTOR_STOPPED: DiagnosticStatus.OK,
            DriverState.CONNECTING: DiagnosticStatus.WARN,
@@ -75,6 +87,10 @@ class RplidarNode(LifecycleNode):
 
     def __init__(self, **kwargs):
         super().__init__('rplidar_node', **kwargs)
+        self._transition_lock = threading.Lock()
+        # rclpy keeps the service's callback here; the guard takes its place (see the module).
+        self._unguarded_change_state = self._service_change_state.callback
+        self._service_change_state.callback = self._change_state
         values = declare_parameters(self, RPLIDAR_NODE)
         self._frame_id = values['frame_id']
         self._inverted = values['inverted']
@@ -225,6 +241,38 @@ class RplidarNode(LifecycleNode):
         driver, self._driver = self._driver, None
         if driver is not None:
             driver.close()
+
+    def _change_state(self, request, response):
+        """
+        Serve change_state: refuse a transition the current state does not have, else make it.
+
+        :param request: lifecycle_msgs/ChangeState request (transition id, or label)
+        :param response: its response
+        :return: the response, ``success`` False for a refused or failed transition
+        """
+        with self._transition_lock:
+            _, state = self._state_machine.current_state
+            available = {label: transition_id for transition_id, label, *_
+                         in self._state_machine.available_transitions}
+            asked = request.transition.label or str(request.transition.id)
+            transition_id = (available.get(request.transition.label) if request.transition.label
+                             else request.transition.id)
+            if transition_id in _SHUTDOWN_TRANSITIONS:
+                transition_id = available.get('shutdown')
+            if transition_id not in available.values():
+                self.get_logger().warning(
+                    f'change_state: transition {asked} is not possible from the {state} state '
+                    f'(possible: {", ".join(available) or "none"}): refused')
+                response.success = False
+                return response
+            request.transition.id, request.transition.label = transition_id, ''
+            try:
+                return self._unguarded_change_state(request, response)
+            except rclpy_implementation.RCLError as error:
+                self.get_logger().error(f'change_state: transition {asked} from the {state} '
+                                        f'state failed: {error}')
+                response.success = False
+                return response
 
     def _publish_turn(self, turn, mode):
         """Publish one turn as a LaserScan, and as a fixed-count one if asked (reader thread)."""

@@ -185,7 +185,7 @@ def emulated_stream(modes, mode_id, plan='environment_a', seconds=3.0, noisy=Fal
 
 
 @contextlib.contextmanager
-def serving(model, typical_mode=None, firmware=None, baudrate=None):
+def serving(model, typical_mode=None, firmware=None, baudrate=None, faults=None):
     """
     Serve a noiseless emulated device of ``model`` on a pseudo-terminal, in a thread.
 
@@ -195,12 +195,13 @@ def serving(model, typical_mode=None, firmware=None, baudrate=None):
         model's)
     :param firmware: (major, minor) (default: the model's)
     :param baudrate: the only rate it hears its client at (default: any)
+    :param faults: its fault settings (default: none)
     :return: a context manager yielding the terminal's path
     """
     profile = EMULATED_MODELS[model] if isinstance(model, str) else model
     scene = SimulatedScene(load_floor_plan('environment_a'), None, NOISELESS,
                            np.random.default_rng(0))
-    emulator = Emulator(scene, Faults(), firmware or profile.firmware, 0,
+    emulator = Emulator(scene, faults or Faults(), firmware or profile.firmware, 0,
                         PtyPort(None, baudrate), modes=profile.modes,
                         typical_mode=profile.typical_mode if typical_mode is None
                         else typical_mode, model=profile)

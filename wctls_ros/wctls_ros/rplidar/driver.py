@@ -207,6 +207,10 @@ class DeviceError(Exception):
     """The device did not answer, answered wrongly or streamed nothing usable."""
 
 
+class UnexpectedAnswer(DeviceError):
+    """The device answered a request, but with another answer type than the request's."""
+
+
 class GiveUp(Exception):
     """Retrying cannot help: an unsupported scan mode or a health error that RESET does not fix."""
 
@@ -390,12 +394,17 @@ class RplidarDriver:
             return self._link_factory(config), config.serial_baudrate
         # The rate that answered last is tried first: a reconnect costs no probe.
         answered = self.status().baudrate
+        unexpected = None
         for baudrate in sorted(PROBED_BAUDRATES, key=lambda rate: rate != answered):
             link = self._link_factory(replace(config, serial_baudrate=baudrate))
             try:
                 self._stop_stream(link)
                 self._ask(link, Command.GET_INFO, AnswerType.DEVICE_INFO,
                           timeout_s=PROBE_TIMEOUT_S)
+            except UnexpectedAnswer as error:
+                link.close()
+                unexpected = error          # the rate is right: the answer is not
+                continue
             except (DeviceError, ProtocolError):
                 link.close()
                 continue
@@ -405,6 +414,8 @@ class RplidarDriver:
             self._log.info(f'serial_baudrate 0: {config.serial_port} answered GET_INFO at '
                            f'{baudrate} baud (probed {", ".join(map(str, PROBED_BAUDRATES))})')
             return link, baudrate
+        if unexpected is not None:
+            raise unexpected
         raise DeviceError(f'no answer to GET_INFO at any rate ('
                           f'{", ".join(map(str, PROBED_BAUDRATES))} baud) on '
                           f'{config.serial_port}: not an RPLIDAR, or not powered (a weak USB '
@@ -590,15 +601,27 @@ class RplidarDriver:
         link.write(request)
         deadline = time.monotonic() + timeout_s
         buffer = b''
+        others = []
         while True:
             descriptor, end = find_descriptor(buffer)
             if descriptor is not None and descriptor.answer_type == answer_type:
                 return descriptor, buffer[end:]
             if descriptor is not None:
                 # Stale bytes that look like another answer: search on past their sync.
+                others.append(f'0x{descriptor.answer_type:02X}')
                 buffer = buffer[end - DESCRIPTOR_SIZE + 1:]
                 continue
-            buffer = buffer[end:] + self._read_more(link, deadline, what, timeout_s)
+            try:
+                buffer = buffer[end:] + self._read_more(link, deadline, what, timeout_s)
+            except DeviceError:
+                if not others:
+                    raise
+                # The device answers, in another way: the port, rate and cable are right.
+                raise UnexpectedAnswer(
+                    f'no {what} within {timeout_s:g} s on {link.name}: the device answered '
+                    f'with answer type {", ".join(dict.fromkeys(others))} instead of '
+                    f'0x{answer_type:02X} (a protocol or firmware this driver does not '
+                    'speak, or a damaged answer)') from None
 
     def _ask(self, link, command: int, answer_type: int, request: bytes = b'',
              timeout_s: float = ANSWER_TIMEOUT_S) -> bytes:

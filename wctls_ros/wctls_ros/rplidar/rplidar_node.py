@@ -30,6 +30,9 @@ background thread (:class:`~wctls_ros.rplidar.driver.RplidarDriver`), which publ
 as soon as it is complete. Unlike sllidar_ros2, header.stamp is the measurement time of the
 turn's first sample (raw angle ~0; on the device's clock for the formats that carry it,
 :class:`~wctls_ros.rplidar.turns.TurnAssembler`) and scan_time the measured rotation period.
+That time is mapped onto the node's ROS clock as each turn is published, so with
+``use_sim_time`` the stamps are on the simulated clock; until the first /clock message that clock
+stands at 0 and no turn is published (a throttled error says why).
 """
 
 import array
@@ -278,8 +281,12 @@ class RplidarNode(LifecycleNode):
         """Publish one turn as a LaserScan, and as a fixed-count one if asked (reader thread)."""
         if not self._active:
             return
-        stamp = Time(nanoseconds=_ros_minus_monotonic_ns(self.get_clock())
-                     + int(turn.first_sample_s * 1e9)).to_msg()
+        stamp_ns = _ros_minus_monotonic_ns(self.get_clock()) + int(turn.first_sample_s * 1e9)
+        if stamp_ns < 0:
+            # Under use_sim_time the ROS clock stands at 0 until /clock is heard.
+            raise ValueError('the ROS clock is not running (use_sim_time is true and no /clock '
+                             'has been received): turns are not published until it runs')
+        stamp = Time(nanoseconds=stamp_ns).to_msg()
         multiple = compensation_multiple(mode.us_per_sample, self._scan_frequency_hz)
         self._scan_pub.publish(self._message(
             turn_to_scan(turn, self._angle_compensate, self._inverted, multiple,

@@ -52,9 +52,10 @@ from .protocol import (ACC_BOARD_MAJOR_IDS, AccBoardFlag, AnswerType, Command, C
                        encode_acc_board_flag_request, encode_conf_request, encode_express_scan,
                        encode_motor_pwm, encode_motor_speed, encode_request, find_descriptor,
                        HealthStatus, MotorControl, ProtocolError, RPM_MOTOR_MAJOR_ID,
-                       SampleRate, ScanMode, SendMode, StandardNodeDecoder, StreamCounts)
+                       SampleRate, ScanMode, SendMode, StreamCounts)
+from .standard import CheckedStandardNodeDecoder
 from .transport import drain, LinkError, SerialLink, TcpLink
-from .turns import TurnAssembler
+from .turns import PublishGate, TurnAssembler
 from .ultra import UltraCapsuleDecoder
 from .ultradense import UltraDenseCapsuleDecoder
 
@@ -108,6 +109,17 @@ CAPSULE_DECODERS = {AnswerType.EXPRESS_CAPSULE: ExpressCapsuleDecoder,
                     AnswerType.DENSE_CAPSULE: DenseCapsuleDecoder,
                     AnswerType.ULTRA_DENSE_CAPSULE: UltraDenseCapsuleDecoder}
 _DECODED_ANSWERS = (AnswerType.MEASUREMENT, *CAPSULE_DECODERS)
+
+
+def stream_decoder(mode: ScanMode):
+    """
+    Return the decoder of a scan mode's stream (standard nodes are checked by their sequence).
+
+    :param mode: a mode whose answer type this driver decodes
+    :return: a fresh decoder, built with the mode's sample time and range
+    """
+    decoder = CAPSULE_DECODERS.get(mode.answer_type, CheckedStandardNodeDecoder)
+    return decoder(mode.us_per_sample, mode.max_distance_m)
 
 
 @dataclass(frozen=True)
@@ -171,7 +183,8 @@ class DriverStatus:
     :ivar mode: the scan mode streaming (or last streamed)
     :ivar turns: turns handed to the callback
     :ivar dropped_turns: turns not handed over: without a usable angle step or a turn boundary
-        in sight, or whose publishing failed
+        in sight, not one plausible rotation (:class:`~wctls_ros.rplidar.turns.PublishGate`:
+        a damaged stream), or whose publishing failed
     :ivar stream: what the scan stream decoders met, summed over sessions (frames, damage,
         repairs, losses, rejected samples)
     :ivar flushed_bytes: stale bytes discarded before a session or while the motor is stopped
@@ -715,11 +728,9 @@ class RplidarDriver:
     def _scan(self, link, device: DeviceInfo, mode: ScanMode):
         """Start ``mode`` and stream turns until closing or a motor stop request."""
         self._start_motor(link, device)
-        if mode.answer_type == AnswerType.MEASUREMENT:
-            request, decoder = encode_request(Command.SCAN), StandardNodeDecoder()
-        else:
-            request = encode_express_scan(mode.mode_id)
-            decoder = CAPSULE_DECODERS[mode.answer_type](mode.us_per_sample, mode.max_distance_m)
+        decoder = stream_decoder(mode)
+        request = (encode_request(Command.SCAN) if mode.answer_type == AnswerType.MEASUREMENT
+                   else encode_express_scan(mode.mode_id))
         descriptor, data = self._request(link, request, mode.answer_type,
                                          f'{mode.name} scan descriptor')
         if descriptor.send_mode != SendMode.MULTIPLE or descriptor.length != decoder.FRAME_SIZE:
@@ -734,6 +745,7 @@ class RplidarDriver:
     def _stream(self, link, decoder, assembler: TurnAssembler, mode: ScanMode, data: bytes):
         """Decode the stream into turns until closing or a motor stop request."""
         offsets, times, pending = [], [], []
+        gate = PublishGate()
         stream_end = 0
         earlier = self.status().stream
         seen = (StreamCounts(), 0)
@@ -757,7 +769,10 @@ class RplidarDriver:
                     last_samples_s = now
                     chunk = np.minimum(np.searchsorted(offsets, samples.frame_end), len(times) - 1)
                     for turn in assembler.push(samples, np.asarray(times)[chunk]):
-                        self._hand_over(turn, mode)
+                        if gate.admit(turn):
+                            self._hand_over(turn, mode)
+                        else:
+                            self._update(add_dropped_turns=1)
                 counts = (decoder.counts, assembler.dropped_turns)
                 if counts != seen:
                     self._update(stream=earlier + counts[0],

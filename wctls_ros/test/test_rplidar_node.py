@@ -424,6 +424,24 @@ def test_a_damaged_link_still_publishes_turns_with_their_beams_right(
     assert float(values['samples rejected (%)']) > 0.0
 
 
+def test_a_standard_stream_too_damaged_to_trust_publishes_nothing_and_says_so(
+        executor, ros_context, own_emulator):
+    # Standard nodes carry no checksum: at 20 % corrupted bytes most pass the check bits
+    # misaligned or with a corrupted distance (57 % of the published beams were wrong).
+    device = own_emulator('--corrupt-rate', '0.2')
+    node, listener = start(executor, ros_context, serial_port=device.link, scan_mode='Standard')
+
+    def alarmed():
+        return [report for report in listener.diagnostics if report.level == DiagnosticStatus.ERROR
+                and 'nothing published' in report.message]
+
+    assert spin_until(executor, lambda: len(alarmed()) >= 3, LIVENESS_S)
+    assert not listener.scans
+    report = alarmed()[-1]
+    values = {value.key: value.value for value in report.values}
+    assert 'damaged link' in report.message and float(values['samples rejected (%)']) > 50.0
+
+
 def test_use_sim_time_stamps_turns_on_the_simulated_clock_once_it_runs(
         executor, ros_context, own_emulator, capfd):
     device = own_emulator()

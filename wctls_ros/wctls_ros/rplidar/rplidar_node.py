@@ -376,6 +376,11 @@ class RplidarNode(LifecycleNode):
                        f'or lost, {100 * rejected:.1f} % of the samples rejected, '
                        f'{recent.resyncs} resyncs in the last {DIAGNOSTICS_PERIOD_S:g} s '
                        '(check the cable and the USB power)')
+            if rate_hz == 0.0:
+                # The driver withholds what it cannot decode with confidence: say so loudly.
+                level = DiagnosticStatus.ERROR
+                message = (f'{message}; nothing published: the stream is too damaged to '
+                           'decode with confidence')
         values = {
             'state': status.state.value,
             'link': status.link,

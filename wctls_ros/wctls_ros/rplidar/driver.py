@@ -118,7 +118,7 @@ def stream_decoder(mode: ScanMode):
     :param mode: a mode whose answer type this driver decodes
     :return: a fresh decoder, built with the mode's sample time and range
     """
-    decoder = CAPSULE_DECODERS.get(mode.answer_type, CheckedStandardNodeDecoder)
+    decoder = CAPSULE_DECODERS.get(AnswerType(mode.answer_type), CheckedStandardNodeDecoder)
     return decoder(mode.us_per_sample, mode.max_distance_m)
 
 

@@ -70,7 +70,7 @@ class CheckedStandardNodeDecoder(StandardNodeDecoder):
         self._rejected = 0
         self._seen_resyncs = 0
         # (nodes, resyncs) of the recent chunks, for the share of resyncs per node.
-        self._recent = []
+        self._recent: list = []
 
     @property
     def counts(self) -> StreamCounts:
@@ -110,7 +110,7 @@ class CheckedStandardNodeDecoder(StandardNodeDecoder):
             self._previous = (float(angle[index[-1]]), int(end[index[-1]]))
         distance = samples.distance_mm[index]
         if self._nodes_since_damage < DAMAGE_MEMORY_NODES and index.size and self._step_deg:
-            distance = self._supported(distance)
+            distance = self._supported(distance, self._step_deg)
         return Samples(angle_deg=angle[index], distance_mm=distance,
                        quality=np.where(distance > 0, samples.quality[index], 0).astype(np.uint8),
                        start=samples.start[index], frame_end=end[index],
@@ -149,12 +149,12 @@ class CheckedStandardNodeDecoder(StandardNodeDecoder):
         # A node the next one follows from is in sequence too (the last waits for no successor).
         return follows | np.r_[follows[1:], False]
 
-    def _supported(self, distance: np.ndarray) -> np.ndarray:
+    def _supported(self, distance: np.ndarray, step_deg: float) -> np.ndarray:
         """Return the distances a neighbour pair predicts; the others as no return (rejected)."""
         row = distance.reshape(1, -1)
         self._noise.update(row)
         supported = supported_by_neighbours(row, row > 0, self._noise.sigma_mm,
-                                            math.radians(self._step_deg)).reshape(-1)
+                                            math.radians(step_deg)).reshape(-1)
         emptied = (distance > 0) & ~supported
         self._rejected += int(np.count_nonzero(emptied))
         return np.where(emptied, 0.0, distance)

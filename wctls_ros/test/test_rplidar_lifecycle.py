@@ -26,6 +26,7 @@ from rclpy.lifecycle import TransitionCallbackReturn  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rplidar_testing import start_emulator  # noqa: E402
 from sensor_msgs.msg import LaserScan  # noqa: E402
+from wctls_ros.rplidar.driver import DriverState  # noqa: E402
 from wctls_ros.rplidar.rplidar_node import RplidarNode  # noqa: E402
 
 # One of the suite's slowest modules (make test-fast leaves it out), and one that runs
@@ -271,6 +272,28 @@ def test_a_lost_port_that_comes_back_gets_the_stale_scan_stopped_first(
     executor.remove_node(node)
     node.destroy_node()
     assert stopped_last(heard(device)) and not streaming(device)
+
+
+def test_destroying_the_node_while_it_waits_to_reconnect_stops_the_motor(
+        executor, ros_context, device):
+    # A stream of garbage ends session after session; between them the driver backs off, for
+    # up to 2 s. The motor the last session started is stopped all the same.
+    node = make_node(ros_context, serial_port=device.link, data_timeout=0.3)
+    executor.add_node(node)
+    assert wait_for(lambda: streaming(device), 20.0)
+    assert device.command('corrupt 1.0').startswith('corrupt rate')
+
+    # Five failed sessions: the back-off after the next one is 1.6 s. A session's failure is
+    # counted as it ends, just before its back-off: the close lands there, not in a handshake.
+    assert wait_for(lambda: node.driver.status().reconnects >= 5, 30.0)
+    failed = node.driver.status().reconnects
+    assert wait_for(lambda: node.driver.status().reconnects > failed, 30.0)
+    assert node.driver.status().state == DriverState.CONNECTING
+    heard(device)
+    executor.remove_node(node)
+    node.destroy_node()
+    requests = heard(device)
+    assert 'MOTOR_SPEED=0' in requests and 'STOP' in requests, requests
 
 
 def node_process(link, *command):

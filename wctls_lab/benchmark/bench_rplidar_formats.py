@@ -21,9 +21,9 @@ import sys
 import time
 
 import numpy as np
-from wctls_rplidar.driver import CAPSULE_DECODERS
+from wctls_rplidar.driver import stream_decoder
 from wctls_rplidar.emulator.device import A_SERIES_MODES, EMULATED_MODELS, Faults, MODES
-from wctls_rplidar.protocol import AnswerType, ScanMode, StandardNodeDecoder
+from wctls_rplidar.protocol import AnswerType, ScanMode
 from wctls_rplidar.turns import TurnAssembler
 
 # The stream generator and the scene oracle are the tests' own.
@@ -49,16 +49,9 @@ FORMATS = (
 )
 
 
-def decoder_for(mode: ScanMode):
-    """Return the driver's decoder for a mode."""
-    if mode.answer_type == AnswerType.MEASUREMENT:
-        return StandardNodeDecoder()
-    return CAPSULE_DECODERS[mode.answer_type](mode.us_per_sample, mode.max_distance_m)
-
-
 def run(mode: ScanMode, data: bytes, seconds: float) -> tuple:
     """Decode ``data`` as the driver does; return the CPU time (s) and the turns."""
-    decoder = decoder_for(mode)
+    decoder = stream_decoder(mode)
     assembler = TurnAssembler(mode.us_per_sample, decoder.FRAME_SIZE * 1e-5)
     chunk = max(int(len(data) / seconds * READ_PERIOD_S), 1)
     turns = []

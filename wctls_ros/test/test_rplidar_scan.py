@@ -67,17 +67,49 @@ def random_turn(rng, count, gaps=0.1):
 
 @pytest.mark.parametrize('inverted', [False, True])
 @pytest.mark.parametrize('count', [411, 926, 1500])
-def test_per_sample_layout_matches_sllidar(inverted, count):
-    turn = random_turn(np.random.default_rng(count), count)
+def test_per_sample_layout_of_a_uniform_turn_matches_sllidar(inverted, count):
+    # Dense capsules and standard nodes sample a uniform grid: one beam per sample, at its own
+    # bearing, as sllidar_ros2 lays them out.
+    rng = np.random.default_rng(count)
+    angle = 0.2 + np.arange(count) * (359.6 / count)
+    distance = np.where(rng.random(count) < 0.1, 0.0, rng.uniform(100.0, 9000.0, count))
+    distance[[0, -1]] = 0.0                                  # exercise the trimming
+    turn = Turn(angle_deg=angle, distance_mm=distance,
+                quality=rng.integers(0, 64, count).astype(np.uint8), first_sample_s=1.0,
+                period_s=0.1, last_byte_s=1.1)
     scan = turn_to_scan(turn, False, inverted, multiple=3)
     lo, hi, increment, ranges, intensities, _ = sllidar_reference(
         turn.angle_deg, turn.distance_mm, turn.quality, False, inverted, 3)
-    assert (scan.angle_min, scan.angle_max) == pytest.approx((lo, hi), abs=1e-12)
-    assert scan.angle_increment == pytest.approx(increment, rel=1e-12)
+    assert (scan.angle_min, scan.angle_max) == pytest.approx((lo, hi), abs=1e-9)
+    assert scan.angle_increment == pytest.approx(increment, rel=1e-9)
     np.testing.assert_array_equal(scan.ranges, np.float32(ranges))
     np.testing.assert_array_equal(scan.intensities, np.float32(intensities))
     assert scan.scan_time == 0.1
     assert scan.time_increment == pytest.approx(increment / (2 * math.pi) * 0.1)
+
+
+@pytest.mark.parametrize('inverted', [False, True])
+@pytest.mark.parametrize('count', [411, 926, 1500])
+def test_per_sample_layout_puts_each_beam_within_half_a_step_of_its_own_sample(
+        inverted, count):
+    # Angles that do not lie on a grid (corrected, or a frame lost): sllidar_ros2 spreads the
+    # samples evenly between the first and the last return, degrees off their own bearings.
+    turn = random_turn(np.random.default_rng(count), count)
+    # In measurement order: the step is the median advance from one sample to the next.
+    turn = Turn(np.sort(turn.angle_deg), turn.distance_mm, turn.quality, 1.0, 0.1, 1.1)
+    scan = turn_to_scan(turn, False, inverted, multiple=3)
+    bearing = scan.angle_min + scan.angle_increment * np.arange(len(scan.ranges))
+    if inverted:
+        bearing = bearing[::-1]
+    sample_bearing = math.pi - np.radians(turn.angle_deg)
+    filled = np.isfinite(scan.ranges)
+    assert filled.sum() > 0.3 * count
+    for beam in np.flatnonzero(filled):
+        # The sample this beam holds: the one of its range (random distances are distinct).
+        sample = np.flatnonzero(np.float32(turn.distance_mm / 1000.0) == scan.ranges[beam])
+        assert len(sample) == 1
+        assert abs(sample_bearing[sample[0]] - bearing[beam]) <= 0.5 * scan.angle_increment + 1e-9
+    assert scan.time_increment == pytest.approx(scan.angle_increment / (2 * math.pi) * 0.1)
 
 
 @pytest.mark.parametrize('inverted', [False, True])

@@ -188,7 +188,7 @@ def emulated_stream(modes, mode_id, pose=SENSOR_POSE, seconds=3.0, noisy=False, 
 
 
 @contextlib.contextmanager
-def serving(model, typical_mode=None, firmware=None, baudrate=None):
+def serving(model, typical_mode=None, firmware=None, baudrate=None, faults=None):
     """
     Serve a noiseless emulated device of ``model`` on a pseudo-terminal, in a thread.
 
@@ -198,11 +198,12 @@ def serving(model, typical_mode=None, firmware=None, baudrate=None):
         model's)
     :param firmware: (major, minor) (default: the model's)
     :param baudrate: the only rate it hears its client at (default: any)
+    :param faults: its fault settings (default: none)
     :return: a context manager yielding the terminal's path
     """
     profile = EMULATED_MODELS[model] if isinstance(model, str) else model
     scene = RoomScene()
-    emulator = Emulator(scene, Faults(), firmware or profile.firmware, 0,
+    emulator = Emulator(scene, faults or Faults(), firmware or profile.firmware, 0,
                         PtyPort(None, baudrate), modes=profile.modes,
                         typical_mode=profile.typical_mode if typical_mode is None
                         else typical_mode, model=profile)
@@ -262,7 +263,12 @@ class DeviceLink:
 
     A pseudo-terminal carries no modem lines, so the DTR motor control of an A1 is seen here:
     the driver's writes, reads and DTR changes reach the device as a serial line would carry
-    them. :meth:`unplug` makes every later use fail as a pulled USB adapter does.
+    them. :meth:`unplug` makes every later use fail as a pulled USB adapter does;
+    :meth:`break_connection` only the open connection's, as a link that broke while the device
+    stayed powered (the next :meth:`connect` reaches it again). :attr:`on_write` and
+    :attr:`on_close`, when set, are called with each write's bytes and on each close (on the
+    driver's thread), to act at an exact point of a session; :attr:`read_error`, when set, is
+    raised once by the next read (a bug in the session).
 
     :param device: the emulated device
     :param baudrate: the line's rate, bits per second (for the driver's byte time)
@@ -273,8 +279,12 @@ class DeviceLink:
         self.name = f'in-process device @ {baudrate} baud'
         self.byte_time_s = 10.0 / baudrate
         self.opened = 0
+        self.on_write = None
+        self.on_close = None
+        self.read_error = None
         self._answers = b''
         self._gone = False
+        self._broken = False
 
     def connect(self, config):
         """
@@ -284,19 +294,28 @@ class DeviceLink:
         :return: this link
         """
         self.opened += 1
+        self._broken = False
         return self
 
     def unplug(self):
         """Pull the device: every later write, read or DTR change fails."""
         self._gone = True
 
+    def break_connection(self):
+        """Break the open connection; the device stays powered and a new connection reaches it."""
+        self._broken = True
+
     def _check(self):
         if self._gone:
             raise LinkError(f'{self.name}: device unplugged')
+        if self._broken:
+            raise LinkError(f'{self.name}: the connection broke')
 
     def write(self, data: bytes):
         """Deliver bytes to the device; keep its answers for :meth:`read`."""
         self._check()
+        if self.on_write is not None:
+            self.on_write(data)
         self._answers += self.device.receive(data, time.monotonic())
 
     def set_dtr(self, asserted: bool) -> bool:
@@ -308,6 +327,9 @@ class DeviceLink:
     def read(self, timeout_s: float) -> bytes:
         """Return the answers and stream bytes due, waiting up to ``timeout_s``."""
         deadline = time.monotonic() + timeout_s
+        if self.read_error is not None:
+            error, self.read_error = self.read_error, None
+            raise error
         while True:
             self._check()
             now = time.monotonic()
@@ -317,7 +339,9 @@ class DeviceLink:
             time.sleep(min(max(self.device.next_frame_in(now), 0.001), deadline - now, 0.02))
 
     def close(self):
-        """Nothing to release."""
+        """Call :attr:`on_close`, if set; nothing to release."""
+        if self.on_close is not None:
+            self.on_close()
 
 
 class LogLines:

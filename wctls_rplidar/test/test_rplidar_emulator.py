@@ -206,7 +206,8 @@ def test_help_shows_every_default():
     options = result.stdout.split('options:')[1].split('Lines on standard input')[0]
     # One entry per option: its flags, then its help, possibly wrapped over several lines.
     entries = [' '.join(entry.split()) for entry in re.split(r'\n  (?=-)', options) if entry]
-    assert len(entries) == 20
+    # 20, and the rates of inserted bytes, bit flips, replays, packet swaps and duplicates.
+    assert len(entries) == 25
     for entry in entries[1:]:                                     # all but -h/--help
         assert '(default:' in entry, entry
     text = ' '.join(result.stdout.split())
@@ -231,6 +232,7 @@ def port_in_use():
     (lambda tmp, port: ['--firmware', 'one'], '--firmware'),
     (lambda tmp, port: ['--corrupt-rate', '1.5'], '--corrupt-rate'),
     (lambda tmp, port: ['--cut-rate', '-0.1'], '--cut-rate'),
+    (lambda tmp, port: ['--flip-rate', '2'], '--flip-rate'),
     (lambda tmp, port: ['--conf-answer', 'speed=3'], 'ENTRY one of mode_count'),
     (lambda tmp, port: ['--conf-answer', 'us_per_sample=1e12'], 'does not fit'),
     (lambda tmp, port: ['--health', 'bad'], '--health'),

@@ -20,11 +20,13 @@ import pytest
 
 rclpy = pytest.importorskip('rclpy')
 
-from lifecycle_msgs.msg import State  # noqa: E402, I100
+from lifecycle_msgs.msg import State, Transition  # noqa: E402, I100
+from lifecycle_msgs.srv import ChangeState  # noqa: E402
 from rclpy.lifecycle import TransitionCallbackReturn  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rplidar_testing import start_emulator  # noqa: E402
 from sensor_msgs.msg import LaserScan  # noqa: E402
+from wctls_rplidar.driver import DriverState  # noqa: E402
 from wctls_rplidar.rplidar_node import RplidarNode  # noqa: E402
 
 # One of the suite's slowest modules (make test-fast leaves it out), and one that runs
@@ -162,6 +164,70 @@ def test_deactivate_stops_the_motor(executor, ros_context, device):
     assert motor_stopped(device)
 
 
+def change_state(executor, context, *transition_ids) -> list:
+    """
+    Send change_state requests at once from another node, as a lifecycle manager does.
+
+    :param transition_ids: the transitions asked for, by id
+    :return: each answer's ``success``
+    """
+    manager = rclpy.create_node('lifecycle_manager', context=context)
+    client = manager.create_client(ChangeState, '/rplidar_node/change_state')
+    executor.add_node(manager)
+    try:
+        assert spin_until(executor, client.service_is_ready, 20.0)
+        futures = [client.call_async(ChangeState.Request(transition=Transition(id=i)))
+                   for i in transition_ids]
+        # The node's executor raised the failing transition's error: it ended here.
+        assert spin_until(executor, lambda: all(f.done() for f in futures), 60.0)
+    finally:
+        executor.remove_node(manager)
+        manager.destroy_node()
+    return [future.result().success for future in futures]
+
+
+def test_a_transition_the_state_does_not_have_is_refused_and_the_node_lives_on(
+        executor, ros_context, device, capfd):
+    node = make_node(ros_context, serial_port=device.link, autostart=False)
+    executor.add_node(node)
+    scans = scan_counter(ros_context, executor)
+    assert change_state(executor, ros_context, Transition.TRANSITION_CLEANUP,
+                        Transition.TRANSITION_ACTIVATE) == [False, False]
+    assert state_id(node) == State.PRIMARY_STATE_UNCONFIGURED
+    assert change_state(executor, ros_context, Transition.TRANSITION_CONFIGURE,
+                        Transition.TRANSITION_ACTIVATE) == [True, True]
+    assert spin_until(executor, lambda: len(scans) >= 1, 10.0)
+    assert change_state(executor, ros_context, Transition.TRANSITION_CONFIGURE,
+                        Transition.TRANSITION_CLEANUP) == [False, False]
+    assert state_id(node) == State.PRIMARY_STATE_ACTIVE
+    count = len(scans)
+    assert spin_until(executor, lambda: len(scans) >= count + 2, 10.0)
+    refusals = [line for line in capfd.readouterr().err.splitlines() if 'refused' in line]
+    assert len(refusals) == 4, refusals
+    assert 'transition 2 is not possible from the unconfigured state' in refusals[0]
+    assert '(possible: deactivate, shutdown)' in refusals[2]
+    # A manager asking for the shutdown of another state: this state's is the one meant.
+    heard(device)
+    assert change_state(executor, ros_context,
+                        Transition.TRANSITION_UNCONFIGURED_SHUTDOWN) == [True]
+    assert state_id(node) == State.PRIMARY_STATE_FINALIZED and node.driver is None
+    assert stopped_last(heard(device)) and not streaming(device)
+
+
+def test_two_managers_configuring_at_once_get_one_success_and_one_refusal(
+        executor, ros_context, device):
+    node = make_node(ros_context, serial_port=device.link, autostart=False)
+    executor.add_node(node)
+    answers = change_state(executor, ros_context, Transition.TRANSITION_CONFIGURE,
+                           Transition.TRANSITION_CONFIGURE)
+    assert answers == [True, False]
+    assert state_id(node) == State.PRIMARY_STATE_INACTIVE and node.driver is not None
+    answers = change_state(executor, ros_context, Transition.TRANSITION_ACTIVATE,
+                           Transition.TRANSITION_ACTIVATE, Transition.TRANSITION_DEACTIVATE)
+    assert answers == [True, False, True]
+    assert state_id(node) == State.PRIMARY_STATE_INACTIVE
+
+
 def test_configure_without_a_device_fails_naming_the_cause(ros_context, tmp_path, capfd):
     node = make_node(ros_context, serial_port=str(tmp_path / 'absent'), autostart=False,
                      configure_timeout=0.5)
@@ -206,6 +272,28 @@ def test_a_lost_port_that_comes_back_gets_the_stale_scan_stopped_first(
     executor.remove_node(node)
     node.destroy_node()
     assert stopped_last(heard(device)) and not streaming(device)
+
+
+def test_destroying_the_node_while_it_waits_to_reconnect_stops_the_motor(
+        executor, ros_context, device):
+    # A stream of garbage ends session after session; between them the driver backs off, for
+    # up to 2 s. The motor the last session started is stopped all the same.
+    node = make_node(ros_context, serial_port=device.link, data_timeout=0.3)
+    executor.add_node(node)
+    assert wait_for(lambda: streaming(device), 20.0)
+    assert device.command('corrupt 1.0').startswith('corrupt rate')
+
+    # Five failed sessions: the back-off after the next one is 1.6 s. A session's failure is
+    # counted as it ends, just before its back-off: the close lands there, not in a handshake.
+    assert wait_for(lambda: node.driver.status().reconnects >= 5, 30.0)
+    failed = node.driver.status().reconnects
+    assert wait_for(lambda: node.driver.status().reconnects > failed, 30.0)
+    assert node.driver.status().state == DriverState.CONNECTING
+    heard(device)
+    executor.remove_node(node)
+    node.destroy_node()
+    requests = heard(device)
+    assert 'MOTOR_SPEED=0' in requests and 'STOP' in requests, requests
 
 
 def node_process(link, *command):

@@ -246,6 +246,20 @@ def test_no_answer_at_any_rate_says_so_in_one_line():
     assert '\n' not in message and 'not powered' in message, message
 
 
+def test_a_device_answering_with_another_answer_type_is_named_not_the_port():
+    # Every answer's descriptor says 0x99: the device answers, but not as this driver expects.
+    with serving('s1', faults=Faults(answer_type=0x99)) as path:
+        driver, turns, log = start_driver(path)
+        try:
+            message = wait_for(lambda: 'GET_INFO' in driver.status().message
+                               and driver.status().message, what='a failed GET_INFO')
+        finally:
+            driver.close()
+    assert 'answered with answer type 0x99 instead of 0x04' in message, message
+    assert 'serial_baudrate' not in message and not turns.turns
+    assert any('answer type 0x99' in line for line in log.lines), log.lines
+
+
 def test_a_lasting_health_error_names_its_code_in_one_line():
     _, link = emulated_device('s1', faults=Faults(health=HealthStatus.ERROR, resets_to_clear=99))
     driver, _, log = start_driver(link, health_reset_attempts=0)

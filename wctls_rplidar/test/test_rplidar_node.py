@@ -14,8 +14,10 @@ import pytest
 
 rclpy = pytest.importorskip('rclpy')
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402, I100
+from builtin_interfaces.msg import Time as TimeMsg  # noqa: E402, I100
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
 from rplidar_testing import (compensated_beam_bands, EMULATOR_TURN_S,  # noqa: E402
                              EMULATOR_TURN_SAMPLES, first_sample_times, range_band,
                              ros_minus_monotonic_s, serving, start_emulator, true_ranges)
@@ -420,6 +422,55 @@ def test_a_damaged_link_still_publishes_turns_with_their_beams_right(
     assert report.level == DiagnosticStatus.WARN and 'damaged link' in report.message
     assert float(values['frames damaged or lost (%)']) > damaged_pct
     assert float(values['samples rejected (%)']) > 0.0
+
+
+def test_a_standard_stream_too_damaged_to_trust_publishes_nothing_and_says_so(
+        executor, ros_context, own_emulator):
+    # Standard nodes carry no checksum: at 20 % corrupted bytes most pass the check bits
+    # misaligned or with a corrupted distance (57 % of the published beams were wrong).
+    device = own_emulator('--corrupt-rate', '0.2')
+    node, listener = start(executor, ros_context, serial_port=device.link, scan_mode='Standard')
+
+    def alarmed():
+        return [report for report in listener.diagnostics if report.level == DiagnosticStatus.ERROR
+                and 'nothing published' in report.message]
+
+    assert spin_until(executor, lambda: len(alarmed()) >= 3, LIVENESS_S)
+    assert not listener.scans
+    report = alarmed()[-1]
+    values = {value.key: value.value for value in report.values}
+    assert 'damaged link' in report.message and float(values['samples rejected (%)']) > 50.0
+
+
+def test_use_sim_time_stamps_turns_on_the_simulated_clock_once_it_runs(
+        executor, ros_context, own_emulator, capfd):
+    device = own_emulator()
+    node, listener = start(executor, ros_context, serial_port=device.link, use_sim_time=True)
+    # No /clock yet: the ROS clock stands at 0, no turn can be stamped on it.
+    assert spin_until(executor, lambda: node.driver is not None
+                      and node.driver.status().dropped_turns >= 3, LIVENESS_S)
+    assert not listener.scans
+    errors = capfd.readouterr().err
+    failures = [line for line in errors.splitlines() if 'publishing a turn failed' in line]
+    assert failures and all('the ROS clock is not running' in line for line in failures), errors
+    assert 'must not be negative' not in errors
+    # A simulation's clock from 1000 s on, advancing with the wall clock.
+    clock_pub = listener.node.create_publisher(Clock, '/clock', 10)
+    started_s = time.monotonic()
+    sim_now_s = []
+
+    def tick():
+        sim_now_s.append(1000.0 + time.monotonic() - started_s)
+        seconds = math.floor(sim_now_s[-1])
+        clock_pub.publish(Clock(clock=TimeMsg(sec=seconds,
+                                              nanosec=int(1e9 * (sim_now_s[-1] - seconds)))))
+
+    listener.node.create_timer(0.02, tick)
+    spin_until(executor, lambda: sim_now_s, LIVENESS_S)
+    scans = collect(executor, listener, 6)[1:]
+    stamps = np.array([stamp_s(scan) for scan in scans])
+    assert np.all((stamps > 1000.0) & (stamps < sim_now_s[-1])), (stamps, sim_now_s[-1])
+    assert np.median(np.diff(stamps)) == pytest.approx(EMULATOR_TURN_S, rel=0.2)
 
 
 def test_a_stream_of_garbage_restarts_the_session_until_it_clears(executor, ros_context,

@@ -29,8 +29,11 @@ error gets a RESET, a ~2 s wait and a new session, and after ``health_reset_atte
 resets the driver gives up with a clear error until the motor is started again.
 
 :meth:`RplidarDriver.close` ends scanning and stops the motor the model's way (STOP, then
-MOTOR_SPEED 0, SET_MOTOR_PWM 0 or DTR set); it may be called from a signal handler and after the
-port is gone.
+MOTOR_SPEED 0, SET_MOTOR_PWM 0 or DTR set; all three while the model is not yet known), in
+whatever state the driver is: scanning, in a handshake, backing off after a failed session or
+given up. When the session's link is gone (or there is none) it reopens the link briefly to
+send them: a device still powered behind a link that broke is stopped too. A driver that gives
+up stops the motor as well. close may be called from a signal handler and after the port is gone.
 """
 
 from dataclasses import dataclass, replace
@@ -49,9 +52,10 @@ from .protocol import (ACC_BOARD_MAJOR_IDS, AccBoardFlag, AnswerType, Command, C
                        encode_acc_board_flag_request, encode_conf_request, encode_express_scan,
                        encode_motor_pwm, encode_motor_speed, encode_request, find_descriptor,
                        HealthStatus, MotorControl, ProtocolError, RPM_MOTOR_MAJOR_ID,
-                       SampleRate, ScanMode, SendMode, StandardNodeDecoder, StreamCounts)
+                       SampleRate, ScanMode, SendMode, StreamCounts)
+from .standard import CheckedStandardNodeDecoder
 from .transport import drain, LinkError, SerialLink, TcpLink
-from .turns import TurnAssembler
+from .turns import PublishGate, TurnAssembler
 from .ultra import UltraCapsuleDecoder
 from .ultradense import UltraDenseCapsuleDecoder
 
@@ -105,6 +109,17 @@ CAPSULE_DECODERS = {AnswerType.EXPRESS_CAPSULE: ExpressCapsuleDecoder,
                     AnswerType.DENSE_CAPSULE: DenseCapsuleDecoder,
                     AnswerType.ULTRA_DENSE_CAPSULE: UltraDenseCapsuleDecoder}
 _DECODED_ANSWERS = (AnswerType.MEASUREMENT, *CAPSULE_DECODERS)
+
+
+def stream_decoder(mode: ScanMode):
+    """
+    Return the decoder of a scan mode's stream (standard nodes are checked by their sequence).
+
+    :param mode: a mode whose answer type this driver decodes
+    :return: a fresh decoder, built with the mode's sample time and range
+    """
+    decoder = CAPSULE_DECODERS.get(AnswerType(mode.answer_type), CheckedStandardNodeDecoder)
+    return decoder(mode.us_per_sample, mode.max_distance_m)
 
 
 @dataclass(frozen=True)
@@ -168,7 +183,8 @@ class DriverStatus:
     :ivar mode: the scan mode streaming (or last streamed)
     :ivar turns: turns handed to the callback
     :ivar dropped_turns: turns not handed over: without a usable angle step or a turn boundary
-        in sight, or whose publishing failed
+        in sight, not one plausible rotation (:class:`~wctls_rplidar.turns.PublishGate`:
+        a damaged stream), or whose publishing failed
     :ivar stream: what the scan stream decoders met, summed over sessions (frames, damage,
         repairs, losses, rejected samples)
     :ivar flushed_bytes: stale bytes discarded before a session or while the motor is stopped
@@ -204,8 +220,16 @@ class DeviceError(Exception):
     """The device did not answer, answered wrongly or streamed nothing usable."""
 
 
+class UnexpectedAnswer(DeviceError):
+    """The device answered a request, but with another answer type than the request's."""
+
+
 class GiveUp(Exception):
     """Retrying cannot help: an unsupported scan mode or a health error that RESET does not fix."""
+
+
+class _Closing(Exception):
+    """close() was called: the handshake under way is abandoned."""
 
 
 def plausible_mode(mode: ScanMode) -> tuple:
@@ -328,9 +352,12 @@ class RplidarDriver:
             self._status = replace(self._status, **changes)
 
     def _run(self):
+        stopped = False
         while not self._closing.is_set():
             try:
                 link, baudrate = self._open()
+            except _Closing:
+                break
             except (LinkError, DeviceError, ProtocolError) as error:
                 self._update(state=DriverState.CONNECTING, message=str(error))
                 self._log.warning(f'{error}; retrying', throttle_duration_sec=LOG_THROTTLE_S)
@@ -343,9 +370,11 @@ class RplidarDriver:
             try:
                 self._serve(link)
                 failed = False
+            except _Closing:
+                failed = False
             except GiveUp as error:
                 failed = False
-                self._give_up(str(error), requests)
+                self._give_up(link, str(error), requests)
             except (LinkError, DeviceError, ProtocolError) as error:
                 self._update(state=DriverState.CONNECTING, message=str(error), add_reconnects=1)
                 self._log.warning(f'{error}; reconnecting', throttle_duration_sec=LOG_THROTTLE_S)
@@ -356,10 +385,12 @@ class RplidarDriver:
                                 f'{error}; reconnecting', throttle_duration_sec=LOG_THROTTLE_S)
             finally:
                 if self._closing.is_set():
-                    self._shut_down(link)
+                    stopped = self._shut_down(link)
                 link.close()
             if failed:
                 self._back_off()
+        if not stopped:
+            self._shut_down_through_new_link()
 
     def _open(self):
         """
@@ -376,12 +407,17 @@ class RplidarDriver:
             return self._link_factory(config), config.serial_baudrate
         # The rate that answered last is tried first: a reconnect costs no probe.
         answered = self.status().baudrate
+        unexpected = None
         for baudrate in sorted(PROBED_BAUDRATES, key=lambda rate: rate != answered):
             link = self._link_factory(replace(config, serial_baudrate=baudrate))
             try:
                 self._stop_stream(link)
                 self._ask(link, Command.GET_INFO, AnswerType.DEVICE_INFO,
                           timeout_s=PROBE_TIMEOUT_S)
+            except UnexpectedAnswer as error:
+                link.close()
+                unexpected = error          # the rate is right: the answer is not
+                continue
             except (DeviceError, ProtocolError):
                 link.close()
                 continue
@@ -391,6 +427,8 @@ class RplidarDriver:
             self._log.info(f'serial_baudrate 0: {config.serial_port} answered GET_INFO at '
                            f'{baudrate} baud (probed {", ".join(map(str, PROBED_BAUDRATES))})')
             return link, baudrate
+        if unexpected is not None:
+            raise unexpected
         raise DeviceError(f'no answer to GET_INFO at any rate ('
                           f'{", ".join(map(str, PROBED_BAUDRATES))} baud) on '
                           f'{config.serial_port}: not an RPLIDAR, or not powered (a weak USB '
@@ -402,9 +440,9 @@ class RplidarDriver:
         self._closing.wait(backoff_s)
         self._update(backoff_s=min(2.0 * backoff_s, BACKOFF_MAX_S))
 
-    def _give_up(self, reason: str, requests_before: int):
+    def _give_up(self, link, reason: str, requests_before: int):
         """
-        Report a failure retrying cannot fix; wait until the motor is requested again.
+        Report a failure retrying cannot fix; stop the motor; wait until it is requested again.
 
         A start_motor that arrived after the failing session began is not swallowed: the driver
         tries once more instead of waiting.
@@ -418,6 +456,7 @@ class RplidarDriver:
             return
         self._update(state=DriverState.FAILED, message=reason)
         self._log.error(f'{reason} (call the start_motor service to retry)')
+        self._shut_down(link)
         while not self._closing.is_set() and not self._motor_on:
             self._closing.wait(STREAM_READ_TIMEOUT_S)
 
@@ -489,22 +528,56 @@ class RplidarDriver:
                        'device leaves it'))
 
     def _stop_motor(self, link):
-        """Stop the motor the model's way (nothing before the model is known)."""
+        """
+        Stop the motor the model's way; before the model is known, every way.
+
+        A device ignores the motor commands of the other families (SLAMTEC's SDK sends each
+        family its own), so an unknown model gets all three: STOP alone leaves an S-series motor
+        turning, an A2/A3 board's PWM and an A1's DTR line as they were.
+        """
         motor = self.status().motor
-        if motor == MotorControl.RPM:
+        if motor in (MotorControl.RPM, None):
             link.write(encode_motor_speed(0))
-        elif motor == MotorControl.PWM:
+        if motor in (MotorControl.PWM, None):
             link.write(encode_motor_pwm(0))
-        elif motor == MotorControl.DTR:
+        if motor in (MotorControl.DTR, None):
             link.set_dtr(True)
 
-    def _shut_down(self, link):
-        """On close: end scanning, then stop the motor; a link already gone is no error."""
+    def _shut_down(self, link) -> bool:
+        """
+        End scanning, then stop the motor; a link already gone is no error.
+
+        :return: whether the commands were sent
+        """
         try:
             link.write(encode_request(Command.STOP))
             self._stop_motor(link)
         except LinkError as error:
-            self._log.info(f'closing: the motor could not be told to stop ({error})')
+            self._log.info(f'the motor could not be told to stop ({error})')
+            return False
+        return True
+
+    def _shut_down_through_new_link(self):
+        """
+        On close without a link that took the stop: open one briefly and stop through it.
+
+        With an automatic serial rate not yet found, every probed rate is tried (bytes at a
+        wrong rate are garbage the device discards).
+        """
+        config = self._config
+        baudrates = [config.serial_baudrate]
+        if config.channel_type == 'serial' and config.serial_baudrate == AUTO_BAUDRATE:
+            baudrates = [self.status().baudrate] if self.status().baudrate else PROBED_BAUDRATES
+        for baudrate in baudrates:
+            try:
+                link = self._link_factory(replace(config, serial_baudrate=baudrate))
+            except LinkError as error:
+                self._log.info(f'closing: the motor could not be told to stop ({error})')
+                return
+            try:
+                self._shut_down(link)
+            finally:
+                link.close()
 
     def _stop_stream(self, link):
         """Stop any scan in progress and discard the bytes still arriving."""
@@ -525,6 +598,8 @@ class RplidarDriver:
     def _read_more(self, link, deadline: float, what: str,
                    timeout_s: float = ANSWER_TIMEOUT_S) -> bytes:
         """Read the next bytes before ``deadline`` (``timeout_s`` after the request) or raise."""
+        if self._closing.is_set():
+            raise _Closing()
         remaining = deadline - time.monotonic()
         data = link.read(remaining) if remaining > 0 else b''
         if not data:
@@ -539,15 +614,27 @@ class RplidarDriver:
         link.write(request)
         deadline = time.monotonic() + timeout_s
         buffer = b''
+        others = []
         while True:
             descriptor, end = find_descriptor(buffer)
             if descriptor is not None and descriptor.answer_type == answer_type:
                 return descriptor, buffer[end:]
             if descriptor is not None:
                 # Stale bytes that look like another answer: search on past their sync.
+                others.append(f'0x{descriptor.answer_type:02X}')
                 buffer = buffer[end - DESCRIPTOR_SIZE + 1:]
                 continue
-            buffer = buffer[end:] + self._read_more(link, deadline, what, timeout_s)
+            try:
+                buffer = buffer[end:] + self._read_more(link, deadline, what, timeout_s)
+            except DeviceError:
+                if not others:
+                    raise
+                # The device answers, in another way: the port, rate and cable are right.
+                raise UnexpectedAnswer(
+                    f'no {what} within {timeout_s:g} s on {link.name}: the device answered '
+                    f'with answer type {", ".join(dict.fromkeys(others))} instead of '
+                    f'0x{answer_type:02X} (a protocol or firmware this driver does not '
+                    'speak, or a damaged answer)') from None
 
     def _ask(self, link, command: int, answer_type: int, request: bytes = b'',
              timeout_s: float = ANSWER_TIMEOUT_S) -> bytes:
@@ -641,11 +728,9 @@ class RplidarDriver:
     def _scan(self, link, device: DeviceInfo, mode: ScanMode):
         """Start ``mode`` and stream turns until closing or a motor stop request."""
         self._start_motor(link, device)
-        if mode.answer_type == AnswerType.MEASUREMENT:
-            request, decoder = encode_request(Command.SCAN), StandardNodeDecoder()
-        else:
-            request = encode_express_scan(mode.mode_id)
-            decoder = CAPSULE_DECODERS[mode.answer_type](mode.us_per_sample, mode.max_distance_m)
+        decoder = stream_decoder(mode)
+        request = (encode_request(Command.SCAN) if mode.answer_type == AnswerType.MEASUREMENT
+                   else encode_express_scan(mode.mode_id))
         descriptor, data = self._request(link, request, mode.answer_type,
                                          f'{mode.name} scan descriptor')
         if descriptor.send_mode != SendMode.MULTIPLE or descriptor.length != decoder.FRAME_SIZE:
@@ -660,6 +745,7 @@ class RplidarDriver:
     def _stream(self, link, decoder, assembler: TurnAssembler, mode: ScanMode, data: bytes):
         """Decode the stream into turns until closing or a motor stop request."""
         offsets, times, pending = [], [], []
+        gate = PublishGate()
         stream_end = 0
         earlier = self.status().stream
         seen = (StreamCounts(), 0)
@@ -683,7 +769,10 @@ class RplidarDriver:
                     last_samples_s = now
                     chunk = np.minimum(np.searchsorted(offsets, samples.frame_end), len(times) - 1)
                     for turn in assembler.push(samples, np.asarray(times)[chunk]):
-                        self._hand_over(turn, mode)
+                        if gate.admit(turn):
+                            self._hand_over(turn, mode)
+                        else:
+                            self._update(add_dropped_turns=1)
                 counts = (decoder.counts, assembler.dropped_turns)
                 if counts != seen:
                     self._update(stream=earlier + counts[0],

@@ -19,8 +19,15 @@ A turn in sllidar_ros2's layout, and as a fixed-count scan: LaserScan fields (pu
   jump back by one across the seam; it also copies each sample into the next k - 1 bins (a
   quarter of an A2's beams hold a copy 0.5-2.4 bins off its sample's bearing) and leaves the
   bins left empty +inf.
-- Otherwise every sample is a beam between the first and the last sample with a return, so the
-  beam count and angle_min/max change from turn to turn.
+- Otherwise the beams lie on the turn's own angle grid, from its first to its last sample with
+  a return (so the beam count and angle_min/max change from turn to turn): increment = the
+  turn's angle step (the median advance between consecutive samples), each beam holding the
+  sample nearest its bearing, so that every sample is published within half a step of its own
+  bearing; a grid angle no sample fell near is NaN (no measurement, REP-117). On a device that
+  samples a uniform grid (dense and standard nodes) that is one beam per sample, each at its
+  sample's bearing; express and ultra capsules' corrected angles (up to 8 degrees) and lost
+  frames no longer spread the samples evenly between the first and the last, as sllidar_ros2
+  does (1.9-2.6 degrees off on clean A-series streams, up to 54 after a lost capsule).
 - No return -> +inf; intensities = the 6-bit quality (sllidar's ``quality >> 2``).
 - :func:`fixed_scan`: N bins of 2 pi / N from -pi, each holding the sample nearest its centre
   (+inf for a sample without a return); a bin no sample fell in is NaN (no measurement,
@@ -38,7 +45,7 @@ The timing fields are this driver's own, honest ones: scan_time is the measured 
 and time_increment the time the sensor takes to sweep one angle_increment.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 
 import numpy as np
@@ -143,29 +150,43 @@ def turn_to_scan(turn: Turn, angle_compensate: bool, inverted: bool, multiple: i
     offset = orientation_offset_rad(orientation)
     if angle_compensate:
         return _compensated_scan(turn, inverted, multiple, offset)
-    order = np.argsort(turn.angle_deg, kind='stable')
-    angle = turn.angle_deg[order]
-    ranges = np.where(turn.distance_mm[order] > 0, turn.distance_mm[order] / 1000.0, np.inf)
-    intensities = turn.quality[order].astype(np.float32)
-    valid = np.isfinite(ranges)
-    if valid.any():
-        first, last = np.flatnonzero(valid)[[0, -1]]
-        ranges, intensities = ranges[first:last + 1], intensities[first:last + 1]
-        raw_min, raw_max = math.radians(angle[first]), math.radians(angle[last])
-    else:
-        raw_min, raw_max = 0.0, math.radians(359.0)
-    count = len(ranges)
-    forward = raw_max > raw_min
-    angle_min, angle_max = (offset - raw_max, offset - raw_min) if forward else (
-        offset - raw_min, offset - raw_max)
-    increment = (angle_max - angle_min) / (count - 1) if count > 1 else 0.0
-    if forward != inverted:
+    return _grid_scan(turn, inverted, offset)
+
+
+def _grid_scan(turn: Turn, inverted: bool, offset_rad: float) -> ScanArrays:
+    """
+    Lay one turn out on its own angle grid, from its first to its last return (see the module).
+
+    Beam k (in raw order) is at raw angle a0 + k s, s the turn's step: the sample nearest it,
+    at most s / 2 away, fills it.
+
+    :param turn: the assembled turn
+    :param inverted: the sensor is mounted upside down (mirror the array order)
+    :param offset_rad: the published angle of raw angle 0
+    :return: the LaserScan fields, increment s (0 for a single beam)
+    """
+    angle = turn.angle_deg
+    advances = np.diff(angle)
+    advances = advances[advances > 0.0]
+    step_deg = float(np.median(advances)) if advances.size else 1.0
+    returns = turn.distance_mm > 0
+    ends = angle[returns] if returns.any() else angle
+    first_deg, last_deg = float(ends.min()), float(ends.max())
+    count = int(round((last_deg - first_deg) / step_deg)) + 1
+    position = (angle - first_deg) / step_deg + 0.5
+    near = (position >= 0.0) & (position < count)
+    ranges, intensities = _binned(replace(turn, angle_deg=angle[near],
+                                          distance_mm=turn.distance_mm[near],
+                                          quality=turn.quality[near]), position[near], count)
+    step_rad = math.radians(step_deg)
+    raw_max = math.radians(first_deg) + (count - 1) * step_rad
+    if not inverted:
         ranges, intensities = ranges[::-1], intensities[::-1]
-    return ScanArrays(angle_min=angle_min, angle_max=angle_max, angle_increment=increment,
-                      time_increment=abs(increment) / (2.0 * math.pi) * turn.period_s,
-                      scan_time=turn.period_s,
-                      ranges=np.ascontiguousarray(ranges, dtype=np.float32),
-                      intensities=np.ascontiguousarray(intensities, dtype=np.float32))
+    return ScanArrays(angle_min=offset_rad - raw_max, angle_max=offset_rad - math.radians(
+                          first_deg), angle_increment=step_rad if count > 1 else 0.0,
+                      time_increment=step_rad / (2.0 * math.pi) * turn.period_s,
+                      scan_time=turn.period_s, ranges=np.ascontiguousarray(ranges),
+                      intensities=np.ascontiguousarray(intensities))
 
 
 def _compensated_scan(turn: Turn, inverted: bool, multiple: int, offset_rad: float) -> ScanArrays:

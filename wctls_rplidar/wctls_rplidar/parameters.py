@@ -49,8 +49,9 @@ PARAMETERS = tuple(Parameter(*row) for row in (
      'sllidar_ros2)'),
     ('inverted', False, 'The sensor is mounted upside down (mirror the beam order)'),
     ('angle_compensate', True, 'Bin each turn into 360*k fixed beams (k from the sample '
-     'rate), each at its bin centre, NaN where no sample fell; false publishes every sample, '
-     'with a varying beam count'),
+     'rate), each at its bin centre, NaN where no sample fell; false publishes the turn on its '
+     'own angle grid, each sample within half a step of its bearing, with a varying beam '
+     'count'),
     ('scan_mode', '', "Scan mode name, e.g. 'DenseBoost' or 'Standard'; '' = the device's "
      'typical mode'),
     ('scan_frequency', 10.0, 'Rotation frequency requested from the motor, Hz (sets the '

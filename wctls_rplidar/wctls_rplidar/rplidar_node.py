@@ -14,6 +14,12 @@ likely cause, when the device has not answered within ``configure_timeout``. How
 ends (a transition, destroy_node after Ctrl-C, SIGTERM or an exception) the driver is closed,
 which stops the scan and the motor.
 
+A change_state request the current state does not allow (configure while active, cleanup while
+unconfigured) is refused with ``success: false`` and a warning, and the node goes on: the rclpy
+of Jazzy raises on it inside the service and ends the node (ros2/rclpy#1209, fixed upstream by
+ros2/rclpy#1319). A shutdown request names whichever of the three shutdown transitions; the
+current state's is taken. Requests are handled one at a time.
+
 Publishes sensor_msgs/LaserScan on ``scan`` (reliable, keep last 10, like sllidar_ros2; a
 lifecycle publisher: only while active), with ``fixed_beams`` N > 0 the same turns as N fixed
 beams on ``scan_fixed`` (:func:`~wctls_rplidar.laserscan.fixed_scan`), and
@@ -24,6 +30,9 @@ background thread (:class:`~wctls_rplidar.driver.RplidarDriver`), which publishe
 as soon as it is complete. Unlike sllidar_ros2, header.stamp is the measurement time of the
 turn's first sample (raw angle ~0; on the device's clock for the formats that carry it,
 :class:`~wctls_rplidar.turns.TurnAssembler`) and scan_time the measured rotation period.
+That time is mapped onto the node's ROS clock as each turn is published, so with
+``use_sim_time`` the stamps are on the simulated clock; until the first /clock message that clock
+stands at 0 and no turn is published (a throttled error says why).
 """
 
 import array
@@ -36,6 +45,7 @@ import time
 from typing import Optional
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from lifecycle_msgs.msg import Transition
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -60,6 +70,10 @@ _POLL_S = 0.02
 # A report period with this share of frames damaged or lost, or of samples rejected, is WARN.
 DAMAGED_LINK_SHARE = 0.01
 _LATENCY_WINDOW = 1000
+# The shutdown transitions, one per primary state it leaves.
+_SHUTDOWN_TRANSITIONS = (Transition.TRANSITION_UNCONFIGURED_SHUTDOWN,
+                         Transition.TRANSITION_INACTIVE_SHUTDOWN,
+                         Transition.TRANSITION_ACTIVE_SHUTDOWN)
 _LEVELS = {DriverState.SCANNING: DiagnosticStatus.OK,
            DriverState.MOTOR_STOPPED: DiagnosticStatus.OK,
            DriverState.CONNECTING: DiagnosticStatus.WARN,
@@ -79,6 +93,10 @@ class RplidarNode(LifecycleNode):
 
     def __init__(self, **kwargs):
         super().__init__('rplidar_node', **kwargs)
+        self._transition_lock = threading.Lock()
+        # rclpy keeps the service's callback here; the guard takes its place (see the module).
+        self._unguarded_change_state = self._service_change_state.callback
+        self._service_change_state.callback = self._change_state
         values = declare_all(self)
         self._frame_id = values['frame_id']
         self._inverted = values['inverted']
@@ -230,12 +248,48 @@ class RplidarNode(LifecycleNode):
         if driver is not None:
             driver.close()
 
+    def _change_state(self, request, response):
+        """
+        Serve change_state: refuse a transition the current state does not have, else make it.
+
+        :param request: lifecycle_msgs/ChangeState request (transition id, or label)
+        :param response: its response
+        :return: the response, ``success`` False for a refused or failed transition
+        """
+        with self._transition_lock:
+            _, state = self._state_machine.current_state
+            available = {label: transition_id for transition_id, label, *_
+                         in self._state_machine.available_transitions}
+            asked = request.transition.label or str(request.transition.id)
+            transition_id = (available.get(request.transition.label) if request.transition.label
+                             else request.transition.id)
+            if transition_id in _SHUTDOWN_TRANSITIONS:
+                transition_id = available.get('shutdown')
+            if transition_id not in available.values():
+                self.get_logger().warning(
+                    f'change_state: transition {asked} is not possible from the {state} state '
+                    f'(possible: {", ".join(available) or "none"}): refused')
+                response.success = False
+                return response
+            request.transition.id, request.transition.label = transition_id, ''
+            try:
+                return self._unguarded_change_state(request, response)
+            except rclpy_implementation.RCLError as error:
+                self.get_logger().error(f'change_state: transition {asked} from the {state} '
+                                        f'state failed: {error}')
+                response.success = False
+                return response
+
     def _publish_turn(self, turn, mode):
         """Publish one turn as a LaserScan, and as a fixed-count one if asked (reader thread)."""
         if not self._active:
             return
-        stamp = Time(nanoseconds=_ros_minus_monotonic_ns(self.get_clock())
-                     + int(turn.first_sample_s * 1e9)).to_msg()
+        stamp_ns = _ros_minus_monotonic_ns(self.get_clock()) + int(turn.first_sample_s * 1e9)
+        if stamp_ns < 0:
+            # Under use_sim_time the ROS clock stands at 0 until /clock is heard.
+            raise ValueError('the ROS clock is not running (use_sim_time is true and no /clock '
+                             'has been received): turns are not published until it runs')
+        stamp = Time(nanoseconds=stamp_ns).to_msg()
         multiple = compensation_multiple(mode.us_per_sample, self._scan_frequency_hz)
         self._scan_pub.publish(self._message(
             turn_to_scan(turn, self._angle_compensate, self._inverted, multiple,
@@ -325,6 +379,11 @@ class RplidarNode(LifecycleNode):
                        f'or lost, {100 * rejected:.1f} % of the samples rejected, '
                        f'{recent.resyncs} resyncs in the last {DIAGNOSTICS_PERIOD_S:g} s '
                        '(check the cable and the USB power)')
+            if rate_hz == 0.0:
+                # The driver withholds what it cannot decode with confidence: say so loudly.
+                level = DiagnosticStatus.ERROR
+                message = (f'{message}; nothing published: the stream is too damaged to '
+                           'decode with confidence')
         values = {
             'state': status.state.value,
             'link': status.link,

@@ -25,6 +25,7 @@ device's own timing, whatever its sample rate, and a frame counted wrongly does 
 
 import collections
 from dataclasses import dataclass
+import math
 from typing import Optional
 
 import numpy as np
@@ -37,6 +38,11 @@ _MISSED_START_DROP_DEG = 270.0
 _CORRECTION_SPAN_DEG = 16.0
 # The range of a 32-bit device clock (ultra-dense capsules' timestamps wrap after 72 minutes).
 _DEVICE_TIME_WRAP_US = 1 << 32
+# What a published turn must sweep, degrees, and the share of a rotation it may sweep at most.
+MIN_SWEEP_DEG = 180.0
+MAX_TURN_SHARE = 1.05
+# The least time between the starts of published turns, in rotation periods.
+MIN_PERIOD_SHARE = 0.9
 
 
 class SampleClock:
@@ -303,3 +309,47 @@ class TurnAssembler:
         device_us = np.full(len(frame_us), -1.0)
         device_us[known] = unwrapped + place[known] * self._sample_s * 1e6
         return device_us
+
+
+def sweep_deg(angle_deg: np.ndarray) -> float:
+    """
+    Return the raw angle a run of samples sweeps, each step taken the short way round.
+
+    A sample repeated or out of order steps back and is taken back; only a run of more than a
+    rotation sweeps more than 360 degrees.
+
+    :param angle_deg: raw angles in measurement order, degrees
+    :return: degrees from the first sample to the last
+    """
+    return float(np.sum(np.mod(np.diff(angle_deg) + 180.0, 360.0) - 180.0))
+
+
+class PublishGate:
+    """
+    Pass the turns that are one rotation a damaged stream cannot have made up, one per rotation.
+
+    A turn passes when its samples sweep (:func:`sweep_deg`) at least :data:`MIN_SWEEP_DEG`
+    (false turn boundaries, which garbage angles make, cut fragments that would be published
+    many times a rotation) and at most :data:`MAX_TURN_SHARE` of a rotation (a missed boundary
+    would publish two rotations as one), and when it starts at least :data:`MIN_PERIOD_SHARE`
+    of its rotation period after the last turn passed (two fragments of one rotation are not
+    published as two scans).
+    """
+
+    def __init__(self):
+        self._last_start_s = -math.inf
+
+    def admit(self, turn: Turn) -> bool:
+        """
+        Tell whether to publish a turn (and remember it when so).
+
+        :param turn: the next assembled turn
+        :return: True to publish it
+        """
+        sweep = sweep_deg(turn.angle_deg) if len(turn.angle_deg) > 1 else 0.0
+        admitted = bool(MIN_SWEEP_DEG <= sweep <= 360.0 * MAX_TURN_SHARE
+                        and turn.first_sample_s - self._last_start_s
+                        >= MIN_PERIOD_SHARE * turn.period_s)
+        if admitted:
+            self._last_start_s = turn.first_sample_s
+        return admitted

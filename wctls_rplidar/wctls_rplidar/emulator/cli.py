@@ -13,12 +13,16 @@ rate and motor control (the A1 on the DTR line, the A2 and A3 by PWM through the
 board, by DTR with ``--no-accessory-board``, the S-series in rpm, the C1 on its own).
 It answers on the pseudo-terminal only when its client set the model's rate (the S1's 256000 by
 default), as a real device hears only its own; ``--baudrate RATE`` sets another, 0 any rate.
-Faults for testing recovery: ``--corrupt-rate`` / ``--drop-rate`` (per streamed byte),
-``--cut-rate`` (per streamed frame: a run of bytes lost from a random one to the frame's end),
+Faults for testing recovery: ``--corrupt-rate`` / ``--drop-rate`` / ``--insert-rate`` (per
+streamed byte), ``--cut-rate`` (per streamed frame: a run of bytes lost from a random one to the
+frame's end), ``--flip-rate`` (per frame: one bit flipped in two of its bytes, unseen by an XOR
+checksum), ``--replay-rate`` (per frame: an earlier frame sent again after it),
+``--swap-rate`` / ``--duplicate-rate`` (per 64-byte USB packet: swapped with the next, sent twice),
 ``--silent-after``/``--silent-for``, ``--health warning|error``, ``--conf-answer ENTRY=VALUE``
 (a scan mode entry reported wrongly). Lines on standard input control it live: ``unplug``,
 ``replug``, ``silent SECONDS``, ``health ok|warning|error [RESETS]``, ``corrupt RATE``,
-``drop RATE``, ``cut RATE``, ``conf ENTRY=VALUE``, ``clock`` (the true timing of the samples
+``drop RATE``, ``cut RATE``, ``insert RATE``, ``flip RATE``, ``replay RATE``, ``swap RATE``,
+``duplicate RATE``, ``conf ENTRY=VALUE``, ``clock`` (the true timing of the samples
 streamed), ``quit``; each is acknowledged on standard output.
 
 Exit status: 0 after ``quit`` or SIGTERM, 2 on a user error (one line on standard error,
@@ -145,7 +149,8 @@ def parser(prog: str = PROG, scene_options: Callable = room_options) -> argparse
         description='An RPLIDAR (an S1 by default) speaking the real byte protocol on a '
                     'pseudo-terminal (and TCP), streaming what it sees in real time.',
         epilog='Lines on standard input control it while it runs: unplug, replug, silent SECONDS, '
-               'health ok|warning|error [RESETS], corrupt RATE, drop RATE, cut RATE, conf '
+               'health ok|warning|error [RESETS], corrupt RATE, drop RATE, cut RATE, insert '
+               'RATE, flip RATE, replay RATE, swap RATE, duplicate RATE, conf '
                'ENTRY=VALUE, clock, quit. Exit status: 0 after quit or SIGTERM, 2 on a user '
                'error, 130 on Ctrl-C.')
     probability = bounded(float, 0.0, 1.0)
@@ -183,6 +188,21 @@ def parser(prog: str = PROG, scene_options: Callable = room_options) -> argparse
                    help='probability that a streamed frame (capsule or node) is cut short: a '
                         'run of its bytes, from a random one to its end, is lost (default: '
                         '%(default)s)')
+    p.add_argument('--insert-rate', type=probability, default=0.0,
+                   help='probability that a random byte is inserted after a streamed byte '
+                        '(default: %(default)s)')
+    p.add_argument('--flip-rate', type=probability, default=0.0,
+                   help='probability that a streamed frame has one bit flipped in two of its '
+                        'bytes, which its XOR checksum does not see (default: %(default)s)')
+    p.add_argument('--replay-rate', type=probability, default=0.0,
+                   help='probability that a streamed frame is followed by a copy of one of the '
+                        '8 before it (default: %(default)s)')
+    p.add_argument('--swap-rate', type=probability, default=0.0,
+                   help='probability that a 64-byte USB packet of the stream is swapped with '
+                        'the next (default: %(default)s)')
+    p.add_argument('--duplicate-rate', type=probability, default=0.0,
+                   help='probability that a 64-byte USB packet of the stream is delivered '
+                        'twice (default: %(default)s)')
     p.add_argument('--silent-after', type=bounded(float, 0.0),
                    help='go silent after this many seconds (default: never)')
     p.add_argument('--silent-for', type=bounded(float, 0.0), default=3.0,
@@ -239,7 +259,10 @@ def _serve(args, scene_of: Callable):
     """Start the emulator, announce it on standard output and serve until ``quit``."""
     scene, scene_name = scene_of(args)
     faults = Faults(corrupt_rate=args.corrupt_rate, drop_rate=args.drop_rate,
-                    cut_rate=args.cut_rate, health=HealthStatus[args.health.upper()],
+                    cut_rate=args.cut_rate, insert_rate=args.insert_rate,
+                    flip_rate=args.flip_rate, replay_rate=args.replay_rate,
+                    swap_rate=args.swap_rate, duplicate_rate=args.duplicate_rate,
+                    health=HealthStatus[args.health.upper()],
                     resets_to_clear=args.health_error_resets)
     for answer in args.conf_answer:
         faults.replace_conf_answer(answer)

@@ -17,10 +17,12 @@ grid, as a triangulating device does (for ultra capsules, the offset SLAMTEC's S
 the distance sent, where a few passes find it; the distances sent are those the capsule's scale
 and predictions carry).
 
-:class:`Faults` (shared with the server's control commands) corrupts or drops streamed bytes, cuts
-frames short (a run of bytes lost, as when a USB packet or a burst of the UART's input is lost),
-silences the device, sets the health it reports and replaces the values of GET_LIDAR_CONF
-entries it reports (:func:`parse_conf_answer`).
+:class:`Faults` (shared with the server's control commands) corrupts, drops or inserts streamed
+bytes, cuts frames short (a run of bytes lost, as when a USB packet or a burst of the UART's
+input is lost), flips one bit in two bytes of a frame (a double error its XOR checksum does not
+see), replays earlier frames, swaps and duplicates the 64-byte packets of a USB full-speed bulk
+link, silences the device, sets the health it reports, answers with another answer type and
+replaces the values of GET_LIDAR_CONF entries it reports (:func:`parse_conf_answer`).
 """
 
 from dataclasses import dataclass, field, replace
@@ -78,6 +80,12 @@ RESET_SILENCE_S = 1.5
 HEALTH_ERROR_CODE = 0x0001
 MAX_NODE_DISTANCE_Q2 = 0xFFFF
 _CATCH_UP_LIMIT_S = 0.5
+# A USB full-speed bulk packet, bytes: the unit a USB-serial adapter's packets swap or repeat in.
+USB_PACKET_SIZE = 64
+# A replayed frame is one of this many sent before it.
+REPLAY_MAX_FRAMES_BACK = 8
+# The stream faults, by the name of their rate (the server's commands: ``<name> RATE``).
+STREAM_FAULTS = ('corrupt', 'drop', 'cut', 'insert', 'flip', 'replay', 'swap', 'duplicate')
 
 
 @dataclass(frozen=True)
@@ -231,22 +239,38 @@ class Faults:
     :ivar drop_rate: probability that a streamed byte is left out
     :ivar cut_rate: probability that a streamed frame is cut short: its bytes from a random one
         (uniform over the frame) to its end are lost
+    :ivar insert_rate: probability that a random byte is inserted after a streamed byte
+    :ivar flip_rate: probability that a streamed frame has one bit flipped in two of its bytes
+        after the first two (the same bit: the XOR checksum of a capsule still passes)
+    :ivar replay_rate: probability that a streamed frame is followed by a copy of one of the
+        :data:`REPLAY_MAX_FRAMES_BACK` frames before it
+    :ivar swap_rate: probability that a :data:`USB_PACKET_SIZE`-byte packet of the stream is
+        swapped with the next one
+    :ivar duplicate_rate: probability that a packet of the stream is delivered twice
     :ivar silent_from_s: monotonic time from which the device neither answers nor streams
     :ivar silent_until_s: monotonic time at which it speaks again
     :ivar health: :class:`HealthStatus` reported by GET_HEALTH
     :ivar resets_to_clear: RESETs still needed before an error health clears
     :ivar conf_answers: GET_LIDAR_CONF values reported instead of the device's own, by
         :class:`ConfType` (for every mode); None: the type echo alone
+    :ivar answer_type: the answer type every answer's descriptor carries instead of its own
+        (None: its own), as a device of another protocol generation answers
     """
 
     corrupt_rate: float = 0.0
     drop_rate: float = 0.0
     cut_rate: float = 0.0
+    insert_rate: float = 0.0
+    flip_rate: float = 0.0
+    replay_rate: float = 0.0
+    swap_rate: float = 0.0
+    duplicate_rate: float = 0.0
     silent_from_s: float = 0.0
     silent_until_s: float = 0.0
     health: int = HealthStatus.OK
     resets_to_clear: int = 1
     conf_answers: dict = field(default_factory=dict)
+    answer_type: Optional[int] = None
 
     def replace_conf_answer(self, text: str):
         """
@@ -385,7 +409,11 @@ class S1Device:
         for request in self._parser.feed(data):
             if now_s < self._booting_until_s or self._faults.silent(now_s):
                 continue
-            answers += self._answer(request.command, request.payload, now_s)
+            answer = self._answer(request.command, request.payload, now_s)
+            if answer and self._faults.answer_type is not None:
+                # The descriptor's last byte is its answer type.
+                answer = answer[:6] + bytes([self._faults.answer_type]) + answer[7:]
+            answers += answer
             self._motor_changed(now_s)
         return answers
 
@@ -653,11 +681,13 @@ class S1Device:
         return encode_standard_nodes(angle_q6, distance_q2, quality, angle_q6 < previous)
 
     def _inject_faults(self, data: bytes) -> bytes:
-        """Corrupt and drop streamed bytes and cut frames short at the configured rates."""
+        """Apply the stream faults at their configured rates (``data``: whole frames)."""
         faults = self._faults
-        if not (faults.corrupt_rate or faults.drop_rate or faults.cut_rate):
+        if not any(getattr(faults, f'{name}_rate') for name in STREAM_FAULTS):
             return data
         raw = np.frombuffer(data, np.uint8).copy()
+        if faults.flip_rate or faults.replay_rate:
+            raw = self._damage_frames(raw.reshape(-1, self._frame_size)).reshape(-1)
         corrupt = self._rng.random(raw.size) < faults.corrupt_rate
         raw[corrupt] ^= self._rng.integers(1, 256, int(corrupt.sum()), dtype=np.uint8)
         kept = self._rng.random(raw.size) >= faults.drop_rate
@@ -668,4 +698,50 @@ class S1Device:
             first_lost = np.where(cut, self._rng.integers(0, self._frame_size, frames),
                                   self._frame_size)
             kept &= (np.arange(self._frame_size) < first_lost[:, None]).reshape(-1)
-        return raw[kept].tobytes()
+        raw = raw[kept]
+        if faults.insert_rate:
+            inserted = np.flatnonzero(self._rng.random(raw.size) < faults.insert_rate) + 1
+            raw = np.insert(raw, inserted, self._rng.integers(0, 256, inserted.size,
+                                                              dtype=np.uint8))
+        if faults.swap_rate or faults.duplicate_rate:
+            raw = self._damage_packets(raw)
+        return raw.tobytes()
+
+    def _damage_frames(self, frames: np.ndarray) -> np.ndarray:
+        """
+        Flip one bit in two bytes of frames and follow frames by replays, at their rates.
+
+        :param frames: the frames to send, shape (n, frame size), uint8
+        :return: the frames sent, shape (m, frame size)
+        """
+        faults, count, size = self._faults, len(frames), frames.shape[1]
+        if faults.flip_rate:
+            flipped = np.flatnonzero(self._rng.random(count) < faults.flip_rate)
+            bits = (1 << self._rng.integers(0, 8, flipped.size)).astype(np.uint8)
+            for frame, bit in zip(flipped, bits):
+                first, second = self._rng.choice(np.arange(2, size), 2, replace=False)
+                frames[frame, first] ^= bit
+                frames[frame, second] ^= bit
+        if not faults.replay_rate:
+            return frames
+        replayed = np.flatnonzero(self._rng.random(count) < faults.replay_rate)
+        back = self._rng.integers(1, REPLAY_MAX_FRAMES_BACK + 1, replayed.size)
+        copies = frames[np.maximum(replayed - back, 0)]
+        return np.insert(frames, replayed + 1, copies, axis=0)
+
+    def _damage_packets(self, raw: np.ndarray) -> np.ndarray:
+        """
+        Swap and duplicate the stream's USB packets at their rates.
+
+        :param raw: the stream bytes
+        :return: the bytes delivered
+        """
+        faults = self._faults
+        packets = [raw[i:i + USB_PACKET_SIZE] for i in range(0, raw.size, USB_PACKET_SIZE)]
+        swapped = self._rng.random(len(packets)) < faults.swap_rate
+        for i in np.flatnonzero(swapped[:-1]):
+            packets[i], packets[i + 1] = packets[i + 1], packets[i]
+        twice = self._rng.random(len(packets)) < faults.duplicate_rate
+        delivered = [p for packet, double in zip(packets, twice)
+                     for p in ((packet, packet) if double else (packet,))]
+        return np.concatenate(delivered) if delivered else raw

@@ -13,7 +13,9 @@ command's name with its payload: ``MOTOR_SPEED=0``; how tests see a client stop 
 ``requests timed``: each as ``NAME@SECONDS``, when it was read, on the machine's monotonic
 clock: how tests time a client's retries), ``silent SECONDS``,
 ``health ok|warning|error [RESETS]``, ``corrupt RATE``, ``drop RATE``, ``cut RATE``,
-``conf ENTRY=VALUE`` (a GET_LIDAR_CONF value reported instead of the device's own), ``clock``
+``insert RATE``, ``flip RATE``, ``replay RATE``, ``swap RATE``, ``duplicate RATE`` (the stream
+faults of :class:`~wctls_rplidar.emulator.device.Faults`), ``conf ENTRY=VALUE`` (a
+GET_LIDAR_CONF value reported instead of the device's own), ``clock``
 (the pty device's sample clock: when and at what angle each sample of its stream is measured),
 ``quit``) are queued on :attr:`Emulator.commands` and each is acknowledged with one line on
 standard output.
@@ -38,7 +40,7 @@ from typing import Optional
 
 import numpy as np
 
-from .device import Faults, MODEL_S1M1, MODES, S1Device, Scene, TYPICAL_MODE
+from .device import Faults, MODEL_S1M1, MODES, S1Device, Scene, STREAM_FAULTS, TYPICAL_MODE
 from ..protocol import Command, HealthStatus, RequestParser
 
 _POLL_S = 0.001
@@ -299,7 +301,7 @@ class Emulator:
             self._faults.health = HealthStatus[args[0].upper()]
             self._faults.resets_to_clear = int(args[1]) if len(args) > 1 else 1
             return f'health {args[0]}'
-        if verb in ('corrupt', 'drop', 'cut'):
+        if verb in STREAM_FAULTS:
             setattr(self._faults, f'{verb}_rate', float(args[0]))
             return f'{verb} rate {float(args[0]):g}'
         if verb == 'conf':
@@ -313,7 +315,8 @@ class Emulator:
                     f'sample, first at {clock.first_angle_deg:.9f} deg, '
                     f'{clock.step_deg:.9f} deg per sample')
         raise ValueError('unknown command (unplug, replug, hangup, requests [timed], silent S, '
-                         'health STATUS [RESETS], corrupt RATE, drop RATE, cut RATE, '
+                         'health STATUS [RESETS], '
+                         f'{", ".join(f"{name} RATE" for name in STREAM_FAULTS)}, '
                          'conf ENTRY=VALUE, clock, quit)')
 
     def close(self):

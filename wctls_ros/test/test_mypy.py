@@ -8,7 +8,7 @@ import pathlib
 import pytest
 
 PACKAGE = pathlib.Path(__file__).resolve().parents[1] / 'wctls_ros'
-CHECKED = ['core', 'conversions.py', 'params.py', 'plain_yaml.py']
+CHECKED = ['core', 'conversions.py', 'frontend', 'params.py', 'plain_yaml.py']
 
 
 @pytest.mark.linter

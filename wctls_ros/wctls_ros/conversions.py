@@ -33,6 +33,7 @@ MESSAGE_TYPES = (
     'visualization_msgs/msg/MeshFile',
     'wctls_msgs/msg/Corner', 'wctls_msgs/msg/CornerArray', 'wctls_msgs/msg/LineSegment',
     'wctls_msgs/msg/LineSegmentArray',
+    'wctls_msgs/msg/Landmark', 'wctls_msgs/msg/LandmarkArray',
 )
 MESSAGE_PACKAGE = 'wctls_msgs'
 # Rows/columns of (x, y, yaw) in a geometry_msgs 6x6 pose covariance (x, y, z, roll, pitch, yaw).

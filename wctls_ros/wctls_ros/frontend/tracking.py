@@ -253,6 +253,30 @@ def detections_of(features, max_landmark_angle_sigma_rad: float) -> Detections:
                                ).reshape(-1, 2, 2))
 
 
+def observation_poses(detections: Detections) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Return every detection as a planar pose with covariance: corners first, then lines.
+
+    A corner is its position and bisector yaw. A line (alpha, r) is its point closest to the
+    sensor, (r cos alpha, r sin alpha), with yaw alpha; its covariance J C J^T with
+    J = d(x, y, yaw) / d(alpha, r) = [[-r sin alpha, cos alpha], [r cos alpha, sin alpha],
+    [1, 0]] (rank 2).
+
+    :param detections: one scan's detections
+    :return: (poses (C + L, 3): x m, y m, yaw rad; covariances (C + L, 3, 3))
+    """
+    angle, radius = detections.line[:, 0], detections.line[:, 1]
+    cos, sin = np.cos(angle), np.sin(angle)
+    line_pose = np.column_stack([radius * cos, radius * sin, angle])
+    jacobian = np.zeros((len(angle), 3, 2))
+    jacobian[:, 0] = np.column_stack([-radius * sin, cos])
+    jacobian[:, 1] = np.column_stack([radius * cos, sin])
+    jacobian[:, 2, 0] = 1.0
+    line_cov = jacobian @ detections.line_cov @ jacobian.transpose(0, 2, 1)
+    return (np.concatenate([detections.corner_pose, line_pose.reshape(-1, 3)]),
+            np.concatenate([detections.corner_cov, line_cov.reshape(-1, 3, 3)]))
+
+
 @dataclass(frozen=True)
 class View:
     """

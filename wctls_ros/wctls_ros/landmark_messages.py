@@ -1,0 +1,86 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""
+The landmark codec: a scan's detections with their track ids as a LandmarkArray and as rows.
+
+Both give every detection of the scan, corners first, then line landmarks, as the tracker
+(:mod:`.frontend.tracking`) labelled it: id, kind, state, hits, age and the observation's own
+pose with covariance in the sensor frame (:func:`~.frontend.tracking.observation_poses`).
+Builds with rclpy's classes or rosbags' alike (:class:`~.conversions.MessageTypes`).
+"""
+
+from typing import List, Optional
+
+import numpy as np
+
+from .conversions import MessageTypes, pose_covariances, rclpy_types
+from .frontend.tracking import Detections, observation_poses, STATES, TrackedScan
+
+# landmarks.csv's columns: the observation in the sensor frame and the upper triangle of its
+# (x, y, yaw) covariance.
+LANDMARK_COLUMNS = ('stamp_s', 'id', 'kind', 'state', 'x_m', 'y_m', 'yaw_rad', 'cov_xx',
+                    'cov_xy', 'cov_xyaw', 'cov_yy', 'cov_yyaw', 'cov_yawyaw', 'hits')
+# Upper triangle of a 3x3 covariance, in the order of the columns: rows, columns.
+_TRIANGLE = (np.array([0, 0, 0, 1, 1, 2]), np.array([0, 1, 2, 1, 2, 2]))
+# Landmark.msg's kind codes, corners first.
+KIND_CORNER = 0
+KIND_LINE = 1
+
+
+def _labels(detections: Detections, tracked: TrackedScan):
+    """Return (kind codes, ids, states, hits, ages) of every detection, corners first."""
+    kinds = np.concatenate([np.full(len(detections.corner_pose), KIND_CORNER),
+                            np.full(len(detections.line), KIND_LINE)])
+    fields = [np.concatenate([getattr(tracked.corners, name), getattr(tracked.lines, name)])
+              for name in ('ids', 'states', 'hits', 'age_scans')]
+    return (kinds, *fields)
+
+
+def landmark_array(detections: Detections, tracked: TrackedScan, header,
+                   types: Optional[MessageTypes] = None):
+    """
+    Convert one scan's tracked detections to a LandmarkArray.
+
+    :param detections: the scan's detections
+    :param tracked: their tracks (from :meth:`~.frontend.tracking.Tracker.update`)
+    :param header: the scan's header, a ``types.Header`` (shared, not copied)
+    :param types: the message classes to build with (None: rclpy's)
+    :return: the message (empty landmarks when the scan has none)
+    """
+    types = types or rclpy_types()
+    Point, Quaternion = types.Point, types.Quaternion
+    PoseWithCovariance, Pose = types.PoseWithCovariance, types.Pose
+    poses, covariances = observation_poses(detections)
+    kinds, ids, states, hits, ages = _labels(detections, tracked)
+    half_yaw = 0.5 * poses[:, 2]
+    landmarks = [
+        types.Landmark(id=track, kind=kind, state=state, hits=count, age=age,
+                       pose=PoseWithCovariance(
+                           pose=Pose(position=Point(x=x, y=y, z=0.0),
+                                     orientation=Quaternion(x=0.0, y=0.0, z=qz, w=qw)),
+                           covariance=covariance))
+        for track, kind, state, count, age, (x, y), qz, qw, covariance in zip(
+            ids.tolist(), kinds.tolist(), states.tolist(), hits.tolist(), ages.tolist(),
+            poses[:, :2].tolist(), np.sin(half_yaw).tolist(), np.cos(half_yaw).tolist(),
+            pose_covariances(covariances))]
+    return types.LandmarkArray(header=header, landmarks=landmarks)
+
+
+def landmark_rows(stamp_s: str, detections: Detections, tracked: TrackedScan) -> List[list]:
+    """
+    Return one scan's rows of landmarks.csv (LANDMARK_COLUMNS).
+
+    :param stamp_s: the scan's stamp, s, as text (``sec.nanosec``)
+    :param detections: the scan's detections
+    :param tracked: their tracks
+    :return: one row per detection, corners first
+    """
+    poses, covariances = observation_poses(detections)
+    kinds, ids, states, hits, _ = _labels(detections, tracked)
+    triangle = covariances[:, _TRIANGLE[0], _TRIANGLE[1]]
+    return [[stamp_s, track, 'corner' if kind == KIND_CORNER else 'line', STATES[state],
+             *pose, *terms, count]
+            for track, kind, state, pose, terms, count in zip(
+                ids.tolist(), kinds.tolist(), states.tolist(), poses.tolist(),
+                triangle.tolist(), hits.tolist())]

@@ -8,6 +8,8 @@ Both give every detection of the scan, corners first, then line landmarks, as th
 (:mod:`.frontend.tracking`) labelled it: id, kind, state, hits, age and the observation's own
 pose with covariance in the sensor frame (:func:`~.frontend.tracking.observation_poses`).
 Builds with rclpy's classes or rosbags' alike (:class:`~.conversions.MessageTypes`).
+:class:`LandmarkStream` is feature_node's tracker: one scan's features in, its LandmarkArray
+out.
 """
 
 from typing import List, Optional
@@ -15,7 +17,9 @@ from typing import List, Optional
 import numpy as np
 
 from .conversions import MessageTypes, pose_covariances, rclpy_types
-from .frontend.tracking import Detections, observation_poses, STATES, TrackedScan
+from .core import Features
+from .frontend.tracking import (Detections, detections_of, Motion, observation_poses, STATES,
+                                TrackedScan, Tracker, View)
 
 # landmarks.csv's columns: the observation in the sensor frame and the upper triangle of its
 # (x, y, yaw) covariance.
@@ -84,3 +88,46 @@ def landmark_rows(stamp_s: str, detections: Detections, tracked: TrackedScan) ->
             for track, kind, state, pose, terms, count in zip(
                 ids.tolist(), kinds.tolist(), states.tolist(), poses.tolist(),
                 triangle.tolist(), hits.tolist())]
+
+
+class LandmarkStream:
+    """
+    Tracks the landmarks of consecutive scans of one sensor and converts them to messages.
+
+    The sensor counts as still between scans, its unknown step of the given sigmas.
+    """
+
+    def __init__(self, step_sigma_m: float = 0.0, step_sigma_rad: float = 0.0):
+        """
+        Start with no tracks.
+
+        :param step_sigma_m: the sigma of a step between scans in x and y, m
+        :param step_sigma_rad: the sigma of a turn between scans, rad
+        """
+        self.tracker = Tracker()
+        self.motion = Motion(np.zeros(3), np.diag([step_sigma_m ** 2, step_sigma_m ** 2,
+                                                   step_sigma_rad ** 2]))
+
+    def array(self, features: Features, scan, header, max_landmark_angle_sigma_rad: float,
+              types: MessageTypes):
+        """
+        Track one scan's landmarks and return them with their ids.
+
+        :param features: the scan's features (empty for a scan that could not be used)
+        :param scan: the LaserScan (its ranges say which tracks it could have seen)
+        :param header: the header to publish with
+        :param max_landmark_angle_sigma_rad: the line landmark rule's bound, rad
+        :param types: the message classes
+        :return: a LandmarkArray
+        """
+        detections = detections_of(features, max_landmark_angle_sigma_rad)
+        try:
+            view: Optional[View] = View(float(scan.angle_min), float(scan.angle_increment),
+                                        np.asarray(scan.ranges, dtype=float),
+                                        float(scan.range_max))
+        except (TypeError, ValueError):         # a malformed scan: every track counts in view
+            view = None
+        if view is not None and (not len(view.ranges_m) or not view.angle_increment_rad):
+            view = None
+        return landmark_array(detections, self.tracker.update(detections, self.motion, view),
+                              header, types)

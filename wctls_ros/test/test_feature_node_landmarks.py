@@ -8,7 +8,8 @@ A still sensor in the simulated room sends scans with fresh noise: every scan ge
 LandmarkArray with the scan's header; its corners are the CornerArray's, in order, with the
 same poses and covariances; each true corner keeps one id through the scans and is confirmed
 from its third observation; a scan with no returns gets an empty LandmarkArray and costs no
-id. Without the parameter nothing is published on landmarks.
+id. Without the parameter nothing is published on landmarks. The pose_array bridge publishes
+every scan's detections in the LandmarkArray's order; an unknown bridge is refused.
 """
 
 from conftest import spin_until
@@ -16,18 +17,21 @@ import numpy as np
 import pytest
 
 pytest.importorskip('rclpy')
+PoseArray = pytest.importorskip('geometry_msgs.msg').PoseArray
 
 from scans import NODE_PARAMETERS, room_scan_message  # noqa: E402
 from test_feature_node import Harness  # noqa: E402
 from wctls_msgs.msg import Landmark, LandmarkArray  # noqa: E402
+from wctls_ros.params import ConfigError  # noqa: E402
 
 # Runs nodes against deadlines: make test runs it in its realtime group.
 pytestmark = pytest.mark.realtime
 SCANS = 6
 
 
-def landmark_harness(context, executor, publish: bool):
-    harness = Harness(context, executor, {**NODE_PARAMETERS, 'publish_landmarks': publish})
+def landmark_harness(context, executor, publish: bool, **more):
+    harness = Harness(context, executor, {**NODE_PARAMETERS, 'publish_landmarks': publish,
+                                          **more})
     harness.received['landmarks'] = []
     harness.peer.create_subscription(LandmarkArray, 'landmarks',
                                      harness.received['landmarks'].append, 10)
@@ -70,3 +74,20 @@ def test_no_landmarks_without_the_parameter(ros_context, executor):
     harness.exchange(room_scan_message(seed=1))
     spin_until(executor, lambda: harness.received['landmarks'], 0.5)
     assert harness.received['landmarks'] == []
+
+
+def test_the_pose_array_bridge_follows_the_landmark_array(ros_context, executor):
+    harness = landmark_harness(ros_context, executor, True, landmark_bridges='pose_array')
+    poses = []
+    harness.peer.create_subscription(PoseArray, 'landmark_poses', poses.append, 10)
+    harness.exchange(room_scan_message(seed=3))
+    assert spin_until(executor, lambda: poses and harness.received['landmarks'])
+    marks = harness.received['landmarks'][-1].landmarks
+    assert poses[-1].header.frame_id == 'laser'
+    assert [p.position.x for p in poses[-1].poses] == pytest.approx(
+        [m.pose.pose.position.x for m in marks])
+
+
+def test_an_unknown_bridge_is_refused_with_the_known_ones(ros_context, executor):
+    with pytest.raises(ConfigError, match='choose among rtabmap, cartographer, pose_array'):
+        landmark_harness(ros_context, executor, True, landmark_bridges='gmapping')

@@ -44,7 +44,8 @@ from .conversions import (copy_header, corner_array, line_segment_array, marker_
 from .core import (CoreStatus, CornerSet, Features, line_landmarks, SegmentSet,
                    start as start_core, status as core_status)
 from .extras import missing_extra
-from .landmark_messages import LandmarkStream
+from .landmark_messages import landmark_array, LandmarkStream
+from .landmark_publishers import BridgePublishers
 from .node_main import declare_parameters, run_node
 from .params import FEATURE_NODE, feature_settings, landmark_settings
 
@@ -99,6 +100,7 @@ class FeatureNode(Node):
         self._publish_landmarks, *step_sigmas = landmark_settings(values)
         self._landmark_stream = LandmarkStream(*step_sigmas)
         self._landmarks = self.create_publisher(LandmarkArray, 'landmarks', 10)
+        self._bridges = BridgePublishers(self, str(values['landmark_bridges']))
         # As ros2/demos do: a change is checked whole before it is accepted, applied after.
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -225,6 +227,14 @@ class FeatureNode(Node):
             self._count('implausible_features', features.implausible_features)
         return features
 
+    def _publish_tracks(self, features: Features, scan, header, types: MessageTypes) -> None:
+        """Track the scan's landmarks; publish them with their ids, and on every bridge."""
+        detections, tracked = self._landmark_stream.track(
+            features, scan, self._config.max_landmark_angle_sigma_rad)
+        self._landmarks.publish(types.serialize(landmark_array(detections, tracked, header,
+                                                               types)))
+        self._bridges.publish(detections, tracked, scan.header)
+
     def _on_scan(self, serialized: bytes, info: dict):
         started = time.perf_counter()
         self._count_skipped(info)
@@ -252,8 +262,7 @@ class FeatureNode(Node):
             self._lines.publish(types.serialize(
                 line_segment_array(features, header, types, is_landmark=is_landmark)))
             if self._publish_landmarks:
-                self._landmarks.publish(types.serialize(self._landmark_stream.array(
-                    features, scan, header, self._config.max_landmark_angle_sigma_rad, types)))
+                self._publish_tracks(features, scan, header, types)
             # Markers are costly to build (a Marker per corner label and ellipse): only for a
             # listener such as RViz.
             if self._publish_markers and self._markers.get_subscription_count():

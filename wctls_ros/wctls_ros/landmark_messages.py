@@ -8,11 +8,11 @@ Both give every detection of the scan, corners first, then line landmarks, as th
 (:mod:`.frontend.tracking`) labelled it: id, kind, state, hits, age and the observation's own
 pose with covariance in the sensor frame (:func:`~.frontend.tracking.observation_poses`).
 Builds with rclpy's classes or rosbags' alike (:class:`~.conversions.MessageTypes`).
-:class:`LandmarkStream` is feature_node's tracker: one scan's features in, its LandmarkArray
-out.
+:class:`LandmarkStream` is feature_node's tracker: one scan's features in, its detections and
+their tracks out.
 """
 
-from typing import List, Optional
+from typing import List, Optional, Tuple
 
 import numpy as np
 
@@ -108,17 +108,15 @@ class LandmarkStream:
         self.motion = Motion(np.zeros(3), np.diag([step_sigma_m ** 2, step_sigma_m ** 2,
                                                    step_sigma_rad ** 2]))
 
-    def array(self, features: Features, scan, header, max_landmark_angle_sigma_rad: float,
-              types: MessageTypes):
+    def track(self, features: Features, scan, max_landmark_angle_sigma_rad: float
+              ) -> Tuple[Detections, TrackedScan]:
         """
-        Track one scan's landmarks and return them with their ids.
+        Track one scan's landmarks.
 
         :param features: the scan's features (empty for a scan that could not be used)
         :param scan: the LaserScan (its ranges say which tracks it could have seen)
-        :param header: the header to publish with
         :param max_landmark_angle_sigma_rad: the line landmark rule's bound, rad
-        :param types: the message classes
-        :return: a LandmarkArray
+        :return: (its detections, their tracks)
         """
         detections = detections_of(features, max_landmark_angle_sigma_rad)
         try:
@@ -129,5 +127,4 @@ class LandmarkStream:
             view = None
         if view is not None and (not len(view.ranges_m) or not view.angle_increment_rad):
             view = None
-        return landmark_array(detections, self.tracker.update(detections, self.motion, view),
-                              header, types)
+        return detections, self.tracker.update(detections, self.motion, view)

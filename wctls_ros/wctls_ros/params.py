@@ -183,6 +183,12 @@ FEATURE_NODE = (
     Parameter('landmark_step_sigma_deg', 0.0,
               'With publish_landmarks: the sigma of its unknown turn between scans, deg',
               Limits(0.0, 180.0)),
+    Parameter('landmark_bridges', '',
+              'With publish_landmarks: comma-separated bridges among rtabmap '
+              '(rtabmap_msgs/LandmarkDetections on landmark_detections), cartographer '
+              '(cartographer_ros_msgs/LandmarkList on landmark) and pose_array '
+              '(geometry_msgs/PoseArray on landmark_poses); one whose package is not installed '
+              'is left out with a warning', read_only=True),
 )
 
 

@@ -5,9 +5,10 @@
 process_bag --tracks: a LandmarkArray every scan and landmarks.csv, the ids the tracker gives.
 
 On the still LMS1xx recording every scan gets one /landmarks message (empty ones too), the CSV
-holds the issue's columns and the same ids, states and poses as the messages, and a still
-corner keeps its id through the recording. On a slice of the moving RPLIDAR car, with its pose
-file, the ids are those the tracker library gives with the same poses and step sigmas
+holds the issue's columns and the same ids, states and poses as the messages, the markers on
+/landmark_markers label the same ids, and a still corner keeps its id through the recording.
+On a slice of the moving RPLIDAR car, with its pose file, the ids are those the tracker library
+gives with the same poses and step sigmas
 (:func:`~wctls_ros.evaluation.tracks.run_tracker`): the tool composes the laser's offset and
 the steps as the library does. Bad uses are refused with the reason.
 """
@@ -31,13 +32,17 @@ ISSUE_COLUMNS = ('stamp_s,id,kind,state,x_m,y_m,yaw_rad,cov_xx,cov_xy,cov_xyaw,c
                  'cov_yyaw,cov_yawyaw,hits')
 
 
-def landmark_messages(path):
-    """Return the LandmarkArray messages of an output bag, read with its own definitions."""
+def topic_messages(path, topic, msgtype):
+    """Return the messages of one topic of an output bag, read with its own definitions."""
     with AnyReader([path], default_typestore=get_typestore(Stores.EMPTY)) as reader:
-        connections = [c for c in reader.connections if c.topic == '/landmarks']
-        assert connections and connections[0].msgtype == 'wctls_msgs/msg/LandmarkArray'
+        connections = [c for c in reader.connections if c.topic == topic]
+        assert connections and connections[0].msgtype == msgtype
         return [reader.deserialize(raw, c.msgtype)
                 for c, _, raw in reader.messages(connections=connections)]
+
+
+def landmark_messages(path):
+    return topic_messages(path, '/landmarks', 'wctls_msgs/msg/LandmarkArray')
 
 
 def csv_rows(path):
@@ -64,6 +69,11 @@ def test_tracks_give_a_landmark_array_every_scan_and_the_same_rows(tmp_path):
         assert int(row['hits']) == landmark.hits
         assert float(row['x_m']) == pytest.approx(landmark.pose.pose.position.x)
         assert float(row['cov_yawyaw']) == pytest.approx(landmark.pose.covariance[35])
+    # The markers label every detection with its id, after a DELETEALL.
+    markers = topic_messages(out, '/landmark_markers', 'visualization_msgs/msg/MarkerArray')
+    assert [[int(m.text) for m in array.markers[1:]] for array in markers] == [
+        [landmark.id for landmark in message.landmarks] for message in messages]
+    assert all(array.markers[0].action == 3 for array in markers)        # DELETEALL
     # The labelled north-east corner is seen in nearly every scan, under one id.
     confirmed = [int(row['id']) for row in rows
                  if row['kind'] == 'corner' and row['state'] == 'confirmed']

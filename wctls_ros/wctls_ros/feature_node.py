@@ -44,7 +44,7 @@ from .conversions import (copy_header, corner_array, line_segment_array, marker_
 from .core import (CoreStatus, CornerSet, Features, line_landmarks, SegmentSet,
                    start as start_core, status as core_status)
 from .extras import missing_extra
-from .landmark_messages import landmark_array, LandmarkStream
+from .landmark_messages import landmark_array, landmark_markers, LandmarkStream
 from .landmark_publishers import BridgePublishers
 from .node_main import declare_parameters, run_node
 from .params import FEATURE_NODE, feature_settings, landmark_settings
@@ -100,6 +100,7 @@ class FeatureNode(Node):
         self._publish_landmarks, *step_sigmas = landmark_settings(values)
         self._landmark_stream = LandmarkStream(*step_sigmas)
         self._landmarks = self.create_publisher(LandmarkArray, 'landmarks', 10)
+        self._landmark_markers = self.create_publisher(MarkerArray, 'landmark_markers', 10)
         self._bridges = BridgePublishers(self, str(values['landmark_bridges']))
         # As ros2/demos do: a change is checked whole before it is accepted, applied after.
         self.add_on_set_parameters_callback(self._check_parameters)
@@ -233,6 +234,9 @@ class FeatureNode(Node):
             features, scan, self._config.max_landmark_angle_sigma_rad)
         self._landmarks.publish(types.serialize(landmark_array(detections, tracked, header,
                                                                types)))
+        if self._landmark_markers.get_subscription_count():
+            self._landmark_markers.publish(types.serialize(landmark_markers(
+                detections, tracked, header, types, self._style.corner_size_m)))
         self._bridges.publish(detections, tracked, scan.header)
 
     def _on_scan(self, serialized: bytes, info: dict):

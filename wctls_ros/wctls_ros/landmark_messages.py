@@ -16,10 +16,10 @@ from typing import List, Optional, Tuple
 
 import numpy as np
 
-from .conversions import MessageTypes, pose_covariances, rclpy_types
+from .conversions import MessageTypes, pose_covariances, rclpy_types, unused_marker_fields
 from .core import Features
-from .frontend.tracking import (Detections, detections_of, Motion, observation_poses, STATES,
-                                TrackedScan, Tracker, View)
+from .frontend.tracking import (CONFIRMED, Detections, detections_of, Motion,
+                                observation_poses, STATES, TrackedScan, Tracker, View)
 
 # landmarks.csv's columns: the observation in the sensor frame and the upper triangle of its
 # (x, y, yaw) covariance.
@@ -69,6 +69,45 @@ def landmark_array(detections: Detections, tracked: TrackedScan, header,
             poses[:, :2].tolist(), np.sin(half_yaw).tolist(), np.cos(half_yaw).tolist(),
             pose_covariances(covariances))]
     return types.LandmarkArray(header=header, landmarks=landmarks)
+
+
+def landmark_markers(detections: Detections, tracked: TrackedScan, header,
+                     types: Optional[MessageTypes] = None, size_m: float = 0.06):
+    """
+    Label every detection of one scan with its track id, for RViz or Foxglove.
+
+    A DELETEALL first (ids of earlier scans never linger), then one TEXT_VIEW_FACING marker per
+    detection (namespace ``landmark_ids``), at its pose (a line's at its closest point): the
+    id, green when confirmed, grey while tentative.
+
+    :param detections: the scan's detections
+    :param tracked: their tracks
+    :param header: the scan's header
+    :param types: the message classes (None: rclpy's)
+    :param size_m: the labels' height, m
+    :return: a MarkerArray
+    """
+    types = types or rclpy_types()
+    Marker, Point, Pose, Quaternion = types.Marker, types.Point, types.Pose, types.Quaternion
+    ColorRGBA, Vector3 = types.ColorRGBA, types.Vector3
+    alike = dict(unused_marker_fields(types), header=header, points=[])
+    upright = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
+    markers = [Marker(**alike, action=Marker.DELETEALL, ns='', id=0, type=Marker.ARROW,
+                      pose=Pose(position=Point(x=0.0, y=0.0, z=0.0), orientation=upright),
+                      scale=Vector3(x=0.0, y=0.0, z=0.0),
+                      color=ColorRGBA(r=0.0, g=0.0, b=0.0, a=0.0), text='')]
+    poses, _ = observation_poses(detections)
+    _, ids, states, _, _ = _labels(detections, tracked)
+    confirmed = ColorRGBA(r=0.2, g=1.0, b=0.2, a=1.0)
+    tentative = ColorRGBA(r=0.6, g=0.6, b=0.6, a=1.0)
+    for n, ((x, y, _), track, state) in enumerate(zip(poses.tolist(), ids.tolist(),
+                                                      states.tolist())):
+        markers.append(Marker(
+            **alike, action=Marker.ADD, ns='landmark_ids', id=n, type=Marker.TEXT_VIEW_FACING,
+            pose=Pose(position=Point(x=x, y=y, z=3.0 * size_m), orientation=upright),
+            scale=Vector3(x=0.0, y=0.0, z=2.0 * size_m),
+            color=confirmed if state == CONFIRMED else tentative, text=str(track)))
+    return types.MarkerArray(markers=markers)
 
 
 def landmark_rows(stamp_s: str, detections: Detections, tracked: TrackedScan) -> List[list]:

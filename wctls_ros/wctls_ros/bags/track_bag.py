@@ -9,7 +9,8 @@ through one :class:`~wctls_ros.frontend.tracking.Tracker` here, in order. The mo
 scans comes from a pose file (``stamp_s,x_m,y_m,yaw_rad``, the robot's pose; the laser's
 offset on the robot composed in), each step given a stated sigma; without one the sensor is
 taken as still. Writes, per scan, a wctls_msgs/LandmarkArray on ``/landmarks`` into the output
-bag (empty ones too) and the rows of ``landmarks.csv`` beside ``corners.csv``.
+bag (empty ones too), the ids as markers on ``/landmark_markers`` and the rows of
+``landmarks.csv`` beside ``corners.csv``.
 """
 
 import csv
@@ -23,11 +24,14 @@ from .bag_io import BagError
 from ..frontend.frames import relative_step
 from ..frontend.poses import load_poses, PoseError, poses_at
 from ..frontend.tracking import Detections, Motion, Tracker, View
-from ..landmark_messages import landmark_array, LANDMARK_COLUMNS, landmark_rows
+from ..landmark_messages import (landmark_array, LANDMARK_COLUMNS, landmark_markers,
+                                 landmark_rows)
 
 LANDMARKS_CSV = 'landmarks.csv'
 LANDMARKS_TOPIC = '/landmarks'
 LANDMARK_ARRAY = 'wctls_msgs/msg/LandmarkArray'
+LANDMARK_MARKERS_TOPIC = '/landmark_markers'
+MARKER_ARRAY = 'visualization_msgs/msg/MarkerArray'
 
 
 @dataclass(frozen=True)
@@ -128,4 +132,7 @@ class BagTracks:
         message = landmark_array(detections, tracked, header, types)
         self._writer.write_serialized(LANDMARKS_TOPIC, LANDMARK_ARRAY, log_time_ns,
                                       types.serialize(message))
+        self._writer.write_serialized(LANDMARK_MARKERS_TOPIC, MARKER_ARRAY, log_time_ns,
+                                      types.serialize(landmark_markers(detections, tracked,
+                                                                       header, types)))
         self._csv.writerows(landmark_rows(stamp, detections, tracked))

@@ -10,7 +10,8 @@ The landmark tracker against independent truth: Monte Carlo, a simulated walk, h
   the step's covariance the mean is clearly above 2 (a test that can fail).
 - A row of corners and a step whose error moves each onto its neighbour's prediction: joint
   compatibility keeps every id, the nearest-first pairing (the search cut to its first leaf)
-  shifts them.
+  shifts them. Each 2.2 sigma off, six corners pass jointly only with the shared step's cross
+  terms.
 - On a simulated walk through a room every true corner keeps one id, and the fused estimates'
   NEES against the truth is about 2; without the persistent share of the observation
   covariance it is about 4 (the extractor's small bias does not average out).
@@ -118,14 +119,14 @@ def test_a_step_covariance_stated_too_small_shows_in_the_innovations():
     assert finite.mean() > 2.6 or np.isnan(squared).mean() > 0.1
 
 
-def row_of_corners(max_hypotheses: int):
-    """Track a row of corners 0.3 m apart through a step 0.3 m longer than stated."""
-    world = np.column_stack([0.3 * np.arange(6) - 0.75, np.full(6, 2.0), np.zeros(6)])
+def row_of_corners(max_hypotheses: int, spacing_m: float = 0.3, shift_m: float = 0.3):
+    """Track a row of corners spacing_m apart through a step shift_m longer than stated."""
+    world = np.column_stack([spacing_m * (np.arange(6) - 2.5), np.full(6, 2.0), np.zeros(6)])
     step_cov = np.diag([0.2 ** 2, 0.002 ** 2, 1e-8])
     rng = np.random.default_rng(2)
     tracker = Tracker(TrackerConfig(max_hypotheses=max_hypotheses))
     first = tracker.update(corners_seen(world, np.zeros(3), rng, 0.002), Motion.still())
-    second = tracker.update(corners_seen(world, np.array([0.3, 0.0, 0.0]), rng, 0.002),
+    second = tracker.update(corners_seen(world, np.array([shift_m, 0.0, 0.0]), rng, 0.002),
                             Motion(np.zeros(3), step_cov))
     return first.corners.ids, second.corners.ids
 
@@ -135,6 +136,15 @@ def test_joint_compatibility_keeps_the_ids_nearest_first_shifts():
     np.testing.assert_array_equal(first, second)
     first, second = row_of_corners(1)     # cut to the nearest-first pairing
     assert np.sum(first == second) <= 1
+
+
+def test_the_shared_step_lets_a_common_shift_pass_jointly():
+    # Each corner is 2.24 sigma off along the row (d2 5, plus about 1 across it, of the gate's
+    # 9.21), its neighbour's prediction 2.76 sigma (d2 7.6; an ambiguous cluster): the six are
+    # jointly compatible as one shared step error (d2 about 5 + 6 of chi2(12) 26.2), not as
+    # six independent errors (d2 about 36).
+    first, second = row_of_corners(200, spacing_m=1.0, shift_m=0.2 * math.sqrt(5.0))
+    np.testing.assert_array_equal(first, second)
 
 
 @pytest.fixture(scope='module')

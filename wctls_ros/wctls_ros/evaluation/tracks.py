@@ -29,6 +29,7 @@ consecutive poses (a still recording: no motion), each step given ``step_sigma_m
 
 from dataclasses import dataclass
 import math
+import time
 from typing import Dict, List, Optional, Sequence
 
 import numpy as np
@@ -83,7 +84,6 @@ def run_tracker(scans: StaticScans, config: FeatureConfig, poses: Optional[np.nd
     :param tracker_config: the tracker's rules (defaults: :class:`TrackerConfig`)
     :return: the run
     """
-    import time
     poses = np.zeros((len(scans), 3)) if poses is None else np.asarray(poses, dtype=float)
     motions = steps_from_poses(poses, step_sigma_m, step_sigma_rad)
     tracker = Tracker(tracker_config)

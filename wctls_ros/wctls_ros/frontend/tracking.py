@@ -50,7 +50,8 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .frames import overlapping, spanned, step_corners, step_lines, step_points, wrap_angle
+from .frames import (overlapping, relative_step, spanned, step_corners, step_lines, step_points,
+                     wrap_angle)
 from ..core import line_landmarks
 
 CORNER = 'corner'
@@ -185,7 +186,6 @@ def steps_from_poses(poses: np.ndarray, step_sigma_m: float,
     :param step_sigma_rad: the sigma of each step's dyaw, rad
     :return: T motions; the first is still (nothing before it)
     """
-    from .frames import relative_step
     covariance = np.diag([step_sigma_m ** 2, step_sigma_m ** 2, step_sigma_rad ** 2])
     poses = np.asarray(poses, dtype=float).reshape(-1, 3)
     return [Motion.still()] + [Motion(relative_step(before, after), covariance)

@@ -45,7 +45,14 @@ def test_demo_records_a_bag_and_writes_the_table_and_the_figure(tmp_path):
         times = {topic: [] for topic in bag.topics}
         for connection, log_time_ns, _ in bag.messages():
             times[connection.topic].append(log_time_ns * 1e-9)
-    assert set(times) == {'/scan', '/corners', '/lines', '/markers'}
+    assert set(times) == {'/scan', '/corners', '/lines', '/markers', '/landmarks',
+                          '/landmark_markers'}
+    # The still sensor's corners keep their track ids: one confirmed id through most arrays.
+    with AnyReader([out / 'bag']) as bag:
+        arrays = [bag.deserialize(raw, c.msgtype) for c, _, raw in bag.messages()
+                  if c.topic == '/landmarks']
+    confirmed = [m.id for a in arrays for m in a.landmarks if m.kind == 0 and m.state == 1]
+    assert confirmed and max(map(confirmed.count, set(confirmed))) >= len(arrays) / 2
     assert len(times['/scan']) >= 25                                # 10 Hz for 3 s
     # Features flowed through the recording. Not one per scan: on a busy machine feature_node
     # skips the scans that came while it was busy (17 CornerArrays for 51 scans once, beside

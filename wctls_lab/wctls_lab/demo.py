@@ -188,7 +188,7 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
     from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import LaserScan
     from visualization_msgs.msg import MarkerArray
-    from wctls_msgs.msg import CornerArray, LineSegmentArray
+    from wctls_msgs.msg import CornerArray, LandmarkArray, LineSegmentArray
 
     seen = Recording()
     context = rclpy.context.Context()
@@ -224,7 +224,8 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
             node.create_subscription(LaserScan, 'scan', lambda m: keep('/scan', m),
                                      qos_profile_sensor_data)
             for topic, kind in (('corners', CornerArray), ('lines', LineSegmentArray),
-                                ('markers', MarkerArray)):
+                                ('markers', MarkerArray), ('landmarks', LandmarkArray),
+                                ('landmark_markers', MarkerArray)):
                 node.create_subscription(kind, topic, lambda m, t=topic: keep(f'/{t}', m), 10)
             settled = threading.Event()
 
@@ -448,7 +449,8 @@ def _run(args) -> int:
         return USER_ERROR
     domain = private_network(os.environ)
     tty = out.resolve() / 'ttyS1'
-    parameters = {'method': args.method}
+    # The landmark tracks too: their ids on landmarks and, as labels, on landmark_markers.
+    parameters = {'method': args.method, 'publish_landmarks': True}
     config = feature_settings(
         load_parameters(_config_file('wctls_ros') / 'feature_node.yaml', overrides=parameters))[0]
     processes = Processes(out / 'logs')

@@ -33,7 +33,7 @@ def _fields_with_comments(path):
             if in_fields:
                 comment, in_fields = [], False
             comment.append(stripped.lstrip('#').strip())
-        elif stripped:
+        elif stripped and '=' not in stripped:      # a constant is no field
             field_type, name = stripped.split()[:2]
             in_fields = True
             yield field_type, name, ' '.join(comment)
@@ -41,9 +41,9 @@ def _fields_with_comments(path):
             comment, in_fields = [], False
 
 
-def test_the_four_designed_messages_exist():
+def test_the_designed_messages_exist():
     assert [p.stem for p in MSG_FILES] == [
-        'Corner', 'CornerArray', 'LineSegment', 'LineSegmentArray']
+        'Corner', 'CornerArray', 'Landmark', 'LandmarkArray', 'LineSegment', 'LineSegmentArray']
 
 
 @pytest.mark.parametrize('path', MSG_FILES, ids=lambda p: p.name)

@@ -33,6 +33,7 @@ MESSAGE_TYPES = (
     'visualization_msgs/msg/MeshFile',
     'wctls_msgs/msg/Corner', 'wctls_msgs/msg/CornerArray', 'wctls_msgs/msg/LineSegment',
     'wctls_msgs/msg/LineSegmentArray',
+    'wctls_msgs/msg/Landmark', 'wctls_msgs/msg/LandmarkArray',
 )
 MESSAGE_PACKAGE = 'wctls_msgs'
 # Rows/columns of (x, y, yaw) in a geometry_msgs 6x6 pose covariance (x, y, z, roll, pitch, yaw).
@@ -385,8 +386,13 @@ def line_segment_array(features: Features, header, types: Optional[MessageTypes]
     return types.LineSegmentArray(header=header, method=features.method, segments=messages)
 
 
-def _unused_marker_fields(types: MessageTypes) -> dict:
-    """Return the Marker fields we never use, at their defaults (rosbags needs every field)."""
+def unused_marker_fields(types: MessageTypes) -> dict:
+    """
+    Return the Marker fields we never use, at their defaults (rosbags needs every field).
+
+    :param types: the message classes
+    :return: field name -> default value
+    """
     no_bytes = np.zeros(0, np.uint8)
     no_header = types.Header(stamp=types.Time(sec=0, nanosec=0), frame_id='')
     return {'lifetime': types.Duration(sec=0, nanosec=0), 'frame_locked': False, 'colors': [],
@@ -423,7 +429,7 @@ def marker_array(features: Features, header, style: MarkerStyle = MarkerStyle(),
     Marker, Point, Pose, Quaternion = types.Marker, types.Point, types.Pose, types.Quaternion
     Vector3, ColorRGBA = types.Vector3, types.ColorRGBA
     # What the markers of each kind have alike; each marker adds its id, pose and what varies.
-    alike = dict(_unused_marker_fields(types), header=header, action=Marker.ADD)
+    alike = dict(unused_marker_fields(types), header=header, action=Marker.ADD)
     upright = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
     at_origin = Pose(position=Point(x=0.0, y=0.0, z=0.0), orientation=upright)
     no_scale = Vector3(x=0.0, y=0.0, z=0.0)

@@ -37,15 +37,17 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import MarkerArray
-from wctls_msgs.msg import CornerArray, LineSegmentArray
+from wctls_msgs.msg import CornerArray, LandmarkArray, LineSegmentArray
 
 from .conversions import (copy_header, corner_array, line_segment_array, marker_array,
                           MessageTypes, mismatched_types, rclpy_types, scan_features, typestore)
 from .core import (CoreStatus, CornerSet, Features, line_landmarks, SegmentSet,
                    start as start_core, status as core_status)
 from .extras import missing_extra
+from .landmark_messages import landmark_array, landmark_markers, LandmarkStream
+from .landmark_publishers import BridgePublishers
 from .node_main import declare_parameters, run_node
-from .params import FEATURE_NODE, feature_settings
+from .params import FEATURE_NODE, feature_settings, landmark_settings
 
 # A throttled warning repeats at most this often, s.
 WARN_PERIOD_S = 5.0
@@ -93,8 +95,13 @@ class FeatureNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('feature_node', **kwargs)
-        self._config, self._style, self._publish_markers = feature_settings(
-            declare_parameters(self, FEATURE_NODE))
+        values = declare_parameters(self, FEATURE_NODE)
+        self._config, self._style, self._publish_markers = feature_settings(values)
+        self._publish_landmarks, *step_sigmas = landmark_settings(values)
+        self._landmark_stream = LandmarkStream(*step_sigmas)
+        self._landmarks = self.create_publisher(LandmarkArray, 'landmarks', 10)
+        self._landmark_markers = self.create_publisher(MarkerArray, 'landmark_markers', 10)
+        self._bridges = BridgePublishers(self, str(values['landmark_bridges']))
         # As ros2/demos do: a change is checked whole before it is accepted, applied after.
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -163,6 +170,9 @@ class FeatureNode(Node):
     def _apply_parameters(self, changes) -> None:
         # Takes effect on the next scan (callbacks of this node never run concurrently).
         self._config, self._style, self._publish_markers = self._settings()
+        values = {spec.name: self.get_parameter(spec.name).value for spec in FEATURE_NODE}
+        self._publish_landmarks, *step_sigmas = landmark_settings(values)
+        self._landmark_stream.motion = LandmarkStream(*step_sigmas).motion
 
     @property
     def counters(self) -> ScanCounters:
@@ -218,6 +228,17 @@ class FeatureNode(Node):
             self._count('implausible_features', features.implausible_features)
         return features
 
+    def _publish_tracks(self, features: Features, scan, header, types: MessageTypes) -> None:
+        """Track the scan's landmarks; publish them with their ids, and on every bridge."""
+        detections, tracked = self._landmark_stream.track(
+            features, scan, self._config.max_landmark_angle_sigma_rad)
+        self._landmarks.publish(types.serialize(landmark_array(detections, tracked, header,
+                                                               types)))
+        if self._landmark_markers.get_subscription_count():
+            self._landmark_markers.publish(types.serialize(landmark_markers(
+                detections, tracked, header, types, self._style.corner_size_m)))
+        self._bridges.publish(detections, tracked, scan.header)
+
     def _on_scan(self, serialized: bytes, info: dict):
         started = time.perf_counter()
         self._count_skipped(info)
@@ -244,6 +265,8 @@ class FeatureNode(Node):
                                          self._config.max_landmark_angle_sigma_rad)
             self._lines.publish(types.serialize(
                 line_segment_array(features, header, types, is_landmark=is_landmark)))
+            if self._publish_landmarks:
+                self._publish_tracks(features, scan, header, types)
             # Markers are costly to build (a Marker per corner label and ellipse): only for a
             # listener such as RViz.
             if self._publish_markers and self._markers.get_subscription_count():

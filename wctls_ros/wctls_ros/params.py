@@ -174,6 +174,21 @@ FEATURE_NODE = (
               'Label each corner with its index (one text marker per corner: serialising it '
               "doubles the markers' cost, about 0.6x the core per scan, so off by default)",
               setting='text_ids'),
+    Parameter('publish_landmarks', False,
+              "Track the corners and line landmarks and publish every scan's, with their "
+              'persistent ids, on landmarks (wctls_msgs/LandmarkArray; empty ones too)'),
+    Parameter('landmark_step_sigma_m', 0.0,
+              'With publish_landmarks: the sensor counts as still between scans, its unknown '
+              'step this sigma in x and y (0: a sensor on a tripod), m', Limits(0.0, 10.0)),
+    Parameter('landmark_step_sigma_deg', 0.0,
+              'With publish_landmarks: the sigma of its unknown turn between scans, deg',
+              Limits(0.0, 180.0)),
+    Parameter('landmark_bridges', '',
+              'With publish_landmarks: comma-separated bridges among rtabmap '
+              '(rtabmap_msgs/LandmarkDetections on landmark_detections), cartographer '
+              '(cartographer_ros_msgs/LandmarkList on landmark) and pose_array '
+              '(geometry_msgs/PoseArray on landmark_poses); one whose package is not installed '
+              'is left out with a warning', read_only=True),
 )
 
 
@@ -256,6 +271,17 @@ def feature_settings(values: Dict[str, Value]) -> FeatureSettings:
         raise ConfigError('; '.join(problems))
     return FeatureSettings(FeatureConfig(**config), MarkerStyle(**style),
                            bool(values['publish_markers']))
+
+
+def landmark_settings(values: Dict[str, Value]) -> Tuple[bool, float, float]:
+    """
+    Return whether feature_node tracks its landmarks, and the sigmas of a step between scans.
+
+    :param values: parameter name -> value (FEATURE_NODE)
+    :return: (publish_landmarks, step sigma m, step sigma rad)
+    """
+    return (bool(values['publish_landmarks']), float(values['landmark_step_sigma_m']),
+            math.radians(float(values['landmark_step_sigma_deg'])))
 
 
 def _flatten(parameters: dict, prefix: str = '') -> dict:

@@ -39,6 +39,8 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from wctls_ros.core import FeatureConfig, line_landmarks
+from wctls_ros.frontend.frames import (overlapping, spanned, to_world_points, world_landmarks,
+                                       wrap_angle)
 
 from .analysis import features_per_scan
 from .rules import assign, ASSOCIATION_GATE_MAX_M
@@ -223,11 +225,6 @@ def landmarks_of(features, corners: ScanCorners, max_landmark_angle_sigma_rad: f
                      np.stack([segments.start_xy_m, segments.end_xy_m], axis=1).reshape(-1, 2, 2))
 
 
-def _wrap(angle):
-    """Return angles wrapped into (-pi, pi]."""
-    return np.pi - np.mod(np.pi - angle, 2 * np.pi)
-
-
 def match_lines(before: np.ndarray, after: np.ndarray) -> np.ndarray:
     """
     Match the lines of two consecutive scans, nearest first, one to one.
@@ -239,7 +236,7 @@ def match_lines(before: np.ndarray, after: np.ndarray) -> np.ndarray:
     out = np.full(len(before), -1, dtype=np.intp)
     if not len(before) or not len(after):
         return out
-    d_angle = np.abs(_wrap(before[:, None, 0] - after[None, :, 0]))
+    d_angle = np.abs(wrap_angle(before[:, None, 0] - after[None, :, 0]))
     d_radius = np.abs(before[:, None, 1] - after[None, :, 1])
     cost = (d_angle / LINE_GATE_RAD) ** 2 + (d_radius / LINE_GATE_M) ** 2
     pairs = np.argwhere((d_angle <= LINE_GATE_RAD) & (d_radius <= LINE_GATE_M))
@@ -304,12 +301,12 @@ def pose_free(per_scan: Sequence[Landmarks]) -> Tuple[GateShare, GateShare, Gate
             counts[0] += _gated((c - a) ** 2 / (b + d), GATE_1DOF)
         if len(li) >= 2:
             i, j = np.triu_indices(len(li), 1)
-            angle_before = _wrap(before.line[li[i], 0] - before.line[li[j], 0])
-            angle_after = _wrap(after.line[lines[li[i]], 0] - after.line[lines[li[j]], 0])
+            angle_before = wrap_angle(before.line[li[i], 0] - before.line[li[j], 0])
+            angle_after = wrap_angle(after.line[lines[li[i]], 0] - after.line[lines[li[j]], 0])
             variance = (before.line_cov[li[i], 0, 0] + before.line_cov[li[j], 0, 0]
                         + after.line_cov[lines[li[i]], 0, 0]
                         + after.line_cov[lines[li[j]], 0, 0])
-            counts[1] += _gated(_wrap(angle_after - angle_before) ** 2 / variance, GATE_1DOF)
+            counts[1] += _gated(wrap_angle(angle_after - angle_before) ** 2 / variance, GATE_1DOF)
         if len(ci) and len(li):
             c, k = (grid.ravel() for grid in np.meshgrid(ci, li, indexing='ij'))
             own = (before.corner_lines[c] == k[:, None]).any(axis=1)
@@ -337,79 +334,8 @@ def to_world(landmarks: Landmarks, pose: np.ndarray, pose_cov: np.ndarray):
     :param pose_cov: its covariance, shape (3, 3)
     :return: (corner xy (C, 2), their covariances (C, 2, 2), lines (L, 2), theirs (L, 2, 2))
     """
-    x, y, yaw = pose
-    rotation = _rotation(yaw)
-    xy = _moved(landmarks.corner_xy, pose)
-    # d(world xy) / d(x, y, yaw)
-    pose_jacobian = np.zeros((len(xy), 2, 3))
-    pose_jacobian[:, :, :2] = np.eye(2)
-    pose_jacobian[:, 0, 2] = -(xy[:, 1] - y)
-    pose_jacobian[:, 1, 2] = xy[:, 0] - x
-    corner_cov = (rotation @ landmarks.corner_cov @ rotation.T
-                  + pose_jacobian @ pose_cov @ pose_jacobian.transpose(0, 2, 1))
-    angle = landmarks.line[:, 0] + yaw
-    radius = landmarks.line[:, 1] + x * np.cos(angle) + y * np.sin(angle)
-    # d(world angle, radius) / d(angle, radius) and / d(x, y, yaw)
-    lever = -x * np.sin(angle) + y * np.cos(angle)
-    line_jacobian = np.zeros((len(angle), 2, 2))
-    line_jacobian[:, 0, 0] = 1.0
-    line_jacobian[:, 1, 0] = lever
-    line_jacobian[:, 1, 1] = 1.0
-    line_pose = np.zeros((len(angle), 2, 3))
-    line_pose[:, 0, 2] = 1.0
-    line_pose[:, 1, 0] = np.cos(angle)
-    line_pose[:, 1, 1] = np.sin(angle)
-    line_pose[:, 1, 2] = lever
-    line_cov = (line_jacobian @ landmarks.line_cov @ line_jacobian.transpose(0, 2, 1)
-                + line_pose @ pose_cov @ line_pose.transpose(0, 2, 1))
-    flip = radius < 0.0                  # the normal points from the origin to the line
-    radius = np.where(flip, -radius, radius)
-    angle = _wrap(np.where(flip, angle + np.pi, angle))
-    line_cov[flip, 0, 1] *= -1.0
-    line_cov[flip, 1, 0] *= -1.0
-    return xy, corner_cov, np.column_stack([angle, radius]), line_cov
-
-
-def _rotation(yaw: float) -> np.ndarray:
-    """Return the 2D rotation by yaw (rad)."""
-    cos, sin = math.cos(yaw), math.sin(yaw)
-    return np.array([[cos, -sin], [sin, cos]])
-
-
-def _moved(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
-    """Return points of the sensor frame (..., 2) in the world frame of pose (x, y, yaw)."""
-    return points @ _rotation(pose[2]).T + pose[:2]
-
-
-def _overlapping(ends: np.ndarray, track_ends: np.ndarray) -> np.ndarray:
-    """
-    Return which segments overlap which tracks' stretches of wall, along each segment's line.
-
-    :param ends: the segments' ends, shape (N, 2, 2), m
-    :param track_ends: the ends of the stretch each track has seen, shape (K, 2, 2), m
-    :return: shape (N, K): the two extents share a stretch of positive length
-    """
-    direction = ends[:, 1] - ends[:, 0]
-    direction = direction / np.maximum(np.linalg.norm(direction, axis=1), 1e-12)[:, None]
-    own = np.sort(np.einsum('nei,ni->ne', ends, direction), axis=1)
-    other = np.sort(np.einsum('kei,ni->nke', track_ends, direction), axis=2)
-    return (np.minimum(own[:, None, 1], other[..., 1])
-            > np.maximum(own[:, None, 0], other[..., 0]))
-
-
-def _spanned(ends: np.ndarray, track_ends: np.ndarray) -> np.ndarray:
-    """
-    Return a segment's ends stretched over the stretch of its track seen before.
-
-    :param ends: the segment's ends, shape (2, 2), m
-    :param track_ends: the track's ends, shape (2, 2), m
-    :return: the ends of the union of both extents along the segment's line, shape (2, 2)
-    """
-    direction = ends[1] - ends[0]
-    direction = direction / max(float(np.linalg.norm(direction)), 1e-12)
-    along = np.concatenate([ends, track_ends]) @ direction
-    foot = ends[0] - along[0] * direction
-    return foot + np.array([along.min(), along.max()])[:, None] * direction
+    return world_landmarks(landmarks.corner_xy, landmarks.corner_cov, landmarks.line,
+                           landmarks.line_cov, pose, pose_cov)
 
 
 class _Tracks:
@@ -447,12 +373,12 @@ class _Tracks:
         if len(active) and len(value):
             error = value[:, None, :] - self.last[None, active]
             if self.lines:
-                error[..., 0] = _wrap(error[..., 0])
+                error[..., 0] = wrap_angle(error[..., 0])
             innovation = cov[:, None] + self.last_cov[None, active]
             squared = np.einsum('nki,nkij,nkj->nk', error, np.linalg.inv(innovation), error)
             gated = squared <= TRACK_GATE_2DOF
             if self.lines:
-                gated &= _overlapping(ends, self.last_ends[active])
+                gated &= overlapping(ends, self.last_ends[active])
             pairs = np.argwhere(gated)
             taken = np.zeros(len(active), dtype=bool)
             for n, k in pairs[np.argsort(squared[pairs[:, 0], pairs[:, 1]], kind='stable')]:
@@ -465,7 +391,7 @@ class _Tracks:
             if k >= 0:
                 self.last[k], self.last_cov[k], self.last_scan[k] = value[n], cov[n], scan
                 if self.lines:
-                    self.last_ends[k] = _spanned(ends[n], self.last_ends[k])
+                    self.last_ends[k] = spanned(ends[n], self.last_ends[k])
                 self.lengths[k] += 1
         new = matched < 0
         self.last = np.concatenate([self.last, value[new]])
@@ -488,7 +414,7 @@ def with_poses(per_scan: Sequence[Landmarks], poses: np.ndarray, pose_cov: np.nd
     for scan, (landmarks, pose) in enumerate(zip(per_scan, poses)):
         xy, xy_cov, line, line_cov = to_world(landmarks, pose, pose_cov)
         corners.update(scan, xy, xy_cov, np.stack([xy, xy], axis=1))
-        lines.update(scan, line, line_cov, _moved(landmarks.line_ends, pose))
+        lines.update(scan, line, line_cov, to_world_points(landmarks.line_ends, pose))
     return (GateShare(corners.tested, corners.inside), GateShare(lines.tested, lines.inside),
             tuple(corners.lengths), tuple(lines.lengths))
 

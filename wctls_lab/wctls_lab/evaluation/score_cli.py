@@ -43,6 +43,7 @@ from .rules import check_still, corners_per_scan_figure
 from .scans import load_json_scans, load_scans, StaticScans
 from .score import (markdown_table, RECURRING_PRESENCE, REOBSERVATION_COLUMNS, score_scans,
                     write_score)
+from .tracks import run_tracker, track_figures, track_lines
 from .truth import load_truth, Truth, TRUTH_FILE
 
 
@@ -110,6 +111,16 @@ def parser() -> argparse.ArgumentParser:
                    help='position sigma of the poses, each axis, m (default: %(default)s)')
     p.add_argument('--pose-sigma-deg', type=bounded(float, 0.0), default=0.0,
                    help='heading sigma of the poses, deg (default: %(default)s)')
+    p.add_argument('--tracks', action='store_true',
+                   help='also run the landmark tracker (the first method) and print its '
+                   'figures: confirmed tracks, their lengths, id switches and duplicates per '
+                   '100 scans, the gate share, and with labels confirmed-landmark precision and '
+                   'recall (wctls_lab.evaluation.tracks)')
+    p.add_argument('--step-sigma', type=bounded(float, 0.0), nargs=2, default=None,
+                   metavar=('M', 'DEG'),
+                   help='with --tracks: sigma of each step between scans (default: with poses '
+                   'sqrt(2) times the pose sigmas, the difference of two independent pose '
+                   'errors; without, 0 0: a still sensor)')
     p.add_argument('--out', default=None, help='folder for table.md, table.csv, corners.csv, '
                    'score.png: a new or empty folder, or an earlier output of score, which is '
                    'replaced (default: print only)')
@@ -202,6 +213,31 @@ def _poses(args, scans: StaticScans):
     return poses
 
 
+def _track_lines(args, scans: StaticScans, config: FeatureConfig, truth: Optional[Truth],
+                 poses: Optional[np.ndarray]) -> list:
+    """Run the landmark tracker over the scans with known poses; return its figures' lines."""
+    pose_sigma_rad = math.radians(args.pose_sigma_deg)
+    step_m, step_rad = ((math.sqrt(2.0) * args.pose_sigma_m, math.sqrt(2.0) * pose_sigma_rad)
+                        if args.step_sigma is None and poses is not None else
+                        (0.0, 0.0) if args.step_sigma is None else
+                        (args.step_sigma[0], math.radians(args.step_sigma[1])))
+    if poses is not None:
+        known = np.isfinite(poses).all(axis=1)
+        if truth is not None and not known.all():
+            raise UserError('--tracks with labels needs a pose for every scan')
+        scans = StaticScans(scans.ranges[known], scans.angle_min, scans.angle_increment,
+                            scans.range_min, scans.range_max, scans.stamps_ns[known],
+                            scans.source)
+        poses = poses[known]
+    run = run_tracker(scans, config, poses, step_m, step_rad)
+    lines = [f'{len(scans)} scans, steps of sigma {1e3 * step_m:g} mm and '
+             f'{math.degrees(step_rad):g} deg; tracker {1e3 * run.seconds_per_scan:.2f} ms '
+             'per scan']
+    return lines + track_lines([track_figures(run, kind, truth, max(args.pose_sigma_m, 1e-3),
+                                              max(pose_sigma_rad, 1e-3))
+                                for kind in ('corner', 'line')])
+
+
 def run(args, argv) -> int:
     """Load, score, print and write; raise on what the user gave wrong."""
     methods = [m.strip() for m in args.methods.split(',') if m.strip()]
@@ -269,6 +305,9 @@ def run(args, argv) -> int:
         print(f'# {scored.method}: corners per scan '
               f'{corners_per_scan_figure(scored.per_scan):.3f}')
         print('\n'.join(f'# {scored.method}: {line}' for line in scored.reobservation.lines()))
+    if args.tracks:
+        print('\n'.join(f'# {methods[0]} tracks: {line}' for line in _track_lines(
+            args, scans, settings[methods[0]], truth, poses)))
     if args.out is not None:
         command = 'score ' + ' '.join(shlex.quote(a) for a in
                                       (sys.argv[1:] if argv is None else argv))

@@ -14,7 +14,9 @@ every scan with the same parameters (a feature_node YAML file) and writes, with 
   header and log time; with ``--method all`` every method on its own topics
   (``/corners/wctls``, ...);
 - ``corners.csv`` (one row per corner) and ``corners.json`` (one entry per scan) inside the bag
-  folder.
+  folder;
+- with ``--tracks``, every scan's landmarks with their track ids (:mod:`.track_bag`): a
+  wctls_msgs/LandmarkArray on ``/landmarks`` and ``landmarks.csv`` (one row per observation).
 
 Memory stays constant however long the bag is, and the output appears only when complete.
 """
@@ -43,10 +45,12 @@ import numpy as np
 
 from .bag_io import (bag_info, BagError, BagWriter, choose_scan_topic, LASER_SCAN, read_scans,
                      typestore)
+from .track_bag import BagTracks, LANDMARKS_CSV, TrackOptions
 from ..cli import start_core
 from ..conversions import (corner_array, laser_scan, line_segment_array, marker_array,
                            MessageTypes, scan_features)
 from ..core import CornerSet, line_landmarks, METHODS, SegmentSet, start
+from ..frontend.tracking import detections_of, View
 from ..params import ConfigError, feature_settings, load_parameters, SENSOR
 from ..sensors import DEFAULT_SENSOR, sensor_presets
 
@@ -203,6 +207,8 @@ class ScanOutput(NamedTuple):
     :ivar segments: method -> segments found
     :ivar line_landmarks: method -> of those, line landmarks
     :ivar malformed: whether the scan was unusable (written with no features)
+    :ivar tracking: with --tracks, ((stamp sec, nanosec, frame_id), Detections, View) of the
+        scan, else None
     """
 
     messages: list
@@ -212,6 +218,7 @@ class ScanOutput(NamedTuple):
     segments: dict
     line_landmarks: dict
     malformed: bool
+    tracking: Optional[tuple] = None
 
 
 def _corner_rows(corners: CornerSet, segments: SegmentSet) -> list:
@@ -235,14 +242,16 @@ class ScanWork:
     Made once per run; called here, or in worker processes that inherit it (``--jobs``).
     """
 
-    def __init__(self, parameters: dict, methods=None):
+    def __init__(self, parameters: dict, methods=None, tracks: bool = False):
         """
         Prepare the work.
 
         :param parameters: feature_node parameter values (see :func:`load_parameters`)
         :param methods: the methods to run (None: the ``method`` parameter)
+        :param tracks: also hand over each scan's landmarks for the tracker (one method)
         :raises ValueError: for parameters that make no valid configuration
         """
+        self.tracks = tracks
         config, self.style, self.publish_markers = feature_settings(parameters)
         self.methods = tuple(methods or (config.method,))
         self.configs = {m: config.replace(method=m) for m in self.methods}
@@ -282,13 +291,20 @@ class ScanWork:
             corners_of[method] = [dict(zip(CSV_COLUMNS[4:], row)) for row in rows]
             corners[method], segments[method] = len(features.corners), len(features.segments)
             landmarks[method] = int(np.count_nonzero(is_landmark))
+        tracking = None
+        if self.tracks:
+            bound = self.configs[method].max_landmark_angle_sigma_rad
+            tracking = ((header.stamp.sec, header.stamp.nanosec, header.frame_id),
+                        detections_of(features, bound),
+                        View(scan.angle_min, scan.angle_increment, np.asarray(scan.ranges),
+                             scan.range_max))
         table = io.StringIO()
         csv.writer(table).writerows(csv_rows)
         entry = json.dumps({'scan': index, 'stamp': stamp, 'frame_id': header.frame_id,
                             'log_time_ns': log_time_ns, 'problems': problems,
                             'corners': corners_of})
         return ScanOutput(messages, table.getvalue(), entry, corners, segments, landmarks,
-                          bool(problems))
+                          bool(problems), tracking)
 
 
 # The work of a worker process, inherited from the process that started it.
@@ -407,7 +423,7 @@ class _CornerTables:
 
 def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = None,
             overwrite: bool = False, after_scans: Optional[Callable[[int], None]] = None,
-            jobs: int = 1) -> Summary:
+            jobs: int = 1, tracks: Optional[TrackOptions] = None) -> Summary:
     """
     Extract features from every scan of a bag into an output bag with corner tables.
 
@@ -422,13 +438,16 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
         batch of scans); whatever it raises (e.g. :class:`Interrupted`) ends the run and
         leaves nothing
     :param jobs: processes that extract features (1: this one alone)
+    :param tracks: track the landmarks (one method only) with this motion source, or None
     :return: counts and timing
     :raises BagError: for a missing, unreadable or damaged bag, or one without LaserScans, or
         an output that exists (without ``overwrite``, or that process_bag did not write)
     :raises ValueError: for parameters that make no valid configuration
     """
     started = time.perf_counter()
-    work = ScanWork(parameters, methods)
+    work = ScanWork(parameters, methods, tracks is not None)
+    if tracks is not None and len(work.methods) > 1:
+        raise BagError('--tracks follows the landmarks of one method, not of --method all')
     info = bag_info(bag)
     topic = choose_scan_topic(bag, topic, info)
     output = pathlib.Path(output)
@@ -439,18 +458,22 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
     with BagWriter(output, overwrite=overwrite) as writer:
         writer.sidecar(MARKER_NAME).write_text(json.dumps({
             'written_by': 'process_bag of wctls_ros',
-            'files': [MARKER_NAME, f'{output.name}.mcap', 'metadata.yaml', CSV_NAME, JSON_NAME]}))
+            'files': [MARKER_NAME, f'{output.name}.mcap', 'metadata.yaml', CSV_NAME, JSON_NAME]
+            + ([LANDMARKS_CSV] if tracks is not None else [])}))
+        tracker = BagTracks(writer, tracks, work.types) if tracks is not None else None
         tables = _CornerTables(writer, {'bag': str(bag), 'topic': topic,
                                         'methods': work.methods, 'parameters': parameters})
         # Closed on the way out, whatever ends the run: the worker processes stop at once.
         batches = contextlib.closing(_outputs(work, read_scans(bag, topic), jobs))
-        with tables, batches as outputs:
+        with tables, batches as outputs, contextlib.closing(tracker or io.StringIO()):
             for batch in outputs:
                 for log_time_ns, scan_data, scan_output in batch:
                     writer.write_serialized(topic, LASER_SCAN, log_time_ns, scan_data)
                     for message_topic, kind, data in scan_output.messages:
                         writer.write_serialized(message_topic, kind, log_time_ns, data)
                     tables.add(scan_output)
+                    if tracker is not None:
+                        tracker.add(log_time_ns, *scan_output.tracking)
                     for method in work.methods:
                         summary.corners[method] += scan_output.corners[method]
                         summary.segments[method] += scan_output.segments[method]
@@ -543,6 +566,19 @@ def parser() -> argparse.ArgumentParser:
     cli.add_argument('-j', '--jobs', type=_positive, default=usable_cpus(),
                      help='processes that extract features, each taking batches of scans '
                           f'(default: the CPUs this process may use, {usable_cpus()} here)')
+    cli.add_argument('--tracks', action='store_true',
+                     help='also track the corners and line landmarks: ids on /landmarks '
+                          f'(wctls_msgs/LandmarkArray) and {LANDMARKS_CSV}; the sensor still '
+                          'unless --poses')
+    cli.add_argument('--poses', metavar='FILE',
+                     help="with --tracks: the robot's poses (CSV stamp_s,x_m,y_m,yaw_rad) that "
+                          'move the tracks from scan to scan')
+    cli.add_argument('--laser-offset', nargs=3, type=float, default=[0.0, 0.0, 0.0],
+                     metavar=('X', 'Y', 'YAW_DEG'),
+                     help="with --poses: the laser's pose on the robot (default: 0 0 0)")
+    cli.add_argument('--step-sigma', nargs=2, type=float, default=None, metavar=('M', 'DEG'),
+                     help='with --tracks: sigma of each step between scans, position (m) and '
+                          'heading (deg) (default: 0.02 1 with --poses, 0 0 without)')
     cli.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
                      help='show one progress bar for all bags (default: on a terminal, for '
                           'runs over 1 s)')
@@ -666,6 +702,8 @@ def main(argv=None) -> int:
             except ValueError as error:
                 raise ConfigError(f'process_bag: error: {error}') from error
             runs = _plan(args)
+            tracks = (TrackOptions.from_arguments(args.poses, args.laser_offset,
+                                                  args.step_sigma) if args.tracks else None)
             # Workers are forked from a process that has chosen (and compiled) the core.
             start_core('process_bag', wait=args.jobs > 1,
                        give_up=lambda: stop.received is not None)
@@ -682,7 +720,7 @@ def main(argv=None) -> int:
                     try:
                         results.append((bag, process(bag, output, parameters, methods,
                                                      args.topic, args.force, after_scans,
-                                                     args.jobs)))
+                                                     args.jobs, tracks)))
                     except BagError as error:
                         if len(runs) == 1:
                             raise

@@ -50,10 +50,12 @@ from numba.core.caching import FunctionCache
 
 _CACHE_VARIABLE = 'NUMBA_CACHE_DIR'
 _HERE = os.path.dirname(os.path.abspath(__file__))
-# Kernels use constants of the shared modules and of the numpy core too: every core source counts.
+# Kernels use constants and records of the shared modules too: every core source counts...
 _CORE_SOURCES = os.path.join(os.path.dirname(_HERE), '**', '*.py')
-# ... but the one that chooses which implementation runs: no kernel reads it.
-_NOT_READ_BY_KERNELS = os.path.join(os.path.dirname(_HERE), 'runtime.py')
+# ... but the one that chooses which implementation runs and the numpy twin: no kernel reads
+# them (the shared rule constants are in ..rules), so editing them recompiles nothing.
+_NOT_READ_BY_KERNELS = (os.path.join(os.path.dirname(_HERE), 'runtime.py'),
+                        os.path.join(os.path.dirname(_HERE), 'numpy_core', ''))
 _FINGERPRINT_FILE = 'wctls_ros_core.fingerprint'
 # numba makes its configuration's attributes when it reads its environment, so no type checker
 # knows them.
@@ -101,7 +103,7 @@ def _fingerprint() -> str:
     """Return a digest of numba's version and every source file of the core kernels read."""
     digest = hashlib.sha256(numba.__version__.encode())
     for path in sorted(glob.glob(_CORE_SOURCES, recursive=True)):
-        if path == _NOT_READ_BY_KERNELS:
+        if path.startswith(_NOT_READ_BY_KERNELS):
             continue
         digest.update(os.path.relpath(path, _HERE).encode())
         with open(path, 'rb') as source:

@@ -25,8 +25,8 @@ from ._jit import jit, jit_inline
 from ._order import wrapped
 from ._types import (FLAGS, INDICES, INTEGER, NOISE, PLACED, REAL, RETURNS, ROWS, RULE, WALL,
                      WALLS, WINDOW)
-from ..numpy_core.corners import CORNER_MISSING_BEAMS
 from ..records import AlongWall, CornerCandidates, EndWindow, WallAtCorner
+from ..rules import CORNER_MISSING_BEAMS
 
 # The upper triangle of the symmetric (x, y, yaw) covariance, row by row: (row, column) of each
 # of its six entries.

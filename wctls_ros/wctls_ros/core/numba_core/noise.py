@@ -16,8 +16,7 @@ import numpy as np
 from ._jit import jit
 from ._order import median
 from ._types import INDICES, VALUES
-from ..numpy_core.noise import (_CUT_SIGMAS, _CUT_VARIANCE, _MAD_TO_SIGMA, _REFINEMENTS,
-                                MIN_TRIPLES)
+from ..rules import CUT_SIGMAS, CUT_VARIANCE, MAD_TO_SIGMA, MIN_TRIPLES, REFINEMENTS
 from ..scan import ScanPoints
 
 
@@ -64,12 +63,12 @@ def range_sigma_of_returns(index, range_m):
     for k in range(triples):
         second[k] -= centre
         deviation[k] = abs(second[k])
-    sigma = _MAD_TO_SIGMA * median(deviation)
-    for _ in range(_REFINEMENTS):
+    sigma = MAD_TO_SIGMA * median(deviation)
+    for _ in range(REFINEMENTS):
         total, kept = 0.0, 0
         for k in range(triples):
-            if deviation[k] < _CUT_SIGMAS * sigma:
+            if deviation[k] < CUT_SIGMAS * sigma:
                 total += second[k] * second[k]
                 kept += 1
-        sigma = math.sqrt(total / kept / _CUT_VARIANCE) if kept else 0.0
+        sigma = math.sqrt(total / kept / CUT_VARIANCE) if kept else 0.0
     return sigma / math.sqrt(6.0)

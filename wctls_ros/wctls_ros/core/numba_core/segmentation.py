@@ -20,9 +20,9 @@ import numpy as np
 from ._jit import jit
 from ._order import stable_order, wrapped
 from ._types import FLAG, FLAGS, GRID, INTEGER, LINES, NOISE, REAL, RETURNS, SEGMENTS, VALUES
-from ..numpy_core.segmentation import (_BUDGET_EXTRA_PASSES, _BUDGET_LEVELS_PER_DOUBLING,
-                                       _JOINABLE_SIGMAS, _MIN_CHORD_M, MIN_FIT_RETURNS)
 from ..records import Lines, Segments
+from ..rules import (BUDGET_EXTRA_PASSES, BUDGET_LEVELS_PER_DOUBLING, JOINABLE_SIGMAS, MIN_CHORD_M,
+                     MIN_FIT_RETURNS)
 
 
 @jit(ahead=(INTEGER,))
@@ -35,8 +35,8 @@ def pass_budget(count: int) -> int:
     :param count: number of returns in the scan
     :return: the number of passes, 2 ceil(log2 count) + 8
     """
-    return (_BUDGET_LEVELS_PER_DOUBLING * math.ceil(math.log2(max(count, 2)))
-            + _BUDGET_EXTRA_PASSES)
+    return (BUDGET_LEVELS_PER_DOUBLING * math.ceil(math.log2(max(count, 2)))
+            + BUDGET_EXTRA_PASSES)
 
 
 @jit
@@ -113,7 +113,7 @@ def breakpoints_of(returns, grid, noise, lambda_rad, max_missing_beams, noise_si
         gap = beams - 1.0 >= max_missing_beams + 0.5
         separated[i] = reach < 0.0 or gap or distance > surface + noise_sigmas * sigma
         joinable[i] = (separated[i] and reach >= 0.0 and not gap
-                       and distance <= surface + _JOINABLE_SIGMAS * sigma)
+                       and distance <= surface + JOINABLE_SIGMAS * sigma)
     if not grid.full_turn or n == 1:
         separated[0], joinable[0] = True, False
     return separated, joinable
@@ -219,7 +219,7 @@ def split_iepf(x_m, y_m, runs, threshold_m, max_levels):
                     undefined = True
             chord2 = dx * dx + dy * dy
             if (not undefined and farthest * farthest > chord2
-                    and chord2 > _MIN_CHORD_M ** 2):
+                    and chord2 > MIN_CHORD_M ** 2):
                 if depth == max_levels:          # out of passes: not straight, left out
                     unsplit = True
                     continue

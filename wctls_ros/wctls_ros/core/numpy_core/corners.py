@@ -27,10 +27,7 @@ import numpy as np
 from ..features import CornerSet, SegmentSet
 from ..records import (AlongWall, CornerCandidates, CornerEndRule, EndWindow, Noise, Returns,
                        WallAtCorner)
-
-# A corner may sit one beam without a return beyond a wall's last return (a dropout there),
-# reported with that wall's end not seen; farther, it is an extrapolation, not a corner.
-CORNER_MISSING_BEAMS = 1
+from ..rules import CORNER_MISSING_BEAMS
 
 # The upper triangle of the symmetric (x, y, yaw) covariance, row by row: (row, column) of each
 # of its six entries, and which of them each entry of the full matrix is.

@@ -19,15 +19,9 @@ import numpy as np
 
 from ._linalg import mahalanobis_squared_2x2
 from ..records import Lines, Noise
+from ..rules import (BUDGET_EXTRA_PASSES, BUDGET_LEVELS_PER_DOUBLING, JOINABLE_SIGMAS, MIN_CHORD_M,
+                     MIN_FIT_RETURNS)
 from ..scan import ScanPoints
-
-# A chord shorter than this (m) has no usable direction: distances are measured from its start.
-_MIN_CHORD_M = 1e-9
-# A segment needs this many returns to be fitted (and so to take part in merging).
-MIN_FIT_RETURNS = 3
-# The work bound of IEPF and merging: passes per scan of n returns (see :func:`pass_budget`).
-_BUDGET_LEVELS_PER_DOUBLING = 2
-_BUDGET_EXTRA_PASSES = 8
 
 
 def pass_budget(count: int) -> int:
@@ -43,8 +37,8 @@ def pass_budget(count: int) -> int:
     :param count: number of returns in the scan
     :return: the number of passes, 2 ceil(log2 count) + 8
     """
-    return (_BUDGET_LEVELS_PER_DOUBLING * math.ceil(math.log2(max(count, 2)))
-            + _BUDGET_EXTRA_PASSES)
+    return (BUDGET_LEVELS_PER_DOUBLING * math.ceil(math.log2(max(count, 2)))
+            + BUDGET_EXTRA_PASSES)
 
 
 @dataclass(frozen=True)
@@ -215,13 +209,6 @@ def piece_sums(values: np.ndarray, segments: SegmentRanges) -> PieceSums:
     return PieceSums(edges, prefix)
 
 
-# A break between two returns one surface could have given is one the noise made: their
-# distance exceeds the surface's allowance by at most this many sigma of the difference of two
-# returns (a pair on one surface goes beyond it with probability 6e-7). Beyond it, the break is
-# a discontinuity, which merging never crosses.
-_JOINABLE_SIGMAS = 5.0 * math.sqrt(2.0)
-
-
 class Breaks(NamedTuple):
     """
     Where neighbouring returns are separated, and which separations merging may cross.
@@ -296,7 +283,7 @@ def breakpoints(points: ScanPoints, range_sigma_m: float, bearing_sigma_rad: flo
     gap = missing >= max_missing_beams + 0.5
     separated = (reach < 0.0) | gap | (distance > surface + noise_sigmas * noise)
     joinable = (separated & (reach >= 0.0) & ~gap
-                & (distance <= surface + _JOINABLE_SIGMAS * noise))
+                & (distance <= surface + JOINABLE_SIGMAS * noise))
     if not points.full_turn or n == 1:
         separated[0], joinable[0] = True, False
     return Breaks(separated, joinable)
@@ -379,7 +366,7 @@ def iterative_end_point_fit(x_m: np.ndarray, y_m: np.ndarray, start: np.ndarray,
         farthest = np.maximum.reduceat(cross, first)
         chord2 = dx * dx + dy * dy
         # A chord too short to have a direction never splits (it would at distance 0).
-        split = (farthest * farthest > chord2) & (chord2 > _MIN_CHORD_M ** 2)
+        split = (farthest * farthest > chord2) & (chord2 > MIN_CHORD_M ** 2)
         if not split.any():
             break
         if level == max_levels:                  # out of passes: drop what is not straight

@@ -5,13 +5,14 @@
 The per-scan pipeline of the paper's Algorithm 1: returns -> segments -> lines -> corners.
 
 One compiled function (:func:`_features_of_scan`) runs every step on a scan, as loops over its
-returns (numba); :func:`extract_features` checks the scan's geometry and packs the arrays it
-returns into the frozen result dataclasses.
+returns (numba), the plausibility bounds included; :func:`extract_features` checks the scan's
+geometry, hands it the configuration prepared once per configuration and beam layout, and wraps
+the arrays it returns in the frozen result dataclasses: no other Python runs per scan.
 """
 
 import functools
 import math
-from typing import NamedTuple
+from typing import NamedTuple, Optional
 
 import numpy as np
 
@@ -24,12 +25,12 @@ from .corners import (along_wall, blocked, corner_candidates, corner_zone, end_w
 from .lines import fit_segments, residual_chi2_dof
 from .model_error import with_model_error
 from .noise import range_sigma_of_returns
+from .plausibility import plausible_arrays
 from .scan import valid_returns
 from .segmentation import (breakpoints_of, chains_of, merge_segments, pass_budget, split_iepf,
                            trim_ambiguous, trim_offset)
 from ..config import FeatureConfig, METHODS
 from ..features import CornerSet, Features, SegmentSet
-from ..plausibility import implausible_scan, noise_is_plausible, plausible
 from ..records import (BeamGrid, CornerArrays, CornerEndRule, Lines, Noise, Returns, ScanResult,
                        SegmentArrays, Segments, Settings, Walls)
 from ..scan import beam_density, scan_geometry, ScanError
@@ -65,6 +66,52 @@ def _settings(config: FeatureConfig) -> Settings:
         name: Settings.__annotations__[name](value) for name, value in values.items()})
 
 
+class _Prepared(NamedTuple):
+    """The compiled pipeline's arguments that depend on the configuration and beam layout."""
+
+    config: FeatureConfig
+    angle_increment_rad: float
+    beam_count: int
+    settings: Settings
+    density: _AtDensity
+
+
+class _LatestPrepared:
+    """
+    The arguments prepared for the latest configuration and beam layout.
+
+    A node or a bag replay extracts every scan with the same FeatureConfig object and layout:
+    comparing them by identity costs well under a microsecond, where hashing the configuration
+    (about 40 fields) for the caches above costs several. One record, replaced whole, so that
+    threads extracting at once each see a consistent one.
+    """
+
+    def __init__(self) -> None:
+        self.prepared: Optional[_Prepared] = None
+
+    def get(self, config: FeatureConfig, angle_increment_rad: float,
+            beam_count: int) -> _Prepared:
+        """
+        Return the arguments for a configuration and beam layout, prepared at most once in a row.
+
+        :param config: the configuration
+        :param angle_increment_rad: the scan's bearing step, rad
+        :param beam_count: the scan's number of beams
+        :return: the prepared arguments
+        """
+        prepared = self.prepared
+        if (prepared is None or prepared.config is not config
+                or prepared.angle_increment_rad != angle_increment_rad
+                or prepared.beam_count != beam_count):
+            prepared = _Prepared(config, angle_increment_rad, beam_count, _settings(config),
+                                 _at_density(angle_increment_rad, beam_count, config))
+            self.prepared = prepared
+        return prepared
+
+
+_LATEST = _LatestPrepared()
+
+
 def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
                      config: FeatureConfig = _DEFAULT_CONFIG, range_min_m: float = 0.0,
                      range_max_m: float = math.inf) -> Features:
@@ -78,21 +125,14 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
         raise ScanError(f'{np.size(ranges_m)} beams are more than max_beams '
                         f'({config.max_beams})')
     ranges, full_turn, cos, sin = scan_geometry(ranges_m, angle_min_rad, angle_increment_rad)
+    prepared = _LATEST.get(config, float(angle_increment_rad), ranges.size)
     found = _features_of_scan(
-        ranges, cos, sin, float(angle_min_rad), float(angle_increment_rad),
+        ranges, cos, sin, float(angle_min_rad), prepared.angle_increment_rad,
         float(max(range_min_m, config.range_min_m)), float(min(range_max_m, config.range_max_m)),
-        full_turn, _settings(config),
-        _at_density(float(angle_increment_rad), ranges.size, config))
-    features = Features(config.method, SegmentSet(**found.segments._asdict()),
-                        CornerSet(**found.corners._asdict()), bool(found.work_limited))
-    # #plausibility: nothing published that says "unknown" (a scan too few returns to process
-    # has no range noise: NaN).
-    range_sigma = found.range_sigma_m
-    if math.isnan(range_sigma):
-        return features
-    if not noise_is_plausible(range_sigma, config):
-        return implausible_scan(config.method, range_sigma)
-    return plausible(features, config, range_sigma)
+        full_turn, prepared.settings, prepared.density)
+    return Features(config.method, SegmentSet(*found.segments), CornerSet(*found.corners),
+                    found.work_limited, found.range_sigma_m, found.noise_implausible,
+                    found.implausible_features)
 
 
 def kernels_last_first():
@@ -134,11 +174,14 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
                             range_min_m, range_max_m)
     count = returns.beam_index.size
     if count < settings.min_segment_points:
-        return ScanResult(_no_segments(), _no_corners(), False, math.nan)
+        return ScanResult(_no_segments(), _no_corners(), False, math.nan, False, 0)
     # #range-noise-from-the-scan
     range_sigma = settings.range_sigma_m
     if settings.range_sigma_from_scan:
         range_sigma = max(range_sigma, range_sigma_of_returns(returns.beam_index, returns.range_m))
+    # #plausibility: a scan whose own noise is beyond the bound is no scan of surfaces.
+    if not range_sigma <= settings.max_range_sigma_m:
+        return ScanResult(_no_segments(), _no_corners(), False, range_sigma, True, 0)
     # #decision-noise: every decision tolerates the model error on top of the sensor noise;
     # the fits weigh the returns by the sensor noise alone.
     noise = Noise(range_sigma, settings.bearing_sigma_rad,
@@ -158,7 +201,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
         x, y, runs, _split_threshold(contour.range_m, noise, settings.iepf_threshold_m,
                                      density.iepf_noise_sigmas), budget)
     if segments.start.size == 0:
-        return ScanResult(_no_segments(), _no_corners(), unsplit, range_sigma)
+        return ScanResult(_no_segments(), _no_corners(), unsplit, range_sigma, False, 0)
     segments, lines, unmerged = merge_segments(x, y, segments, full_turn, joinable[order], noise,
                                                settings.merge_chi2, budget)
     work_limited = unsplit or unmerged
@@ -166,7 +209,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     segments = Segments(segments.start[keep], segments.stop[keep], segments.chain[keep])
     lines = Lines(lines.angle_rad[keep], lines.radius_m[keep])
     if segments.start.size == 0:
-        return ScanResult(_no_segments(), _no_corners(), work_limited, range_sigma)
+        return ScanResult(_no_segments(), _no_corners(), work_limited, range_sigma, False, 0)
     segments = trim_ambiguous(segments, full_turn, x, y, lines, noise,
                               settings.min_segment_points, density.end_window)
     if settings.end_offset_sigmas > 0.0:
@@ -177,7 +220,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     start, stop = _in_scan_order(contour.beam_index, ranges_m.size, segments.start, segments.stop)
     walls = _fit_walls(contour, start, stop, noise, settings)
     if walls.angle_rad.size == 0:
-        return ScanResult(_no_segments(), _no_corners(), work_limited, range_sigma)
+        return ScanResult(_no_segments(), _no_corners(), work_limited, range_sigma, False, 0)
     # #corners: which pairs are corners is decided with the decision noise; the published
     # covariances add the model error to the fits' (#model-error).
     corners = _corners(contour, walls, grid, noise, settings, density)
@@ -200,7 +243,10 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     corners_found = CornerArrays(corners.xy_m, corners.yaw_rad, corner_covariance,
                                  corners.opening_angle_rad, corners.first_segment,
                                  corners.second_segment, corners.end_seen)
-    return ScanResult(segments_found, corners_found, work_limited, range_sigma)
+    # #plausibility: nothing published whose covariance gates nothing.
+    segments_found, corners_found, dropped = plausible_arrays(segments_found, corners_found,
+                                                              range_sigma, settings)
+    return ScanResult(segments_found, corners_found, work_limited, range_sigma, False, dropped)
 
 
 @jit(ahead=())

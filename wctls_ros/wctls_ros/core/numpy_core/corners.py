@@ -414,9 +414,9 @@ def short_of_corner(wall: WallAtCorner, placed: AlongWall, on_line: np.ndarray,
     return np.maximum(gap - wall.tolerance_m, 0.0) / wall.spacing_m
 
 
-def seen_through(corner_x_m: float, corner_y_m: float, wall: WallAtCorner, other: WallAtCorner,
-                 contour: Returns, start: int, stop: int, noise: Noise,
-                 rule: CornerEndRule) -> bool:
+def seen_through(corner_x_m: np.ndarray, corner_y_m: np.ndarray, wall: WallAtCorner,
+                 other: WallAtCorner, contour: Returns, start: np.ndarray, stop: np.ndarray,
+                 noise: Noise, rule: CornerEndRule) -> np.ndarray:
     """
     Tell whether the other wall is seen through a wall between its segment and the corner.
 
@@ -424,34 +424,46 @@ def seen_through(corner_x_m: float, corner_y_m: float, wall: WallAtCorner, other
     returns on the other wall's line whose sight lines cross this wall's line farther than its
     tolerance along it into the wall (and that are not in front of it beyond the noise) lie
     behind it together: sum of (distance behind / noise) over sqrt(count) > ``run_sigmas``.
+    Every test at once: each test's stretch of returns laid end to end, each return labelled
+    with its test, the sums per test by label.
 
-    :param corner_x_m: x of the corner, m
-    :param corner_y_m: y of the corner, m
-    :param wall: the wall at the corner, each field a number
-    :param other: the other wall
+    :param corner_x_m: x of each test's corner, shape (K,) (or a number for one test), m
+    :param corner_y_m: y of each test's corner, shape (K,), m
+    :param wall: the wall at each corner, each field shape (K,)
+    :param other: the other wall of each corner
     :param contour: the returns in circular order
-    :param start: position of the first return to test (taken modulo n)
-    :param stop: position of the last return to test (taken modulo n, after ``start``)
+    :param start: position of each test's first return (taken modulo n), shape (K,)
+    :param stop: position of its last return (taken modulo n, after ``start``), shape (K,)
     :param noise: the noise (the rule decides with its deciding_sigma_m)
     :param rule: the rule's tolerances
-    :return: whether the wall is seen through
+    :return: whether each wall is seen through, shape (K,)
     """
-    x_m, y_m = contour.x_m, contour.y_m
-    crossing = np.arange(start, start + (stop - start) % len(x_m) + 1)
-    x, y = x_m.take(crossing, mode='wrap'), y_m.take(crossing, mode='wrap')
+    start, stop = np.atleast_1d(start), np.atleast_1d(stop)
+    lengths = (stop - start) % len(contour.x_m) + 1
+    test = np.repeat(np.arange(lengths.size), lengths)
+
+    def per_return(value) -> np.ndarray:
+        """Return a per-test number at every return of that test's stretch."""
+        return np.atleast_1d(value)[test]
+    crossing = (np.arange(test.size) - np.repeat(np.cumsum(lengths) - lengths, lengths)
+                + start[test])
+    x, y = contour.x_m.take(crossing, mode='wrap'), contour.y_m.take(crossing, mode='wrap')
     sigma = np.sqrt(noise.deciding_sigma_m ** 2 + (x ** 2 + y ** 2) * noise.bearing_sigma_rad ** 2)
     line_tolerance = rule.sigmas * sigma + rule.floor_m
-    offset = x * wall.normal_x + y * wall.normal_y
-    on_other = np.abs(other.radius_m - x * other.normal_x - y * other.normal_y)
+    radius = per_return(wall.radius_m)
+    offset = x * per_return(wall.normal_x) + y * per_return(wall.normal_y)
+    on_other = np.abs(per_return(other.radius_m) - x * per_return(other.normal_x)
+                      - y * per_return(other.normal_y))
     with np.errstate(divide='ignore', invalid='ignore'):
-        sight = np.column_stack([x, y]) * (wall.radius_m / offset)[:, None]
-    inward = np.array([wall.inward_x, wall.inward_y])
-    along = (sight - np.array([corner_x_m, corner_y_m])) @ inward
-    tested = ((on_other <= line_tolerance) & (offset > 0.0)
-              & (wall.radius_m - offset <= line_tolerance) & (along > wall.tolerance_m))
-    run = np.count_nonzero(tested)
-    return bool(run) and ((offset - wall.radius_m)[tested] / sigma[tested]).sum() / np.sqrt(
-        run) > rule.run_sigmas
+        to_line = radius / offset
+    along = ((x * to_line - per_return(corner_x_m)) * per_return(wall.inward_x)
+             + (y * to_line - per_return(corner_y_m)) * per_return(wall.inward_y))
+    tested = ((on_other <= line_tolerance) & (offset > 0.0) & (radius - offset <= line_tolerance)
+              & (along > per_return(wall.tolerance_m)))
+    run = np.bincount(test[tested], minlength=lengths.size)
+    behind = np.bincount(test[tested], ((offset - radius) / sigma)[tested], lengths.size)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return (run > 0) & (behind / np.sqrt(run) > rule.run_sigmas)
 
 
 def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.ndarray,
@@ -496,20 +508,26 @@ def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.
                        second_here, at_corner)
             & (first_short <= 1.0 + CORNER_MISSING_BEAMS)
             & (second_short <= 1.0 + CORNER_MISSING_BEAMS))
-    if rule.run_sigmas > 0.0:
+    kept = np.flatnonzero(keep)
+    if rule.run_sigmas > 0.0 and kept.size:
         # The first wall's stretch is crossed by the sight lines after its last return up to the
         # second wall's last; the second's by those from the first wall's first return up to
-        # its own first.
-        for c in np.flatnonzero(keep).tolist():
-            first_c, second_c = _corner(first, c), _corner(second, c)
-            keep[c] = not (
-                seen_through(corner_x[c], corner_y[c], first_c, second_c, contour,
-                             after_first[c] + 1, last_position[two[c]], noise, rule)
-                or seen_through(corner_x[c], corner_y[c], second_c, first_c, contour,
-                                first_position[one[c]], before_second[c] - 1, noise, rule))
+        # its own first: both tests of every corner left, in one call.
+        first_kept, second_kept = _corners(first, kept), _corners(second, kept)
+        seen = seen_through(
+            np.tile(corner_x[kept], 2), np.tile(corner_y[kept], 2),
+            _stacked(first_kept, second_kept), _stacked(second_kept, first_kept), contour,
+            np.concatenate([after_first[kept] + 1, first_position[one[kept]]]),
+            np.concatenate([last_position[two[kept]], before_second[kept] - 1]), noise, rule)
+        keep[kept] = ~(seen[:kept.size] | seen[kept.size:])
     return keep, np.column_stack([first_short <= 1.0, second_short <= 1.0])
 
 
-def _corner(wall: WallAtCorner, c: int) -> WallAtCorner:
-    """Return one corner's wall of a WallAtCorner over every corner."""
-    return WallAtCorner(*(field[c] for field in wall))
+def _corners(wall: WallAtCorner, kept: np.ndarray) -> WallAtCorner:
+    """Return the walls of some corners of a WallAtCorner over every corner."""
+    return WallAtCorner(*(field[kept] for field in wall))
+
+
+def _stacked(one: WallAtCorner, other: WallAtCorner) -> WallAtCorner:
+    """Return the walls of two sets of tests, one's first."""
+    return WallAtCorner(*(np.concatenate([a, b]) for a, b in zip(one, other)))

@@ -23,8 +23,6 @@ import numpy as np
 
 from ._jit import jit, jit_inline
 from ._order import wrapped
-from ._types import (FLAGS, INDICES, INTEGER, NOISE, PLACED, REAL, RETURNS, ROWS, RULE, WALL,
-                     WALLS, WINDOW)
 from ..records import AlongWall, CornerCandidates, EndWindow, WallAtCorner
 from ..rules import CORNER_MISSING_BEAMS
 
@@ -34,7 +32,7 @@ _UPPER_ROWS = (0, 0, 0, 1, 1, 2)
 _UPPER_COLUMNS = (0, 1, 2, 1, 2, 2)
 
 
-@jit(ahead=(WALLS, INDICES, INDICES, REAL, REAL))
+@jit
 def corner_candidates(walls, first_wall, second_wall, min_angle_rad, common_range_sigma_m):
     """
     Intersect pairs of walls that are not close to parallel.
@@ -147,7 +145,7 @@ def corner_candidates(walls, first_wall, second_wall, min_angle_rad, common_rang
                             first_kept[:found], second_kept[:found])
 
 
-@jit(ahead=(RETURNS, INTEGER, INTEGER, NOISE, RULE))
+@jit
 def end_window(contour, after_first, before_second, noise, rule):
     """
     Gather the returns between two walls that the corner end rule looks at.
@@ -179,7 +177,7 @@ def end_window(contour, after_first, before_second, noise, rule):
     return EndWindow(x, y, sigma, line_tolerance, in_window, between)
 
 
-@jit(ahead=(WALLS, INTEGER, REAL, REAL, ROWS, REAL, RULE))
+@jit
 def wall_at_corner(walls, wall, corner_x_m, corner_y_m, corner_covariance, step_rad, rule):
     """
     Describe one wall of a corner as seen from the corner.
@@ -218,7 +216,7 @@ def wall_at_corner(walls, wall, corner_x_m, corner_y_m, corner_covariance, step_
                         rule.sigmas * along_sigma + rule.floor_m)
 
 
-@jit(ahead=(WINDOW, WALL, REAL, REAL))
+@jit
 def along_wall(window, wall, corner_x_m, corner_y_m):
     """
     Place the returns of an end window with respect to one wall of the corner.
@@ -244,7 +242,7 @@ def along_wall(window, wall, corner_x_m, corner_y_m):
     return AlongWall(in_front, along, on_line)
 
 
-@jit(ahead=(WINDOW, REAL, REAL, WALL, WALL, NOISE, RULE))
+@jit
 def corner_zone(window, corner_x_m, corner_y_m, first, second, noise, rule):
     """
     Tell which returns of an end window lie so close to the corner that they belong to either wall.
@@ -276,7 +274,7 @@ def corner_zone(window, corner_x_m, corner_y_m, first, second, noise, rule):
     return at_corner
 
 
-@jit(ahead=(WINDOW, WALL, PLACED, FLAGS, RULE))
+@jit
 def without_object_in_front(window, wall, placed, at_corner, rule):
     """
     Return which returns lie on a wall's line, less a run that lies in front of it together.
@@ -311,7 +309,7 @@ def without_object_in_front(window, wall, placed, at_corner, rule):
     return on_line
 
 
-@jit(ahead=(WALL, PLACED, FLAGS, FLAGS))
+@jit
 def reaches(wall, placed, on_line, at_corner):
     """
     Tell which returns of an end window the wall reaches: in the corner zone, or on its line.
@@ -331,7 +329,7 @@ def reaches(wall, placed, on_line, at_corner):
     return here
 
 
-@jit(ahead=(WALL, WALL, PLACED, PLACED, FLAGS, FLAGS, FLAGS))
+@jit
 def goes_on(first, second, first_placed, second_placed, first_on_line, second_on_line,
             at_corner):
     """
@@ -361,7 +359,7 @@ def goes_on(first, second, first_placed, second_placed, first_on_line, second_on
     return False
 
 
-@jit(ahead=(WINDOW, WALL, WALL, PLACED, PLACED, FLAGS, FLAGS, FLAGS))
+@jit
 def blocked(window, first, second, first_placed, second_placed, first_here, second_here,
             at_corner):
     """
@@ -400,7 +398,7 @@ def blocked(window, first, second, first_placed, second_placed, first_here, seco
     return False
 
 
-@jit(ahead=(WALL, PLACED, FLAGS, FLAGS))
+@jit
 def short_of_corner(wall, placed, on_line, here):
     """
     Return how far a wall's own returns stop short of the corner, in beams beyond its tolerance.
@@ -423,7 +421,7 @@ def short_of_corner(wall, placed, on_line, here):
     return max(gap - wall.tolerance_m, 0.0) / wall.spacing_m
 
 
-@jit(ahead=(REAL, REAL, WALL, WALL, RETURNS, INTEGER, INTEGER, NOISE, RULE))
+@jit
 def seen_through(corner_x_m, corner_y_m, wall, other, contour, start, stop, noise, rule):
     """
     Tell whether the other wall is seen through a wall's stretch between its segment and a corner.

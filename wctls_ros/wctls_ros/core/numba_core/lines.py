@@ -25,7 +25,6 @@ import math
 import numpy as np
 
 from ._jit import jit
-from ._types import INDICES, INTEGER, LINES, NOISE, VALUES
 from ..config import METHODS
 from ..features import LineFits, SegmentReturns
 from ..records import Noise
@@ -264,7 +263,7 @@ def _times(jacobian, vector, out):
         out[r] = total
 
 
-@jit(ahead=(INTEGER, VALUES, VALUES, VALUES, VALUES, INDICES, INDICES, NOISE))
+@jit
 def fit_segments(method_code, rho, theta, x, y, offsets, counts, noise):
     """
     Fit every segment with one method, in its own form and in normal form (:func:`fit_lines`).
@@ -449,7 +448,7 @@ def _ml_fits(rho, theta, x, y, offsets, counts, noise):
     return angle, radius, covariance, normal_offset
 
 
-@jit(ahead=(VALUES, VALUES, VALUES, INDICES, INDICES, LINES, NOISE))
+@jit
 def residual_chi2_dof(rho, x, y, offsets, counts, lines, noise):
     """
     Return each fit's residual chi2 per degree of freedom (docs/derivation.md#model-error).

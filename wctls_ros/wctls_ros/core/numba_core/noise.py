@@ -15,7 +15,6 @@ import numpy as np
 
 from ._jit import jit
 from ._order import median
-from ._types import INDICES, VALUES
 from ..rules import CUT_SIGMAS, CUT_VARIANCE, MAD_TO_SIGMA, MIN_TRIPLES, REFINEMENTS
 from ..scan import ScanPoints
 
@@ -40,7 +39,7 @@ def scan_range_sigma(points: ScanPoints) -> float:
     return range_sigma_of_returns(points.index, points.range_m)
 
 
-@jit(ahead=(INDICES, VALUES))
+@jit
 def range_sigma_of_returns(index, range_m):
     """
     Return :func:`scan_range_sigma` of the returns with these beam indices and ranges.

@@ -16,12 +16,9 @@ from typing import NamedTuple, Optional
 
 import numpy as np
 
-from ._jit import argument_types, jit, jit_inline, use_disk_cache
+from ._jit import jit, jit_inline, use_disk_cache
 from ._order import wrapped
-from ._types import INDICES, INTEGER, NOISE, REAL, ROWS, SEGMENTS, SETTINGS, VALUES
-from .corners import (along_wall, blocked, corner_candidates, corner_zone, end_window, goes_on,
-                      reaches, seen_through, short_of_corner, wall_at_corner, walls_end_at,
-                      without_object_in_front)
+from .corners import corner_candidates, walls_end_at
 from .lines import fit_segments, residual_chi2_dof
 from .model_error import with_model_error
 from .noise import range_sigma_of_returns
@@ -135,19 +132,6 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
                     found.implausible_features)
 
 
-def kernels_last_first():
-    """
-    Return the kernels the pipeline calls, last step first, with the types it passes them.
-
-    :data:`PIPELINE_KERNELS` backwards, for compiling them in other processes while this one
-    compiles the pipeline (:mod:`.precompile`); each kernel's types are declared where it is
-    defined (``@jit(ahead=...)``).
-
-    :return: tuples (kernel, tuple of numba argument types)
-    """
-    return tuple((kernel, argument_types(kernel)) for kernel in reversed(PIPELINE_KERNELS))
-
-
 @jit
 def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, range_min_m,
                       range_max_m, full_turn, settings, density):
@@ -249,7 +233,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     return ScanResult(segments_found, corners_found, work_limited, range_sigma, False, dropped)
 
 
-@jit(ahead=())
+@jit
 def _no_segments():
     """
     Return the arrays of a SegmentSet without segments.
@@ -263,7 +247,7 @@ def _no_segments():
                          np.zeros((0, 2)), no_index, no_index, no_index, np.zeros(0))
 
 
-@jit(ahead=())
+@jit
 def _no_corners():
     """Return the arrays of a CornerSet without corners (as :meth:`..features.CornerSet.empty`)."""
     no_index = np.zeros(0, np.intp)
@@ -271,7 +255,7 @@ def _no_corners():
                         no_index, no_index, np.zeros((0, 2), np.bool_))
 
 
-@jit(ahead=(VALUES, NOISE, REAL, REAL))
+@jit
 def _split_threshold(rho, noise, threshold_m, noise_sigmas):
     """
     Return the IEPF split distance of every return, m.
@@ -290,7 +274,7 @@ def _split_threshold(rho, noise, threshold_m, noise_sigmas):
     return threshold
 
 
-@jit(ahead=(VALUES, VALUES, SEGMENTS, SETTINGS))
+@jit
 def _large_enough(x, y, segments, settings):
     """Return which segments have min_segment_points returns and min_segment_length."""
     count, start, stop = x.size, segments.start, segments.stop
@@ -303,7 +287,7 @@ def _large_enough(x, y, segments, settings):
     return keep
 
 
-@jit(ahead=(INDICES, INTEGER, INDICES, INDICES))
+@jit
 def _in_scan_order(beam_of_position, beam_count, start, stop):
     """
     Return the segments sorted by the beam index of their first return.
@@ -367,7 +351,7 @@ def _fit_walls(contour, start, stop, noise, settings):
                  start[keep], last[keep], counts[keep], chi2_dof[keep])
 
 
-@jit(ahead=(VALUES, VALUES, INDICES, VALUES, VALUES))
+@jit
 def _feet(x, y, position, angle, radius):
     """Return the feet of the perpendiculars from the returns at ``position`` to the lines, m."""
     foot = np.empty((position.size, 2))
@@ -378,7 +362,7 @@ def _feet(x, y, position, angle, radius):
     return foot
 
 
-@jit(ahead=(VALUES, ROWS, REAL, REAL, ROWS))
+@jit
 def _usable(line, line_covariance, angle, radius, normal_covariance):
     """Return whether a fit is finite everywhere with a positive-definite normal covariance."""
     total = line.sum() + line_covariance.sum() + angle + radius + normal_covariance.sum()
@@ -410,15 +394,3 @@ def _corners(contour, walls, grid, noise, settings, density):
     return CornerArrays(candidates.xy_m[keep], candidates.yaw_rad[keep],
                         candidates.covariance[keep], candidates.opening_angle_rad[keep],
                         candidates.first_wall[keep], candidates.second_wall[keep], seen[keep])
-
-
-# Every kernel :func:`_features_of_scan` calls (with those of :func:`_fit_walls`, :func:`_corners`
-# and :func:`~.corners.walls_end_at`, inlined into it), in the order it calls them: the one list
-# of what :mod:`.precompile` compiles ahead, each with the types declared at its definition.
-PIPELINE_KERNELS = (
-    _no_segments, _no_corners, valid_returns, range_sigma_of_returns, breakpoints_of, chains_of,
-    pass_budget, _split_threshold, split_iepf, merge_segments, _large_enough, trim_ambiguous,
-    trim_offset, _in_scan_order, fit_segments, residual_chi2_dof, _feet, _usable,
-    corner_candidates, end_window, wall_at_corner, along_wall, corner_zone,
-    without_object_in_front, reaches, short_of_corner, goes_on, blocked, seen_through,
-    with_model_error)

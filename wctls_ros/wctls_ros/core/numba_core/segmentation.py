@@ -19,13 +19,12 @@ import numpy as np
 
 from ._jit import jit
 from ._order import stable_order, wrapped
-from ._types import FLAG, FLAGS, GRID, INTEGER, LINES, NOISE, REAL, RETURNS, SEGMENTS, VALUES
 from ..records import Lines, Segments
 from ..rules import (BUDGET_EXTRA_PASSES, BUDGET_LEVELS_PER_DOUBLING, JOINABLE_SIGMAS, MIN_CHORD_M,
                      MIN_FIT_RETURNS)
 
 
-@jit(ahead=(INTEGER,))
+@jit
 def pass_budget(count: int) -> int:
     """
     Return how many whole-contour passes IEPF (and merging) may make on a scan.
@@ -51,7 +50,7 @@ def _reach_factor(beams, step_rad, lambda_rad):
     return math.sin(dphi) / math.sin(lambda_rad - dphi) if dphi < lambda_rad else -1.0
 
 
-@jit(ahead=(RETURNS, GRID, NOISE, REAL, INTEGER, REAL))
+@jit
 def breakpoints_of(returns, grid, noise, lambda_rad, max_missing_beams, noise_sigmas):
     """
     Mark where the adaptive breakpoint rule of Borges and Aldon separates neighbouring returns.
@@ -119,7 +118,7 @@ def breakpoints_of(returns, grid, noise, lambda_rad, max_missing_beams, noise_si
     return separated, joinable
 
 
-@jit(ahead=(RETURNS, FLAGS))
+@jit
 def chains_of(returns, separated):
     """
     Group the returns into chains between breakpoints, in circular order.
@@ -160,7 +159,7 @@ def chains_of(returns, separated):
     return order, Segments(start, stop, chain)
 
 
-@jit(ahead=(VALUES, VALUES, SEGMENTS, VALUES, INTEGER))
+@jit
 def split_iepf(x_m, y_m, runs, threshold_m, max_levels):
     """
     Split runs of returns where a return lies farther than a threshold from the run's chord.
@@ -281,7 +280,7 @@ def moment_line(x_m, y_m, first, stop, range_sigma_m, bearing_sigma_rad):
             scatter / count + offset * offset * var_angle)
 
 
-@jit(ahead=(VALUES, VALUES, SEGMENTS, FLAG, FLAGS, NOISE, REAL, INTEGER))
+@jit
 def merge_segments(x_m, y_m, segments, circular, joinable, noise, chi2_threshold, max_passes):
     """
     Merge neighbouring segments that are statistically the same line.
@@ -396,7 +395,7 @@ def _within(start, stop, n):
             stop[s] -= n
 
 
-@jit(ahead=(SEGMENTS, FLAG, VALUES, VALUES, LINES, NOISE, INTEGER, INTEGER))
+@jit
 def trim_ambiguous(segments, circular, x_m, y_m, lines, noise, min_returns, window):
     """
     Drop the returns at the meeting ends of two neighbouring segments that could fit both lines.
@@ -469,7 +468,7 @@ def trim_ambiguous(segments, circular, x_m, y_m, lines, noise, min_returns, wind
     return Segments(new_start, new_stop, chain)
 
 
-@jit(ahead=(SEGMENTS, VALUES, VALUES, LINES, NOISE, INTEGER, REAL, INTEGER))
+@jit
 def trim_offset(segments, x_m, y_m, lines, noise, min_returns, threshold_sigmas, window):
     """
     Cut off the returns at segment ends that lie off the segment's line together.

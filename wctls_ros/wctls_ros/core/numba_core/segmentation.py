@@ -308,82 +308,124 @@ def merge_segments(x_m, y_m, segments, circular, joinable, noise, chi2_threshold
         ran out)
     """
     n = x_m.size
-    range_sigma_m, bearing_sigma_rad = noise.deciding_sigma_m, noise.bearing_sigma_rad
     start, stop, chain = segments.start.copy(), segments.stop.copy(), segments.chain.copy()
     angle, radius = np.empty(start.size), np.empty(start.size)
     for passes in range(max_passes + 1):
-        count = start.size
-        angle, radius = np.empty(count), np.empty(count)
-        covariance = np.empty((count, 3))                 # Var(angle), Cov, Var(radius)
-        for s in range(count):
-            fit = moment_line(x_m, y_m, start[s], stop[s], range_sigma_m, bearing_sigma_rad)
-            angle[s], radius[s] = fit[0], fit[1]
-            covariance[s, 0], covariance[s, 1], covariance[s, 2] = fit[2], fit[3], fit[4]
-        if count < 2 or chi2_threshold <= 0.0:
+        angle, radius, covariance = _merge_fits(x_m, y_m, start, stop, noise)
+        if start.size < 2 or chi2_threshold <= 0.0:
             break
-        distance = np.full(count, np.inf)
-        merged_stop = np.empty(count, np.intp)
-        candidates = 0
-        for k in range(count):
-            j = k + 1 if k + 1 < count else 0
-            merged_stop[k] = stop[j] + (n if j == 0 else 0)
-            touching = stop[k] % n == start[j] and joinable[start[j]]
-            ok = (chain[k] == chain[j] or touching) and merged_stop[k] - start[k] <= n
-            if j == 0 and (not circular or count < 3):
-                ok = False                        # the last segment has no successor
-            if not ok:
-                continue
-            # The squared Mahalanobis distance of the difference of the two lines.
-            turn = (angle[k] - angle[j] + np.pi) % (2.0 * np.pi) - np.pi
-            shift = radius[k] - radius[j]
-            a = covariance[k, 0] + covariance[j, 0]
-            b = covariance[k, 1] + covariance[j, 1]
-            d = covariance[k, 2] + covariance[j, 2]
-            chi2 = (d * turn * turn - 2.0 * b * turn * shift + a * shift * shift) / (a * d - b * b)
-            if chi2 < chi2_threshold:
-                distance[k] = chi2
-                candidates += 1
+        distance, merged_stop, candidates = _merge_distances(
+            angle, radius, covariance, start, stop, chain, n, circular, joinable, chi2_threshold)
         if candidates == 0:
             break
         if passes == max_passes:
             return Segments(start, stop, chain), Lines(angle, radius), True
-        used = np.zeros(count, np.bool_)
-        # Chains joined by a merged segment are one chain from now on: union by root.
-        labels = 1
-        for s in range(count):
-            labels = max(labels, chain[s] + 1)
-        parent = np.arange(labels)
-        kept = count
-        lowest_first = stable_order(distance)
-        for rank in range(candidates):
-            k = lowest_first[rank]
-            j = k + 1 if k + 1 < count else 0
-            if used[k] or used[j]:
-                continue
-            used[k] = used[j] = True
-            stop[k] = merged_stop[k]
-            start[j] = -1                         # absorbed into k
-            kept -= 1
-            into, other = chain[k], chain[j]
-            while parent[into] != into:
-                into = parent[into]
-            while parent[other] != other:
-                other = parent[other]
-            if into != other:
-                parent[other] = into
-        new_start, new_stop = np.empty(kept, np.intp), np.empty(kept, np.intp)
-        new_chain = np.empty(kept, np.intp)
-        out = 0
-        for s in range(count):
-            if start[s] < 0:
-                continue
-            label = chain[s]
-            while parent[label] != label:
-                label = parent[label]
-            new_start[out], new_stop[out], new_chain[out] = start[s], stop[s], label
-            out += 1
-        start, stop, chain = new_start, new_stop, new_chain
+        start, stop, chain = _merge_lowest_first(start, stop, chain, distance, merged_stop,
+                                                 candidates)
     return Segments(start, stop, chain), Lines(angle, radius), False
+
+
+@jit
+def _merge_fits(x_m, y_m, start, stop, noise):
+    """
+    Return the moment fit of every segment: angle (S,) rad, radius (S,) m, covariance (S, 3).
+
+    The covariance's columns are Var(angle), Cov(angle, radius), Var(radius); the fits decide
+    with the deciding noise.
+    """
+    count = start.size
+    angle, radius = np.empty(count), np.empty(count)
+    covariance = np.empty((count, 3))
+    for s in range(count):
+        fit = moment_line(x_m, y_m, start[s], stop[s], noise.deciding_sigma_m,
+                          noise.bearing_sigma_rad)
+        angle[s], radius[s] = fit[0], fit[1]
+        covariance[s, 0], covariance[s, 1], covariance[s, 2] = fit[2], fit[3], fit[4]
+    return angle, radius, covariance
+
+
+@jit
+def _merge_distances(angle, radius, covariance, start, stop, chain, n, circular, joinable,
+                     chi2_threshold):
+    """
+    Return the merge test of every segment with its successor.
+
+    :return: (the squared Mahalanobis distance of each pair that may merge and passes, inf for
+        the others, shape (S,); the stop of each pair merged, shape (S,); how many pass)
+    """
+    count = start.size
+    distance = np.full(count, np.inf)
+    merged_stop = np.empty(count, np.intp)
+    candidates = 0
+    for k in range(count):
+        j = k + 1 if k + 1 < count else 0
+        merged_stop[k] = stop[j] + (n if j == 0 else 0)
+        touching = stop[k] % n == start[j] and joinable[start[j]]
+        ok = (chain[k] == chain[j] or touching) and merged_stop[k] - start[k] <= n
+        if j == 0 and (not circular or count < 3):
+            ok = False                        # the last segment has no successor
+        if not ok:
+            continue
+        # The squared Mahalanobis distance of the difference of the two lines.
+        turn = (angle[k] - angle[j] + np.pi) % (2.0 * np.pi) - np.pi
+        shift = radius[k] - radius[j]
+        a = covariance[k, 0] + covariance[j, 0]
+        b = covariance[k, 1] + covariance[j, 1]
+        d = covariance[k, 2] + covariance[j, 2]
+        chi2 = (d * turn * turn - 2.0 * b * turn * shift + a * shift * shift) / (a * d - b * b)
+        if chi2 < chi2_threshold:
+            distance[k] = chi2
+            candidates += 1
+    return distance, merged_stop, candidates
+
+
+@jit
+def _root(parent, label):
+    """Return the chain a chain label was joined into (union-find's root)."""
+    while parent[label] != label:
+        label = parent[label]
+    return label
+
+
+@jit
+def _merge_lowest_first(start, stop, chain, distance, merged_stop, candidates):
+    """
+    Merge the passing pairs, lowest distance first, each segment at most once.
+
+    Chains joined by a merged segment are one chain from then on (union by root).
+
+    :return: the merged segments' start, stop and chain, shape (S',) each
+    """
+    count = start.size
+    start, stop = start.copy(), stop.copy()
+    used = np.zeros(count, np.bool_)
+    labels = 1
+    for s in range(count):
+        labels = max(labels, chain[s] + 1)
+    parent = np.arange(labels)
+    kept = count
+    lowest_first = stable_order(distance)
+    for rank in range(candidates):
+        k = lowest_first[rank]
+        j = k + 1 if k + 1 < count else 0
+        if used[k] or used[j]:
+            continue
+        used[k] = used[j] = True
+        stop[k] = merged_stop[k]
+        start[j] = -1                         # absorbed into k
+        kept -= 1
+        into, other = _root(parent, chain[k]), _root(parent, chain[j])
+        if into != other:
+            parent[other] = into
+    new_start, new_stop = np.empty(kept, np.intp), np.empty(kept, np.intp)
+    new_chain = np.empty(kept, np.intp)
+    out = 0
+    for s in range(count):
+        if start[s] >= 0:
+            new_start[out], new_stop[out] = start[s], stop[s]
+            new_chain[out] = _root(parent, chain[s])
+            out += 1
+    return new_start, new_stop, new_chain
 
 
 @jit

@@ -414,59 +414,85 @@ def merge_collinear(segments: SegmentRanges, circular: bool, contour_length: int
     """
     for passes in range(max_passes + 1):
         line_fit = fit(segments)
-        count = len(segments)
-        if count < 2 or chi2_threshold <= 0.0:
+        if len(segments) < 2 or chi2_threshold <= 0.0:
             break
-        start, stop, chain = segments.start, segments.stop, segments.chain
-        second = np.arange(1, count + 1)
-        second[-1] = 0
-        # A merged segment must not wrap onto itself around a closed contour.
-        merged_stop = stop[second]
-        merged_stop[-1] += contour_length
-        touching = (stop % contour_length == start[second]) & joinable[start[second]]
-        pair_ok = (((chain == chain[second]) | touching)
-                   & (merged_stop - start <= contour_length))
-        if not circular or count < 3:
-            pair_ok[-1] = False                     # the last segment has no successor
-        angle, radius, covariance = line_fit
-        distance = mahalanobis_squared_2x2(
-            np.remainder(angle - angle[second] + np.pi, 2.0 * np.pi) - np.pi,
-            radius - radius[second], covariance + covariance[second])
-        candidates = (pair_ok & (distance < chi2_threshold)).nonzero()[0]
+        distance, merged_stop, candidates = _merge_distances(
+            segments, line_fit, circular, contour_length, joinable, chi2_threshold)
         if not candidates.size:
             break
         if passes == max_passes:
             return segments, line_fit, True
-        # Few candidates: plain Python is faster than numpy here.
-        used = [False] * count
-        absorbed = []
-        new_stop, chain_of = stop.copy(), chain.tolist()
-        joined: dict = {}                          # chain -> the chain it joined
-
-        def root(label):
-            while label in joined:
-                label = joined[label]
-            return label
-
-        for k in candidates[np.argsort(distance[candidates], kind='stable')].tolist():
-            j = (k + 1) % count
-            if not (used[k] or used[j]):
-                used[k] = used[j] = True
-                absorbed.append(j)
-                new_stop[k] = merged_stop[k]
-                # Two chains joined by a merged segment are one chain from now on.
-                into, other = root(chain_of[k]), root(chain_of[j])
-                if into != other:
-                    joined[other] = into
-        if joined:
-            relabel = np.arange(chain.max() + 1)
-            for label in joined:
-                relabel[label] = root(label)
-            chain = relabel[chain]
-        keep = np.ones(count, dtype=bool)
-        keep[absorbed] = False
-        segments = SegmentRanges(start, new_stop, chain).select(keep)
+        segments = _merge_lowest_first(segments, distance, merged_stop, candidates)
     return segments, line_fit, False
+
+
+def _merge_distances(segments: SegmentRanges, line_fit: tuple, circular: bool,
+                     contour_length: int, joinable: np.ndarray, chi2_threshold: float):
+    """
+    Return the merge test of every segment with its successor.
+
+    :return: (the squared Mahalanobis distance of each pair, shape (S,); the stop of each pair
+        merged, shape (S,); the pairs that may merge and pass, ascending)
+    """
+    count = len(segments)
+    start, stop, chain = segments.start, segments.stop, segments.chain
+    second = np.arange(1, count + 1)
+    second[-1] = 0
+    # A merged segment must not wrap onto itself around a closed contour.
+    merged_stop = stop[second]
+    merged_stop[-1] += contour_length
+    touching = (stop % contour_length == start[second]) & joinable[start[second]]
+    pair_ok = (((chain == chain[second]) | touching)
+               & (merged_stop - start <= contour_length))
+    if not circular or count < 3:
+        pair_ok[-1] = False                     # the last segment has no successor
+    angle, radius, covariance = line_fit
+    distance = mahalanobis_squared_2x2(
+        np.remainder(angle - angle[second] + np.pi, 2.0 * np.pi) - np.pi,
+        radius - radius[second], covariance + covariance[second])
+    return distance, merged_stop, (pair_ok & (distance < chi2_threshold)).nonzero()[0]
+
+
+def _root(joined: dict, label: int) -> int:
+    """Return the chain a chain label was joined into (union-find's root)."""
+    while label in joined:
+        label = joined[label]
+    return label
+
+
+def _merge_lowest_first(segments: SegmentRanges, distance: np.ndarray, merged_stop: np.ndarray,
+                        candidates: np.ndarray) -> SegmentRanges:
+    """
+    Merge the passing pairs, lowest distance first, each segment at most once.
+
+    Chains joined by a merged segment are one chain from then on (union by root). Few
+    candidates: plain Python is faster than numpy here.
+
+    :return: the merged segments
+    """
+    count = len(segments)
+    used = [False] * count
+    absorbed = []
+    new_stop, chain_of = segments.stop.copy(), segments.chain.tolist()
+    joined: dict = {}                          # chain -> the chain it joined
+    for k in candidates[np.argsort(distance[candidates], kind='stable')].tolist():
+        j = (k + 1) % count
+        if not (used[k] or used[j]):
+            used[k] = used[j] = True
+            absorbed.append(j)
+            new_stop[k] = merged_stop[k]
+            into, other = _root(joined, chain_of[k]), _root(joined, chain_of[j])
+            if into != other:
+                joined[other] = into
+    chain = segments.chain
+    if joined:
+        relabel = np.arange(chain.max() + 1)
+        for label in joined:
+            relabel[label] = _root(joined, label)
+        chain = relabel[chain]
+    keep = np.ones(count, dtype=bool)
+    keep[absorbed] = False
+    return SegmentRanges(segments.start, new_stop, chain).select(keep)
 
 
 def trim_ambiguous(segments: SegmentRanges, circular: bool, x_m: np.ndarray, y_m: np.ndarray,

@@ -7,8 +7,8 @@ Benchmark the core by stage, and against an earlier core and the C++ peer, in on
 
 On the same scans, interleaved in blocks of BLOCK scans so that the machine's load falls on
 every contender alike (and each runs with its own code and data in the CPU's caches, as in a
-node that runs one of them): today's compiled pipeline split into its Python before the compiled call, the call, and
-its Python after; the numpy pipeline; and the core of an earlier commit (``--against COMMIT``,
+node that runs one of them): today's compiled pipeline split into its compiled call and the
+Python around it; the numpy pipeline; and the core of an earlier commit (``--against COMMIT``,
 default the 2026-11-27 core, e613b0c), taken out of git into a cache folder and compiled in this
 process with the same numba (its first run compiles it, later runs load it). With ``--peer
 BINARY`` (the C++ laser_line_extraction's timing driver, built outside this repository:

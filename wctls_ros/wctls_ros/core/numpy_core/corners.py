@@ -158,8 +158,14 @@ def corner_candidates(walls: SegmentSet, first_wall: np.ndarray, second_wall: np
     Intersect pairs of walls that are not close to parallel.
 
     Whether both walls really end at the intersection is :func:`walls_end_at`'s question.
-    (D11)-(D16), as :func:`..numba_core.corners.corner_candidates` states them, for every pair
-    at once.
+
+    For each pair: the corner z = -A^-1 (c_1, c_2) (the paper's eqs. (24)-(25)), the bisector's
+    yaw towards the open side the sensor sees, the opening angle, and the joint covariance of
+    (x, y, yaw) of (D11)-(D14): sum_k J_k C_k J_k^T with dz/dL_k = -A^-1 e_k h^T, h = (x, y, 1),
+    d yaw / dL_k = g_k = (-b_k, a_k, 0) / (2 (a_k^2 + b_k^2)); plus sigma^2 j j^T for the range
+    offset common to the scan, j = sum_k J_k dL_k / d offset ((D15)-(D16)).
+
+    For every pair at once.
 
     :param walls: the walls (their line, line_covariance, line_offset_jacobian, start_xy_m and
         end_xy_m are read)
@@ -241,7 +247,12 @@ def end_window(contour: Returns, after_first: np.ndarray, before_second: np.ndar
     """
     Gather the returns between two walls that the corner end rule looks at, for every corner.
 
-    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.end_window`).
+    docs/derivation.md#corners, "Corner end rule": the first wall's facing end, the returns
+    left out of both segments (at most ``rule.window``) and the second wall's facing end, each
+    with its position noise and the tolerance of "on a line", ``sigmas`` times that noise plus
+    ``floor_m``.
+
+    For every corner at once.
 
     :param contour: the returns in circular order
     :param after_first: position of each first wall's last return, shape (C,)
@@ -267,7 +278,13 @@ def wall_at_corner(walls: SegmentSet, wall: np.ndarray, corner_xy_m: np.ndarray,
     """
     Describe one wall of every corner as seen from the corner.
 
-    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.wall_at_corner`).
+    docs/derivation.md#corners, "Corner end rule": its unit normal, the unit direction from the
+    corner into the wall (towards the middle of its returns), the corner's standard deviation
+    along that direction (from its position covariance), the spacing of the beams on the wall
+    at the corner (the range times the bearing step over the incidence, at most 1000 times the
+    step), and the tolerance along the wall, ``sigmas`` times that deviation plus ``floor_m``.
+
+    For every corner at once.
 
     :param walls: the walls
     :param wall: which wall of each corner, shape (C,)
@@ -295,7 +312,11 @@ def along_wall(window: EndWindow, wall: WallAtCorner, corner_x_m: np.ndarray,
     """
     Place the returns of every end window with respect to one wall of its corner.
 
-    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.along_wall`).
+    docs/derivation.md#corners, "Corner end rule": each return's offset in front of the wall's
+    line, its distance from the corner into the wall, and whether it lies on the line (within
+    its line tolerance; only the window's own returns).
+
+    For every corner at once.
 
     :param window: the end windows
     :param wall: the wall of each corner
@@ -316,7 +337,13 @@ def corner_zone(window: EndWindow, corner_x_m: np.ndarray, corner_y_m: np.ndarra
     """
     Tell which returns of every end window lie so close to the corner that they fit either wall.
 
-    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.corner_zone`).
+    docs/derivation.md#corners, "Corner end rule": there both lines are within the noise of each
+    other, and a beam's footprint on both walls returns a range in between (an inside corner
+    looks rounded): within ``sigmas`` times the corner's noise (its position noise and the
+    larger of its deviations along the walls) over the sine of the walls' angle, plus
+    ``floor_m``, plus the smaller beam spacing.
+
+    For every corner at once.
 
     :return: shape (C, W)
     """
@@ -335,9 +362,15 @@ def without_object_in_front(window: EndWindow, wall: WallAtCorner, placed: Along
     """
     Return which returns lie on a wall's line, less a run that lies in front of it together.
 
-    docs/derivation.md#corners, "Corner end rule"
-    (:func:`..numba_core.corners.without_object_in_front`; the test of
-    :func:`.segmentation.trim_offset_ends`).
+    docs/derivation.md#corners, "Corner end rule": a wall reaches as far towards the corner as
+    its returns do, also beyond something in front of it (e.g. a leg), unless the returns it
+    claims beyond its segment (on its line, not past the corner's tolerance, outside the corner
+    zone) lie in front of its line together: their residuals over the noise sum to more than
+    ``run_sigmas`` times the square root of their number, an object before the wall's end
+    (their line was fitted without them, so the plain sum is already a deleted-residual test,
+    as :func:`~.segmentation.trim_offset`'s). The facing ends are the wall's own.
+
+    For every corner at once.
 
     :return: shape (C, W)
     """
@@ -356,7 +389,10 @@ def reaches(wall: WallAtCorner, placed: AlongWall, on_line: np.ndarray,
     """
     Tell which returns of every end window the wall reaches: in the corner zone, or on its line.
 
-    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.reaches`).
+    docs/derivation.md#corners, "Corner end rule": a return on the wall's line reaches the
+    corner when it lies no farther past it than the wall's tolerance along it.
+
+    For every corner at once.
 
     :return: shape (C, W)
     """
@@ -369,7 +405,10 @@ def goes_on(first: WallAtCorner, second: WallAtCorner, first_placed: AlongWall,
     """
     Tell at which corners a wall's line carries returns past the corner.
 
-    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.goes_on`).
+    docs/derivation.md#corners, "Corner end rule": a return on one wall's line alone, outside
+    the corner zone, past the corner by more than that wall's tolerance along it.
+
+    For every corner at once.
 
     :return: shape (C,)
     """
@@ -386,8 +425,13 @@ def blocked(window: EndWindow, first: WallAtCorner, second: WallAtCorner,
     """
     Tell at which corners anything lies between the two walls' reaches.
 
-    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.blocked`): each
-    wall's anchor is its last own return short of the corner zone (its facing end if none).
+    docs/derivation.md#corners, "Corner end rule". Each wall's anchor is its last own return
+    short of the corner zone (its facing end if none). Between the anchors every return must be
+    reached by a wall; outside them (beyond something in front of a wall, where its own returns
+    go on) a return reached by neither is allowed only when it lies in front of both lines (an
+    occluder); a return behind them is a view through a gap where the walls do not meet.
+
+    For every corner at once.
 
     :return: shape (C,)
     """
@@ -406,7 +450,12 @@ def short_of_corner(wall: WallAtCorner, placed: AlongWall, on_line: np.ndarray,
     """
     Return how far a wall's own returns stop short of each corner, in beams beyond its tolerance.
 
-    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.short_of_corner`).
+    docs/derivation.md#corners, "Corner end rule": the nearest return on its line that reaches
+    the corner, its distance from the corner into the wall less the wall's tolerance along it,
+    over the beam spacing there. More than ``1 + CORNER_MISSING_BEAMS``: the corner is an
+    extrapolation across an unseen stretch; at most 1: the wall's end was seen.
+
+    For every corner at once.
 
     :return: shape (C,) (inf: none of its returns reaches the corner)
     """
@@ -420,10 +469,18 @@ def seen_through(corner_x_m: np.ndarray, corner_y_m: np.ndarray, wall: WallAtCor
     """
     Tell whether the other wall is seen through a wall between its segment and the corner.
 
-    docs/derivation.md#corners, "Seen through" (:func:`..numba_core.corners.seen_through`): the
-    returns on the other wall's line whose sight lines cross this wall's line farther than its
-    tolerance along it into the wall (and that are not in front of it beyond the noise) lie
-    behind it together: sum of (distance behind / noise) over sqrt(count) > ``run_sigmas``.
+    docs/derivation.md#corners, "Seen through". If the wall ended at the corner it would stand
+    between them, and no line of sight could cross its line there to a return farther away.
+    Returns on the other wall's line (within ``sigmas`` standard deviations of their position
+    noise plus ``floor_m``) whose line of sight crosses this wall's line farther than its
+    tolerance along it from the corner, into the wall, and not in front of it by more than
+    that noise tolerance, are tested together like :func:`~.segmentation.trim_offset`'s runs:
+    the sum of their distances behind the line over their noise, over the square root of their
+    number, above ``run_sigmas`` means the other wall goes on behind this one's end (the end
+    is an edge: a pilaster, a wardrobe, a door frame in front of a wall, whose line merely
+    meets the wall behind). One return behind by a few sigma is noise or a rounded corner; a
+    run of them is not.
+
     Every test at once: each test's stretch of returns laid end to end, each return labelled
     with its test, the sums per test by label.
 
@@ -471,9 +528,30 @@ def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.
     """
     Tell which corners both walls end at, and at which the end was seen.
 
-    docs/derivation.md#corners, "Corner end rule" and "Seen through": the steps and the rule of
-    :func:`..numba_core.corners.walls_end_at`, each over every candidate corner at once (the
-    seen-through test corner by corner, on the corners left).
+    docs/derivation.md#corners, "Corner end rule" and "Seen through". A corner is the point
+    where two walls end; adjacent segments whose lines merely intersect near their ends (across
+    an occlusion, a gap, a T-junction seen from the side where one wall goes on) are not
+    corners. The returns between the first wall's last return and the second wall's first one
+    (:func:`end_window`) are sorted by where they lie: on one of the two lines
+    (:func:`along_wall`), around the corner (:func:`corner_zone`), in front of both lines (an
+    occluder) or elsewhere; each wall reaches as far towards the corner as its returns do
+    (:func:`reaches`), also beyond something in front of it, unless those returns lie in front
+    of its line together (:func:`without_object_in_front`). The corner is rejected when
+
+    - more than ``rule.window`` returns lie between the walls: they are not neighbours;
+    - a facing end does not reach the corner;
+    - a wall's line carries returns past the corner (:func:`goes_on`);
+    - anything lies between the two reaches (:func:`blocked`);
+    - a wall's reach stops short of the corner by more than ``1 + CORNER_MISSING_BEAMS`` beams
+      beyond its tolerance (:func:`short_of_corner`): an extrapolation across an unseen stretch;
+    - a wall is seen through where it would have to stand (:func:`seen_through`, when
+      ``rule.run_sigmas`` > 0): the other wall goes on behind this wall's end, an edge in
+      front of it, not a corner.
+
+    A wall's end is seen when its reach is within one beam's spacing of that bound.
+
+    Each step over every candidate corner at once, the seen-through test over the corners
+    left.
 
     :param candidates: candidate corners
     :param walls: the walls

@@ -508,8 +508,10 @@ def trim_ambiguous(segments: SegmentRanges, circular: bool, x_m: np.ndarray, y_m
     r) within a distance t / sin(angle between them) of their intersection: the returns at a
     meeting end inside that radius, in an unbroken run from the end, are left out of both
     segments. A segment keeps at least ``min_returns`` returns, shared evenly by its two ends
-    when both meet a neighbour (so that the rule does not depend on the beam order). The rule
-    of :func:`..numba_core.segmentation.trim_ambiguous`, for every meeting end at once.
+    when both meet a neighbour (so that the rule does not depend on the beam order). At most
+    ``window`` returns are examined at each end.
+
+    For every meeting end at once.
 
     :param segments: segments sorted by start position (positions modulo n)
     :param circular: whether the returns cover a full turn (the last and first can meet)
@@ -569,9 +571,26 @@ def trim_offset(segments: SegmentRanges, x_m: np.ndarray, y_m: np.ndarray, lines
     """
     Cut off the returns at segment ends that lie off the line of the segment's other returns.
 
-    The deleted-residual test of :func:`..numba_core.segmentation.trim_offset`, whose docstring
-    states it (and docs/derivation.md, "Offset ends"): the same sums, for every segment end and
-    every k at once.
+    IEPF leaves a run of returns from another surface at a segment's end when the run stays
+    within its threshold of the chord: a box beside a wall, met at a shallow angle, or a chair
+    leg a few cm in front of it, whose returns then join the wall in some scans and not in
+    others, and move its line by more than its covariance says. The last k returns at an end
+    are tested against the line of the segment's other returns, not against a line they have
+    pulled towards themselves (a deleted-residual test). In the frame of the segment's line
+    (angle, radius), each return has a coordinate t along it and a residual e across it; the
+    other returns' line is the least-squares line e = a + b t through theirs (m returns,
+    t-mean t_m, sum of squares S_tt about it; to first order the orthogonal fit of those
+    returns). With z_j = (e_j - a - b t_j) / sigma_j, sigma_j = sqrt(range_sigma^2 +
+    (rho_j bearing_sigma)^2), the k returns sum to Z_k, normal with mean 0 on one line and
+    variance at most k + s^2 (W^2 / m + (T - t_m W)^2 / S_tt), W and T the sums of 1 / sigma_j
+    and t_j / sigma_j over the k returns and s^2 the mean sigma^2 of the other returns (the
+    noise is an upper bound of the scatter across the line; the second term is their line's
+    own error carried to the end). An end is cut after the k that maximises Z_k^2 / Var(Z_k),
+    when that maximum exceeds ``threshold_sigmas`` squared. Each end cuts at most half of the
+    returns a segment has beyond ``min_returns``, so that the rule does not depend on the beam
+    order. At most ``window`` returns are examined at each end.
+
+    The same sums, for every segment end and every k at once.
 
     :param segments: segments sorted by start position (positions modulo n)
     :param x_m: x of the returns in position order, shape (n,), m

@@ -10,8 +10,8 @@ every contender alike (and each runs with its own code and data in the CPU's cac
 node that runs one of them): today's compiled pipeline split into its compiled call and the
 Python around it; the numpy pipeline; and the core of an earlier commit (``--against COMMIT``,
 default the 2026-11-27 core, e613b0c), taken out of git into a cache folder and compiled in this
-process with the same numba (its first run compiles it, later runs load it). With ``--peer
-BINARY`` (the C++ laser_line_extraction's timing driver, built outside this repository:
+process with the same numba (its first run compiles it, later runs load it), split alike. With
+``--peer BINARY`` (the C++ laser_line_extraction's timing driver, built outside this repository:
 docs/performance.md), the peer's time on the same scans. Prints the median per scan and the
 ratios the speed goals are stated in; ``--profile`` adds the numpy pipeline's time by step
 (cProfile, cumulative).
@@ -99,8 +99,9 @@ def earlier_core(commit):
 class StageClock:
     """Time the compiled pipeline's call inside each extract_features call (wraps it)."""
 
-    def __init__(self):
-        self.compiled = pipeline._features_of_scan
+    def __init__(self, module):
+        self.module = module
+        self.compiled = module._features_of_scan
         self.inside_s = 0.0
 
     def __call__(self, *arguments):
@@ -110,11 +111,16 @@ class StageClock:
         return found
 
     def __enter__(self):
-        pipeline._features_of_scan = self
+        self.module._features_of_scan = self
         return self
 
     def __exit__(self, *_):
-        pipeline._features_of_scan = self.compiled
+        self.module._features_of_scan = self.compiled
+
+
+def pipeline_of(core):
+    """Return the module of a core that holds its compiled _features_of_scan."""
+    return getattr(getattr(core, 'numba_core', None), 'pipeline', None) or core.pipeline
 
 
 def side_by_side(sets, old, peer):
@@ -130,8 +136,14 @@ def side_by_side(sets, old, peer):
             contenders['earlier'] = lambda r: old.extract_features(r, angle_min, increment,
                                                                    old_config)
         times = {key: [] for key in contenders}
-        outside, inside = [], []
-        with StageClock() as clock:
+        outside = {'compiled': [], 'earlier': []}
+        inside = []
+        clocks = {'compiled': StageClock(pipeline)}
+        if old is not None:
+            clocks['earlier'] = StageClock(pipeline_of(old))
+        for clock in clocks.values():
+            clock.__enter__()
+        try:
             for r in ranges[:10]:                       # warm caches and allocators
                 for extract in contenders.values():
                     extract(r)
@@ -141,12 +153,18 @@ def side_by_side(sets, old, peer):
                         start = time.perf_counter()
                         extract(r)
                         times[key].append(time.perf_counter() - start)
+                        if key in clocks:
+                            outside[key].append(times[key][-1] - clocks[key].inside_s)
                         if key == 'compiled':
-                            inside.append(clock.inside_s)
-                            outside.append(times[key][-1] - clock.inside_s)
+                            inside.append(clocks[key].inside_s)
+        finally:
+            for clock in clocks.values():
+                clock.__exit__()
         row = {key: 1e3 * float(np.median(value)) for key, value in times.items()}
         row['inside'] = 1e3 * float(np.median(inside))
-        row['outside_us'] = 1e6 * float(np.median(outside))
+        row['outside_us'] = 1e6 * float(np.median(outside['compiled']))
+        row['earlier_outside_us'] = (1e6 * float(np.median(outside['earlier']))
+                                     if outside['earlier'] else float('nan'))
         row['peer'] = peer_ms(peer, ranges, angle_min, increment)[0] if peer else float('nan')
         rows.append((name, len(ranges), row))
     return rows
@@ -194,14 +212,15 @@ def main():
     rows = side_by_side(sets, old, args.peer)
     print(f'median ms per scan, contenders interleaved by {BLOCK} scans; load {load:.1f} before, '
           f'{os.getloadavg()[0]:.1f} after; {os.cpu_count()} CPUs')
-    print(f'{"scans":>12} {"count":>5} {"peer":>7} {"earlier":>8} {"compiled":>8} '
-          f'{"of which":>8} {"outside":>8} {"numpy":>7} {"compiled/":>9} {"numpy/":>7} '
-          f'{"compiled/":>9}')
-    print(f'{"":>12} {"":>5} {"":>7} {"":>8} {"":>8} {"call":>8} {"us":>8} {"":>7} '
+    print(f'{"scans":>12} {"count":>5} {"peer":>7} {"earlier":>8} {"outside":>8} '
+          f'{"compiled":>8} {"of which":>8} {"outside":>8} {"numpy":>7} {"compiled/":>9} '
+          f'{"numpy/":>7} {"compiled/":>9}')
+    print(f'{"":>12} {"":>5} {"":>7} {"":>8} {"us":>8} {"":>8} {"call":>8} {"us":>8} {"":>7} '
           f'{"peer":>9} {"peer":>7} {"earlier":>9}')
     for name, count, row in rows:
         earlier = row.get('earlier', float('nan'))
         print(f'{name:>12} {count:>5} {row["peer"]:>7.3f} {earlier:>8.3f} '
+              f'{row["earlier_outside_us"]:>8.1f} '
               f'{row["compiled"]:>8.3f} {row["inside"]:>8.3f} {row["outside_us"]:>8.1f} '
               f'{row["numpy"]:>7.3f} {row["compiled"] / row["peer"]:>9.2f} '
               f'{row["numpy"] / row["peer"]:>7.2f} {row["compiled"] / earlier:>9.2f}')

@@ -51,7 +51,7 @@ help:
 	@echo 'make test-fast  the tests but the modules marked slow (the inner loop, about 2 min)'
 	@echo 'make build  set up and colcon build the four packages into install/'
 	@echo 'make lint   only the ament-style lint (flake8 with ament rules, pep257)'
-	@echo 'make bench  run the benchmarks and print their figures'
+	@echo 'make bench  run the benchmarks and print their figures (PEER=BINARY: the C++ peer too)'
 	@echo 'make results  regenerate docs/results (evaluation of simulated and real static scans)'
 	@echo 'make docs   regenerate the parameter tables of docs/user_guide.md from the schema'
 	@echo 'make golden re-record the test corpus features (wctls_ros/test/golden/) after a rule change'
@@ -131,8 +131,11 @@ test-fast: $(BUILD_STAMP)
 lint: $(BUILD_STAMP)
 	$(WITH_ENV) python -m pytest -m linter $(PYTEST_ARGS)
 
+# PEER=BINARY: the C++ laser_line_extraction's timing driver, timed beside the core.
 bench: $(BUILD_STAMP)
-	$(WITH_ENV) for b in wctls_lab/benchmark/bench_*.py; do python "$$b"; done
+	$(WITH_ENV) for b in wctls_lab/benchmark/bench_*.py; do case "$$b" in \
+	  *bench_core.py|*bench_stages.py) python "$$b" $(if $(PEER),--peer $(PEER));; \
+	  *) python "$$b";; esac; done
 
 results: $(BUILD_STAMP)
 	$(WITH_ENV) wctls_lab/tools/make_results.sh

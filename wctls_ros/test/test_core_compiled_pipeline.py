@@ -93,6 +93,11 @@ def real_scans():
 def assert_same(fast, reference, where):
     """Assert equal features: integers and flags exactly, values within RELATIVE."""
     assert fast.work_limited == reference.work_limited, where
+    assert fast.noise_implausible == reference.noise_implausible, where
+    assert fast.implausible_features == reference.implausible_features, where
+    assert (math.isnan(fast.range_sigma_m) and math.isnan(reference.range_sigma_m)
+            or abs(fast.range_sigma_m - reference.range_sigma_m)
+            <= RELATIVE * reference.range_sigma_m), where
     for group in ('segments', 'corners'):
         ours, theirs = getattr(fast, group), getattr(reference, group)
         for name in theirs.__dataclass_fields__:

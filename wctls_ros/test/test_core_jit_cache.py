@@ -113,6 +113,28 @@ def test_a_changed_callee_in_another_file_is_not_served_from_the_cache(package, 
     run_probe(site, expected=6.0, XDG_CACHE_HOME=str(tmp_path / 'xdg'))
 
 
+def cache_stamps(folder: pathlib.Path):
+    """Return the modification time of each of numba's cache files under a folder, ns."""
+    return {path.name: path.stat().st_mtime_ns for path in folder.rglob('probe.twice-*.nb[ic]')}
+
+
+@pytest.mark.parametrize('edited, recompiled', [(('numpy_core', 'noise.py'), False),
+                                                (('rules.py',), True)])
+def test_only_sources_the_kernels_read_invalidate_the_cache(package, tmp_path, edited,
+                                                            recompiled):
+    # The numpy twin is no kernel's source: a docstring edit there keeps every machine's
+    # compiled kernels; the shared rule constants are, so an edit there recompiles.
+    site, core = package
+    run_probe(site, XDG_CACHE_HOME=str(tmp_path / 'xdg'))
+    before = cache_stamps(core / '__pycache__')
+    source = core.parent.joinpath(*edited)
+    source.write_text(source.read_text() + '# an edited comment\n')
+    run_probe(site, XDG_CACHE_HOME=str(tmp_path / 'xdg'))
+    after = cache_stamps(core / '__pycache__')
+    assert before and after.keys() == before.keys()
+    assert (after != before) == recompiled
+
+
 IMPORT_EVERYTHING = """
 import json, os, sys
 import numba

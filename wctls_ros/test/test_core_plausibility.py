@@ -20,6 +20,7 @@ from wctls_ros.core.numba_core.pipeline import extract_features as compiled
 from wctls_ros.core.numpy_core.pipeline import extract_features as in_numpy
 from wctls_ros.core.plausibility import (corner_sigma_m, MAX_SIGMA_RATIO, plausible,
                                          segment_sigma_m)
+from wctls_ros.core.records import CornerArrays, SegmentArrays
 
 PIPELINES = pytest.mark.parametrize('extract', [compiled, in_numpy], ids=['compiled', 'numpy'])
 # The generic preset's noise model.
@@ -61,6 +62,34 @@ def test_a_clean_scan_keeps_every_feature_and_reports_its_noise(extract):
     assert not features.noise_implausible and features.implausible_features == 0
     assert features.range_sigma_m == pytest.approx(0.01, rel=0.15)      # the simulated 1 cm
     assert len(features.corners) >= 12
+
+
+def _beyond_the_bound(features):
+    """Return the features with a cornered wall's and one corner's covariance inflated 1e8x."""
+    walls = features.segments
+    doomed = int(features.corners.first_segment[len(features.corners) // 2])
+    covariance, corner_covariance = walls.covariance.copy(), features.corners.covariance.copy()
+    covariance[doomed] *= 1e8
+    corner_covariance[-1, :2, :2] *= 1e8
+    return replace(features, segments=replace(walls, covariance=covariance),
+                   corners=replace(features.corners, covariance=corner_covariance))
+
+
+def test_the_compiled_bounds_drop_and_renumber_as_the_numpy_ones():
+    pipeline = pytest.importorskip('wctls_ros.core.numba_core.pipeline')
+    plausibility = pytest.importorskip('wctls_ros.core.numba_core.plausibility')
+    features = in_numpy(*_room_scan(), GENERIC)
+    for case in (features, _beyond_the_bound(features)):
+        expected = plausible(case, GENERIC, features.range_sigma_m)
+        segments, corners, dropped = plausibility.plausible_arrays(
+            SegmentArrays(*(getattr(case.segments, name) for name in SegmentArrays._fields)),
+            CornerArrays(*(getattr(case.corners, name) for name in CornerArrays._fields)),
+            features.range_sigma_m, pipeline._settings(GENERIC))
+        assert dropped == expected.implausible_features
+        for found, wanted in ((segments, expected.segments), (corners, expected.corners)):
+            for name in found._fields:
+                assert np.array_equal(getattr(found, name), getattr(wanted, name)), name
+    assert expected.implausible_features >= 2
 
 
 def test_a_feature_beyond_the_bound_is_dropped_and_the_corners_renumbered():

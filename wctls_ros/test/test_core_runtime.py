@@ -103,7 +103,7 @@ def test_an_unknown_choice_is_refused(monkeypatch):
 def test_a_compile_that_fails_falls_back_to_numpy(monkeypatch):
     from wctls_ros.core.numba_core import precompile
 
-    def failing(helpers=None):
+    def failing():
         raise RuntimeError('Failed in nopython mode pipeline\nthe details')
     monkeypatch.setattr(precompile, 'pipeline_is_cached', lambda: True)
     monkeypatch.setattr(precompile, 'warm_up', failing)

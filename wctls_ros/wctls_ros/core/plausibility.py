@@ -4,7 +4,8 @@
 """
 Nothing published that says "unknown": the plausibility bounds on a scan and on its features.
 
-Shared by both implementations of the pipeline, applied to their result
+The numpy pipeline applies these functions to its result; the compiled one applies their
+compiled twin (:mod:`.numba_core.plausibility`) within its compiled call
 (docs/derivation.md#plausibility):
 
 - a scan whose own range-noise estimate exceeds ``max_range_sigma_m`` is no scan of surfaces

@@ -47,6 +47,7 @@ class Settings(NamedTuple):
     min_wall_beam_angle_rad: float
     corner_end_sigmas: float
     corner_end_floor_m: float
+    max_range_sigma_m: float
 
 
 class Noise(NamedTuple):
@@ -191,12 +192,16 @@ class ScanResult(NamedTuple):
     :ivar corners: the corners between them
     :ivar work_limited: whether the work bound stopped splitting or merging
     :ivar range_sigma_m: the range noise the scan was processed with, m (NaN: too few returns)
+    :ivar noise_implausible: the range noise exceeded ``max_range_sigma_m``: no features
+    :ivar implausible_features: segments and corners left out by the plausibility bound
     """
 
     segments: SegmentArrays
     corners: CornerArrays
     work_limited: bool
     range_sigma_m: float
+    noise_implausible: bool
+    implausible_features: int
 
 
 class CornerCandidates(NamedTuple):

@@ -310,7 +310,7 @@ def _bring_in_compiled(asked: str, on_compile: Optional[Callable[[], None]],
             if on_compile is not None:
                 on_compile()
             _compile_in_child(give_up)
-        precompile.warm_up(helpers=0)          # from the cache
+        precompile.warm_up()                   # from the cache
     except Exception as error:  # noqa: B902 - any failure of numba falls back to numpy
         version = sys.modules['numba'].__version__ if sys.modules.get('numba') else '?'
         reason = f'numba {version} failed to compile the core ({_first_line(error)})'

@@ -22,13 +22,12 @@ that (a test of one step) compiles in memory.
 The options are the same for every kernel: ``error_model='numpy'`` so that a division by zero
 gives inf or NaN as in numpy (degenerate segments and corners are dropped later, not raised on),
 and no fastmath, so that NaN compares and rounding are IEEE as in the numpy reference the tests
-hold the kernels to. A kernel that :mod:`.precompile` compiles in a helper process names, where
-it is defined, the numba argument types the pipeline calls it with (``@jit(ahead=...)``, the
-types of :mod:`._types`); ``pipeline.PIPELINE_KERNELS`` is the one list of those kernels, in the
-order the pipeline calls them.
+hold the kernels to. numba types each kernel from the arguments of its first call, lazily: the
+pipeline's compiled function types all of its callees in one compile.
 
-The first run on a machine compiles every kernel (15-20 s of CPU on a 2-core EPYC VM; helper
-processes share it, :mod:`.precompile`), so the kernels avoid what costs compile time without need:
+The first run on a machine compiles every kernel (15-20 s of CPU on a 2-core EPYC VM, in a
+process of its own while the numpy pipeline serves: :mod:`..runtime`), so the kernels avoid what
+costs compile time without need:
 an array assigned to a slice (``a[:-1] = b[1:]``) makes numba compile its shape-mismatch message
 (string formatting), 1.7 s for the one such line the core had; the core's kernels write those as
 loops. And numba builds each compiled function's machine code with its callees linked in, so a step
@@ -43,26 +42,26 @@ import glob
 import hashlib
 import os
 import threading
-from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple
+from typing import Any, Callable, Iterator, List, Optional
 
 import numba
 from numba.core.caching import FunctionCache
 
 _CACHE_VARIABLE = 'NUMBA_CACHE_DIR'
 _HERE = os.path.dirname(os.path.abspath(__file__))
-# Kernels use constants of the shared modules and of the numpy core too: every core source counts.
+# Kernels use constants and records of the shared modules too: every core source counts...
 _CORE_SOURCES = os.path.join(os.path.dirname(_HERE), '**', '*.py')
-# ... but the one that chooses which implementation runs: no kernel reads it.
-_NOT_READ_BY_KERNELS = os.path.join(os.path.dirname(_HERE), 'runtime.py')
+# ... but the one that chooses which implementation runs and the numpy twin: no kernel reads
+# them (the shared rule constants are in ..rules), so editing them recompiles nothing.
+_NOT_READ_BY_KERNELS = (os.path.join(os.path.dirname(_HERE), 'runtime.py'),
+                        os.path.join(os.path.dirname(_HERE), 'numpy_core', ''))
 _FINGERPRINT_FILE = 'wctls_ros_core.fingerprint'
 # numba makes its configuration's attributes when it reads its environment, so no type checker
 # knows them.
 _NUMBA_CONFIG: Any = numba.config
 
-# Every kernel of the core, in the order of definition, and the numba argument types the
-# pipeline passes those it compiles ahead in helper processes (:mod:`.precompile`).
+# Every kernel of the core, in the order of definition.
 _kernels: List[Callable] = []
-_ahead: Dict[int, Tuple[numba.types.Type, ...]] = {}
 _cache_on = False
 # The runtime's thread may set the cache up while the node's thread asks whether it is there.
 _setting_up = threading.Lock()
@@ -101,7 +100,7 @@ def _fingerprint() -> str:
     """Return a digest of numba's version and every source file of the core kernels read."""
     digest = hashlib.sha256(numba.__version__.encode())
     for path in sorted(glob.glob(_CORE_SOURCES, recursive=True)):
-        if path == _NOT_READ_BY_KERNELS:
+        if path.startswith(_NOT_READ_BY_KERNELS):
             continue
         digest.update(os.path.relpath(path, _HERE).encode())
         with open(path, 'rb') as source:
@@ -175,45 +174,25 @@ def use_disk_cache() -> None:
         _cache_on = True
 
 
-def argument_types(kernel) -> Tuple[numba.types.Type, ...]:
-    """
-    Return the numba argument types the pipeline calls a kernel with (its ``ahead`` types).
-
-    :param kernel: a kernel made by :func:`jit` with ``ahead``
-    :return: the types
-    :raises KeyError: for a kernel made without them
-    """
-    return _ahead[id(kernel)]
-
-
-def _kernel(function, ahead: Optional[Tuple[numba.types.Type, ...]], **options):
+def _kernel(function, **options):
     """Make and register a kernel of the core (see :func:`jit`)."""
     kernel = numba.njit(error_model='numpy', nogil=True, **options)(function)
     _kernels.append(kernel)
-    if ahead is not None:
-        _ahead[id(kernel)] = tuple(ahead)
     if _cache_on:
         _cache(kernel)
     return kernel
 
 
-def jit(function: Optional[Callable] = None, *, ahead=None):
+def jit(function: Callable):
     """
     Compile a function of the core with numba, cached on disk once :func:`use_disk_cache` ran.
 
     Lazily, as numba does: nothing compiles at import.
 
     :param function: a function written in numba's subset of Python and numpy (``@jit``)
-    :param ahead: the numba argument types the pipeline calls it with, for the kernels
-        :mod:`.precompile` compiles in helper processes (``@jit(ahead=(...))``): numba compiles
-        a kernel once for each tuple of argument types, so these must be exactly the
-        pipeline's; a test holds them to a compiled pipeline's signatures
-    :return: the compiled dispatcher (callable from Python and from other compiled functions),
-        or with ``ahead`` alone, the decorator
+    :return: the compiled dispatcher (callable from Python and from other compiled functions)
     """
-    if function is None:
-        return lambda function: _kernel(function, ahead)
-    return _kernel(function, ahead)
+    return _kernel(function)
 
 
 def jit_inline(function):
@@ -227,4 +206,4 @@ def jit_inline(function):
     :param function: a function written in numba's subset of Python and numpy
     :return: the dispatcher
     """
-    return _kernel(function, None, inline='always')
+    return _kernel(function, inline='always')

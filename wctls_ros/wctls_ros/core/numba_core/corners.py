@@ -23,10 +23,8 @@ import numpy as np
 
 from ._jit import jit, jit_inline
 from ._order import wrapped
-from ._types import (FLAGS, INDICES, INTEGER, NOISE, PLACED, REAL, RETURNS, ROWS, RULE, WALL,
-                     WALLS, WINDOW)
-from ..numpy_core.corners import CORNER_MISSING_BEAMS
 from ..records import AlongWall, CornerCandidates, EndWindow, WallAtCorner
+from ..rules import CORNER_MISSING_BEAMS
 
 # The upper triangle of the symmetric (x, y, yaw) covariance, row by row: (row, column) of each
 # of its six entries.
@@ -34,18 +32,10 @@ _UPPER_ROWS = (0, 0, 0, 1, 1, 2)
 _UPPER_COLUMNS = (0, 1, 2, 1, 2, 2)
 
 
-@jit(ahead=(WALLS, INDICES, INDICES, REAL, REAL))
+@jit
 def corner_candidates(walls, first_wall, second_wall, min_angle_rad, common_range_sigma_m):
     """
-    Intersect pairs of walls that are not close to parallel.
-
-    Whether both walls really end at the intersection is :func:`walls_end_at`'s question.
-
-    For each pair: the corner z = -A^-1 (c_1, c_2) (the paper's eqs. (24)-(25)), the bisector's
-    yaw towards the open side the sensor sees, the opening angle, and the joint covariance of
-    (x, y, yaw) of (D11)-(D14): sum_k J_k C_k J_k^T with dz/dL_k = -A^-1 e_k h^T, h = (x, y, 1),
-    d yaw / dL_k = g_k = (-b_k, a_k, 0) / (2 (a_k^2 + b_k^2)); plus sigma^2 j j^T for the range
-    offset common to the scan, j = sum_k J_k dL_k / d offset ((D15)-(D16)).
+    Compiled twin of :func:`..numpy_core.corners.corner_candidates`, one pair at a time.
 
     :param walls: the walls (their line, line_covariance, line_offset_jacobian, start_xy_m and
         end_xy_m are read)
@@ -147,15 +137,10 @@ def corner_candidates(walls, first_wall, second_wall, min_angle_rad, common_rang
                             first_kept[:found], second_kept[:found])
 
 
-@jit(ahead=(RETURNS, INTEGER, INTEGER, NOISE, RULE))
+@jit
 def end_window(contour, after_first, before_second, noise, rule):
     """
-    Gather the returns between two walls that the corner end rule looks at.
-
-    docs/derivation.md#corners, "Corner end rule": the first wall's facing end, the returns
-    left out of both segments (at most ``rule.window``) and the second wall's facing end, each
-    with its position noise and the tolerance of "on a line", ``sigmas`` times that noise plus
-    ``floor_m``.
+    Compiled twin of :func:`..numpy_core.corners.end_window`, one corner at a time.
 
     :param contour: the returns in circular order
     :param after_first: position of the first wall's last return
@@ -179,16 +164,10 @@ def end_window(contour, after_first, before_second, noise, rule):
     return EndWindow(x, y, sigma, line_tolerance, in_window, between)
 
 
-@jit(ahead=(WALLS, INTEGER, REAL, REAL, ROWS, REAL, RULE))
+@jit
 def wall_at_corner(walls, wall, corner_x_m, corner_y_m, corner_covariance, step_rad, rule):
     """
-    Describe one wall of a corner as seen from the corner.
-
-    docs/derivation.md#corners, "Corner end rule": its unit normal, the unit direction from the
-    corner into the wall (towards the middle of its returns), the corner's standard deviation
-    along that direction (from its position covariance), the spacing of the beams on the wall
-    at the corner (the range times the bearing step over the incidence, at most 1000 times the
-    step), and the tolerance along the wall, ``sigmas`` times that deviation plus ``floor_m``.
+    Compiled twin of :func:`..numpy_core.corners.wall_at_corner`, one corner at a time.
 
     :param walls: the walls
     :param wall: which wall
@@ -218,14 +197,10 @@ def wall_at_corner(walls, wall, corner_x_m, corner_y_m, corner_covariance, step_
                         rule.sigmas * along_sigma + rule.floor_m)
 
 
-@jit(ahead=(WINDOW, WALL, REAL, REAL))
+@jit
 def along_wall(window, wall, corner_x_m, corner_y_m):
     """
-    Place the returns of an end window with respect to one wall of the corner.
-
-    docs/derivation.md#corners, "Corner end rule": each return's offset in front of the wall's
-    line, its distance from the corner into the wall, and whether it lies on the line (within
-    its line tolerance; only the window's own returns).
+    Compiled twin of :func:`..numpy_core.corners.along_wall`, one corner at a time.
 
     :param window: the end window
     :param wall: the wall at the corner
@@ -244,16 +219,10 @@ def along_wall(window, wall, corner_x_m, corner_y_m):
     return AlongWall(in_front, along, on_line)
 
 
-@jit(ahead=(WINDOW, REAL, REAL, WALL, WALL, NOISE, RULE))
+@jit
 def corner_zone(window, corner_x_m, corner_y_m, first, second, noise, rule):
     """
-    Tell which returns of an end window lie so close to the corner that they belong to either wall.
-
-    docs/derivation.md#corners, "Corner end rule": there both lines are within the noise of each
-    other, and a beam's footprint on both walls returns a range in between (an inside corner
-    looks rounded): within ``sigmas`` times the corner's noise (its position noise and the
-    larger of its deviations along the walls) over the sine of the walls' angle, plus
-    ``floor_m``, plus the smaller beam spacing.
+    Compiled twin of :func:`..numpy_core.corners.corner_zone`, one corner at a time.
 
     :param window: the end window
     :param corner_x_m: x of the corner, m
@@ -276,18 +245,10 @@ def corner_zone(window, corner_x_m, corner_y_m, first, second, noise, rule):
     return at_corner
 
 
-@jit(ahead=(WINDOW, WALL, PLACED, FLAGS, RULE))
+@jit
 def without_object_in_front(window, wall, placed, at_corner, rule):
     """
-    Return which returns lie on a wall's line, less a run that lies in front of it together.
-
-    docs/derivation.md#corners, "Corner end rule": a wall reaches as far towards the corner as
-    its returns do, also beyond something in front of it (e.g. a leg), unless the returns it
-    claims beyond its segment (on its line, not past the corner's tolerance, outside the corner
-    zone) lie in front of its line together: their residuals over the noise sum to more than
-    ``run_sigmas`` times the square root of their number, an object before the wall's end
-    (their line was fitted without them, so the plain sum is already a deleted-residual test,
-    as :func:`~.segmentation.trim_offset`'s). The facing ends are the wall's own.
+    Compiled twin of :func:`..numpy_core.corners.without_object_in_front`, one corner at a time.
 
     :param window: the end window
     :param wall: the wall at the corner
@@ -311,13 +272,10 @@ def without_object_in_front(window, wall, placed, at_corner, rule):
     return on_line
 
 
-@jit(ahead=(WALL, PLACED, FLAGS, FLAGS))
+@jit
 def reaches(wall, placed, on_line, at_corner):
     """
-    Tell which returns of an end window the wall reaches: in the corner zone, or on its line.
-
-    docs/derivation.md#corners, "Corner end rule": a return on the wall's line reaches the
-    corner when it lies no farther past it than the wall's tolerance along it.
+    Compiled twin of :func:`..numpy_core.corners.reaches`, one corner at a time.
 
     :param wall: the wall at the corner
     :param placed: the window's returns with respect to the wall
@@ -331,14 +289,11 @@ def reaches(wall, placed, on_line, at_corner):
     return here
 
 
-@jit(ahead=(WALL, WALL, PLACED, PLACED, FLAGS, FLAGS, FLAGS))
+@jit
 def goes_on(first, second, first_placed, second_placed, first_on_line, second_on_line,
             at_corner):
     """
-    Tell whether a wall's line carries returns past the corner: the wall does not end there.
-
-    docs/derivation.md#corners, "Corner end rule": a return on one wall's line alone, outside
-    the corner zone, past the corner by more than that wall's tolerance along it.
+    Compiled twin of :func:`..numpy_core.corners.goes_on`, one corner at a time.
 
     :param first: the first wall at the corner
     :param second: the second wall
@@ -361,17 +316,11 @@ def goes_on(first, second, first_placed, second_placed, first_on_line, second_on
     return False
 
 
-@jit(ahead=(WINDOW, WALL, WALL, PLACED, PLACED, FLAGS, FLAGS, FLAGS))
+@jit
 def blocked(window, first, second, first_placed, second_placed, first_here, second_here,
             at_corner):
     """
-    Tell whether anything lies between the two walls' reaches: an occluder, or a view through.
-
-    docs/derivation.md#corners, "Corner end rule". Each wall's anchor is its last own return
-    short of the corner zone (its facing end if none). Between the anchors every return must be
-    reached by a wall; outside them (beyond something in front of a wall, where its own returns
-    go on) a return reached by neither is allowed only when it lies in front of both lines (an
-    occluder); a return behind them is a view through a gap where the walls do not meet.
+    Compiled twin of :func:`..numpy_core.corners.blocked`, one corner at a time.
 
     :param window: the end window
     :param first: the first wall at the corner
@@ -400,15 +349,10 @@ def blocked(window, first, second, first_placed, second_placed, first_here, seco
     return False
 
 
-@jit(ahead=(WALL, PLACED, FLAGS, FLAGS))
+@jit
 def short_of_corner(wall, placed, on_line, here):
     """
-    Return how far a wall's own returns stop short of the corner, in beams beyond its tolerance.
-
-    docs/derivation.md#corners, "Corner end rule": the nearest return on its line that reaches
-    the corner, its distance from the corner into the wall less the wall's tolerance along it,
-    over the beam spacing there. More than ``1 + CORNER_MISSING_BEAMS``: the corner is an
-    extrapolation across an unseen stretch; at most 1: the wall's end was seen.
+    Compiled twin of :func:`..numpy_core.corners.short_of_corner`, one corner at a time.
 
     :param wall: the wall at the corner
     :param placed: the window's returns with respect to the wall
@@ -423,22 +367,10 @@ def short_of_corner(wall, placed, on_line, here):
     return max(gap - wall.tolerance_m, 0.0) / wall.spacing_m
 
 
-@jit(ahead=(REAL, REAL, WALL, WALL, RETURNS, INTEGER, INTEGER, NOISE, RULE))
+@jit
 def seen_through(corner_x_m, corner_y_m, wall, other, contour, start, stop, noise, rule):
     """
-    Tell whether the other wall is seen through a wall's stretch between its segment and a corner.
-
-    docs/derivation.md#corners, "Seen through". If the wall ended at the corner it would stand
-    between them, and no line of sight could cross its line there to a return farther away.
-    Returns on the other wall's line (within ``sigmas`` standard deviations of their position
-    noise plus ``floor_m``) whose line of sight crosses this wall's line farther than its
-    tolerance along it from the corner, into the wall, and not in front of it by more than
-    that noise tolerance, are tested together like :func:`~.segmentation.trim_offset`'s runs:
-    the sum of their distances behind the line over their noise, over the square root of their
-    number, above ``run_sigmas`` means the other wall goes on behind this one's end (the end
-    is an edge: a pilaster, a wardrobe, a door frame in front of a wall, whose line merely
-    meets the wall behind). One return behind by a few sigma is noise or a rounded corner; a
-    run of them is not.
+    Compiled twin of :func:`..numpy_core.corners.seen_through`, one test at a time.
 
     :param corner_x_m: x of the corner, m
     :param corner_y_m: y of the corner, m
@@ -476,29 +408,7 @@ def seen_through(corner_x_m, corner_y_m, wall, other, contour, start, stop, nois
 @jit_inline
 def walls_end_at(candidates, walls, contour, step_rad, noise, rule):
     """
-    Tell which corners both walls end at, and at which the end was seen.
-
-    docs/derivation.md#corners, "Corner end rule" and "Seen through". A corner is the point
-    where two walls end; adjacent segments whose lines merely intersect near their ends (across
-    an occlusion, a gap, a T-junction seen from the side where one wall goes on) are not
-    corners. The returns between the first wall's last return and the second wall's first one
-    (:func:`end_window`) are sorted by where they lie: on one of the two lines
-    (:func:`along_wall`), around the corner (:func:`corner_zone`), in front of both lines (an
-    occluder) or elsewhere; each wall reaches as far towards the corner as its returns do
-    (:func:`reaches`), also beyond something in front of it, unless those returns lie in front
-    of its line together (:func:`without_object_in_front`). The corner is rejected when
-
-    - more than ``rule.window`` returns lie between the walls: they are not neighbours;
-    - a facing end does not reach the corner;
-    - a wall's line carries returns past the corner (:func:`goes_on`);
-    - anything lies between the two reaches (:func:`blocked`);
-    - a wall's reach stops short of the corner by more than ``1 + CORNER_MISSING_BEAMS`` beams
-      beyond its tolerance (:func:`short_of_corner`): an extrapolation across an unseen stretch;
-    - a wall is seen through where it would have to stand (:func:`seen_through`, when
-      ``rule.run_sigmas`` > 0): the other wall goes on behind this wall's end, an edge in
-      front of it, not a corner.
-
-    A wall's end is seen when its reach is within one beam's spacing of that bound.
+    Compiled twin of :func:`..numpy_core.corners.walls_end_at`, one corner at a time.
 
     :param candidates: the candidate corners
     :param walls: the walls

@@ -25,16 +25,10 @@ import math
 import numpy as np
 
 from ._jit import jit
-from ._types import INDICES, INTEGER, LINES, NOISE, VALUES
 from ..config import METHODS
 from ..features import LineFits, SegmentReturns
 from ..records import Noise
-
-# Gauss-Newton of the maximum-likelihood fit stops once every step is below this (rad and m)...
-_ML_STEP_TOLERANCE = 1e-12
-# ... or after this many iterations. From the WTLS line it takes 5 to 8 on simulated S1 scans
-# (the variances move with the line, so convergence is linear), the last step below 1e-12.
-_ML_MAX_ITERATIONS = 8
+from ..rules import ML_MAX_ITERATIONS, ML_STEP_TOLERANCE
 
 
 def _fits(method: str, returns: SegmentReturns, range_sigma: float,
@@ -269,7 +263,7 @@ def _times(jacobian, vector, out):
         out[r] = total
 
 
-@jit(ahead=(INTEGER, VALUES, VALUES, VALUES, VALUES, INDICES, INDICES, NOISE))
+@jit
 def fit_segments(method_code, rho, theta, x, y, offsets, counts, noise):
     """
     Fit every segment with one method, in its own form and in normal form (:func:`fit_lines`).
@@ -398,8 +392,8 @@ def _ml_fits(rho, theta, x, y, offsets, counts, noise):
     Return the maximum-likelihood lines of every segment (Pfister et al. 2003), from WTLS.
 
     Minimises sum d_i^2 / s_i^2 by Gauss-Newton, the variances re-evaluated at each iterate;
-    all segments iterate together until every step is below _ML_STEP_TOLERANCE (or
-    _ML_MAX_ITERATIONS). The covariance is the inverse Fisher information F^-1 =
+    all segments iterate together until every step is below ML_STEP_TOLERANCE (or
+    ML_MAX_ITERATIONS). The covariance is the inverse Fisher information F^-1 =
     [[C, B], [B, A]] / det F, and the offset Jacobian d(angle, radius) / d(offset of every
     range) is -F^-1 (sum iv g cos, -sum iv cos), from the estimating equations
     sum_i s_i^-2 (g_i, -1) d_i = 0 (first order).
@@ -418,7 +412,7 @@ def _ml_fits(rho, theta, x, y, offsets, counts, noise):
         sign = -1.0 if c > 0.0 else 1.0
         angle[s], radius[s] = math.atan2(sign * b, sign * a), -sign * c / math.hypot(a, b)
     sums = np.empty((count, 7))
-    for _ in range(_ML_MAX_ITERATIONS):
+    for _ in range(ML_MAX_ITERATIONS):
         moving = False
         for s in range(count):
             _ml_sums(x, y, rho, offsets[s], offsets[s] + counts[s], angle[s], radius[s],
@@ -430,7 +424,7 @@ def _ml_fits(rho, theta, x, y, offsets, counts, noise):
             step_radius = (f[2] * f[3] - f[1] * f[4]) * inv_det
             angle[s] += step_angle
             radius[s] += step_radius
-            moving |= abs(step_angle) > _ML_STEP_TOLERANCE or abs(step_radius) > _ML_STEP_TOLERANCE
+            moving |= abs(step_angle) > ML_STEP_TOLERANCE or abs(step_radius) > ML_STEP_TOLERANCE
         if not moving:
             break
     for s in range(count):
@@ -454,7 +448,7 @@ def _ml_fits(rho, theta, x, y, offsets, counts, noise):
     return angle, radius, covariance, normal_offset
 
 
-@jit(ahead=(VALUES, VALUES, VALUES, INDICES, INDICES, LINES, NOISE))
+@jit
 def residual_chi2_dof(rho, x, y, offsets, counts, lines, noise):
     """
     Return each fit's residual chi2 per degree of freedom (docs/derivation.md#model-error).

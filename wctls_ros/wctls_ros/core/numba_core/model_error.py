@@ -23,7 +23,6 @@ import math
 import numpy as np
 
 from ._jit import jit
-from ._types import FLAG, REAL, WALLS
 from .lines import normal_jacobians
 from ..records import Walls
 
@@ -85,7 +84,7 @@ def residual_factor(chi2_dof: float, returns: int) -> float:
     return max(chi2_dof - math.sqrt(2.0 / dof), 1.0)
 
 
-@jit(ahead=(WALLS, FLAG, REAL, REAL))
+@jit
 def with_model_error(walls: Walls, residual_scaling: bool, flatness_sigma_m: float,
                      common_range_sigma_m: float):
     """

@@ -5,31 +5,29 @@
 The per-scan pipeline of the paper's Algorithm 1: returns -> segments -> lines -> corners.
 
 One compiled function (:func:`_features_of_scan`) runs every step on a scan, as loops over its
-returns (numba); :func:`extract_features` checks the scan's geometry and packs the arrays it
-returns into the frozen result dataclasses.
+returns (numba), the plausibility bounds included; :func:`extract_features` checks the scan's
+geometry, hands it the configuration prepared once per configuration and beam layout, and wraps
+the arrays it returns in the frozen result dataclasses: no other Python runs per scan.
 """
 
 import functools
 import math
-from typing import NamedTuple
+from typing import NamedTuple, Optional
 
 import numpy as np
 
-from ._jit import argument_types, jit, jit_inline, use_disk_cache
+from ._jit import jit, jit_inline, use_disk_cache
 from ._order import wrapped
-from ._types import INDICES, INTEGER, NOISE, REAL, ROWS, SEGMENTS, SETTINGS, VALUES
-from .corners import (along_wall, blocked, corner_candidates, corner_zone, end_window, goes_on,
-                      reaches, seen_through, short_of_corner, wall_at_corner, walls_end_at,
-                      without_object_in_front)
+from .corners import corner_candidates, walls_end_at
 from .lines import fit_segments, residual_chi2_dof
 from .model_error import with_model_error
 from .noise import range_sigma_of_returns
+from .plausibility import plausible_arrays
 from .scan import valid_returns
 from .segmentation import (breakpoints_of, chains_of, merge_segments, pass_budget, split_iepf,
                            trim_ambiguous, trim_offset)
 from ..config import FeatureConfig, METHODS
 from ..features import CornerSet, Features, SegmentSet
-from ..plausibility import implausible_scan, noise_is_plausible, plausible
 from ..records import (BeamGrid, CornerArrays, CornerEndRule, Lines, Noise, Returns, ScanResult,
                        SegmentArrays, Segments, Settings, Walls)
 from ..scan import beam_density, scan_geometry, ScanError
@@ -65,6 +63,52 @@ def _settings(config: FeatureConfig) -> Settings:
         name: Settings.__annotations__[name](value) for name, value in values.items()})
 
 
+class _Prepared(NamedTuple):
+    """The compiled pipeline's arguments that depend on the configuration and beam layout."""
+
+    config: FeatureConfig
+    angle_increment_rad: float
+    beam_count: int
+    settings: Settings
+    density: _AtDensity
+
+
+class _LatestPrepared:
+    """
+    The arguments prepared for the latest configuration and beam layout.
+
+    A node or a bag replay extracts every scan with the same FeatureConfig object and layout:
+    comparing them by identity costs well under a microsecond, where hashing the configuration
+    (about 40 fields) for the caches above costs several. One record, replaced whole, so that
+    threads extracting at once each see a consistent one.
+    """
+
+    def __init__(self) -> None:
+        self.prepared: Optional[_Prepared] = None
+
+    def get(self, config: FeatureConfig, angle_increment_rad: float,
+            beam_count: int) -> _Prepared:
+        """
+        Return the arguments for a configuration and beam layout, prepared at most once in a row.
+
+        :param config: the configuration
+        :param angle_increment_rad: the scan's bearing step, rad
+        :param beam_count: the scan's number of beams
+        :return: the prepared arguments
+        """
+        prepared = self.prepared
+        if (prepared is None or prepared.config is not config
+                or prepared.angle_increment_rad != angle_increment_rad
+                or prepared.beam_count != beam_count):
+            prepared = _Prepared(config, angle_increment_rad, beam_count, _settings(config),
+                                 _at_density(angle_increment_rad, beam_count, config))
+            self.prepared = prepared
+        return prepared
+
+
+_LATEST = _LatestPrepared()
+
+
 def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
                      config: FeatureConfig = _DEFAULT_CONFIG, range_min_m: float = 0.0,
                      range_max_m: float = math.inf) -> Features:
@@ -78,34 +122,14 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
         raise ScanError(f'{np.size(ranges_m)} beams are more than max_beams '
                         f'({config.max_beams})')
     ranges, full_turn, cos, sin = scan_geometry(ranges_m, angle_min_rad, angle_increment_rad)
+    prepared = _LATEST.get(config, float(angle_increment_rad), ranges.size)
     found = _features_of_scan(
-        ranges, cos, sin, float(angle_min_rad), float(angle_increment_rad),
+        ranges, cos, sin, float(angle_min_rad), prepared.angle_increment_rad,
         float(max(range_min_m, config.range_min_m)), float(min(range_max_m, config.range_max_m)),
-        full_turn, _settings(config),
-        _at_density(float(angle_increment_rad), ranges.size, config))
-    features = Features(config.method, SegmentSet(**found.segments._asdict()),
-                        CornerSet(**found.corners._asdict()), bool(found.work_limited))
-    # #plausibility: nothing published that says "unknown" (a scan too few returns to process
-    # has no range noise: NaN).
-    range_sigma = found.range_sigma_m
-    if math.isnan(range_sigma):
-        return features
-    if not noise_is_plausible(range_sigma, config):
-        return implausible_scan(config.method, range_sigma)
-    return plausible(features, config, range_sigma)
-
-
-def kernels_last_first():
-    """
-    Return the kernels the pipeline calls, last step first, with the types it passes them.
-
-    :data:`PIPELINE_KERNELS` backwards, for compiling them in other processes while this one
-    compiles the pipeline (:mod:`.precompile`); each kernel's types are declared where it is
-    defined (``@jit(ahead=...)``).
-
-    :return: tuples (kernel, tuple of numba argument types)
-    """
-    return tuple((kernel, argument_types(kernel)) for kernel in reversed(PIPELINE_KERNELS))
+        full_turn, prepared.settings, prepared.density)
+    return Features(config.method, SegmentSet(*found.segments), CornerSet(*found.corners),
+                    found.work_limited, found.range_sigma_m, found.noise_implausible,
+                    found.implausible_features)
 
 
 @jit
@@ -134,11 +158,14 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
                             range_min_m, range_max_m)
     count = returns.beam_index.size
     if count < settings.min_segment_points:
-        return ScanResult(_no_segments(), _no_corners(), False, math.nan)
+        return ScanResult(_no_segments(), _no_corners(), False, math.nan, False, 0)
     # #range-noise-from-the-scan
     range_sigma = settings.range_sigma_m
     if settings.range_sigma_from_scan:
         range_sigma = max(range_sigma, range_sigma_of_returns(returns.beam_index, returns.range_m))
+    # #plausibility: a scan whose own noise is beyond the bound is no scan of surfaces.
+    if not range_sigma <= settings.max_range_sigma_m:
+        return ScanResult(_no_segments(), _no_corners(), False, range_sigma, True, 0)
     # #decision-noise: every decision tolerates the model error on top of the sensor noise;
     # the fits weigh the returns by the sensor noise alone.
     noise = Noise(range_sigma, settings.bearing_sigma_rad,
@@ -158,7 +185,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
         x, y, runs, _split_threshold(contour.range_m, noise, settings.iepf_threshold_m,
                                      density.iepf_noise_sigmas), budget)
     if segments.start.size == 0:
-        return ScanResult(_no_segments(), _no_corners(), unsplit, range_sigma)
+        return ScanResult(_no_segments(), _no_corners(), unsplit, range_sigma, False, 0)
     segments, lines, unmerged = merge_segments(x, y, segments, full_turn, joinable[order], noise,
                                                settings.merge_chi2, budget)
     work_limited = unsplit or unmerged
@@ -166,7 +193,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     segments = Segments(segments.start[keep], segments.stop[keep], segments.chain[keep])
     lines = Lines(lines.angle_rad[keep], lines.radius_m[keep])
     if segments.start.size == 0:
-        return ScanResult(_no_segments(), _no_corners(), work_limited, range_sigma)
+        return ScanResult(_no_segments(), _no_corners(), work_limited, range_sigma, False, 0)
     segments = trim_ambiguous(segments, full_turn, x, y, lines, noise,
                               settings.min_segment_points, density.end_window)
     if settings.end_offset_sigmas > 0.0:
@@ -177,7 +204,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     start, stop = _in_scan_order(contour.beam_index, ranges_m.size, segments.start, segments.stop)
     walls = _fit_walls(contour, start, stop, noise, settings)
     if walls.angle_rad.size == 0:
-        return ScanResult(_no_segments(), _no_corners(), work_limited, range_sigma)
+        return ScanResult(_no_segments(), _no_corners(), work_limited, range_sigma, False, 0)
     # #corners: which pairs are corners is decided with the decision noise; the published
     # covariances add the model error to the fits' (#model-error).
     corners = _corners(contour, walls, grid, noise, settings, density)
@@ -200,10 +227,13 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     corners_found = CornerArrays(corners.xy_m, corners.yaw_rad, corner_covariance,
                                  corners.opening_angle_rad, corners.first_segment,
                                  corners.second_segment, corners.end_seen)
-    return ScanResult(segments_found, corners_found, work_limited, range_sigma)
+    # #plausibility: nothing published whose covariance gates nothing.
+    segments_found, corners_found, dropped = plausible_arrays(segments_found, corners_found,
+                                                              range_sigma, settings)
+    return ScanResult(segments_found, corners_found, work_limited, range_sigma, False, dropped)
 
 
-@jit(ahead=())
+@jit
 def _no_segments():
     """
     Return the arrays of a SegmentSet without segments.
@@ -217,7 +247,7 @@ def _no_segments():
                          np.zeros((0, 2)), no_index, no_index, no_index, np.zeros(0))
 
 
-@jit(ahead=())
+@jit
 def _no_corners():
     """Return the arrays of a CornerSet without corners (as :meth:`..features.CornerSet.empty`)."""
     no_index = np.zeros(0, np.intp)
@@ -225,7 +255,7 @@ def _no_corners():
                         no_index, no_index, np.zeros((0, 2), np.bool_))
 
 
-@jit(ahead=(VALUES, NOISE, REAL, REAL))
+@jit
 def _split_threshold(rho, noise, threshold_m, noise_sigmas):
     """
     Return the IEPF split distance of every return, m.
@@ -244,7 +274,7 @@ def _split_threshold(rho, noise, threshold_m, noise_sigmas):
     return threshold
 
 
-@jit(ahead=(VALUES, VALUES, SEGMENTS, SETTINGS))
+@jit
 def _large_enough(x, y, segments, settings):
     """Return which segments have min_segment_points returns and min_segment_length."""
     count, start, stop = x.size, segments.start, segments.stop
@@ -257,7 +287,7 @@ def _large_enough(x, y, segments, settings):
     return keep
 
 
-@jit(ahead=(INDICES, INTEGER, INDICES, INDICES))
+@jit
 def _in_scan_order(beam_of_position, beam_count, start, stop):
     """
     Return the segments sorted by the beam index of their first return.
@@ -321,7 +351,7 @@ def _fit_walls(contour, start, stop, noise, settings):
                  start[keep], last[keep], counts[keep], chi2_dof[keep])
 
 
-@jit(ahead=(VALUES, VALUES, INDICES, VALUES, VALUES))
+@jit
 def _feet(x, y, position, angle, radius):
     """Return the feet of the perpendiculars from the returns at ``position`` to the lines, m."""
     foot = np.empty((position.size, 2))
@@ -332,7 +362,7 @@ def _feet(x, y, position, angle, radius):
     return foot
 
 
-@jit(ahead=(VALUES, ROWS, REAL, REAL, ROWS))
+@jit
 def _usable(line, line_covariance, angle, radius, normal_covariance):
     """Return whether a fit is finite everywhere with a positive-definite normal covariance."""
     total = line.sum() + line_covariance.sum() + angle + radius + normal_covariance.sum()
@@ -364,15 +394,3 @@ def _corners(contour, walls, grid, noise, settings, density):
     return CornerArrays(candidates.xy_m[keep], candidates.yaw_rad[keep],
                         candidates.covariance[keep], candidates.opening_angle_rad[keep],
                         candidates.first_wall[keep], candidates.second_wall[keep], seen[keep])
-
-
-# Every kernel :func:`_features_of_scan` calls (with those of :func:`_fit_walls`, :func:`_corners`
-# and :func:`~.corners.walls_end_at`, inlined into it), in the order it calls them: the one list
-# of what :mod:`.precompile` compiles ahead, each with the types declared at its definition.
-PIPELINE_KERNELS = (
-    _no_segments, _no_corners, valid_returns, range_sigma_of_returns, breakpoints_of, chains_of,
-    pass_budget, _split_threshold, split_iepf, merge_segments, _large_enough, trim_ambiguous,
-    trim_offset, _in_scan_order, fit_segments, residual_chi2_dof, _feet, _usable,
-    corner_candidates, end_window, wall_at_corner, along_wall, corner_zone,
-    without_object_in_front, reaches, short_of_corner, goes_on, blocked, seen_through,
-    with_model_error)

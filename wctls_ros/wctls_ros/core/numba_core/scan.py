@@ -6,12 +6,11 @@
 import numpy as np
 
 from ._jit import jit
-from ._types import READ_ONLY_VALUES, REAL, VALUES
 from ..records import Returns
 from ..scan import _LARGEST_RANGE
 
 
-@jit(ahead=(VALUES, READ_ONLY_VALUES, READ_ONLY_VALUES, REAL, REAL, REAL, REAL))
+@jit
 def valid_returns(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, range_min_m,
                   range_max_m):
     """

@@ -19,13 +19,12 @@ import numpy as np
 
 from ._jit import jit
 from ._order import stable_order, wrapped
-from ._types import FLAG, FLAGS, GRID, INTEGER, LINES, NOISE, REAL, RETURNS, SEGMENTS, VALUES
-from ..numpy_core.segmentation import (_BUDGET_EXTRA_PASSES, _BUDGET_LEVELS_PER_DOUBLING,
-                                       _JOINABLE_SIGMAS, _MIN_CHORD_M, MIN_FIT_RETURNS)
 from ..records import Lines, Segments
+from ..rules import (BUDGET_EXTRA_PASSES, BUDGET_LEVELS_PER_DOUBLING, JOINABLE_SIGMAS, MIN_CHORD_M,
+                     MIN_FIT_RETURNS)
 
 
-@jit(ahead=(INTEGER,))
+@jit
 def pass_budget(count: int) -> int:
     """
     Return how many whole-contour passes IEPF (and merging) may make on a scan.
@@ -35,8 +34,8 @@ def pass_budget(count: int) -> int:
     :param count: number of returns in the scan
     :return: the number of passes, 2 ceil(log2 count) + 8
     """
-    return (_BUDGET_LEVELS_PER_DOUBLING * math.ceil(math.log2(max(count, 2)))
-            + _BUDGET_EXTRA_PASSES)
+    return (BUDGET_LEVELS_PER_DOUBLING * math.ceil(math.log2(max(count, 2)))
+            + BUDGET_EXTRA_PASSES)
 
 
 @jit
@@ -51,7 +50,7 @@ def _reach_factor(beams, step_rad, lambda_rad):
     return math.sin(dphi) / math.sin(lambda_rad - dphi) if dphi < lambda_rad else -1.0
 
 
-@jit(ahead=(RETURNS, GRID, NOISE, REAL, INTEGER, REAL))
+@jit
 def breakpoints_of(returns, grid, noise, lambda_rad, max_missing_beams, noise_sigmas):
     """
     Mark where the adaptive breakpoint rule of Borges and Aldon separates neighbouring returns.
@@ -113,13 +112,13 @@ def breakpoints_of(returns, grid, noise, lambda_rad, max_missing_beams, noise_si
         gap = beams - 1.0 >= max_missing_beams + 0.5
         separated[i] = reach < 0.0 or gap or distance > surface + noise_sigmas * sigma
         joinable[i] = (separated[i] and reach >= 0.0 and not gap
-                       and distance <= surface + _JOINABLE_SIGMAS * sigma)
+                       and distance <= surface + JOINABLE_SIGMAS * sigma)
     if not grid.full_turn or n == 1:
         separated[0], joinable[0] = True, False
     return separated, joinable
 
 
-@jit(ahead=(RETURNS, FLAGS))
+@jit
 def chains_of(returns, separated):
     """
     Group the returns into chains between breakpoints, in circular order.
@@ -160,7 +159,7 @@ def chains_of(returns, separated):
     return order, Segments(start, stop, chain)
 
 
-@jit(ahead=(VALUES, VALUES, SEGMENTS, VALUES, INTEGER))
+@jit
 def split_iepf(x_m, y_m, runs, threshold_m, max_levels):
     """
     Split runs of returns where a return lies farther than a threshold from the run's chord.
@@ -219,7 +218,7 @@ def split_iepf(x_m, y_m, runs, threshold_m, max_levels):
                     undefined = True
             chord2 = dx * dx + dy * dy
             if (not undefined and farthest * farthest > chord2
-                    and chord2 > _MIN_CHORD_M ** 2):
+                    and chord2 > MIN_CHORD_M ** 2):
                 if depth == max_levels:          # out of passes: not straight, left out
                     unsplit = True
                     continue
@@ -281,7 +280,7 @@ def moment_line(x_m, y_m, first, stop, range_sigma_m, bearing_sigma_rad):
             scatter / count + offset * offset * var_angle)
 
 
-@jit(ahead=(VALUES, VALUES, SEGMENTS, FLAG, FLAGS, NOISE, REAL, INTEGER))
+@jit
 def merge_segments(x_m, y_m, segments, circular, joinable, noise, chi2_threshold, max_passes):
     """
     Merge neighbouring segments that are statistically the same line.
@@ -309,82 +308,124 @@ def merge_segments(x_m, y_m, segments, circular, joinable, noise, chi2_threshold
         ran out)
     """
     n = x_m.size
-    range_sigma_m, bearing_sigma_rad = noise.deciding_sigma_m, noise.bearing_sigma_rad
     start, stop, chain = segments.start.copy(), segments.stop.copy(), segments.chain.copy()
     angle, radius = np.empty(start.size), np.empty(start.size)
     for passes in range(max_passes + 1):
-        count = start.size
-        angle, radius = np.empty(count), np.empty(count)
-        covariance = np.empty((count, 3))                 # Var(angle), Cov, Var(radius)
-        for s in range(count):
-            fit = moment_line(x_m, y_m, start[s], stop[s], range_sigma_m, bearing_sigma_rad)
-            angle[s], radius[s] = fit[0], fit[1]
-            covariance[s, 0], covariance[s, 1], covariance[s, 2] = fit[2], fit[3], fit[4]
-        if count < 2 or chi2_threshold <= 0.0:
+        angle, radius, covariance = _merge_fits(x_m, y_m, start, stop, noise)
+        if start.size < 2 or chi2_threshold <= 0.0:
             break
-        distance = np.full(count, np.inf)
-        merged_stop = np.empty(count, np.intp)
-        candidates = 0
-        for k in range(count):
-            j = k + 1 if k + 1 < count else 0
-            merged_stop[k] = stop[j] + (n if j == 0 else 0)
-            touching = stop[k] % n == start[j] and joinable[start[j]]
-            ok = (chain[k] == chain[j] or touching) and merged_stop[k] - start[k] <= n
-            if j == 0 and (not circular or count < 3):
-                ok = False                        # the last segment has no successor
-            if not ok:
-                continue
-            # The squared Mahalanobis distance of the difference of the two lines.
-            turn = (angle[k] - angle[j] + np.pi) % (2.0 * np.pi) - np.pi
-            shift = radius[k] - radius[j]
-            a = covariance[k, 0] + covariance[j, 0]
-            b = covariance[k, 1] + covariance[j, 1]
-            d = covariance[k, 2] + covariance[j, 2]
-            chi2 = (d * turn * turn - 2.0 * b * turn * shift + a * shift * shift) / (a * d - b * b)
-            if chi2 < chi2_threshold:
-                distance[k] = chi2
-                candidates += 1
+        distance, merged_stop, candidates = _merge_distances(
+            angle, radius, covariance, start, stop, chain, n, circular, joinable, chi2_threshold)
         if candidates == 0:
             break
         if passes == max_passes:
             return Segments(start, stop, chain), Lines(angle, radius), True
-        used = np.zeros(count, np.bool_)
-        # Chains joined by a merged segment are one chain from now on: union by root.
-        labels = 1
-        for s in range(count):
-            labels = max(labels, chain[s] + 1)
-        parent = np.arange(labels)
-        kept = count
-        lowest_first = stable_order(distance)
-        for rank in range(candidates):
-            k = lowest_first[rank]
-            j = k + 1 if k + 1 < count else 0
-            if used[k] or used[j]:
-                continue
-            used[k] = used[j] = True
-            stop[k] = merged_stop[k]
-            start[j] = -1                         # absorbed into k
-            kept -= 1
-            into, other = chain[k], chain[j]
-            while parent[into] != into:
-                into = parent[into]
-            while parent[other] != other:
-                other = parent[other]
-            if into != other:
-                parent[other] = into
-        new_start, new_stop = np.empty(kept, np.intp), np.empty(kept, np.intp)
-        new_chain = np.empty(kept, np.intp)
-        out = 0
-        for s in range(count):
-            if start[s] < 0:
-                continue
-            label = chain[s]
-            while parent[label] != label:
-                label = parent[label]
-            new_start[out], new_stop[out], new_chain[out] = start[s], stop[s], label
-            out += 1
-        start, stop, chain = new_start, new_stop, new_chain
+        start, stop, chain = _merge_lowest_first(start, stop, chain, distance, merged_stop,
+                                                 candidates)
     return Segments(start, stop, chain), Lines(angle, radius), False
+
+
+@jit
+def _merge_fits(x_m, y_m, start, stop, noise):
+    """
+    Return the moment fit of every segment: angle (S,) rad, radius (S,) m, covariance (S, 3).
+
+    The covariance's columns are Var(angle), Cov(angle, radius), Var(radius); the fits decide
+    with the deciding noise.
+    """
+    count = start.size
+    angle, radius = np.empty(count), np.empty(count)
+    covariance = np.empty((count, 3))
+    for s in range(count):
+        fit = moment_line(x_m, y_m, start[s], stop[s], noise.deciding_sigma_m,
+                          noise.bearing_sigma_rad)
+        angle[s], radius[s] = fit[0], fit[1]
+        covariance[s, 0], covariance[s, 1], covariance[s, 2] = fit[2], fit[3], fit[4]
+    return angle, radius, covariance
+
+
+@jit
+def _merge_distances(angle, radius, covariance, start, stop, chain, n, circular, joinable,
+                     chi2_threshold):
+    """
+    Return the merge test of every segment with its successor.
+
+    :return: (the squared Mahalanobis distance of each pair that may merge and passes, inf for
+        the others, shape (S,); the stop of each pair merged, shape (S,); how many pass)
+    """
+    count = start.size
+    distance = np.full(count, np.inf)
+    merged_stop = np.empty(count, np.intp)
+    candidates = 0
+    for k in range(count):
+        j = k + 1 if k + 1 < count else 0
+        merged_stop[k] = stop[j] + (n if j == 0 else 0)
+        touching = stop[k] % n == start[j] and joinable[start[j]]
+        ok = (chain[k] == chain[j] or touching) and merged_stop[k] - start[k] <= n
+        if j == 0 and (not circular or count < 3):
+            ok = False                        # the last segment has no successor
+        if not ok:
+            continue
+        # The squared Mahalanobis distance of the difference of the two lines.
+        turn = (angle[k] - angle[j] + np.pi) % (2.0 * np.pi) - np.pi
+        shift = radius[k] - radius[j]
+        a = covariance[k, 0] + covariance[j, 0]
+        b = covariance[k, 1] + covariance[j, 1]
+        d = covariance[k, 2] + covariance[j, 2]
+        chi2 = (d * turn * turn - 2.0 * b * turn * shift + a * shift * shift) / (a * d - b * b)
+        if chi2 < chi2_threshold:
+            distance[k] = chi2
+            candidates += 1
+    return distance, merged_stop, candidates
+
+
+@jit
+def _root(parent, label):
+    """Return the chain a chain label was joined into (union-find's root)."""
+    while parent[label] != label:
+        label = parent[label]
+    return label
+
+
+@jit
+def _merge_lowest_first(start, stop, chain, distance, merged_stop, candidates):
+    """
+    Merge the passing pairs, lowest distance first, each segment at most once.
+
+    Chains joined by a merged segment are one chain from then on (union by root).
+
+    :return: the merged segments' start, stop and chain, shape (S',) each
+    """
+    count = start.size
+    start, stop = start.copy(), stop.copy()
+    used = np.zeros(count, np.bool_)
+    labels = 1
+    for s in range(count):
+        labels = max(labels, chain[s] + 1)
+    parent = np.arange(labels)
+    kept = count
+    lowest_first = stable_order(distance)
+    for rank in range(candidates):
+        k = lowest_first[rank]
+        j = k + 1 if k + 1 < count else 0
+        if used[k] or used[j]:
+            continue
+        used[k] = used[j] = True
+        stop[k] = merged_stop[k]
+        start[j] = -1                         # absorbed into k
+        kept -= 1
+        into, other = _root(parent, chain[k]), _root(parent, chain[j])
+        if into != other:
+            parent[other] = into
+    new_start, new_stop = np.empty(kept, np.intp), np.empty(kept, np.intp)
+    new_chain = np.empty(kept, np.intp)
+    out = 0
+    for s in range(count):
+        if start[s] >= 0:
+            new_start[out], new_stop[out] = start[s], stop[s]
+            new_chain[out] = _root(parent, chain[s])
+            out += 1
+    return new_start, new_stop, new_chain
 
 
 @jit
@@ -396,21 +437,10 @@ def _within(start, stop, n):
             stop[s] -= n
 
 
-@jit(ahead=(SEGMENTS, FLAG, VALUES, VALUES, LINES, NOISE, INTEGER, INTEGER))
+@jit
 def trim_ambiguous(segments, circular, x_m, y_m, lines, noise, min_returns, window):
     """
-    Drop the returns at the meeting ends of two neighbouring segments that could fit both lines.
-
-    Where two segments meet (no return, or only the IEPF split return, between them), the
-    returns nearest the corner lie within the noise of both lines, and which segment they
-    fall into changes from scan to scan. Left in, that switching adds corner scatter no
-    covariance describes (most on short walls). The two lines are closer to each other than
-    t = 3 sqrt(range_sigma^2 + (r bearing_sigma)^2) (3 sigma of a return at the corner's range
-    r) within a distance t / sin(angle between them) of their intersection: the returns at a
-    meeting end inside that radius, in an unbroken run from the end, are left out of both
-    segments. A segment keeps at least ``min_returns`` returns, shared evenly by its two ends
-    when both meet a neighbour (so that the rule does not depend on the beam order). At most
-    ``window`` returns are examined at each end.
+    Compiled twin of :func:`..numpy_core.segmentation.trim_ambiguous`, one meeting end at a time.
 
     :param segments: the segments, sorted by start (stop modulo n)
     :param circular: whether the returns cover a full turn (the last and first can meet)
@@ -469,29 +499,10 @@ def trim_ambiguous(segments, circular, x_m, y_m, lines, noise, min_returns, wind
     return Segments(new_start, new_stop, chain)
 
 
-@jit(ahead=(SEGMENTS, VALUES, VALUES, LINES, NOISE, INTEGER, REAL, INTEGER))
+@jit
 def trim_offset(segments, x_m, y_m, lines, noise, min_returns, threshold_sigmas, window):
     """
-    Cut off the returns at segment ends that lie off the segment's line together.
-
-    IEPF leaves a run of returns from another surface at a segment's end when the run stays
-    within its threshold of the chord: a box beside a wall, met at a shallow angle, or a chair
-    leg a few cm in front of it, whose returns then join the wall in some scans and not in
-    others, and move its line by more than its covariance says. The last k returns at an end
-    are tested against the line of the segment's other returns, not against a line they have
-    pulled towards themselves (a deleted-residual test). In the frame of the segment's line
-    (angle, radius), each return has a coordinate t along it and a residual e across it; the
-    other returns' line is the least-squares line e = a + b t through theirs (m returns,
-    t-mean t_m, sum of squares S_tt about it; to first order the orthogonal fit of those
-    returns). With z_j = (e_j - a - b t_j) / sigma_j, sigma_j = sqrt(range_sigma^2 +
-    (rho_j bearing_sigma)^2), the k returns sum to Z_k, normal with mean 0 on one line and
-    variance at most k + s^2 (W^2 / m + (T - t_m W)^2 / S_tt), W and T the sums of 1 / sigma_j
-    and t_j / sigma_j over the k returns and s^2 the mean sigma^2 of the other returns (the
-    noise is an upper bound of the scatter across the line; the second term is their line's
-    own error carried to the end). An end is cut after the k that maximises Z_k^2 / Var(Z_k),
-    when that maximum exceeds ``threshold_sigmas`` squared. Each end cuts at most half of the
-    returns a segment has beyond ``min_returns``, so that the rule does not depend on the beam
-    order. At most ``window`` returns are examined at each end.
+    Compiled twin of :func:`..numpy_core.segmentation.trim_offset`, one segment end at a time.
 
     :param segments: the segments, sorted by start (stop modulo n)
     :param x_m: x of the returns in circular order, shape (n,), m

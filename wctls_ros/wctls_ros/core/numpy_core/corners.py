@@ -27,10 +27,7 @@ import numpy as np
 from ..features import CornerSet, SegmentSet
 from ..records import (AlongWall, CornerCandidates, CornerEndRule, EndWindow, Noise, Returns,
                        WallAtCorner)
-
-# A corner may sit one beam without a return beyond a wall's last return (a dropout there),
-# reported with that wall's end not seen; farther, it is an extrapolation, not a corner.
-CORNER_MISSING_BEAMS = 1
+from ..rules import CORNER_MISSING_BEAMS
 
 # The upper triangle of the symmetric (x, y, yaw) covariance, row by row: (row, column) of each
 # of its six entries, and which of them each entry of the full matrix is.
@@ -161,8 +158,14 @@ def corner_candidates(walls: SegmentSet, first_wall: np.ndarray, second_wall: np
     Intersect pairs of walls that are not close to parallel.
 
     Whether both walls really end at the intersection is :func:`walls_end_at`'s question.
-    (D11)-(D16), as :func:`..numba_core.corners.corner_candidates` states them, for every pair
-    at once.
+
+    For each pair: the corner z = -A^-1 (c_1, c_2) (the paper's eqs. (24)-(25)), the bisector's
+    yaw towards the open side the sensor sees, the opening angle, and the joint covariance of
+    (x, y, yaw) of (D11)-(D14): sum_k J_k C_k J_k^T with dz/dL_k = -A^-1 e_k h^T, h = (x, y, 1),
+    d yaw / dL_k = g_k = (-b_k, a_k, 0) / (2 (a_k^2 + b_k^2)); plus sigma^2 j j^T for the range
+    offset common to the scan, j = sum_k J_k dL_k / d offset ((D15)-(D16)).
+
+    For every pair at once.
 
     :param walls: the walls (their line, line_covariance, line_offset_jacobian, start_xy_m and
         end_xy_m are read)
@@ -244,7 +247,12 @@ def end_window(contour: Returns, after_first: np.ndarray, before_second: np.ndar
     """
     Gather the returns between two walls that the corner end rule looks at, for every corner.
 
-    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.end_window`).
+    docs/derivation.md#corners, "Corner end rule": the first wall's facing end, the returns
+    left out of both segments (at most ``rule.window``) and the second wall's facing end, each
+    with its position noise and the tolerance of "on a line", ``sigmas`` times that noise plus
+    ``floor_m``.
+
+    For every corner at once.
 
     :param contour: the returns in circular order
     :param after_first: position of each first wall's last return, shape (C,)
@@ -270,7 +278,13 @@ def wall_at_corner(walls: SegmentSet, wall: np.ndarray, corner_xy_m: np.ndarray,
     """
     Describe one wall of every corner as seen from the corner.
 
-    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.wall_at_corner`).
+    docs/derivation.md#corners, "Corner end rule": its unit normal, the unit direction from the
+    corner into the wall (towards the middle of its returns), the corner's standard deviation
+    along that direction (from its position covariance), the spacing of the beams on the wall
+    at the corner (the range times the bearing step over the incidence, at most 1000 times the
+    step), and the tolerance along the wall, ``sigmas`` times that deviation plus ``floor_m``.
+
+    For every corner at once.
 
     :param walls: the walls
     :param wall: which wall of each corner, shape (C,)
@@ -298,7 +312,11 @@ def along_wall(window: EndWindow, wall: WallAtCorner, corner_x_m: np.ndarray,
     """
     Place the returns of every end window with respect to one wall of its corner.
 
-    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.along_wall`).
+    docs/derivation.md#corners, "Corner end rule": each return's offset in front of the wall's
+    line, its distance from the corner into the wall, and whether it lies on the line (within
+    its line tolerance; only the window's own returns).
+
+    For every corner at once.
 
     :param window: the end windows
     :param wall: the wall of each corner
@@ -319,7 +337,13 @@ def corner_zone(window: EndWindow, corner_x_m: np.ndarray, corner_y_m: np.ndarra
     """
     Tell which returns of every end window lie so close to the corner that they fit either wall.
 
-    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.corner_zone`).
+    docs/derivation.md#corners, "Corner end rule": there both lines are within the noise of each
+    other, and a beam's footprint on both walls returns a range in between (an inside corner
+    looks rounded): within ``sigmas`` times the corner's noise (its position noise and the
+    larger of its deviations along the walls) over the sine of the walls' angle, plus
+    ``floor_m``, plus the smaller beam spacing.
+
+    For every corner at once.
 
     :return: shape (C, W)
     """
@@ -338,9 +362,15 @@ def without_object_in_front(window: EndWindow, wall: WallAtCorner, placed: Along
     """
     Return which returns lie on a wall's line, less a run that lies in front of it together.
 
-    docs/derivation.md#corners, "Corner end rule"
-    (:func:`..numba_core.corners.without_object_in_front`; the test of
-    :func:`.segmentation.trim_offset_ends`).
+    docs/derivation.md#corners, "Corner end rule": a wall reaches as far towards the corner as
+    its returns do, also beyond something in front of it (e.g. a leg), unless the returns it
+    claims beyond its segment (on its line, not past the corner's tolerance, outside the corner
+    zone) lie in front of its line together: their residuals over the noise sum to more than
+    ``run_sigmas`` times the square root of their number, an object before the wall's end
+    (their line was fitted without them, so the plain sum is already a deleted-residual test,
+    as :func:`~.segmentation.trim_offset`'s). The facing ends are the wall's own.
+
+    For every corner at once.
 
     :return: shape (C, W)
     """
@@ -359,7 +389,10 @@ def reaches(wall: WallAtCorner, placed: AlongWall, on_line: np.ndarray,
     """
     Tell which returns of every end window the wall reaches: in the corner zone, or on its line.
 
-    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.reaches`).
+    docs/derivation.md#corners, "Corner end rule": a return on the wall's line reaches the
+    corner when it lies no farther past it than the wall's tolerance along it.
+
+    For every corner at once.
 
     :return: shape (C, W)
     """
@@ -372,7 +405,10 @@ def goes_on(first: WallAtCorner, second: WallAtCorner, first_placed: AlongWall,
     """
     Tell at which corners a wall's line carries returns past the corner.
 
-    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.goes_on`).
+    docs/derivation.md#corners, "Corner end rule": a return on one wall's line alone, outside
+    the corner zone, past the corner by more than that wall's tolerance along it.
+
+    For every corner at once.
 
     :return: shape (C,)
     """
@@ -389,8 +425,13 @@ def blocked(window: EndWindow, first: WallAtCorner, second: WallAtCorner,
     """
     Tell at which corners anything lies between the two walls' reaches.
 
-    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.blocked`): each
-    wall's anchor is its last own return short of the corner zone (its facing end if none).
+    docs/derivation.md#corners, "Corner end rule". Each wall's anchor is its last own return
+    short of the corner zone (its facing end if none). Between the anchors every return must be
+    reached by a wall; outside them (beyond something in front of a wall, where its own returns
+    go on) a return reached by neither is allowed only when it lies in front of both lines (an
+    occluder); a return behind them is a view through a gap where the walls do not meet.
+
+    For every corner at once.
 
     :return: shape (C,)
     """
@@ -409,7 +450,12 @@ def short_of_corner(wall: WallAtCorner, placed: AlongWall, on_line: np.ndarray,
     """
     Return how far a wall's own returns stop short of each corner, in beams beyond its tolerance.
 
-    docs/derivation.md#corners, "Corner end rule" (:func:`..numba_core.corners.short_of_corner`).
+    docs/derivation.md#corners, "Corner end rule": the nearest return on its line that reaches
+    the corner, its distance from the corner into the wall less the wall's tolerance along it,
+    over the beam spacing there. More than ``1 + CORNER_MISSING_BEAMS``: the corner is an
+    extrapolation across an unseen stretch; at most 1: the wall's end was seen.
+
+    For every corner at once.
 
     :return: shape (C,) (inf: none of its returns reaches the corner)
     """
@@ -417,44 +463,64 @@ def short_of_corner(wall: WallAtCorner, placed: AlongWall, on_line: np.ndarray,
     return np.maximum(gap - wall.tolerance_m, 0.0) / wall.spacing_m
 
 
-def seen_through(corner_x_m: float, corner_y_m: float, wall: WallAtCorner, other: WallAtCorner,
-                 contour: Returns, start: int, stop: int, noise: Noise,
-                 rule: CornerEndRule) -> bool:
+def seen_through(corner_x_m: np.ndarray, corner_y_m: np.ndarray, wall: WallAtCorner,
+                 other: WallAtCorner, contour: Returns, start: np.ndarray, stop: np.ndarray,
+                 noise: Noise, rule: CornerEndRule) -> np.ndarray:
     """
     Tell whether the other wall is seen through a wall between its segment and the corner.
 
-    docs/derivation.md#corners, "Seen through" (:func:`..numba_core.corners.seen_through`): the
-    returns on the other wall's line whose sight lines cross this wall's line farther than its
-    tolerance along it into the wall (and that are not in front of it beyond the noise) lie
-    behind it together: sum of (distance behind / noise) over sqrt(count) > ``run_sigmas``.
+    docs/derivation.md#corners, "Seen through". If the wall ended at the corner it would stand
+    between them, and no line of sight could cross its line there to a return farther away.
+    Returns on the other wall's line (within ``sigmas`` standard deviations of their position
+    noise plus ``floor_m``) whose line of sight crosses this wall's line farther than its
+    tolerance along it from the corner, into the wall, and not in front of it by more than
+    that noise tolerance, are tested together like :func:`~.segmentation.trim_offset`'s runs:
+    the sum of their distances behind the line over their noise, over the square root of their
+    number, above ``run_sigmas`` means the other wall goes on behind this one's end (the end
+    is an edge: a pilaster, a wardrobe, a door frame in front of a wall, whose line merely
+    meets the wall behind). One return behind by a few sigma is noise or a rounded corner; a
+    run of them is not.
 
-    :param corner_x_m: x of the corner, m
-    :param corner_y_m: y of the corner, m
-    :param wall: the wall at the corner, each field a number
-    :param other: the other wall
+    Every test at once: each test's stretch of returns laid end to end, each return labelled
+    with its test, the sums per test by label.
+
+    :param corner_x_m: x of each test's corner, shape (K,) (or a number for one test), m
+    :param corner_y_m: y of each test's corner, shape (K,), m
+    :param wall: the wall at each corner, each field shape (K,)
+    :param other: the other wall of each corner
     :param contour: the returns in circular order
-    :param start: position of the first return to test (taken modulo n)
-    :param stop: position of the last return to test (taken modulo n, after ``start``)
+    :param start: position of each test's first return (taken modulo n), shape (K,)
+    :param stop: position of its last return (taken modulo n, after ``start``), shape (K,)
     :param noise: the noise (the rule decides with its deciding_sigma_m)
     :param rule: the rule's tolerances
-    :return: whether the wall is seen through
+    :return: whether each wall is seen through, shape (K,)
     """
-    x_m, y_m = contour.x_m, contour.y_m
-    crossing = np.arange(start, start + (stop - start) % len(x_m) + 1)
-    x, y = x_m.take(crossing, mode='wrap'), y_m.take(crossing, mode='wrap')
+    start, stop = np.atleast_1d(start), np.atleast_1d(stop)
+    lengths = (stop - start) % len(contour.x_m) + 1
+    test = np.repeat(np.arange(lengths.size), lengths)
+
+    def per_return(value) -> np.ndarray:
+        """Return a per-test number at every return of that test's stretch."""
+        return np.atleast_1d(value)[test]
+    crossing = (np.arange(test.size) - np.repeat(np.cumsum(lengths) - lengths, lengths)
+                + start[test])
+    x, y = contour.x_m.take(crossing, mode='wrap'), contour.y_m.take(crossing, mode='wrap')
     sigma = np.sqrt(noise.deciding_sigma_m ** 2 + (x ** 2 + y ** 2) * noise.bearing_sigma_rad ** 2)
     line_tolerance = rule.sigmas * sigma + rule.floor_m
-    offset = x * wall.normal_x + y * wall.normal_y
-    on_other = np.abs(other.radius_m - x * other.normal_x - y * other.normal_y)
+    radius = per_return(wall.radius_m)
+    offset = x * per_return(wall.normal_x) + y * per_return(wall.normal_y)
+    on_other = np.abs(per_return(other.radius_m) - x * per_return(other.normal_x)
+                      - y * per_return(other.normal_y))
     with np.errstate(divide='ignore', invalid='ignore'):
-        sight = np.column_stack([x, y]) * (wall.radius_m / offset)[:, None]
-    inward = np.array([wall.inward_x, wall.inward_y])
-    along = (sight - np.array([corner_x_m, corner_y_m])) @ inward
-    tested = ((on_other <= line_tolerance) & (offset > 0.0)
-              & (wall.radius_m - offset <= line_tolerance) & (along > wall.tolerance_m))
-    run = np.count_nonzero(tested)
-    return bool(run) and ((offset - wall.radius_m)[tested] / sigma[tested]).sum() / np.sqrt(
-        run) > rule.run_sigmas
+        to_line = radius / offset
+    along = ((x * to_line - per_return(corner_x_m)) * per_return(wall.inward_x)
+             + (y * to_line - per_return(corner_y_m)) * per_return(wall.inward_y))
+    tested = ((on_other <= line_tolerance) & (offset > 0.0) & (radius - offset <= line_tolerance)
+              & (along > per_return(wall.tolerance_m)))
+    run = np.bincount(test[tested], minlength=lengths.size)
+    behind = np.bincount(test[tested], ((offset - radius) / sigma)[tested], lengths.size)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return (run > 0) & (behind / np.sqrt(run) > rule.run_sigmas)
 
 
 def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.ndarray,
@@ -462,9 +528,30 @@ def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.
     """
     Tell which corners both walls end at, and at which the end was seen.
 
-    docs/derivation.md#corners, "Corner end rule" and "Seen through": the steps and the rule of
-    :func:`..numba_core.corners.walls_end_at`, each over every candidate corner at once (the
-    seen-through test corner by corner, on the corners left).
+    docs/derivation.md#corners, "Corner end rule" and "Seen through". A corner is the point
+    where two walls end; adjacent segments whose lines merely intersect near their ends (across
+    an occlusion, a gap, a T-junction seen from the side where one wall goes on) are not
+    corners. The returns between the first wall's last return and the second wall's first one
+    (:func:`end_window`) are sorted by where they lie: on one of the two lines
+    (:func:`along_wall`), around the corner (:func:`corner_zone`), in front of both lines (an
+    occluder) or elsewhere; each wall reaches as far towards the corner as its returns do
+    (:func:`reaches`), also beyond something in front of it, unless those returns lie in front
+    of its line together (:func:`without_object_in_front`). The corner is rejected when
+
+    - more than ``rule.window`` returns lie between the walls: they are not neighbours;
+    - a facing end does not reach the corner;
+    - a wall's line carries returns past the corner (:func:`goes_on`);
+    - anything lies between the two reaches (:func:`blocked`);
+    - a wall's reach stops short of the corner by more than ``1 + CORNER_MISSING_BEAMS`` beams
+      beyond its tolerance (:func:`short_of_corner`): an extrapolation across an unseen stretch;
+    - a wall is seen through where it would have to stand (:func:`seen_through`, when
+      ``rule.run_sigmas`` > 0): the other wall goes on behind this wall's end, an edge in
+      front of it, not a corner.
+
+    A wall's end is seen when its reach is within one beam's spacing of that bound.
+
+    Each step over every candidate corner at once, the seen-through test over the corners
+    left.
 
     :param candidates: candidate corners
     :param walls: the walls
@@ -499,20 +586,26 @@ def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.
                        second_here, at_corner)
             & (first_short <= 1.0 + CORNER_MISSING_BEAMS)
             & (second_short <= 1.0 + CORNER_MISSING_BEAMS))
-    if rule.run_sigmas > 0.0:
+    kept = np.flatnonzero(keep)
+    if rule.run_sigmas > 0.0 and kept.size:
         # The first wall's stretch is crossed by the sight lines after its last return up to the
         # second wall's last; the second's by those from the first wall's first return up to
-        # its own first.
-        for c in np.flatnonzero(keep).tolist():
-            first_c, second_c = _corner(first, c), _corner(second, c)
-            keep[c] = not (
-                seen_through(corner_x[c], corner_y[c], first_c, second_c, contour,
-                             after_first[c] + 1, last_position[two[c]], noise, rule)
-                or seen_through(corner_x[c], corner_y[c], second_c, first_c, contour,
-                                first_position[one[c]], before_second[c] - 1, noise, rule))
+        # its own first: both tests of every corner left, in one call.
+        first_kept, second_kept = _corners(first, kept), _corners(second, kept)
+        seen = seen_through(
+            np.tile(corner_x[kept], 2), np.tile(corner_y[kept], 2),
+            _stacked(first_kept, second_kept), _stacked(second_kept, first_kept), contour,
+            np.concatenate([after_first[kept] + 1, first_position[one[kept]]]),
+            np.concatenate([last_position[two[kept]], before_second[kept] - 1]), noise, rule)
+        keep[kept] = ~(seen[:kept.size] | seen[kept.size:])
     return keep, np.column_stack([first_short <= 1.0, second_short <= 1.0])
 
 
-def _corner(wall: WallAtCorner, c: int) -> WallAtCorner:
-    """Return one corner's wall of a WallAtCorner over every corner."""
-    return WallAtCorner(*(field[c] for field in wall))
+def _corners(wall: WallAtCorner, kept: np.ndarray) -> WallAtCorner:
+    """Return the walls of some corners of a WallAtCorner over every corner."""
+    return WallAtCorner(*(field[kept] for field in wall))
+
+
+def _stacked(one: WallAtCorner, other: WallAtCorner) -> WallAtCorner:
+    """Return the walls of two sets of tests, one's first."""
+    return WallAtCorner(*(np.concatenate([a, b]) for a, b in zip(one, other)))

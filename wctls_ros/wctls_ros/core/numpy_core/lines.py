@@ -23,12 +23,7 @@ covariance of (angle, radius).
 import numpy as np
 
 from ..features import LineFits, SegmentReturns
-
-# Gauss-Newton of the maximum-likelihood fit stops once every step is below this (rad and m)...
-_ML_STEP_TOLERANCE = 1e-12
-# ... or after this many iterations. From the WTLS line it takes 5 to 8 on simulated S1 scans
-# (the variances move with the line, so convergence is linear), the last step below 1e-12.
-_ML_MAX_ITERATIONS = 8
+from ..rules import ML_MAX_ITERATIONS, ML_STEP_TOLERANCE
 
 
 def _square_order(k: int) -> np.ndarray:
@@ -362,12 +357,12 @@ def ml(returns: SegmentReturns, range_sigma: float, bearing_sigma: float,
     angle = np.array(start_angle, dtype=float)
     radius = np.array(start_radius, dtype=float)
     inv_rho = 1.0 / returns.rho
-    for _ in range(_ML_MAX_ITERATIONS):
+    for _ in range(ML_MAX_ITERATIONS):
         sums, inv_det = _ml_sums(returns, inv_rho, angle, radius, range_sigma, bearing_sigma)
         step = _ml_solve(sums, inv_det, 3)
         angle += step[0]
         radius += step[1]
-        if not (np.abs(step) > _ML_STEP_TOLERANCE).any():
+        if not (np.abs(step) > ML_STEP_TOLERANCE).any():
             break
     sums, inv_det = _ml_sums(returns, inv_rho, angle, radius, range_sigma, bearing_sigma)
     offset = _ml_solve(sums, inv_det, 5)

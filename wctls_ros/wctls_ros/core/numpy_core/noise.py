@@ -13,20 +13,8 @@ import math
 
 import numpy as np
 
+from ..rules import CUT_SIGMAS, CUT_VARIANCE, MAD_TO_SIGMA, MIN_TRIPLES, REFINEMENTS
 from ..scan import ScanPoints
-
-# Fewer triples of neighbouring returns than this estimate nothing (a scan of a few returns).
-MIN_TRIPLES = 30
-# 1 / Phi^-1(3/4): the median absolute deviation of a normal sample times this is its sigma.
-_MAD_TO_SIGMA = 1.482602218505602
-# Second differences beyond this many sigma are not noise (edges, mixed pixels, clutter)...
-_CUT_SIGMAS = 3.0
-# ... and a normal sample cut there keeps this share of its variance: 1 - 2 k phi(k) / (2 Phi(k)
-# - 1) for k = 3.
-_CUT_VARIANCE = 1.0 - 2.0 * _CUT_SIGMAS * math.exp(-0.5 * _CUT_SIGMAS ** 2) / math.sqrt(
-    2.0 * math.pi) / math.erf(_CUT_SIGMAS / math.sqrt(2.0))
-# Re-cuts after the median absolute deviation's first guess (the sigma settles in two).
-_REFINEMENTS = 3
 
 
 def scan_range_sigma(points: ScanPoints) -> float:
@@ -52,8 +40,8 @@ def scan_range_sigma(points: ScanPoints) -> float:
         return 0.0
     second = (ranges[:-2] - 2.0 * ranges[1:-1] + ranges[2:])[triple]
     second = second - np.median(second)
-    sigma = _MAD_TO_SIGMA * np.median(np.abs(second))
-    for _ in range(_REFINEMENTS):
-        kept = second[np.abs(second) < _CUT_SIGMAS * sigma]
-        sigma = math.sqrt(np.mean(kept * kept) / _CUT_VARIANCE) if len(kept) else 0.0
+    sigma = MAD_TO_SIGMA * np.median(np.abs(second))
+    for _ in range(REFINEMENTS):
+        kept = second[np.abs(second) < CUT_SIGMAS * sigma]
+        sigma = math.sqrt(np.mean(kept * kept) / CUT_VARIANCE) if len(kept) else 0.0
     return float(sigma / math.sqrt(6.0))

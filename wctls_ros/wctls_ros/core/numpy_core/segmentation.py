@@ -19,15 +19,9 @@ import numpy as np
 
 from ._linalg import mahalanobis_squared_2x2
 from ..records import Lines, Noise
+from ..rules import (BUDGET_EXTRA_PASSES, BUDGET_LEVELS_PER_DOUBLING, JOINABLE_SIGMAS, MIN_CHORD_M,
+                     MIN_FIT_RETURNS)
 from ..scan import ScanPoints
-
-# A chord shorter than this (m) has no usable direction: distances are measured from its start.
-_MIN_CHORD_M = 1e-9
-# A segment needs this many returns to be fitted (and so to take part in merging).
-MIN_FIT_RETURNS = 3
-# The work bound of IEPF and merging: passes per scan of n returns (see :func:`pass_budget`).
-_BUDGET_LEVELS_PER_DOUBLING = 2
-_BUDGET_EXTRA_PASSES = 8
 
 
 def pass_budget(count: int) -> int:
@@ -43,8 +37,8 @@ def pass_budget(count: int) -> int:
     :param count: number of returns in the scan
     :return: the number of passes, 2 ceil(log2 count) + 8
     """
-    return (_BUDGET_LEVELS_PER_DOUBLING * math.ceil(math.log2(max(count, 2)))
-            + _BUDGET_EXTRA_PASSES)
+    return (BUDGET_LEVELS_PER_DOUBLING * math.ceil(math.log2(max(count, 2)))
+            + BUDGET_EXTRA_PASSES)
 
 
 @dataclass(frozen=True)
@@ -215,13 +209,6 @@ def piece_sums(values: np.ndarray, segments: SegmentRanges) -> PieceSums:
     return PieceSums(edges, prefix)
 
 
-# A break between two returns one surface could have given is one the noise made: their
-# distance exceeds the surface's allowance by at most this many sigma of the difference of two
-# returns (a pair on one surface goes beyond it with probability 6e-7). Beyond it, the break is
-# a discontinuity, which merging never crosses.
-_JOINABLE_SIGMAS = 5.0 * math.sqrt(2.0)
-
-
 class Breaks(NamedTuple):
     """
     Where neighbouring returns are separated, and which separations merging may cross.
@@ -296,7 +283,7 @@ def breakpoints(points: ScanPoints, range_sigma_m: float, bearing_sigma_rad: flo
     gap = missing >= max_missing_beams + 0.5
     separated = (reach < 0.0) | gap | (distance > surface + noise_sigmas * noise)
     joinable = (separated & (reach >= 0.0) & ~gap
-                & (distance <= surface + _JOINABLE_SIGMAS * noise))
+                & (distance <= surface + JOINABLE_SIGMAS * noise))
     if not points.full_turn or n == 1:
         separated[0], joinable[0] = True, False
     return Breaks(separated, joinable)
@@ -379,7 +366,7 @@ def iterative_end_point_fit(x_m: np.ndarray, y_m: np.ndarray, start: np.ndarray,
         farthest = np.maximum.reduceat(cross, first)
         chord2 = dx * dx + dy * dy
         # A chord too short to have a direction never splits (it would at distance 0).
-        split = (farthest * farthest > chord2) & (chord2 > _MIN_CHORD_M ** 2)
+        split = (farthest * farthest > chord2) & (chord2 > MIN_CHORD_M ** 2)
         if not split.any():
             break
         if level == max_levels:                  # out of passes: drop what is not straight
@@ -427,59 +414,85 @@ def merge_collinear(segments: SegmentRanges, circular: bool, contour_length: int
     """
     for passes in range(max_passes + 1):
         line_fit = fit(segments)
-        count = len(segments)
-        if count < 2 or chi2_threshold <= 0.0:
+        if len(segments) < 2 or chi2_threshold <= 0.0:
             break
-        start, stop, chain = segments.start, segments.stop, segments.chain
-        second = np.arange(1, count + 1)
-        second[-1] = 0
-        # A merged segment must not wrap onto itself around a closed contour.
-        merged_stop = stop[second]
-        merged_stop[-1] += contour_length
-        touching = (stop % contour_length == start[second]) & joinable[start[second]]
-        pair_ok = (((chain == chain[second]) | touching)
-                   & (merged_stop - start <= contour_length))
-        if not circular or count < 3:
-            pair_ok[-1] = False                     # the last segment has no successor
-        angle, radius, covariance = line_fit
-        distance = mahalanobis_squared_2x2(
-            np.remainder(angle - angle[second] + np.pi, 2.0 * np.pi) - np.pi,
-            radius - radius[second], covariance + covariance[second])
-        candidates = (pair_ok & (distance < chi2_threshold)).nonzero()[0]
+        distance, merged_stop, candidates = _merge_distances(
+            segments, line_fit, circular, contour_length, joinable, chi2_threshold)
         if not candidates.size:
             break
         if passes == max_passes:
             return segments, line_fit, True
-        # Few candidates: plain Python is faster than numpy here.
-        used = [False] * count
-        absorbed = []
-        new_stop, chain_of = stop.copy(), chain.tolist()
-        joined: dict = {}                          # chain -> the chain it joined
-
-        def root(label):
-            while label in joined:
-                label = joined[label]
-            return label
-
-        for k in candidates[np.argsort(distance[candidates], kind='stable')].tolist():
-            j = (k + 1) % count
-            if not (used[k] or used[j]):
-                used[k] = used[j] = True
-                absorbed.append(j)
-                new_stop[k] = merged_stop[k]
-                # Two chains joined by a merged segment are one chain from now on.
-                into, other = root(chain_of[k]), root(chain_of[j])
-                if into != other:
-                    joined[other] = into
-        if joined:
-            relabel = np.arange(chain.max() + 1)
-            for label in joined:
-                relabel[label] = root(label)
-            chain = relabel[chain]
-        keep = np.ones(count, dtype=bool)
-        keep[absorbed] = False
-        segments = SegmentRanges(start, new_stop, chain).select(keep)
+        segments = _merge_lowest_first(segments, distance, merged_stop, candidates)
     return segments, line_fit, False
+
+
+def _merge_distances(segments: SegmentRanges, line_fit: tuple, circular: bool,
+                     contour_length: int, joinable: np.ndarray, chi2_threshold: float):
+    """
+    Return the merge test of every segment with its successor.
+
+    :return: (the squared Mahalanobis distance of each pair, shape (S,); the stop of each pair
+        merged, shape (S,); the pairs that may merge and pass, ascending)
+    """
+    count = len(segments)
+    start, stop, chain = segments.start, segments.stop, segments.chain
+    second = np.arange(1, count + 1)
+    second[-1] = 0
+    # A merged segment must not wrap onto itself around a closed contour.
+    merged_stop = stop[second]
+    merged_stop[-1] += contour_length
+    touching = (stop % contour_length == start[second]) & joinable[start[second]]
+    pair_ok = (((chain == chain[second]) | touching)
+               & (merged_stop - start <= contour_length))
+    if not circular or count < 3:
+        pair_ok[-1] = False                     # the last segment has no successor
+    angle, radius, covariance = line_fit
+    distance = mahalanobis_squared_2x2(
+        np.remainder(angle - angle[second] + np.pi, 2.0 * np.pi) - np.pi,
+        radius - radius[second], covariance + covariance[second])
+    return distance, merged_stop, (pair_ok & (distance < chi2_threshold)).nonzero()[0]
+
+
+def _root(joined: dict, label: int) -> int:
+    """Return the chain a chain label was joined into (union-find's root)."""
+    while label in joined:
+        label = joined[label]
+    return label
+
+
+def _merge_lowest_first(segments: SegmentRanges, distance: np.ndarray, merged_stop: np.ndarray,
+                        candidates: np.ndarray) -> SegmentRanges:
+    """
+    Merge the passing pairs, lowest distance first, each segment at most once.
+
+    Chains joined by a merged segment are one chain from then on (union by root). Few
+    candidates: plain Python is faster than numpy here.
+
+    :return: the merged segments
+    """
+    count = len(segments)
+    used = [False] * count
+    absorbed = []
+    new_stop, chain_of = segments.stop.copy(), segments.chain.tolist()
+    joined: dict = {}                          # chain -> the chain it joined
+    for k in candidates[np.argsort(distance[candidates], kind='stable')].tolist():
+        j = (k + 1) % count
+        if not (used[k] or used[j]):
+            used[k] = used[j] = True
+            absorbed.append(j)
+            new_stop[k] = merged_stop[k]
+            into, other = _root(joined, chain_of[k]), _root(joined, chain_of[j])
+            if into != other:
+                joined[other] = into
+    chain = segments.chain
+    if joined:
+        relabel = np.arange(chain.max() + 1)
+        for label in joined:
+            relabel[label] = _root(joined, label)
+        chain = relabel[chain]
+    keep = np.ones(count, dtype=bool)
+    keep[absorbed] = False
+    return SegmentRanges(segments.start, new_stop, chain).select(keep)
 
 
 def trim_ambiguous(segments: SegmentRanges, circular: bool, x_m: np.ndarray, y_m: np.ndarray,
@@ -495,8 +508,10 @@ def trim_ambiguous(segments: SegmentRanges, circular: bool, x_m: np.ndarray, y_m
     r) within a distance t / sin(angle between them) of their intersection: the returns at a
     meeting end inside that radius, in an unbroken run from the end, are left out of both
     segments. A segment keeps at least ``min_returns`` returns, shared evenly by its two ends
-    when both meet a neighbour (so that the rule does not depend on the beam order). The rule
-    of :func:`..numba_core.segmentation.trim_ambiguous`, for every meeting end at once.
+    when both meet a neighbour (so that the rule does not depend on the beam order). At most
+    ``window`` returns are examined at each end.
+
+    For every meeting end at once.
 
     :param segments: segments sorted by start position (positions modulo n)
     :param circular: whether the returns cover a full turn (the last and first can meet)
@@ -556,9 +571,26 @@ def trim_offset(segments: SegmentRanges, x_m: np.ndarray, y_m: np.ndarray, lines
     """
     Cut off the returns at segment ends that lie off the line of the segment's other returns.
 
-    The deleted-residual test of :func:`..numba_core.segmentation.trim_offset`, whose docstring
-    states it (and docs/derivation.md, "Offset ends"): the same sums, for every segment end and
-    every k at once.
+    IEPF leaves a run of returns from another surface at a segment's end when the run stays
+    within its threshold of the chord: a box beside a wall, met at a shallow angle, or a chair
+    leg a few cm in front of it, whose returns then join the wall in some scans and not in
+    others, and move its line by more than its covariance says. The last k returns at an end
+    are tested against the line of the segment's other returns, not against a line they have
+    pulled towards themselves (a deleted-residual test). In the frame of the segment's line
+    (angle, radius), each return has a coordinate t along it and a residual e across it; the
+    other returns' line is the least-squares line e = a + b t through theirs (m returns,
+    t-mean t_m, sum of squares S_tt about it; to first order the orthogonal fit of those
+    returns). With z_j = (e_j - a - b t_j) / sigma_j, sigma_j = sqrt(range_sigma^2 +
+    (rho_j bearing_sigma)^2), the k returns sum to Z_k, normal with mean 0 on one line and
+    variance at most k + s^2 (W^2 / m + (T - t_m W)^2 / S_tt), W and T the sums of 1 / sigma_j
+    and t_j / sigma_j over the k returns and s^2 the mean sigma^2 of the other returns (the
+    noise is an upper bound of the scatter across the line; the second term is their line's
+    own error carried to the end). An end is cut after the k that maximises Z_k^2 / Var(Z_k),
+    when that maximum exceeds ``threshold_sigmas`` squared. Each end cuts at most half of the
+    returns a segment has beyond ``min_returns``, so that the rule does not depend on the beam
+    order. At most ``window`` returns are examined at each end.
+
+    The same sums, for every segment end and every k at once.
 
     :param segments: segments sorted by start position (positions modulo n)
     :param x_m: x of the returns in position order, shape (n,), m

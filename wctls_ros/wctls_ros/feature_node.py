@@ -23,6 +23,13 @@ The feature pipeline starts at once: the numpy one, while a thread loads the com
 numba's cache (about a second) or, on the first start on a machine, has it compiled in another
 process (about 15 s); the compiled one takes over when ready (:mod:`wctls_ros.core.runtime`).
 Each step is logged.
+
+A lifecycle node (rclpy.lifecycle), like rplidar_node: configure reads and checks the
+parameters and creates the publishers, activate subscribes ``scan`` and publishes, deactivate
+unsubscribes (nothing is published), cleanup frees the publishers, shutdown (from any state)
+frees everything. ``/diagnostics`` is published in every state. With ``autostart`` (the
+default) the node configures and activates itself at start, so a plain ``ros2 run`` and the
+launch files work at once; without it a lifecycle manager drives the transitions.
 """
 
 from dataclasses import dataclass, field
@@ -33,7 +40,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import MarkerArray
@@ -45,7 +52,7 @@ from .core import (CoreStatus, CornerSet, Features, line_landmarks, SegmentSet,
                    start as start_core, status as core_status)
 from .extras import missing_extra
 from .node_main import declare_parameters, run_node
-from .params import FEATURE_NODE, feature_settings
+from .params import AUTOSTART, FEATURE_NODE, feature_settings
 
 # A throttled warning repeats at most this often, s.
 WARN_PERIOD_S = 5.0
@@ -88,35 +95,113 @@ class ScanCounters:
     seconds: list = field(default_factory=list)
 
 
-class FeatureNode(Node):
-    """Extract corners and segments with covariances from every LaserScan."""
+class FeatureNode(LifecycleNode):
+    """
+    Extract corners and segments with covariances from every LaserScan (a lifecycle node).
+
+    :param kwargs: passed to ``LifecycleNode.__init__`` (e.g. ``context``,
+        ``parameter_overrides``)
+    :raises ValueError: with ``autostart``, on parameters that make no valid configuration
+    """
 
     def __init__(self, **kwargs):
         super().__init__('feature_node', **kwargs)
-        self._config, self._style, self._publish_markers = feature_settings(
-            declare_parameters(self, FEATURE_NODE))
+        values = declare_parameters(self, FEATURE_NODE)
         # As ros2/demos do: a change is checked whole before it is accepted, applied after.
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
-        self._corners = self.create_publisher(CornerArray, 'corners', 10)
-        self._lines = self.create_publisher(LineSegmentArray, 'lines', 10)
-        self._markers = self.create_publisher(MarkerArray, 'markers', 10)
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._total, self._recent = ScanCounters(), ScanCounters()
         self._last_sequence = None
         self._frame_id = ''
+        self._configured = False
+        self._scans = None
+        self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
+        if values[AUTOSTART]:
+            feature_settings(values)          # a bad configuration ends ros2 run: status 1
+            if self.trigger_configure() == TransitionCallbackReturn.SUCCESS:
+                self.trigger_activate()
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """
+        Read and check the parameters, create the publishers, start loading the pipeline.
+
+        :param state: the state transitioned from
+        :return: SUCCESS, or FAILURE (the reason logged) on an invalid configuration
+        """
+        try:
+            self._config, self._style, self._publish_markers = self._settings()
+        except ValueError as error:
+            self.get_logger().error(f'configure failed: {error}')
+            return TransitionCallbackReturn.FAILURE
+        self._corners = self.create_lifecycle_publisher(CornerArray, 'corners', 10)
+        self._lines = self.create_lifecycle_publisher(LineSegmentArray, 'lines', 10)
+        self._markers = self.create_lifecycle_publisher(MarkerArray, 'markers', 10)
+        self._configured = True
+        # Never waits for a compile: the numpy pipeline serves until the compiled one is ready
+        # (the process's one choice: a second configure is told the same).
+        self.get_logger().info(start_core(on_change=self._on_core_change).describe())
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """
+        Subscribe to the scans and publish the features of each.
+
+        :param state: the state transitioned from
+        :return: SUCCESS
+        """
         # The scan arrives as its CDR bytes, decoded with the same classes the outputs are
         # built with (rosbags' decode in about half the time rclpy's take).
+        self._last_sequence = None
         self._scans = self.create_subscription(
             LaserScan, 'scan', self._on_scan, SCAN_QOS, raw=True,
             event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_scans_lost))
         self._types = self._message_types()
-        self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
         self.get_logger().info(f'extracting features with {self._config.method} from '
                                f'{self.resolve_topic_name("scan")}')
-        # Last, so that its thread importing numba does not slow the node's own start. Never
-        # waits for a compile: the numpy pipeline serves until the compiled one is ready.
-        self.get_logger().info(start_core(on_change=self._on_core_change).describe())
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """
+        Unsubscribe from the scans; nothing is published until activated again.
+
+        :param state: the state transitioned from
+        :return: SUCCESS
+        """
+        self._unsubscribe()
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """
+        Free the publishers; configure reads the parameters again.
+
+        :param state: the state transitioned from
+        :return: SUCCESS
+        """
+        self._free_publishers()
+        return super().on_cleanup(state)
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """
+        Unsubscribe and free the publishers, from any state.
+
+        :param state: the state transitioned from
+        :return: SUCCESS
+        """
+        self._unsubscribe()
+        self._free_publishers()
+        return super().on_shutdown(state)
+
+    def _unsubscribe(self) -> None:
+        scans, self._scans = self._scans, None
+        if scans is not None:
+            self.destroy_subscription(scans)
+
+    def _free_publishers(self) -> None:
+        if self._configured:
+            for publisher in (self._corners, self._lines, self._markers):
+                self.destroy_publisher(publisher)
+        self._configured = False
 
     def _message_types(self) -> MessageTypes:
         """Choose the classes the scan is decoded and the outputs built with: rosbags' if fit."""
@@ -161,8 +246,10 @@ class FeatureNode(Node):
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, changes) -> None:
-        # Takes effect on the next scan (callbacks of this node never run concurrently).
-        self._config, self._style, self._publish_markers = self._settings()
+        # Takes effect on the next scan (callbacks of this node never run concurrently);
+        # unconfigured, configure reads them.
+        if self._configured:
+            self._config, self._style, self._publish_markers = self._settings()
 
     @property
     def counters(self) -> ScanCounters:
@@ -266,6 +353,9 @@ class FeatureNode(Node):
                 (recent.malformed, 'dropped (malformed)'),
                 (recent.implausible_noise, 'dropped (implausible noise)'),
                 (recent.work_limited, 'over the work bound')) if count)
+        elif self._scans is None:
+            message = ('inactive: not subscribed to scans' if self._configured
+                       else 'unconfigured: not subscribed to scans')
         elif not recent.processed:
             message = 'no scans'
         seconds = recent.seconds or [0.0]
@@ -276,13 +366,13 @@ class FeatureNode(Node):
             'feature pipeline': core.name if core else 'none',
             'feature pipeline settled': 'no' if core is None or core.pending else 'yes',
             'scan topic': self.resolve_topic_name('scan'),
-            'method': self._config.method,
+            'method': self._config.method if self._configured else 'none',
             'scans processed (last period)': recent.processed,
             'scans processed': self._total.processed,
             'scans skipped (busy or lost)': self._total.skipped,
             'scans lost (DDS message-lost events)': self._total.lost,
             # Sequence gaps say nothing with several publishers on the topic (see above).
-            'scan publishers': self._scans.get_publisher_count(),
+            'scan publishers': self._scans.get_publisher_count() if self._scans else 0,
             'scans dropped (malformed)': self._total.malformed,
             'scans over the work bound': self._total.work_limited,
             'scans dropped (implausible noise)': self._total.implausible_noise,

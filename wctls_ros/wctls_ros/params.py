@@ -176,6 +176,14 @@ FEATURE_NODE = (
               setting='text_ids'),
 )
 
+# feature_node is a lifecycle node: whether it drives itself to active.
+AUTOSTART = 'autostart'
+FEATURE_NODE += (
+    Parameter(AUTOSTART, True, 'Configure and activate at start (a plain ros2 run extracts at '
+              'once); false waits for a lifecycle manager or launch file to drive the '
+              'transitions', read_only=True),
+)
+
 
 def _read_only(name: str, default: Value, description: str, limits: Optional[Limits] = None,
                choices: Tuple[str, ...] = ()) -> Parameter:

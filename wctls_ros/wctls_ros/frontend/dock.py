@@ -1,0 +1,336 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""
+A docking station seen by a 2D LiDAR: two straight faces meeting at an apex, found among corners.
+
+A dock is described by :class:`DockShape`: the length of its right and left faces and the
+opening angle between them through the side the robot sees (below 180 deg a V the robot faces
+into, above 180 deg a wedge pointing at the robot, 90 deg an L), with tolerances. Each corner
+of a scan whose opening angle and faces' lengths match is a candidate (:func:`find_docks`);
+its pose is the dock frame: origin at the apex, x along the bisector away from the robot's
+side (the way a robot docking forwards faces), y to the left, moved to a stated reference
+point; its 3x3 covariance over (x, y, yaw) is the corner's, propagated (docs/docking.md, eq.
+D1-D3). :func:`track_dock` keeps the candidates that agree with the last ones (a chi2 gate
+over the pose difference, with the motion allowed in between, eq. D4) and confirms a dock
+only after a few agreeing scans.
+
+Everything is in the scan's frame: m, rad. Pure numpy; no ROS.
+"""
+
+from dataclasses import dataclass
+import math
+from typing import List, Optional, Tuple
+
+import numpy as np
+
+from ..core import CornerSet, SegmentSet
+
+# P(chi2 with 3 dof <= 16.27) = 99.9 %: the gate of a pose difference.
+CHI2_3DOF_999 = 16.266
+
+
+@dataclass(frozen=True)
+class DockShape:
+    """
+    What a dock looks like, and where its frame is.
+
+    :ivar right_face_m: length of the face on the robot's right (the dock's -y side), apex to
+        its outer end, m
+    :ivar left_face_m: length of the face on the robot's left (+y), m
+    :ivar opening_angle_rad: angle between the faces through the robot's side, rad in
+        (0, 2 pi), not pi: below pi a V, above pi a wedge
+    :ivar face_tolerance_m: how much longer than its length a seen face may be, m
+    :ivar face_shortfall_m: how much shorter a seen face may be, beyond the spacing of its
+        returns (its outer end lies up to one return short of the edge, and the extraction
+        may leave a few returns by the edge out), m
+    :ivar angle_tolerance_rad: how much the seen opening angle may differ, rad
+    :ivar reference_xy_m: the dock frame's origin in the apex frame, shape (2,), m
+    :ivar reference_yaw_rad: the dock frame's yaw in the apex frame, rad
+    """
+
+    right_face_m: float = 0.30
+    left_face_m: float = 0.30
+    opening_angle_rad: float = math.radians(120.0)
+    face_tolerance_m: float = 0.03
+    face_shortfall_m: float = 0.10
+    angle_tolerance_rad: float = math.radians(8.0)
+    reference_xy_m: Tuple[float, float] = (0.0, 0.0)
+    reference_yaw_rad: float = 0.0
+
+    def __post_init__(self):
+        problems = shape_errors(self)
+        if problems:
+            raise ValueError('; '.join(problems))
+
+
+def shape_errors(shape: DockShape) -> List[str]:
+    """
+    Return why a dock description is unusable (empty when it is fine).
+
+    :param shape: the description
+    :return: one sentence per problem
+    """
+    problems = []
+    for name in ('right_face_m', 'left_face_m'):
+        if not getattr(shape, name) > 0.0:
+            problems.append(f'{name} must be > 0, got {getattr(shape, name)}')
+    for name in ('face_tolerance_m', 'face_shortfall_m'):
+        if not getattr(shape, name) >= 0.0:
+            problems.append(f'{name} must be >= 0, got {getattr(shape, name)}')
+    if not shape.face_shortfall_m < min(shape.right_face_m, shape.left_face_m):
+        problems.append(f'face_shortfall_m ({shape.face_shortfall_m:g} m) must be shorter than '
+                        'the faces')
+    angle, tolerance = shape.opening_angle_rad, shape.angle_tolerance_rad
+    if not 0.0 < angle < 2.0 * math.pi:
+        problems.append(f'the opening angle must be in (0, 360) deg, got {math.degrees(angle)}')
+    elif not 0.0 <= tolerance < min(abs(angle - math.pi), angle, 2.0 * math.pi - angle):
+        # A tolerance reaching 180 deg would take a straight wall for a dock.
+        problems.append(f'the opening angle tolerance ({math.degrees(tolerance):g} deg) must be '
+                        f'>= 0 and leave the opening angle ({math.degrees(angle):g} deg) short '
+                        'of 0, 180 and 360 deg')
+    if not all(math.isfinite(v) for v in (*shape.reference_xy_m, shape.reference_yaw_rad)):
+        problems.append('the reference point must be finite')
+    return problems
+
+
+@dataclass(frozen=True)
+class DockPose:
+    """
+    One detection of the dock: its frame in the scan's frame.
+
+    :ivar x_m: origin x, m
+    :ivar y_m: origin y, m
+    :ivar yaw_rad: x axis direction, rad in (-pi, pi]
+    :ivar covariance: of (x, y, yaw), shape (3, 3): m^2, m rad, rad^2
+    :ivar misfit: how far the seen shape is from the description, in tolerances (the largest
+        of the three ratios; <= 1 for every candidate)
+    """
+
+    x_m: float
+    y_m: float
+    yaw_rad: float
+    covariance: np.ndarray
+    misfit: float
+
+    @property
+    def vector(self) -> np.ndarray:
+        """
+        Return (x, y, yaw).
+
+        :return: shape (3,), m, m, rad
+        """
+        return np.array([self.x_m, self.y_m, self.yaw_rad])
+
+
+def wrap_angle(angle_rad):
+    """
+    Return an angle (or an array of them) wrapped into (-pi, pi].
+
+    :param angle_rad: rad
+    :return: rad
+    """
+    return np.pi - np.mod(np.pi - np.asarray(angle_rad, dtype=float), 2.0 * np.pi)
+
+
+def reference_pose(apex_xy_m: np.ndarray, apex_yaw_rad: float, apex_covariance: np.ndarray,
+                   shape: DockShape) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Move a pose at the apex to the dock's reference point, with its covariance (eq. D2-D3).
+
+    p = a + R(yaw_a) r,  yaw = yaw_a + yaw_r; J = d(p, yaw)/d(a, yaw_a), C = J C_a J^T.
+
+    :param apex_xy_m: the apex, shape (2,), m
+    :param apex_yaw_rad: the apex frame's yaw, rad
+    :param apex_covariance: of (x, y, yaw) at the apex, shape (3, 3)
+    :param shape: the dock (its reference point)
+    :return: (x, y, yaw) shape (3,) and its covariance shape (3, 3)
+    """
+    c, s = math.cos(apex_yaw_rad), math.sin(apex_yaw_rad)
+    rx, ry = shape.reference_xy_m
+    pose = np.array([apex_xy_m[0] + c * rx - s * ry, apex_xy_m[1] + s * rx + c * ry,
+                     float(wrap_angle(apex_yaw_rad + shape.reference_yaw_rad))])
+    jacobian = np.array([[1.0, 0.0, -s * rx - c * ry],
+                         [0.0, 1.0, c * rx - s * ry],
+                         [0.0, 0.0, 1.0]])
+    return pose, jacobian @ apex_covariance @ jacobian.T
+
+
+def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape) -> List[DockPose]:
+    """
+    Return every corner of a scan that has the dock's shape, as a dock pose (eq. D1-D3).
+
+    A corner matches when both its walls are seen up to it, its opening angle is within the
+    tolerance of the dock's, its walls lie on either side of its bisector, and each wall, from
+    the apex to its outer end, is as long as its face: at most ``face_tolerance_m`` longer,
+    and at most ``face_shortfall_m`` plus one return spacing shorter (the edge lies between
+    the last return on the face and the next; the extraction may leave a few returns by a
+    dock's edge out). Which wall is the right face follows from the side of the apex frame
+    its outer end lies on, not from the scan order (the seam of a turn).
+
+    :param segments: the scan's segments
+    :param corners: the scan's corners (their segment indices point into ``segments``)
+    :param shape: the dock
+    :return: the candidates, best fitting first (usually none or one)
+    """
+    # Most scans hold no corner of the dock's angle: one vectorised test, then a loop over few.
+    angle_error = np.abs(corners.opening_angle_rad - shape.opening_angle_rad)
+    keep = np.flatnonzero((angle_error <= shape.angle_tolerance_rad)
+                          & corners.end_seen.all(axis=1))
+    docks = []
+    for k in keep.tolist():
+        # The apex frame's x axis points away from the robot's side: the corner's bisector
+        # points into the side the sensor sees.
+        yaw = float(wrap_angle(corners.yaw_rad[k] + math.pi))
+        apex = corners.xy_m[k]
+        faces = [_seen_face(segments, int(wall), apex, yaw)
+                 for wall in (corners.first_segment[k], corners.second_segment[k])]
+        (right_side, right, right_step), (left_side, left, left_step) = sorted(faces)
+        if not right_side < 0.0 < left_side:
+            continue
+        misfits = [_face_misfit(right, right_step, shape.right_face_m, shape),
+                   _face_misfit(left, left_step, shape.left_face_m, shape)]
+        if max(misfits) > 1.0:
+            continue
+        misfit = max(*misfits, angle_error[k] / max(shape.angle_tolerance_rad, 1e-12))
+        pose, covariance = reference_pose(apex, yaw, corners.covariance[k], shape)
+        docks.append(DockPose(float(pose[0]), float(pose[1]), float(pose[2]), covariance,
+                              float(misfit)))
+    return sorted(docks, key=lambda dock: dock.misfit)
+
+
+def _seen_face(segments: SegmentSet, wall: int, apex: np.ndarray,
+               yaw_rad: float) -> Tuple[float, float, float]:
+    """Return a wall's outer end's side (+ left) in the apex frame, its length, its spacing."""
+    start, end = segments.start_xy_m[wall], segments.end_xy_m[wall]
+    to_start, to_end = start - apex, end - apex
+    start_m, end_m = math.hypot(*to_start), math.hypot(*to_end)
+    outer, length = (to_start, start_m) if start_m > end_m else (to_end, end_m)
+    side = math.cos(yaw_rad) * outer[1] - math.sin(yaw_rad) * outer[0]
+    spacing = math.hypot(*(end - start)) / max(int(segments.num_points[wall]) - 1, 1)
+    return side, length, spacing
+
+
+def _face_misfit(seen_m: float, spacing_m: float, face_m: float, shape: DockShape) -> float:
+    """Return how far a seen face is from its length, in its tolerance (<= 1 fits)."""
+    if seen_m > face_m:
+        return (seen_m - face_m) / max(shape.face_tolerance_m, 1e-9)
+    return max(face_m - seen_m - spacing_m, 0.0) / max(shape.face_shortfall_m, 1e-9)
+
+
+@dataclass(frozen=True)
+class TrackSettings:
+    """
+    How detections are checked against the last ones.
+
+    :ivar max_speed_m_s: the fastest the dock may move in the scan's frame (the robot's
+        speed while docking, plus the turn rate times the dock's distance), m/s
+    :ivar max_turn_rate_rad_s: the fastest the dock's yaw may change (the robot's turn), rad/s
+    :ivar confirm_detections: agreeing detections in a row before a dock is reported
+    :ivar timeout_s: a dock not seen for this long is forgotten: the next one starts again, s
+    :ivar gate: the chi2 bound of an agreeing pose difference (3 dof)
+    """
+
+    max_speed_m_s: float = 0.3
+    max_turn_rate_rad_s: float = math.radians(30.0)
+    confirm_detections: int = 3
+    timeout_s: float = 1.0
+    gate: float = CHI2_3DOF_999
+
+
+@dataclass(frozen=True)
+class Track:
+    """
+    A dock seen over consecutive scans.
+
+    :ivar pose: its last detection
+    :ivar stamp_s: when, s
+    :ivar detections: agreeing detections in a row
+    """
+
+    pose: DockPose
+    stamp_s: float
+    detections: int
+
+
+@dataclass(frozen=True)
+class TrackerState:
+    """
+    What :func:`track_dock` remembers between scans.
+
+    :ivar track: the dock being followed, or None
+    :ivar rival: a detection that disagrees with the track, followed in case the track was a
+        mistake (it replaces the track once it is confirmed and the track is not seen)
+    """
+
+    track: Optional[Track] = None
+    rival: Optional[Track] = None
+
+
+def pose_chi2(new: DockPose, old: DockPose, elapsed_s: float, settings: TrackSettings) -> float:
+    """
+    Return the Mahalanobis distance squared between two detections (eq. D4).
+
+    d = (x, y, yaw)_new - (x, y, yaw)_old (yaw wrapped); S = C_new + C_old + Q,
+    Q = diag((v dt)^2, (v dt)^2, (w dt)^2) the motion allowed in between; chi2 = d^T S^-1 d.
+
+    :param new: the newer detection
+    :param old: the older one
+    :param elapsed_s: the time between them, s
+    :param settings: the motion allowed
+    :return: chi2 (3 dof)
+    """
+    difference = new.vector - old.vector
+    difference[2] = wrap_angle(difference[2])
+    step_m = settings.max_speed_m_s * elapsed_s
+    turn_rad = settings.max_turn_rate_rad_s * elapsed_s
+    innovation = new.covariance + old.covariance + np.diag([step_m ** 2, step_m ** 2,
+                                                            turn_rad ** 2])
+    return float(difference @ np.linalg.solve(innovation, difference))
+
+
+def _follow(track: Optional[Track], candidates: List[DockPose], stamp_s: float,
+            settings: TrackSettings) -> Tuple[Optional[Track], List[DockPose]]:
+    """Extend a track with its best agreeing candidate; return it and the others."""
+    if track is None or stamp_s - track.stamp_s > settings.timeout_s:
+        return None, candidates
+    chi2 = [pose_chi2(c, track.pose, stamp_s - track.stamp_s, settings) for c in candidates]
+    if not chi2 or min(chi2) > settings.gate:
+        return track, candidates
+    best = int(np.argmin(chi2))
+    rest = candidates[:best] + candidates[best + 1:]
+    return Track(candidates[best], stamp_s, track.detections + 1), rest
+
+
+def track_dock(state: TrackerState, candidates: List[DockPose], stamp_s: float,
+               settings: TrackSettings) -> Tuple[TrackerState, Optional[DockPose]]:
+    """
+    Take one scan's candidates; return the new state and the dock to report, if any.
+
+    The candidate that agrees with the track (chi2 within the gate) extends it; a track seen
+    ``confirm_detections`` times in a row is reported, with this scan's detection (never a
+    blend: its covariance stays the detection's own). A disagreeing candidate starts or
+    extends a rival; a confirmed rival whose track is not seen replaces it. A track or rival
+    not seen for ``timeout_s`` is dropped.
+
+    :param state: the state after the previous scan
+    :param candidates: this scan's detections (:func:`find_docks`), best fitting first
+    :param stamp_s: this scan's time, s (not before the previous scan's)
+    :param settings: gate, motion and confirmation
+    :return: (the new state, the dock pose to report or None)
+    """
+    before = state.track
+    track, rest = _follow(state.track, candidates, stamp_s, settings)
+    rival, rest = _follow(state.rival, rest, stamp_s, settings)
+    extended = track is not None and track is not before
+    if track is None and candidates:
+        track, rival = Track(candidates[0], stamp_s, 1), None
+        extended = True
+    elif rest and (rival is None or rival is state.rival):
+        rival = Track(rest[0], stamp_s, 1)
+    if (not extended and rival is not None and rival is not state.rival
+            and rival.detections >= settings.confirm_detections):
+        track, rival, extended = rival, None, True
+    report = (track.pose if extended and track.detections >= settings.confirm_detections
+              else None)
+    return TrackerState(track, rival), report

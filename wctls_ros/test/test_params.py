@@ -96,7 +96,8 @@ def test_a_parameter_value_passes_its_check_exactly_when_the_core_accepts_it(par
 @given(strategies.floats(allow_nan=False, allow_infinity=False, min_value=-10, max_value=200))
 def test_degree_parameters_refuse_what_the_radian_fields_refuse(degrees):
     for parameter in FEATURE_NODE:
-        if not parameter.name.endswith('_deg'):
+        # The dock's angles fill no FeatureConfig field (test_frontend_dock checks them).
+        if not parameter.name.endswith('_deg') or parameter.setting is None:
             continue
         try:
             parameter.check(degrees)

@@ -38,21 +38,25 @@ import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
+from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 from wctls_msgs.msg import CornerArray, LineSegmentArray
 
-from .conversions import (copy_header, corner_array, line_segment_array, marker_array,
-                          MessageTypes, mismatched_types, rclpy_types, scan_features, typestore)
+from .conversions import (copy_header, corner_array, dock_pose_messages, line_segment_array,
+                          marker_array, MessageTypes, mismatched_types, rclpy_types,
+                          scan_features, typestore)
 from .core import (CoreStatus, CornerSet, Features, line_landmarks, SegmentSet,
                    start as start_core, status as core_status)
 from .extras import missing_extra
+from .frontend.dock import find_docks, track_dock, TrackerState
 from .node_main import declare_parameters, run_node
-from .params import AUTOSTART, FEATURE_NODE, feature_settings
+from .params import AUTOSTART, dock_settings, FEATURE_NODE, feature_settings
 
 # A throttled warning repeats at most this often, s.
 WARN_PERIOD_S = 5.0
@@ -116,6 +120,12 @@ class FeatureNode(LifecycleNode):
         self._frame_id = ''
         self._configured = False
         self._scans = None
+        self._dock = None
+        self._dock_publishers: tuple = ()
+        self._dock_services: tuple = ()
+        self._detecting = False
+        self._dock_track = TrackerState()
+        self._docks_published = 0
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
         if values[AUTOSTART]:
             feature_settings(values)          # a bad configuration ends ros2 run: status 1
@@ -131,12 +141,15 @@ class FeatureNode(LifecycleNode):
         """
         try:
             self._config, self._style, self._publish_markers = self._settings()
+            self._dock = dock_settings(self._values())
         except ValueError as error:
             self.get_logger().error(f'configure failed: {error}')
             return TransitionCallbackReturn.FAILURE
         self._corners = self.create_lifecycle_publisher(CornerArray, 'corners', 10)
         self._lines = self.create_lifecycle_publisher(LineSegmentArray, 'lines', 10)
         self._markers = self.create_lifecycle_publisher(MarkerArray, 'markers', 10)
+        if self._dock is not None:
+            self._configure_dock()
         self._configured = True
         # Never waits for a compile: the numpy pipeline serves until the compiled one is ready
         # (the process's one choice: a second configure is told the same).
@@ -192,6 +205,42 @@ class FeatureNode(LifecycleNode):
         self._free_publishers()
         return super().on_shutdown(state)
 
+    def _configure_dock(self) -> None:
+        """Create the dock's publishers and the services that start and stop its detection."""
+        # Reliable, keep last 10: what opennav_docking subscribes detected_dock_pose with.
+        self._dock_publishers = (
+            self.create_lifecycle_publisher(PoseStamped, 'detected_dock_pose', 10),
+            self.create_lifecycle_publisher(PoseWithCovarianceStamped,
+                                            'detected_dock_pose_with_covariance', 10))
+        self._dock_services = tuple(
+            self.create_service(Trigger, f'~/{name}_dock_detection', callback)
+            for name, callback in (('start', self._start_detection),
+                                   ('stop', self._stop_detection),
+                                   ('toggle', self._toggle_detection)))
+        self._detecting = self._dock.detect_at_start
+        self._dock_track = TrackerState()
+
+    def _start_detection(self, request, response):
+        return self._set_detection(True, response)
+
+    def _stop_detection(self, request, response):
+        return self._set_detection(False, response)
+
+    def _toggle_detection(self, request, response):
+        # opennav_docking calls its one detector service to start and again to stop.
+        return self._set_detection(not self._detecting, response)
+
+    def _set_detection(self, on: bool, response):
+        """Turn dock detection on or off; answer a std_srvs/Trigger call."""
+        if on and not self._detecting:
+            self._dock_track = TrackerState()       # start afresh: confirm the dock again
+        self._detecting = on
+        response.success = True
+        response.message = f'dock detection {"on" if on else "off"}' + (
+            '' if self._scans is not None else ' (the node is not active: no scans yet)')
+        self.get_logger().info(response.message)
+        return response
+
     def _unsubscribe(self) -> None:
         scans, self._scans = self._scans, None
         if scans is not None:
@@ -199,14 +248,19 @@ class FeatureNode(LifecycleNode):
 
     def _free_publishers(self) -> None:
         if self._configured:
-            for publisher in (self._corners, self._lines, self._markers):
+            for publisher in (self._corners, self._lines, self._markers,
+                              *self._dock_publishers):
                 self.destroy_publisher(publisher)
+            for service in self._dock_services:
+                self.destroy_service(service)
+        self._dock_publishers, self._dock_services = (), ()
         self._configured = False
 
     def _message_types(self) -> MessageTypes:
         """Choose the classes the scan is decoded and the outputs built with: rosbags' if fit."""
         mine = (self.get_name(), self.get_namespace())
-        endpoints = [info for publisher in (self._corners, self._lines, self._markers)
+        publishers = (self._corners, self._lines, self._markers, *self._dock_publishers)
+        endpoints = [info for publisher in publishers
                      for info in self.get_publishers_info_by_topic(publisher.topic_name)]
         endpoints += self.get_subscriptions_info_by_topic(self._scans.topic_name)
         installed = {info.topic_type: str(info.topic_type_hash) for info in endpoints
@@ -219,7 +273,7 @@ class FeatureNode(LifecycleNode):
                 f'{missing_extra(error) or error}')
             return rclpy_types()
         mismatched = mismatched_types(store, installed)
-        if len(installed) == 4 and not mismatched:
+        if len(installed) == 4 + len(self._dock_publishers) and not mismatched:
             return MessageTypes.from_typestore(store)
         self.get_logger().warning(
             "decoding scans and building the outputs with rclpy's message classes (slower): "
@@ -232,15 +286,20 @@ class FeatureNode(LifecycleNode):
         self.get_logger().info(f'now running the {status.describe()}' if status.name == 'numba'
                                else status.describe())
 
-    def _settings(self, changes=()):
-        """Return the settings of the current parameters with ``changes`` applied (validated)."""
+    def _values(self, changes=()) -> dict:
+        """Return the current parameter values with ``changes`` applied."""
         values = {spec.name: self.get_parameter(spec.name).value for spec in FEATURE_NODE}
         values.update({p.name: p.value for p in changes if p.name in values})
-        return feature_settings(values)
+        return values
+
+    def _settings(self, changes=()):
+        """Return the settings of the current parameters with ``changes`` applied (validated)."""
+        return feature_settings(self._values(changes))
 
     def _check_parameters(self, changes) -> SetParametersResult:
         try:
             self._settings(changes)
+            dock_settings(self._values(changes))
         except (ValueError, TypeError) as error:
             return SetParametersResult(successful=False, reason=str(error))
         return SetParametersResult(successful=True)
@@ -250,6 +309,7 @@ class FeatureNode(LifecycleNode):
         # unconfigured, configure reads them.
         if self._configured:
             self._config, self._style, self._publish_markers = self._settings()
+            self._dock = dock_settings(self._values())
 
     @property
     def counters(self) -> ScanCounters:
@@ -336,12 +396,27 @@ class FeatureNode(LifecycleNode):
             if self._publish_markers and self._markers.get_subscription_count():
                 self._markers.publish(types.serialize(
                     marker_array(features, header, self._style, types, is_landmark=is_landmark)))
+            if self._dock is not None and self._detecting:
+                self._publish_dock(features, header, types)
         except Exception:  # noqa: B902 - only a shutdown (Ctrl-C mid-callback) is expected here
             if self.context.ok():
                 raise
             return
         self._count('processed')
         self._recent.seconds.append(time.perf_counter() - started)
+
+    def _publish_dock(self, features: Features, header, types: MessageTypes) -> None:
+        """Look for the dock among the features; publish its pose once the tracker confirms it."""
+        stamp_s = header.stamp.sec + 1e-9 * header.stamp.nanosec
+        candidates = find_docks(features.segments, features.corners, self._dock.shape)
+        self._dock_track, dock = track_dock(self._dock_track, candidates, stamp_s,
+                                            self._dock.tracking)
+        if dock is None:
+            return
+        for publisher, message in zip(self._dock_publishers,
+                                      dock_pose_messages(dock, header, types)):
+            publisher.publish(types.serialize(message))
+        self._docks_published += 1
 
     def _publish_diagnostics(self):
         recent, self._recent = self._recent, ScanCounters()
@@ -378,6 +453,9 @@ class FeatureNode(LifecycleNode):
             'scans dropped (implausible noise)': self._total.implausible_noise,
             'features dropped (implausible covariance)': self._total.implausible_features,
             'processing time median (ms)': f'{1e3 * statistics.median(seconds):.2f}',
+            'dock detection': ('not configured' if self._dock is None
+                               else 'on' if self._detecting else 'off'),
+            'dock poses published': self._docks_published,
             'processing time max (ms)': f'{1e3 * max(seconds):.2f}',
         }
         status = DiagnosticStatus(

@@ -13,8 +13,10 @@ Measure the dock detector (wctls_ros.frontend.dock): accuracy, NEES, detection, 
    truth, the mean NEES (3 dof; a rate over the scans with the dock fully in view: every face
    unoccluded and 12 beams wide or more) and the share of those scans with a reported dock.
 2. False docks: simulated rooms whose corners have the dock's angle (a hexagonal room, 120 deg
-   inside corners of 1.5 m walls; a V of 120 deg with 0.6 and 0.3 m faces) and every shipped
-   real recording of data/ (none holds a dock): candidates and reported docks.
+   inside corners of 1.5 m walls; a V of 120 deg with 0.6 and 0.3 m faces), the four bundled
+   floor plans without a dock (pilasters, niches, chamfers, columns, clutter; five poses each)
+   and every shipped real recording of data/ (none holds a dock): candidates (single scans
+   that match) and reported docks (confirmed by the tracker).
 3. Time per scan of find_docks + track_dock beside the extraction (the compiled core), median.
 
 Usage: python bench_dock.py [--scans N]
@@ -32,8 +34,8 @@ from wctls_ros.evaluation.scans import load_json_scans, load_scans
 from wctls_ros.frontend.dock import (DockShape, find_docks, track_dock, TrackerState,
                                      TrackSettings, wrap_angle)
 from wctls_ros.params import defaults, FEATURE_NODE, feature_settings
-from wctls_ros.simulation import (floor_plan_from_dict, full_turn_bearings, ray_hits,
-                                  SENSOR_MODELS, simulate_scan)
+from wctls_ros.simulation import (BUNDLED_PLANS, floor_plan_from_dict, full_turn_bearings,
+                                  load_floor_plan, ray_hits, SENSOR_MODELS, simulate_scan)
 
 DATA = pathlib.Path(__file__).resolve().parents[2] / 'data'
 SHAPE = DockShape()
@@ -163,6 +165,12 @@ def look_alikes(config, count):
              'polylines': [{'closed': True, 'points': dock_polygon(v_apex, wrong_faces)}]},
             [(3.45, 1.25, 0.0), (2.5, 1.0, 0.3), (4.0, 0.8, 2.0)]),
     }
+    for name in BUNDLED_PLANS:
+        x, y, _ = load_floor_plan(name).sensor_pose
+        rooms[f'{name} (no dock)'] = ({'name': name, 'base': name}, [
+            (x + dx, y + dy, yaw) for dx, dy, yaw in ((0.0, 0.0, 0.0), (0.8, 0.3, 1.0),
+                                                     (-0.8, -0.3, 2.0), (1.5, 0.2, -1.0),
+                                                     (-1.2, 0.4, 3.0))])
     rng = np.random.default_rng(7)
     for name, (spec, poses) in rooms.items():
         plan = floor_plan_from_dict(spec)

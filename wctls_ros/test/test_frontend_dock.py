@@ -12,8 +12,8 @@ from wctls_ros.frontend.dock import (DockPose, DockShape, find_docks, pose_chi2,
                                      reference_pose, track_dock, TrackerState, TrackSettings,
                                      wrap_angle)
 from wctls_ros.params import defaults, FEATURE_NODE, feature_settings
-from wctls_ros.simulation import (floor_plan_from_dict, full_turn_bearings, SENSOR_MODELS,
-                                  simulate_scan)
+from wctls_ros.simulation import (BUNDLED_PLANS, floor_plan_from_dict, full_turn_bearings,
+                                  load_floor_plan, SENSOR_MODELS, simulate_scan)
 
 S1 = feature_settings(defaults(FEATURE_NODE, 'rplidar_s1')).config
 ROOM = [[0.0, 0.0], [4.5, 0.0], [4.5, 3.0], [0.0, 3.0]]
@@ -127,6 +127,24 @@ def test_room_corners_of_the_dock_angle_with_other_lengths_are_no_dock(room, pos
                                                < shape.angle_tolerance_rad))
             assert find_docks(features.segments, features.corners, shape) == []
     assert corners_of_the_angle >= 40          # the look-alike corners were there to refuse
+
+
+@pytest.mark.parametrize('name', BUNDLED_PLANS)
+def test_no_dock_is_reported_in_the_bundled_rooms(name):
+    # Pilasters, niches, chamfers, columns and clutter: corners of every angle, some of walls
+    # as long as the dock's faces, seen from the plan's pose and four others.
+    plan = load_floor_plan(name)
+    x, y, _ = plan.sensor_pose
+    reports = 0
+    for dx, dy, yaw in ((0.0, 0.0, 0.0), (0.8, 0.3, 1.0), (-0.8, -0.3, 2.0), (1.5, 0.2, -1.0),
+                        (-1.2, 0.4, 3.0)):
+        state = TrackerState()
+        for k, features in enumerate(scans(plan, (x + dx, y + dy, yaw), 12, seed=8)):
+            state, report = track_dock(
+                state, find_docks(features.segments, features.corners, DockShape()), 0.1 * k,
+                TrackSettings())
+            reports += report is not None
+    assert reports == 0
 
 
 def test_a_v_of_the_dock_angle_with_one_face_too_long_is_no_dock():

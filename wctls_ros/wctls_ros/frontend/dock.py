@@ -28,8 +28,6 @@ from ..core import CornerSet, SegmentSet
 
 # P(chi2 with 3 dof <= 16.27) = 99.9 %: the gate of a pose difference.
 CHI2_3DOF_999 = 16.266
-# A seen opening angle may differ from the dock's by its tolerance plus this many of its stds.
-ANGLE_SIGMAS = 3.0
 
 
 @dataclass(frozen=True)
@@ -46,8 +44,7 @@ class DockShape:
     :ivar face_shortfall_m: how much shorter a seen face may be, beyond the spacing of its
         returns (its outer end lies up to one return short of the edge, and the extraction
         may leave a few returns by the edge out), m
-    :ivar angle_tolerance_rad: how much the seen opening angle may differ, beyond 3 of its
-        stds, rad
+    :ivar angle_tolerance_rad: how much the seen opening angle may differ, rad
     :ivar reference_xy_m: the dock frame's origin in the apex frame, shape (2,), m
     :ivar reference_yaw_rad: the dock frame's yaw in the apex frame, rad
     """
@@ -57,7 +54,7 @@ class DockShape:
     opening_angle_rad: float = math.radians(120.0)
     face_tolerance_m: float = 0.03
     face_shortfall_m: float = 0.10
-    angle_tolerance_rad: float = math.radians(8.0)
+    angle_tolerance_rad: float = math.radians(10.0)
     reference_xy_m: Tuple[float, float] = (0.0, 0.0)
     reference_yaw_rad: float = 0.0
 
@@ -164,7 +161,7 @@ def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape) -> Li
     Return every corner of a scan that has the dock's shape, as a dock pose (eq. D1-D3).
 
     A corner matches when both its walls are seen up to it, its opening angle is within the
-    tolerance of the dock's (plus 3 of its stds, from its walls' angle variances), its walls lie on either side of its bisector, and each wall, from
+    tolerance of the dock's, its walls lie on either side of its bisector, and each wall, from
     the apex to its outer end, is as long as its face: at most ``face_tolerance_m`` longer,
     and at most ``face_shortfall_m`` plus one return spacing shorter (the edge lies between
     the last return on the face and the next; the extraction may leave a few returns by a
@@ -177,12 +174,11 @@ def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape) -> Li
     :return: the candidates, best fitting first (usually none or one)
     """
     # Most scans hold no corner of the dock's angle: one vectorised test, then a loop over few.
-    # The seen angle scatters with its walls' angles: the tolerance plus 3 sigma of it.
+    # The tolerance alone, not widened by the angle's own std: a right-angle corner seen at a
+    # grazing angle scatters by 5 deg and more, and would pass for a 120 deg dock.
     angle_error = np.abs(corners.opening_angle_rad - shape.opening_angle_rad)
-    angle_sigma = np.sqrt(segments.covariance[corners.first_segment, 0, 0]
-                          + segments.covariance[corners.second_segment, 0, 0])
-    angle_bound = shape.angle_tolerance_rad + ANGLE_SIGMAS * angle_sigma
-    keep = np.flatnonzero((angle_error <= angle_bound) & corners.end_seen.all(axis=1))
+    keep = np.flatnonzero((angle_error <= shape.angle_tolerance_rad)
+                          & corners.end_seen.all(axis=1))
     docks = []
     for k in keep.tolist():
         # The apex frame's x axis points away from the robot's side: the corner's bisector
@@ -198,7 +194,7 @@ def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape) -> Li
                    _face_misfit(left, left_step, shape.left_face_m, shape)]
         if max(misfits) > 1.0:
             continue
-        misfit = max(*misfits, angle_error[k] / angle_bound[k])
+        misfit = max(*misfits, angle_error[k] / max(shape.angle_tolerance_rad, 1e-12))
         pose, covariance = reference_pose(apex, yaw, corners.covariance[k], shape)
         docks.append(DockPose(float(pose[0]), float(pose[1]), float(pose[2]), covariance,
                               float(misfit)))

@@ -10,8 +10,9 @@ into, above 180 deg a wedge pointing at the robot, 90 deg an L), with tolerances
 of a scan whose opening angle and faces' lengths match is a candidate (:func:`find_docks`);
 its pose is the dock frame: origin at the apex, x along the bisector away from the robot's
 side (the way a robot docking forwards faces), y to the left, moved to a stated reference
-point; its 3x3 covariance over (x, y, yaw) is the corner's, propagated (docs/docking.md, eq.
-D1-D3). :func:`track_dock` keeps the candidates that agree with the last ones (a chi2 gate
+point. The apex frame is fitted to the corner's two walls knowing the dock's opening angle,
+with the covariance of the fit from the walls' own, and moved to the reference point with it
+(docs/docking.md, eq. D1-D3). :func:`track_dock` keeps the candidates that agree with the last ones (a chi2 gate
 over the pose difference, with the motion allowed in between, eq. D4) and confirms a dock
 only after a few agreeing scans.
 
@@ -156,6 +157,85 @@ def reference_pose(apex_xy_m: np.ndarray, apex_yaw_rad: float, apex_covariance: 
     return pose, jacobian @ apex_covariance @ jacobian.T
 
 
+def fit_apex(segments: SegmentSet, right: int, left: int, apex_xy_m: np.ndarray,
+             yaw_rad: float, shape: DockShape) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Fit the apex frame to the two faces' lines, knowing the dock's opening angle (eq. D1).
+
+    The faces' lines (alpha_i, r_i), covariances C_i, are modelled from the apex frame
+    s = (x, y, yaw): alpha_i = yaw + c_i, r_i = (cos alpha_i, sin alpha_i) . (x, y), c_i the
+    normal of face i in the apex frame (towards the face from the sensor's side). Gauss-Newton
+    on sum_i e_i^T C_i^-1 e_i from the corner's pose (two steps); Cov(s) = (J^T W J)^-1.
+    Unlike the corner, whose walls' angles are free, the opening angle is the dock's: its
+    error no longer moves the apex. In plain floats: numpy's small-matrix calls would cost
+    more than the whole fit.
+
+    :param segments: the scan's segments
+    :param right: index of the right face's segment
+    :param left: index of the left face's segment
+    :param apex_xy_m: the corner, shape (2,), m (the start)
+    :param yaw_rad: the apex frame's yaw from the corner, rad (the start)
+    :param shape: the dock (its opening angle)
+    :return: (x, y, yaw) shape (3,) and its covariance shape (3, 3)
+    """
+    half = 0.5 * shape.opening_angle_rad
+    x, y, yaw = float(apex_xy_m[0]), float(apex_xy_m[1]), yaw_rad
+    c, s = math.cos(yaw), math.sin(yaw)
+    # The sensor in the apex frame, to orient each face's normal from the sensor's side.
+    sensor_x, sensor_y = -(c * x + s * y), s * x - c * y
+    faces = []
+    for side, wall in ((-1.0, right), (1.0, left)):
+        normal_x, normal_y = math.sin(half), side * math.cos(half)
+        if normal_x * sensor_x + normal_y * sensor_y > 0.0:
+            normal_x, normal_y = -normal_x, -normal_y
+        (caa, car), (_, crr) = segments.covariance[wall].tolist()
+        det = caa * crr - car * car
+        faces.append((math.atan2(normal_y, normal_x), float(segments.angle_rad[wall]),
+                      float(segments.radius_m[wall]), crr / det, -car / det, caa / det))
+    for _ in range(2):
+        # The normal matrix J^T W J (its upper triangle) and J^T W e, summed over the faces;
+        # J's rows: d alpha / d s = (0, 0, 1), d r / d s = (ca, sa, q), q = -sa x + ca y.
+        nxx = nxy = nyy = nxt = nyt = ntt = gx = gy = gt = 0.0
+        for offset, alpha_seen, radius_seen, waa, war, wrr in faces:
+            alpha = yaw + offset
+            ca, sa = math.cos(alpha), math.sin(alpha)
+            q = ca * y - sa * x
+            error_alpha = _wrap(alpha_seen - alpha)
+            error_radius = radius_seen - (ca * x + sa * y)
+            u = waa * error_alpha + war * error_radius
+            v = war * error_alpha + wrr * error_radius
+            nxx += wrr * ca * ca
+            nxy += wrr * ca * sa
+            nyy += wrr * sa * sa
+            nxt += (war + wrr * q) * ca
+            nyt += (war + wrr * q) * sa
+            ntt += waa + 2.0 * war * q + wrr * q * q
+            gx += ca * v
+            gy += sa * v
+            gt += u + q * v
+        covariance = _inverse3([[nxx, nxy, nxt], [nxy, nyy, nyt], [nxt, nyt, ntt]])
+        (pxx, pxy, pxt), (_, pyy, pyt), (_, _, ptt) = covariance
+        x += pxx * gx + pxy * gy + pxt * gt
+        y += pxy * gx + pyy * gy + pyt * gt
+        yaw += pxt * gx + pyt * gy + ptt * gt
+    return np.array([x, y, _wrap(yaw)]), np.array(covariance)
+
+
+def _wrap(angle_rad: float) -> float:
+    """Return a scalar angle wrapped into [-pi, pi]."""
+    return math.remainder(angle_rad, 2.0 * math.pi)
+
+
+def _inverse3(matrix: list) -> list:
+    """Return the inverse of a 3x3 matrix (lists of floats) by its adjugate."""
+    (a, b, c), (d, e, f), (g, h, i) = matrix
+    cofactors = [[e * i - f * h, c * h - b * i, b * f - c * e],
+                 [f * g - d * i, a * i - c * g, c * d - a * f],
+                 [d * h - e * g, b * g - a * h, a * e - b * d]]
+    det = a * cofactors[0][0] + b * cofactors[1][0] + c * cofactors[2][0]
+    return [[value / det for value in row] for row in cofactors]
+
+
 def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape) -> List[DockPose]:
     """
     Return every corner of a scan that has the dock's shape, as a dock pose (eq. D1-D3).
@@ -166,7 +246,8 @@ def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape) -> Li
     and at most ``face_shortfall_m`` plus one return spacing shorter (the edge lies between
     the last return on the face and the next; the extraction may leave a few returns by a
     dock's edge out). Which wall is the right face follows from the side of the apex frame
-    its outer end lies on, not from the scan order (the seam of a turn).
+    its outer end lies on, not from the scan order (the seam of a turn). The pose is
+    :func:`fit_apex`'s, moved to the reference point (:func:`reference_pose`).
 
     :param segments: the scan's segments
     :param corners: the scan's corners (their segment indices point into ``segments``)
@@ -187,7 +268,8 @@ def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape) -> Li
         apex = corners.xy_m[k]
         faces = [_seen_face(segments, int(wall), apex, yaw)
                  for wall in (corners.first_segment[k], corners.second_segment[k])]
-        (right_side, right, right_step), (left_side, left, left_step) = sorted(faces)
+        ((right_side, right, right_step, right_wall),
+         (left_side, left, left_step, left_wall)) = sorted(faces)
         if not right_side < 0.0 < left_side:
             continue
         misfits = [_face_misfit(right, right_step, shape.right_face_m, shape),
@@ -195,22 +277,28 @@ def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape) -> Li
         if max(misfits) > 1.0:
             continue
         misfit = max(*misfits, angle_error[k] / max(shape.angle_tolerance_rad, 1e-12))
-        pose, covariance = reference_pose(apex, yaw, corners.covariance[k], shape)
+        apex_pose, apex_covariance = fit_apex(segments, right_wall, left_wall, apex, yaw, shape)
+        pose, covariance = reference_pose(apex_pose[:2], float(apex_pose[2]), apex_covariance,
+                                          shape)
         docks.append(DockPose(float(pose[0]), float(pose[1]), float(pose[2]), covariance,
                               float(misfit)))
     return sorted(docks, key=lambda dock: dock.misfit)
 
 
 def _seen_face(segments: SegmentSet, wall: int, apex: np.ndarray,
-               yaw_rad: float) -> Tuple[float, float, float]:
-    """Return a wall's outer end's side (+ left) in the apex frame, its length, its spacing."""
-    start, end = segments.start_xy_m[wall], segments.end_xy_m[wall]
-    to_start, to_end = start - apex, end - apex
-    start_m, end_m = math.hypot(*to_start), math.hypot(*to_end)
-    outer, length = (to_start, start_m) if start_m > end_m else (to_end, end_m)
-    side = math.cos(yaw_rad) * outer[1] - math.sin(yaw_rad) * outer[0]
-    spacing = math.hypot(*(end - start)) / max(int(segments.num_points[wall]) - 1, 1)
-    return side, length, spacing
+               yaw_rad: float) -> Tuple[float, float, float, int]:
+    """Return a wall's outer end's side (+ left) in the apex frame, length, spacing, index."""
+    (start_x, start_y), (end_x, end_y) = segments.start_xy_m[wall].tolist(), segments.end_xy_m[
+        wall].tolist()
+    apex_x, apex_y = apex.tolist()
+    start_m = math.hypot(start_x - apex_x, start_y - apex_y)
+    end_m = math.hypot(end_x - apex_x, end_y - apex_y)
+    outer_x, outer_y, length = ((start_x, start_y, start_m) if start_m > end_m
+                                else (end_x, end_y, end_m))
+    side = math.cos(yaw_rad) * (outer_y - apex_y) - math.sin(yaw_rad) * (outer_x - apex_x)
+    spacing = math.hypot(end_x - start_x, end_y - start_y) / max(
+        int(segments.num_points[wall]) - 1, 1)
+    return side, length, spacing, wall
 
 
 def _face_misfit(seen_m: float, spacing_m: float, face_m: float, shape: DockShape) -> float:
@@ -282,13 +370,14 @@ def pose_chi2(new: DockPose, old: DockPose, elapsed_s: float, settings: TrackSet
     :param settings: the motion allowed
     :return: chi2 (3 dof)
     """
-    difference = new.vector - old.vector
-    difference[2] = wrap_angle(difference[2])
-    step_m = settings.max_speed_m_s * elapsed_s
-    turn_rad = settings.max_turn_rate_rad_s * elapsed_s
-    innovation = new.covariance + old.covariance + np.diag([step_m ** 2, step_m ** 2,
-                                                            turn_rad ** 2])
-    return float(difference @ np.linalg.solve(innovation, difference))
+    step2 = (settings.max_speed_m_s * elapsed_s) ** 2
+    turn2 = (settings.max_turn_rate_rad_s * elapsed_s) ** 2
+    innovation = (new.covariance + old.covariance).tolist()
+    for k, allowed in enumerate((step2, step2, turn2)):
+        innovation[k][k] += allowed
+    difference = (new.x_m - old.x_m, new.y_m - old.y_m, _wrap(new.yaw_rad - old.yaw_rad))
+    inverse = _inverse3(innovation)
+    return sum(difference[i] * inverse[i][k] * difference[k] for i in range(3) for k in range(3))
 
 
 def _follow(track: Optional[Track], candidates: List[DockPose], stamp_s: float,

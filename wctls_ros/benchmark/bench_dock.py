@@ -12,7 +12,8 @@ Measure the dock detector (wctls_ros.frontend.dock): accuracy, NEES, detection, 
    at -60 and +60 deg in its scan): per distance and angle the median position and yaw error
    of the reported docks against the truth, their mean NEES (3 dof), and the share of the scans
    with the dock fully in view (every face unoccluded and 12 beams wide or more) that report
-   it. A line from which the dock cannot be fully in view (a face edge-on) is skipped.
+   it: all of them, and those after the tracker's first report (its confirmation scans left
+   out). A line from which the dock cannot be fully in view (a face edge-on) is skipped.
 2. False docks: simulated rooms whose corners have the dock's angle (a hexagonal room, 120 deg
    inside corners of 1.5 m walls; a V of 120 deg with 0.6 and 0.3 m faces), the four bundled
    floor plans without a dock (pilasters, niches, chamfers, columns, clutter; five poses each)
@@ -105,12 +106,11 @@ def accuracy(config, count):
             APEX + SHAPE.left_face_m * np.array([-math.cos(half), math.sin(half)]))
     _, increment, _ = full_turn_bearings()
     rng = np.random.default_rng(46)
-    print('distance m | view deg | bearings deg | in view | detected % | median error mm | '
-          'median yaw error deg | mean NEES (3 dof)')
-    summary = {}
+    print('distance m | view deg | bearings deg | in view | detected % | once confirmed % | '
+          'median error mm | median yaw error deg | mean NEES (3 dof)')
     for distance in DISTANCES_M:
         for view in VIEWS_DEG:
-            in_view = detected = 0
+            in_view = detected = in_view_after = detected_after = 0
             errors, yaw_errors, nees = [], [], []
             bearings = BEARINGS_DEG.get((distance, view), (0,))
             for bearing in bearings:
@@ -125,29 +125,32 @@ def accuracy(config, count):
                 if not fully_in_view(Scene.of_walls(plan.scene(pose).walls_m), faces,
                                      increment):
                     continue
-                state = TrackerState()
+                state, confirmed = TrackerState(), False
                 for t, (scene, features, _) in enumerate(
                         run_scans(plan, pose, count, config, rng, walk_time_s=rng.uniform(0, 3))):
                     state, report = track_dock(
                         state, find_docks(features.segments, features.corners, SHAPE),
                         SCAN_PERIOD_S * t, TrackSettings())
+                    # The scans after the tracker's first report: the steady rate.
+                    after, confirmed = confirmed, confirmed or report is not None
                     if not fully_in_view(scene, faces, increment):
                         continue
                     in_view += 1
+                    in_view_after += after
                     if report is None:
                         continue
                     detected += 1
+                    detected_after += after
                     errors.append(1e3 * math.hypot(*(report.vector[:2] - truth[:2])))
                     yaw_errors.append(abs(math.degrees(wrap_angle(report.yaw_rad - truth[2]))))
                     nees.append(nees3(report, truth))
             rate = 100.0 * detected / in_view if in_view else math.nan
-            summary[(distance, view)] = (in_view, detected, errors, yaw_errors, nees)
+            steady = 100.0 * detected_after / in_view_after if in_view_after else math.nan
             if not in_view:
                 continue
             print(f'{distance:10.1f} | {view:8d} | {",".join(map(str, bearings)):>12} | '
-                  f'{in_view:7d} | {rate:10.1f} | {_median(errors):15.1f} | '
+                  f'{in_view:7d} | {rate:10.1f} | {steady:16.1f} | {_median(errors):15.1f} | '
                   f'{_median(yaw_errors):20.2f} | {_mean(nees):6.2f}', flush=True)
-    return summary
 
 
 def _median(values):
@@ -176,10 +179,10 @@ def look_alikes(config, count):
     }
     for name in BUNDLED_PLANS:
         x, y, _ = load_floor_plan(name).sensor_pose
-        rooms[f'{name} (no dock)'] = ({'name': name, 'base': name}, [
-            (x + dx, y + dy, yaw) for dx, dy, yaw in ((0.0, 0.0, 0.0), (0.8, 0.3, 1.0),
-                                                     (-0.8, -0.3, 2.0), (1.5, 0.2, -1.0),
-                                                     (-1.2, 0.4, 3.0))])
+        offsets = ((0.0, 0.0, 0.0), (0.8, 0.3, 1.0), (-0.8, -0.3, 2.0), (1.5, 0.2, -1.0),
+                   (-1.2, 0.4, 3.0))
+        rooms[f'{name} (no dock)'] = ({'name': name, 'base': name},
+                                      [(x + dx, y + dy, yaw) for dx, dy, yaw in offsets])
     rng = np.random.default_rng(7)
     for name, (spec, poses) in rooms.items():
         plan = floor_plan_from_dict(spec)

@@ -7,8 +7,8 @@ import math
 
 import numpy as np
 import pytest
-from wctls_ros.core import extract_features
-from wctls_ros.frontend.dock import (DockPose, DockShape, find_docks, pose_chi2,
+from wctls_ros.core import extract_features, SegmentSet
+from wctls_ros.frontend.dock import (DockPose, DockShape, find_docks, fit_apex, pose_chi2,
                                      reference_pose, track_dock, TrackerState, TrackSettings,
                                      wrap_angle)
 from wctls_ros.params import defaults, FEATURE_NODE, feature_settings
@@ -73,6 +73,56 @@ def test_the_reference_pose_covariance_is_the_jacobian_of_finite_differences():
     np.testing.assert_allclose(propagated, jacobian @ jacobian.T, rtol=1e-7, atol=1e-9)
     # The reference point moves with the apex frame: not a plain offset.
     assert not np.allclose(jacobian, np.eye(3), atol=0.01)
+
+
+def face_lines(apex, yaw, shape):
+    """Return the exact (angle, radius) lines of the right and left faces of a dock."""
+    half = shape.opening_angle_rad / 2.0
+    lines = []
+    for side in (-1.0, 1.0):
+        direction = np.array([-math.cos(half), side * math.sin(half)])
+        c, s = math.cos(yaw), math.sin(yaw)
+        u = np.array([c * direction[0] - s * direction[1], s * direction[0] + c * direction[1]])
+        normal = np.array([-u[1], u[0]])
+        normal = normal if normal @ apex > 0 else -normal
+        lines.append((math.atan2(normal[1], normal[0]), float(normal @ apex)))
+    return np.array(lines)
+
+
+def two_segments(lines, covariances):
+    """Return a SegmentSet of two segments with the given lines (the fit reads no more)."""
+    empty = SegmentSet.empty()
+    fields = {name: np.zeros((2,) + getattr(empty, name).shape[1:],
+                             getattr(empty, name).dtype) for name in empty.__dataclass_fields__}
+    fields.update(angle_rad=lines[:, 0], radius_m=lines[:, 1], covariance=covariances)
+    return SegmentSet(**fields)
+
+
+def test_the_apex_fit_is_exact_and_its_covariance_that_of_finite_differences():
+    shape = DockShape()
+    apex, yaw = np.array([1.0, 0.2]), 0.3
+    lines = face_lines(apex, yaw, shape)
+    covariances = np.array([[[4e-4, 1e-5], [1e-5, 9e-5]], [[9e-4, -2e-5], [-2e-5, 4e-5]]])
+    # From a start off the truth, the fit lands on it; its covariance is that of the last
+    # iterate, a tenth of a millimetre from the truth.
+    fitted, off_start = fit_apex(two_segments(lines, covariances), 0, 1, apex + [0.01, -0.01],
+                                 yaw + 0.02, shape)
+    np.testing.assert_allclose(fitted, [*apex, yaw], atol=1e-9)
+    _, covariance = fit_apex(two_segments(lines, covariances), 0, 1, apex, yaw, shape)
+    np.testing.assert_allclose(off_start, covariance, rtol=1e-2)
+    # A least-squares fit's covariance is K R K^T, K its sensitivity to the measured lines.
+    step, columns = 1e-7, []
+    for k in range(4):
+        moved = [lines.copy(), lines.copy()]
+        moved[0].flat[k] += step
+        moved[1].flat[k] -= step
+        plus, minus = (fit_apex(two_segments(m, covariances), 0, 1, apex, yaw, shape)[0]
+                       for m in moved)
+        columns.append((plus - minus) / (2 * step))
+    sensitivity = np.array(columns).T
+    measured = np.zeros((4, 4))
+    measured[:2, :2], measured[2:, 2:] = covariances
+    np.testing.assert_allclose(covariance, sensitivity @ measured @ sensitivity.T, rtol=1e-6)
 
 
 def test_a_dock_at_one_metre_is_found_with_an_honest_covariance():

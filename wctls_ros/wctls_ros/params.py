@@ -20,7 +20,7 @@ import math
 import pathlib
 import re
 import sys
-from typing import Callable, Dict, NamedTuple, Optional, Tuple, Union
+from typing import Any, Callable, Dict, NamedTuple, Optional, Tuple, Union
 
 import yaml
 
@@ -377,17 +377,17 @@ def dock_settings(values: Dict[str, Value]) -> Optional[DockSettings]:
     """
     if not values[DOCK_ENABLED]:
         return None
-    checked = {p.name: p.check(values[p.name]) for p in DOCK_PARAMETERS}
-    shape = dict(
-        right_face_m=checked['dock_right_face_m'], left_face_m=checked['dock_left_face_m'],
-        opening_angle_rad=math.radians(checked['dock_opening_angle_deg']),
-        face_tolerance_m=checked['dock_face_tolerance_m'],
-        face_shortfall_m=checked['dock_face_shortfall_m'],
-        angle_tolerance_rad=math.radians(checked['dock_angle_tolerance_deg']),
-        reference_xy_m=(checked['dock_reference_x_m'], checked['dock_reference_y_m']),
-        reference_yaw_rad=math.radians(checked['dock_reference_yaw_deg']))
+    # Each value is of its parameter's type once checked (bool, int or float here).
+    checked: Dict[str, Any] = {p.name: p.check(values[p.name]) for p in DOCK_PARAMETERS}
     try:
-        dock = DockShape(**shape)
+        dock = DockShape(
+            right_face_m=checked['dock_right_face_m'], left_face_m=checked['dock_left_face_m'],
+            opening_angle_rad=math.radians(checked['dock_opening_angle_deg']),
+            face_tolerance_m=checked['dock_face_tolerance_m'],
+            face_shortfall_m=checked['dock_face_shortfall_m'],
+            angle_tolerance_rad=math.radians(checked['dock_angle_tolerance_deg']),
+            reference_xy_m=(checked['dock_reference_x_m'], checked['dock_reference_y_m']),
+            reference_yaw_rad=math.radians(checked['dock_reference_yaw_deg']))
     except ValueError as error:          # the dock's own checks (shape_errors)
         raise ConfigError(f'the dock parameters describe no usable dock: {error}') from error
     tracking = TrackSettings(

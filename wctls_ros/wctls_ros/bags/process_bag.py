@@ -52,7 +52,7 @@ from ..conversions import (corner_array, dock_pose_messages, laser_scan, line_se
                            marker_array, MessageTypes, scan_features)
 from ..core import CornerSet, line_landmarks, METHODS, SegmentSet, start
 from ..frontend.dock import find_docks, track_dock, TrackerState
-from ..params import (ConfigError, dock_settings, DOCK_ENABLED, DockSettings, feature_settings,
+from ..params import (ConfigError, DOCK_ENABLED, dock_settings, DockSettings, feature_settings,
                       load_parameters, SENSOR)
 from ..sensors import DEFAULT_SENSOR, sensor_presets
 

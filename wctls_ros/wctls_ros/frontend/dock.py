@@ -12,9 +12,9 @@ its pose is the dock frame: origin at the apex, x along the bisector away from t
 side (the way a robot docking forwards faces), y to the left, moved to a stated reference
 point. The apex frame is fitted to the corner's two walls knowing the dock's opening angle,
 with the covariance of the fit from the walls' own, and moved to the reference point with it
-(docs/docking.md, eq. D1-D3). :func:`track_dock` keeps the candidates that agree with the last ones (a chi2 gate
-over the pose difference, with the motion allowed in between, eq. D4) and confirms a dock
-only after a few agreeing scans.
+(docs/docking.md, eq. D1-D3). :func:`track_dock` keeps the candidates that agree with the
+last ones (a chi2 gate over the pose difference, with the motion allowed in between, eq. D4)
+and confirms a dock only after a few agreeing scans.
 
 Everything is in the scan's frame: m, rad. Pure numpy; no ROS.
 """

@@ -25,7 +25,8 @@ def dock_outline(shape, apex=APEX):
     half = shape.opening_angle_rad / 2.0
     right = apex + shape.right_face_m * np.array([-math.cos(half), -math.sin(half)])
     left = apex + shape.left_face_m * np.array([-math.cos(half), math.sin(half)])
-    return [right.tolist(), apex.tolist(), left.tolist(), [4.5, left[1]], [4.5, right[1]]]
+    return [right.tolist(), apex.tolist(), left.tolist(), [4.5, float(left[1])],
+            [4.5, float(right[1])]]
 
 
 def plan_with(outlines, room=ROOM):

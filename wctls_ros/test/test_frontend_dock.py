@@ -126,6 +126,15 @@ def test_the_apex_fit_is_exact_and_its_covariance_that_of_finite_differences():
     np.testing.assert_allclose(covariance, sensitivity @ measured @ sensitivity.T, rtol=1e-6)
 
 
+@pytest.mark.parametrize('bad', [0.0, math.nan, -1e-4])
+def test_lines_without_a_usable_covariance_give_no_pose_rather_than_a_nan(bad):
+    shape = DockShape()
+    apex, yaw = np.array([1.0, 0.2]), 0.3
+    covariances = np.array([[[4e-4, 0.0], [0.0, 9e-5]], [[bad, 0.0], [0.0, bad]]])
+    assert fit_apex(two_segments(face_lines(apex, yaw, shape), covariances), 0, 1, apex, yaw,
+                    shape) is None
+
+
 def test_a_dock_at_one_metre_is_found_with_an_honest_covariance():
     shape = DockShape(reference_xy_m=(-0.1, 0.0))
     plan = plan_with([dock_outline(shape)])

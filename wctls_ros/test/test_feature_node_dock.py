@@ -93,6 +93,22 @@ def test_a_confirmed_dock_is_published_with_the_scan_header_and_its_covariance(
         assert np.all(np.linalg.eigvalsh(xy_yaw) > 0)
 
 
+def test_the_dock_is_drawn_in_the_markers_only_while_it_is_seen(ros_context, executor):
+    harness = DockHarness(ros_context, executor, DOCKING)
+    harness.feed(dock_scans(6))
+    arrows = [m for array in harness.received['markers'] for m in array.markers
+              if m.ns == 'dock']
+    assert harness.poses and len(arrows) == len(harness.poses)
+    for arrow, pose in zip(arrows, harness.poses):
+        assert arrow.type == arrow.ARROW and arrow.header == pose.header
+        assert arrow.pose == pose.pose
+    harness.call('stop')
+    drawn = len(arrows)
+    harness.feed(dock_scans(3, seed=1))
+    assert drawn == len([m for array in harness.received['markers'] for m in array.markers
+                         if m.ns == 'dock'])
+
+
 def test_the_services_stop_start_and_toggle_the_detection(ros_context, executor):
     harness = DockHarness(ros_context, executor, DOCKING)
     harness.feed(dock_scans(6))

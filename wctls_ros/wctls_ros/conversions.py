@@ -494,3 +494,23 @@ def dock_pose_messages(dock: DockPose, header, types: Optional[MessageTypes] = N
     return (types.PoseStamped(header=header, pose=pose),
             types.PoseWithCovarianceStamped(header=header, pose=types.PoseWithCovariance(
                 pose=pose, covariance=covariance)))
+
+
+def dock_marker(dock: DockPose, header, types: Optional[MessageTypes] = None):
+    """
+    Draw a dock detection as an arrow along its x axis, in a MarkerArray of its own.
+
+    Published after the scan's features, whose array starts with DELETEALL: the arrow shows
+    until the next scan's features, so only while the dock is seen (namespace ``dock``).
+
+    :param dock: the detection, in the scan's frame
+    :param header: the scan's header, a ``types.Header`` (shared, not copied)
+    :param types: the message classes to build with (None: rclpy's)
+    :return: the markers
+    """
+    types = types or rclpy_types()
+    pose = dock_pose_messages(dock, header, types)[0].pose
+    return types.MarkerArray(markers=[types.Marker(
+        **_unused_marker_fields(types), header=header, action=types.Marker.ADD, ns='dock', id=0,
+        type=types.Marker.ARROW, pose=pose, scale=types.Vector3(x=0.3, y=0.03, z=0.03),
+        color=types.ColorRGBA(r=0.6, g=0.2, b=0.8, a=1.0), points=[], text='')])

@@ -48,9 +48,9 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 from wctls_msgs.msg import CornerArray, LineSegmentArray
 
-from .conversions import (copy_header, corner_array, dock_pose_messages, line_segment_array,
-                          marker_array, MessageTypes, mismatched_types, rclpy_types,
-                          scan_features, typestore)
+from .conversions import (copy_header, corner_array, dock_marker, dock_pose_messages,
+                          line_segment_array, marker_array, MessageTypes, mismatched_types,
+                          rclpy_types, scan_features, typestore)
 from .core import (CoreStatus, CornerSet, Features, line_landmarks, SegmentSet,
                    start as start_core, status as core_status)
 from .extras import missing_extra
@@ -416,6 +416,8 @@ class FeatureNode(LifecycleNode):
         for publisher, message in zip(self._dock_publishers,
                                       dock_pose_messages(dock, header, types)):
             publisher.publish(types.serialize(message))
+        if self._publish_markers and self._markers.get_subscription_count():
+            self._markers.publish(types.serialize(dock_marker(dock, header, types)))
         self._docks_published += 1
 
     def _publish_diagnostics(self):

@@ -167,3 +167,24 @@ def test_the_summary_explains_missing_corner_arrays_and_corners_beyond_those_in_
         1, 1, 1]                                     # before, at the end, skipped
     assert 'more corners (4) than the 2 true corners in view. Of the 2 corners' in notes[1]
     assert notes[1].endswith('thin evidence): 1; false: 1.')
+
+
+def test_the_dock_demo_records_and_summarises_the_dock_poses(tmp_path):
+    out = tmp_path / 'demo'
+    result = subprocess.run([str(installed_executable('demo')), '--seconds', '3', '--dock',
+                             '--out', str(out)], capture_output=True, text=True, timeout=180,
+                            env=own_domain())
+    assert result.returncode == 0, result.stdout + result.stderr
+    from rosbags.highlevel import AnyReader
+    with AnyReader([out / 'bag']) as bag:
+        counts = {topic: info.msgcount for topic, info in bag.topics.items()}
+    assert counts.get('/detected_dock_pose_with_covariance', 0) >= 10, counts
+    table = (out / 'summary.md').read_text().split('\n\n')[0]
+    rows = dict(line.strip('|').split('|')[:2] for line in table.splitlines()[2:])
+    rows = {name.strip(): value.strip() for name, value in rows.items()}
+    median_mm, median_deg = (float(v) for v in rows[
+        'dock error against the truth (median mm, deg)'].split(','))
+    # The example dock 1 m ahead, the shipped generic noise model on the emulated S1.
+    assert median_mm < 20.0 and median_deg < 3.0, rows
+    assert 0.5 < float(rows['dock NEES against the truth (mean; 3 = calibrated)']) < 9.0, rows
+    assert (out / 'dock_plan.yaml').is_file() and not leftovers(out)

@@ -8,7 +8,9 @@ Starts an RPLIDAR emulator (the S1 unless ``--model`` says another) on a pseudo-
 (streaming a simulated floor plan), rplidar_node reading it, and feature_node extracting
 corners, each as its own process like ``ros2 run`` would; records ``scan``, ``corners``,
 ``lines`` and ``markers`` into an mcap bag; then prints a table (corners per scan, their sigmas,
-their error against the simulated truth, latency) and draws one scan.
+their error against the simulated truth, latency) and draws one scan. With ``--dock``, the
+example dock stands 1 m in front of the sensor and feature_node looks for it: its poses are
+recorded too, and the table and the figure show them against the truth.
 
 Sealed: its processes talk on a ROS domain of their own, discovered on this machine only,
 whatever ROS_DOMAIN_ID and the DDS settings of the environment say, so that its emulated scans
@@ -26,6 +28,7 @@ import argparse
 import ctypes
 from dataclasses import dataclass, field
 import functools
+import math
 import os
 import pathlib
 import random
@@ -35,16 +38,18 @@ import sys
 import textwrap
 import threading
 import time
-from typing import Dict, List
+from typing import Dict, List, Optional
 
 import numpy as np
 from wctls_ros.bags import BagWriter
 from wctls_ros.cli import bounded, Parser, USER_ERROR, UserError
 from wctls_ros.core import METHODS, nees
+from wctls_ros.frontend.dock import DockShape, wrap_angle
 from wctls_ros.output_folders import claim, mark, remove_entries
 from wctls_ros.params import feature_settings, load_parameters
 from wctls_ros.stop_signals import raise_stopped, raising, SIGNALS, Stopped
 from wctls_rplidar.emulator.device import EMULATED_MODELS
+import yaml
 
 from .simulation import full_turn_bearings, load_floor_plan, S1_BEAMS_PER_TURN
 from .simulation.visibility import visible_corners
@@ -56,7 +61,11 @@ from .simulation.visibility import visible_corners
 MATCH_RADIUS_M = 0.1
 STOP_TIMEOUT_S = 10.0
 # What the demo writes into its output folder.
-OUTPUTS = ('bag', 'logs', 'scan.png', 'summary.md', 'ttyS1')
+OUTPUTS = ('bag', 'logs', 'scan.png', 'summary.md', 'ttyS1', 'dock_plan.yaml')
+# With --dock: the example dock's apex this far in front of the sensor, m, and its body's depth
+# behind the apex, m.
+DOCK_DISTANCE_M = 1.0
+DOCK_DEPTH_M = 0.1
 # Its ROS domain is drawn from these (ROS 2's usable ids on Linux), never the environment's.
 DOMAIN_IDS = range(1, 102)
 # Settings that could take the demo's traffic off this machine or into a live system:
@@ -77,6 +86,7 @@ class Recording:
 
     scans: Dict[int, tuple] = field(default_factory=dict)    # stamp -> (receive time, msg)
     corners: List[tuple] = field(default_factory=list)       # (receive time, CornerArray)
+    docks: List[tuple] = field(default_factory=list)   # (receive time, PoseWithCovarianceStamped)
     stopped_by: int = 0                 # the signal that ended the recording early, if any
 
 
@@ -170,7 +180,7 @@ def _wait_for(path: pathlib.Path, process: subprocess.Popen, timeout_s: float) -
         time.sleep(0.05)
 
 
-def record(bag_path: pathlib.Path, seconds: float) -> Recording:
+def record(bag_path: pathlib.Path, seconds: float, dock: bool = False) -> Recording:
     """
     Record the demo's topics into an mcap bag for ``seconds`` once features flow.
 
@@ -179,6 +189,7 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
 
     :param bag_path: the bag folder to write
     :param seconds: how long to record once features flow, s
+    :param dock: also record the dock's poses (detected_dock_pose_with_covariance)
     :return: what was seen, for the summary (``stopped_by`` set on a stop signal)
     """
     from diagnostic_msgs.msg import DiagnosticArray
@@ -220,6 +231,8 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
                     seen.scans[stamp] = (now, message)
                 elif topic == '/corners':
                     seen.corners.append((now, message))
+                elif topic == DOCK_TOPIC:
+                    seen.docks.append((now, message))
 
             node.create_subscription(LaserScan, 'scan', lambda m: keep('/scan', m),
                                      qos_profile_sensor_data)
@@ -227,6 +240,10 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
                                 ('markers', MarkerArray), ('landmarks', LandmarkArray),
                                 ('landmark_markers', MarkerArray)):
                 node.create_subscription(kind, topic, lambda m, t=topic: keep(f'/{t}', m), 10)
+            if dock:
+                from geometry_msgs.msg import PoseWithCovarianceStamped
+                node.create_subscription(PoseWithCovarianceStamped, DOCK_TOPIC[1:],
+                                         lambda m: keep(DOCK_TOPIC, m), 10)
             settled = threading.Event()
 
             def on_diagnostics(array):
@@ -260,6 +277,65 @@ def record(bag_path: pathlib.Path, seconds: float) -> Recording:
             if handler is not None:                # None: not installed from Python
                 signal.signal(number, handler)
     return seen
+
+
+DOCK_TOPIC = '/detected_dock_pose_with_covariance'
+
+
+def dock_plan(floor_plan: str, path: pathlib.Path, shape: DockShape = DockShape()) -> np.ndarray:
+    """
+    Write a floor plan with the example dock standing in front of the plan's sensor.
+
+    :param floor_plan: the plan's name or YAML path (its base)
+    :param path: the plan file to write
+    :param shape: the dock
+    :return: the dock's true pose in the laser frame (x m, y m, yaw rad), shape (3,)
+    """
+    base = (str(pathlib.Path(floor_plan).resolve()) if pathlib.Path(floor_plan).is_file()
+            else floor_plan)
+    x, y, yaw = load_floor_plan(floor_plan).sensor_pose
+    half = 0.5 * shape.opening_angle_rad
+    # The dock frame: x along the sensor's heading (away from it), y to its left.
+    outline = [(-shape.right_face_m * math.cos(half), -shape.right_face_m * math.sin(half)),
+               (0.0, 0.0),
+               (-shape.left_face_m * math.cos(half), shape.left_face_m * math.sin(half)),
+               (DOCK_DEPTH_M, shape.left_face_m * math.sin(half)),
+               (DOCK_DEPTH_M, -shape.right_face_m * math.sin(half))]
+    c, s = math.cos(yaw), math.sin(yaw)
+    apex = (x + DOCK_DISTANCE_M * c, y + DOCK_DISTANCE_M * s)
+    points = [[apex[0] + c * u - s * v, apex[1] + s * u + c * v] for u, v in outline]
+    spec = {'name': 'demo_dock', 'base': base,
+            'polylines': [{'closed': True, 'points': points}]}
+    path.write_text(yaml.safe_dump(spec))
+    return np.array([DOCK_DISTANCE_M, 0.0, 0.0])
+
+
+def dock_rows(seen: Recording, truth: np.ndarray) -> list:
+    """
+    Return the table's rows of the dock: poses published, their error and NEES.
+
+    :param seen: the recording
+    :param truth: the dock's true pose in the laser frame (x m, y m, yaw rad)
+    :return: rows (measure, value)
+    """
+    errors, yaw_errors, values = [], [], []
+    for _, message in seen.docks:
+        pose, q = message.pose.pose.position, message.pose.pose.orientation
+        error = np.array([pose.x - truth[0], pose.y - truth[1],
+                          float(wrap_angle(2.0 * math.atan2(q.z, q.w) - truth[2]))])
+        rows = np.ix_([0, 1, 5], [0, 1, 5])
+        covariance = np.array(message.pose.covariance).reshape(6, 6)[rows]
+        errors.append(1e3 * math.hypot(*error[:2]))
+        yaw_errors.append(math.degrees(abs(error[2])))
+        values.append(float(nees(error, covariance)))
+    share = 100.0 * len(seen.docks) / max(len(seen.corners), 1)
+    return [
+        ('dock poses published (per CornerArray)', f'{len(seen.docks)} ({share:.0f} %)'),
+        ('dock error against the truth (median mm, deg)',
+         f'{np.median(errors):.1f}, {np.median(yaw_errors):.2f}' if errors else '-'),
+        ('dock NEES against the truth (mean; 3 = calibrated)',
+         f'{np.mean(values):.2f}' if values else '-'),
+    ]
 
 
 def summarise(seen: Recording, truth_xy: np.ndarray, hidden_xy: np.ndarray) -> tuple:
@@ -349,7 +425,8 @@ def _notes(seen: Recording, counts: np.ndarray, in_view: int, matched: int,
     return notes
 
 
-def draw(seen: Recording, config, truth_xy: np.ndarray, path: pathlib.Path) -> None:
+def draw(seen: Recording, config, truth_xy: np.ndarray, path: pathlib.Path,
+         dock_truth: Optional[np.ndarray] = None) -> None:
     """
     Draw the scan with the median number of corners: segments, corners, ellipses x10, truth.
 
@@ -357,6 +434,8 @@ def draw(seen: Recording, config, truth_xy: np.ndarray, path: pathlib.Path) -> N
     :param config: the FeatureConfig feature_node ran with (to redraw the same features)
     :param truth_xy: true corners in the laser frame, shape (M, 2), m
     :param path: PNG to write
+    :param dock_truth: with --dock, the dock's true pose (x, y, yaw): it and the last
+        published dock pose are drawn as arrows
     """
     from wctls_ros.conversions import scan_features
     from .plotting import draw_scan_features, pyplot
@@ -371,6 +450,15 @@ def draw(seen: Recording, config, truth_xy: np.ndarray, path: pathlib.Path) -> N
     fig, ax = plt.subplots(figsize=(8.0, 5.5), dpi=90)
     draw_scan_features(ax, ranges, bearings, features)
     ax.plot(truth_xy[:, 0], truth_xy[:, 1], 'x', color='tab:green', ms=6, label='true corners')
+    if dock_truth is not None:
+        arrows = [(dock_truth, 'tab:green', 'true dock')]
+        if seen.docks:
+            pose = seen.docks[-1][1].pose.pose
+            arrows.append((np.array([pose.position.x, pose.position.y, 2.0 * math.atan2(
+                pose.orientation.z, pose.orientation.w)]), 'tab:purple', 'dock seen'))
+        for (x, y, yaw), color, label in arrows:
+            ax.arrow(x, y, 0.3 * math.cos(yaw), 0.3 * math.sin(yaw), width=0.01, color=color,
+                     label=label)
     ax.set_title(f'make demo: one emulated S1 scan, {len(features.corners)} corners '
                  f'({config.method}), 1-sigma ellipses x10', fontsize=9)
     ax.legend(fontsize=7, loc='best')
@@ -397,6 +485,10 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--model', default='s1', choices=tuple(EMULATED_MODELS),
                    help='the emulated RPLIDAR: its modes, serial rate and motor control, which '
                    'rplidar_node finds as it would on a real one (default: %(default)s)')
+    p.add_argument('--dock', action='store_true',
+                   help=f'stand the example dock (docs/docking.md) {DOCK_DISTANCE_M:g} m in '
+                   'front of the sensor; feature_node looks for it, and its poses are '
+                   'recorded and summarised')
     return p
 
 
@@ -450,7 +542,13 @@ def _run(args) -> int:
     domain = private_network(os.environ)
     tty = out.resolve() / 'ttyS1'
     # The landmark tracks too: their ids on landmarks and, as labels, on landmark_markers.
-    parameters = {'method': args.method, 'publish_landmarks': True}
+    parameters: dict = {'method': args.method, 'publish_landmarks': True}
+    floor_plan, dock_truth = args.floor_plan, None
+    if args.dock:
+        floor_plan = str(out.resolve() / 'dock_plan.yaml')
+        dock_truth = dock_plan(args.floor_plan, pathlib.Path(floor_plan))
+        plan = load_floor_plan(floor_plan)
+        parameters['dock_enabled'] = True
     config = feature_settings(
         load_parameters(_config_file('wctls_ros') / 'feature_node.yaml', overrides=parameters))[0]
     processes = Processes(out / 'logs')
@@ -459,7 +557,7 @@ def _run(args) -> int:
     try:
         emulator = processes.start('simulated_rplidar', [
             _executable('wctls_lab', 'simulated_rplidar'), '--link', str(tty), '--floor-plan',
-            args.floor_plan, '--model', args.model])
+            floor_plan, '--model', args.model])
         _wait_for(tty, emulator, 20.0)
         processes.start('rplidar_node', [
             _executable('wctls_rplidar', 'rplidar_node'), '--ros-args', '--params-file',
@@ -470,7 +568,7 @@ def _run(args) -> int:
             + [arg for k, v in parameters.items() for arg in ('-p', f'{k}:={v}')])
         print(f'demo: {args.model.upper()} emulator on {tty} -> rplidar_node -> feature_node '
               f'(ROS_DOMAIN_ID {domain}, logs in {out / "logs"})', flush=True)
-        seen = record(out / 'bag', args.seconds)
+        seen = record(out / 'bag', args.seconds, dock=args.dock)
     except Stopped as stopped:
         seen.stopped_by = stopped.signal_number
     except RuntimeError as error:
@@ -498,9 +596,11 @@ def _run(args) -> int:
     in_view = visible_corners(walls, corners, bearings)
     truth = corners[in_view]
     rows, notes = summarise(seen, truth, corners[~in_view])
+    if dock_truth is not None:
+        rows += dock_rows(seen, dock_truth)
     width = max(len(name) for name, _ in rows)
     table = '\n'.join(f'{name:<{width}}  {value}' for name, value in rows)
-    draw(seen, config, truth, out / 'scan.png')
+    draw(seen, config, truth, out / 'scan.png', dock_truth)
     (out / 'summary.md').write_text(
         '| measure | value |\n|---|---|\n'
         + '\n'.join(f'| {name} | {value} |' for name, value in rows) + '\n'

@@ -20,12 +20,14 @@ from typing import Any, Callable, Dict, Optional
 import numpy as np
 
 from .core import CornerSet, ellipse, extract_features, FeatureConfig, Features, SegmentSet
+from .frontend.dock import DockPose
 from .params import MarkerStyle
 
 # The message types the codec reads and builds.
 MESSAGE_TYPES = (
     'builtin_interfaces/msg/Duration', 'builtin_interfaces/msg/Time',
     'geometry_msgs/msg/Point', 'geometry_msgs/msg/Pose', 'geometry_msgs/msg/PoseWithCovariance',
+    'geometry_msgs/msg/PoseStamped', 'geometry_msgs/msg/PoseWithCovarianceStamped',
     'geometry_msgs/msg/Quaternion', 'geometry_msgs/msg/Vector3',
     'sensor_msgs/msg/CompressedImage', 'sensor_msgs/msg/LaserScan',
     'std_msgs/msg/ColorRGBA', 'std_msgs/msg/Header',
@@ -478,3 +480,43 @@ def marker_array(features: Features, header, style: MarkerStyle = MarkerStyle(),
                       orientation=Quaternion(x=0.0, y=0.0, z=qz, w=qw)),
             scale=Vector3(x=major_axis, y=minor_axis, z=_ELLIPSE_THICKNESS_M)))
     return types.MarkerArray(markers=markers)
+
+
+def dock_pose_messages(dock: DockPose, header, types: Optional[MessageTypes] = None) -> tuple:
+    """
+    Convert a dock detection to the PoseStamped Nav2's docking server takes, and its covariance.
+
+    :param dock: the detection, in the scan's frame
+    :param header: the scan's header, a ``types.Header`` (shared, not copied)
+    :param types: the message classes to build with (None: rclpy's)
+    :return: (PoseStamped, PoseWithCovarianceStamped), both with ``header``
+    """
+    types = types or rclpy_types()
+    half_yaw = 0.5 * dock.yaw_rad          # a turn about z: (0, 0, sin(yaw / 2), cos(yaw / 2))
+    pose = types.Pose(position=types.Point(x=dock.x_m, y=dock.y_m, z=0.0),
+                      orientation=types.Quaternion(x=0.0, y=0.0, z=math.sin(half_yaw),
+                                                   w=math.cos(half_yaw)))
+    covariance = pose_covariances(dock.covariance[None])[0]
+    return (types.PoseStamped(header=header, pose=pose),
+            types.PoseWithCovarianceStamped(header=header, pose=types.PoseWithCovariance(
+                pose=pose, covariance=covariance)))
+
+
+def dock_marker(dock: DockPose, header, types: Optional[MessageTypes] = None):
+    """
+    Draw a dock detection as an arrow along its x axis, in a MarkerArray of its own.
+
+    Published after the scan's features, whose array starts with DELETEALL: the arrow shows
+    until the next scan's features, so only while the dock is seen (namespace ``dock``).
+
+    :param dock: the detection, in the scan's frame
+    :param header: the scan's header, a ``types.Header`` (shared, not copied)
+    :param types: the message classes to build with (None: rclpy's)
+    :return: the markers
+    """
+    types = types or rclpy_types()
+    pose = dock_pose_messages(dock, header, types)[0].pose
+    return types.MarkerArray(markers=[types.Marker(
+        **unused_marker_fields(types), header=header, action=types.Marker.ADD, ns='dock', id=0,
+        type=types.Marker.ARROW, pose=pose, scale=types.Vector3(x=0.3, y=0.03, z=0.03),
+        color=types.ColorRGBA(r=0.6, g=0.2, b=0.8, a=1.0), points=[], text='')])

@@ -23,6 +23,13 @@ The feature pipeline starts at once: the numpy one, while a thread loads the com
 numba's cache (about a second) or, on the first start on a machine, has it compiled in another
 process (about 15 s); the compiled one takes over when ready (:mod:`wctls_ros.core.runtime`).
 Each step is logged.
+
+A lifecycle node (rclpy.lifecycle), like rplidar_node: configure reads and checks the
+parameters and creates the publishers, activate subscribes ``scan`` and publishes, deactivate
+unsubscribes (nothing is published), cleanup frees the publishers, shutdown (from any state)
+frees everything. ``/diagnostics`` is published in every state. With ``autostart`` (the
+default) the node configures and activates itself at start, so a plain ``ros2 run`` and the
+launch files work at once; without it a lifecycle manager drives the transitions.
 """
 
 from dataclasses import dataclass, field
@@ -31,23 +38,27 @@ import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
+from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 from wctls_msgs.msg import CornerArray, LandmarkArray, LineSegmentArray
 
-from .conversions import (copy_header, corner_array, line_segment_array, marker_array,
-                          MessageTypes, mismatched_types, rclpy_types, scan_features, typestore)
+from .conversions import (copy_header, corner_array, dock_marker, dock_pose_messages,
+                          line_segment_array, marker_array, MessageTypes, mismatched_types,
+                          rclpy_types, scan_features, typestore)
 from .core import (CoreStatus, CornerSet, Features, line_landmarks, SegmentSet,
                    start as start_core, status as core_status)
 from .extras import missing_extra
+from .frontend.dock import find_docks, track_dock, TrackerState
 from .landmark_messages import landmark_array, landmark_markers, LandmarkStream
 from .landmark_publishers import BridgePublishers
 from .node_main import declare_parameters, run_node
-from .params import FEATURE_NODE, feature_settings, landmark_settings
+from .params import AUTOSTART, dock_settings, FEATURE_NODE, feature_settings, landmark_settings
 
 # A throttled warning repeats at most this often, s.
 WARN_PERIOD_S = 5.0
@@ -90,45 +101,176 @@ class ScanCounters:
     seconds: list = field(default_factory=list)
 
 
-class FeatureNode(Node):
-    """Extract corners and segments with covariances from every LaserScan."""
+class FeatureNode(LifecycleNode):
+    """
+    Extract corners and segments with covariances from every LaserScan (a lifecycle node).
+
+    :param kwargs: passed to ``LifecycleNode.__init__`` (e.g. ``context``,
+        ``parameter_overrides``)
+    :raises ValueError: with ``autostart``, on parameters that make no valid configuration
+    """
 
     def __init__(self, **kwargs):
         super().__init__('feature_node', **kwargs)
         values = declare_parameters(self, FEATURE_NODE)
-        self._config, self._style, self._publish_markers = feature_settings(values)
-        self._publish_landmarks, *step_sigmas = landmark_settings(values)
-        self._landmark_stream = LandmarkStream(*step_sigmas)
-        self._landmarks = self.create_publisher(LandmarkArray, 'landmarks', 10)
-        self._landmark_markers = self.create_publisher(MarkerArray, 'landmark_markers', 10)
-        self._bridges = BridgePublishers(self, str(values['landmark_bridges']))
         # As ros2/demos do: a change is checked whole before it is accepted, applied after.
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
-        self._corners = self.create_publisher(CornerArray, 'corners', 10)
-        self._lines = self.create_publisher(LineSegmentArray, 'lines', 10)
-        self._markers = self.create_publisher(MarkerArray, 'markers', 10)
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._total, self._recent = ScanCounters(), ScanCounters()
         self._last_sequence = None
         self._frame_id = ''
+        self._configured = False
+        self._scans = None
+        self._dock = None
+        self._dock_publishers: tuple = ()
+        self._dock_services: tuple = ()
+        self._detecting = False
+        self._dock_track = TrackerState()
+        self._docks_published = 0
+        self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
+        if values[AUTOSTART]:
+            feature_settings(values)          # a bad configuration ends ros2 run: status 1
+            if self.trigger_configure() == TransitionCallbackReturn.SUCCESS:
+                self.trigger_activate()
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """
+        Read and check the parameters, create the publishers, start loading the pipeline.
+
+        :param state: the state transitioned from
+        :return: SUCCESS, or FAILURE (the reason logged) on an invalid configuration
+        """
+        try:
+            self._config, self._style, self._publish_markers = self._settings()
+            values = self._values()
+            self._dock = dock_settings(values)
+            self._publish_landmarks, *step_sigmas = landmark_settings(values)
+        except ValueError as error:
+            self.get_logger().error(f'configure failed: {error}')
+            return TransitionCallbackReturn.FAILURE
+        self._landmark_stream = LandmarkStream(*step_sigmas)
+        self._corners = self.create_lifecycle_publisher(CornerArray, 'corners', 10)
+        self._lines = self.create_lifecycle_publisher(LineSegmentArray, 'lines', 10)
+        self._markers = self.create_lifecycle_publisher(MarkerArray, 'markers', 10)
+        self._landmarks = self.create_lifecycle_publisher(LandmarkArray, 'landmarks', 10)
+        self._landmark_markers = self.create_lifecycle_publisher(MarkerArray, 'landmark_markers',
+                                                                 10)
+        self._bridges = BridgePublishers(self, str(values['landmark_bridges']))
+        if self._dock is not None:
+            self._configure_dock()
+        self._configured = True
+        # Never waits for a compile: the numpy pipeline serves until the compiled one is ready
+        # (the process's one choice: a second configure is told the same).
+        self.get_logger().info(start_core(on_change=self._on_core_change).describe())
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """
+        Subscribe to the scans and publish the features of each.
+
+        :param state: the state transitioned from
+        :return: SUCCESS
+        """
         # The scan arrives as its CDR bytes, decoded with the same classes the outputs are
         # built with (rosbags' decode in about half the time rclpy's take).
+        self._last_sequence = None
         self._scans = self.create_subscription(
             LaserScan, 'scan', self._on_scan, SCAN_QOS, raw=True,
             event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_scans_lost))
         self._types = self._message_types()
-        self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
         self.get_logger().info(f'extracting features with {self._config.method} from '
                                f'{self.resolve_topic_name("scan")}')
-        # Last, so that its thread importing numba does not slow the node's own start. Never
-        # waits for a compile: the numpy pipeline serves until the compiled one is ready.
-        self.get_logger().info(start_core(on_change=self._on_core_change).describe())
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """
+        Unsubscribe from the scans; nothing is published until activated again.
+
+        :param state: the state transitioned from
+        :return: SUCCESS
+        """
+        self._unsubscribe()
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """
+        Free the publishers; configure reads the parameters again.
+
+        :param state: the state transitioned from
+        :return: SUCCESS
+        """
+        self._free_publishers()
+        return super().on_cleanup(state)
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """
+        Unsubscribe and free the publishers, from any state.
+
+        :param state: the state transitioned from
+        :return: SUCCESS
+        """
+        self._unsubscribe()
+        self._free_publishers()
+        return super().on_shutdown(state)
+
+    def _configure_dock(self) -> None:
+        """Create the dock's publishers and the services that start and stop its detection."""
+        # Reliable, keep last 10: what opennav_docking subscribes detected_dock_pose with.
+        self._dock_publishers = (
+            self.create_lifecycle_publisher(PoseStamped, 'detected_dock_pose', 10),
+            self.create_lifecycle_publisher(PoseWithCovarianceStamped,
+                                            'detected_dock_pose_with_covariance', 10))
+        self._dock_services = tuple(
+            self.create_service(Trigger, f'~/{name}_dock_detection', callback)
+            for name, callback in (('start', self._start_detection),
+                                   ('stop', self._stop_detection),
+                                   ('toggle', self._toggle_detection)))
+        self._detecting = self._dock.detect_at_start
+        self._dock_track = TrackerState()
+
+    def _start_detection(self, request, response):
+        return self._set_detection(True, response)
+
+    def _stop_detection(self, request, response):
+        return self._set_detection(False, response)
+
+    def _toggle_detection(self, request, response):
+        # opennav_docking calls its one detector service to start and again to stop.
+        return self._set_detection(not self._detecting, response)
+
+    def _set_detection(self, on: bool, response):
+        """Turn dock detection on or off; answer a std_srvs/Trigger call."""
+        if on and not self._detecting:
+            self._dock_track = TrackerState()       # start afresh: confirm the dock again
+        self._detecting = on
+        response.success = True
+        response.message = f'dock detection {"on" if on else "off"}' + (
+            '' if self._scans is not None else ' (the node is not active: no scans yet)')
+        self.get_logger().info(response.message)
+        return response
+
+    def _unsubscribe(self) -> None:
+        scans, self._scans = self._scans, None
+        if scans is not None:
+            self.destroy_subscription(scans)
+
+    def _free_publishers(self) -> None:
+        if self._configured:
+            for publisher in (self._corners, self._lines, self._markers, self._landmarks,
+                              self._landmark_markers, *self._bridges.publishers,
+                              *self._dock_publishers):
+                self.destroy_publisher(publisher)
+            for service in self._dock_services:
+                self.destroy_service(service)
+        self._dock_publishers, self._dock_services = (), ()
+        self._configured = False
 
     def _message_types(self) -> MessageTypes:
         """Choose the classes the scan is decoded and the outputs built with: rosbags' if fit."""
         mine = (self.get_name(), self.get_namespace())
-        endpoints = [info for publisher in (self._corners, self._lines, self._markers)
+        publishers = (self._corners, self._lines, self._markers, *self._dock_publishers)
+        endpoints = [info for publisher in publishers
                      for info in self.get_publishers_info_by_topic(publisher.topic_name)]
         endpoints += self.get_subscriptions_info_by_topic(self._scans.topic_name)
         installed = {info.topic_type: str(info.topic_type_hash) for info in endpoints
@@ -141,7 +283,7 @@ class FeatureNode(Node):
                 f'{missing_extra(error) or error}')
             return rclpy_types()
         mismatched = mismatched_types(store, installed)
-        if len(installed) == 4 and not mismatched:
+        if len(installed) == 4 + len(self._dock_publishers) and not mismatched:
             return MessageTypes.from_typestore(store)
         self.get_logger().warning(
             "decoding scans and building the outputs with rclpy's message classes (slower): "
@@ -154,25 +296,33 @@ class FeatureNode(Node):
         self.get_logger().info(f'now running the {status.describe()}' if status.name == 'numba'
                                else status.describe())
 
-    def _settings(self, changes=()):
-        """Return the settings of the current parameters with ``changes`` applied (validated)."""
+    def _values(self, changes=()) -> dict:
+        """Return the current parameter values with ``changes`` applied."""
         values = {spec.name: self.get_parameter(spec.name).value for spec in FEATURE_NODE}
         values.update({p.name: p.value for p in changes if p.name in values})
-        return feature_settings(values)
+        return values
+
+    def _settings(self, changes=()):
+        """Return the settings of the current parameters with ``changes`` applied (validated)."""
+        return feature_settings(self._values(changes))
 
     def _check_parameters(self, changes) -> SetParametersResult:
         try:
             self._settings(changes)
+            dock_settings(self._values(changes))
         except (ValueError, TypeError) as error:
             return SetParametersResult(successful=False, reason=str(error))
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, changes) -> None:
-        # Takes effect on the next scan (callbacks of this node never run concurrently).
-        self._config, self._style, self._publish_markers = self._settings()
-        values = {spec.name: self.get_parameter(spec.name).value for spec in FEATURE_NODE}
-        self._publish_landmarks, *step_sigmas = landmark_settings(values)
-        self._landmark_stream.motion = LandmarkStream(*step_sigmas).motion
+        # Takes effect on the next scan (callbacks of this node never run concurrently);
+        # unconfigured, configure reads them.
+        if self._configured:
+            self._config, self._style, self._publish_markers = self._settings()
+            values = self._values()
+            self._dock = dock_settings(values)
+            self._publish_landmarks, *step_sigmas = landmark_settings(values)
+            self._landmark_stream.motion = LandmarkStream(*step_sigmas).motion
 
     @property
     def counters(self) -> ScanCounters:
@@ -272,12 +422,29 @@ class FeatureNode(Node):
             if self._publish_markers and self._markers.get_subscription_count():
                 self._markers.publish(types.serialize(
                     marker_array(features, header, self._style, types, is_landmark=is_landmark)))
+            if self._dock is not None and self._detecting:
+                self._publish_dock(features, header, types)
         except Exception:  # noqa: B902 - only a shutdown (Ctrl-C mid-callback) is expected here
             if self.context.ok():
                 raise
             return
         self._count('processed')
         self._recent.seconds.append(time.perf_counter() - started)
+
+    def _publish_dock(self, features: Features, header, types: MessageTypes) -> None:
+        """Look for the dock among the features; publish its pose once the tracker confirms it."""
+        stamp_s = header.stamp.sec + 1e-9 * header.stamp.nanosec
+        candidates = find_docks(features.segments, features.corners, self._dock.shape)
+        self._dock_track, dock = track_dock(self._dock_track, candidates, stamp_s,
+                                            self._dock.tracking)
+        if dock is None:
+            return
+        for publisher, message in zip(self._dock_publishers,
+                                      dock_pose_messages(dock, header, types)):
+            publisher.publish(types.serialize(message))
+        if self._publish_markers and self._markers.get_subscription_count():
+            self._markers.publish(types.serialize(dock_marker(dock, header, types)))
+        self._docks_published += 1
 
     def _publish_diagnostics(self):
         recent, self._recent = self._recent, ScanCounters()
@@ -289,6 +456,9 @@ class FeatureNode(Node):
                 (recent.malformed, 'dropped (malformed)'),
                 (recent.implausible_noise, 'dropped (implausible noise)'),
                 (recent.work_limited, 'over the work bound')) if count)
+        elif self._scans is None:
+            message = ('inactive: not subscribed to scans' if self._configured
+                       else 'unconfigured: not subscribed to scans')
         elif not recent.processed:
             message = 'no scans'
         seconds = recent.seconds or [0.0]
@@ -299,18 +469,21 @@ class FeatureNode(Node):
             'feature pipeline': core.name if core else 'none',
             'feature pipeline settled': 'no' if core is None or core.pending else 'yes',
             'scan topic': self.resolve_topic_name('scan'),
-            'method': self._config.method,
+            'method': self._config.method if self._configured else 'none',
             'scans processed (last period)': recent.processed,
             'scans processed': self._total.processed,
             'scans skipped (busy or lost)': self._total.skipped,
             'scans lost (DDS message-lost events)': self._total.lost,
             # Sequence gaps say nothing with several publishers on the topic (see above).
-            'scan publishers': self._scans.get_publisher_count(),
+            'scan publishers': self._scans.get_publisher_count() if self._scans else 0,
             'scans dropped (malformed)': self._total.malformed,
             'scans over the work bound': self._total.work_limited,
             'scans dropped (implausible noise)': self._total.implausible_noise,
             'features dropped (implausible covariance)': self._total.implausible_features,
             'processing time median (ms)': f'{1e3 * statistics.median(seconds):.2f}',
+            'dock detection': ('not configured' if self._dock is None
+                               else 'on' if self._detecting else 'off'),
+            'dock poses published': self._docks_published,
             'processing time max (ms)': f'{1e3 * max(seconds):.2f}',
         }
         status = DiagnosticStatus(

@@ -54,6 +54,15 @@ class BridgePublishers:
                                                         TOPICS[name][0], 10)
                             for name, classes in self._classes.items()}
 
+    @property
+    def publishers(self) -> tuple:
+        """
+        Return the bridges' rclpy publishers, which the node destroys at cleanup.
+
+        :return: one per bridge that loaded
+        """
+        return tuple(self._publishers.values())
+
     def publish(self, detections, tracked, scan_header) -> None:
         """
         Publish one scan's landmarks on every bridge.

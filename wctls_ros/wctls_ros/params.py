@@ -20,12 +20,13 @@ import math
 import pathlib
 import re
 import sys
-from typing import Callable, Dict, NamedTuple, Optional, Tuple, Union
+from typing import Any, Callable, Dict, NamedTuple, Optional, Tuple, Union
 
 import yaml
 
 from .core import FeatureConfig, METHODS
 from .core.config import field_description, field_limits, Limits
+from .frontend.dock import DockShape, TrackSettings
 from .plain_yaml import load_without_aliases
 from .sensors import DEFAULT_SENSOR, PRESET_PARAMETERS, sensor_presets
 
@@ -191,6 +192,56 @@ FEATURE_NODE = (
               'is left out with a warning', read_only=True),
 )
 
+# feature_node is a lifecycle node: whether it drives itself to active.
+AUTOSTART = 'autostart'
+FEATURE_NODE += (
+    Parameter(AUTOSTART, True, 'Configure and activate at start (a plain ros2 run extracts at '
+              'once); false waits for a lifecycle manager or launch file to drive the '
+              'transitions', read_only=True),
+)
+
+# feature_node's dock detection (wctls_ros.frontend.dock; docs/docking.md).
+DOCK_ENABLED = 'dock_enabled'
+_DOCK, _TRACK = DockShape(), TrackSettings()
+DOCK_PARAMETERS = (
+    Parameter(DOCK_ENABLED, False, 'Look for a dock in every scan and offer the services that '
+              'start and stop it; publish its pose on detected_dock_pose and '
+              'detected_dock_pose_with_covariance', read_only=True),
+    Parameter('dock_detect_at_start', True, 'Detection on from activation; false: off until '
+              'the start_dock_detection or toggle_dock_detection service turns it on',
+              read_only=True),
+    Parameter('dock_right_face_m', _DOCK.right_face_m, "Length of the dock's face on the "
+              "robot's right, apex to outer end, m", Limits(0.02, 5.0)),
+    Parameter('dock_left_face_m', _DOCK.left_face_m, "Length of the dock's face on the robot's "
+              'left, m', Limits(0.02, 5.0)),
+    Parameter('dock_opening_angle_deg', math.degrees(_DOCK.opening_angle_rad), 'Angle between '
+              "the dock's faces through the robot's side, deg: below 180 a V, above 180 a "
+              'wedge, 90 an L', Limits(1.0, 359.0)),
+    Parameter('dock_face_tolerance_m', _DOCK.face_tolerance_m, 'How much longer than its '
+              'length a seen face may be, m', Limits(0.0, 1.0)),
+    Parameter('dock_face_shortfall_m', _DOCK.face_shortfall_m, 'How much shorter a seen face '
+              'may be, beyond the spacing of its returns, m', Limits(0.0, 1.0)),
+    Parameter('dock_angle_tolerance_deg', math.degrees(_DOCK.angle_tolerance_rad), 'How much '
+              'the seen opening angle may differ, deg', Limits(0.0, 45.0)),
+    Parameter('dock_reference_x_m', 0.0, "The dock frame's origin in the apex frame (x along "
+              'the axis, away from the robot), m', Limits(-5.0, 5.0)),
+    Parameter('dock_reference_y_m', 0.0, "The dock frame's origin in the apex frame, y (left), "
+              'm', Limits(-5.0, 5.0)),
+    Parameter('dock_reference_yaw_deg', 0.0, "The dock frame's yaw in the apex frame, deg",
+              Limits(-180.0, 180.0)),
+    Parameter('dock_max_speed_m_s', _TRACK.max_speed_m_s, 'The fastest the dock may move in '
+              "the scan's frame between detections (the tracker's gate), m/s",
+              Limits(0.0, 10.0)),
+    Parameter('dock_max_turn_rate_deg_s', math.degrees(_TRACK.max_turn_rate_rad_s), 'The '
+              "fastest the dock's yaw may change between detections, deg/s",
+              Limits(0.0, 720.0)),
+    Parameter('dock_confirm_detections', _TRACK.confirm_detections, 'Agreeing detections in a '
+              'row before a dock is published', Limits(1, 100)),
+    Parameter('dock_timeout_s', _TRACK.timeout_s, 'A dock not seen for this long must be '
+              'confirmed again, s', Limits(0.01, 60.0)),
+)
+FEATURE_NODE += DOCK_PARAMETERS
+
 
 BAG_REPLAY = (
     Parameter('bag', '', 'ROS 2 bag folder (or its .mcap / .db3 file) or ROS 1 .bag file to '
@@ -282,6 +333,51 @@ def landmark_settings(values: Dict[str, Value]) -> Tuple[bool, float, float]:
     """
     return (bool(values['publish_landmarks']), float(values['landmark_step_sigma_m']),
             math.radians(float(values['landmark_step_sigma_deg'])))
+
+
+class DockSettings(NamedTuple):
+    """
+    What feature_node's dock parameters configure.
+
+    :ivar shape: the dock
+    :ivar tracking: how detections are checked against the last ones
+    :ivar detect_at_start: detection on from activation
+    """
+
+    shape: DockShape
+    tracking: TrackSettings
+    detect_at_start: bool
+
+
+def dock_settings(values: Dict[str, Value]) -> Optional[DockSettings]:
+    """
+    Build feature_node's dock settings from its parameter values.
+
+    :param values: name -> value for every parameter of FEATURE_NODE
+    :return: the settings; None when ``dock_enabled`` is false
+    :raises ConfigError: with every reason when the values describe no usable dock
+    """
+    if not values[DOCK_ENABLED]:
+        return None
+    # Each value is of its parameter's type once checked (bool, int or float here).
+    checked: Dict[str, Any] = {p.name: p.check(values[p.name]) for p in DOCK_PARAMETERS}
+    try:
+        dock = DockShape(
+            right_face_m=checked['dock_right_face_m'], left_face_m=checked['dock_left_face_m'],
+            opening_angle_rad=math.radians(checked['dock_opening_angle_deg']),
+            face_tolerance_m=checked['dock_face_tolerance_m'],
+            face_shortfall_m=checked['dock_face_shortfall_m'],
+            angle_tolerance_rad=math.radians(checked['dock_angle_tolerance_deg']),
+            reference_xy_m=(checked['dock_reference_x_m'], checked['dock_reference_y_m']),
+            reference_yaw_rad=math.radians(checked['dock_reference_yaw_deg']))
+    except ValueError as error:          # the dock's own checks (shape_errors)
+        raise ConfigError(f'the dock parameters describe no usable dock: {error}') from error
+    tracking = TrackSettings(
+        max_speed_m_s=checked['dock_max_speed_m_s'],
+        max_turn_rate_rad_s=math.radians(checked['dock_max_turn_rate_deg_s']),
+        confirm_detections=checked['dock_confirm_detections'],
+        timeout_s=checked['dock_timeout_s'])
+    return DockSettings(dock, tracking, checked['dock_detect_at_start'])
 
 
 def _flatten(parameters: dict, prefix: str = '') -> dict:

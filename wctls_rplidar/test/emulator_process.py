@@ -15,15 +15,18 @@ class EmulatorProcess:
 
     :param args: command line arguments, e.g. ``['--noiseless', '--tcp-port', '0']``
     :param startup_timeout_s: longest wait for the emulator to be ready, s
+    :param module: the emulator's module (the lab's ``wctls_lab.simulated_rplidar`` sees a
+        floor plan)
     :ivar pty: the pseudo-terminal's device path
     :ivar link: the symlink to it (None without ``--link``)
     :ivar tcp_port: the TCP port served (None without ``--tcp-port``)
     :raises RuntimeError: when it does not become ready
     """
 
-    def __init__(self, args: list = (), startup_timeout_s: float = 20.0):
+    def __init__(self, args: list = (), startup_timeout_s: float = 20.0,
+                 module: str = 'wctls_rplidar.emulator.cli'):
         self._process = subprocess.Popen(
-            [sys.executable, '-m', 'wctls_rplidar.emulator.cli', *args], stdin=subprocess.PIPE,
+            [sys.executable, '-m', module, *args], stdin=subprocess.PIPE,
             stdout=subprocess.PIPE, text=True, bufsize=1)
         self._lines = queue.Queue()
         threading.Thread(target=self._forward_lines, daemon=True).start()

@@ -17,6 +17,10 @@ every scan with the same parameters (a feature_node YAML file) and writes, with 
   folder;
 - with ``--tracks``, every scan's landmarks with their track ids (:mod:`.track_bag`): a
   wctls_msgs/LandmarkArray on ``/landmarks`` and ``landmarks.csv`` (one row per observation).
+- with ``--dock``, the dock feature_node would publish (the ``dock_*`` parameters of the config
+  file, else the example dock of docs/docking.md) on ``/detected_dock_pose`` and
+  ``/detected_dock_pose_with_covariance``, and ``dock.csv`` (one row per dock pose) beside
+  ``corners.csv``.
 
 Memory stays constant however long the bag is, and the output appears only when complete.
 """
@@ -47,11 +51,13 @@ from .bag_io import (bag_info, BagError, BagWriter, choose_scan_topic, LASER_SCA
                      typestore)
 from .track_bag import BagTracks, LANDMARKS_CSV, TrackOptions
 from ..cli import start_core
-from ..conversions import (corner_array, laser_scan, line_segment_array, marker_array,
-                           MessageTypes, scan_features)
+from ..conversions import (corner_array, dock_pose_messages, laser_scan, line_segment_array,
+                           marker_array, MessageTypes, scan_features)
 from ..core import CornerSet, line_landmarks, METHODS, SegmentSet, start
+from ..frontend.dock import find_docks, track_dock, TrackerState
 from ..frontend.tracking import detections_of, View
-from ..params import ConfigError, feature_settings, load_parameters, SENSOR
+from ..params import (ConfigError, DOCK_ENABLED, dock_settings, DockSettings, feature_settings,
+                      load_parameters, SENSOR)
 from ..sensors import DEFAULT_SENSOR, sensor_presets
 
 ALL = 'all'
@@ -67,6 +73,12 @@ CSV_COLUMNS = ('scan', 'stamp', 'frame_id', 'method', 'index', 'x_m', 'y_m', 'ya
                'second_line_chi2_dof', 'first_end_seen', 'second_end_seen')
 # Upper triangle of the (x, y, yaw) covariance, in the order of the CSV columns: rows, columns.
 _TRIANGLE = (np.array([0, 0, 0, 1, 1, 2]), np.array([0, 1, 2, 1, 2, 2]))
+DOCK_CSV_NAME = 'dock.csv'
+DOCK_CSV_COLUMNS = ('stamp_s', 'x_m', 'y_m', 'yaw_rad', 'cov_xx', 'cov_xy', 'cov_xyaw', 'cov_yy',
+                    'cov_yyaw', 'cov_yawyaw')
+DOCK_TOPICS = (('/detected_dock_pose', 'geometry_msgs/msg/PoseStamped'),
+               ('/detected_dock_pose_with_covariance',
+                'geometry_msgs/msg/PoseWithCovarianceStamped'))
 CORNER_ARRAY = 'wctls_msgs/msg/CornerArray'
 LINE_SEGMENT_ARRAY = 'wctls_msgs/msg/LineSegmentArray'
 MARKER_ARRAY = 'visualization_msgs/msg/MarkerArray'
@@ -139,6 +151,7 @@ class Summary:
     :ivar line_landmarks: method -> of those, line landmarks (flagged ``landmark`` on the lines
         topic)
     :ivar seconds: wall time of the run, s
+    :ivar docks: dock poses written (None: no ``--dock``)
     """
 
     bag: pathlib.Path
@@ -150,6 +163,7 @@ class Summary:
     segments: dict = field(default_factory=dict)
     line_landmarks: dict = field(default_factory=dict)
     seconds: float = 0.0
+    docks: Optional[int] = None
 
 
 def output_topics(methods) -> dict:
@@ -209,6 +223,7 @@ class ScanOutput(NamedTuple):
     :ivar malformed: whether the scan was unusable (written with no features)
     :ivar tracking: with --tracks, ((stamp sec, nanosec, frame_id), Detections, View) of the
         scan, else None
+    :ivar dock: with a dock to look for, (the scan's header, this scan's dock candidates)
     """
 
     messages: list
@@ -219,6 +234,7 @@ class ScanOutput(NamedTuple):
     line_landmarks: dict
     malformed: bool
     tracking: Optional[tuple] = None
+    dock: Optional[tuple] = None
 
 
 def _corner_rows(corners: CornerSet, segments: SegmentSet) -> list:
@@ -242,18 +258,23 @@ class ScanWork:
     Made once per run; called here, or in worker processes that inherit it (``--jobs``).
     """
 
-    def __init__(self, parameters: dict, methods=None, tracks: bool = False):
+    def __init__(self, parameters: dict, methods=None, tracks: bool = False,
+                 dock: Optional[DockSettings] = None):
         """
         Prepare the work.
 
         :param parameters: feature_node parameter values (see :func:`load_parameters`)
         :param methods: the methods to run (None: the ``method`` parameter)
         :param tracks: also hand over each scan's landmarks for the tracker (one method)
+        :param dock: the dock to look for (among the features of the ``method`` parameter's
+            fit, or the first method's), or None
         :raises ValueError: for parameters that make no valid configuration
         """
         self.tracks = tracks
         config, self.style, self.publish_markers = feature_settings(parameters)
         self.methods = tuple(methods or (config.method,))
+        self.dock = dock
+        self.dock_method = config.method if config.method in self.methods else self.methods[0]
         self.configs = {m: config.replace(method=m) for m in self.methods}
         self.topics = output_topics(self.methods)
         self.store = typestore()
@@ -272,9 +293,12 @@ class ScanWork:
         header, types, serialize = scan.header, self.types, self.types.serialize
         stamp = f'{header.stamp.sec}.{header.stamp.nanosec:09d}'
         messages, csv_rows, corners_of, corners, segments, landmarks = [], [], {}, {}, {}, {}
-        problems = []
+        problems, dock = [], None
         for method, (corners_topic, lines_topic, markers_topic) in self.topics.items():
             features, problems = scan_features(scan, self.configs[method])
+            if self.dock is not None and method == self.dock_method:
+                dock = (header, find_docks(features.segments, features.corners,
+                                           self.dock.shape))
             is_landmark = line_landmarks(features.segments,
                                          self.configs[method].max_landmark_angle_sigma_rad)
             messages.append((corners_topic, CORNER_ARRAY,
@@ -304,7 +328,7 @@ class ScanWork:
                             'log_time_ns': log_time_ns, 'problems': problems,
                             'corners': corners_of})
         return ScanOutput(messages, table.getvalue(), entry, corners, segments, landmarks,
-                          bool(problems), tracking)
+                          bool(problems), tracking, dock)
 
 
 # The work of a worker process, inherited from the process that started it.
@@ -421,9 +445,45 @@ class _CornerTables:
         return False
 
 
+class _DockTable:
+    """Follows the dock over the scans in bag order; writes its poses to the bag and dock.csv."""
+
+    def __init__(self, bag_writer: BagWriter, settings: DockSettings, types: MessageTypes):
+        self._writer, self._settings, self._types = bag_writer, settings, types
+        self._path = bag_writer.sidecar(DOCK_CSV_NAME)
+        self._state = TrackerState()
+        self.written = 0
+
+    def __enter__(self) -> '_DockTable':
+        self._file = self._path.open('w', newline='')
+        self._csv = csv.writer(self._file)
+        self._csv.writerow(DOCK_CSV_COLUMNS)
+        return self
+
+    def add(self, log_time_ns: int, output: ScanOutput) -> None:
+        """Track one scan's candidates; write the dock the tracker reports."""
+        header, candidates = output.dock
+        stamp_s = header.stamp.sec + 1e-9 * header.stamp.nanosec
+        self._state, dock = track_dock(self._state, candidates, stamp_s,
+                                       self._settings.tracking)
+        if dock is None:
+            return
+        for (topic, kind), message in zip(DOCK_TOPICS,
+                                          dock_pose_messages(dock, header, self._types)):
+            self._writer.write_serialized(topic, kind, log_time_ns, self._types.serialize(message))
+        self._csv.writerow([f'{header.stamp.sec}.{header.stamp.nanosec:09d}', dock.x_m, dock.y_m,
+                            dock.yaw_rad, *dock.covariance[_TRIANGLE].tolist()])
+        self.written += 1
+
+    def __exit__(self, kind, value, traceback):
+        with contextlib.suppress(OSError) if kind is not None else contextlib.nullcontext():
+            self._file.close()
+        return False
+
+
 def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = None,
             overwrite: bool = False, after_scans: Optional[Callable[[int], None]] = None,
-            jobs: int = 1, tracks: Optional[TrackOptions] = None) -> Summary:
+            jobs: int = 1, tracks: Optional[TrackOptions] = None, dock: bool = False) -> Summary:
     """
     Extract features from every scan of a bag into an output bag with corner tables.
 
@@ -439,13 +499,16 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
         leaves nothing
     :param jobs: processes that extract features (1: this one alone)
     :param tracks: track the landmarks (one method only) with this motion source, or None
+    :param dock: also look for the dock the parameters describe (``dock_enabled`` or not) and
+        write its poses and dock.csv
     :return: counts and timing
     :raises BagError: for a missing, unreadable or damaged bag, or one without LaserScans, or
         an output that exists (without ``overwrite``, or that process_bag did not write)
     :raises ValueError: for parameters that make no valid configuration
     """
     started = time.perf_counter()
-    work = ScanWork(parameters, methods, tracks is not None)
+    work = ScanWork(parameters, methods, tracks is not None,
+                    dock_settings({**parameters, DOCK_ENABLED: True}) if dock else None)
     if tracks is not None and len(work.methods) > 1:
         raise BagError('--tracks follows the landmarks of one method, not of --method all')
     info = bag_info(bag)
@@ -459,13 +522,16 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
         writer.sidecar(MARKER_NAME).write_text(json.dumps({
             'written_by': 'process_bag of wctls_ros',
             'files': [MARKER_NAME, f'{output.name}.mcap', 'metadata.yaml', CSV_NAME, JSON_NAME]
-            + ([LANDMARKS_CSV] if tracks is not None else [])}))
+            + ([LANDMARKS_CSV] if tracks is not None else [])
+            + ([DOCK_CSV_NAME] if dock else [])}))
         tracker = BagTracks(writer, tracks, work.types) if tracks is not None else None
         tables = _CornerTables(writer, {'bag': str(bag), 'topic': topic,
                                         'methods': work.methods, 'parameters': parameters})
+        docks = (_DockTable(writer, work.dock, work.types) if work.dock is not None
+                 else contextlib.nullcontext())
         # Closed on the way out, whatever ends the run: the worker processes stop at once.
         batches = contextlib.closing(_outputs(work, read_scans(bag, topic), jobs))
-        with tables, batches as outputs, contextlib.closing(tracker or io.StringIO()):
+        with tables, docks, batches as outputs, contextlib.closing(tracker or io.StringIO()):
             for batch in outputs:
                 for log_time_ns, scan_data, scan_output in batch:
                     writer.write_serialized(topic, LASER_SCAN, log_time_ns, scan_data)
@@ -474,6 +540,8 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
                     tables.add(scan_output)
                     if tracker is not None:
                         tracker.add(log_time_ns, *scan_output.tracking)
+                    if work.dock is not None:
+                        docks.add(log_time_ns, scan_output)
                     for method in work.methods:
                         summary.corners[method] += scan_output.corners[method]
                         summary.segments[method] += scan_output.segments[method]
@@ -483,6 +551,8 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
                 if after_scans is not None:
                     after_scans(len(batch))
     summary.seconds = time.perf_counter() - started
+    if work.dock is not None:
+        summary.docks = docks.written
     return summary
 
 
@@ -579,6 +649,11 @@ def parser() -> argparse.ArgumentParser:
     cli.add_argument('--step-sigma', nargs=2, type=float, default=None, metavar=('M', 'DEG'),
                      help='with --tracks: sigma of each step between scans, position (m) and '
                           'heading (deg) (default: 0.02 1 with --poses, 0 0 without)')
+    cli.add_argument('--dock', action='store_true',
+                     help='also look for the dock the config file describes (its dock_* '
+                          'parameters; default: the example dock, a V of two 0.3 m faces at '
+                          '120 deg) and write its poses on /detected_dock_pose and '
+                          f'/detected_dock_pose_with_covariance and in {DOCK_CSV_NAME}')
     cli.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
                      help='show one progress bar for all bags (default: on a terminal, for '
                           'runs over 1 s)')
@@ -624,6 +699,8 @@ def _report(summary: Summary) -> str:
                      'line landmarks)')
     if summary.malformed:
         lines.append(f'  {summary.malformed} malformed scans kept without features')
+    if summary.docks is not None:
+        lines.append(f'  dock: {summary.docks} poses, in {DOCK_CSV_NAME}')
     return '\n'.join(lines)
 
 
@@ -699,6 +776,8 @@ def main(argv=None) -> int:
             parameters = load_parameters(args.config, overrides=overrides)
             try:
                 feature_settings(parameters)
+                if args.dock:
+                    dock_settings({**parameters, DOCK_ENABLED: True})
             except ValueError as error:
                 raise ConfigError(f'process_bag: error: {error}') from error
             runs = _plan(args)
@@ -720,7 +799,7 @@ def main(argv=None) -> int:
                     try:
                         results.append((bag, process(bag, output, parameters, methods,
                                                      args.topic, args.force, after_scans,
-                                                     args.jobs, tracks)))
+                                                     args.jobs, tracks, args.dock)))
                     except BagError as error:
                         if len(runs) == 1:
                             raise

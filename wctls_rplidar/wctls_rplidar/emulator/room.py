@@ -67,17 +67,32 @@ def walls_in_sensor_frame(pose: Tuple[float, float, float] = SENSOR_POSE) -> np.
 
 class RoomScene:
     """
-    The room's ranges at the emulator's raw angles, with independent Gaussian range noise.
+    The room's ranges at the emulator's raw angles, through a sensor model.
+
+    For a sample at bearing theta the range is the room's along ``theta + d_theta`` plus
+    ``d_r + offset``, with ``d_theta ~ N(0, bearing_sigma_rad^2)`` and
+    ``d_r ~ N(0, range_sigma_m^2)`` independent per sample, ``offset ~ N(0,
+    common_range_sigma_m^2)`` one draw per call; a sample returns nothing with probability
+    ``dropout_probability``. The draws come in the order of the lab simulator's sensor model
+    (wctls_lab.simulation.scanner), so one seed gives the same stream with either scene.
 
     :param pose: the sensor's (x m, y m, yaw rad) in the room
     :param range_sigma_m: the range noise std, m (0: exact ranges)
-    :param rng: random generator (None with no noise)
+    :param rng: random generator (default: seeded with 0); the device's faults may share it
+    :param bearing_sigma_rad: the bearing noise std, rad
+    :param common_range_sigma_m: the std of a range offset shared by a call's samples, m
+    :param dropout_probability: the chance that a sample returns nothing
     """
 
     def __init__(self, pose: Tuple[float, float, float] = SENSOR_POSE,
-                 range_sigma_m: float = 0.0, rng: Optional[np.random.Generator] = None):
+                 range_sigma_m: float = 0.0, rng: Optional[np.random.Generator] = None,
+                 bearing_sigma_rad: float = 0.0, common_range_sigma_m: float = 0.0,
+                 dropout_probability: float = 0.0):
         self._walls = walls_in_sensor_frame(pose)
         self._range_sigma_m = range_sigma_m
+        self._bearing_sigma_rad = bearing_sigma_rad
+        self._common_range_sigma_m = common_range_sigma_m
+        self._dropout_probability = dropout_probability
         self._rng = rng or np.random.default_rng(0)
         self._draws = self._rng.bit_generator.state    # the state before the last call's draws
 
@@ -93,7 +108,11 @@ class RoomScene:
             self._draws = self._rng.bit_generator.state
         else:
             self._rng.bit_generator.state = self._draws
-        ranges = cast_rays(self._walls, np.zeros(2), math.pi - np.radians(raw_angle_deg))
-        if self._range_sigma_m > 0.0:
-            ranges = ranges + self._rng.normal(0.0, self._range_sigma_m, ranges.shape)
-        return np.where(np.isfinite(ranges) & (ranges > 0.0), ranges * 1000.0, 0.0)
+        bearings = math.pi - np.radians(np.asarray(raw_angle_deg, dtype=float))
+        rng = self._rng
+        ranges = cast_rays(self._walls, np.zeros(2),
+                           bearings + rng.normal(0.0, self._bearing_sigma_rad, bearings.shape))
+        offset = rng.normal(0.0, self._common_range_sigma_m)
+        ranges = ranges + rng.normal(0.0, 1.0, bearings.shape) * self._range_sigma_m + offset
+        returned = (rng.random(bearings.shape) >= self._dropout_probability) & (ranges > 0.0)
+        return np.where(returned & np.isfinite(ranges), ranges * 1000.0, 0.0)

@@ -1,0 +1,278 @@
+# Copyright 2026 wctls_ros maintainers
+# SPDX-License-Identifier: Apache-2.0
+
+"""The dock detector against simulated scans: pose, covariance, look-alikes, the chi2 tracker."""
+
+import math
+
+import numpy as np
+import pytest
+from wctls_lab.simulation import (BUNDLED_PLANS, floor_plan_from_dict, full_turn_bearings,
+                                  load_floor_plan, SENSOR_MODELS, simulate_scan)
+from wctls_ros.core import extract_features, SegmentSet
+from wctls_ros.frontend.dock import (DockPose, DockShape, find_docks, fit_apex, pose_chi2,
+                                     reference_pose, track_dock, TrackerState, TrackSettings,
+                                     wrap_angle)
+from wctls_ros.params import defaults, FEATURE_NODE, feature_settings
+
+S1 = feature_settings(defaults(FEATURE_NODE, 'rplidar_s1')).config
+ROOM = [[0.0, 0.0], [4.5, 0.0], [4.5, 3.0], [0.0, 3.0]]
+APEX = np.array([4.45, 1.5])      # the dock's apex, its axis along +x, against the east wall
+
+
+def dock_outline(shape, apex=APEX):
+    """Return a dock's closed outline in the plan: right tip, apex, left tip, back corners."""
+    half = shape.opening_angle_rad / 2.0
+    right = apex + shape.right_face_m * np.array([-math.cos(half), -math.sin(half)])
+    left = apex + shape.left_face_m * np.array([-math.cos(half), math.sin(half)])
+    return [right.tolist(), apex.tolist(), left.tolist(), [4.5, float(left[1])],
+            [4.5, float(right[1])]]
+
+
+def plan_with(outlines, room=ROOM):
+    """Return a plain room with the given closed outlines in it."""
+    return floor_plan_from_dict({'name': 'dock_test', 'polylines': [
+        {'closed': True, 'points': room}] + [{'closed': True, 'points': o} for o in outlines]})
+
+
+def scans(plan, pose, count, seed=0):
+    """Yield the features of ``count`` S1-like scans from a pose (x, y, yaw in the plan)."""
+    rng = np.random.default_rng(seed)
+    angle_min, increment, bearings = full_turn_bearings()
+    for _ in range(count):
+        ranges = simulate_scan(plan.scene(pose), bearings, SENSOR_MODELS['s1_like'], rng)
+        yield extract_features(ranges, angle_min, increment, S1)
+
+
+def true_dock(plan, pose, shape):
+    """Return the true (x, y, yaw) of the dock frame in the sensor frame."""
+    apex = plan.to_sensor_frame(APEX[None], pose)[0]
+    truth, _ = reference_pose(apex, float(wrap_angle(-pose[2])), np.zeros((3, 3)), shape)
+    return truth
+
+
+def nees(dock: DockPose, truth) -> float:
+    error = dock.vector - truth
+    error[2] = wrap_angle(error[2])
+    return float(error @ np.linalg.solve(dock.covariance, error))
+
+
+def test_the_reference_pose_covariance_is_the_jacobian_of_finite_differences():
+    shape = DockShape(reference_xy_m=(-0.2, 0.07), reference_yaw_rad=0.3)
+    apex, yaw = np.array([1.2, -0.4]), 2.5
+    _, propagated = reference_pose(apex, yaw, np.eye(3), shape)
+    step = 1e-6
+    columns = []
+    for k in range(3):
+        delta = np.zeros(3)
+        delta[k] = step
+        plus, _ = reference_pose(apex + delta[:2], yaw + delta[2], np.eye(3), shape)
+        minus, _ = reference_pose(apex - delta[:2], yaw - delta[2], np.eye(3), shape)
+        columns.append((plus - minus) / (2 * step))
+    jacobian = np.array(columns).T
+    # With C = I, the propagated covariance is J J^T.
+    np.testing.assert_allclose(propagated, jacobian @ jacobian.T, rtol=1e-7, atol=1e-9)
+    # The reference point moves with the apex frame: not a plain offset.
+    assert not np.allclose(jacobian, np.eye(3), atol=0.01)
+
+
+def face_lines(apex, yaw, shape):
+    """Return the exact (angle, radius) lines of the right and left faces of a dock."""
+    half = shape.opening_angle_rad / 2.0
+    lines = []
+    for side in (-1.0, 1.0):
+        direction = np.array([-math.cos(half), side * math.sin(half)])
+        c, s = math.cos(yaw), math.sin(yaw)
+        u = np.array([c * direction[0] - s * direction[1], s * direction[0] + c * direction[1]])
+        normal = np.array([-u[1], u[0]])
+        normal = normal if normal @ apex > 0 else -normal
+        lines.append((math.atan2(normal[1], normal[0]), float(normal @ apex)))
+    return np.array(lines)
+
+
+def two_segments(lines, covariances):
+    """Return a SegmentSet of two segments with the given lines (the fit reads no more)."""
+    empty = SegmentSet.empty()
+    fields = {name: np.zeros((2,) + getattr(empty, name).shape[1:],
+                             getattr(empty, name).dtype) for name in empty.__dataclass_fields__}
+    fields.update(angle_rad=lines[:, 0], radius_m=lines[:, 1], covariance=covariances)
+    return SegmentSet(**fields)
+
+
+def test_the_apex_fit_is_exact_and_its_covariance_that_of_finite_differences():
+    shape = DockShape()
+    apex, yaw = np.array([1.0, 0.2]), 0.3
+    lines = face_lines(apex, yaw, shape)
+    covariances = np.array([[[4e-4, 1e-5], [1e-5, 9e-5]], [[9e-4, -2e-5], [-2e-5, 4e-5]]])
+    # From a start off the truth, the fit lands on it; its covariance is that of the last
+    # iterate, a tenth of a millimetre from the truth.
+    fitted, off_start = fit_apex(two_segments(lines, covariances), 0, 1, apex + [0.01, -0.01],
+                                 yaw + 0.02, shape)
+    np.testing.assert_allclose(fitted, [*apex, yaw], atol=1e-9)
+    _, covariance = fit_apex(two_segments(lines, covariances), 0, 1, apex, yaw, shape)
+    np.testing.assert_allclose(off_start, covariance, rtol=1e-2)
+    # A least-squares fit's covariance is K R K^T, K its sensitivity to the measured lines.
+    step, columns = 1e-7, []
+    for k in range(4):
+        moved = [lines.copy(), lines.copy()]
+        moved[0].flat[k] += step
+        moved[1].flat[k] -= step
+        plus, minus = (fit_apex(two_segments(m, covariances), 0, 1, apex, yaw, shape)[0]
+                       for m in moved)
+        columns.append((plus - minus) / (2 * step))
+    sensitivity = np.array(columns).T
+    measured = np.zeros((4, 4))
+    measured[:2, :2], measured[2:, 2:] = covariances
+    np.testing.assert_allclose(covariance, sensitivity @ measured @ sensitivity.T, rtol=1e-6)
+
+
+@pytest.mark.parametrize('bad', [0.0, math.nan, -1e-4])
+def test_lines_without_a_usable_covariance_give_no_pose_rather_than_a_nan(bad):
+    shape = DockShape()
+    apex, yaw = np.array([1.0, 0.2]), 0.3
+    covariances = np.array([[[4e-4, 0.0], [0.0, 9e-5]], [[bad, 0.0], [0.0, bad]]])
+    assert fit_apex(two_segments(face_lines(apex, yaw, shape), covariances), 0, 1, apex, yaw,
+                    shape) is None
+
+
+def test_a_dock_at_one_metre_is_found_with_an_honest_covariance():
+    shape = DockShape(reference_xy_m=(-0.1, 0.0))
+    plan = plan_with([dock_outline(shape)])
+    pose = (APEX[0] - 1.0, APEX[1] + 0.1, 0.4)
+    truth = true_dock(plan, pose, shape)
+    found, values = 0, []
+    for features in scans(plan, pose, 60, seed=4):
+        docks = find_docks(features.segments, features.corners, shape)
+        assert len(docks) <= 1
+        if docks:
+            found += 1
+            values.append(nees(docks[0], truth))
+            assert docks[0].misfit <= 1.0
+    assert found >= 48                               # 80 % of single scans, before tracking
+    # Monte Carlo over the scans: the mean NEES of a calibrated 3-dof covariance is 3.
+    assert 1.5 <= np.mean(values) <= 4.5
+
+
+def test_an_asymmetric_dock_is_told_from_its_mirror_image():
+    shape = DockShape(right_face_m=0.40, left_face_m=0.25, opening_angle_rad=math.radians(100))
+    mirrored = DockShape(right_face_m=0.25, left_face_m=0.40,
+                         opening_angle_rad=math.radians(100))
+    plan = plan_with([dock_outline(shape)])
+    pose = (APEX[0] - 1.2, APEX[1] - 0.2, -0.3)
+    truth = true_dock(plan, pose, shape)
+    seen = mirrored_seen = 0
+    for features in scans(plan, pose, 20, seed=5):
+        docks = find_docks(features.segments, features.corners, shape)
+        mirrored_seen += len(find_docks(features.segments, features.corners, mirrored))
+        if docks:
+            seen += 1
+            # Within the 99.9 % bound of its own covariance: the right face on the right.
+            assert nees(docks[0], truth) < 16.3
+    assert seen >= 15 and mirrored_seen == 0
+
+
+@pytest.mark.parametrize('room,poses', [
+    # A hexagonal room: every inside corner has the dock's 120 deg, its walls are 1.5 m.
+    ([[2.25 + 1.5 * math.cos(k * math.pi / 3), 1.5 + 1.5 * math.sin(k * math.pi / 3)]
+      for k in range(6)], [(2.25, 1.5, 0.0), (2.8, 1.1, 1.0)]),
+])
+def test_room_corners_of_the_dock_angle_with_other_lengths_are_no_dock(room, poses):
+    plan = plan_with([], room=room)
+    shape = DockShape()
+    corners_of_the_angle = 0
+    for pose in poses:
+        for features in scans(plan, pose, 10, seed=6):
+            angles = features.corners.opening_angle_rad
+            corners_of_the_angle += int(np.sum(np.abs(angles - shape.opening_angle_rad)
+                                               < shape.angle_tolerance_rad))
+            assert find_docks(features.segments, features.corners, shape) == []
+    assert corners_of_the_angle >= 40          # the look-alike corners were there to refuse
+
+
+@pytest.mark.parametrize('name', BUNDLED_PLANS)
+def test_no_dock_is_reported_in_the_bundled_rooms(name):
+    # Pilasters, niches, chamfers, columns and clutter: corners of every angle, some of walls
+    # as long as the dock's faces, seen from the plan's pose and four others.
+    plan = load_floor_plan(name)
+    x, y, _ = plan.sensor_pose
+    reports = 0
+    for dx, dy, yaw in ((0.0, 0.0, 0.0), (0.8, 0.3, 1.0), (-0.8, -0.3, 2.0), (1.5, 0.2, -1.0),
+                        (-1.2, 0.4, 3.0)):
+        state = TrackerState()
+        for k, features in enumerate(scans(plan, (x + dx, y + dy, yaw), 12, seed=8)):
+            state, report = track_dock(
+                state, find_docks(features.segments, features.corners, DockShape()), 0.1 * k,
+                TrackSettings())
+            reports += report is not None
+    assert reports == 0
+
+
+def test_a_v_of_the_dock_angle_with_one_face_too_long_is_no_dock():
+    shape = DockShape()
+    longer = DockShape(right_face_m=0.5)
+    plan = plan_with([dock_outline(longer)])
+    pose = (APEX[0] - 1.0, APEX[1], 0.0)
+    found_as_longer = 0
+    for features in scans(plan, pose, 10, seed=7):
+        assert find_docks(features.segments, features.corners, shape) == []
+        found_as_longer += bool(find_docks(features.segments, features.corners, longer))
+    assert found_as_longer >= 7                # the V itself is seen: the lengths refuse it
+
+
+def test_an_invalid_dock_description_is_refused_with_the_reason():
+    with pytest.raises(ValueError, match='right_face_m must be > 0'):
+        DockShape(right_face_m=0.0)
+    with pytest.raises(ValueError, match='short of 0, 180 and 360 deg'):
+        DockShape(opening_angle_rad=math.radians(175.0))
+    with pytest.raises(ValueError, match='shorter than the faces'):
+        DockShape(left_face_m=0.05)
+
+
+def detection(x, y=0.0, yaw=0.0, sigma_m=0.005, sigma_rad=0.01) -> DockPose:
+    return DockPose(x, y, yaw, np.diag([sigma_m ** 2, sigma_m ** 2, sigma_rad ** 2]), 0.1)
+
+
+def test_the_tracker_confirms_then_rejects_an_inconsistent_pose():
+    settings = TrackSettings(confirm_detections=3)
+    state, reports = TrackerState(), []
+    for k in range(4):
+        state, report = track_dock(state, [detection(1.0 + 0.001 * k)], 0.1 * k, settings)
+        reports.append(report)
+    assert reports[:2] == [None, None] and reports[2].x_m == pytest.approx(1.002)
+    # 20 cm away in 0.1 s, with 5 mm stds and at most 0.3 m/s: chi2 far beyond the gate.
+    jump = detection(1.2)
+    assert pose_chi2(jump, state.track.pose, 0.1, settings) > settings.gate
+    state, report = track_dock(state, [jump], 0.4, settings)
+    assert report is None and state.track.pose.x_m == pytest.approx(1.003)
+    # The true dock beside a look-alike: the one that agrees is reported.
+    state, report = track_dock(state, [jump, detection(1.004)], 0.5, settings)
+    assert report.x_m == pytest.approx(1.004)
+
+
+def test_a_confirmed_rival_replaces_a_track_that_is_no_longer_seen():
+    settings = TrackSettings(confirm_detections=2)
+    state = TrackerState()
+    for k in range(2):
+        state, _ = track_dock(state, [detection(1.0)], 0.1 * k, settings)
+    reports = []
+    for k in range(2, 5):
+        state, report = track_dock(state, [detection(2.0)], 0.1 * k, settings)
+        reports.append(report)
+    assert reports[0] is None and reports[1].x_m == 2.0 and reports[2].x_m == 2.0
+
+
+def test_a_dock_not_seen_for_the_timeout_must_be_confirmed_again():
+    settings = TrackSettings(confirm_detections=2, timeout_s=1.0)
+    state = TrackerState()
+    for k in range(3):
+        state, report = track_dock(state, [detection(1.0)], 0.1 * k, settings)
+    assert report is not None
+    state, report = track_dock(state, [detection(1.0)], 1.5, settings)
+    assert report is None and state.track.detections == 1
+
+
+def test_the_gate_widens_with_the_time_between_detections():
+    settings = TrackSettings()
+    near, far = detection(1.0), detection(1.2)
+    assert pose_chi2(far, near, 0.1, settings) > settings.gate
+    assert pose_chi2(far, near, 1.0, settings) < settings.gate

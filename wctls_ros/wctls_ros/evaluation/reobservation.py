@@ -44,6 +44,8 @@ from .rules import assign, ASSOCIATION_GATE_MAX_M
 from .samples import ScanCorners
 from .scans import StaticScans
 from ..core import FeatureConfig, line_landmarks
+from ..frontend.frames import (Landmarks, moved as _moved, overlapping as _overlapping, to_world,
+                               wrap as _wrap)
 
 # 95 % points of the chi-square distribution with 1 and 2 degrees of freedom.
 GATE_1DOF = 3.841
@@ -61,29 +63,6 @@ REOBSERVATION_KEYS = (
     'landmarks_per_scan', 'lines_per_scan', 'corner_distance_in_gate', 'line_angle_in_gate',
     'corner_line_distance_in_gate', 'corner_tracks_in_gate', 'line_tracks_in_gate',
     'corner_track_median', 'corner_track_p90', 'line_track_median', 'line_track_p90')
-
-
-@dataclass(frozen=True)
-class Landmarks:
-    """
-    The corners and lines of one scan in the sensor frame.
-
-    :ivar corner_xy: corner positions, shape (C, 2), m
-    :ivar corner_cov: their covariances, shape (C, 2, 2), m^2
-    :ivar corner_lines: the two walls each corner joins, as indices into the lines, shape
-        (C, 2) (-1: a wall that is not a line landmark)
-    :ivar line: (normal angle rad, distance m) of each line landmark's infinite line, shape
-        (L, 2)
-    :ivar line_cov: their covariances, shape (L, 2, 2)
-    :ivar line_ends: each line landmark's first and last end, shape (L, 2, 2), m
-    """
-
-    corner_xy: np.ndarray
-    corner_cov: np.ndarray
-    corner_lines: np.ndarray
-    line: np.ndarray
-    line_cov: np.ndarray
-    line_ends: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -223,11 +202,6 @@ def landmarks_of(features, corners: ScanCorners, max_landmark_angle_sigma_rad: f
                      np.stack([segments.start_xy_m, segments.end_xy_m], axis=1).reshape(-1, 2, 2))
 
 
-def _wrap(angle):
-    """Return angles wrapped into (-pi, pi]."""
-    return np.pi - np.mod(np.pi - angle, 2 * np.pi)
-
-
 def match_lines(before: np.ndarray, after: np.ndarray) -> np.ndarray:
     """
     Match the lines of two consecutive scans, nearest first, one to one.
@@ -326,75 +300,6 @@ def _gated(squared: np.ndarray, gate: float) -> np.ndarray:
     """Return (tested, inside) of normalised squares (non-finite ones are left out)."""
     finite = squared[np.isfinite(squared)]
     return np.array([len(finite), int(np.count_nonzero(finite <= gate))])
-
-
-def to_world(landmarks: Landmarks, pose: np.ndarray, pose_cov: np.ndarray):
-    """
-    Move one scan's landmarks into the world frame, their covariances with the pose's.
-
-    :param landmarks: the scan's landmarks in the sensor frame
-    :param pose: the sensor's pose (x m, y m, yaw rad)
-    :param pose_cov: its covariance, shape (3, 3)
-    :return: (corner xy (C, 2), their covariances (C, 2, 2), lines (L, 2), theirs (L, 2, 2))
-    """
-    x, y, yaw = pose
-    rotation = _rotation(yaw)
-    xy = _moved(landmarks.corner_xy, pose)
-    # d(world xy) / d(x, y, yaw)
-    pose_jacobian = np.zeros((len(xy), 2, 3))
-    pose_jacobian[:, :, :2] = np.eye(2)
-    pose_jacobian[:, 0, 2] = -(xy[:, 1] - y)
-    pose_jacobian[:, 1, 2] = xy[:, 0] - x
-    corner_cov = (rotation @ landmarks.corner_cov @ rotation.T
-                  + pose_jacobian @ pose_cov @ pose_jacobian.transpose(0, 2, 1))
-    angle = landmarks.line[:, 0] + yaw
-    radius = landmarks.line[:, 1] + x * np.cos(angle) + y * np.sin(angle)
-    # d(world angle, radius) / d(angle, radius) and / d(x, y, yaw)
-    lever = -x * np.sin(angle) + y * np.cos(angle)
-    line_jacobian = np.zeros((len(angle), 2, 2))
-    line_jacobian[:, 0, 0] = 1.0
-    line_jacobian[:, 1, 0] = lever
-    line_jacobian[:, 1, 1] = 1.0
-    line_pose = np.zeros((len(angle), 2, 3))
-    line_pose[:, 0, 2] = 1.0
-    line_pose[:, 1, 0] = np.cos(angle)
-    line_pose[:, 1, 1] = np.sin(angle)
-    line_pose[:, 1, 2] = lever
-    line_cov = (line_jacobian @ landmarks.line_cov @ line_jacobian.transpose(0, 2, 1)
-                + line_pose @ pose_cov @ line_pose.transpose(0, 2, 1))
-    flip = radius < 0.0                  # the normal points from the origin to the line
-    radius = np.where(flip, -radius, radius)
-    angle = _wrap(np.where(flip, angle + np.pi, angle))
-    line_cov[flip, 0, 1] *= -1.0
-    line_cov[flip, 1, 0] *= -1.0
-    return xy, corner_cov, np.column_stack([angle, radius]), line_cov
-
-
-def _rotation(yaw: float) -> np.ndarray:
-    """Return the 2D rotation by yaw (rad)."""
-    cos, sin = math.cos(yaw), math.sin(yaw)
-    return np.array([[cos, -sin], [sin, cos]])
-
-
-def _moved(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
-    """Return points of the sensor frame (..., 2) in the world frame of pose (x, y, yaw)."""
-    return points @ _rotation(pose[2]).T + pose[:2]
-
-
-def _overlapping(ends: np.ndarray, track_ends: np.ndarray) -> np.ndarray:
-    """
-    Return which segments overlap which tracks' stretches of wall, along each segment's line.
-
-    :param ends: the segments' ends, shape (N, 2, 2), m
-    :param track_ends: the ends of the stretch each track has seen, shape (K, 2, 2), m
-    :return: shape (N, K): the two extents share a stretch of positive length
-    """
-    direction = ends[:, 1] - ends[:, 0]
-    direction = direction / np.maximum(np.linalg.norm(direction, axis=1), 1e-12)[:, None]
-    own = np.sort(np.einsum('nei,ni->ne', ends, direction), axis=1)
-    other = np.sort(np.einsum('kei,ni->nke', track_ends, direction), axis=2)
-    return (np.minimum(own[:, None, 1], other[..., 1])
-            > np.maximum(own[:, None, 0], other[..., 0]))
 
 
 def _spanned(ends: np.ndarray, track_ends: np.ndarray) -> np.ndarray:

@@ -24,12 +24,15 @@ Pure numpy.
 
 from dataclasses import dataclass
 import math
-from typing import Dict, List
+import time
+from typing import Dict, List, Tuple
 
 import numpy as np
 
-from ..frontend.frames import wrap
-from ..frontend.odometry import compose, compose_jacobians, inverse
+from .scans import StaticScans
+from ..core import extract_features, FeatureConfig
+from ..frontend.frames import landmarks_from_features, wrap
+from ..frontend.odometry import compose, compose_jacobians, inverse, Odometry, OdometryConfig
 
 GATE_3DOF_95 = 7.815
 STEP_TOLERANCE_M = 0.10
@@ -198,3 +201,55 @@ def drift(estimate: np.ndarray) -> np.ndarray:
     :return: distance from the first pose, shape (T,), m
     """
     return np.hypot(estimate[:, 0] - estimate[0, 0], estimate[:, 1] - estimate[0, 1])
+
+
+@dataclass(frozen=True)
+class OdometryRun:
+    """
+    The odometry of a recording, scan by scan, in the laser's frame.
+
+    :ivar stamps_s: each scan's stamp, shape (T,), s
+    :ivar poses: the laser's pose in odom, shape (T, 3)
+    :ivar pose_covariances: their covariances, shape (T, 3, 3)
+    :ivar steps: the step into each scan from the one before, shape (T, 3)
+    :ivar step_covariances: their covariances, shape (T, 3, 3)
+    :ivar statuses: each scan's status
+    :ivar odometry_s: the odometry's time per scan (the extraction left out), s
+    """
+
+    stamps_s: np.ndarray
+    poses: np.ndarray
+    pose_covariances: np.ndarray
+    steps: np.ndarray
+    step_covariances: np.ndarray
+    statuses: Tuple[str, ...]
+    odometry_s: float
+
+
+def run_odometry(scans: StaticScans, config: FeatureConfig,
+                 odometry_config: OdometryConfig = OdometryConfig()) -> OdometryRun:
+    """
+    Extract every scan's landmarks and run the odometry over them.
+
+    :param scans: consecutive scans
+    :param config: the pipeline configuration
+    :param odometry_config: the odometry's settings
+    :return: the run
+    """
+    odometry = Odometry(odometry_config)
+    updates, spent = [], 0.0
+    for ranges, stamp_ns in zip(scans.ranges, scans.stamps_ns):
+        features = extract_features(ranges, scans.angle_min, scans.angle_increment, config,
+                                    scans.range_min, scans.range_max)
+        landmarks = landmarks_from_features(features, config.max_landmark_angle_sigma_rad)
+        start = time.perf_counter()
+        updates.append(odometry.update(stamp_ns * 1e-9, landmarks))
+        spent += time.perf_counter() - start
+
+    def stacked(name: str, shape: Tuple[int, ...]) -> np.ndarray:
+        return np.array([getattr(u, name) for u in updates]).reshape((-1,) + shape)
+
+    return OdometryRun(stacked('stamp_s', ()), stacked('pose', (3,)),
+                       stacked('pose_covariance', (3, 3)), stacked('step', (3,)),
+                       stacked('step_covariance', (3, 3)), tuple(u.status for u in updates),
+                       spent / max(len(updates), 1))

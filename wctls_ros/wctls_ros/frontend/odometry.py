@@ -68,10 +68,12 @@ class OdometryConfig:
     :ivar reinit_sigma_rad: its std in yaw, rad
     :ivar consistency_probability: the fit's chi-square must lie below this quantile for its
         degrees of freedom (above: inconsistent, reinitialized)
+    :ivar max_step_m: the largest step between two scans, m (hypotheses beyond it are not
+        scored: a repeated structure shifted by its period is not a step)
     :ivar seed: seed of the hypothesis draw
     """
 
-    max_hypotheses: int = 400
+    max_hypotheses: int = 200
     min_matches: int = 3
     degenerate_sigma_m: float = 0.1
     degenerate_sigma_rad: float = math.radians(3.0)
@@ -80,6 +82,7 @@ class OdometryConfig:
     reinit_sigma_m: float = 1.0
     reinit_sigma_rad: float = math.radians(60.0)
     consistency_probability: float = 0.999
+    max_step_m: float = 2.0
     seed: int = 0
 
 
@@ -193,13 +196,13 @@ def change_frame(step: np.ndarray, covariance: np.ndarray,
 
 def chi2_quantile(probability: float, dof: int) -> float:
     """
-    Return the chi-square quantile (Wilson-Hilferty; within 1 % for dof >= 3 at 0.999).
+    Return the chi-square quantile (Wilson-Hilferty; within 2 % for dof >= 3 at 0.999).
 
     :param probability: in (0, 1)
     :param dof: degrees of freedom (>= 1)
     :return: the quantile
     """
-    # The normal quantile by the Acklam-free rational approximation of Abramowitz-Stegun 26.2.23.
+    # The normal quantile by the rational approximation of Abramowitz and Stegun, 26.2.23.
     tail = min(probability, 1.0 - probability)
     t = math.sqrt(-2.0 * math.log(tail))
     z = t - (2.515517 + 0.802853 * t + 0.010328 * t * t) / (
@@ -277,10 +280,12 @@ def line_hypotheses(previous: Landmarks, current: Landmarks) -> np.ndarray:
     """
     Return the steps that pairs of lines seen in both scans allow.
 
-    Two lines of each scan, not close to parallel, are a pair when the angle between their
-    normals (modulo pi: a normal flips when the sensor crosses the line's side) agrees within
-    the 99 % gate; each of the two rotations that map the first normal onto the other scan's
-    gives, from the two radii, the translation t with t . n_p = r_p - sigma r_c
+    A line's normal points from the sensor to the wall, and the sensor stays on the side of a
+    wall it sees (it cannot cross the wall; the other face is another landmark): the normals
+    of one line agree in both frames up to the rotation, never flipped. Two lines of each
+    scan, not close to parallel, are a pair when the angle between their normals agrees
+    within the 99 % gate; the rotation maps the first normal onto the previous scan's, and the
+    radii give the translation, t . n_p = r_p - r_c for both lines
     (docs/odometry.md#hypotheses).
 
     :param previous: the previous scan's landmarks
@@ -293,35 +298,24 @@ def line_hypotheses(previous: Landmarks, current: Landmarks) -> np.ndarray:
     k, m = _ordered_pairs(len(current.line))
 
     def between(landmarks, a, b):
-        # The angle between the normals modulo pi, in (-pi/2, pi/2].
-        angle = wrap(2.0 * (landmarks.line[b, 0] - landmarks.line[a, 0])) / 2.0
+        angle = wrap(landmarks.line[b, 0] - landmarks.line[a, 0])
         return angle, landmarks.line_cov[a, 0, 0] + landmarks.line_cov[b, 0, 0]
 
     a_prev, v_prev = between(previous, i, j)
     a_cur, v_cur = between(current, k, m)
-    keep_prev = np.abs(a_prev) >= MIN_PAIR_ANGLE_RAD
-    keep_cur = np.abs(a_cur) >= MIN_PAIR_ANGLE_RAD
-    difference = wrap(2.0 * (a_prev[:, None] - a_cur[None, :])) / 2.0
+    keep_prev = np.abs(np.sin(a_prev)) >= math.sin(MIN_PAIR_ANGLE_RAD)
+    keep_cur = np.abs(np.sin(a_cur)) >= math.sin(MIN_PAIR_ANGLE_RAD)
+    difference = wrap(a_prev[:, None] - a_cur[None, :])
     gated = difference ** 2 <= CHI2_1DOF_99 * (v_prev[:, None] + v_cur[None, :])
     gated &= keep_prev[:, None] & keep_cur[None, :]
     p, c = np.nonzero(gated)
-    steps = []
-    for flip in (0.0, math.pi):
-        yaw = wrap(previous.line[i[p], 0] - current.line[k[c], 0] + flip)
-        rows = []
-        for prev_index, cur_index in ((i[p], k[c]), (j[p], m[c])):
-            angle_p = previous.line[prev_index, 0]
-            # sigma = +1 where the moved normal points the previous one's way.
-            sigma = np.sign(np.cos(current.line[cur_index, 0] + yaw - angle_p))
-            rows.append((np.cos(angle_p), np.sin(angle_p),
-                         previous.line[prev_index, 1] - sigma * current.line[cur_index, 1]))
-        (a1, b1, r1), (a2, b2, r2) = rows
-        det = a1 * b2 - a2 * b1
-        with np.errstate(divide='ignore', invalid='ignore'):
-            dx = (r1 * b2 - r2 * b1) / det
-            dy = (a1 * r2 - a2 * r1) / det
-        steps.append(np.column_stack([dx, dy, yaw]))
-    out = np.concatenate(steps)
+    yaw = wrap(previous.line[i[p], 0] - current.line[k[c], 0])
+    a1, b1 = np.cos(previous.line[i[p], 0]), np.sin(previous.line[i[p], 0])
+    a2, b2 = np.cos(previous.line[j[p], 0]), np.sin(previous.line[j[p], 0])
+    r1 = previous.line[i[p], 1] - current.line[k[c], 1]
+    r2 = previous.line[j[p], 1] - current.line[m[c], 1]
+    det = a1 * b2 - a2 * b1
+    out = np.column_stack([(r1 * b2 - r2 * b1) / det, (a1 * r2 - a2 * r1) / det, yaw])
     return out[np.isfinite(out).all(axis=1)]
 
 
@@ -348,10 +342,14 @@ def _corner_chi2(previous: Landmarks, current: Landmarks, steps: np.ndarray,
 
 def _line_errors(previous: Landmarks, current: Landmarks, steps: np.ndarray):
     """
-    Return every line pair's error under each step and the moved current lines' covariances.
+    Return every line pair's error under each step and its covariance.
 
-    :return: (error (H, P, C, 2) of (angle rad, radius m), innovation covariance (H, P, C, 2, 2),
-        the sign sigma (H, P, C) of the moved normal against the previous one)
+    The current line moved into the previous frame is (angle + dyaw, r + t . n), n its moved
+    normal, with covariance J C J^T, J = [[1, 0], [t . n_perp, 1]] (as :func:`.frames.to_world`
+    with an exact pose); its normal is not flipped (:func:`line_hypotheses`).
+
+    :return: (error (H, P, C, 2) of (angle rad, radius m), innovation covariance
+        (H, P, C, 2, 2))
     """
     angle = current.line[None, :, 0] + steps[:, 2:3]
     lever = -steps[:, :1] * np.sin(angle) + steps[:, 1:2] * np.cos(angle)
@@ -362,21 +360,15 @@ def _line_errors(previous: Landmarks, current: Landmarks, steps: np.ndarray):
     jacobian[..., 1, 0] = lever
     jacobian[..., 1, 1] = 1.0
     cur_cov = jacobian @ current.line_cov[None] @ jacobian.transpose(0, 1, 3, 2)
-    sigma = np.where(np.cos(angle[:, None, :] - previous.line[None, :, None, 0]) >= 0.0, 1.0,
-                     -1.0)
-    error = np.stack([wrap(angle[:, None, :] + np.where(sigma > 0, 0.0, math.pi)
-                           - previous.line[None, :, None, 0]),
-                      sigma * radius[:, None, :] - previous.line[None, :, None, 1]], -1)
-    # The sign flips the radius row of the moved line: its cross terms change sign.
-    flip = np.stack([np.ones_like(sigma), sigma], -1)
-    cur_cov = cur_cov[:, None] * flip[..., :, None] * flip[..., None, :]
-    return error, previous.line_cov[None, :, None] + cur_cov, sigma
+    error = np.stack([wrap(angle[:, None, :] - previous.line[None, :, None, 0]),
+                      radius[:, None, :] - previous.line[None, :, None, 1]], -1)
+    return error, previous.line_cov[None, :, None] + cur_cov[:, None]
 
 
 def _line_chi2(previous: Landmarks, current: Landmarks, steps: np.ndarray,
                search: bool = False) -> np.ndarray:
     """Return the squared Mahalanobis distances of every line pair under each step, (H, P, C)."""
-    error, innovation, _ = _line_errors(previous, current, steps)
+    error, innovation = _line_errors(previous, current, steps)
     if search:
         innovation = innovation + np.diag([SEARCH_SLACK_RAD ** 2, SEARCH_SLACK_M ** 2])
     chi2 = np.einsum('hpci,hpcij,hpcj->hpc', error, _inverse_2x2(innovation), error)
@@ -451,8 +443,8 @@ def residuals(previous: Landmarks, current: Landmarks, step: np.ndarray, corners
     Return the fit's residuals, their Jacobians by the step and their covariances.
 
     Corners: e = p_prev - (R q_cur + t), S = C_prev + R C_cur R^T. Lines: the current line
-    moved into the previous frame, (angle + dyaw, r + t . n) in the sign of the previous one's
-    normal, minus the previous line; S = C_prev + J C_cur J^T (docs/odometry.md#the-fit).
+    moved into the previous frame, (angle + dyaw, r + t . n), minus the previous line;
+    S = C_prev + J C_cur J^T (docs/odometry.md#the-fit).
 
     :param previous: the previous scan's landmarks
     :param current: the current scan's landmarks
@@ -482,15 +474,14 @@ def residuals(previous: Landmarks, current: Landmarks, step: np.ndarray, corners
         sub_cur = Landmarks(current.corner_xy[:0], current.corner_cov[:0],
                             current.corner_lines[:0], current.line[c], current.line_cov[c],
                             current.line_ends[c])
-        error, innovation, sigma = _line_errors(sub_prev, sub_cur, step[None])
+        error, innovation = _line_errors(sub_prev, sub_cur, step[None])
         n = np.arange(len(p))
         angle = current.line[c, 0] + step[2]
-        sign = sigma[0, n, n]
         jac = np.zeros((len(p), 2, 3))
         jac[:, 0, 2] = 1.0
-        jac[:, 1, 0] = sign * np.cos(angle)
-        jac[:, 1, 1] = sign * np.sin(angle)
-        jac[:, 1, 2] = sign * (-step[0] * np.sin(angle) + step[1] * np.cos(angle))
+        jac[:, 1, 0] = np.cos(angle)
+        jac[:, 1, 1] = np.sin(angle)
+        jac[:, 1, 2] = -step[0] * np.sin(angle) + step[1] * np.cos(angle)
         out_e.append(error[0, n, n])
         out_j.append(jac)
         out_s.append(innovation[0, n, n])
@@ -615,6 +606,7 @@ def estimate_step(previous: Landmarks, current: Landmarks, prior_step: np.ndarra
         return StepEstimate(prior_step.copy(), prior_covariance.copy(), 'prior')
     steps = np.concatenate([corner_hypotheses(previous, current),
                             line_hypotheses(previous, current)])
+    steps = steps[np.hypot(steps[:, 0], steps[:, 1]) <= config.max_step_m]
     if len(steps) > config.max_hypotheses:
         rng = np.random.default_rng(config.seed)
         steps = steps[rng.choice(len(steps), config.max_hypotheses, replace=False)]
@@ -626,7 +618,8 @@ def estimate_step(previous: Landmarks, current: Landmarks, prior_step: np.ndarra
     # outside the gate of landmarks that a fit from it brings in.
     for start in steps[np.argsort(-scores, kind='stable')[:REFINED_HYPOTHESES]]:
         refined, pairs = _refine(previous, current, start)
-        count = len(pairs[0]) + len(pairs[1])
+        count = len(pairs[0]) + len(pairs[1]) if math.hypot(
+            refined[0], refined[1]) <= config.max_step_m else 0
         chi2 = _chi2(previous, current, refined, *pairs) if count else math.inf
         if count > best_count or (count == best_count and chi2 < best_chi2):
             best_count, best_chi2 = count, chi2

@@ -34,6 +34,7 @@ setup(
             'calibrate = wctls_ros.executables:calibrate',
             'evaluate = wctls_ros.executables:evaluate',
             'feature_node = wctls_ros.executables:feature_node',
+            'odometry_node = wctls_ros.executables:odometry_node',
             'demo = wctls_ros.executables:demo',
             'process_bag = wctls_ros.executables:process_bag',
             'rplidar_node = wctls_ros.executables:rplidar_node',

@@ -233,3 +233,36 @@ def test_the_rplidar_car_against_its_tracking_system():
     assert 2.1 <= errors.nees_mean <= 4.5
     assert 0.90 <= errors.nees_in_gate <= 0.98
     assert statuses.count('reinitialized') <= 5
+
+
+def read_odometry_csv(path):
+    """Return the rows of odometry.csv as dicts."""
+    import csv
+    with open(path, newline='') as stream:
+        return list(csv.DictReader(stream))
+
+
+@pytest.mark.skipif(not (DATA / 'urg04lx_office').is_dir(), reason='no recording')
+def test_process_bag_writes_the_laser_and_the_robots_odometry(tmp_path):
+    pytest.importorskip('rosbags')
+    from wctls_ros.bags.odometry_table import ODOMETRY_COLUMNS
+    from wctls_ros.bags.process_bag import main
+    from wctls_ros.bags.bag_io import read_scans
+    bag = DATA / 'urg04lx_office'
+    assert main([str(bag), '-o', str(tmp_path / 'laser'), '--odometry', '-j', '1']) == 0
+    assert main([str(bag), '-o', str(tmp_path / 'robot'), '--odometry', '--laser-mount', '0.5',
+                 '-0.2', '90', '-j', '1']) == 0
+    laser = read_odometry_csv(tmp_path / 'laser' / 'odometry.csv')
+    robot = read_odometry_csv(tmp_path / 'robot' / 'odometry.csv')
+    assert tuple(laser[0]) == ODOMETRY_COLUMNS
+    assert len(laser) == len(robot) == sum(1 for _ in read_scans(bag))
+    assert {row['status'] for row in laser} <= {'tracking', 'degenerate', 'prior',
+                                                'reinitialized'}
+    mount = np.array([0.5, -0.2, math.pi / 2])
+    for one, other in zip(laser, robot):
+        assert all(math.isfinite(float(one[c])) for c in ODOMETRY_COLUMNS[:-1])
+        laser_pose = np.array([float(one[c]) for c in ('x_m', 'y_m', 'yaw_rad')])
+        robot_pose = np.array([float(other[c]) for c in ('x_m', 'y_m', 'yaw_rad')])
+        # The robot's pose carries the laser at its mount; odom is the robot's first pose.
+        assert np.allclose(compose(robot_pose, mount), compose(mount, laser_pose), atol=1e-6)
+        assert one['status'] == other['status']

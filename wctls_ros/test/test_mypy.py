@@ -8,7 +8,8 @@ import pathlib
 import pytest
 
 PACKAGE = pathlib.Path(__file__).resolve().parents[1] / 'wctls_ros'
-CHECKED = ['core', 'conversions.py', 'params.py', 'plain_yaml.py']
+CHECKED = ['core', 'conversions.py', 'frontend', 'odometry_messages.py', 'params.py',
+           'plain_yaml.py']
 
 
 @pytest.mark.linter

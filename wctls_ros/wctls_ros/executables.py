@@ -64,6 +64,11 @@ def feature_node() -> int:
     return _run('feature_node', 'feature_node', NODE_INTERRUPTED)
 
 
+def odometry_node() -> int:
+    """Run the odometry_node node (:mod:`wctls_ros.odometry_node`)."""
+    return _run('odometry_node', 'odometry_node', NODE_INTERRUPTED)
+
+
 def rplidar_node() -> int:
     """Run the rplidar_node node (:mod:`wctls_ros.rplidar.rplidar_node`)."""
     return _run('rplidar_node', 'rplidar.rplidar_node', NODE_INTERRUPTED)

@@ -14,7 +14,9 @@ every scan with the same parameters (a feature_node YAML file) and writes, with 
   header and log time; with ``--method all`` every method on its own topics
   (``/corners/wctls``, ...);
 - ``corners.csv`` (one row per corner) and ``corners.json`` (one entry per scan) inside the bag
-  folder.
+  folder;
+- with ``--odometry``, the odometry from the features: nav_msgs/Odometry on ``/odom`` and
+  ``odometry.csv`` (:mod:`.odometry_table`).
 
 Memory stays constant however long the bag is, and the output appears only when complete.
 """
@@ -37,16 +39,19 @@ import pathlib
 import signal
 import sys
 import time
-from typing import Callable, NamedTuple, Optional
+from typing import Any, Callable, NamedTuple, Optional, Tuple
 
 import numpy as np
 
 from .bag_io import (bag_info, BagError, BagWriter, choose_scan_topic, LASER_SCAN, read_scans,
                      typestore)
+from .odometry_table import (ODOMETRY_CSV, odometry_request, ODOMETRY_TOPIC, OdometryOutput,
+                             OdometryTable)
 from ..cli import start_core
 from ..conversions import (corner_array, laser_scan, line_segment_array, marker_array,
                            MessageTypes, scan_features)
 from ..core import CornerSet, line_landmarks, METHODS, SegmentSet, start
+from ..frontend.frames import Landmarks, landmarks_from_features
 from ..params import ConfigError, feature_settings, load_parameters, SENSOR
 from ..sensors import DEFAULT_SENSOR, sensor_presets
 
@@ -203,6 +208,8 @@ class ScanOutput(NamedTuple):
     :ivar segments: method -> segments found
     :ivar line_landmarks: method -> of those, line landmarks
     :ivar malformed: whether the scan was unusable (written with no features)
+    :ivar odometry_input: with the odometry, the scan's header and the first method's
+        landmarks (else None)
     """
 
     messages: list
@@ -212,6 +219,7 @@ class ScanOutput(NamedTuple):
     segments: dict
     line_landmarks: dict
     malformed: bool
+    odometry_input: Optional[Tuple[Any, Landmarks]] = None
 
 
 def _corner_rows(corners: CornerSet, segments: SegmentSet) -> list:
@@ -235,16 +243,18 @@ class ScanWork:
     Made once per run; called here, or in worker processes that inherit it (``--jobs``).
     """
 
-    def __init__(self, parameters: dict, methods=None):
+    def __init__(self, parameters: dict, methods=None, odometry: bool = False):
         """
         Prepare the work.
 
         :param parameters: feature_node parameter values (see :func:`load_parameters`)
         :param methods: the methods to run (None: the ``method`` parameter)
+        :param odometry: also give each scan's landmarks (of the first method)
         :raises ValueError: for parameters that make no valid configuration
         """
         config, self.style, self.publish_markers = feature_settings(parameters)
         self.methods = tuple(methods or (config.method,))
+        self.odometry = odometry
         self.configs = {m: config.replace(method=m) for m in self.methods}
         self.topics = output_topics(self.methods)
         self.store = typestore()
@@ -263,9 +273,12 @@ class ScanWork:
         header, types, serialize = scan.header, self.types, self.types.serialize
         stamp = f'{header.stamp.sec}.{header.stamp.nanosec:09d}'
         messages, csv_rows, corners_of, corners, segments, landmarks = [], [], {}, {}, {}, {}
-        problems = []
+        problems, scan_landmarks = [], None
         for method, (corners_topic, lines_topic, markers_topic) in self.topics.items():
             features, problems = scan_features(scan, self.configs[method])
+            if self.odometry and scan_landmarks is None:
+                scan_landmarks = landmarks_from_features(
+                    features, self.configs[method].max_landmark_angle_sigma_rad)
             is_landmark = line_landmarks(features.segments,
                                          self.configs[method].max_landmark_angle_sigma_rad)
             messages.append((corners_topic, CORNER_ARRAY,
@@ -288,7 +301,8 @@ class ScanWork:
                             'log_time_ns': log_time_ns, 'problems': problems,
                             'corners': corners_of})
         return ScanOutput(messages, table.getvalue(), entry, corners, segments, landmarks,
-                          bool(problems))
+                          bool(problems),
+                          None if scan_landmarks is None else (header, scan_landmarks))
 
 
 # The work of a worker process, inherited from the process that started it.
@@ -407,7 +421,7 @@ class _CornerTables:
 
 def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = None,
             overwrite: bool = False, after_scans: Optional[Callable[[int], None]] = None,
-            jobs: int = 1) -> Summary:
+            jobs: int = 1, odometry: Optional[OdometryOutput] = None) -> Summary:
     """
     Extract features from every scan of a bag into an output bag with corner tables.
 
@@ -422,13 +436,14 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
         batch of scans); whatever it raises (e.g. :class:`Interrupted`) ends the run and
         leaves nothing
     :param jobs: processes that extract features (1: this one alone)
+    :param odometry: also the odometry, with these settings (None: none)
     :return: counts and timing
     :raises BagError: for a missing, unreadable or damaged bag, or one without LaserScans, or
         an output that exists (without ``overwrite``, or that process_bag did not write)
     :raises ValueError: for parameters that make no valid configuration
     """
     started = time.perf_counter()
-    work = ScanWork(parameters, methods)
+    work = ScanWork(parameters, methods, odometry is not None)
     info = bag_info(bag)
     topic = choose_scan_topic(bag, topic, info)
     output = pathlib.Path(output)
@@ -439,18 +454,23 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
     with BagWriter(output, overwrite=overwrite) as writer:
         writer.sidecar(MARKER_NAME).write_text(json.dumps({
             'written_by': 'process_bag of wctls_ros',
-            'files': [MARKER_NAME, f'{output.name}.mcap', 'metadata.yaml', CSV_NAME, JSON_NAME]}))
+            'files': [MARKER_NAME, f'{output.name}.mcap', 'metadata.yaml', CSV_NAME, JSON_NAME]
+            + ([ODOMETRY_CSV] if odometry is not None else [])}))
         tables = _CornerTables(writer, {'bag': str(bag), 'topic': topic,
                                         'methods': work.methods, 'parameters': parameters})
         # Closed on the way out, whatever ends the run: the worker processes stop at once.
         batches = contextlib.closing(_outputs(work, read_scans(bag, topic), jobs))
-        with tables, batches as outputs:
+        odometry_table = (OdometryTable(writer, odometry.config, odometry.mount)
+                          if odometry is not None else contextlib.nullcontext())
+        with tables, batches as outputs, odometry_table:
             for batch in outputs:
                 for log_time_ns, scan_data, scan_output in batch:
                     writer.write_serialized(topic, LASER_SCAN, log_time_ns, scan_data)
                     for message_topic, kind, data in scan_output.messages:
                         writer.write_serialized(message_topic, kind, log_time_ns, data)
                     tables.add(scan_output)
+                    if odometry is not None:
+                        odometry_table.add(log_time_ns, *scan_output.odometry_input)
                     for method in work.methods:
                         summary.corners[method] += scan_output.corners[method]
                         summary.segments[method] += scan_output.segments[method]
@@ -546,6 +566,14 @@ def parser() -> argparse.ArgumentParser:
     cli.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
                      help='show one progress bar for all bags (default: on a terminal, for '
                           'runs over 1 s)')
+    cli.add_argument('--odometry', action='store_true',
+                     help=f'also the odometry from the features: nav_msgs/Odometry on '
+                          f'{ODOMETRY_TOPIC} and {ODOMETRY_CSV} in the output folder (the '
+                          "laser's pose, or the robot's with --laser-mount)")
+    cli.add_argument('--laser-mount', nargs='+', metavar='X_M Y_M YAW_DEG | FILE',
+                     help="with --odometry: the laser's pose on the robot, as three numbers "
+                          '(m, m, deg) or a YAML file with x_m, y_m, yaw_rad (such as a '
+                          "recording's laser_mount.yaml)")
     return cli
 
 
@@ -666,6 +694,7 @@ def main(argv=None) -> int:
             except ValueError as error:
                 raise ConfigError(f'process_bag: error: {error}') from error
             runs = _plan(args)
+            odometry = odometry_request(args.odometry, args.laser_mount)
             # Workers are forked from a process that has chosen (and compiled) the core.
             start_core('process_bag', wait=args.jobs > 1,
                        give_up=lambda: stop.received is not None)
@@ -682,7 +711,7 @@ def main(argv=None) -> int:
                     try:
                         results.append((bag, process(bag, output, parameters, methods,
                                                      args.topic, args.force, after_scans,
-                                                     args.jobs)))
+                                                     args.jobs, odometry)))
                     except BagError as error:
                         if len(runs) == 1:
                             raise

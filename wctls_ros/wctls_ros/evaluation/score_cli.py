@@ -37,6 +37,7 @@ from .rules import check_still, corners_per_scan_figure
 from .scans import load_json_scans, load_scans, StaticScans
 from .score import (markdown_table, RECURRING_PRESENCE, REOBSERVATION_COLUMNS, score_scans,
                     write_score)
+from .trajectory import score_trajectory
 from .truth import load_truth, Truth, TRUTH_FILE
 from ..cli import bounded, Parser, start_core, USER_ERROR, UserError
 from ..core import FeatureConfig, METHODS
@@ -110,6 +111,10 @@ def parser() -> argparse.ArgumentParser:
                    help='position sigma of the poses, each axis, m (default: %(default)s)')
     p.add_argument('--pose-sigma-deg', type=bounded(float, 0.0), default=0.0,
                    help='heading sigma of the poses, deg (default: %(default)s)')
+    p.add_argument('--odometry', action='store_true',
+                   help='with poses: also run the odometry from the features (the first '
+                   "method's) and compare its trajectory with the poses: RPE per metre, ATE "
+                   "after SE(2) alignment, step NEES with the poses' sigmas as their jitter")
     p.add_argument('--out', default=None, help='folder for table.md, table.csv, corners.csv, '
                    'score.png: a new or empty folder, or an earlier output of score, which is '
                    'replaced (default: print only)')
@@ -237,6 +242,9 @@ def run(args, argv) -> int:
                         f'is no truth (--labels, or {TRUTH_FILE} beside the scans); for a '
                         'moving sensor say so: --still no tests the re-observations without '
                         'poses, --poses FILE or --poses-topic TOPIC with them')
+    if args.odometry and poses is None:
+        raise UserError('--odometry compares the odometry with the poses: give --poses or '
+                        '--poses-topic')
     started = time.monotonic()
     table = score_scans(scans, settings, truth, still, args.min_presence, poses,
                         args.pose_sigma_m, math.radians(args.pose_sigma_deg))
@@ -269,6 +277,10 @@ def run(args, argv) -> int:
         print(f'# {scored.method}: corners per scan '
               f'{corners_per_scan_figure(scored.per_scan):.3f}')
         print('\n'.join(f'# {scored.method}: {line}' for line in scored.reobservation.lines()))
+    if args.odometry:
+        errors = score_trajectory(scans, config, poses, args.pose_sigma_m,
+                                  math.radians(args.pose_sigma_deg))
+        print('\n'.join(f'# odometry ({config.method}): {line}' for line in errors.lines()))
     if args.out is not None:
         command = 'score ' + ' '.join(shlex.quote(a) for a in
                                       (sys.argv[1:] if argv is None else argv))

@@ -253,3 +253,24 @@ def run_odometry(scans: StaticScans, config: FeatureConfig,
                        stacked('pose_covariance', (3, 3)), stacked('step', (3,)),
                        stacked('step_covariance', (3, 3)), tuple(u.status for u in updates),
                        spent / max(len(updates), 1))
+
+
+def score_trajectory(scans: StaticScans, config: FeatureConfig, poses: np.ndarray,
+                     sigma_m: float, sigma_rad: float,
+                     odometry_config: OdometryConfig = OdometryConfig()) -> TrajectoryErrors:
+    """
+    Run the odometry over a recording and compare it with the sensor's reference poses.
+
+    :param scans: consecutive scans
+    :param config: the pipeline configuration
+    :param poses: the sensor's reference pose at each scan, shape (T, 3), NaN rows where
+        unknown (left out)
+    :param sigma_m: the reference's per-pose position jitter, each axis, m
+    :param sigma_rad: its heading jitter, rad
+    :param odometry_config: the odometry's settings
+    :return: the figures
+    """
+    run = run_odometry(scans, config, odometry_config)
+    known = np.isfinite(poses).all(axis=1)
+    return trajectory_errors(run.poses[known], run.steps[known], run.step_covariances[known],
+                             poses[known], sigma_m, sigma_rad)

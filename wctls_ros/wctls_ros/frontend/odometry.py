@@ -114,6 +114,7 @@ class OdometryUpdate:
     One scan's odometry.
 
     :ivar stamp_s: the scan's stamp, s
+    :ivar dt_s: the time since the previous scan, s (0 for the first)
     :ivar step: as in :class:`StepEstimate`
     :ivar step_covariance: its covariance, shape (3, 3)
     :ivar pose: the pose in odom (x m, y m, yaw rad), shape (3,)
@@ -124,6 +125,7 @@ class OdometryUpdate:
     """
 
     stamp_s: float
+    dt_s: float
     step: np.ndarray
     step_covariance: np.ndarray
     pose: np.ndarray
@@ -716,6 +718,27 @@ class Odometry:
             self._velocity_covariance = np.zeros((3, 3))
         self._reference = landmarks
         self._stamp_s = stamp_s if math.isfinite(stamp_s) else self._stamp_s
-        return OdometryUpdate(stamp_s, estimate.step, estimate.covariance, self.pose.copy(),
-                              self.pose_covariance.copy(), estimate.status, estimate.corners,
-                              estimate.lines)
+        return OdometryUpdate(stamp_s, dt_s, estimate.step, estimate.covariance,
+                              self.pose.copy(), self.pose_covariance.copy(), estimate.status,
+                              estimate.corners, estimate.lines)
+
+
+def on_robot(update: OdometryUpdate, mount: np.ndarray) -> OdometryUpdate:
+    """
+    Return a laser's odometry as the odometry of the robot that carries it.
+
+    The laser's odometry starts at its mount M (the laser's pose in the robot frame, so that
+    odom is the robot's first pose); the robot's pose is the laser's (+) M^-1 and its step
+    M (+) s (+) M^-1 (:func:`change_frame`), covariances by the first-order Jacobians.
+
+    :param update: the laser's odometry (started at the mount)
+    :param mount: the laser's pose in the robot frame (x m, y m, yaw rad)
+    :return: the robot's
+    """
+    mount = np.asarray(mount, dtype=float)
+    by_pose, _ = compose_jacobians(update.pose, inverse(mount))
+    step, step_covariance = change_frame(update.step, update.step_covariance, mount)
+    return OdometryUpdate(update.stamp_s, update.dt_s, step, step_covariance,
+                          compose(update.pose, inverse(mount)),
+                          by_pose @ update.pose_covariance @ by_pose.T, update.status,
+                          update.corners, update.lines)

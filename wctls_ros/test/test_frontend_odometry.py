@@ -174,6 +174,24 @@ def test_the_odometry_composes_its_steps_into_the_pose_and_its_covariance():
     assert np.allclose(updates[2].pose_covariance, expected)
 
 
+def test_a_still_sensor_matched_to_its_keyframe_neither_drifts_nor_grows_its_covariance():
+    rng = np.random.default_rng(4)
+    scans = [observe((0.0, 0.0, 0.0), rng) for _ in range(60)]
+    against_keyframe = Odometry(OdometryConfig())
+    by_keyframe = [against_keyframe.update(0.1 * k, scan) for k, scan in enumerate(scans)]
+    scan_to_scan = Odometry(OdometryConfig(keyframe_m=0.0, keyframe_rad=0.0))
+    chained = [scan_to_scan.update(0.1 * k, scan) for k, scan in enumerate(scans)]
+    assert all(u.status == 'tracking' for u in by_keyframe[1:] + chained[1:])
+    # Against the keyframe, the pose's covariance is the one match's: it does not grow.
+    assert np.trace(by_keyframe[-1].pose_covariance) < 1.5 * np.trace(
+        by_keyframe[1].pose_covariance)
+    # Scan to scan, it grows with every step (a random walk), and so does the error.
+    assert np.trace(chained[-1].pose_covariance) > 30 * np.trace(chained[1].pose_covariance)
+    last = by_keyframe[-1].pose
+    assert math.hypot(last[0], last[1]) < 3 * math.sqrt(np.trace(
+        by_keyframe[-1].pose_covariance[:2, :2]))
+
+
 def test_trajectory_errors_of_a_perfect_and_of_a_shifted_and_scaled_estimate():
     t = np.linspace(0, 2 * math.pi, 200)
     reference = np.column_stack([3 * np.cos(t), 2 * np.sin(t), t + math.pi / 2])

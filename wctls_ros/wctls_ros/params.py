@@ -255,6 +255,12 @@ ODOMETRY_NODE = FEATURE_NODE[:1 + len(fields(FeatureConfig))] + (
               'at most', Limits(1, 100000), setting='max_hypotheses'),
     Parameter('max_step_m', _ODOMETRY.max_step_m, 'Largest motion between two scans, m',
               Limits(0.01, 100.0), setting='max_step_m'),
+    Parameter('keyframe_m', _ODOMETRY.keyframe_m, 'Match the scans against a keyframe until '
+              'they lie this far from it, m (0 and keyframe_deg 0: scan to scan)',
+              Limits(0.0, 100.0), setting='keyframe_m'),
+    Parameter('keyframe_deg', round(math.degrees(_ODOMETRY.keyframe_rad), 6), '... or turned '
+              'this far from it, deg', Limits(0.0, 180.0), setting='keyframe_rad',
+              to_setting=math.radians),
     Parameter('degenerate_sigma_m', _ODOMETRY.degenerate_sigma_m, 'A step the landmarks know '
               'worse than this along some direction, m, is degenerate (the prior fills in)',
               Limits(1e-4, 10.0), setting='degenerate_sigma_m'),

@@ -32,7 +32,8 @@ import numpy as np
 from .scans import StaticScans
 from ..core import extract_features, FeatureConfig
 from ..frontend.frames import landmarks_from_features, wrap
-from ..frontend.odometry import compose, compose_jacobians, inverse, Odometry, OdometryConfig
+from ..frontend.odometry import (compose, compose_jacobians, inverse, inverse_jacobian, Odometry,
+                                 OdometryConfig)
 
 GATE_3DOF_95 = 7.815
 STEP_TOLERANCE_M = 0.10
@@ -129,14 +130,9 @@ def reference_step_covariance(reference: np.ndarray, k: int, sigma_m: float,
     :return: shape (3, 3)
     """
     before, after = reference[k - 1], reference[k]
-    cos, sin = math.cos(before[2]), math.sin(before[2])
-    # d inverse(a) / da
-    by_inverse = np.array([[-cos, -sin, sin * before[0] - cos * before[1]],
-                           [sin, -cos, cos * before[0] + sin * before[1]],
-                           [0.0, 0.0, -1.0]])
     by_first, by_second = compose_jacobians(inverse(before), after)
     jitter = np.diag([sigma_m ** 2, sigma_m ** 2, sigma_rad ** 2])
-    by_before = by_first @ by_inverse
+    by_before = by_first @ inverse_jacobian(before)
     return by_before @ jitter @ by_before.T + by_second @ jitter @ by_second.T
 
 

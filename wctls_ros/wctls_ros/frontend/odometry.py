@@ -70,6 +70,9 @@ class OdometryConfig:
         degrees of freedom (above: inconsistent, reinitialized)
     :ivar max_step_m: the largest step between two scans, m (hypotheses beyond it are not
         scored: a repeated structure shifted by its period is not a step)
+    :ivar keyframe_m: match the scans against a keyframe until they lie this far from it, m
+        (0 and keyframe_rad 0: scan to scan)
+    :ivar keyframe_rad: ... or turned this far from it, rad
     :ivar seed: seed of the hypothesis draw
     """
 
@@ -83,6 +86,8 @@ class OdometryConfig:
     reinit_sigma_rad: float = math.radians(60.0)
     consistency_probability: float = 0.999
     max_step_m: float = 2.0
+    keyframe_m: float = 0.1
+    keyframe_rad: float = math.radians(3.0)
     seed: int = 0
 
 
@@ -173,6 +178,19 @@ def inverse(a: np.ndarray) -> np.ndarray:
     """
     cos, sin = math.cos(a[2]), math.sin(a[2])
     return np.array([-cos * a[0] - sin * a[1], sin * a[0] - cos * a[1], -a[2]])
+
+
+def inverse_jacobian(a: np.ndarray) -> np.ndarray:
+    """
+    Return d(a^-1)/da.
+
+    :param a: (x m, y m, yaw rad)
+    :return: 3x3
+    """
+    cos, sin = math.cos(a[2]), math.sin(a[2])
+    return np.array([[-cos, -sin, sin * a[0] - cos * a[1]],
+                     [sin, -cos, cos * a[0] + sin * a[1]],
+                     [0.0, 0.0, -1.0]])
 
 
 def change_frame(step: np.ndarray, covariance: np.ndarray,
@@ -470,23 +488,25 @@ def residuals(previous: Landmarks, current: Landmarks, step: np.ndarray, corners
         out_s.append(previous.corner_cov[p] + rot @ current.corner_cov[c] @ rot.T)
     if lines:
         p, c = np.array(lines).T
-        sub_prev = Landmarks(previous.corner_xy[:0], previous.corner_cov[:0],
-                             previous.corner_lines[:0], previous.line[p], previous.line_cov[p],
-                             previous.line_ends[p])
-        sub_cur = Landmarks(current.corner_xy[:0], current.corner_cov[:0],
-                            current.corner_lines[:0], current.line[c], current.line_cov[c],
-                            current.line_ends[c])
-        error, innovation = _line_errors(sub_prev, sub_cur, step[None])
-        n = np.arange(len(p))
         angle = current.line[c, 0] + step[2]
+        cos, sin = np.cos(angle), np.sin(angle)
+        lever = -step[0] * sin + step[1] * cos
+        out_e.append(np.column_stack([wrap(angle - previous.line[p, 0]),
+                                      current.line[c, 1] + step[0] * cos + step[1] * sin
+                                      - previous.line[p, 1]]))
         jac = np.zeros((len(p), 2, 3))
         jac[:, 0, 2] = 1.0
-        jac[:, 1, 0] = np.cos(angle)
-        jac[:, 1, 1] = np.sin(angle)
-        jac[:, 1, 2] = -step[0] * np.sin(angle) + step[1] * np.cos(angle)
-        out_e.append(error[0, n, n])
+        jac[:, 1, 0] = cos
+        jac[:, 1, 1] = sin
+        jac[:, 1, 2] = lever
         out_j.append(jac)
-        out_s.append(innovation[0, n, n])
+        # The moved line's covariance J C J^T, J = [[1, 0], [lever, 1]] (see _line_errors).
+        moved = np.zeros((len(p), 2, 2))
+        moved[:, 0, 0] = 1.0
+        moved[:, 1, 0] = lever
+        moved[:, 1, 1] = 1.0
+        out_s.append(previous.line_cov[p] + moved @ current.line_cov[c]
+                     @ moved.transpose(0, 2, 1))
     if not out_e:
         return np.zeros((0, 2)), np.zeros((0, 2, 3)), np.zeros((0, 2, 2))
     return np.concatenate(out_e), np.concatenate(out_j), np.concatenate(out_s)
@@ -530,7 +550,7 @@ def fit(previous: Landmarks, current: Landmarks, start: np.ndarray, corners, lin
             break
         step = step + update
         step[2] = float(wrap(step[2]))
-        if np.abs(update).max() < 1e-10:
+        if np.abs(update).max() < 1e-9:
             break
     error, jac, cov = residuals(previous, current, step, corners, lines)
     weight = _inverse_2x2(cov)
@@ -618,11 +638,24 @@ def estimate_step(previous: Landmarks, current: Landmarks, prior_step: np.ndarra
     step, corners, lines = prior_step, [], []
     # The best few hypotheses are each refined: a hypothesis from a short baseline can lie
     # outside the gate of landmarks that a fit from it brings in.
-    for start in steps[np.argsort(-scores, kind='stable')[:REFINED_HYPOTHESES]]:
+    starts: List[np.ndarray] = []
+    for start in steps[np.argsort(-scores, kind='stable')]:
+        if len(starts) == REFINED_HYPOTHESES:
+            break
+        # Hypotheses of one motion from different pairs: refining one of them is enough.
+        if any(abs(start[0] - other[0]) + abs(start[1] - other[1]) < SEARCH_SLACK_M
+               and abs(float(wrap(start[2] - other[2]))) < SEARCH_SLACK_RAD
+               for other in starts):
+            continue
+        starts.append(start)
         refined, pairs = _refine(previous, current, start)
         count = len(pairs[0]) + len(pairs[1]) if math.hypot(
             refined[0], refined[1]) <= config.max_step_m else 0
-        chi2 = _chi2(previous, current, refined, *pairs) if count else math.inf
+        # Equal support (a symmetric room): the motion the prior expects, then the better fit.
+        away = refined - prior_step
+        away[2] = float(wrap(away[2]))
+        chi2 = (_chi2(previous, current, refined, *pairs)
+                + float(away @ np.linalg.solve(prior_covariance, away))) if count else math.inf
         if count > best_count or (count == best_count and chi2 < best_chi2):
             best_count, best_chi2 = count, chi2
             step, (corners, lines) = refined, pairs
@@ -663,9 +696,12 @@ class Odometry:
     """
     The odometry of one sensor: a step per scan, composed into a pose in odom.
 
-    The previous scan's landmarks are the reference (scan to scan); the constant-velocity
-    prior is the last good step per second times the time since, its covariance that step's
-    grown by the prior's growth per step.
+    The reference is a keyframe: a scan whose landmarks the next scans are matched against
+    until the motion from it exceeds ``keyframe_m`` or ``keyframe_rad`` (or a match fails);
+    with both 0, every scan is the next one's reference (scan to scan). Matched against a
+    keyframe, a still sensor does not drift, and its pose covariance does not grow, scan by
+    scan (docs/odometry.md#keyframes). The constant-velocity prior is the last good step per
+    second times the time since, its covariance that step's grown by the prior's growth.
     """
 
     def __init__(self, config: OdometryConfig = OdometryConfig(),
@@ -680,6 +716,11 @@ class Odometry:
         self.pose = np.asarray(pose, dtype=float)
         self.pose_covariance = np.zeros((3, 3))
         self._reference: Optional[Landmarks] = None
+        self._reference_pose = self.pose.copy()
+        self._reference_covariance = np.zeros((3, 3))
+        # The last scan's pose in the keyframe's frame, and its covariance.
+        self._last = np.zeros(3)
+        self._last_covariance = np.zeros((3, 3))
         self._stamp_s = math.nan
         self._velocity = np.zeros(3)            # per second
         self._velocity_covariance = np.zeros((3, 3))
@@ -689,6 +730,14 @@ class Odometry:
         growth = np.diag([self.config.prior_sigma_m ** 2, self.config.prior_sigma_m ** 2,
                           self.config.prior_sigma_rad ** 2])
         return self._velocity * dt_s, self._velocity_covariance * dt_s ** 2 + growth
+
+    def _keyframe(self, landmarks: Landmarks) -> None:
+        """Make the scan just taken the reference."""
+        self._reference = landmarks
+        self._reference_pose = self.pose.copy()
+        self._reference_covariance = self.pose_covariance.copy()
+        self._last = np.zeros(3)
+        self._last_covariance = np.zeros((3, 3))
 
     def update(self, stamp_s: float, landmarks: Landmarks) -> OdometryUpdate:
         """
@@ -701,24 +750,51 @@ class Odometry:
         dt_s = stamp_s - self._stamp_s if math.isfinite(self._stamp_s) else 0.0
         dt_s = dt_s if math.isfinite(dt_s) and dt_s > 0.0 else 0.0
         prior_step, prior_covariance = self._prior(dt_s)
+        # The prior of the scan's pose in the keyframe's frame: the last one's, one step on.
+        by_last, by_prior = compose_jacobians(self._last, prior_step)
+        prior_relative = compose(self._last, prior_step)
+        prior_relative_covariance = (by_last @ self._last_covariance @ by_last.T
+                                     + by_prior @ prior_covariance @ by_prior.T)
         if self._reference is None:
             estimate = StepEstimate(np.zeros(3), np.zeros((3, 3)), 'prior')
         else:
-            estimate = estimate_step(self._reference, landmarks, prior_step, prior_covariance,
-                                     self.config)
-        by_pose, by_step = compose_jacobians(self.pose, estimate.step)
-        self.pose = compose(self.pose, estimate.step)
-        self.pose_covariance = (by_pose @ self.pose_covariance @ by_pose.T
-                                + by_step @ estimate.covariance @ by_step.T)
-        if estimate.status in ('tracking', 'degenerate') and dt_s > 0.0:
-            self._velocity = estimate.step / dt_s
-            self._velocity_covariance = estimate.covariance / dt_s ** 2
+            estimate = estimate_step(self._reference, landmarks, prior_relative,
+                                     prior_relative_covariance, self.config)
+        matched = estimate.status in ('tracking', 'degenerate')
+        # The step from the last scan: last^-1 (+) relative (the two taken as independent).
+        by_inverse, by_relative = compose_jacobians(inverse(self._last), estimate.step)
+        by_last = by_inverse @ inverse_jacobian(self._last)
+        step = compose(inverse(self._last), estimate.step)
+        step_covariance = (by_last @ self._last_covariance @ by_last.T
+                           + by_relative @ estimate.covariance @ by_relative.T)
+        if not matched:
+            # The prior or a reinitialization: its covariance is the step's own.
+            step, step_covariance = prior_step.copy(), estimate.covariance.copy()
+            if estimate.status == 'prior' and self._reference is None:
+                step_covariance = np.zeros((3, 3))
+            by_pose, by_step = compose_jacobians(self.pose, step)
+            self.pose = compose(self.pose, step)
+            self.pose_covariance = (by_pose @ self.pose_covariance @ by_pose.T
+                                    + by_step @ step_covariance @ by_step.T)
+        else:
+            by_pose, by_step = compose_jacobians(self._reference_pose, estimate.step)
+            self.pose = compose(self._reference_pose, estimate.step)
+            self.pose_covariance = (by_pose @ self._reference_covariance @ by_pose.T
+                                    + by_step @ estimate.covariance @ by_step.T)
+        if matched and dt_s > 0.0:
+            self._velocity = step / dt_s
+            self._velocity_covariance = step_covariance / dt_s ** 2
         elif estimate.status == 'reinitialized':
             self._velocity = np.zeros(3)
             self._velocity_covariance = np.zeros((3, 3))
-        self._reference = landmarks
+        far = (math.hypot(estimate.step[0], estimate.step[1]) > self.config.keyframe_m
+               or abs(estimate.step[2]) > self.config.keyframe_rad)
+        if not matched or far:
+            self._keyframe(landmarks)
+        else:
+            self._last, self._last_covariance = estimate.step, estimate.covariance
         self._stamp_s = stamp_s if math.isfinite(stamp_s) else self._stamp_s
-        return OdometryUpdate(stamp_s, dt_s, estimate.step, estimate.covariance,
+        return OdometryUpdate(stamp_s, dt_s, step, 0.5 * (step_covariance + step_covariance.T),
                               self.pose.copy(), self.pose_covariance.copy(), estimate.status,
                               estimate.corners, estimate.lines)
 

@@ -306,18 +306,7 @@ def odometry_settings(values: Dict[str, Value]) -> OdometrySettings:
     :return: the settings
     :raises ValueError: with every reason when the values make no valid configuration
     """
-    settings: dict = {}
-    problems: list = []
-    for parameter in ODOMETRY_NODE:
-        try:
-            value = parameter.check(values[parameter.name])
-        except ConfigError as error:
-            problems.append(str(error))
-            continue
-        if parameter.setting is not None:
-            settings[parameter.setting] = parameter.to_setting(value)
-    if problems:
-        raise ConfigError('; '.join(problems))
+    settings = _settings(ODOMETRY_NODE, values)
     feature = {k: v for k, v in settings.items() if k in FeatureConfig.__dataclass_fields__}
     odometry = {k: v for k, v in settings.items() if k in OdometryConfig.__dataclass_fields__}
     return OdometrySettings(FeatureConfig(**feature), OdometryConfig(**odometry),
@@ -369,22 +358,35 @@ def feature_settings(values: Dict[str, Value]) -> FeatureSettings:
     :return: the settings
     :raises ValueError: with every reason when the values make no valid configuration
     """
-    config: dict = {}
-    style: dict = {}
+    settings = _settings(FEATURE_NODE, values)
+    config = {k: v for k, v in settings.items() if k in FeatureConfig.__dataclass_fields__}
+    style = {k: v for k, v in settings.items() if k not in config}
+    return FeatureSettings(FeatureConfig(**config), MarkerStyle(**style),
+                           bool(values['publish_markers']))
+
+
+def _settings(schema, values: Dict[str, Value]) -> dict:
+    """
+    Return the settings fields a schema's parameter values fill, in the fields' units.
+
+    :param schema: e.g. FEATURE_NODE
+    :param values: name -> value for every parameter of the schema
+    :return: setting field -> value
+    :raises ConfigError: with every value the schema refuses
+    """
+    settings: dict = {}
     problems: list = []
-    for parameter in FEATURE_NODE:
+    for parameter in schema:
         try:
             value = parameter.check(values[parameter.name])
         except ConfigError as error:           # stated in the parameter's own name and unit
             problems.append(str(error))
             continue
         if parameter.setting is not None:
-            target = config if parameter.setting in FeatureConfig.__dataclass_fields__ else style
-            target[parameter.setting] = parameter.to_setting(value)
+            settings[parameter.setting] = parameter.to_setting(value)
     if problems:
         raise ConfigError('; '.join(problems))
-    return FeatureSettings(FeatureConfig(**config), MarkerStyle(**style),
-                           bool(values['publish_markers']))
+    return settings
 
 
 def _flatten(parameters: dict, prefix: str = '') -> dict:

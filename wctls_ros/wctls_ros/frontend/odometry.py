@@ -49,6 +49,8 @@ REFINED_HYPOTHESES = 6
 # The search's gates are wider by these (a hypothesis from two landmarks is itself uncertain).
 SEARCH_SLACK_M = 0.05
 SEARCH_SLACK_RAD = math.radians(2.0)
+# A refined hypothesis that associates this share of the smaller scan's landmarks ends the search.
+ENOUGH_SHARE = 0.9
 
 
 @dataclass(frozen=True)
@@ -550,7 +552,7 @@ def fit(previous: Landmarks, current: Landmarks, start: np.ndarray, corners, lin
             break
         step = step + update
         step[2] = float(wrap(step[2]))
-        if np.abs(update).max() < 1e-9:
+        if np.abs(update).max() < 1e-8:
             break
     error, jac, cov = residuals(previous, current, step, corners, lines)
     weight = _inverse_2x2(cov)
@@ -659,6 +661,8 @@ def estimate_step(previous: Landmarks, current: Landmarks, prior_step: np.ndarra
         if count > best_count or (count == best_count and chi2 < best_chi2):
             best_count, best_chi2 = count, chi2
             step, (corners, lines) = refined, pairs
+        if best_count >= ENOUGH_SHARE * min(landmarks_prev, landmarks_cur):
+            break                       # nothing else could associate much more
     matched = len(corners) + len(lines)
     reinit = StepEstimate(prior_step.copy(), np.diag(
         [config.reinit_sigma_m ** 2, config.reinit_sigma_m ** 2, config.reinit_sigma_rad ** 2])

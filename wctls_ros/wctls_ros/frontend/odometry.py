@@ -728,11 +728,17 @@ class Odometry:
         self._stamp_s = math.nan
         self._velocity = np.zeros(3)            # per second
         self._velocity_covariance = np.zeros((3, 3))
+        self._velocity_known = False
 
     def _prior(self, dt_s: float) -> Tuple[np.ndarray, np.ndarray]:
         """Return the constant-velocity step over dt and its grown covariance."""
-        growth = np.diag([self.config.prior_sigma_m ** 2, self.config.prior_sigma_m ** 2,
-                          self.config.prior_sigma_rad ** 2])
+        config = self.config
+        growth = np.diag([config.prior_sigma_m ** 2, config.prior_sigma_m ** 2,
+                          config.prior_sigma_rad ** 2])
+        if not self._velocity_known:
+            # Before a first match the velocity is unknown: a motion of any size is as likely.
+            growth = growth + np.diag([config.reinit_sigma_m ** 2, config.reinit_sigma_m ** 2,
+                                       config.reinit_sigma_rad ** 2])
         return self._velocity * dt_s, self._velocity_covariance * dt_s ** 2 + growth
 
     def _keyframe(self, landmarks: Landmarks) -> None:
@@ -788,9 +794,11 @@ class Odometry:
         if matched and dt_s > 0.0:
             self._velocity = step / dt_s
             self._velocity_covariance = step_covariance / dt_s ** 2
+            self._velocity_known = True
         elif estimate.status == 'reinitialized':
             self._velocity = np.zeros(3)
             self._velocity_covariance = np.zeros((3, 3))
+            self._velocity_known = False
         far = (math.hypot(estimate.step[0], estimate.step[1]) > self.config.keyframe_m
                or abs(estimate.step[2]) > self.config.keyframe_rad)
         if not matched or far:

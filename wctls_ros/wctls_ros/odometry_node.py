@@ -62,8 +62,12 @@ class OdometryNode(Node):
         self._odom = self.create_publisher(OdometryMessage, 'odom', 10)
         self._tf = None
         if settings.publish_tf:
-            # tf2_msgs is on every ROS install; the PyPI wheels lack it (a clear error here).
-            from tf2_msgs.msg import TFMessage
+            # tf2_msgs is on every ROS install; the PyPI wheels lack it.
+            try:
+                from tf2_msgs.msg import TFMessage
+            except ImportError as error:
+                raise ValueError('publish_tf needs the tf2_msgs package, which this install '
+                                 'lacks: sudo apt install ros-jazzy-tf2-msgs') from error
             self._tf_classes = _rclpy_classes(TRANSFORM_TYPES)
             self._tf = self.create_publisher(TFMessage, '/tf', 100)
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
@@ -121,9 +125,7 @@ class OdometryNode(Node):
 
 def main(args=None) -> int:
     """Run the node until Ctrl-C or shutdown; exit 1 on an invalid configuration."""
-    # A missing tf2_msgs (publish_tf on an install without it) is a configuration error too.
-    return run_node('odometry_node', OdometryNode, config_errors=(ValueError, ImportError),
-                    args=args)
+    return run_node('odometry_node', OdometryNode, args=args)
 
 
 if __name__ == '__main__':

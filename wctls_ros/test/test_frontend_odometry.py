@@ -284,3 +284,41 @@ def test_process_bag_writes_the_laser_and_the_robots_odometry(tmp_path):
         # The robot's pose carries the laser at its mount; odom is the robot's first pose.
         assert np.allclose(compose(robot_pose, mount), compose(mount, laser_pose), atol=1e-6)
         assert one['status'] == other['status']
+    # The output bag holds one nav_msgs/Odometry per scan, the robot's in odom -> base_link.
+    from rosbags.highlevel import AnyReader
+    from wctls_ros.bags.bag_io import typestore
+    with AnyReader([tmp_path / 'robot'], default_typestore=typestore()) as reader:
+        odom = [c for c in reader.connections if c.topic == '/odom']
+        messages = [reader.deserialize(raw, c.msgtype)
+                    for c, _, raw in reader.messages(connections=odom)]
+    assert len(messages) == len(robot)
+    last = messages[-1]
+    assert (last.header.frame_id, last.child_frame_id) == ('odom', 'base_link')
+    assert last.pose.pose.position.x == pytest.approx(float(robot[-1]['x_m']))
+    covariance = np.asarray(last.pose.covariance).reshape(6, 6)
+    assert covariance[0, 0] == pytest.approx(float(robot[-1]['cov_xx']))
+    assert covariance[5, 5] == pytest.approx(float(robot[-1]['cov_yawyaw']))
+
+
+@pytest.mark.skipif(not (DATA / 'mrpt_malaga_moving').is_dir(), reason='no recording')
+def test_score_reports_the_odometrys_trajectory_against_the_poses(tmp_path, capsys):
+    pytest.importorskip('rosbags')
+    from wctls_ros.evaluation.score_cli import main
+    folder = DATA / 'mrpt_malaga_moving'
+    common = [str(folder), '--still', 'no', '--methods', 'wctls', '--odometry']
+    assert main(common) == 2
+    assert '--odometry compares the odometry with the poses' in capsys.readouterr().err
+    assert main(common + ['--poses', str(folder / 'poses.csv'), '--laser-offset', '0.78', '0',
+                          '0', '--pose-sigma-m', '0.01', '--pose-sigma-deg', '0.5', '--out',
+                          str(tmp_path / 'out')]) == 0
+    printed = capsys.readouterr().out
+    line = next(line for line in printed.splitlines() if 'odometry (wctls): RPE' in line)
+    # The same figures as the library gives for the same recording and jitter.
+    scans = load_scans(folder)
+    reference = poses_at(load_poses(folder / 'poses.csv'), scans.stamps_ns * 1e-9,
+                         (0.78, 0.0, 0.0))
+    from wctls_ros.evaluation.trajectory import score_trajectory
+    errors = score_trajectory(scans, node_config(None, None), reference, 0.01,
+                              math.radians(0.5))
+    assert f'{errors.rpe_percent_per_m:.2f} %/m' in line
+    assert 'odometry (wctls): RPE' in (tmp_path / 'out' / 'table.md').read_text()

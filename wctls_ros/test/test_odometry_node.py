@@ -95,8 +95,8 @@ def test_the_cars_odometry_follows_its_tracking_system(ros_context, executor):
             assert np.linalg.eigvalsh(matrix[np.ix_([0, 1, 5], [0, 1, 5])]).min() >= 0.0
     # The tracked body's motion since the first scan, against the published pose.
     reference = poses_at(load_poses(RECORDING / 'poses.csv'), stamps)
-    travelled = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(reference[:, :2],
-                                                                    axis=0).T))])
+    steps = np.diff(reference[:, :2], axis=0)
+    travelled = np.concatenate([[0.0], np.cumsum(np.hypot(steps[:, 0], steps[:, 1]))])
     assert travelled[-1] > 5.0
     for message, pose, path in zip(messages, reference, travelled):
         relative = compose(inverse(reference[0]), pose)

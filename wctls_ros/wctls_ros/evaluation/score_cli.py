@@ -270,6 +270,11 @@ def run(args, argv) -> int:
                           f'sigma {1e3 * args.pose_sigma_m:g} mm and {args.pose_sigma_deg:g} '
                           'deg'),
              f'scored in {elapsed:.1f} s']
+    if args.odometry:
+        # In the notes: printed, and in table.md with the command that made them.
+        errors = score_trajectory(scans, config, poses, args.pose_sigma_m,
+                                  math.radians(args.pose_sigma_deg))
+        notes += [f'odometry ({config.method}): {line}' for line in errors.lines()]
     print('\n'.join(f'# {note}' for note in notes))
     print(markdown_table(table))
     print(markdown_table(table, REOBSERVATION_COLUMNS))
@@ -277,10 +282,6 @@ def run(args, argv) -> int:
         print(f'# {scored.method}: corners per scan '
               f'{corners_per_scan_figure(scored.per_scan):.3f}')
         print('\n'.join(f'# {scored.method}: {line}' for line in scored.reobservation.lines()))
-    if args.odometry:
-        errors = score_trajectory(scans, config, poses, args.pose_sigma_m,
-                                  math.radians(args.pose_sigma_deg))
-        print('\n'.join(f'# odometry ({config.method}): {line}' for line in errors.lines()))
     if args.out is not None:
         command = 'score ' + ' '.join(shlex.quote(a) for a in
                                       (sys.argv[1:] if argv is None else argv))

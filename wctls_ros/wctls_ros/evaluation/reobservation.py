@@ -43,9 +43,9 @@ from .analysis import features_per_scan
 from .rules import assign, ASSOCIATION_GATE_MAX_M
 from .samples import ScanCorners
 from .scans import StaticScans
-from ..core import FeatureConfig, line_landmarks
-from ..frontend.frames import (Landmarks, moved as _moved, overlapping as _overlapping, to_world,
-                               wrap as _wrap)
+from ..core import FeatureConfig
+from ..frontend.frames import (Landmarks, landmarks_from_features, moved as _moved,
+                               overlapping as _overlapping, to_world, wrap as _wrap)
 
 # 95 % points of the chi-square distribution with 1 and 2 degrees of freedom.
 GATE_1DOF = 3.841
@@ -176,30 +176,6 @@ class Reobservation:
 def _percentile(lengths: Sequence[int], percent: float) -> float:
     """Return a percentile of track lengths (NaN without tracks)."""
     return float(np.percentile(lengths, percent)) if len(lengths) else math.nan
-
-
-def landmarks_of(features, corners: ScanCorners, max_landmark_angle_sigma_rad: float,
-                 covariance_scale: float = 1.0) -> Landmarks:
-    """
-    Return one scan's corners and line landmarks, as a front end of feature_node takes them.
-
-    :param features: the core's Features of the scan
-    :param corners: its corners (:func:`.samples.scan_corners`)
-    :param max_landmark_angle_sigma_rad: the bound of the line landmark rule, rad
-        (:func:`~wctls_ros.core.line_landmarks`): the other segments are no lines here
-    :param covariance_scale: multiply every covariance by this (1: as the extractor gives them;
-        a check that the tests can fail uses 0.5)
-    :return: the landmarks
-    """
-    is_landmark = line_landmarks(features.segments, max_landmark_angle_sigma_rad)
-    segments = features.segments.select(is_landmark)
-    # Each segment's index among the landmarks (-1 for the others), for the corners' walls.
-    line_index = np.where(is_landmark, np.cumsum(is_landmark) - 1, -1)
-    return Landmarks(corners.xy, covariance_scale * corners.covariance,
-                     line_index[corners.segments].reshape(-1, 2),
-                     np.column_stack([segments.angle_rad, segments.radius_m]).reshape(-1, 2),
-                     covariance_scale * np.asarray(segments.covariance).reshape(-1, 2, 2),
-                     np.stack([segments.start_xy_m, segments.end_xy_m], axis=1).reshape(-1, 2, 2))
 
 
 def match_lines(before: np.ndarray, after: np.ndarray) -> np.ndarray:
@@ -412,9 +388,9 @@ def reobservation(scans: StaticScans, config: FeatureConfig, poses: Optional[np.
     :param covariance_scale: multiply the landmark covariances by this (1: as extracted)
     :return: the figures
     """
-    per_scan = [landmarks_of(features, corners, config.max_landmark_angle_sigma_rad,
-                             covariance_scale)
-                for features, corners in features_per_scan(scans, config)]
+    per_scan = [landmarks_from_features(features, config.max_landmark_angle_sigma_rad,
+                                        covariance_scale)
+                for features, _ in features_per_scan(scans, config)]
     return measure(per_scan, poses, pose_sigma_m, pose_sigma_rad)
 
 

@@ -161,6 +161,22 @@ def test_no_landmarks_give_the_prior_and_a_kidnap_reinitializes():
     assert np.isfinite(estimate.step).all()
 
 
+def test_landmarks_that_are_not_finite_are_left_out_and_nothing_is_nan():
+    odometry = Odometry(OdometryConfig())
+    damaged = observe((0.2, 0.1, 0.3))
+    damaged.corner_xy[0] = np.nan
+    damaged.line_cov[1, 0, 0] = np.inf
+    updates = [odometry.update(0.0, observe((0, 0, 0))), odometry.update(0.1, damaged),
+               odometry.update(math.nan, observe((0.4, 0.1, 0.5)))]
+    assert updates[1].status == 'tracking'
+    assert (updates[1].corners, updates[1].lines) == (len(CORNERS) - 1, len(WALLS) - 1)
+    assert np.allclose(updates[1].pose, (0.2, 0.1, 0.3), atol=1e-6)
+    for update in updates:
+        for value in (update.pose, update.pose_covariance, update.step,
+                      update.step_covariance):
+            assert np.isfinite(value).all()
+
+
 def test_the_odometry_composes_its_steps_into_the_pose_and_its_covariance():
     odometry = Odometry(OdometryConfig())
     poses = [np.zeros(3), np.array([0.3, 0.1, 0.4]), np.array([0.5, 0.4, 0.9])]

@@ -115,6 +115,27 @@ def overlapping(ends: np.ndarray, track_ends: np.ndarray) -> np.ndarray:
             > np.maximum(own[:, None, 0], other[..., 0]))
 
 
+def finite_only(landmarks: Landmarks) -> Landmarks:
+    """
+    Return the landmarks whose values and covariances are all finite.
+
+    :param landmarks: a scan's landmarks
+    :return: the finite ones (corner_lines of a dropped line become -1)
+    """
+    corners = (np.isfinite(landmarks.corner_xy).all(axis=1)
+               & np.isfinite(landmarks.corner_cov).all(axis=(1, 2)))
+    lines = (np.isfinite(landmarks.line).all(axis=1)
+             & np.isfinite(landmarks.line_cov).all(axis=(1, 2))
+             & np.isfinite(landmarks.line_ends).all(axis=(1, 2)))
+    if corners.all() and lines.all():
+        return landmarks
+    index = np.where(lines, np.cumsum(lines) - 1, -1)
+    walls = landmarks.corner_lines[corners]
+    walls = np.where(walls >= 0, index[np.maximum(walls, 0)], -1) if len(index) else walls
+    return Landmarks(landmarks.corner_xy[corners], landmarks.corner_cov[corners], walls,
+                     landmarks.line[lines], landmarks.line_cov[lines], landmarks.line_ends[lines])
+
+
 def landmarks_from_features(features: Features, max_landmark_angle_sigma_rad: float,
                             covariance_scale: float = 1.0) -> Landmarks:
     """

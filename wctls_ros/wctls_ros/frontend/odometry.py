@@ -32,7 +32,7 @@ from typing import List, Optional, Tuple
 
 import numpy as np
 
-from .frames import Landmarks, overlapping, rotation, wrap
+from .frames import finite_only, Landmarks, overlapping, rotation, wrap
 
 STATUSES = ('tracking', 'degenerate', 'prior', 'reinitialized')
 # 99 % points of the chi-square distribution with 1 and 2 degrees of freedom.
@@ -754,9 +754,11 @@ class Odometry:
         Take one scan's landmarks.
 
         :param stamp_s: the scan's stamp, s (a stamp not after the previous one: a step of 0 s)
-        :param landmarks: its landmarks in the sensor frame
+        :param landmarks: its landmarks in the sensor frame (those with a value that is not
+            finite are left out)
         :return: the odometry of this scan
         """
+        landmarks = finite_only(landmarks)
         dt_s = stamp_s - self._stamp_s if math.isfinite(self._stamp_s) else 0.0
         dt_s = dt_s if math.isfinite(dt_s) and dt_s > 0.0 else 0.0
         prior_step, prior_covariance = self._prior(dt_s)

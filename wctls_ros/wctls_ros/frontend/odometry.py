@@ -552,7 +552,7 @@ def fit(previous: Landmarks, current: Landmarks, start: np.ndarray, corners, lin
             break
         step = step + update
         step[2] = float(wrap(step[2]))
-        if np.abs(update).max() < 1e-8:
+        if np.abs(update).max() < 1e-6:
             break
     error, jac, cov = residuals(previous, current, step, corners, lines)
     weight = _inverse_2x2(cov)

@@ -31,6 +31,7 @@ setup(
         'console_scripts': [
             'bag_replay = wctls_ros.executables:bag_replay',
             'feature_node = wctls_ros.executables:feature_node',
+            'odometry_node = wctls_ros.executables:odometry_node',
             'process_bag = wctls_ros.executables:process_bag',
         ],
     },

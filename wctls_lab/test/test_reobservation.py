@@ -210,10 +210,10 @@ def test_a_bad_pose_file_is_refused_with_the_reason(tmp_path, text, message):
 def test_unknown_poses_leave_their_scans_out_of_the_tracks_only(moving):
     scans, poses = moving
     from wctls_lab.evaluation.analysis import features_per_scan
-    from wctls_lab.evaluation.reobservation import landmarks_of
+    from wctls_ros.frontend.frames import landmarks_from_features
     config = calibrated()
-    landmarks = [landmarks_of(f, c, config.max_landmark_angle_sigma_rad)
-                 for f, c in features_per_scan(scans, config)]
+    landmarks = [landmarks_from_features(f, config.max_landmark_angle_sigma_rad)
+                 for f, _ in features_per_scan(scans, config)]
     partial = poses.copy()
     partial[:20] = np.nan
     some = measure(landmarks, partial)

@@ -99,10 +99,10 @@ def test_the_user_guide_tables_are_the_schemas():
 
 def test_a_stale_table_is_found_and_rewritten(tmp_path):
     current = USER_GUIDE.read_text(encoding='utf-8')
-    row = '| `iepf_threshold_m` | double | 0.04 |'
+    row = '| `marker_line_width_m` | double | 0.02 |'
     assert current.count(row) == 1
     stale = tmp_path / 'guide.md'
-    stale.write_text(current.replace(row, '| `iepf_threshold_m` | double | 0.05 |'),
+    stale.write_text(current.replace(row, '| `marker_line_width_m` | double | 0.03 |'),
                      encoding='utf-8')
 
     checked = _params_cli('--check', str(stale))

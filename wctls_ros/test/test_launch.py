@@ -23,6 +23,7 @@ CONSOLE_SCRIPTS = set(re.findall(r"'(\w+) = wctls_ros[\w.]*:\w+'",
                                  (PACKAGE / 'setup.py').read_text()))
 EXPECTED_ARGUMENTS = {
     'feature_node.launch.py': {'params_file', 'scan_topic', 'sensor', 'method', 'use_sim_time'},
+    'odometry.launch.py': {'params_file', 'scan_topic', 'sensor', 'publish_tf', 'use_sim_time'},
     'replay.launch.py': {'bag', 'rate', 'loop', 'params_file', 'sensor', 'method'},
     'rplidar_s1.launch.py': {'serial_port', 'channel_type', 'tcp_ip', 'frame_id', 'autostart',
                              'params_file', 'sensor', 'method', 'feature_params_file',
@@ -31,7 +32,7 @@ EXPECTED_ARGUMENTS = {
 # Launch arguments that set a parameter which the node's parameter file also sets: passed only
 # when given, so that a user's file is never silently overridden by a launch default...
 FILE_PARAMETERS = {'sensor', 'method', 'use_sim_time', 'serial_port', 'channel_type', 'tcp_ip',
-                   'frame_id', 'autostart'}
+                   'frame_id', 'autostart', 'publish_tf'}
 # ... except where the launch file is about one sensor (documented in its --show-args).
 DELIBERATE_DEFAULTS = {('rplidar_s1.launch.py', 'sensor'): 'rplidar_s1'}
 launch_ros_missing = pytest.mark.skipif(importlib.util.find_spec('launch_ros') is None,

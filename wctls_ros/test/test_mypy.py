@@ -9,7 +9,8 @@ import pytest
 
 REPOSITORY = pathlib.Path(__file__).resolve().parents[2]
 CHECKED = [f'wctls_ros/wctls_ros/{path}'
-           for path in ('core', 'conversions.py', 'frontend', 'params.py', 'plain_yaml.py')] + [
+           for path in ('core', 'conversions.py', 'frontend', 'odometry_messages.py', 'params.py',
+                        'plain_yaml.py')] + [
     'wctls_rplidar/wctls_rplidar/parameters.py', 'wctls_rplidar/wctls_rplidar/emulator/room.py']
 
 

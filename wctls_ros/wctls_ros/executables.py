@@ -64,6 +64,11 @@ def feature_node() -> int:
     return _run('feature_node', 'feature_node', NODE_INTERRUPTED)
 
 
+def odometry_node() -> int:
+    """Run the odometry_node node (:mod:`wctls_ros.odometry_node`)."""
+    return _run('odometry_node', 'odometry_node', NODE_INTERRUPTED)
+
+
 def bag_replay() -> int:
     """Run the bag_replay node (:mod:`wctls_ros.bags.replay_node`)."""
     return _run('bag_replay', 'bags.replay_node', NODE_INTERRUPTED)

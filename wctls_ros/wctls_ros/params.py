@@ -27,6 +27,7 @@ import yaml
 from .core import FeatureConfig, METHODS
 from .core.config import field_description, field_limits, Limits
 from .frontend.dock import DockShape, TrackSettings
+from .frontend.odometry import OdometryConfig
 from .plain_yaml import load_without_aliases
 from .sensors import DEFAULT_SENSOR, PRESET_PARAMETERS, sensor_presets
 
@@ -261,7 +262,88 @@ BAG_REPLAY = (
               '(0: start at once)', Limits(0, 1000), read_only=True),
 )
 
-SCHEMAS = {'feature_node': FEATURE_NODE, 'bag_replay': BAG_REPLAY}
+
+def _read_only(name: str, default: Value, description: str, limits: Optional[Limits] = None,
+               choices: Tuple[str, ...] = ()) -> Parameter:
+    """Return a parameter fixed at start-up."""
+    return Parameter(name, default, description, limits, choices, read_only=True)
+
+
+_ODOMETRY = OdometryConfig()
+ODOMETRY_NODE = FEATURE_NODE[:1 + len(fields(FeatureConfig))] + (
+    _read_only('odom_frame', 'odom', 'Frame of the published pose (REP-105)'),
+    _read_only('base_frame', 'base_link', "The robot's frame: the child frame of the pose"),
+    _read_only('publish_tf', False, 'Also publish the transform odom -> base_frame on /tf '
+               '(off where another source, such as an EKF, publishes it)'),
+    _read_only('laser_x_m', 0.0, "The laser's position on the robot (base_frame -> the scan's "
+               'frame), x, m', Limits(-100.0, 100.0)),
+    _read_only('laser_y_m', 0.0, "The laser's position on the robot, y, m",
+               Limits(-100.0, 100.0)),
+    _read_only('laser_yaw_deg', 0.0, "The laser's heading on the robot, deg",
+               Limits(-180.0, 180.0)),
+    Parameter('max_hypotheses', _ODOMETRY.max_hypotheses, 'Motion hypotheses scored per scan '
+              'at most', Limits(1, 100000), setting='max_hypotheses'),
+    Parameter('max_step_m', _ODOMETRY.max_step_m, 'Largest motion between two scans, m',
+              Limits(0.01, 100.0), setting='max_step_m'),
+    Parameter('keyframe_m', _ODOMETRY.keyframe_m, 'Match the scans against a keyframe until '
+              'they lie this far from it, m (0 and keyframe_deg 0: scan to scan)',
+              Limits(0.0, 100.0), setting='keyframe_m'),
+    Parameter('keyframe_deg', round(math.degrees(_ODOMETRY.keyframe_rad), 6), '... or turned '
+              'this far from it, deg', Limits(0.0, 180.0), setting='keyframe_rad',
+              to_setting=math.radians),
+    Parameter('degenerate_sigma_m', _ODOMETRY.degenerate_sigma_m, 'A step the landmarks know '
+              'worse than this along some direction, m, is degenerate (the prior fills in)',
+              Limits(1e-4, 10.0), setting='degenerate_sigma_m'),
+    Parameter('degenerate_sigma_deg', round(math.degrees(_ODOMETRY.degenerate_sigma_rad), 6),
+              'The same in rotation, deg', Limits(1e-3, 90.0), setting='degenerate_sigma_rad',
+              to_setting=math.radians),
+    Parameter('prior_sigma_m', _ODOMETRY.prior_sigma_m, "The constant-velocity prior's growth "
+              'per scan, each axis, m', Limits(1e-4, 10.0), setting='prior_sigma_m'),
+    Parameter('prior_sigma_deg', round(math.degrees(_ODOMETRY.prior_sigma_rad), 6),
+              "The prior's growth per scan in yaw, deg", Limits(1e-3, 180.0),
+              setting='prior_sigma_rad', to_setting=math.radians),
+)
+
+SCHEMAS = {'feature_node': FEATURE_NODE, 'bag_replay': BAG_REPLAY,
+           'odometry_node': ODOMETRY_NODE}
+
+
+class OdometrySettings(NamedTuple):
+    """
+    What odometry_node's parameters configure.
+
+    :ivar config: the pipeline configuration
+    :ivar odometry: the odometry's settings
+    :ivar mount: the laser's pose on the robot (x m, y m, yaw rad)
+    :ivar odom_frame: the pose's frame
+    :ivar base_frame: the robot's frame
+    :ivar publish_tf: whether the transform odom -> base_frame is published
+    """
+
+    config: FeatureConfig
+    odometry: OdometryConfig
+    mount: Tuple[float, float, float]
+    odom_frame: str
+    base_frame: str
+    publish_tf: bool
+
+
+def odometry_settings(values: Dict[str, Value]) -> OdometrySettings:
+    """
+    Build odometry_node's validated settings from its parameter values.
+
+    :param values: name -> value for every parameter of ODOMETRY_NODE
+    :return: the settings
+    :raises ValueError: with every reason when the values make no valid configuration
+    """
+    settings = _settings(ODOMETRY_NODE, values)
+    feature = {k: v for k, v in settings.items() if k in FeatureConfig.__dataclass_fields__}
+    odometry = {k: v for k, v in settings.items() if k in OdometryConfig.__dataclass_fields__}
+    return OdometrySettings(FeatureConfig(**feature), OdometryConfig(**odometry),
+                            (float(values['laser_x_m']), float(values['laser_y_m']),
+                             math.radians(float(values['laser_yaw_deg']))),
+                            str(values['odom_frame']), str(values['base_frame']),
+                            bool(values['publish_tf']))
 
 
 class FeatureSettings(NamedTuple):
@@ -306,22 +388,35 @@ def feature_settings(values: Dict[str, Value]) -> FeatureSettings:
     :return: the settings
     :raises ValueError: with every reason when the values make no valid configuration
     """
-    config: dict = {}
-    style: dict = {}
+    settings = _settings(FEATURE_NODE, values)
+    config = {k: v for k, v in settings.items() if k in FeatureConfig.__dataclass_fields__}
+    style = {k: v for k, v in settings.items() if k not in config}
+    return FeatureSettings(FeatureConfig(**config), MarkerStyle(**style),
+                           bool(values['publish_markers']))
+
+
+def _settings(schema, values: Dict[str, Value]) -> dict:
+    """
+    Return the settings fields a schema's parameter values fill, in the fields' units.
+
+    :param schema: e.g. FEATURE_NODE
+    :param values: name -> value for every parameter of the schema
+    :return: setting field -> value
+    :raises ConfigError: with every value the schema refuses
+    """
+    settings: dict = {}
     problems: list = []
-    for parameter in FEATURE_NODE:
+    for parameter in schema:
         try:
             value = parameter.check(values[parameter.name])
         except ConfigError as error:           # stated in the parameter's own name and unit
             problems.append(str(error))
             continue
         if parameter.setting is not None:
-            target = config if parameter.setting in FeatureConfig.__dataclass_fields__ else style
-            target[parameter.setting] = parameter.to_setting(value)
+            settings[parameter.setting] = parameter.to_setting(value)
     if problems:
         raise ConfigError('; '.join(problems))
-    return FeatureSettings(FeatureConfig(**config), MarkerStyle(**style),
-                           bool(values['publish_markers']))
+    return settings
 
 
 def landmark_settings(values: Dict[str, Value]) -> Tuple[bool, float, float]:

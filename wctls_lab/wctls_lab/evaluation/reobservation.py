@@ -38,9 +38,9 @@ import math
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
-from wctls_ros.core import FeatureConfig, line_landmarks
-from wctls_ros.frontend.frames import (overlapping, spanned, to_world_points, world_landmarks,
-                                       wrap_angle)
+from wctls_ros.core import FeatureConfig
+from wctls_ros.frontend.frames import (Landmarks, landmarks_from_features, overlapping, spanned,
+                                       to_world, to_world_points, wrap_angle)
 
 from .analysis import features_per_scan
 from .rules import assign, ASSOCIATION_GATE_MAX_M
@@ -63,29 +63,6 @@ REOBSERVATION_KEYS = (
     'landmarks_per_scan', 'lines_per_scan', 'corner_distance_in_gate', 'line_angle_in_gate',
     'corner_line_distance_in_gate', 'corner_tracks_in_gate', 'line_tracks_in_gate',
     'corner_track_median', 'corner_track_p90', 'line_track_median', 'line_track_p90')
-
-
-@dataclass(frozen=True)
-class Landmarks:
-    """
-    The corners and lines of one scan in the sensor frame.
-
-    :ivar corner_xy: corner positions, shape (C, 2), m
-    :ivar corner_cov: their covariances, shape (C, 2, 2), m^2
-    :ivar corner_lines: the two walls each corner joins, as indices into the lines, shape
-        (C, 2) (-1: a wall that is not a line landmark)
-    :ivar line: (normal angle rad, distance m) of each line landmark's infinite line, shape
-        (L, 2)
-    :ivar line_cov: their covariances, shape (L, 2, 2)
-    :ivar line_ends: each line landmark's first and last end, shape (L, 2, 2), m
-    """
-
-    corner_xy: np.ndarray
-    corner_cov: np.ndarray
-    corner_lines: np.ndarray
-    line: np.ndarray
-    line_cov: np.ndarray
-    line_ends: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -201,30 +178,6 @@ def _percentile(lengths: Sequence[int], percent: float) -> float:
     return float(np.percentile(lengths, percent)) if len(lengths) else math.nan
 
 
-def landmarks_of(features, corners: ScanCorners, max_landmark_angle_sigma_rad: float,
-                 covariance_scale: float = 1.0) -> Landmarks:
-    """
-    Return one scan's corners and line landmarks, as a front end of feature_node takes them.
-
-    :param features: the core's Features of the scan
-    :param corners: its corners (:func:`.samples.scan_corners`)
-    :param max_landmark_angle_sigma_rad: the bound of the line landmark rule, rad
-        (:func:`~wctls_ros.core.line_landmarks`): the other segments are no lines here
-    :param covariance_scale: multiply every covariance by this (1: as the extractor gives them;
-        a check that the tests can fail uses 0.5)
-    :return: the landmarks
-    """
-    is_landmark = line_landmarks(features.segments, max_landmark_angle_sigma_rad)
-    segments = features.segments.select(is_landmark)
-    # Each segment's index among the landmarks (-1 for the others), for the corners' walls.
-    line_index = np.where(is_landmark, np.cumsum(is_landmark) - 1, -1)
-    return Landmarks(corners.xy, covariance_scale * corners.covariance,
-                     line_index[corners.segments].reshape(-1, 2),
-                     np.column_stack([segments.angle_rad, segments.radius_m]).reshape(-1, 2),
-                     covariance_scale * np.asarray(segments.covariance).reshape(-1, 2, 2),
-                     np.stack([segments.start_xy_m, segments.end_xy_m], axis=1).reshape(-1, 2, 2))
-
-
 def match_lines(before: np.ndarray, after: np.ndarray) -> np.ndarray:
     """
     Match the lines of two consecutive scans, nearest first, one to one.
@@ -325,19 +278,6 @@ def _gated(squared: np.ndarray, gate: float) -> np.ndarray:
     return np.array([len(finite), int(np.count_nonzero(finite <= gate))])
 
 
-def to_world(landmarks: Landmarks, pose: np.ndarray, pose_cov: np.ndarray):
-    """
-    Move one scan's landmarks into the world frame, their covariances with the pose's.
-
-    :param landmarks: the scan's landmarks in the sensor frame
-    :param pose: the sensor's pose (x m, y m, yaw rad)
-    :param pose_cov: its covariance, shape (3, 3)
-    :return: (corner xy (C, 2), their covariances (C, 2, 2), lines (L, 2), theirs (L, 2, 2))
-    """
-    return world_landmarks(landmarks.corner_xy, landmarks.corner_cov, landmarks.line,
-                           landmarks.line_cov, pose, pose_cov)
-
-
 class _Tracks:
     """
     Tracks of one kind of landmark: the last observation of each, and its length.
@@ -433,9 +373,9 @@ def reobservation(scans: StaticScans, config: FeatureConfig, poses: Optional[np.
     :param covariance_scale: multiply the landmark covariances by this (1: as extracted)
     :return: the figures
     """
-    per_scan = [landmarks_of(features, corners, config.max_landmark_angle_sigma_rad,
-                             covariance_scale)
-                for features, corners in features_per_scan(scans, config)]
+    per_scan = [landmarks_from_features(features, config.max_landmark_angle_sigma_rad,
+                                        covariance_scale)
+                for features, _ in features_per_scan(scans, config)]
     return measure(per_scan, poses, pose_sigma_m, pose_sigma_rad)
 
 

@@ -45,9 +45,10 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 from wctls_ros.core import ellipse, FeatureConfig, nees
+from wctls_ros.frontend.frames import landmarks_from_features
 
 from .analysis import corner_stats, features_per_scan
-from .reobservation import landmarks_of, measure, Reobservation, REOBSERVATION_KEYS
+from .reobservation import measure, Reobservation, REOBSERVATION_KEYS
 from .rules import assign, associate, check_still
 from .samples import ScanCorners
 from .scans import StaticScans
@@ -357,8 +358,8 @@ def score_scans(scans: StaticScans, configs: Mapping[str, FeatureConfig],
     for label, config in configs.items():
         extracted = features_per_scan(scans, config)
         per_scan = [corners for _, corners in extracted]
-        landmarks = [landmarks_of(features, corners, config.max_landmark_angle_sigma_rad)
-                     for features, corners in extracted]
+        landmarks = [landmarks_from_features(features, config.max_landmark_angle_sigma_rad)
+                     for features, _ in extracted]
         reobserved = measure(landmarks, poses, pose_sigma_m, pose_sigma_rad)
         methods.append(score_detections(label, per_scan, truth, static, min_presence,
                                         reobserved))

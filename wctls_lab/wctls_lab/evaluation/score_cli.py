@@ -44,6 +44,7 @@ from .scans import load_json_scans, load_scans, StaticScans
 from .score import (markdown_table, RECURRING_PRESENCE, REOBSERVATION_COLUMNS, score_scans,
                     write_score)
 from .tracks import run_tracker, track_figures, track_lines
+from .trajectory import score_trajectory
 from .truth import load_truth, Truth, TRUTH_FILE
 
 
@@ -121,6 +122,10 @@ def parser() -> argparse.ArgumentParser:
                    help='with --tracks: sigma of each step between scans (default: with poses '
                    'sqrt(2) times the pose sigmas, the difference of two independent pose '
                    'errors; without, 0 0: a still sensor)')
+    p.add_argument('--odometry', action='store_true',
+                   help='with poses: also run the odometry from the features (the first '
+                   "method's) and compare its trajectory with the poses: RPE per metre, ATE "
+                   "after SE(2) alignment, step NEES with the poses' sigmas as their jitter")
     p.add_argument('--out', default=None, help='folder for table.md, table.csv, corners.csv, '
                    'score.png: a new or empty folder, or an earlier output of score, which is '
                    'replaced (default: print only)')
@@ -273,6 +278,9 @@ def run(args, argv) -> int:
                         f'is no truth (--labels, or {TRUTH_FILE} beside the scans); for a '
                         'moving sensor say so: --still no tests the re-observations without '
                         'poses, --poses FILE or --poses-topic TOPIC with them')
+    if args.odometry and poses is None:
+        raise UserError('--odometry compares the odometry with the poses: give --poses or '
+                        '--poses-topic')
     started = time.monotonic()
     table = score_scans(scans, settings, truth, still, args.min_presence, poses,
                         args.pose_sigma_m, math.radians(args.pose_sigma_deg))
@@ -298,6 +306,11 @@ def run(args, argv) -> int:
                           f'sigma {1e3 * args.pose_sigma_m:g} mm and {args.pose_sigma_deg:g} '
                           'deg'),
              f'scored in {elapsed:.1f} s']
+    if args.odometry:
+        # In the notes: printed, and in table.md with the command that made them.
+        errors = score_trajectory(scans, config, poses, args.pose_sigma_m,
+                                  math.radians(args.pose_sigma_deg))
+        notes += [f'odometry ({config.method}): {line}' for line in errors.lines()]
     print('\n'.join(f'# {note}' for note in notes))
     print(markdown_table(table))
     print(markdown_table(table, REOBSERVATION_COLUMNS))

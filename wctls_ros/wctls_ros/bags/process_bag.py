@@ -21,6 +21,8 @@ every scan with the same parameters (a feature_node YAML file) and writes, with 
   file, else the example dock of docs/docking.md) on ``/detected_dock_pose`` and
   ``/detected_dock_pose_with_covariance``, and ``dock.csv`` (one row per dock pose) beside
   ``corners.csv``.
+- with ``--odometry``, the odometry from the features: nav_msgs/Odometry on ``/odom`` and
+  ``odometry.csv`` (:mod:`.odometry_table`).
 
 Memory stays constant however long the bag is, and the output appears only when complete.
 """
@@ -43,18 +45,21 @@ import pathlib
 import signal
 import sys
 import time
-from typing import Callable, NamedTuple, Optional
+from typing import Any, Callable, NamedTuple, Optional, Tuple
 
 import numpy as np
 
 from .bag_io import (bag_info, BagError, BagWriter, choose_scan_topic, LASER_SCAN, read_scans,
                      typestore)
+from .odometry_table import (ODOMETRY_CSV, odometry_request, ODOMETRY_TOPIC, OdometryOutput,
+                             OdometryTable)
 from .track_bag import BagTracks, LANDMARKS_CSV, TrackOptions
 from ..cli import start_core
 from ..conversions import (corner_array, dock_pose_messages, laser_scan, line_segment_array,
                            marker_array, MessageTypes, scan_features)
 from ..core import CornerSet, line_landmarks, METHODS, SegmentSet, start
 from ..frontend.dock import find_docks, track_dock, TrackerState
+from ..frontend.frames import Landmarks, landmarks_from_features
 from ..frontend.tracking import detections_of, View
 from ..params import (ConfigError, DOCK_ENABLED, dock_settings, DockSettings, feature_settings,
                       load_parameters, SENSOR)
@@ -224,6 +229,8 @@ class ScanOutput(NamedTuple):
     :ivar tracking: with --tracks, ((stamp sec, nanosec, frame_id), Detections, View) of the
         scan, else None
     :ivar dock: with a dock to look for, (the scan's header, this scan's dock candidates)
+    :ivar odometry_input: with the odometry, the scan's header and the first method's
+        landmarks (else None)
     """
 
     messages: list
@@ -235,6 +242,7 @@ class ScanOutput(NamedTuple):
     malformed: bool
     tracking: Optional[tuple] = None
     dock: Optional[tuple] = None
+    odometry_input: Optional[Tuple[Any, Landmarks]] = None
 
 
 def _corner_rows(corners: CornerSet, segments: SegmentSet) -> list:
@@ -259,7 +267,7 @@ class ScanWork:
     """
 
     def __init__(self, parameters: dict, methods=None, tracks: bool = False,
-                 dock: Optional[DockSettings] = None):
+                 dock: Optional[DockSettings] = None, odometry: bool = False):
         """
         Prepare the work.
 
@@ -268,6 +276,7 @@ class ScanWork:
         :param tracks: also hand over each scan's landmarks for the tracker (one method)
         :param dock: the dock to look for (among the features of the ``method`` parameter's
             fit, or the first method's), or None
+        :param odometry: also give each scan's landmarks (of the first method)
         :raises ValueError: for parameters that make no valid configuration
         """
         self.tracks = tracks
@@ -275,6 +284,7 @@ class ScanWork:
         self.methods = tuple(methods or (config.method,))
         self.dock = dock
         self.dock_method = config.method if config.method in self.methods else self.methods[0]
+        self.odometry = odometry
         self.configs = {m: config.replace(method=m) for m in self.methods}
         self.topics = output_topics(self.methods)
         self.store = typestore()
@@ -293,12 +303,15 @@ class ScanWork:
         header, types, serialize = scan.header, self.types, self.types.serialize
         stamp = f'{header.stamp.sec}.{header.stamp.nanosec:09d}'
         messages, csv_rows, corners_of, corners, segments, landmarks = [], [], {}, {}, {}, {}
-        problems, dock = [], None
+        problems, dock, scan_landmarks = [], None, None
         for method, (corners_topic, lines_topic, markers_topic) in self.topics.items():
             features, problems = scan_features(scan, self.configs[method])
             if self.dock is not None and method == self.dock_method:
                 dock = (header, find_docks(features.segments, features.corners,
                                            self.dock.shape))
+            if self.odometry and scan_landmarks is None:
+                scan_landmarks = landmarks_from_features(
+                    features, self.configs[method].max_landmark_angle_sigma_rad)
             is_landmark = line_landmarks(features.segments,
                                          self.configs[method].max_landmark_angle_sigma_rad)
             messages.append((corners_topic, CORNER_ARRAY,
@@ -328,7 +341,8 @@ class ScanWork:
                             'log_time_ns': log_time_ns, 'problems': problems,
                             'corners': corners_of})
         return ScanOutput(messages, table.getvalue(), entry, corners, segments, landmarks,
-                          bool(problems), tracking, dock)
+                          bool(problems), tracking, dock,
+                          None if scan_landmarks is None else (header, scan_landmarks))
 
 
 # The work of a worker process, inherited from the process that started it.
@@ -483,7 +497,8 @@ class _DockTable:
 
 def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = None,
             overwrite: bool = False, after_scans: Optional[Callable[[int], None]] = None,
-            jobs: int = 1, tracks: Optional[TrackOptions] = None, dock: bool = False) -> Summary:
+            jobs: int = 1, tracks: Optional[TrackOptions] = None, dock: bool = False,
+            odometry: Optional[OdometryOutput] = None) -> Summary:
     """
     Extract features from every scan of a bag into an output bag with corner tables.
 
@@ -501,6 +516,7 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
     :param tracks: track the landmarks (one method only) with this motion source, or None
     :param dock: also look for the dock the parameters describe (``dock_enabled`` or not) and
         write its poses and dock.csv
+    :param odometry: also the odometry, with these settings (None: none)
     :return: counts and timing
     :raises BagError: for a missing, unreadable or damaged bag, or one without LaserScans, or
         an output that exists (without ``overwrite``, or that process_bag did not write)
@@ -508,7 +524,8 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
     """
     started = time.perf_counter()
     work = ScanWork(parameters, methods, tracks is not None,
-                    dock_settings({**parameters, DOCK_ENABLED: True}) if dock else None)
+                    dock_settings({**parameters, DOCK_ENABLED: True}) if dock else None,
+                    odometry is not None)
     if tracks is not None and len(work.methods) > 1:
         raise BagError('--tracks follows the landmarks of one method, not of --method all')
     info = bag_info(bag)
@@ -523,7 +540,8 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
             'written_by': 'process_bag of wctls_ros',
             'files': [MARKER_NAME, f'{output.name}.mcap', 'metadata.yaml', CSV_NAME, JSON_NAME]
             + ([LANDMARKS_CSV] if tracks is not None else [])
-            + ([DOCK_CSV_NAME] if dock else [])}))
+            + ([DOCK_CSV_NAME] if dock else [])
+            + ([ODOMETRY_CSV] if odometry is not None else [])}))
         tracker = BagTracks(writer, tracks, work.types) if tracks is not None else None
         tables = _CornerTables(writer, {'bag': str(bag), 'topic': topic,
                                         'methods': work.methods, 'parameters': parameters})
@@ -531,7 +549,10 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
                  else contextlib.nullcontext())
         # Closed on the way out, whatever ends the run: the worker processes stop at once.
         batches = contextlib.closing(_outputs(work, read_scans(bag, topic), jobs))
-        with tables, docks, batches as outputs, contextlib.closing(tracker or io.StringIO()):
+        odometry_table = (OdometryTable(writer, odometry.config, odometry.mount)
+                          if odometry is not None else contextlib.nullcontext())
+        with tables, docks, batches as outputs, odometry_table, contextlib.closing(
+                tracker or io.StringIO()):
             for batch in outputs:
                 for log_time_ns, scan_data, scan_output in batch:
                     writer.write_serialized(topic, LASER_SCAN, log_time_ns, scan_data)
@@ -542,6 +563,8 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
                         tracker.add(log_time_ns, *scan_output.tracking)
                     if work.dock is not None:
                         docks.add(log_time_ns, scan_output)
+                    if odometry is not None:
+                        odometry_table.add(log_time_ns, *scan_output.odometry_input)
                     for method in work.methods:
                         summary.corners[method] += scan_output.corners[method]
                         summary.segments[method] += scan_output.segments[method]
@@ -657,6 +680,14 @@ def parser() -> argparse.ArgumentParser:
     cli.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
                      help='show one progress bar for all bags (default: on a terminal, for '
                           'runs over 1 s)')
+    cli.add_argument('--odometry', action='store_true',
+                     help=f'also the odometry from the features: nav_msgs/Odometry on '
+                          f'{ODOMETRY_TOPIC} and {ODOMETRY_CSV} in the output folder (the '
+                          "laser's pose, or the robot's with --laser-mount)")
+    cli.add_argument('--laser-mount', nargs='+', metavar='X_M Y_M YAW_DEG | FILE',
+                     help="with --odometry: the laser's pose on the robot, as three numbers "
+                          '(m, m, deg) or a YAML file with x_m, y_m, yaw_rad (such as a '
+                          "recording's laser_mount.yaml)")
     return cli
 
 
@@ -783,6 +814,7 @@ def main(argv=None) -> int:
             runs = _plan(args)
             tracks = (TrackOptions.from_arguments(args.poses, args.laser_offset,
                                                   args.step_sigma) if args.tracks else None)
+            odometry = odometry_request(args.odometry, args.laser_mount)
             # Workers are forked from a process that has chosen (and compiled) the core.
             start_core('process_bag', wait=args.jobs > 1,
                        give_up=lambda: stop.received is not None)
@@ -799,7 +831,8 @@ def main(argv=None) -> int:
                     try:
                         results.append((bag, process(bag, output, parameters, methods,
                                                      args.topic, args.force, after_scans,
-                                                     args.jobs, tracks, args.dock)))
+                                                     args.jobs, tracks, args.dock,
+                                                     odometry)))
                     except BagError as error:
                         if len(runs) == 1:
                             raise

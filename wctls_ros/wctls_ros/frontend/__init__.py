@@ -4,6 +4,8 @@
 """
 The front end: pure libraries that turn the core's features into what a SLAM back end needs.
 
-Like the core they import no rclpy and no messages; the nodes, ``process_bag`` and ``score``
-call them.
+Odometry from the features (:mod:`.odometry`), the landmarks of a scan and their moves between
+frames (:mod:`.frames`), landmark tracks with persistent ids (:mod:`.tracking`), the dock
+detector (:mod:`.dock`). Like the core they import no rclpy and no messages; the nodes,
+``process_bag`` and ``score`` call them.
 """

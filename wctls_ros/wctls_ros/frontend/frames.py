@@ -16,13 +16,41 @@ Two moves, both first order (docs/derivation.md, "Landmark tracks"):
   sensor when r' < 0.
 
 Lines are in normal form: alpha the angle of the normal from the sensor towards the line, rad,
-r >= 0 its distance, m. Pure numpy.
+r >= 0 its distance, m. A scan's landmarks as a front end takes them from the features
+(:class:`Landmarks`, :func:`landmarks_from_features`) are what the re-observation test and the
+odometry (:mod:`.odometry`) move. Pure numpy.
 """
 
+from dataclasses import dataclass
 import math
 from typing import Tuple
 
 import numpy as np
+
+from ..core import Features, line_landmarks
+
+
+@dataclass(frozen=True)
+class Landmarks:
+    """
+    The corners and lines of one scan in the sensor frame.
+
+    :ivar corner_xy: corner positions, shape (C, 2), m
+    :ivar corner_cov: their covariances, shape (C, 2, 2), m^2
+    :ivar corner_lines: the two walls each corner joins, as indices into the lines, shape
+        (C, 2) (-1: a wall that is not a line landmark)
+    :ivar line: (normal angle rad, distance m) of each line landmark's infinite line, shape
+        (L, 2)
+    :ivar line_cov: their covariances, shape (L, 2, 2)
+    :ivar line_ends: each line landmark's first and last end, shape (L, 2, 2), m
+    """
+
+    corner_xy: np.ndarray
+    corner_cov: np.ndarray
+    corner_lines: np.ndarray
+    line: np.ndarray
+    line_cov: np.ndarray
+    line_ends: np.ndarray
 
 
 def wrap_angle(angle):
@@ -207,3 +235,63 @@ def spanned(ends: np.ndarray, track_ends: np.ndarray) -> np.ndarray:
     along = np.concatenate([ends, track_ends]) @ direction
     foot = ends[0] - along[0] * direction
     return foot + np.array([along.min(), along.max()])[:, None] * direction
+
+
+def to_world(landmarks: Landmarks, pose: np.ndarray, pose_cov: np.ndarray):
+    """
+    Move one scan's landmarks into the world frame, their covariances with the pose's.
+
+    :param landmarks: the scan's landmarks in the sensor frame
+    :param pose: the sensor's pose (x m, y m, yaw rad)
+    :param pose_cov: its covariance, shape (3, 3)
+    :return: (corner xy (C, 2), their covariances (C, 2, 2), lines (L, 2), theirs (L, 2, 2))
+    """
+    return world_landmarks(landmarks.corner_xy, landmarks.corner_cov, landmarks.line,
+                           landmarks.line_cov, pose, pose_cov)
+
+
+def finite_only(landmarks: Landmarks) -> Landmarks:
+    """
+    Return the landmarks whose values and covariances are all finite.
+
+    :param landmarks: a scan's landmarks
+    :return: the finite ones (corner_lines of a dropped line become -1)
+    """
+    corners = (np.isfinite(landmarks.corner_xy).all(axis=1)
+               & np.isfinite(landmarks.corner_cov).all(axis=(1, 2)))
+    lines = (np.isfinite(landmarks.line).all(axis=1)
+             & np.isfinite(landmarks.line_cov).all(axis=(1, 2))
+             & np.isfinite(landmarks.line_ends).all(axis=(1, 2)))
+    if corners.all() and lines.all():
+        return landmarks
+    index = np.where(lines, np.cumsum(lines) - 1, -1)
+    walls = landmarks.corner_lines[corners]
+    walls = np.where(walls >= 0, index[np.maximum(walls, 0)], -1) if len(index) else walls
+    return Landmarks(landmarks.corner_xy[corners], landmarks.corner_cov[corners], walls,
+                     landmarks.line[lines], landmarks.line_cov[lines], landmarks.line_ends[lines])
+
+
+def landmarks_from_features(features: Features, max_landmark_angle_sigma_rad: float,
+                            covariance_scale: float = 1.0) -> Landmarks:
+    """
+    Return one scan's corners and line landmarks, as a front end of feature_node takes them.
+
+    :param features: the core's Features of the scan
+    :param max_landmark_angle_sigma_rad: the bound of the line landmark rule, rad
+        (:func:`~wctls_ros.core.line_landmarks`): the other segments are no lines here
+    :param covariance_scale: multiply every covariance by this (1: as the extractor gives them)
+    :return: the landmarks (corner covariances: their position block)
+    """
+    corners = features.corners
+    is_landmark = line_landmarks(features.segments, max_landmark_angle_sigma_rad)
+    segments = features.segments.select(is_landmark)
+    # Each segment's index among the landmarks (-1 for the others), for the corners' walls.
+    line_index = np.where(is_landmark, np.cumsum(is_landmark) - 1, -1)
+    walls = np.column_stack([corners.first_segment, corners.second_segment]).astype(np.intp)
+    corner_cov = np.asarray(corners.covariance)[:, :2, :2].reshape(-1, 2, 2)
+    return Landmarks(np.asarray(corners.xy_m, dtype=float).reshape(-1, 2),
+                     covariance_scale * corner_cov,
+                     line_index[walls].reshape(-1, 2),
+                     np.column_stack([segments.angle_rad, segments.radius_m]).reshape(-1, 2),
+                     covariance_scale * np.asarray(segments.covariance).reshape(-1, 2, 2),
+                     np.stack([segments.start_xy_m, segments.end_xy_m], axis=1).reshape(-1, 2, 2))

@@ -16,7 +16,9 @@ docs/performance.md), the peer's time on the same scans. Prints the median per s
 ratios the speed goals are stated in; ``--profile`` adds the numpy pipeline's time by step
 (cProfile, cumulative).
 Scan sets: the real 360-beam RPLIDAR A-series scans and 541-beam SICK LMS111 scans of data/,
-and simulated 1080- and 4320-beam room scans with 5 mm range noise.
+and simulated 1080- and 4320-beam room scans with 5 mm range noise. Last, the worst case the
+speed goals name: star-shaped rooms of 64 and 80 walls (a segment on every wall, a corner at
+every other vertex) against room scans of as many beams, both pipelines.
 Usage: python bench_stages.py [scans] [--against COMMIT] [--peer BINARY] [--profile]
 """
 
@@ -43,6 +45,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from bench_core import peer_ms, scans  # noqa: E402
 import numpy as np  # noqa: E402
 from wctls_lab.evaluation.scans import load_scans  # noqa: E402
+from wctls_lab.simulation import full_turn_bearings, NoiseModel, simulate_ranges  # noqa: E402
 from wctls_ros.core import extract_features, FeatureConfig, numpy_core, warm_up  # noqa: E402
 from wctls_ros.core.numba_core import pipeline  # noqa: E402
 
@@ -179,6 +182,45 @@ def side_by_side(sets, old, peer):
     return rows
 
 
+def star_walls(walls, inner_m=2.0, outer_m=2.8):
+    """Return the walls of a star-shaped room around the sensor, vertices at alternate radii."""
+    angle = 2.0 * np.pi * np.arange(walls) / walls
+    radius = np.where(np.arange(walls) % 2 == 0, inner_m, outer_m)
+    vertex = np.column_stack([radius * np.cos(angle), radius * np.sin(angle)])
+    return np.hstack([vertex, np.roll(vertex, -1, axis=0)])
+
+
+def worst_case(repeats):
+    """Print the star rooms' median time per scan over a room scan's of as many beams."""
+    print(f'worst case: star rooms against room scans of as many beams, {ROOM_NOISE_M * 1e3:.0f}'
+          f' mm, median of {repeats} scans each, in turn')
+    print(f'{"walls":>6} {"beams":>6} {"compiled":>9} {"room":>7} {"ratio":>6} {"numpy":>7} '
+          f'{"room":>7} {"ratio":>6} {"segments":>9} {"corners":>8}')
+    config = FeatureConfig(range_sigma_m=ROOM_NOISE_M, bearing_sigma_rad=0.0)
+    noise = NoiseModel(range_sigma_m=ROOM_NOISE_M, bearing_sigma_rad=0.0)
+    rng = np.random.default_rng(4)
+    for walls in (64, 80):
+        for beams in (1080, 4320):
+            angle_min, increment, bearings = full_turn_bearings(beams)
+            star = simulate_ranges(star_walls(walls), bearings, noise, rng)
+            rooms = scans(beams, repeats, seed=walls, range_noise_m=ROOM_NOISE_M)[2]
+            medians = []
+            for extract in (extract_features, numpy_core.extract_features):
+                star_s, room_s = [], []
+                for room in rooms:
+                    start = time.perf_counter()
+                    found = extract(star, angle_min, increment, config)
+                    star_s.append(time.perf_counter() - start)
+                    start = time.perf_counter()
+                    extract(room, angle_min, increment, config)
+                    room_s.append(time.perf_counter() - start)
+                medians += [1e3 * np.median(star_s), 1e3 * np.median(room_s)]
+            print(f'{walls:>6} {beams:>6} {medians[0]:>9.3f} {medians[1]:>7.3f} '
+                  f'{medians[0] / medians[1]:>6.2f} {medians[2]:>7.3f} {medians[3]:>7.3f} '
+                  f'{medians[2] / medians[3]:>6.2f} {len(found.segments):>9} '
+                  f'{len(found.corners):>8}')
+
+
 def numpy_profile(ranges, angle_min, increment, noise, top=14):
     """Print the numpy pipeline's cumulative time by function over the scans, per scan."""
     config = FeatureConfig(range_sigma_m=noise, bearing_sigma_rad=0.0)
@@ -236,6 +278,7 @@ def main():
     if args.profile:
         name, ranges, angle_min, increment, noise = sets[2]
         numpy_profile(ranges, angle_min, increment, noise)
+    worst_case(max(args.scans // 10, 5))
 
 
 if __name__ == '__main__':

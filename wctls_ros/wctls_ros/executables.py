@@ -5,51 +5,60 @@
 The installed executables: each imports its node or tool when it runs, and runs it.
 
 The imports take a second or more (rclpy, numpy, the message packages); this module imports
-nothing heavy, so that what happens meanwhile is handled: Ctrl-C ends the program quietly with
-the status it has later (0 for a node, 130 for a tool) instead of a traceback, and a tool whose
+nothing heavy, so that what happens meanwhile is handled: a stop signal (Ctrl-C, SIGTERM,
+SIGHUP) ends the program quietly with the status it has later (0 for a node, 128 + N for a
+tool) instead of a traceback or the signal's default end, and a tool whose
 optional package is missing (rosbags, matplotlib, tqdm: :mod:`.extras`) ends with one line
 naming the install command and status 1, whether the package is needed at the tool's import or
 later.
 
-A Ctrl-C during the imports ends the process at once (``os._exit``) rather than raising: the
+A stop signal during the imports ends the process at once (``os._exit``) rather than raising: the
 handler runs in whatever Python code the main thread is in, and the imports run weakref and
 garbage-collector callbacks, in which Python prints an exception with its traceback and drops
 it. A raised exit was lost there once in a loaded test run, and the node went on to run. The
 imports have opened nothing a clean-up would close.
 """
 
+import gc
 import importlib
 import os
 import signal
 import sys
 
-# The status Ctrl-C gives: a node ends cleanly (the ROS convention), a tool reports the signal.
-NODE_INTERRUPTED = 0
-TOOL_INTERRUPTED = 128 + signal.SIGINT
+from .process import STOP_SIGNALS
 
 
-def _run(prog: str, module: str, interrupted: int, function: str = 'main') -> int:
+def _run(prog: str, module: str, node: bool, function: str = 'main') -> int:
     """
-    Import a program's module and run its main(), handling Ctrl-C and missing packages.
+    Import a program's module and run its main(), handling stop signals and missing packages.
 
     :param prog: the program's name, for messages
     :param module: its module, relative to wctls_ros
-    :param interrupted: the exit status of a Ctrl-C the program does not handle itself
+    :param node: the program is a node: a stop signal ends it with 0 (the ROS convention), not
+        with 128 + N as a tool
     :param function: the module's function that runs the program
     :return: the program's exit status
     """
-    def at_once(signal_number, frame):
-        os._exit(interrupted)
+    def stopped(signal_number: int) -> int:
+        return 0 if node else 128 + signal_number
 
-    previous = signal.signal(signal.SIGINT, at_once)
+    def at_once(signal_number, frame):
+        os._exit(stopped(signal_number))
+
+    previous = {number: signal.signal(number, at_once) for number in STOP_SIGNALS}
     try:
         program = importlib.import_module(f'wctls_ros.{module}')
-        signal.signal(signal.SIGINT, previous)
-        return getattr(program, function)()
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+        status = getattr(program, function)()
+        # The process ends: its objects need not be collected one by one at exit (0.8 s with
+        # numba loaded, 0.1 s frozen), so a signal ends it within a second.
+        gc.freeze()
+        return status
     except KeyboardInterrupt:
         # A Ctrl-C the program did not handle (one before a node's run_node or a tool's stop
         # signals take over, or in a tool without them): the finally blocks have run.
-        return interrupted
+        return stopped(signal.SIGINT)
     except ImportError as error:
         from .extras import missing_extra
         reason = missing_extra(error)
@@ -61,54 +70,54 @@ def _run(prog: str, module: str, interrupted: int, function: str = 'main') -> in
 
 def feature_node() -> int:
     """Run the feature_node node (:mod:`wctls_ros.feature_node`)."""
-    return _run('feature_node', 'feature_node', NODE_INTERRUPTED)
+    return _run('feature_node', 'feature_node', True)
 
 
 def rplidar_node() -> int:
     """Run the rplidar_node node (:mod:`wctls_ros.rplidar.rplidar_node`)."""
-    return _run('rplidar_node', 'rplidar.rplidar_node', NODE_INTERRUPTED)
+    return _run('rplidar_node', 'rplidar.rplidar_node', True)
 
 
 def bag_replay() -> int:
     """Run the bag_replay node (:mod:`wctls_ros.bags.replay_node`)."""
-    return _run('bag_replay', 'bags.replay_node', NODE_INTERRUPTED)
+    return _run('bag_replay', 'bags.replay_node', True)
 
 
 def s1_emulator() -> int:
     """Run the s1_emulator tool (:mod:`wctls_ros.s1_emulator`)."""
-    return _run('s1_emulator', 's1_emulator', TOOL_INTERRUPTED)
+    return _run('s1_emulator', 's1_emulator', False)
 
 
 def rplidar_emulator() -> int:
     """Run the rplidar_emulator tool (:func:`wctls_ros.s1_emulator.rplidar_main`)."""
-    return _run('rplidar_emulator', 's1_emulator', TOOL_INTERRUPTED, 'rplidar_main')
+    return _run('rplidar_emulator', 's1_emulator', False, 'rplidar_main')
 
 
 def calibrate() -> int:
     """Run the calibrate tool (:mod:`wctls_ros.evaluation.calibrate_cli`)."""
-    return _run('calibrate', 'evaluation.calibrate_cli', TOOL_INTERRUPTED)
+    return _run('calibrate', 'evaluation.calibrate_cli', False)
 
 
 def demo() -> int:
     """Run the demo tool (:mod:`wctls_ros.demo`)."""
-    return _run('demo', 'demo', TOOL_INTERRUPTED)
+    return _run('demo', 'demo', False)
 
 
 def evaluate() -> int:
     """Run the evaluate tool (:mod:`wctls_ros.evaluation.evaluate_cli`)."""
-    return _run('evaluate', 'evaluation.evaluate_cli', TOOL_INTERRUPTED)
+    return _run('evaluate', 'evaluation.evaluate_cli', False)
 
 
 def process_bag() -> int:
     """Run the process_bag tool (:mod:`wctls_ros.bags.process_bag`)."""
-    return _run('process_bag', 'bags.process_bag', TOOL_INTERRUPTED)
+    return _run('process_bag', 'bags.process_bag', False)
 
 
 def score() -> int:
     """Run the score tool (:mod:`wctls_ros.evaluation.score_cli`)."""
-    return _run('score', 'evaluation.score_cli', TOOL_INTERRUPTED)
+    return _run('score', 'evaluation.score_cli', False)
 
 
 def simulate() -> int:
     """Run the simulate tool (:mod:`wctls_ros.evaluation.simulate_cli`)."""
-    return _run('simulate', 'evaluation.simulate_cli', TOOL_INTERRUPTED)
+    return _run('simulate', 'evaluation.simulate_cli', False)

@@ -39,8 +39,8 @@ from .scans import load_scans, StaticScans
 from .score_cli import node_config
 from ..cli import bounded, Parser, start_core, USER_ERROR, UserError
 from ..core import FeatureConfig, METHODS
+from ..process import check_stop, stop_signals, Stopped
 from ..sensors import DEFAULT_SENSOR, sensor_presets
-from ..stop_signals import raising, Stopped
 
 # Beyond the shared convention (0, 2 a user error, :mod:`wctls_ros.cli`): a model refused.
 IMPLAUSIBLE_EXIT = 3
@@ -107,7 +107,7 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     from ..bags import BagError
     try:
-        with raising():
+        with stop_signals():
             start_core('calibrate')
             return run(args)
     except Stopped as stopped:
@@ -152,6 +152,7 @@ def run(args) -> int:
         _print_validation(bag, scans, validation,
                           'the fitted model' if calibration else f'the model of {origin}')
         findings += _tagged(validation.findings, f'validated on {bag}')
+    check_stop()
     implausible = any(f.implausible for f in findings)
     for finding in findings:
         print(f'calibrate: {"IMPLAUSIBLE" if finding.implausible else "warning"}: '
@@ -200,6 +201,7 @@ def _load(path, args) -> StaticScans:
     if not pathlib.Path(path).exists():
         raise UserError(f'{path}: no such bag')
     scans = load_scans(path, args.topic, args.limit)
+    check_stop()
     require_still(scans)
     return scans
 

@@ -31,8 +31,8 @@ from .score_cli import node_config
 from ..cli import bounded, Parser, start_core, USER_ERROR, UserError
 from ..core import METHODS
 from ..output_folders import claim, owned_folder
+from ..process import check_stop, stop_signals, Stopped
 from ..sensors import sensor_presets
-from ..stop_signals import raising, Stopped
 
 # Beyond the shared convention (0, 2 a user error): nothing to measure a NEES on.
 NO_CORNER_EXIT = 3
@@ -129,7 +129,7 @@ def main(argv=None) -> int:
     from ..bags import BagError
     args = evaluate_parser().parse_args(argv)
     try:
-        with raising():
+        with stop_signals():
             start_core('evaluate')
             return _evaluate(args, args.methods, argv)
     except Stopped as stopped:
@@ -146,11 +146,13 @@ def _evaluate(args, methods, argv) -> int:
     """Load, check, analyse and write the report of ``evaluate``."""
     claim(args.out, 'evaluate')            # refused now rather than after the analysis
     scans = load_scans(args.bag, args.topic, args.limit)
+    check_stop()
     still = require_still(scans)
     base = (node_config(args.params, args.sensor) if args.params or args.sensor else None)
     noise, origin = _noise(args, scans, base)
     evaluation = evaluate_scans(scans, noise, methods, args.propagation, args.min_presence,
                                 base)
+    check_stop()
     unmeasured = [m for m in methods if not math.isfinite(evaluation.pooled_nees(m))]
     if unmeasured:
         print(f'evaluate: error: no NEES for {", ".join(unmeasured)}: no corner was found in '
@@ -168,6 +170,7 @@ def _evaluate(args, methods, argv) -> int:
         with owned_folder(args.out, 'evaluate') as staging:
             written = write_report(evaluation, staging, args.title or str(args.bag), command,
                                    notes)
+            check_stop()                # before the files move in: a stop leaves nothing
     except OSError as error:                # a full disk, a file-size limit, no permission
         raise ValueError(f'cannot write {args.out}: {error.strerror or error}') from error
     path = pathlib.Path(args.out) / written.name

@@ -42,8 +42,8 @@ from ..cli import bounded, Parser, start_core, USER_ERROR, UserError
 from ..core import FeatureConfig, METHODS
 from ..output_folders import claim, owned_folder
 from ..params import feature_settings, load_parameters, SENSOR
+from ..process import check_stop, stop_signals, Stopped
 from ..sensors import DEFAULT_SENSOR, sensor_presets
-from ..stop_signals import raising, Stopped
 
 
 def parser() -> argparse.ArgumentParser:
@@ -216,6 +216,7 @@ def run(args, argv) -> int:
     truth = _truth(args)
     first, last = _scan_range(args.scans, truth)
     recording = load_recording(args.bag, args.topic)
+    check_stop()
     last = len(recording) - 1 if last is None else last
     if last >= len(recording):
         raise UserError(f'scans {first}-{last} asked for, {args.bag} has {len(recording)}')
@@ -240,6 +241,7 @@ def run(args, argv) -> int:
     started = time.monotonic()
     table = score_scans(scans, settings, truth, still, args.min_presence, poses,
                         args.pose_sigma_m, math.radians(args.pose_sigma_deg))
+    check_stop()
     elapsed = time.monotonic() - started
     config = settings[methods[0]]
     notes = [f'scans {first}-{last} of {args.bag} ({len(scans)} scans, '
@@ -276,6 +278,7 @@ def run(args, argv) -> int:
             with owned_folder(args.out, 'score') as staging:
                 written = write_score(table, staging, args.title or pathlib.Path(args.bag).name,
                                       command, notes)
+                check_stop()            # before the files move in: a stop leaves nothing
         except OSError as error:            # a full disk, a file-size limit, no permission
             raise UserError(f'cannot write {args.out}: {error.strerror or error}') from error
         path = pathlib.Path(args.out) / written.name
@@ -293,7 +296,7 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     from ..bags import BagError
     try:
-        with raising():
+        with stop_signals():
             start_core('score')
             return run(args, argv)
     except Stopped as stopped:

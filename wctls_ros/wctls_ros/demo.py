@@ -407,7 +407,7 @@ def _prepare(out: pathlib.Path) -> None:
 
 
 def _run(args) -> int:
-    """Start, record, stop and summarise; the exit status."""
+    """Check the floor plan and the output folder, then run the demo; the exit status."""
     try:
         plan = load_floor_plan(args.floor_plan)
     except (OSError, ValueError) as error:
@@ -423,6 +423,14 @@ def _run(args) -> int:
         print(f'demo: error: --out: cannot write {out}: {error.strerror or error}',
               file=sys.stderr)
         return USER_ERROR
+    try:
+        return _live(args, plan, out)
+    finally:
+        mark(out, 'demo', OUTPUTS)        # what it wrote, as written: the next run replaces it
+
+
+def _live(args, plan, out: pathlib.Path) -> int:
+    """Start, record, stop and summarise into an output folder of the demo's; the status."""
     domain = private_network(os.environ)
     tty = out.resolve() / 'ttyS1'
     parameters = {'method': args.method}

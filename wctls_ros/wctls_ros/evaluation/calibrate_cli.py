@@ -27,6 +27,7 @@ import argparse
 import math
 import os
 import pathlib
+import secrets
 import sys
 from typing import List, Optional, Sequence
 
@@ -186,11 +187,18 @@ def _claim_preset(path: pathlib.Path) -> None:
 
 
 def _write_preset(path: pathlib.Path, text: str) -> None:
-    """Write a preset file whole or not at all (a temporary file beside it, then a rename)."""
+    """
+    Write a preset file whole or not at all (a temporary file beside it, then a rename).
+
+    The temporary file is created exclusively (O_EXCL), under a name of its own: never through
+    a file or link someone left there. Its mode is the umask's, as for any file written.
+    """
     _claim_preset(path)
-    partial = path.with_name(f'.partial-{path.name}')
+    partial = path.with_name(f'.partial-{path.name}-{secrets.token_hex(8)}')
+    descriptor = os.open(partial, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
     try:
-        partial.write_text(f'{PRESET_MARK}\n{text}')
+        with os.fdopen(descriptor, 'w') as file:
+            file.write(f'{PRESET_MARK}\n{text}')
         os.replace(partial, path)
     finally:
         partial.unlink(missing_ok=True)

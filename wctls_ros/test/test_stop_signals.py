@@ -10,7 +10,9 @@ segmentation fault on Ctrl-C, score and evaluate on Ctrl-C, SIGTERM or SIGHUP, o
 no signal had come (the exception lost in a callback). Each case runs beside two CPU hogs.
 """
 
+import os
 import random
+import re
 import signal
 import subprocess
 import sys
@@ -155,3 +157,29 @@ def test_a_stop_signal_while_a_tool_extracts_ends_it_with_its_status(
         [f'{prog}: stopped by {signal.Signals(number).name}'] for number, _, _, _, _ in endings]
     assert max(seconds for _, _, _, seconds, _ in endings) < DEADLINE_S, endings
     assert sorted(path.name for path in tmp_path.iterdir()) == ['whole']
+
+
+@pytest.mark.parametrize('number', [signal.SIGINT, signal.SIGHUP])
+def test_a_stop_signal_while_a_tool_loads_the_compiled_pipeline_ends_it_at_once(
+        heavy_bag, tmp_path, two_cpu_hogs, number):
+    # The load is one step of several seconds beside the hogs, with no safe point in it; the
+    # stop waited for its end. Python reports each module as its import completes
+    # (PYTHONPROFILEIMPORTTIME): numba's first is the load under way.
+    out = tmp_path / 'out'
+    process = subprocess.Popen(
+        [str(installed_executable('score')), str(heavy_bag), '--out', str(out), '--still', 'yes'],
+        env=dict(os.environ, PYTHONPROFILEIMPORTTIME='1'), stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE, text=True)
+    try:
+        for line in process.stderr:
+            if re.search(r'\|\s+numba\b', line):
+                break
+        status, seconds, stderr = ended_by(process, number)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    assert status == 128 + number, stderr[-2000:]
+    assert stderr.strip().splitlines()[-1] == f'score: stopped by {signal.Signals(number).name}'
+    assert seconds < DEADLINE_S
+    assert list(tmp_path.iterdir()) == []

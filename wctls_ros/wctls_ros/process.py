@@ -85,6 +85,31 @@ def check_stop() -> None:
         raise Stopped(_noted[0])
 
 
+@contextlib.contextmanager
+def ending_at_once(prog: str) -> Iterator[None]:
+    """
+    Within the block, a stop signal ends the tool at once: 128 + N, one line on standard error.
+
+    For a step that has written nothing and offers no safe point, such as loading the compiled
+    pipeline (seconds on a busy machine). Ending the process never lands in numba as an
+    exception would; the line is written without taking a lock. A signal noted before the
+    block is left to the next :func:`check_stop`.
+
+    :param prog: the tool's name, for the line
+    :return: nothing (a context manager)
+    """
+    def end(number: int, _frame) -> None:
+        os.write(2, f'{prog}: stopped by {signal.Signals(number).name}\n'.encode())
+        os._exit(128 + number)
+
+    previous = {number: signal.signal(number, end) for number in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+
+
 def die_with_parent(parent_pid: int, number: int = signal.SIGKILL) -> None:
     """
     In a child process: be sent a signal when the parent ends, however it ends (even SIGKILL).

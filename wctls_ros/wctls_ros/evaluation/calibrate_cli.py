@@ -40,7 +40,7 @@ from .scans import load_scans, StaticScans
 from .score_cli import node_config
 from ..cli import bounded, Parser, start_core, USER_ERROR, UserError
 from ..core import FeatureConfig, METHODS
-from ..process import check_stop, stop_signals, Stopped
+from ..process import check_stop, ending_at_once, stop_signals, Stopped
 from ..sensors import DEFAULT_SENSOR, sensor_presets
 
 # Beyond the shared convention (0, 2 a user error, :mod:`wctls_ros.cli`): a model refused.
@@ -109,7 +109,8 @@ def main(argv=None) -> int:
     from ..bags import BagError
     try:
         with stop_signals():
-            start_core('calibrate')
+            with ending_at_once('calibrate'):
+                start_core('calibrate')
             return run(args)
     except Stopped as stopped:
         print(f'calibrate: stopped by {stopped}', file=sys.stderr)

@@ -31,7 +31,7 @@ from .score_cli import node_config
 from ..cli import bounded, Parser, start_core, USER_ERROR, UserError
 from ..core import METHODS
 from ..output_folders import claim, owned_folder
-from ..process import check_stop, stop_signals, Stopped
+from ..process import check_stop, ending_at_once, stop_signals, Stopped
 from ..sensors import sensor_presets
 
 # Beyond the shared convention (0, 2 a user error): nothing to measure a NEES on.
@@ -130,7 +130,8 @@ def main(argv=None) -> int:
     args = evaluate_parser().parse_args(argv)
     try:
         with stop_signals():
-            start_core('evaluate')
+            with ending_at_once('evaluate'):
+                start_core('evaluate')
             return _evaluate(args, args.methods, argv)
     except Stopped as stopped:
         print(f'evaluate: stopped by {stopped}', file=sys.stderr)

@@ -42,7 +42,7 @@ from ..cli import bounded, Parser, start_core, USER_ERROR, UserError
 from ..core import FeatureConfig, METHODS
 from ..output_folders import claim, owned_folder
 from ..params import feature_settings, load_parameters, SENSOR
-from ..process import check_stop, stop_signals, Stopped
+from ..process import check_stop, ending_at_once, stop_signals, Stopped
 from ..sensors import DEFAULT_SENSOR, sensor_presets
 
 
@@ -297,7 +297,8 @@ def main(argv=None) -> int:
     from ..bags import BagError
     try:
         with stop_signals():
-            start_core('score')
+            with ending_at_once('score'):
+                start_core('score')
             return run(args, argv)
     except Stopped as stopped:
         print(f'score: stopped by {stopped}', file=sys.stderr)

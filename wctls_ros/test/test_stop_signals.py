@@ -115,12 +115,22 @@ def heavy_bag(tmp_path_factory):
     return path
 
 
-def timed_run(*command) -> float:
-    """Run a command to its end; return how long it took, s."""
+def figures_begin_s(*command) -> float:
+    """
+    Run a tool to its end; return when it began to draw its figures, s after its start.
+
+    Python reports each module as its import completes (PYTHONPROFILEIMPORTTIME): the tools
+    import matplotlib when they draw.
+    """
     started = time.monotonic()
-    subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True,
-                   timeout=300)
-    return time.monotonic() - started
+    process = subprocess.Popen(command, env=dict(os.environ, PYTHONPROFILEIMPORTTIME='1'),
+                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    begun = None
+    for line in process.stderr:
+        if begun is None and re.search(r'\|\s+matplotlib\b', line):
+            begun = time.monotonic() - started
+    assert process.wait(timeout=300) == 0 and begun is not None
+    return begun
 
 
 @pytest.mark.parametrize('prog, arguments', [
@@ -130,11 +140,12 @@ def timed_run(*command) -> float:
 def test_a_stop_signal_while_a_tool_extracts_ends_it_with_its_status(
         heavy_bag, tmp_path, two_cpu_hogs, prog, arguments):
     executable = str(installed_executable(prog))
-    # The signals land in the extraction, from 45 to 65 % of a whole run: before it come the
-    # imports and the compiled pipeline's load (in one step), after it the statistics and the
-    # figures (steps a second or two apart beside the hogs).
-    run_s = timed_run(executable, str(heavy_bag), '--out', str(tmp_path / 'whole'), *arguments)
-    delays = [run_s * (0.45 + 0.2 * k / (TRIES - 1)) for k in range(TRIES)]
+    # The signals land from 60 to 85 % of the time a whole run takes to reach its figures:
+    # past the imports (a quiet end), in the compiled pipeline's load or the extraction, and
+    # before the figures (each one step, of a second or two beside the hogs).
+    figures_s = figures_begin_s(executable, str(heavy_bag), '--out', str(tmp_path / 'whole'),
+                                *arguments)
+    delays = [figures_s * (0.6 + 0.25 * k / (TRIES - 1)) for k in range(TRIES)]
     endings = []
     for attempt, (number, delay) in enumerate(zip(
             [signal.SIGINT, signal.SIGHUP, signal.SIGTERM, signal.SIGINT], delays)):

@@ -90,10 +90,10 @@ def ending_at_once(prog: str) -> Iterator[None]:
     """
     Within the block, a stop signal ends the tool at once: 128 + N, one line on standard error.
 
-    For a step that has written nothing and offers no safe point, such as loading the compiled
-    pipeline (seconds on a busy machine). Ending the process never lands in numba as an
-    exception would; the line is written without taking a lock. A signal noted before the
-    block is left to the next :func:`check_stop`.
+    For a step of a tool that writes nothing and offers no safe point, such as loading the
+    compiled pipeline, reading a bag or the stillness test (seconds each on a busy machine).
+    Ending the process never lands in numba as an exception would; the line is written without
+    taking a lock. A signal noted before the block is left to the next :func:`check_stop`.
 
     :param prog: the tool's name, for the line
     :return: nothing (a context manager)

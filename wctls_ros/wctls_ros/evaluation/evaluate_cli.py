@@ -146,9 +146,10 @@ def main(argv=None) -> int:
 def _evaluate(args, methods, argv) -> int:
     """Load, check, analyse and write the report of ``evaluate``."""
     claim(args.out, 'evaluate')            # refused now rather than after the analysis
-    scans = load_scans(args.bag, args.topic, args.limit)
+    with ending_at_once('evaluate'):       # steps of seconds that write nothing
+        scans = load_scans(args.bag, args.topic, args.limit)
+        still = require_still(scans)
     check_stop()
-    still = require_still(scans)
     base = (node_config(args.params, args.sensor) if args.params or args.sensor else None)
     noise, origin = _noise(args, scans, base)
     evaluation = evaluate_scans(scans, noise, methods, args.propagation, args.min_presence,

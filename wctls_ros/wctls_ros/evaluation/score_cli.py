@@ -215,7 +215,8 @@ def run(args, argv) -> int:
     settings = configs(args, methods)
     truth = _truth(args)
     first, last = _scan_range(args.scans, truth)
-    recording = load_recording(args.bag, args.topic)
+    with ending_at_once('score'):          # a step of seconds that writes nothing
+        recording = load_recording(args.bag, args.topic)
     check_stop()
     last = len(recording) - 1 if last is None else last
     if last >= len(recording):
@@ -230,7 +231,8 @@ def run(args, argv) -> int:
                             f'{first}-{last}')
         truth = truth.select(first, len(scans))
     poses = _poses(args, scans)
-    check = check_still(scans)
+    with ending_at_once('score'):
+        check = check_still(scans)
     still = {'auto': check.still, 'yes': True, 'no': False}[args.still]
     if truth is None and poses is None and args.still == 'auto' and not still:
         raise UserError(f'{args.bag}: refused: the sensor or scene is not still '

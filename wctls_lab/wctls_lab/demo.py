@@ -25,7 +25,6 @@ signal N (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP), with one line and no traceback.
 """
 
 import argparse
-import ctypes
 from dataclasses import dataclass, field
 import functools
 import math
@@ -47,7 +46,7 @@ from wctls_ros.core import METHODS, nees
 from wctls_ros.frontend.dock import DockShape, wrap_angle
 from wctls_ros.output_folders import claim, mark, remove_entries
 from wctls_ros.params import feature_settings, load_parameters
-from wctls_ros.stop_signals import raise_stopped, raising, SIGNALS, Stopped
+from wctls_ros.process import check_stop, die_with_parent, stop_requested, stop_signals, Stopped
 from wctls_rplidar.emulator.device import EMULATED_MODELS
 import yaml
 
@@ -74,10 +73,6 @@ DOMAIN_IDS = range(1, 102)
 FOREIGN_SETTINGS = ('ROS_STATIC_PEERS', 'ROS_DISCOVERY_SERVER', 'ROS_LOCALHOST_ONLY',
                     'FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE',
                     'CYCLONEDDS_URI')
-# prctl option: the signal a process gets when its parent dies (linux/prctl.h).
-_PR_SET_PDEATHSIG = 1
-# Loaded before any fork: a child must not load a library between fork and exec.
-_LIBC = ctypes.CDLL(None, use_errno=True)
 
 
 @dataclass
@@ -100,17 +95,6 @@ def _config_file(package: str) -> pathlib.Path:
     """Return the folder of a package's installed configuration files."""
     from ament_index_python.packages import get_package_share_directory
     return pathlib.Path(get_package_share_directory(package)) / 'config'
-
-
-def _end_with_parent(parent_pid: int) -> None:
-    """
-    In a child, between fork and exec: be sent SIGTERM when the demo ends, however it ends.
-
-    :param parent_pid: the demo's process id
-    """
-    _LIBC.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
-    if os.getppid() != parent_pid:      # the demo ended before the line above
-        os._exit(1)
 
 
 def private_network(environment: dict) -> int:
@@ -151,7 +135,8 @@ class Processes:
         log = open(self.log_dir / f'{name}.log', 'w')
         process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
                                    stdin=subprocess.DEVNULL, start_new_session=True,
-                                   preexec_fn=functools.partial(_end_with_parent, os.getpid()))
+                                   preexec_fn=functools.partial(die_with_parent, os.getpid(),
+                                                                signal.SIGTERM))
         log.close()
         self.running.append((name, process))
         return process
@@ -177,6 +162,7 @@ def _wait_for(path: pathlib.Path, process: subprocess.Popen, timeout_s: float) -
     while not path.exists():
         if process.poll() is not None or time.monotonic() > deadline:
             raise RuntimeError(f'the emulator did not create {path} (see its log)')
+        check_stop()
         time.sleep(0.05)
 
 
@@ -203,15 +189,8 @@ def record(bag_path: pathlib.Path, seconds: float, dock: bool = False) -> Record
 
     seen = Recording()
     context = rclpy.context.Context()
+    # A stop signal (noted: :func:`main`) ends the recording between two spins.
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
-    # A stop signal ends the recording between two spins. An exception raised at any moment
-    # could cut a bag write short, or surface from inside rclpy's take as a RuntimeError. The
-    # handler takes no lock: a second signal inside a handler holding one would wait for ever.
-
-    def on_signal(number, _):
-        seen.stopped_by = seen.stopped_by or number
-
-    previous_handlers = {number: signal.signal(number, on_signal) for number in SIGNALS}
     node = rclpy.create_node('demo_recorder', context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
@@ -258,24 +237,23 @@ def record(bag_path: pathlib.Path, seconds: float, dock: bool = False) -> Record
             # and feature_node's pipeline is settled: the table measures the compiled pipeline
             # (when numba is there), not the numpy one serving while it loads.
             start_deadline = time.monotonic() + 60.0
-            while not ({'/scan', '/corners'} <= arrived and settled.is_set() or seen.stopped_by):
+            while not ({'/scan', '/corners'} <= arrived and settled.is_set()
+                       or stop_requested()):
                 if time.monotonic() > start_deadline:
                     raise RuntimeError('no scans and corners from a settled feature pipeline '
                                        'within 60 s (see the logs)')
                 executor.spin_once(timeout_sec=0.1)
-            if not seen.stopped_by:
+            if not stop_requested():
                 print(f'demo: features flowing; recording {seconds:g} s ...', flush=True)
             recording.set()
             end = time.monotonic() + seconds
-            while time.monotonic() < end and not seen.stopped_by:
+            while time.monotonic() < end and not stop_requested():
                 executor.spin_once(timeout_sec=0.1)
     finally:
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
-        for number, handler in previous_handlers.items():
-            if handler is not None:                # None: not installed from Python
-                signal.signal(number, handler)
+    seen.stopped_by = stop_requested() or 0
     return seen
 
 
@@ -501,7 +479,7 @@ def main(argv=None) -> int:
     """
     args = parser().parse_args(argv)
     try:
-        with raising():
+        with stop_signals():
             return _run(args)
     except Stopped as stopped:
         print(f'demo: stopped by {stopped}', file=sys.stderr)
@@ -523,7 +501,7 @@ def _prepare(out: pathlib.Path) -> None:
 
 
 def _run(args) -> int:
-    """Start, record, stop and summarise; the exit status."""
+    """Check the floor plan and the output folder, then run the demo; the exit status."""
     try:
         plan = load_floor_plan(args.floor_plan)
     except (OSError, ValueError) as error:
@@ -539,6 +517,14 @@ def _run(args) -> int:
         print(f'demo: error: --out: cannot write {out}: {error.strerror or error}',
               file=sys.stderr)
         return USER_ERROR
+    try:
+        return _live(args, plan, out)
+    finally:
+        mark(out, 'demo', OUTPUTS)        # what it wrote, as written: the next run replaces it
+
+
+def _live(args, plan, out: pathlib.Path) -> int:
+    """Start, record, stop and summarise into an output folder of the demo's; the status."""
     domain = private_network(os.environ)
     tty = out.resolve() / 'ttyS1'
     # The landmark tracks too: their ids on landmarks and, as labels, on landmark_markers.
@@ -553,7 +539,6 @@ def _run(args) -> int:
         load_parameters(_config_file('wctls_ros') / 'feature_node.yaml', overrides=parameters))[0]
     processes = Processes(out / 'logs')
     seen = Recording()
-    late = []               # stop signals received while stopping
     try:
         emulator = processes.start('simulated_rplidar', [
             _executable('wctls_lab', 'simulated_rplidar'), '--link', str(tty), '--floor-plan',
@@ -568,6 +553,7 @@ def _run(args) -> int:
             + [arg for k, v in parameters.items() for arg in ('-p', f'{k}:={v}')])
         print(f'demo: {args.model.upper()} emulator on {tty} -> rplidar_node -> feature_node '
               f'(ROS_DOMAIN_ID {domain}, logs in {out / "logs"})', flush=True)
+        check_stop()
         seen = record(out / 'bag', args.seconds, dock=args.dock)
     except Stopped as stopped:
         seen.stopped_by = stopped.signal_number
@@ -575,19 +561,16 @@ def _run(args) -> int:
         print(f'demo: {error}', file=sys.stderr)
         return 1
     finally:
-        # Stopping takes up to STOP_TIMEOUT_S: a signal meanwhile must not cut it short; it is
-        # honoured once every process has stopped.
-        for number in SIGNALS:
-            signal.signal(number, lambda number, _: late.append(number))
+        # Stopping takes up to STOP_TIMEOUT_S: a signal meanwhile is only noted, and honoured
+        # once every process has stopped.
         if seen.stopped_by:
             print('demo: interrupted; stopping everything', file=sys.stderr)
         processes.stop_all()
-        for number in SIGNALS:
-            signal.signal(number, raise_stopped)
-    if late and not seen.stopped_by:
+    stopped_by = stop_requested()
+    if stopped_by and not seen.stopped_by:
         print('demo: interrupted; every process stopped', file=sys.stderr)
-    if seen.stopped_by or late:
-        return 128 + (seen.stopped_by or late[0])
+    if stopped_by:
+        return 128 + stopped_by
     if not seen.corners:
         print(f'demo: no corners recorded (see {out / "logs"})', file=sys.stderr)
         return 1

@@ -10,6 +10,7 @@ import shutil
 import struct
 import subprocess
 import sys
+from types import SimpleNamespace
 
 from conftest import spin_until
 import numpy as np
@@ -170,6 +171,15 @@ def test_two_publishers_taking_turns_are_not_counted_as_skipped_scans(ros_contex
         assert spin_until(executor, lambda: len(harness.received['corners']) == turn + 1)
     assert harness.node.counters.processed == 8
     assert harness.node.counters.skipped == 0
+
+
+def test_scans_lost_follow_the_running_total_of_dds_and_never_wrap(ros_context, executor):
+    # Fast DDS's message-lost event carried a change of 2^32 - 1 (its count gone back by one,
+    # unsigned) after a large scan was dropped: the node's count jumped by 2^32.
+    node = Harness(ros_context, executor).node
+    for total, change in ((3, 3), (2, 2**32 - 1), (3, 1), (5, 2)):
+        node._on_scans_lost(SimpleNamespace(total_count=total, total_count_change=change))
+    assert node.counters.lost == 5
 
 
 def test_diagnostics_say_which_feature_pipeline_serves_and_whether_it_is_settled(

@@ -9,7 +9,9 @@ or deleted same-named files of the user or of another tool (a bag of the user's 
 ``DEMO/bag``, process_bag's ``corners.csv``) and exited 0.
 """
 
+import json
 import pathlib
+import shutil
 import signal
 import subprocess
 import sys
@@ -163,3 +165,61 @@ def test_a_stop_signal_while_the_output_is_staged_leaves_nothing(tmp_path, comma
     assert stderr.splitlines()[-1] == f'{prog}: stopped by {signal.Signals(number).name}'
     assert 'Traceback' not in stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_calibrate_writes_its_preset_through_no_link_planted_beside_it(tmp_path):
+    # Before, the preset was written through the fixed path .partial-NAME: a link planted there
+    # had its target overwritten, and the preset became that link.
+    victim = tmp_path / 'victim.txt'
+    victim.write_text("the user's\n")
+    (tmp_path / '.partial-measured.yaml').symlink_to(victim)
+    preset = tmp_path / 'measured.yaml'
+    done = tool('wctls_ros.evaluation.calibrate_cli', STILL, '--limit', '20', '--write-preset',
+                preset, '--accept-implausible')
+    assert done.returncode == 0, done.stderr
+    assert victim.read_text() == "the user's\n"
+    assert preset.is_file() and not preset.is_symlink()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        '.partial-measured.yaml', 'measured.yaml', 'victim.txt']
+
+
+def test_a_forged_marker_does_not_make_a_users_file_the_tools(tmp_path):
+    # Before, a marker that listed a user's file made score replace or delete it, exit 0.
+    real = tmp_path / 'real'
+    assert tool(*SCORE, '--out', real).returncode == 0
+    written_by_hand = users_folder(tmp_path, 'thesis.tex')
+    (written_by_hand / '.score').write_text(json.dumps(
+        {'written_by': 'score of wctls_ros', 'files': ['.score', 'bag', 'thesis.tex']}))
+    copied = tmp_path / 'copied'
+    copied.mkdir()
+    (copied / 'table.md').write_text("the user's table\n")
+    shutil.copy(real / '.score', copied / '.score')
+    for folder in (written_by_hand, copied):
+        before = snapshot(folder)
+        done = tool(*SCORE, '--out', folder)
+        assert done.returncode == 2 and len(done.stderr.splitlines()) == 1, done.stderr
+        assert 'refusing to write into it' in done.stderr
+        assert snapshot(folder) == before
+
+
+def test_the_staging_folder_of_a_killed_run_is_removed_by_the_next(tmp_path):
+    out = tmp_path / 'out'
+    killed = subprocess.Popen([sys.executable, '-m', *map(str, SCORE), '--out', str(out)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while not list(tmp_path.glob('.partial-*/.score')) and time.monotonic() < deadline:
+        time.sleep(0.002)
+    killed.kill()
+    killed.wait()
+    assert list(tmp_path.glob('.partial-out-*')), 'the tool never staged its output'
+    # Left alone: a live run's staging folder, and a folder of that name that is no staging.
+    live = tmp_path / '.partial-out-live'
+    live.mkdir()
+    mark(live, 'score', [])
+    unmarked = tmp_path / '.partial-out-mine'
+    unmarked.mkdir()
+    (unmarked / 'notes.md').write_text("the user's\n")
+    assert tool(*SCORE, '--out', out).returncode == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        '.partial-out-live', '.partial-out-mine', 'out']
+    assert (unmarked / 'notes.md').read_text() == "the user's\n"

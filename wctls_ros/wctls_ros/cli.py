@@ -24,8 +24,6 @@ import shutil
 import sys
 import tempfile
 
-from .stop_signals import held
-
 USER_ERROR = 2
 
 
@@ -83,19 +81,14 @@ def staged_folder(out_dir):
     """
     out = pathlib.Path(out_dir)
     out.parent.mkdir(parents=True, exist_ok=True)
-    staging = None
+    staging = pathlib.Path(tempfile.mkdtemp(prefix=f'.partial-{out.name}-', dir=out.parent))
     try:
-        # A stop signal between making the folder and naming it here would leave it behind.
-        with held():
-            staging = pathlib.Path(tempfile.mkdtemp(prefix=f'.partial-{out.name}-',
-                                                    dir=out.parent))
         yield staging
         out.mkdir(exist_ok=True)
         for item in sorted(staging.iterdir()):
             os.replace(item, out / item.name)
     finally:
-        if staging is not None:
-            shutil.rmtree(staging, ignore_errors=True)
+        shutil.rmtree(staging, ignore_errors=True)
 
 
 def start_core(prog: str, wait: bool = False, give_up=None):

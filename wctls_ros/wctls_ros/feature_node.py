@@ -119,6 +119,7 @@ class FeatureNode(LifecycleNode):
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._total, self._recent = ScanCounters(), ScanCounters()
         self._last_sequence = None
+        self._dds_lost_total = 0
         self._frame_id = ''
         self._configured = False
         self._scans = None
@@ -334,7 +335,11 @@ class FeatureNode(LifecycleNode):
             setattr(counters, name, getattr(counters, name) + amount)
 
     def _on_scans_lost(self, status) -> None:
-        self._count('lost', status.total_count_change)
+        # From DDS's running total, which only grows here: its change field read 2^32 - 1 (a
+        # count gone back by one, unsigned) after a large message was dropped.
+        if status.total_count > self._dds_lost_total:
+            self._count('lost', status.total_count - self._dds_lost_total)
+            self._dds_lost_total = status.total_count
 
     def _count_skipped(self, info: dict):
         """Count the gaps in the publication sequence: scans skipped while busy, or lost."""

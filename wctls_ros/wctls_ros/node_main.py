@@ -4,12 +4,9 @@
 """The Jazzy ``main()`` every wctls_ros node shares, and its parameter declarations."""
 
 import difflib
-import itertools
 import os
 import re
-import signal
 import sys
-import threading
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 import rclpy
@@ -19,6 +16,7 @@ from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.utilities import remove_ros_args
 
 from .params import defaults, SENSOR
+from .process import stop_requested, stop_signals
 
 # What rclpy.init raises for bad ROS arguments (an unreadable --params-file, a bad remap rule,
 # an unknown --ros-args option) or environment (ROS_DOMAIN_ID).
@@ -101,24 +99,24 @@ def _warn_of_unknown_parameters(node, declared: list) -> None:
 
 def spin_until_shutdown(executor, finished=lambda: False) -> None:
     """
-    Spin until the context is shut down (Ctrl-C, SIGTERM) or ``finished()`` is true.
+    Spin until a stop signal, the context's shutdown, or ``finished()`` is true.
 
-    rclpy's signal thread first wakes the executors (their signal guard condition), then shuts
-    the context down, and the second step wakes no one: an executor that woke in between, found
-    the context still up and went back to waiting slept until its next timer or message (a
-    second of feature_node's diagnostics, one SIGTERM in five during a compile; for ever on a
-    node without timers). Each wait is bounded by :data:`SHUTDOWN_CHECK_S` instead.
+    A stop signal (:mod:`wctls_ros.process`) is only noted: the spin ends at the next callback
+    or bounded wait, never inside a callback (a scan in the compiled pipeline). Each wait is
+    bounded by :data:`SHUTDOWN_CHECK_S`: rclpy's signal thread wakes the executors before it
+    shuts the context down, and an executor that woke in between would sleep until its next
+    timer or message.
 
     :param executor: the executor holding the nodes
     :param finished: asked after each callback or bounded wait; True ends the spin
     """
-    while executor.context.ok() and not finished():
+    while executor.context.ok() and stop_requested() is None and not finished():
         executor.spin_once(timeout_sec=SHUTDOWN_CHECK_S)
 
 
 def spin_forever(executor, node) -> int:
     """
-    Spin until shutdown (Ctrl-C, SIGTERM).
+    Spin until shutdown (Ctrl-C, SIGTERM, SIGHUP).
 
     :param executor: the executor holding the node
     :param node: the node
@@ -135,11 +133,10 @@ def run_node(name: str, make_node, spin=spin_forever, config_errors=(ValueError,
 
     A bad configuration (bad ROS arguments such as a missing ``--params-file``,
     ``config_errors``, or a parameter of the wrong type or out of range) is one fatal log line
-    and status 1, never a traceback. Ctrl-C and SIGTERM are a clean
-    end: they shut the context down from a signal handler, so whatever runs at that moment (the
-    executor's wait set, a publish) may fail with an RCLError instead of raising
-    ExternalShutdownException; with the context gone, that is a shutdown, not an error. A
-    second Ctrl-C during the clean-up is ignored. Call it last: the process is ending.
+    and status 1, never a traceback. A stop signal (Ctrl-C, SIGTERM, SIGHUP), at any moment
+    from start-up to the clean-up, is a clean end with status 0, at the next safe point
+    (:func:`wctls_ros.process.stop_signals`); once the context is shut down, what fails for
+    that reason is no error. Call it last: the process is ending.
 
     :param name: the logger name for start-up errors
     :param make_node: callable returning the node
@@ -155,45 +152,39 @@ def run_node(name: str, make_node, spin=spin_forever, config_errors=(ValueError,
         logger.fatal(f'cannot start: --params-file {unreadable[0]} is not a regular file (a '
                      'folder, FIFO, device or socket)')
         return 1
-    _interrupt_once()
     node = executor = None
-    try:
-        # The one KeyboardInterrupt (:func:`_interrupt_once`) lands between any two bytecodes:
-        # inside rclpy.init (try_shutdown below undoes a half-done init), or inside the
-        # handlers below, after rclpy's own handler has shut the context down (a node
-        # half-built then fails with an RCLError): Python runs ours after rclpy's.
+    with stop_signals(ending=True):
         try:
-            # Parsed once before rclpy.init, which would log an extra rcl line before raising.
-            remove_ros_args(args)
-            rclpy.init(args=args)
-        except _INIT_ERRORS as error:
-            reason = _SOURCE_LOCATION.sub('', str(error))
-            if isinstance(error, rclpy_implementation.UnknownROSArgsError):
-                reason = f'unknown ROS arguments {reason}'
-            logger.fatal(f'cannot start: {reason}')
-            return 1
-        try:
-            # Made before the (slower) node, so a signal during start-up rarely meets it
-            # half-built.
+            try:
+                # Parsed once before rclpy.init, which would log an extra rcl line before
+                # raising.
+                remove_ros_args(args)
+                rclpy.init(args=args)
+            except _INIT_ERRORS as error:
+                reason = _SOURCE_LOCATION.sub('', str(error))
+                if isinstance(error, rclpy_implementation.UnknownROSArgsError):
+                    reason = f'unknown ROS arguments {reason}'
+                logger.fatal(f'cannot start: {reason}')
+                return 1
             executor = SingleThreadedExecutor()
             node = make_node()
             executor.add_node(node)
             return spin(executor, node)
         except (ParameterException, *config_errors) as error:
-            logger.fatal(str(error))
-            return 1
+            if stop_requested() is None:
+                logger.fatal(str(error))
+                return 1
+        except ExternalShutdownException:
+            pass
         except Exception:  # noqa: B902 - a failure caused by the shutdown itself is no error
-            if rclpy.ok():
+            if rclpy.ok() and stop_requested() is None:
                 raise
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        _ignore_further_interrupts()
-        if executor is not None:
-            executor.shutdown()
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        finally:
+            if executor is not None:
+                executor.shutdown()
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
     return 0
 
 
@@ -201,36 +192,3 @@ def _special_params_files(args) -> list:
     """Return the --params-file arguments that exist but are not regular files."""
     given = [path for option, path in zip(args, args[1:]) if option == '--params-file']
     return [path for path in given if os.path.exists(path) and not os.path.isfile(path)]
-
-
-def _interrupt_once():
-    """
-    Make the first SIGINT a KeyboardInterrupt and ignore the ones after it (main thread only).
-
-    ``ros2 launch`` forwards a Ctrl-C that the terminal has already sent to the whole process
-    group, and users press it twice: a second one would interrupt the clean-up with a
-    KeyboardInterrupt traceback. Ignoring SIGINT only once the first KeyboardInterrupt is
-    caught leaves a window of a few bytecodes, which a busy machine widens (the double Ctrl-C
-    test failed at one of its five delays during a full test run). Installed before
-    rclpy.init, which chains its own handler (that wakes the executor) to this one.
-    """
-    if threading.current_thread() is threading.main_thread():
-        interrupts = itertools.count()
-
-        def interrupt(signal_number, frame):
-            if next(interrupts) == 0:      # one C call: no window between test and count
-                raise KeyboardInterrupt
-
-        signal.signal(signal.SIGINT, interrupt)
-
-
-def _ignore_further_interrupts():
-    """
-    Ignore SIGINT from here on: the process is ending (in the main thread; others get none).
-
-    Python gives SIGINT back to the system's default as it exits, so a Ctrl-C then would
-    kill the process (status -2) although :func:`_interrupt_once` ignores it until then.
-    Clean-up takes milliseconds; a hung one still ends on SIGTERM, which launch sends next.
-    """
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGINT, signal.SIG_IGN)

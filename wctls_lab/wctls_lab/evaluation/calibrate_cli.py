@@ -27,13 +27,14 @@ import argparse
 import math
 import os
 import pathlib
+import secrets
 import sys
 from typing import List, Optional, Sequence
 
 from wctls_ros.cli import bounded, Parser, start_core, USER_ERROR, UserError
 from wctls_ros.core import FeatureConfig, METHODS
+from wctls_ros.process import check_stop, ending_at_once, stop_signals, Stopped
 from wctls_ros.sensors import DEFAULT_SENSOR, sensor_presets
-from wctls_ros.stop_signals import raising, Stopped
 
 from .calibration import (calibrate, Calibration, Finding, node_yaml, noise_of, preset_yaml,
                           validate, Validation)
@@ -108,8 +109,9 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     from wctls_ros.bags import BagError
     try:
-        with raising():
-            start_core('calibrate')
+        with stop_signals():
+            with ending_at_once('calibrate'):
+                start_core('calibrate')
             return run(args)
     except Stopped as stopped:
         print(f'calibrate: stopped by {stopped}', file=sys.stderr)
@@ -153,6 +155,7 @@ def run(args) -> int:
         _print_validation(bag, scans, validation,
                           'the fitted model' if calibration else f'the model of {origin}')
         findings += _tagged(validation.findings, f'validated on {bag}')
+    check_stop()
     implausible = any(f.implausible for f in findings)
     for finding in findings:
         print(f'calibrate: {"IMPLAUSIBLE" if finding.implausible else "warning"}: '
@@ -186,11 +189,18 @@ def _claim_preset(path: pathlib.Path) -> None:
 
 
 def _write_preset(path: pathlib.Path, text: str) -> None:
-    """Write a preset file whole or not at all (a temporary file beside it, then a rename)."""
+    """
+    Write a preset file whole or not at all (a temporary file beside it, then a rename).
+
+    The temporary file is created exclusively (O_EXCL), under a name of its own: never through
+    a file or link someone left there. Its mode is the umask's, as for any file written.
+    """
     _claim_preset(path)
-    partial = path.with_name(f'.partial-{path.name}')
+    partial = path.with_name(f'.partial-{path.name}-{secrets.token_hex(8)}')
+    descriptor = os.open(partial, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
     try:
-        partial.write_text(f'{PRESET_MARK}\n{text}')
+        with os.fdopen(descriptor, 'w') as file:
+            file.write(f'{PRESET_MARK}\n{text}')
         os.replace(partial, path)
     finally:
         partial.unlink(missing_ok=True)
@@ -200,8 +210,10 @@ def _load(path, args) -> StaticScans:
     """Read a bag's scans and refuse a sensor or scene that moved."""
     if not pathlib.Path(path).exists():
         raise UserError(f'{path}: no such bag')
-    scans = load_scans(path, args.topic, args.limit)
-    require_still(scans)
+    with ending_at_once('calibrate'):      # steps of seconds that write nothing
+        scans = load_scans(path, args.topic, args.limit)
+        require_still(scans)
+    check_stop()
     return scans
 
 

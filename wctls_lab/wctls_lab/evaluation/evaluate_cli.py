@@ -26,8 +26,8 @@ import sys
 from wctls_ros.cli import bounded, Parser, start_core, USER_ERROR, UserError
 from wctls_ros.core import METHODS
 from wctls_ros.output_folders import claim, owned_folder
+from wctls_ros.process import check_stop, ending_at_once, stop_signals, Stopped
 from wctls_ros.sensors import sensor_presets
-from wctls_ros.stop_signals import raising, Stopped
 
 from .analysis import evaluate_scans, PROPAGATIONS
 from .calibration import fit_noise, noise_of
@@ -130,8 +130,9 @@ def main(argv=None) -> int:
     from wctls_ros.bags import BagError
     args = evaluate_parser().parse_args(argv)
     try:
-        with raising():
-            start_core('evaluate')
+        with stop_signals():
+            with ending_at_once('evaluate'):
+                start_core('evaluate')
             return _evaluate(args, args.methods, argv)
     except Stopped as stopped:
         print(f'evaluate: stopped by {stopped}', file=sys.stderr)
@@ -146,12 +147,15 @@ def main(argv=None) -> int:
 def _evaluate(args, methods, argv) -> int:
     """Load, check, analyse and write the report of ``evaluate``."""
     claim(args.out, 'evaluate')            # refused now rather than after the analysis
-    scans = load_scans(args.bag, args.topic, args.limit)
-    still = require_still(scans)
+    with ending_at_once('evaluate'):       # steps of seconds that write nothing
+        scans = load_scans(args.bag, args.topic, args.limit)
+        still = require_still(scans)
+    check_stop()
     base = (node_config(args.params, args.sensor) if args.params or args.sensor else None)
     noise, origin = _noise(args, scans, base)
     evaluation = evaluate_scans(scans, noise, methods, args.propagation, args.min_presence,
                                 base)
+    check_stop()
     unmeasured = [m for m in methods if not math.isfinite(evaluation.pooled_nees(m))]
     if unmeasured:
         print(f'evaluate: error: no NEES for {", ".join(unmeasured)}: no corner was found in '
@@ -169,6 +173,7 @@ def _evaluate(args, methods, argv) -> int:
         with owned_folder(args.out, 'evaluate') as staging:
             written = write_report(evaluation, staging, args.title or str(args.bag), command,
                                    notes)
+            check_stop()                # before the files move in: a stop leaves nothing
     except OSError as error:                # a full disk, a file-size limit, no permission
         raise ValueError(f'cannot write {args.out}: {error.strerror or error}') from error
     path = pathlib.Path(args.out) / written.name

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wctls_ros.core import extract_features, FeatureConfig, find_corners
+from wctls_ros.process import check_stop
 
 from ..simulation import NoiseModel
 
@@ -82,7 +83,9 @@ def scan_corners(ranges: np.ndarray, angle_min: float, angle_increment: float,
     :param range_max: the scan's range_max, m
     :param config: the pipeline configuration (method and noise model)
     :return: (the core's Features, ScanCorners)
+    :raises wctls_ros.process.Stopped: when a stop signal was noted (a tool's safe point)
     """
+    check_stop()
     features = extract_features(ranges, angle_min, angle_increment, config, range_min,
                                 range_max)
     corners, segments = features.corners, features.segments

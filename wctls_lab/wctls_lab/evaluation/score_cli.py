@@ -35,8 +35,8 @@ from wctls_ros.cli import bounded, Parser, start_core, USER_ERROR, UserError
 from wctls_ros.core import FeatureConfig, METHODS
 from wctls_ros.output_folders import claim, owned_folder
 from wctls_ros.params import feature_settings, load_parameters, SENSOR
+from wctls_ros.process import check_stop, ending_at_once, stop_signals, Stopped
 from wctls_ros.sensors import DEFAULT_SENSOR, sensor_presets
-from wctls_ros.stop_signals import raising, Stopped
 
 from .poses import load_poses, poses_at, poses_from_bag
 from .rules import check_still, corners_per_scan_figure
@@ -256,7 +256,9 @@ def run(args, argv) -> int:
     settings = configs(args, methods)
     truth = _truth(args)
     first, last = _scan_range(args.scans, truth)
-    recording = load_recording(args.bag, args.topic)
+    with ending_at_once('score'):          # a step of seconds that writes nothing
+        recording = load_recording(args.bag, args.topic)
+    check_stop()
     last = len(recording) - 1 if last is None else last
     if last >= len(recording):
         raise UserError(f'scans {first}-{last} asked for, {args.bag} has {len(recording)}')
@@ -270,7 +272,8 @@ def run(args, argv) -> int:
                             f'{first}-{last}')
         truth = truth.select(first, len(scans))
     poses = _poses(args, scans)
-    check = check_still(scans)
+    with ending_at_once('score'):
+        check = check_still(scans)
     still = {'auto': check.still, 'yes': True, 'no': False}[args.still]
     if truth is None and poses is None and args.still == 'auto' and not still:
         raise UserError(f'{args.bag}: refused: the sensor or scene is not still '
@@ -284,6 +287,7 @@ def run(args, argv) -> int:
     started = time.monotonic()
     table = score_scans(scans, settings, truth, still, args.min_presence, poses,
                         args.pose_sigma_m, math.radians(args.pose_sigma_deg))
+    check_stop()
     elapsed = time.monotonic() - started
     config = settings[methods[0]]
     notes = [f'scans {first}-{last} of {args.bag} ({len(scans)} scans, '
@@ -328,6 +332,7 @@ def run(args, argv) -> int:
             with owned_folder(args.out, 'score') as staging:
                 written = write_score(table, staging, args.title or pathlib.Path(args.bag).name,
                                       command, notes)
+                check_stop()            # before the files move in: a stop leaves nothing
         except OSError as error:            # a full disk, a file-size limit, no permission
             raise UserError(f'cannot write {args.out}: {error.strerror or error}') from error
         path = pathlib.Path(args.out) / written.name
@@ -345,8 +350,9 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     from wctls_ros.bags import BagError
     try:
-        with raising():
-            start_core('score')
+        with stop_signals():
+            with ending_at_once('score'):
+                start_core('score')
             return run(args, argv)
     except Stopped as stopped:
         print(f'score: stopped by {stopped}', file=sys.stderr)

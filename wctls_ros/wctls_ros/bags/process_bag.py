@@ -33,7 +33,6 @@ from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 import contextlib
 import csv
-import ctypes
 from dataclasses import dataclass, field
 import io
 import itertools
@@ -63,6 +62,8 @@ from ..frontend.frames import Landmarks, landmarks_from_features
 from ..frontend.tracking import detections_of, View
 from ..params import (ConfigError, DOCK_ENABLED, dock_settings, DockSettings, feature_settings,
                       load_parameters, SENSOR)
+from ..process import (check_stop, die_with_parent, stop_requested, STOP_SIGNALS, stop_signals,
+                       Stopped)
 from ..sensors import DEFAULT_SENSOR, sensor_presets
 
 ALL = 'all'
@@ -90,55 +91,8 @@ MARKER_ARRAY = 'visualization_msgs/msg/MarkerArray'
 # Scans sent to a worker process at once: enough to make the hand-over cost nothing, few enough
 # to keep every worker busy to the end of a bag.
 BATCH_SCANS = 16
-# prctl option: the signal a process gets when its parent dies (linux/prctl.h).
-_PR_SET_PDEATHSIG = 1
 # A progress bar appears only on runs longer than this, s.
 PROGRESS_DELAY_S = 1.0
-
-
-class Interrupted(Exception):
-    """A run stopped by a signal (nothing of it is left)."""
-
-    def __init__(self, signal_number: int):
-        super().__init__(f'interrupted by {signal.Signals(signal_number).name}')
-        self.signal_number = signal_number
-
-
-class StopSignals:
-    """
-    While active, SIGINT, SIGTERM and SIGHUP only ask the run to stop, between two scans.
-
-    SIGHUP is what closing the terminal sends. A signal never lands inside a write, the cleanup
-    or the rename that completes the output: the run ends either complete or with nothing left.
-    Use as a context manager, and call :meth:`check` where stopping is safe.
-    """
-
-    SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-
-    def __init__(self):
-        self.received = None
-        self._previous = {}
-
-    def _note(self, number, frame):
-        self.received = self.received or number
-
-    def __enter__(self) -> 'StopSignals':
-        self._previous = {number: signal.signal(number, self._note) for number in self.SIGNALS}
-        return self
-
-    def __exit__(self, kind, value, traceback):
-        for number, handler in self._previous.items():
-            signal.signal(number, handler)
-        return False
-
-    def check(self) -> None:
-        """
-        Raise :class:`Interrupted` when a signal has asked the run to stop.
-
-        :raises Interrupted: after SIGINT, SIGTERM or SIGHUP
-        """
-        if self.received is not None:
-            raise Interrupted(self.received)
 
 
 @dataclass
@@ -358,14 +312,11 @@ def _start_worker(work: ScanWork, parent_pid: int) -> None:
     """
     global _WORK
     _WORK = work
-    for number in StopSignals.SIGNALS:
+    for number in STOP_SIGNALS:
         signal.signal(number, signal.SIG_IGN)
-    with contextlib.suppress(OSError, AttributeError):   # die with the parent, even by SIGKILL
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
-    # A parent that died before the line above (a Ctrl-C right after the fork) sends no signal:
-    # this worker would wait for work for ever, on a queue lock a killed sibling may hold.
-    if os.getppid() != parent_pid:
-        os._exit(1)
+    # A worker left waiting for work would wait for ever, on a queue lock a killed sibling may
+    # hold.
+    die_with_parent(parent_pid)
 
 
 def _work_on(batch: list) -> list:
@@ -510,8 +461,8 @@ def process(bag, output, parameters: dict, methods=None, topic: Optional[str] = 
     :param overwrite: replace an existing output once the new one is complete, if it is an
         output of process_bag with nothing added (its marker file says what it wrote)
     :param after_scans: called with the number of scans just written, after each scan (or
-        batch of scans); whatever it raises (e.g. :class:`Interrupted`) ends the run and
-        leaves nothing
+        batch of scans); whatever it raises (e.g. :class:`~wctls_ros.process.Stopped`) ends
+        the run and leaves nothing
     :param jobs: processes that extract features (1: this one alone)
     :param tracks: track the landmarks (one method only) with this motion source, or None
     :param dock: also look for the dock the parameters describe (``dock_enabled`` or not) and
@@ -796,7 +747,7 @@ def main(argv=None) -> int:
         when stopped by SIGINT, SIGTERM or SIGHUP (the output being written is not)
     """
     started = time.perf_counter()
-    with StopSignals() as stop:
+    with stop_signals():
         args = parser().parse_args(argv)
         methods = METHODS if args.method == ALL else None
         results = []
@@ -817,13 +768,13 @@ def main(argv=None) -> int:
             odometry = odometry_request(args.odometry, args.laser_mount)
             # Workers are forked from a process that has chosen (and compiled) the core.
             start_core('process_bag', wait=args.jobs > 1,
-                       give_up=lambda: stop.received is not None)
-            stop.check()
+                       give_up=lambda: stop_requested() is not None)
+            check_stop()
             bar = _progress_bar(sum(scans for _, _, scans in runs), args.progress)
 
             def after_scans(count: int) -> None:
                 bar.update(count)
-                stop.check()
+                check_stop()
 
             with contextlib.closing(bar):
                 for bag, output, _ in runs:
@@ -843,12 +794,13 @@ def main(argv=None) -> int:
             print(text if text.startswith('process_bag: ') else f'process_bag: error: {text}',
                   file=sys.stderr)
             return 2
-        except Interrupted as interruption:
+        except Stopped as stopped:
+            interruption = f'interrupted by {stopped}'
             kept = f'; {len(results)} earlier outputs are complete' if results else ''
             print(f'process_bag: {interruption}; the output of {bag} is not written{kept}'
                   if len(runs) > 1 else f'process_bag: {interruption}; nothing written',
                   file=sys.stderr)
-            return 128 + interruption.signal_number
+            return 128 + stopped.signal_number
     try:
         if len(results) == 1:
             print(_report(results[0][1]), flush=True)

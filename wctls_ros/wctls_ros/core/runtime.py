@@ -26,12 +26,12 @@ A process forked after :func:`start` keeps the implementation that served its pa
 """
 
 from dataclasses import dataclass
+import functools
 from importlib import metadata
 import importlib.util
 import math
 import os
 import re
-import signal
 import subprocess
 import sys
 import threading
@@ -41,6 +41,7 @@ from typing import Callable, List, Optional
 from . import numpy_core
 from .config import FeatureConfig
 from .features import Features
+from ..process import die_with_parent
 
 CORE_VARIABLE = 'WCTLS_ROS_CORE'
 CHOICES = ('auto', 'numba', 'numpy')
@@ -365,7 +366,7 @@ def _compile_in_child(give_up: Optional[Callable[[], bool]] = None) -> None:
         [sys.executable, '-c', 'from wctls_ros.core.numba_core.precompile import warm_up; '
                                'warm_up()'],
         env=environment, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE, preexec_fn=_death_signal_setter())
+        stderr=subprocess.PIPE, preexec_fn=functools.partial(die_with_parent, os.getpid()))
     try:
         while True:
             try:
@@ -382,24 +383,3 @@ def _compile_in_child(give_up: Optional[Callable[[], bool]] = None) -> None:
         lines = errors.decode(errors='replace').strip().splitlines() or [
             f'exit status {_compiler.returncode}']
         raise RuntimeError(lines[-1])
-
-
-def _death_signal_setter() -> Optional[Callable[[], None]]:
-    """
-    Return what the compile process runs before its program: die when its parent dies.
-
-    Linux's PR_SET_PDEATHSIG, so that a parent killed outright (SIGKILL, a closed terminal)
-    leaves no compile behind; it acts when the thread that started the compile ends, which
-    waits for it. Looked up here, in the parent: between fork and exec the child may not import
-    anything. None where there is no prctl (the compile then ends by itself).
-    """
-    try:
-        import ctypes
-        prctl = ctypes.CDLL(None, use_errno=True).prctl
-    except (OSError, AttributeError):
-        return None
-    pr_set_pdeathsig = 1
-
-    def die_with_parent():
-        prctl(pr_set_pdeathsig, signal.SIGKILL)
-    return die_with_parent

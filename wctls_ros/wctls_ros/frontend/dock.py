@@ -224,7 +224,8 @@ def fit_apex(segments: SegmentSet, right: int, left: int, apex_xy_m: np.ndarray,
         y += pxy * gx + pyy * gy + pyt * gt
         yaw += pxt * gx + pyt * gy + ptt * gt
     pose = np.array([x, y, _wrap(yaw)])
-    if not (np.isfinite(pose).all() and np.isfinite(covariance).all()):
+    if covariance is None or not (np.isfinite(pose).all()
+                                  and np.isfinite(np.array(covariance)).all()):
         return None
     return pose, np.array(covariance)
 
@@ -436,6 +437,6 @@ def track_dock(state: TrackerState, candidates: List[DockPose], stamp_s: float,
     if (not extended and rival is not None and rival is not state.rival
             and rival.detections >= settings.confirm_detections):
         track, rival, extended = rival, None, True
-    report = (track.pose if extended and track.detections >= settings.confirm_detections
-              else None)
+    report = (track.pose if track is not None and extended
+              and track.detections >= settings.confirm_detections else None)
     return TrackerState(track, rival), report

@@ -174,7 +174,7 @@ def test_calibrate_writes_its_preset_through_no_link_planted_beside_it(tmp_path)
     victim.write_text("the user's\n")
     (tmp_path / '.partial-measured.yaml').symlink_to(victim)
     preset = tmp_path / 'measured.yaml'
-    done = tool('wctls_ros.evaluation.calibrate_cli', STILL, '--limit', '20', '--write-preset',
+    done = tool('wctls_lab.evaluation.calibrate_cli', STILL, '--limit', '20', '--write-preset',
                 preset, '--accept-implausible')
     assert done.returncode == 0, done.stderr
     assert victim.read_text() == "the user's\n"

@@ -616,7 +616,7 @@ def parser() -> argparse.ArgumentParser:
                           'unless --poses')
     cli.add_argument('--poses', metavar='FILE',
                      help="with --tracks: the robot's poses (CSV stamp_s,x_m,y_m,yaw_rad) that "
-                          'move the tracks from scan to scan')
+                          'move the tracks from scan to scan (default: none, a still sensor)')
     cli.add_argument('--laser-offset', nargs=3, type=float, default=[0.0, 0.0, 0.0],
                      metavar=('X', 'Y', 'YAW_DEG'),
                      help="with --poses: the laser's pose on the robot (default: 0 0 0)")
@@ -638,7 +638,7 @@ def parser() -> argparse.ArgumentParser:
     cli.add_argument('--laser-mount', nargs='+', metavar='X_M Y_M YAW_DEG | FILE',
                      help="with --odometry: the laser's pose on the robot, as three numbers "
                           '(m, m, deg) or a YAML file with x_m, y_m, yaw_rad (such as a '
-                          "recording's laser_mount.yaml)")
+                          "recording's laser_mount.yaml) (default: none, the laser's odometry)")
     return cli
 
 

@@ -24,6 +24,7 @@ import importlib
 import os
 import signal
 import sys
+import threading
 
 from .process import STOP_SIGNALS
 
@@ -54,8 +55,10 @@ def run(prog: str, module: str, node: bool, function: str = 'main') -> int:
             signal.signal(number, handler)
         status = getattr(program, function)()
         # The process ends: its objects need not be collected one by one at exit (0.8 s with
-        # numba loaded, 0.1 s frozen), so a signal ends it within a second.
-        gc.freeze()
+        # numba loaded, 0.1 s frozen), so a signal ends it within a second. Not while another
+        # thread still runs (the compiled pipeline loading): LLVM then aborted at exit.
+        if threading.active_count() == 1:
+            gc.freeze()
         return status
     except KeyboardInterrupt:
         # A Ctrl-C the program did not handle (one before a node's run_node or a tool's stop

@@ -56,7 +56,7 @@ from .core import (CoreStatus, CornerSet, Features, line_landmarks, SegmentSet,
 from .extras import missing_extra
 from .frontend.dock import find_docks, track_dock, TrackerState
 from .landmark_messages import landmark_array, landmark_markers, LandmarkStream
-from .landmark_publishers import BridgePublishers
+from .landmark_publishers import bridge_names, BridgePublishers
 from .node_main import declare_parameters, run_node
 from .params import AUTOSTART, dock_settings, FEATURE_NODE, feature_settings, landmark_settings
 
@@ -132,6 +132,7 @@ class FeatureNode(LifecycleNode):
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
         if values[AUTOSTART]:
             feature_settings(values)          # a bad configuration ends ros2 run: status 1
+            bridge_names(str(values['landmark_bridges']))
             if self.trigger_configure() == TransitionCallbackReturn.SUCCESS:
                 self.trigger_activate()
 
@@ -147,6 +148,7 @@ class FeatureNode(LifecycleNode):
             values = self._values()
             self._dock = dock_settings(values)
             self._publish_landmarks, *step_sigmas = landmark_settings(values)
+            bridge_names(str(values['landmark_bridges']))
         except ValueError as error:
             self.get_logger().error(f'configure failed: {error}')
             return TransitionCallbackReturn.FAILURE

@@ -25,12 +25,12 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'calibrate = wctls_lab.executables:calibrate',
-            'demo = wctls_lab.executables:demo',
-            'evaluate = wctls_lab.executables:evaluate',
-            'score = wctls_lab.executables:score',
-            'simulate = wctls_lab.executables:simulate',
-            'simulated_rplidar = wctls_lab.executables:simulated_rplidar',
+            'calibrate = wctls_lab.evaluation.calibrate_cli:main',
+            'demo = wctls_lab.demo:main',
+            'evaluate = wctls_lab.evaluation.evaluate_cli:main',
+            'score = wctls_lab.evaluation.score_cli:main',
+            'simulate = wctls_lab.evaluation.simulate_cli:main',
+            'simulated_rplidar = wctls_lab.simulated_rplidar:main',
         ],
     },
 )

@@ -29,10 +29,10 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'bag_replay = wctls_ros.executables:bag_replay',
-            'feature_node = wctls_ros.executables:feature_node',
-            'odometry_node = wctls_ros.executables:odometry_node',
-            'process_bag = wctls_ros.executables:process_bag',
+            'bag_replay = wctls_ros.bags.replay_node:main',
+            'feature_node = wctls_ros.feature_node:main',
+            'odometry_node = wctls_ros.odometry_node:main',
+            'process_bag = wctls_ros.bags.process_bag:main',
         ],
     },
 )

@@ -43,6 +43,7 @@ import numpy as np
 from wctls_ros.bags import BagWriter
 from wctls_ros.cli import bounded, Parser, USER_ERROR, UserError
 from wctls_ros.core import METHODS, nees
+from wctls_ros.extras import explains_missing_extras
 from wctls_ros.frontend.dock import DockShape, wrap_angle
 from wctls_ros.output_folders import claim, mark, remove_entries
 from wctls_ros.params import feature_settings, load_parameters
@@ -470,6 +471,7 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
+@explains_missing_extras('demo')
 def main(argv=None) -> int:
     """
     Run the demo.
@@ -502,6 +504,7 @@ def _prepare(out: pathlib.Path) -> None:
 
 def _run(args) -> int:
     """Check the floor plan and the output folder, then run the demo; the exit status."""
+    import rosbags  # noqa: F401 - the recording needs it: missing, nothing is started
     try:
         plan = load_floor_plan(args.floor_plan)
     except (OSError, ValueError) as error:

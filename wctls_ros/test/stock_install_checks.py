@@ -61,9 +61,11 @@ def test_feature_node_needs_nothing_optional():
 
 @pytest.mark.parametrize('tool, arguments', [
     ('process_bag', ['{data}/urg04lx_office', '-d', '{out}']),
-    ('score', ['{data}/sick_lms1xx_static']), ('evaluate', ['{data}/sick_lms1xx_static']),
+    ('score', ['{data}/sick_lms1xx_static']),
+    ('evaluate', ['{data}/sick_lms1xx_static', '--out', '{out}/evaluation']),
     ('calibrate', ['{data}/sick_lms1xx_static']), ('simulate', ['environment_a', '{out}/sim']),
-    ('bag_replay', ['--help']), ('demo', ['--help'])])
+    ('bag_replay', ['--ros-args', '-p', 'bag:={data}/urg04lx_office']),
+    ('demo', ['--seconds', '2', '--out', '{out}/demo'])])
 def test_a_bag_tool_without_rosbags_says_how_to_install_it_in_one_line(tool, arguments,
                                                                        tmp_path):
     command = [str(installed_executable(tool))] + [

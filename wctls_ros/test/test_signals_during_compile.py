@@ -11,10 +11,8 @@ times its end; the compile process must be gone too.
 
 import os
 import pathlib
-import re
 import signal
 import subprocess
-import sys
 import time
 
 import pytest
@@ -99,87 +97,3 @@ def test_a_signal_during_the_compile_ends_it_within_two_seconds(command, signal_
     while any(alive(pid) for pid in compiling) and time.monotonic() < gone:
         time.sleep(0.05)
     assert not any(alive(pid) for pid in compiling)
-
-
-@pytest.mark.parametrize('program, arguments, status', [
-    ('feature_node', [], 0),
-    ('process_bag', [str(REAL_DATA / 'urg04lx_office'), '-d', '{out}'], 128 + signal.SIGINT)])
-def test_ctrl_c_while_a_program_imports_ends_it_quietly(program, arguments, status, tmp_path):
-    # The imports take a second or more; a Ctrl-C then gave a KeyboardInterrupt traceback.
-    # Python reports each import statement's module as it completes (PYTHONPROFILEIMPORTTIME):
-    # the signal is sent once the first module of the package has been imported by the
-    # program's module (not by the executables' module, whose handlers are not yet in place),
-    # and at delays into its imports after that.
-    environment = dict(os.environ, PYTHONPROFILEIMPORTTIME='1')
-    for delay_s in (0.0, 0.1, 0.3):
-        command = [str(installed_executable(program))] + [
-            argument.format(out=tmp_path / f'out{delay_s}') for argument in arguments]
-        process = subprocess.Popen(command, env=environment, stdout=subprocess.PIPE,
-                                   stderr=subprocess.PIPE, text=True)
-        for line in process.stderr:
-            if re.search(r'\|\s+wctls_ros\.(?!(executables|process)\s*$)', line):
-                break
-        time.sleep(delay_s)
-        process.send_signal(signal.SIGINT)
-        try:
-            output, errors = process.communicate(timeout=30)
-        finally:
-            if process.poll() is None:
-                process.kill()
-                process.communicate()
-        assert 'Traceback' not in output + errors, (delay_s, errors[-2000:])
-        assert process.returncode == status, (delay_s, process.returncode, errors[-2000:])
-
-
-# The Ctrl-C of the test above once came while the imports ran a garbage-collector callback:
-# the handler's exit, raised inside it, was printed with its traceback and dropped, and the node
-# ran on. Here the first collection after the import has started sends it, every time.
-_CTRL_C_INSIDE_A_COLLECTION_DURING_THE_IMPORTS = """
-import gc
-import importlib
-import os
-import signal
-import sys
-
-from wctls_ros import executables
-
-sent = []
-
-
-def sigint_inside_a_collection(phase, info):
-    if phase == 'start' and not sent:
-        sent.append(True)
-        print('signalled inside a collection', file=sys.stderr, flush=True)
-        os.kill(os.getpid(), signal.SIGINT)
-        for _ in range(1000):   # the handler runs at one of these bytecodes, in this callback
-            pass
-
-
-real_import_module = importlib.import_module
-
-
-def import_module_with_a_sigint_in_a_collection(name, package=None):
-    gc.callbacks.append(sigint_inside_a_collection)
-    return real_import_module(name, package)
-
-
-importlib.import_module = import_module_with_a_sigint_in_a_collection
-program = sys.argv[1]
-sys.argv = sys.argv[1:]
-sys.exit(getattr(executables, program)())
-"""
-
-
-@pytest.mark.parametrize('program, arguments, status', [
-    ('feature_node', [], 0),
-    ('process_bag', [str(REAL_DATA / 'urg04lx_office'), '-d', '{out}'], 128 + signal.SIGINT)])
-def test_ctrl_c_inside_a_collection_during_the_imports_ends_it(program, arguments, status,
-                                                               tmp_path):
-    command = [sys.executable, '-c', _CTRL_C_INSIDE_A_COLLECTION_DURING_THE_IMPORTS, program,
-               *(argument.format(out=tmp_path / 'out') for argument in arguments)]
-    try:
-        result = subprocess.run(command, capture_output=True, text=True, timeout=30)
-    except subprocess.TimeoutExpired as error:
-        pytest.fail(f'{program} ran on after the Ctrl-C: {error.stderr}')
-    assert result.stderr.splitlines() == ['signalled inside a collection']
-    assert result.returncode == status

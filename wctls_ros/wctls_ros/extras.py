@@ -11,7 +11,9 @@ traceback. The README's install section lists the same, with figures.
 """
 
 from dataclasses import dataclass
-from typing import Optional
+import functools
+import sys
+from typing import Callable, Optional
 
 from .core.runtime import INSTALL_NUMBA, SPEEDUP
 
@@ -54,3 +56,30 @@ def missing_extra(error: ImportError) -> Optional[str]:
     if extra is None:
         return None
     return f'{name} is not installed: it gives {extra.purpose} ({extra.install})'
+
+
+def explains_missing_extras(prog: str) -> Callable[[Callable[..., int]], Callable[..., int]]:
+    """
+    Decorate a tool's ``main``: a missing optional package ends it with one line and status 1.
+
+    The line is ``PROG: error: `` and :func:`missing_extra`'s explanation, on standard error;
+    an ImportError of any other module is a bug and is raised as it is. The tools import their
+    optional packages when they first need them, so that ``--help`` and the argument checks
+    work without them.
+
+    :param prog: the tool's name, for the line
+    :return: the decorator
+    """
+    def decorate(main: Callable[..., int]) -> Callable[..., int]:
+        @functools.wraps(main)
+        def main_explaining_missing_extras(*args, **kwargs) -> int:
+            try:
+                return main(*args, **kwargs)
+            except ImportError as error:
+                reason = missing_extra(error)
+                if reason is None:
+                    raise
+                print(f'{prog}: error: {reason}', file=sys.stderr)
+                return 1
+        return main_explaining_missing_extras
+    return decorate

@@ -33,6 +33,7 @@ from typing import List, Optional, Sequence
 
 from wctls_ros.cli import bounded, Parser, start_core, USER_ERROR, UserError
 from wctls_ros.core import FeatureConfig, METHODS
+from wctls_ros.extras import explains_missing_extras
 from wctls_ros.process import check_stop, ending_at_once, stop_signals, Stopped
 from wctls_ros.sensors import DEFAULT_SENSOR, sensor_presets
 
@@ -99,6 +100,7 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
+@explains_missing_extras('calibrate')
 def main(argv=None) -> int:
     """
     Run ``calibrate``.

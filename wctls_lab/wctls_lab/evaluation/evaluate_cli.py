@@ -25,6 +25,7 @@ import sys
 
 from wctls_ros.cli import bounded, Parser, start_core, USER_ERROR, UserError
 from wctls_ros.core import METHODS
+from wctls_ros.extras import explains_missing_extras
 from wctls_ros.output_folders import claim, owned_folder
 from wctls_ros.process import check_stop, ending_at_once, stop_signals, Stopped
 from wctls_ros.sensors import sensor_presets
@@ -119,6 +120,7 @@ def _noise(args, scans, base):
             'noise model given on the command line')
 
 
+@explains_missing_extras('evaluate')
 def main(argv=None) -> int:
     """
     Run ``evaluate``.

@@ -33,6 +33,7 @@ from typing import Dict, Optional
 import numpy as np
 from wctls_ros.cli import bounded, Parser, start_core, USER_ERROR, UserError
 from wctls_ros.core import FeatureConfig, METHODS
+from wctls_ros.extras import explains_missing_extras
 from wctls_ros.output_folders import claim, owned_folder
 from wctls_ros.params import feature_settings, load_parameters, SENSOR
 from wctls_ros.process import check_stop, ending_at_once, stop_signals, Stopped
@@ -340,6 +341,7 @@ def run(args, argv) -> int:
     return 0
 
 
+@explains_missing_extras('score')
 def main(argv=None) -> int:
     """
     Run ``score``.

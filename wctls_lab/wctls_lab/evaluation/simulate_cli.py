@@ -27,6 +27,7 @@ import sys
 
 import numpy as np
 from wctls_ros.cli import bounded, Parser, USER_ERROR, UserError
+from wctls_ros.extras import explains_missing_extras
 
 from .truth import TRUTH_FILE, truth_from_recording, truth_to_yaml
 from ..simulation import (BUNDLED_PLANS, load_floor_plan, NO_RETURN_VALUES, NoiseModel,
@@ -206,6 +207,7 @@ def _radians(degrees):
     return None if degrees is None else math.radians(degrees)
 
 
+@explains_missing_extras('simulate')
 def main(argv=None) -> int:
     """
     Run the command.

@@ -7,7 +7,9 @@ Reading LaserScans from bags and writing bags, with the ``rosbags`` library (no 
 Reads ROS 2 bags (sqlite3 and mcap) and ROS 1 bags. Writes ROS 2 bags (mcap by default) of
 rosbags messages (serialised by rosbags: no ROS install needed) or of rclpy messages (serialised
 by rclpy, imported only then); the message definitions come from a rosbags typestore with
-wctls_msgs registered from its .msg files. A bag is written to a staging folder beside it and
+wctls_msgs registered from its .msg files. rosbags is imported when a bag is first opened, so a
+tool without it starts and says so in one line (:func:`wctls_ros.extras.explains_missing_extras`).
+A bag is written to a staging folder beside it and
 renamed into place when complete: an error or a signal never leaves half a bag behind, and the
 staging folder of a killed writer (SIGKILL) is removed by the next writer in the same folder.
 """
@@ -20,16 +22,18 @@ import pathlib
 import re
 import shutil
 import tempfile
-from typing import Iterator, Optional
-
-from rosbags.highlevel import AnyReader
-from rosbags.rosbag2 import StoragePlugin, Writer
+from typing import Iterator, Optional, TYPE_CHECKING
 
 from ..conversions import typestore
+
+if TYPE_CHECKING:
+    from rosbags.highlevel import AnyReader
 
 LASER_SCAN = 'sensor_msgs/msg/LaserScan'
 # Files that hold a ROS 2 bag's messages when its metadata.yaml is missing (recorder killed).
 _STORAGE_SUFFIXES = ('.mcap', '.db3')
+# The storages a bag is written in: name -> rosbags' StoragePlugin member.
+_STORAGES = {'mcap': 'MCAP', 'sqlite3': 'SQLITE3'}
 # A bag is written in a staging folder beside it, named after the writing process and locked
 # (flock) by it: one whose process is gone and whose lock is free was left by a killed run.
 _STAGING_PREFIX = '.partial-'
@@ -111,7 +115,8 @@ def _resolve(path) -> pathlib.Path:
     return path
 
 
-def _open(path) -> AnyReader:
+def _open(path) -> 'AnyReader':
+    from rosbags.highlevel import AnyReader
     path = _resolve(path)
     try:
         reader = AnyReader([path], default_typestore=typestore())
@@ -122,7 +127,7 @@ def _open(path) -> AnyReader:
     return reader
 
 
-def _summary(reader: AnyReader) -> BagInfo:
+def _summary(reader: 'AnyReader') -> BagInfo:
     """Summarise an open bag."""
     topics = {}
     for connection in reader.connections:
@@ -298,18 +303,18 @@ class BagWriter:
         :raises BagError: when ``path`` exists and ``overwrite`` is false, or a bad storage
         """
         self.path = pathlib.Path(path)
-        plugins = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
-        if storage not in plugins:
-            raise BagError(f'storage must be one of {sorted(plugins)}, got {storage!r}')
+        if storage not in _STORAGES:
+            raise BagError(f'storage must be one of {list(_STORAGES)}, got {storage!r}')
         if self.path.exists() and not overwrite:
             raise BagError(f'{self.path} exists: refusing to overwrite it')
-        self._plugin = plugins[storage]
+        self._storage = storage
         self._staging = None
         self._lock = None
         self._writer = None
         self._connections = {}
 
     def __enter__(self) -> 'BagWriter':
+        from rosbags.rosbag2 import StoragePlugin, Writer
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             remove_stale_staging(self.path.parent)
@@ -317,7 +322,7 @@ class BagWriter:
                 prefix=f'{_STAGING_PREFIX}{os.getpid()}-', dir=self.path.parent))
             self._lock = _lock_folder(self._staging)
             self._writer = Writer(self._staging / self.path.name, version=9,
-                                  storage_plugin=self._plugin)
+                                  storage_plugin=StoragePlugin[_STORAGES[self._storage]])
             self._writer.open()
         except Exception as error:  # noqa: B902 - rosbags and the file system raise many types
             self._remove_staging()

@@ -57,6 +57,7 @@ from ..cli import start_core
 from ..conversions import (corner_array, dock_pose_messages, laser_scan, line_segment_array,
                            marker_array, MessageTypes, scan_features)
 from ..core import CornerSet, line_landmarks, METHODS, SegmentSet, start
+from ..extras import explains_missing_extras
 from ..frontend.dock import find_docks, track_dock, TrackerState
 from ..frontend.frames import Landmarks, landmarks_from_features
 from ..frontend.tracking import detections_of, View
@@ -738,6 +739,7 @@ class _NoProgress:
         """Close nothing."""
 
 
+@explains_missing_extras('process_bag')
 def main(argv=None) -> int:
     """
     Run the command line tool.

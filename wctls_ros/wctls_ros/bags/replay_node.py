@@ -27,6 +27,7 @@ from sensor_msgs.msg import LaserScan
 
 from .bag_io import bag_info, BagError, choose_scan_topic, read_scans
 from ..conversions import laser_scan
+from ..extras import explains_missing_extras
 from ..node_main import declare_parameters, run_node, spin_until_shutdown
 from ..params import BAG_REPLAY
 
@@ -227,6 +228,7 @@ def _play(executor, node) -> int:
     return node.done.result() if node.done.done() else 0
 
 
+@explains_missing_extras('bag_replay')
 def main(args=None) -> int:
     """Play the bag; exit 0 at its end, 1 on a bad bag or configuration."""
     return run_node('bag_replay', BagReplay, _play, (BagError, ValueError), args)

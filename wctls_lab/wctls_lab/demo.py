@@ -46,6 +46,8 @@ from wctls_ros.core import METHODS, nees
 from wctls_ros.extras import explains_missing_extras
 from wctls_ros.frontend.dock import DockShape, wrap_angle
 from wctls_ros.output_folders import claim, mark, remove_entries
+from wctls_ros.outputs import (CORNERS, DOCK_POSE_WITH_COVARIANCE, FEATURES, LANDMARK_OUTPUTS,
+                               message_class, SCAN)
 from wctls_ros.params import feature_settings, load_parameters
 from wctls_ros.process import check_stop, die_with_parent, stop_requested, stop_signals, Stopped
 from wctls_rplidar.emulator.device import EMULATED_MODELS
@@ -184,9 +186,6 @@ def record(bag_path: pathlib.Path, seconds: float, dock: bool = False) -> Record
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import qos_profile_sensor_data
     from rclpy.signals import SignalHandlerOptions
-    from sensor_msgs.msg import LaserScan
-    from visualization_msgs.msg import MarkerArray
-    from wctls_msgs.msg import CornerArray, LandmarkArray, LineSegmentArray
 
     seen = Recording()
     context = rclpy.context.Context()
@@ -206,24 +205,20 @@ def record(bag_path: pathlib.Path, seconds: float, dock: bool = False) -> Record
                     return
                 now = time.time_ns()
                 bag.write(topic, now, message)
-                if topic == '/scan':
+                if topic == SCAN.in_bag:
                     stamp = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
                     seen.scans[stamp] = (now, message)
-                elif topic == '/corners':
+                elif topic == CORNERS.in_bag:
                     seen.corners.append((now, message))
-                elif topic == DOCK_TOPIC:
+                elif topic == DOCK_POSE_WITH_COVARIANCE.in_bag:
                     seen.docks.append((now, message))
 
-            node.create_subscription(LaserScan, 'scan', lambda m: keep('/scan', m),
-                                     qos_profile_sensor_data)
-            for topic, kind in (('corners', CornerArray), ('lines', LineSegmentArray),
-                                ('markers', MarkerArray), ('landmarks', LandmarkArray),
-                                ('landmark_markers', MarkerArray)):
-                node.create_subscription(kind, topic, lambda m, t=topic: keep(f'/{t}', m), 10)
-            if dock:
-                from geometry_msgs.msg import PoseWithCovarianceStamped
-                node.create_subscription(PoseWithCovarianceStamped, DOCK_TOPIC[1:],
-                                         lambda m: keep(DOCK_TOPIC, m), 10)
+            node.create_subscription(message_class(SCAN.type_name), SCAN.name,
+                                     lambda m: keep(SCAN.in_bag, m), qos_profile_sensor_data)
+            for topic in FEATURES + LANDMARK_OUTPUTS + ((DOCK_POSE_WITH_COVARIANCE,) if dock
+                                                        else ()):
+                node.create_subscription(message_class(topic.type_name), topic.name,
+                                         lambda m, t=topic: keep(t.in_bag, m), 10)
             settled = threading.Event()
 
             def on_diagnostics(array):
@@ -238,7 +233,7 @@ def record(bag_path: pathlib.Path, seconds: float, dock: bool = False) -> Record
             # and feature_node's pipeline is settled: the table measures the compiled pipeline
             # (when numba is there), not the numpy one serving while it loads.
             start_deadline = time.monotonic() + 60.0
-            while not ({'/scan', '/corners'} <= arrived and settled.is_set()
+            while not ({SCAN.in_bag, CORNERS.in_bag} <= arrived and settled.is_set()
                        or stop_requested()):
                 if time.monotonic() > start_deadline:
                     raise RuntimeError('no scans and corners from a settled feature pipeline '
@@ -256,9 +251,6 @@ def record(bag_path: pathlib.Path, seconds: float, dock: bool = False) -> Record
         rclpy.try_shutdown(context=context)
     seen.stopped_by = stop_requested() or 0
     return seen
-
-
-DOCK_TOPIC = '/detected_dock_pose_with_covariance'
 
 
 def dock_plan(floor_plan: str, path: pathlib.Path, shape: DockShape = DockShape()) -> np.ndarray:

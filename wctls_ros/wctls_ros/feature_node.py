@@ -38,15 +38,11 @@ import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import LaserScan
 from std_srvs.srv import Trigger
-from visualization_msgs.msg import MarkerArray
-from wctls_msgs.msg import CornerArray, LandmarkArray, LineSegmentArray
 
 from .conversions import (copy_header, corner_array, dock_marker, dock_pose_messages,
                           line_segment_array, marker_array, MessageTypes, mismatched_types,
@@ -58,6 +54,8 @@ from .frontend.dock import find_docks, track_dock, TrackerState
 from .landmark_messages import landmark_array, landmark_markers, LandmarkStream
 from .landmark_publishers import bridge_names, BridgePublishers
 from .node_main import declare_parameters, run_node
+from .outputs import (codec_types, CORNERS, DOCK_OUTPUTS, FEATURES, LANDMARK_MARKERS,
+                      LANDMARK_OUTPUTS, LANDMARKS, LINES, MARKERS, message_class, SCAN, Topic)
 from .params import AUTOSTART, dock_settings, FEATURE_NODE, feature_settings, landmark_settings
 
 # A throttled warning repeats at most this often, s.
@@ -153,12 +151,11 @@ class FeatureNode(LifecycleNode):
             self.get_logger().error(f'configure failed: {error}')
             return TransitionCallbackReturn.FAILURE
         self._landmark_stream = LandmarkStream(*step_sigmas)
-        self._corners = self.create_lifecycle_publisher(CornerArray, 'corners', 10)
-        self._lines = self.create_lifecycle_publisher(LineSegmentArray, 'lines', 10)
-        self._markers = self.create_lifecycle_publisher(MarkerArray, 'markers', 10)
-        self._landmarks = self.create_lifecycle_publisher(LandmarkArray, 'landmarks', 10)
-        self._landmark_markers = self.create_lifecycle_publisher(MarkerArray, 'landmark_markers',
-                                                                 10)
+        self._corners = self._create_publisher(CORNERS)
+        self._lines = self._create_publisher(LINES)
+        self._markers = self._create_publisher(MARKERS)
+        self._landmarks = self._create_publisher(LANDMARKS)
+        self._landmark_markers = self._create_publisher(LANDMARK_MARKERS)
         self._bridges = BridgePublishers(self, str(values['landmark_bridges']))
         if self._dock is not None:
             self._configure_dock()
@@ -179,7 +176,7 @@ class FeatureNode(LifecycleNode):
         # built with (rosbags' decode in about half the time rclpy's take).
         self._last_sequence = None
         self._scans = self.create_subscription(
-            LaserScan, 'scan', self._on_scan, SCAN_QOS, raw=True,
+            message_class(SCAN.type_name), SCAN.name, self._on_scan, SCAN_QOS, raw=True,
             event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_scans_lost))
         self._types = self._message_types()
         self.get_logger().info(f'extracting features with {self._config.method} from '
@@ -220,10 +217,7 @@ class FeatureNode(LifecycleNode):
     def _configure_dock(self) -> None:
         """Create the dock's publishers and the services that start and stop its detection."""
         # Reliable, keep last 10: what opennav_docking subscribes detected_dock_pose with.
-        self._dock_publishers = (
-            self.create_lifecycle_publisher(PoseStamped, 'detected_dock_pose', 10),
-            self.create_lifecycle_publisher(PoseWithCovarianceStamped,
-                                            'detected_dock_pose_with_covariance', 10))
+        self._dock_publishers = tuple(map(self._create_publisher, DOCK_OUTPUTS))
         self._dock_services = tuple(
             self.create_service(Trigger, f'~/{name}_dock_detection', callback)
             for name, callback in (('start', self._start_detection),
@@ -269,15 +263,24 @@ class FeatureNode(LifecycleNode):
         self._dock_publishers, self._dock_services = (), ()
         self._configured = False
 
+    def _create_publisher(self, topic: Topic):
+        """Create the lifecycle publisher of one of our topics (:mod:`wctls_ros.outputs`)."""
+        return self.create_lifecycle_publisher(message_class(topic.type_name), topic.name, 10)
+
     def _message_types(self) -> MessageTypes:
         """Choose the classes the scan is decoded and the outputs built with: rosbags' if fit."""
         mine = (self.get_name(), self.get_namespace())
-        publishers = (self._corners, self._lines, self._markers, *self._dock_publishers)
+        publishers = (self._corners, self._lines, self._markers, self._landmarks,
+                      self._landmark_markers, *self._dock_publishers)
         endpoints = [info for publisher in publishers
                      for info in self.get_publishers_info_by_topic(publisher.topic_name)]
         endpoints += self.get_subscriptions_info_by_topic(self._scans.topic_name)
+        # The type hashes of this node's own endpoints, for every type it builds or decodes
+        # with the codec; one not seen yet (discovery) counts as unknown, never as fit.
         installed = {info.topic_type: str(info.topic_type_hash) for info in endpoints
                      if (info.node_name, info.node_namespace) == mine}
+        expected = codec_types(FEATURES + LANDMARK_OUTPUTS
+                               + (DOCK_OUTPUTS if self._dock_publishers else ()))
         try:
             store = typestore()
         except ImportError as error:
@@ -285,13 +288,17 @@ class FeatureNode(LifecycleNode):
                 "decoding scans and building the outputs with rclpy's message classes: "
                 f'{missing_extra(error) or error}')
             return rclpy_types()
-        mismatched = mismatched_types(store, installed)
-        if len(installed) == 4 + len(self._dock_publishers) and not mismatched:
+        unseen = [name for name in expected if name not in installed]
+        mismatched = mismatched_types(store, {name: installed[name] for name in expected
+                                              if name in installed})
+        if not unseen and not mismatched:
             return MessageTypes.from_typestore(store)
+        reason = (f"rosbags' definitions of {', '.join(mismatched)} are not this ROS install's"
+                  if mismatched else
+                  f"this node's own endpoints of {', '.join(unseen)} were not discovered")
         self.get_logger().warning(
             "decoding scans and building the outputs with rclpy's message classes (slower): "
-            f"rosbags' definitions of {', '.join(mismatched) or 'the message types'} are not "
-            "this ROS install's")
+            f'{reason}')
         return rclpy_types()
 
     def _on_core_change(self, status: CoreStatus) -> None:

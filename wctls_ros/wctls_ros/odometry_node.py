@@ -34,6 +34,7 @@ from .frontend.odometry import Odometry, on_robot, STATUSES
 from .node_main import declare_parameters, run_node
 from .odometry_messages import (odometry_message, ODOMETRY_TYPES, transform_message,
                                 TRANSFORM_TYPES)
+from .outputs import ODOMETRY
 from .params import ODOMETRY_NODE, odometry_settings
 
 WARN_PERIOD_S = 5.0
@@ -59,7 +60,7 @@ class OdometryNode(Node):
         # The laser's odometry starts at its mount: odom is the robot's first pose.
         self._odometry = Odometry(settings.odometry, settings.mount)
         self._classes = _rclpy_classes(ODOMETRY_TYPES)
-        self._odom = self.create_publisher(OdometryMessage, 'odom', 10)
+        self._odom = self.create_publisher(OdometryMessage, ODOMETRY.name, 10)
         self._tf = None
         if settings.publish_tf:
             # tf2_msgs is on every ROS install; the PyPI wheels lack it.

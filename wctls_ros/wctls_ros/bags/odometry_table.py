@@ -24,9 +24,10 @@ from .bag_io import BagError, BagWriter, typestore
 from ..frontend.frames import Landmarks
 from ..frontend.odometry import Odometry, OdometryConfig, OdometryUpdate, on_robot
 from ..odometry_messages import odometry_message, ODOMETRY_TYPES
+from ..outputs import ODOMETRY
 
 ODOMETRY_CSV = 'odometry.csv'
-ODOMETRY_TOPIC = '/odom'
+ODOMETRY_TOPIC = ODOMETRY.in_bag
 ODOMETRY_COLUMNS = (
     'stamp_s', 'x_m', 'y_m', 'yaw_rad', 'cov_xx', 'cov_xy', 'cov_xyaw', 'cov_yy', 'cov_yyaw',
     'cov_yawyaw', 'dx_m', 'dy_m', 'dyaw_rad', 'dcov_xx', 'dcov_xy', 'dcov_xyaw', 'dcov_yy',

@@ -61,6 +61,7 @@ from ..extras import explains_missing_extras
 from ..frontend.dock import find_docks, track_dock, TrackerState
 from ..frontend.frames import Landmarks, landmarks_from_features
 from ..frontend.tracking import detections_of, View
+from ..outputs import CORNERS, DOCK_OUTPUTS, FEATURES, LINES, MARKERS
 from ..params import (ConfigError, DOCK_ENABLED, dock_settings, DockSettings, feature_settings,
                       load_parameters, SENSOR)
 from ..process import (check_stop, die_with_parent, stop_requested, STOP_SIGNALS, stop_signals,
@@ -83,12 +84,6 @@ _TRIANGLE = (np.array([0, 0, 0, 1, 1, 2]), np.array([0, 1, 2, 1, 2, 2]))
 DOCK_CSV_NAME = 'dock.csv'
 DOCK_CSV_COLUMNS = ('stamp_s', 'x_m', 'y_m', 'yaw_rad', 'cov_xx', 'cov_xy', 'cov_xyaw', 'cov_yy',
                     'cov_yyaw', 'cov_yawyaw')
-DOCK_TOPICS = (('/detected_dock_pose', 'geometry_msgs/msg/PoseStamped'),
-               ('/detected_dock_pose_with_covariance',
-                'geometry_msgs/msg/PoseWithCovarianceStamped'))
-CORNER_ARRAY = 'wctls_msgs/msg/CornerArray'
-LINE_SEGMENT_ARRAY = 'wctls_msgs/msg/LineSegmentArray'
-MARKER_ARRAY = 'visualization_msgs/msg/MarkerArray'
 # Scans sent to a worker process at once: enough to make the hand-over cost nothing, few enough
 # to keep every worker busy to the end of a bag.
 BATCH_SCANS = 16
@@ -134,8 +129,8 @@ def output_topics(methods) -> dict:
     :return: method -> (corners topic, lines topic, markers topic)
     """
     if len(methods) == 1:
-        return {methods[0]: ('/corners', '/lines', '/markers')}
-    return {m: (f'/corners/{m}', f'/lines/{m}', f'/markers/{m}') for m in methods}
+        return {methods[0]: tuple(topic.in_bag for topic in FEATURES)}
+    return {m: tuple(f'{topic.in_bag}/{m}' for topic in FEATURES) for m in methods}
 
 
 def _refuse_to_replace(output: pathlib.Path, bags, force: bool) -> None:
@@ -269,13 +264,13 @@ class ScanWork:
                     features, self.configs[method].max_landmark_angle_sigma_rad)
             is_landmark = line_landmarks(features.segments,
                                          self.configs[method].max_landmark_angle_sigma_rad)
-            messages.append((corners_topic, CORNER_ARRAY,
+            messages.append((corners_topic, CORNERS.type_name,
                              serialize(corner_array(features, header, types))))
-            messages.append((lines_topic, LINE_SEGMENT_ARRAY,
+            messages.append((lines_topic, LINES.type_name,
                              serialize(line_segment_array(features, header, types,
                                                           is_landmark=is_landmark))))
             if self.publish_markers:
-                messages.append((markers_topic, MARKER_ARRAY, serialize(
+                messages.append((markers_topic, MARKERS.type_name, serialize(
                     marker_array(features, header, self.style, types,
                                  is_landmark=is_landmark))))
             rows = _corner_rows(features.corners, features.segments)
@@ -434,9 +429,9 @@ class _DockTable:
                                        self._settings.tracking)
         if dock is None:
             return
-        for (topic, kind), message in zip(DOCK_TOPICS,
-                                          dock_pose_messages(dock, header, self._types)):
-            self._writer.write_serialized(topic, kind, log_time_ns, self._types.serialize(message))
+        for topic, message in zip(DOCK_OUTPUTS, dock_pose_messages(dock, header, self._types)):
+            self._writer.write_serialized(topic.in_bag, topic.type_name, log_time_ns,
+                                          self._types.serialize(message))
         self._csv.writerow([f'{header.stamp.sec}.{header.stamp.nanosec:09d}', dock.x_m, dock.y_m,
                             dock.yaw_rad, *dock.covariance[_TRIANGLE].tolist()])
         self.written += 1

@@ -26,12 +26,9 @@ from ..frontend.poses import load_poses, PoseError, poses_at
 from ..frontend.tracking import Detections, Motion, Tracker, View
 from ..landmark_messages import (landmark_array, LANDMARK_COLUMNS, landmark_markers,
                                  landmark_rows)
+from ..outputs import LANDMARK_MARKERS, LANDMARKS
 
 LANDMARKS_CSV = 'landmarks.csv'
-LANDMARKS_TOPIC = '/landmarks'
-LANDMARK_ARRAY = 'wctls_msgs/msg/LandmarkArray'
-LANDMARK_MARKERS_TOPIC = '/landmark_markers'
-MARKER_ARRAY = 'visualization_msgs/msg/MarkerArray'
 
 
 @dataclass(frozen=True)
@@ -130,9 +127,10 @@ class BagTracks:
         stamp = f'{sec}.{nanosec:09d}'
         tracked = self._tracker.update(detections, self._motion(float(stamp)), view)
         message = landmark_array(detections, tracked, header, types)
-        self._writer.write_serialized(LANDMARKS_TOPIC, LANDMARK_ARRAY, log_time_ns,
+        self._writer.write_serialized(LANDMARKS.in_bag, LANDMARKS.type_name, log_time_ns,
                                       types.serialize(message))
-        self._writer.write_serialized(LANDMARK_MARKERS_TOPIC, MARKER_ARRAY, log_time_ns,
+        self._writer.write_serialized(LANDMARK_MARKERS.in_bag, LANDMARK_MARKERS.type_name,
+                                      log_time_ns,
                                       types.serialize(landmark_markers(detections, tracked,
                                                                        header, types)))
         self._csv.writerows(landmark_rows(stamp, detections, tracked))

@@ -53,7 +53,7 @@ from .bag_io import (bag_info, BagError, BagWriter, choose_scan_topic, LASER_SCA
 from .odometry_table import (ODOMETRY_CSV, odometry_request, ODOMETRY_TOPIC, OdometryOutput,
                              OdometryTable)
 from .track_bag import BagTracks, LANDMARKS_CSV, TrackOptions
-from ..cli import start_core
+from ..cli import bounded, Parser, start_core, USER_ERROR
 from ..conversions import (corner_array, dock_pose_messages, laser_scan, line_segment_array,
                            marker_array, MessageTypes, scan_features)
 from ..core import CornerSet, line_landmarks, METHODS, SegmentSet, start
@@ -548,28 +548,13 @@ def usable_cpus() -> int:
     return len(os.sched_getaffinity(0))
 
 
-def _positive(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f'must be 1 or more, got {value}')
-    return value
-
-
-class _OneLineErrors(argparse.ArgumentParser):
-    """An argument parser whose errors are one line (the usage is in --help)."""
-
-    def error(self, message):
-        """Exit 2 with ``process_bag: error: <message>``."""
-        self.exit(2, f'{self.prog}: error: {message} (see --help)\n')
-
-
 def parser() -> argparse.ArgumentParser:
     """
     Build the command line interface.
 
     :return: the argument parser
     """
-    cli = _OneLineErrors(
+    cli = Parser(
         prog='process_bag',
         description='Extract corners and line segments with covariances from the LaserScans '
                     'of ROS 1 or ROS 2 bags, without ROS middleware. Writes, per bag, an mcap '
@@ -603,7 +588,7 @@ def parser() -> argparse.ArgumentParser:
     cli.add_argument('-f', '--force', action='store_true',
                      help='replace an existing output once the new one is complete; only an '
                           f'output of process_bag (its {MARKER_NAME} file) with no file added')
-    cli.add_argument('-j', '--jobs', type=_positive, default=usable_cpus(),
+    cli.add_argument('-j', '--jobs', type=bounded(int, 1), default=usable_cpus(),
                      help='processes that extract features, each taking batches of scans '
                           f'(default: the CPUs this process may use, {usable_cpus()} here)')
     cli.add_argument('--tracks', action='store_true',
@@ -790,7 +775,7 @@ def main(argv=None) -> int:
             text = str(error)
             print(text if text.startswith('process_bag: ') else f'process_bag: error: {text}',
                   file=sys.stderr)
-            return 2
+            return USER_ERROR
         except Stopped as stopped:
             interruption = f'interrupted by {stopped}'
             kept = f'; {len(results)} earlier outputs are complete' if results else ''
@@ -811,8 +796,8 @@ def main(argv=None) -> int:
         print(f'process_bag: error: cannot print the summary ({error.strerror}); '
               + (f'the output {written[0]} is complete' if len(written) == 1 else
                  f'the outputs {", ".join(written)} are complete'), file=sys.stderr)
-        return 2
-    return 2 if any(summary is None for _, summary in results) else 0
+        return USER_ERROR
+    return USER_ERROR if any(summary is None for _, summary in results) else 0
 
 
 if __name__ == '__main__':

@@ -160,7 +160,7 @@ def test_the_summary_explains_missing_corner_arrays_and_corners_beyond_those_in_
     seen.corners = [corner_array(2, [[1.0, 0.01], [0.0, 1.0]]),
                     corner_array(3, [[1.0, 0.0], [0.0, 1.0], [-1.0, 0.02], [3.0, 3.0]]),
                     corner_array(5, [[1.0, 0.0]])]
-    rows, notes = summarise(seen, in_view, hidden)
+    rows, notes = summarise(seen, lambda stamp_ns: (in_view, hidden))
     assert dict(rows)['corners per scan (mean, min-max)'] == '2.3 (1-4)'
     assert notes[0].startswith('3 recorded scans have no CornerArray')
     assert [int(part.split(';')[0].split(',')[0]) for part in notes[0].split(': ')[1:]] == [
@@ -188,3 +188,48 @@ def test_the_dock_demo_records_and_summarises_the_dock_poses(tmp_path):
     assert median_mm < 20.0 and median_deg < 3.0, rows
     assert 0.5 < float(rows['dock NEES against the truth (mean; 3 = calibrated)']) < 9.0, rows
     assert (out / 'dock_plan.yaml').is_file() and not leftovers(out)
+
+
+def test_the_moving_demo_follows_the_emulated_robot_with_the_odometry(tmp_path):
+    out = tmp_path / 'demo'
+    result = subprocess.run([str(installed_executable('demo')), '--seconds', '12', '--moving',
+                             '--out', str(out)], capture_output=True, text=True, timeout=180,
+                            env=own_domain())
+    assert result.returncode == 0, result.stdout + result.stderr
+    from rosbags.highlevel import AnyReader
+    with AnyReader([out / 'bag']) as bag:
+        counts = {topic: info.msgcount for topic, info in bag.topics.items()}
+    assert counts.get('/odom', 0) >= 60, counts
+    table = (out / 'summary.md').read_text().split('\n\n')[0]
+    rows = dict(line.strip('|').split('|')[:2] for line in table.splitlines()[2:])
+    rows = {name.strip(): value.strip() for name, value in rows.items()}
+    # 12 s at 0.1 m/s round the circle: the odometry against the emulator's own true poses.
+    path_m = float(rows['odometry poses, true path (m)'].split(',')[1])
+    assert 0.8 < path_m < 1.4, rows
+    assert float(rows['odometry ATE, SE(2) aligned (m)']) < 0.03, rows
+    nees_mean = float(rows['odometry step NEES (mean; 3 = honest), inside the 95 % gate']
+                      .split(',')[0])
+    assert 0.5 < nees_mean < 9.0, rows
+    # The corners are compared with the plan seen from the true pose of each scan.
+    matched = float(rows['corners within 10 cm of a true one'].split('(')[1].split()[0])
+    assert matched > 80.0, rows
+    assert not leftovers(out)
+
+
+def test_the_emulated_robot_drives_round_its_circle_at_its_speed():
+    import math
+    import numpy as np
+    from wctls_lab.simulated_rplidar import Circle
+    circle, start = Circle(radius_m=0.35, speed_m_s=0.1), np.array([2.2, 1.25, math.pi / 2])
+    times = np.linspace(0.0, 30.0, 3001)
+    poses = np.array([circle.pose(start, t) for t in times])
+    assert np.allclose(poses[0], start)
+    centre = np.array([2.2 - 0.35, 1.25])
+    assert np.allclose(np.hypot(*(poses[:, :2] - centre).T), 0.35)
+    velocity = np.diff(poses[:, :2], axis=0) / np.diff(times)[:, None]
+    assert np.allclose(np.hypot(*velocity.T), 0.1, rtol=1e-4)
+    # Heading along the path (finite differences), turning left.
+    heading = np.arctan2(velocity[:, 1], velocity[:, 0])
+    middle = 0.5 * (poses[1:, 2] + poses[:-1, 2])
+    assert np.allclose(np.angle(np.exp(1j * (heading - middle))), 0.0, atol=1e-6)
+    assert np.all(np.diff(poses[:, 2]) > 0)

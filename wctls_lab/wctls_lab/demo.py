@@ -10,7 +10,9 @@ corners, each as its own process like ``ros2 run`` would; records ``scan``, ``co
 ``lines`` and ``markers`` into an mcap bag; then prints a table (corners per scan, their sigmas,
 their error against the simulated truth, latency) and draws one scan. With ``--dock``, the
 example dock stands 1 m in front of the sensor and feature_node looks for it: its poses are
-recorded too, and the table and the figure show them against the truth.
+recorded too, and the table and the figure show them against the truth. With ``--moving``, the
+emulated sensor drives round a circle, odometry_node follows it from the scans, and the table
+compares its trajectory and covariance with the emulator's true poses.
 
 Sealed: its processes talk on a ROS domain of their own, discovered on this machine only,
 whatever ROS_DOMAIN_ID and the DDS settings of the environment say, so that its emulated scans
@@ -37,7 +39,7 @@ import sys
 import textwrap
 import threading
 import time
-from typing import Dict, List, Optional
+from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 from wctls_ros.bags import BagWriter
@@ -47,7 +49,7 @@ from wctls_ros.extras import explains_missing_extras
 from wctls_ros.frontend.dock import DockShape, wrap_angle
 from wctls_ros.output_folders import claim, mark, remove_entries
 from wctls_ros.outputs import (CORNERS, DOCK_POSE_WITH_COVARIANCE, FEATURES, LANDMARK_OUTPUTS,
-                               message_class, SCAN)
+                               message_class, ODOMETRY, SCAN)
 from wctls_ros.params import feature_settings, load_parameters
 from wctls_ros.process import check_stop, die_with_parent, stop_requested, stop_signals, Stopped
 from wctls_rplidar.emulator.device import EMULATED_MODELS
@@ -63,11 +65,18 @@ from .simulation.visibility import visible_corners
 MATCH_RADIUS_M = 0.1
 STOP_TIMEOUT_S = 10.0
 # What the demo writes into its output folder.
-OUTPUTS = ('bag', 'logs', 'scan.png', 'summary.md', 'ttyS1', 'dock_plan.yaml')
+OUTPUTS = ('bag', 'logs', 'scan.png', 'summary.md', 'ttyS1', 'dock_plan.yaml', 'truth.csv')
 # With --dock: the example dock's apex this far in front of the sensor, m, and its body's depth
 # behind the apex, m.
 DOCK_DISTANCE_M = 1.0
 DOCK_DEPTH_M = 0.1
+# With --moving: the sensor drives round a circle of this radius, m, at this speed, m/s, starting
+# at the plan's pose turned this far left, deg (in environment_a the circle then passes between
+# the columns and the cabinet). A turn then sweeps 1.6 deg: the scans are distorted by the
+# motion, as a real robot's are.
+MOVING_RADIUS_M = 0.35
+MOVING_SPEED_M_S = 0.1
+MOVING_TURN_DEG = 90.0
 # Its ROS domain is drawn from these (ROS 2's usable ids on Linux), never the environment's.
 DOMAIN_IDS = range(1, 102)
 # Settings that could take the demo's traffic off this machine or into a live system:
@@ -85,6 +94,7 @@ class Recording:
     scans: Dict[int, tuple] = field(default_factory=dict)    # stamp -> (receive time, msg)
     corners: List[tuple] = field(default_factory=list)       # (receive time, CornerArray)
     docks: List[tuple] = field(default_factory=list)   # (receive time, PoseWithCovarianceStamped)
+    odometry: List[tuple] = field(default_factory=list)     # (receive time, nav_msgs/Odometry)
     stopped_by: int = 0                 # the signal that ended the recording early, if any
 
 
@@ -169,7 +179,8 @@ def _wait_for(path: pathlib.Path, process: subprocess.Popen, timeout_s: float) -
         time.sleep(0.05)
 
 
-def record(bag_path: pathlib.Path, seconds: float, dock: bool = False) -> Recording:
+def record(bag_path: pathlib.Path, seconds: float, dock: bool = False,
+           odometry: bool = False) -> Recording:
     """
     Record the demo's topics into an mcap bag for ``seconds`` once features flow.
 
@@ -179,6 +190,7 @@ def record(bag_path: pathlib.Path, seconds: float, dock: bool = False) -> Record
     :param bag_path: the bag folder to write
     :param seconds: how long to record once features flow, s
     :param dock: also record the dock's poses (detected_dock_pose_with_covariance)
+    :param odometry: also record odometry_node's odometry (odom)
     :return: what was seen, for the summary (``stopped_by`` set on a stop signal)
     """
     from diagnostic_msgs.msg import DiagnosticArray
@@ -206,17 +218,19 @@ def record(bag_path: pathlib.Path, seconds: float, dock: bool = False) -> Record
                 now = time.time_ns()
                 bag.write(topic, now, message)
                 if topic == SCAN.in_bag:
-                    stamp = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
-                    seen.scans[stamp] = (now, message)
+                    seen.scans[_stamp_ns(message)] = (now, message)
                 elif topic == CORNERS.in_bag:
                     seen.corners.append((now, message))
                 elif topic == DOCK_POSE_WITH_COVARIANCE.in_bag:
                     seen.docks.append((now, message))
+                elif topic == ODOMETRY.in_bag:
+                    seen.odometry.append((now, message))
 
             node.create_subscription(message_class(SCAN.type_name), SCAN.name,
                                      lambda m: keep(SCAN.in_bag, m), qos_profile_sensor_data)
-            for topic in FEATURES + LANDMARK_OUTPUTS + ((DOCK_POSE_WITH_COVARIANCE,) if dock
-                                                        else ()):
+            optional = (((DOCK_POSE_WITH_COVARIANCE,) if dock else ())
+                        + ((ODOMETRY,) if odometry else ()))
+            for topic in FEATURES + LANDMARK_OUTPUTS + optional:
                 node.create_subscription(message_class(topic.type_name), topic.name,
                                          lambda m, t=topic: keep(t.in_bag, m), 10)
             settled = threading.Event()
@@ -309,20 +323,100 @@ def dock_rows(seen: Recording, truth: np.ndarray) -> list:
     ]
 
 
-def summarise(seen: Recording, truth_xy: np.ndarray, hidden_xy: np.ndarray) -> tuple:
+def corners_seen_from(plan, pose: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Return the plan's corners a full S1 turn sees from a pose, and the others, in its frame.
+
+    :param plan: the floor plan
+    :param pose: the sensor's pose in the plan (x m, y m, yaw rad); None: the plan's own
+    :return: (corners in view (M, 2), the other corners (H, 2)), laser frame, m
+    """
+    walls, corners = plan.in_sensor_frame(pose)
+    _, _, bearings = full_turn_bearings(S1_BEAMS_PER_TURN)
+    in_view = visible_corners(walls, corners, bearings)
+    return corners[in_view], corners[~in_view]
+
+
+def truth_poses(path: pathlib.Path) -> Callable[[float], np.ndarray]:
+    """
+    Read the emulator's true poses (simulated_rplidar --truth) and interpolate them in time.
+
+    :param path: the CSV file (time_s, x_m, y_m, yaw_rad; yaw unwrapped)
+    :return: wall-clock time (s) -> the sensor's pose in the plan (x m, y m, yaw rad)
+    :raises RuntimeError: when the file holds fewer than two poses
+    """
+    rows = np.loadtxt(path, delimiter=',', skiprows=1, ndmin=2)
+    if len(rows) < 2:
+        raise RuntimeError(f'the emulator logged {len(rows)} true poses in {path}')
+    return lambda time_s: np.array([np.interp(time_s, rows[:, 0], rows[:, k]) for k in (1, 2, 3)])
+
+
+def _stamp_ns(message) -> int:
+    return message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
+
+
+def odometry_rows(seen: Recording, pose_at: Callable[[float], np.ndarray]) -> list:
+    """
+    Return the table's rows of the odometry against the emulator's truth.
+
+    Each Odometry is compared with the true pose half a turn after its scan's stamp (the scan's
+    first beam): a scan's features come from its whole turn. The step into each pose and its
+    covariance are the twist's times the time since the previous one, as the message defines
+    them (:mod:`wctls_ros.odometry_messages`).
+
+    :param seen: the recording
+    :param pose_at: wall-clock time (s) -> the sensor's true pose in the plan
+    :return: rows (measure, value)
+    """
+    from .evaluation.trajectory import trajectory_errors
+    messages = [message for _, message in seen.odometry]
+    if len(messages) < 2:
+        return [('odometry poses recorded', f'{len(messages)}')]
+    stamps = 1e-9 * np.array([_stamp_ns(message) for message in messages], dtype=float)
+    half_turn_s = 0.5 * float(np.median(np.diff(stamps)))
+    planar = np.ix_([0, 1, 5], [0, 1, 5])
+    estimate = np.array([[m.pose.pose.position.x, m.pose.pose.position.y,
+                          2.0 * math.atan2(m.pose.pose.orientation.z, m.pose.pose.orientation.w)]
+                         for m in messages])
+    rates = np.array([[m.twist.twist.linear.x, m.twist.twist.linear.y, m.twist.twist.angular.z]
+                      for m in messages])
+    rate_covariances = np.array([np.array(m.twist.covariance).reshape(6, 6)[planar]
+                                 for m in messages])
+    dt = np.concatenate([[0.0], np.diff(stamps)])
+    steps = rates * dt[:, None]
+    step_covariances = rate_covariances * (dt ** 2)[:, None, None]
+    step_covariances[0] = np.eye(3)                  # row 0: no step into the first pose
+    reference = np.array([pose_at(stamp + half_turn_s) for stamp in stamps])
+    errors = trajectory_errors(estimate, steps, step_covariances, reference, 0.0, 0.0)
+    return [
+        ('odometry poses, true path (m)', f'{len(messages)}, {errors.path_m:.2f}'),
+        ('odometry RPE over >= 1 m of path (%/m, deg/m)',
+         f'{errors.rpe_percent_per_m:.2f}, {errors.rpe_deg_per_m:.2f}'
+         if errors.rpe_pairs else '-'),
+        ('odometry ATE, SE(2) aligned (m)', f'{errors.ate_m:.3f}'),
+        ('odometry steps within 10 cm and 2 deg of the truth',
+         f'{100 * errors.steps_within:.1f} %'),
+        ('odometry step NEES (mean; 3 = honest), inside the 95 % gate',
+         f'{errors.nees_mean:.2f}, {100 * errors.nees_in_gate:.1f} %'),
+    ]
+
+
+def summarise(seen: Recording, truth_at: Callable[[int], Tuple[np.ndarray, np.ndarray]]) -> tuple:
     """
     Compute the demo's table from what was recorded, and the notes that explain its counts.
 
     :param seen: the recording
-    :param truth_xy: the corners the sensor can see, in the laser frame, shape (M, 2), m
-    :param hidden_xy: the plan's other corners (the visibility rule says not seen), shape
-        (H, 2), m
+    :param truth_at: a scan's stamp (ns) -> (the corners the sensor can see then, the plan's
+        other corners (the visibility rule says not seen)), laser frame, shapes (M, 2), (H, 2),
+        m (:func:`corners_seen_from`)
     :return: (rows (measure, value), notes: sentences)
     """
-    counts, sigmas, errors, latency, age = [], [], [], [], []
+    counts, sigmas, errors, latency, age, in_view = [], [], [], [], [], []
     near_hidden = 0
     for received, message in seen.corners:
-        stamp = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
+        stamp = _stamp_ns(message)
+        truth_xy, hidden_xy = truth_at(stamp)
+        in_view.append(len(truth_xy))
         counts.append(len(message.corners))
         if stamp in seen.scans:
             latency.append((received - seen.scans[stamp][0]) * 1e-6)
@@ -343,7 +437,7 @@ def summarise(seen: Recording, truth_xy: np.ndarray, hidden_xy: np.ndarray) -> t
         ('CornerArrays recorded', f'{len(seen.corners)}'),
         ('corners per scan (mean, min-max)',
          f'{counts.mean():.1f} ({counts.min()}-{counts.max()})' if counts.size else '-'),
-        ('true corners in view', f'{len(truth_xy)}'),
+        ('true corners in view (mean)', f'{np.mean(in_view):.1f}' if in_view else '-'),
         (f'corners within {MATCH_RADIUS_M * 100:.0f} cm of a true one',
          f'{len(errors)} of {counts.sum()} ({100 * len(errors) / counts.sum():.1f} %)'
          if counts.sum() else '-'),
@@ -357,7 +451,7 @@ def summarise(seen: Recording, truth_xy: np.ndarray, hidden_xy: np.ndarray) -> t
         ('age of the corners since the first beam (median ms)',
          f'{np.median(age):.0f}' if age else '-'),
     ]
-    return rows, _notes(seen, counts, len(truth_xy), len(errors), near_hidden)
+    return rows, _notes(seen, counts, max(in_view, default=0), len(errors), near_hidden)
 
 
 def _notes(seen: Recording, counts: np.ndarray, in_view: int, matched: int,
@@ -367,14 +461,13 @@ def _notes(seen: Recording, counts: np.ndarray, in_view: int, matched: int,
 
     :param seen: the recording
     :param counts: corners in each CornerArray, shape (A,)
-    :param in_view: true corners in view
+    :param in_view: true corners in view (the most of any scan)
     :param matched: corners within the match radius of one in view
     :param near_hidden: other corners within it of a true corner not in view
     :return: sentences
     """
     notes = []
-    answered = {message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
-                for _, message in seen.corners}
+    answered = {_stamp_ns(message) for _, message in seen.corners}
     unanswered = sorted(set(seen.scans) - answered)
     if unanswered and answered:
         before = sum(stamp < min(answered) for stamp in unanswered)
@@ -396,14 +489,15 @@ def _notes(seen: Recording, counts: np.ndarray, in_view: int, matched: int,
     return notes
 
 
-def draw(seen: Recording, config, truth_xy: np.ndarray, path: pathlib.Path,
-         dock_truth: Optional[np.ndarray] = None) -> None:
+def draw(seen: Recording, config, truth_at: Callable[[int], Tuple[np.ndarray, np.ndarray]],
+         path: pathlib.Path, dock_truth: Optional[np.ndarray] = None) -> None:
     """
     Draw the scan with the median number of corners: segments, corners, ellipses x10, truth.
 
     :param seen: the recording
     :param config: the FeatureConfig feature_node ran with (to redraw the same features)
-    :param truth_xy: true corners in the laser frame, shape (M, 2), m
+    :param truth_at: a scan's stamp (ns) -> its true corners in view and the others
+        (:func:`summarise`)
     :param path: PNG to write
     :param dock_truth: with --dock, the dock's true pose (x, y, yaw): it and the last
         published dock pose are drawn as arrows
@@ -412,8 +506,9 @@ def draw(seen: Recording, config, truth_xy: np.ndarray, path: pathlib.Path,
     from .plotting import draw_scan_features, pyplot
     received = [message for _, message in seen.corners]
     median = sorted(received, key=lambda m: len(m.corners))[len(received) // 2]
-    stamp = median.header.stamp.sec * 1_000_000_000 + median.header.stamp.nanosec
+    stamp = _stamp_ns(median)
     scan = seen.scans.get(stamp, next(iter(seen.scans.values())))[1]
+    truth_xy = truth_at(_stamp_ns(scan))[0]
     features, _ = scan_features(scan, config)
     ranges = np.asarray(scan.ranges, dtype=float)
     bearings = scan.angle_min + np.arange(len(ranges)) * scan.angle_increment
@@ -460,6 +555,10 @@ def parser() -> argparse.ArgumentParser:
                    help=f'stand the example dock (docs/docking.md) {DOCK_DISTANCE_M:g} m in '
                    'front of the sensor; feature_node looks for it, and its poses are '
                    'recorded and summarised')
+    p.add_argument('--moving', action='store_true',
+                   help=f'drive the emulated sensor round a circle ({MOVING_RADIUS_M:g} m, '
+                   f'{MOVING_SPEED_M_S:g} m/s); odometry_node follows it from the scans, and its '
+                   "odometry is recorded and summarised against the emulator's true poses")
     return p
 
 
@@ -497,6 +596,10 @@ def _prepare(out: pathlib.Path) -> None:
 def _run(args) -> int:
     """Check the floor plan and the output folder, then run the demo; the exit status."""
     import rosbags  # noqa: F401 - the recording needs it: missing, nothing is started
+    if args.dock and args.moving:
+        print('demo: error: --dock and --moving: the dock stands in front of a still sensor',
+              file=sys.stderr)
+        return USER_ERROR
     try:
         plan = load_floor_plan(args.floor_plan)
     except (OSError, ValueError) as error:
@@ -532,12 +635,19 @@ def _live(args, plan, out: pathlib.Path) -> int:
         parameters['dock_enabled'] = True
     config = feature_settings(
         load_parameters(_config_file('wctls_ros') / 'feature_node.yaml', overrides=parameters))[0]
+    emulator_options, truth_file = [], out / 'truth.csv'
+    if args.moving:
+        x_m, y_m, yaw_rad = plan.sensor_pose
+        emulator_options = ['--pose', str(x_m), str(y_m),
+                            str(math.degrees(yaw_rad) + MOVING_TURN_DEG),
+                            '--circle', str(MOVING_RADIUS_M), str(MOVING_SPEED_M_S),
+                            '--truth', str(truth_file)]
     processes = Processes(out / 'logs')
     seen = Recording()
     try:
         emulator = processes.start('simulated_rplidar', [
             _executable('wctls_lab', 'simulated_rplidar'), '--link', str(tty), '--floor-plan',
-            floor_plan, '--model', args.model])
+            floor_plan, '--model', args.model, *emulator_options])
         _wait_for(tty, emulator, 20.0)
         processes.start('rplidar_node', [
             _executable('wctls_rplidar', 'rplidar_node'), '--ros-args', '--params-file',
@@ -546,10 +656,16 @@ def _live(args, plan, out: pathlib.Path) -> int:
             _executable('wctls_ros', 'feature_node'), '--ros-args', '--params-file',
             str(_config_file('wctls_ros') / 'feature_node.yaml')]
             + [arg for k, v in parameters.items() for arg in ('-p', f'{k}:={v}')])
-        print(f'demo: {args.model.upper()} emulator on {tty} -> rplidar_node -> feature_node '
+        if args.moving:
+            processes.start('odometry_node', [
+                _executable('wctls_ros', 'odometry_node'), '--ros-args', '--params-file',
+                str(_config_file('wctls_ros') / 'odometry_node.yaml'), '-p',
+                f'method:={args.method}'])
+        nodes = 'feature_node and odometry_node' if args.moving else 'feature_node'
+        print(f'demo: {args.model.upper()} emulator on {tty} -> rplidar_node -> {nodes} '
               f'(ROS_DOMAIN_ID {domain}, logs in {out / "logs"})', flush=True)
         check_stop()
-        seen = record(out / 'bag', args.seconds, dock=args.dock)
+        seen = record(out / 'bag', args.seconds, dock=args.dock, odometry=args.moving)
     except Stopped as stopped:
         seen.stopped_by = stopped.signal_number
     except RuntimeError as error:
@@ -569,16 +685,25 @@ def _live(args, plan, out: pathlib.Path) -> int:
     if not seen.corners:
         print(f'demo: no corners recorded (see {out / "logs"})', file=sys.stderr)
         return 1
-    walls, corners = plan.in_sensor_frame()
-    _, _, bearings = full_turn_bearings(S1_BEAMS_PER_TURN)
-    in_view = visible_corners(walls, corners, bearings)
-    truth = corners[in_view]
-    rows, notes = summarise(seen, truth, corners[~in_view])
+    if args.moving:
+        pose_at = truth_poses(truth_file)
+        half_turn_ns = 50_000_000                   # a scan's middle: its stamp is its start
+
+        def truth_at(stamp_ns: int) -> Tuple[np.ndarray, np.ndarray]:
+            return corners_seen_from(plan, pose_at(1e-9 * (stamp_ns + half_turn_ns)))
+    else:
+        still = corners_seen_from(plan)
+
+        def truth_at(stamp_ns: int) -> Tuple[np.ndarray, np.ndarray]:
+            return still
+    rows, notes = summarise(seen, truth_at)
     if dock_truth is not None:
         rows += dock_rows(seen, dock_truth)
+    if args.moving:
+        rows += odometry_rows(seen, pose_at)
     width = max(len(name) for name, _ in rows)
     table = '\n'.join(f'{name:<{width}}  {value}' for name, value in rows)
-    draw(seen, config, truth, out / 'scan.png', dock_truth)
+    draw(seen, config, truth_at, out / 'scan.png', dock_truth)
     (out / 'summary.md').write_text(
         '| measure | value |\n|---|---|\n'
         + '\n'.join(f'| {name} | {value} |' for name, value in rows) + '\n'

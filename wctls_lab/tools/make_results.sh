@@ -6,7 +6,7 @@
 # real static SICK recordings; then docs/results/score (the yardstick, make_score_results.sh).
 # Run through `make results` (needs the built workspace).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 bin=install/wctls_lab/lib/wctls_lab
 data=data
 docs=docs/results

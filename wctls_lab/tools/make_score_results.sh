@@ -7,7 +7,7 @@
 # on the hand-labelled real recordings. Run by tools/make_results.sh (`make results`); needs the
 # built workspace and docs/results/*_calibration.txt (written by make_results.sh before this).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 bin=install/wctls_lab/lib/wctls_lab
 docs=docs/results/score
 work=out/results/score

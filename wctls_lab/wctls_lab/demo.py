@@ -77,6 +77,9 @@ DOCK_DEPTH_M = 0.1
 MOVING_RADIUS_M = 0.35
 MOVING_SPEED_M_S = 0.1
 MOVING_TURN_DEG = 90.0
+# Half a turn of the emulated S1 at 10 Hz, s: a scan's features come from its whole turn, and its
+# stamp is its first beam's, so it is compared with the true pose this long after its stamp.
+HALF_TURN_S = 0.05
 # Its ROS domain is drawn from these (ROS 2's usable ids on Linux), never the environment's.
 DOMAIN_IDS = range(1, 102)
 # Settings that could take the demo's traffic off this machine or into a live system:
@@ -359,8 +362,8 @@ def odometry_rows(seen: Recording, pose_at: Callable[[float], np.ndarray]) -> li
     """
     Return the table's rows of the odometry against the emulator's truth.
 
-    Each Odometry is compared with the true pose half a turn after its scan's stamp (the scan's
-    first beam): a scan's features come from its whole turn. The step into each pose and its
+    Each Odometry is compared with the true pose half a turn after its scan's stamp
+    (:data:`HALF_TURN_S`). The step into each pose and its
     covariance are the twist's times the time since the previous one, as the message defines
     them (:mod:`wctls_ros.odometry_messages`).
 
@@ -373,7 +376,6 @@ def odometry_rows(seen: Recording, pose_at: Callable[[float], np.ndarray]) -> li
     if len(messages) < 2:
         return [('odometry poses recorded', f'{len(messages)}')]
     stamps = 1e-9 * np.array([_stamp_ns(message) for message in messages], dtype=float)
-    half_turn_s = 0.5 * float(np.median(np.diff(stamps)))
     planar = np.ix_([0, 1, 5], [0, 1, 5])
     estimate = np.array([[m.pose.pose.position.x, m.pose.pose.position.y,
                           2.0 * math.atan2(m.pose.pose.orientation.z, m.pose.pose.orientation.w)]
@@ -386,7 +388,7 @@ def odometry_rows(seen: Recording, pose_at: Callable[[float], np.ndarray]) -> li
     steps = rates * dt[:, None]
     step_covariances = rate_covariances * (dt ** 2)[:, None, None]
     step_covariances[0] = np.eye(3)                  # row 0: no step into the first pose
-    reference = np.array([pose_at(stamp + half_turn_s) for stamp in stamps])
+    reference = np.array([pose_at(stamp + HALF_TURN_S) for stamp in stamps])
     errors = trajectory_errors(estimate, steps, step_covariances, reference, 0.0, 0.0)
     return [
         ('odometry poses, true path (m)', f'{len(messages)}, {errors.path_m:.2f}'),
@@ -633,8 +635,6 @@ def _live(args, plan, out: pathlib.Path) -> int:
         dock_truth = dock_plan(args.floor_plan, pathlib.Path(floor_plan))
         plan = load_floor_plan(floor_plan)
         parameters['dock_enabled'] = True
-    config = feature_settings(
-        load_parameters(_config_file('wctls_ros') / 'feature_node.yaml', overrides=parameters))[0]
     emulator_options, truth_file = [], out / 'truth.csv'
     if args.moving:
         x_m, y_m, yaw_rad = plan.sensor_pose
@@ -645,22 +645,7 @@ def _live(args, plan, out: pathlib.Path) -> int:
     processes = Processes(out / 'logs')
     seen = Recording()
     try:
-        emulator = processes.start('simulated_rplidar', [
-            _executable('wctls_lab', 'simulated_rplidar'), '--link', str(tty), '--floor-plan',
-            floor_plan, '--model', args.model, *emulator_options])
-        _wait_for(tty, emulator, 20.0)
-        processes.start('rplidar_node', [
-            _executable('wctls_rplidar', 'rplidar_node'), '--ros-args', '--params-file',
-            str(_config_file('wctls_rplidar') / 'rplidar_s1.yaml'), '-p', f'serial_port:={tty}'])
-        processes.start('feature_node', [
-            _executable('wctls_ros', 'feature_node'), '--ros-args', '--params-file',
-            str(_config_file('wctls_ros') / 'feature_node.yaml')]
-            + [arg for k, v in parameters.items() for arg in ('-p', f'{k}:={v}')])
-        if args.moving:
-            processes.start('odometry_node', [
-                _executable('wctls_ros', 'odometry_node'), '--ros-args', '--params-file',
-                str(_config_file('wctls_ros') / 'odometry_node.yaml'), '-p',
-                f'method:={args.method}'])
+        _start_nodes(processes, args, tty, floor_plan, parameters, emulator_options)
         nodes = 'feature_node and odometry_node' if args.moving else 'feature_node'
         print(f'demo: {args.model.upper()} emulator on {tty} -> rplidar_node -> {nodes} '
               f'(ROS_DOMAIN_ID {domain}, logs in {out / "logs"})', flush=True)
@@ -685,21 +670,59 @@ def _live(args, plan, out: pathlib.Path) -> int:
     if not seen.corners:
         print(f'demo: no corners recorded (see {out / "logs"})', file=sys.stderr)
         return 1
-    if args.moving:
-        pose_at = truth_poses(truth_file)
-        half_turn_ns = 50_000_000                   # a scan's middle: its stamp is its start
+    config = feature_settings(
+        load_parameters(_config_file('wctls_ros') / 'feature_node.yaml', overrides=parameters))[0]
+    _summarise_into(out, seen, plan, config, dock_truth,
+                    truth_poses(truth_file) if args.moving else None)
+    return 0
 
-        def truth_at(stamp_ns: int) -> Tuple[np.ndarray, np.ndarray]:
-            return corners_seen_from(plan, pose_at(1e-9 * (stamp_ns + half_turn_ns)))
-    else:
+
+def _start_nodes(processes: Processes, args, tty: pathlib.Path, floor_plan: str,
+                 parameters: dict, emulator_options: List[str]) -> None:
+    """Start the emulator, then rplidar_node reading it, feature_node and odometry_node."""
+    emulator = processes.start('simulated_rplidar', [
+        _executable('wctls_lab', 'simulated_rplidar'), '--link', str(tty), '--floor-plan',
+        floor_plan, '--model', args.model, *emulator_options])
+    _wait_for(tty, emulator, 20.0)
+    processes.start('rplidar_node', [
+        _executable('wctls_rplidar', 'rplidar_node'), '--ros-args', '--params-file',
+        str(_config_file('wctls_rplidar') / 'rplidar_s1.yaml'), '-p', f'serial_port:={tty}'])
+    processes.start('feature_node', [
+        _executable('wctls_ros', 'feature_node'), '--ros-args', '--params-file',
+        str(_config_file('wctls_ros') / 'feature_node.yaml')]
+        + [arg for k, v in parameters.items() for arg in ('-p', f'{k}:={v}')])
+    if args.moving:
+        processes.start('odometry_node', [
+            _executable('wctls_ros', 'odometry_node'), '--ros-args', '--params-file',
+            str(_config_file('wctls_ros') / 'odometry_node.yaml'), '-p',
+            f'method:={args.method}'])
+
+
+def _summarise_into(out: pathlib.Path, seen: Recording, plan, config,
+                    dock_truth: Optional[np.ndarray],
+                    pose_at: Optional[Callable[[float], np.ndarray]]) -> None:
+    """
+    Print the table and write it, and the figure, into the output folder.
+
+    :param out: the output folder
+    :param seen: the recording
+    :param plan: the floor plan the emulator saw
+    :param config: feature_node's FeatureConfig
+    :param dock_truth: with --dock, the dock's true pose in the laser frame
+    :param pose_at: with --moving, the emulator's true poses (:func:`truth_poses`)
+    """
+    if pose_at is None:
         still = corners_seen_from(plan)
 
         def truth_at(stamp_ns: int) -> Tuple[np.ndarray, np.ndarray]:
             return still
+    else:
+        def truth_at(stamp_ns: int) -> Tuple[np.ndarray, np.ndarray]:
+            return corners_seen_from(plan, pose_at(1e-9 * stamp_ns + HALF_TURN_S))
     rows, notes = summarise(seen, truth_at)
     if dock_truth is not None:
         rows += dock_rows(seen, dock_truth)
-    if args.moving:
+    if pose_at is not None:
         rows += odometry_rows(seen, pose_at)
     width = max(len(name) for name, _ in rows)
     table = '\n'.join(f'{name:<{width}}  {value}' for name, value in rows)
@@ -711,7 +734,6 @@ def _live(args, plan, out: pathlib.Path) -> int:
     print(f'\n{table}\n' + ''.join(f'\n{textwrap.fill(note, 99)}\n' for note in notes))
     print(f'demo: wrote {out / "bag"} (mcap: open it in Foxglove), {out / "scan.png"} and '
           f'{out / "summary.md"}')
-    return 0
 
 
 if __name__ == '__main__':

@@ -45,7 +45,7 @@ import numpy as np
 from wctls_ros.bags import BagWriter
 from wctls_ros.cli import bounded, Parser, USER_ERROR, UserError
 from wctls_ros.core import METHODS, nees
-from wctls_ros.extras import explains_missing_extras
+from wctls_ros.extras import explains_missing_extras, require
 from wctls_ros.frontend.dock import DockShape, wrap_angle
 from wctls_ros.output_folders import claim, mark, remove_entries
 from wctls_ros.outputs import (CORNERS, DOCK_POSE_WITH_COVARIANCE, FEATURES, LANDMARK_OUTPUTS,
@@ -597,7 +597,7 @@ def _prepare(out: pathlib.Path) -> None:
 
 def _run(args) -> int:
     """Check the floor plan and the output folder, then run the demo; the exit status."""
-    import rosbags  # noqa: F401 - the recording needs it: missing, nothing is started
+    require('rosbags')          # the recording needs it: missing, nothing is started
     if args.dock and args.moving:
         print('demo: error: --dock and --moving: the dock stands in front of a still sensor',
               file=sys.stderr)

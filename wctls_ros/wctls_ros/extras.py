@@ -12,6 +12,7 @@ traceback. The README's install section lists the same, with figures.
 
 from dataclasses import dataclass
 import functools
+import importlib
 import sys
 from typing import Callable, Optional
 
@@ -56,6 +57,17 @@ def missing_extra(error: ImportError) -> Optional[str]:
     if extra is None:
         return None
     return f'{name} is not installed: it gives {extra.purpose} ({extra.install})'
+
+
+def require(name: str) -> None:
+    """
+    Import an optional package now: a tool that cannot work without it fails before it starts.
+
+    :param name: one of :data:`EXTRAS`
+    :raises ImportError: when it is missing (:func:`explains_missing_extras` turns it into
+        one line)
+    """
+    importlib.import_module(name)
 
 
 def explains_missing_extras(prog: str) -> Callable[[Callable[..., int]], Callable[..., int]]:

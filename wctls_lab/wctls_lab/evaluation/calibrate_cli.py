@@ -33,7 +33,7 @@ from typing import List, Optional, Sequence
 
 from wctls_ros.cli import bounded, Parser, start_core, USER_ERROR, UserError
 from wctls_ros.core import FeatureConfig, METHODS
-from wctls_ros.extras import explains_missing_extras
+from wctls_ros.extras import explains_missing_extras, require
 from wctls_ros.process import check_stop, ending_at_once, stop_signals, Stopped
 from wctls_ros.sensors import DEFAULT_SENSOR, sensor_presets
 
@@ -113,6 +113,7 @@ def main(argv=None) -> int:
     try:
         with stop_signals():
             with ending_at_once('calibrate'):
+                require('rosbags')     # reads bags: missing, the tool ends before it starts
                 start_core('calibrate')
             return run(args)
     except Stopped as stopped:

@@ -25,7 +25,7 @@ import sys
 
 from wctls_ros.cli import bounded, Parser, start_core, USER_ERROR, UserError
 from wctls_ros.core import METHODS
-from wctls_ros.extras import explains_missing_extras
+from wctls_ros.extras import explains_missing_extras, require
 from wctls_ros.output_folders import claim, owned_folder
 from wctls_ros.process import check_stop, ending_at_once, stop_signals, Stopped
 from wctls_ros.sensors import sensor_presets
@@ -134,6 +134,7 @@ def main(argv=None) -> int:
     try:
         with stop_signals():
             with ending_at_once('evaluate'):
+                require('rosbags')     # reads bags: missing, the tool ends before it starts
                 start_core('evaluate')
             return _evaluate(args, args.methods, argv)
     except Stopped as stopped:

@@ -33,7 +33,7 @@ from typing import Dict, Optional
 import numpy as np
 from wctls_ros.cli import bounded, Parser, start_core, USER_ERROR, UserError
 from wctls_ros.core import FeatureConfig, METHODS
-from wctls_ros.extras import explains_missing_extras
+from wctls_ros.extras import explains_missing_extras, require
 from wctls_ros.output_folders import claim, owned_folder
 from wctls_ros.params import feature_settings, load_parameters, SENSOR
 from wctls_ros.process import check_stop, ending_at_once, stop_signals, Stopped
@@ -354,6 +354,7 @@ def main(argv=None) -> int:
     try:
         with stop_signals():
             with ending_at_once('score'):
+                require('rosbags')     # reads bags: missing, the tool ends before it starts
                 start_core('score')
             return run(args, argv)
     except Stopped as stopped:

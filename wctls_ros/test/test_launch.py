@@ -22,7 +22,8 @@ LAUNCH_FILES = sorted((PACKAGE / 'launch').glob('*.launch.py'))
 CONSOLE_SCRIPTS = set(re.findall(r"'(\w+) = wctls_ros[\w.]*:\w+'",
                                  (PACKAGE / 'setup.py').read_text()))
 EXPECTED_ARGUMENTS = {
-    'feature_node.launch.py': {'params_file', 'scan_topic', 'sensor', 'method', 'use_sim_time'},
+    'feature_node.launch.py': {'params_file', 'scan_topic', 'sensor', 'method', 'use_sim_time',
+                               'autostart'},
     'odometry.launch.py': {'params_file', 'scan_topic', 'sensor', 'publish_tf', 'use_sim_time'},
     'replay.launch.py': {'bag', 'rate', 'loop', 'params_file', 'sensor', 'method'},
     'rplidar_s1.launch.py': {'serial_port', 'channel_type', 'tcp_ip', 'frame_id', 'autostart',
@@ -96,6 +97,14 @@ def test_starts_installed_executables_with_existing_files(path):
         assert call.args[0].value in CONSOLE_SCRIPTS
     for call in calls(path, 'config_file'):
         assert (PACKAGE / 'config' / call.args[0].value).is_file(), call.args[0].value
+
+
+@pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda p: p.name)
+def test_feature_node_is_started_as_a_lifecycle_node(path):
+    # As a plain Node, autostart false would leave it unconfigured: no launch transitions.
+    assert 'feature_node' not in [call.args[0].value for call in calls(path, 'node')]
+    started = [call.args[0].value for call in calls(path, 'lifecycle_node')]
+    assert started == ([] if path.name == 'odometry.launch.py' else ['feature_node'])
 
 
 def test_the_rplidar_driver_is_started_as_a_lifecycle_node_by_its_own_launch_file():
@@ -173,3 +182,47 @@ def test_a_users_parameter_file_wins_unless_the_argument_is_given(tmp_path, argu
     service.run()
     asker.join()
     assert answer == expected
+
+
+@launch_ros_missing
+@pytest.mark.parametrize('autostart', ['', 'false'])
+def test_the_launched_feature_node_becomes_active_with_autostart_either_way(autostart):
+    import threading
+
+    from launch import LaunchDescription, LaunchService
+    from launch.actions import IncludeLaunchDescription
+    from launch.launch_description_sources import PythonLaunchDescriptionSource
+    from lifecycle_msgs.srv import GetState
+    import rclpy
+    service = LaunchService()
+    service.include_launch_description(LaunchDescription([IncludeLaunchDescription(
+        PythonLaunchDescriptionSource(str(PACKAGE / 'launch' / 'feature_node.launch.py')),
+        launch_arguments={'autostart': autostart}.items())]))
+    states = []
+
+    def watch_the_state():
+        context = rclpy.context.Context()
+        rclpy.init(context=context)
+        try:
+            client_node = rclpy.create_node('launch_test_client', context=context)
+            client = client_node.create_client(GetState, '/feature_node/get_state')
+            executor = rclpy.executors.SingleThreadedExecutor(context=context)
+            executor.add_node(client_node)
+            if client.wait_for_service(timeout_sec=20.0):
+                # The launch's transitions are asynchronous: poll until active or 30 s.
+                for _ in range(60):
+                    future = client.call_async(GetState.Request())
+                    executor.spin_until_future_complete(future, timeout_sec=5.0)
+                    states.append(future.result().current_state.label)
+                    if states[-1] == 'active':
+                        break
+                    executor.spin_once(timeout_sec=0.5)
+        finally:
+            rclpy.try_shutdown(context=context)
+            service.shutdown()                      # thread-safe
+
+    watcher = threading.Thread(target=watch_the_state)
+    watcher.start()
+    service.run()
+    watcher.join()
+    assert states and states[-1] == 'active', states

@@ -6,7 +6,7 @@
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
-from wctls_ros.launching import config_file, node, optional_argument
+from wctls_ros.launching import config_file, lifecycle_node, optional_argument
 from wctls_ros.sensors import sensor_presets
 
 
@@ -14,7 +14,7 @@ def generate_launch_description():
     """
     Return the launch description.
 
-    Arguments: params_file, scan_topic, sensor, method, use_sim_time.
+    Arguments: params_file, scan_topic, sensor, method, use_sim_time, autostart.
     """
     return LaunchDescription([
         DeclareLaunchArgument('params_file', default_value=config_file('feature_node.yaml'),
@@ -25,8 +25,10 @@ def generate_launch_description():
             sensor_presets())),
         optional_argument('method', 'line fit: utls | wtls | wctls | ml'),
         optional_argument('use_sim_time', 'use /clock, e.g. when a bag is replayed with it'),
-        node('feature_node', LaunchConfiguration('params_file'),
-             arguments=[('sensor', 'sensor'), ('method', 'method'),
-                        ('use_sim_time', 'use_sim_time')],
-             remappings=[('scan', LaunchConfiguration('scan_topic'))]),
+        optional_argument('autostart', 'true: feature_node activates itself; false: this launch '
+                          'file drives its lifecycle transitions (configure, then activate)'),
+        lifecycle_node('feature_node', LaunchConfiguration('params_file'),
+                       arguments=[('sensor', 'sensor'), ('method', 'method'),
+                                  ('use_sim_time', 'use_sim_time'), ('autostart', 'autostart')],
+                       remappings=[('scan', LaunchConfiguration('scan_topic'))]),
     ])

@@ -6,7 +6,7 @@
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, Shutdown
 from launch.substitutions import LaunchConfiguration
-from wctls_ros.launching import config_file, node, optional_argument
+from wctls_ros.launching import config_file, lifecycle_node, node, optional_argument
 from wctls_ros.sensors import sensor_presets
 
 
@@ -35,7 +35,7 @@ def generate_launch_description():
              fixed={'publish_clock': True, 'wait_for_subscribers': 1},
              on_exit=Shutdown(reason='end of the bag')),
         # feature_node runs on the bag's clock, whatever its parameter file says.
-        node('feature_node', LaunchConfiguration('params_file'),
-             arguments=[('sensor', 'sensor'), ('method', 'method')],
-             fixed={'use_sim_time': True}),
+        lifecycle_node('feature_node', LaunchConfiguration('params_file'),
+                       arguments=[('sensor', 'sensor'), ('method', 'method')],
+                       fixed={'use_sim_time': True}),
     ])

@@ -18,7 +18,7 @@ from launch.conditions import IfCondition
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.substitutions import FindPackageShare
-from wctls_ros.launching import config_file, node, optional_argument
+from wctls_ros.launching import config_file, lifecycle_node, optional_argument
 from wctls_ros.sensors import sensor_presets
 
 DRIVER = 'wctls_rplidar'
@@ -55,7 +55,7 @@ def generate_launch_description():
                 [FindPackageShare(DRIVER), 'launch', 'rplidar.launch.py'])),
             launch_arguments=[(name, LaunchConfiguration(name))
                               for name, _ in (*DRIVER_ARGUMENTS, ('params_file', ''))]),
-        node('feature_node', LaunchConfiguration('feature_params_file'),
-             arguments=[('sensor', 'sensor'), ('method', 'method')],
-             condition=IfCondition(LaunchConfiguration('with_feature_node'))),
+        lifecycle_node('feature_node', LaunchConfiguration('feature_params_file'),
+                       arguments=[('sensor', 'sensor'), ('method', 'method')],
+                       condition=IfCondition(LaunchConfiguration('with_feature_node'))),
     ])

@@ -22,7 +22,8 @@ LAUNCH_FILES = sorted((PACKAGE / 'launch').glob('*.launch.py'))
 CONSOLE_SCRIPTS = set(re.findall(r"'(\w+) = wctls_ros[\w.]*:\w+'",
                                  (PACKAGE / 'setup.py').read_text()))
 EXPECTED_ARGUMENTS = {
-    'feature_node.launch.py': {'params_file', 'scan_topic', 'sensor', 'method', 'use_sim_time'},
+    'feature_node.launch.py': {'params_file', 'scan_topic', 'sensor', 'method', 'use_sim_time',
+                               'autostart'},
     'odometry.launch.py': {'params_file', 'scan_topic', 'sensor', 'publish_tf', 'use_sim_time'},
     'replay.launch.py': {'bag', 'rate', 'loop', 'params_file', 'sensor', 'method'},
     'rplidar_s1.launch.py': {'serial_port', 'channel_type', 'tcp_ip', 'frame_id', 'autostart',
@@ -98,6 +99,14 @@ def test_starts_installed_executables_with_existing_files(path):
         assert (PACKAGE / 'config' / call.args[0].value).is_file(), call.args[0].value
 
 
+@pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda p: p.name)
+def test_feature_node_is_started_as_a_lifecycle_node(path):
+    # As a plain Node, autostart false would leave it unconfigured: no launch transitions.
+    assert 'feature_node' not in [call.args[0].value for call in calls(path, 'node')]
+    started = [call.args[0].value for call in calls(path, 'lifecycle_node')]
+    assert started == ([] if path.name == 'odometry.launch.py' else ['feature_node'])
+
+
 def test_the_rplidar_driver_is_started_as_a_lifecycle_node_by_its_own_launch_file():
     # Its autostart false needs the launch file to drive the configure and activate transitions.
     driver = PACKAGE.parent / 'wctls_rplidar' / 'launch' / 'rplidar.launch.py'
@@ -127,49 +136,148 @@ def test_builds_a_launch_description_that_shows_only_its_own_arguments(path):
     assert shown == EXPECTED_ARGUMENTS[path.name]
 
 
-@launch_ros_missing
-@pytest.mark.parametrize('arguments,expected', [
-    ({}, ['ml', 0.009]), ({'method': 'utls'}, ['utls', 0.009]),
-    ({'sensor': 'rplidar_s1'}, ['ml', 0.02])])
-def test_a_users_parameter_file_wins_unless_the_argument_is_given(tmp_path, arguments,
-                                                                  expected):
+def run_launch(path, arguments, ask, timeout_s=60.0):
+    """
+    Run a launch file with its arguments while ``ask(node, executor)`` asks from a thread.
+
+    The launch service must run in the main thread; ``ask`` gets a node and executor of a
+    context of its own, and the launch is shut down when it returns (or after timeout_s).
+
+    :return: True when the launch ended by itself before ``ask`` returned
+    """
     import threading
 
     from launch import LaunchDescription, LaunchService
     from launch.actions import IncludeLaunchDescription
     from launch.launch_description_sources import PythonLaunchDescriptionSource
     import rclpy
-    from rcl_interfaces.srv import GetParameters
-    user_file = tmp_path / 'user.yaml'
-    user_file.write_text('feature_node:\n  ros__parameters:\n    method: ml\n'
-                         '    sensor: sick_lms1xx\n')
     service = LaunchService()
     service.include_launch_description(LaunchDescription([IncludeLaunchDescription(
-        PythonLaunchDescriptionSource(str(PACKAGE / 'launch' / 'feature_node.launch.py')),
-        launch_arguments={'params_file': str(user_file), **arguments}.items())]))
-    answer = []
+        PythonLaunchDescriptionSource(str(path)), launch_arguments=arguments.items())]))
+    ended = threading.Event()
 
-    def ask_the_node():
-        # The launch service must run in the main thread; the question is asked from this one.
+    def asker():
         context = rclpy.context.Context()
         rclpy.init(context=context)
         try:
-            client_node = rclpy.create_node('launch_test_client', context=context)
-            client = client_node.create_client(GetParameters, '/feature_node/get_parameters')
-            if client.wait_for_service(timeout_sec=20.0):
-                future = client.call_async(GetParameters.Request(
-                    names=['method', 'range_sigma_m']))
-                executor = rclpy.executors.SingleThreadedExecutor(context=context)
-                executor.add_node(client_node)
-                executor.spin_until_future_complete(future, timeout_sec=10.0)
-                method, sigma = future.result().values
-                answer.extend([method.string_value, sigma.double_value])
+            node = rclpy.create_node('launch_test_client', context=context)
+            executor = rclpy.executors.SingleThreadedExecutor(context=context)
+            executor.add_node(node)
+            ask(node, executor, ended)
         finally:
             rclpy.try_shutdown(context=context)
             service.shutdown()                      # thread-safe
 
-    asker = threading.Thread(target=ask_the_node)
-    asker.start()
+    thread = threading.Thread(target=asker, daemon=True)
+    thread.start()
     service.run()
-    asker.join()
+    ended.set()
+    thread.join(timeout_s)
+    return not thread.is_alive()
+
+
+def call(node, executor, service_type, name, request, timeout_s=20.0):
+    """Return a service's answer, or None when it does not come within timeout_s."""
+    client = node.create_client(service_type, name)
+    if not client.wait_for_service(timeout_sec=timeout_s):
+        return None
+    future = client.call_async(request)
+    executor.spin_until_future_complete(future, timeout_sec=10.0)
+    return future.result()
+
+
+def parameters(node, executor, names):
+    """Return the values of feature_node's parameters named (None: it did not answer)."""
+    from rcl_interfaces.srv import GetParameters
+    answer = call(node, executor, GetParameters, '/feature_node/get_parameters',
+                  GetParameters.Request(names=names))
+    return None if answer is None else answer.values
+
+
+def state_once_settled(node, executor, settle_s=30.0):
+    """Return feature_node's lifecycle states, polled until active (the launch's are async)."""
+    from lifecycle_msgs.srv import GetState
+    states = []
+    for _ in range(int(2 * settle_s)):
+        answer = call(node, executor, GetState, '/feature_node/get_state', GetState.Request())
+        if answer is None:
+            break
+        states.append(answer.current_state.label)
+        if states[-1] == 'active':
+            break
+        executor.spin_once(timeout_sec=0.5)
+    return states
+
+
+@launch_ros_missing
+@pytest.mark.parametrize('arguments,expected', [
+    ({}, ['ml', 0.009]), ({'method': 'utls'}, ['utls', 0.009]),
+    ({'sensor': 'rplidar_s1'}, ['ml', 0.02])])
+def test_a_users_parameter_file_wins_unless_the_argument_is_given(tmp_path, arguments,
+                                                                  expected):
+    user_file = tmp_path / 'user.yaml'
+    user_file.write_text('feature_node:\n  ros__parameters:\n    method: ml\n'
+                         '    sensor: sick_lms1xx\n')
+    answer = []
+
+    def ask(node, executor, _):
+        values = parameters(node, executor, ['method', 'range_sigma_m'])
+        if values is not None:
+            answer.extend([values[0].string_value, values[1].double_value])
+
+    run_launch(PACKAGE / 'launch' / 'feature_node.launch.py',
+               {'params_file': str(user_file), **arguments}, ask)
     assert answer == expected
+
+
+@launch_ros_missing
+@pytest.mark.parametrize('autostart_in', ['nowhere', 'the file', 'the argument'])
+def test_the_launched_feature_node_becomes_active_whatever_its_autostart(
+        tmp_path, autostart_in):
+    # autostart false in the file or the argument: the launch file drives the transitions
+    # (a plain Node would stay unconfigured).
+    user_file = tmp_path / 'user.yaml'
+    user_file.write_text('feature_node:\n  ros__parameters:\n    autostart: '
+                         f'{str(autostart_in != "the file").lower()}\n')
+    arguments = {'params_file': str(user_file)}
+    if autostart_in == 'the argument':
+        arguments['autostart'] = 'false'
+    states = []
+    run_launch(PACKAGE / 'launch' / 'feature_node.launch.py', arguments,
+               lambda node, executor, _: states.extend(state_once_settled(node, executor)))
+    assert states and states[-1] == 'active', states
+
+
+@launch_ros_missing
+def test_the_replay_runs_feature_node_active_on_the_bags_clock_until_the_bag_ends():
+    bag = PACKAGE.parent / 'data' / 'sick_lms1xx_static'          # 89 scans, 1.8 s: 9 s here
+    seen = {}
+
+    def ask(node, executor, ended):
+        seen['states'] = state_once_settled(node, executor)
+        values = parameters(node, executor, ['use_sim_time'])
+        seen['use_sim_time'] = None if values is None else values[0].bool_value
+        seen['ended by itself'] = ended.wait(60.0)
+
+    run_launch(PACKAGE / 'launch' / 'replay.launch.py',
+               {'bag': str(bag), 'rate': '0.2', 'sensor': 'sick_lms1xx'}, ask, timeout_s=90.0)
+    assert seen == {'states': seen['states'][:-1] + ['active'], 'use_sim_time': True,
+                    'ended by itself': True}, seen
+
+
+@launch_ros_missing
+@pytest.mark.parametrize('with_feature_node', ['true', 'false'])
+def test_the_s1_launch_starts_feature_node_only_when_asked(with_feature_node):
+    # No S1 attached: the driver's lifecycle services answer all the same.
+    from lifecycle_msgs.srv import GetState
+    seen = {}
+
+    def ask(node, executor, _):
+        seen['driver'] = call(node, executor, GetState, '/rplidar_node/get_state',
+                              GetState.Request()) is not None
+        seen['feature_node'] = call(node, executor, GetState, '/feature_node/get_state',
+                                    GetState.Request(), timeout_s=10.0) is not None
+
+    run_launch(PACKAGE / 'launch' / 'rplidar_s1.launch.py',
+               {'with_feature_node': with_feature_node, 'serial_port': '/dev/null'}, ask)
+    assert seen == {'driver': True, 'feature_node': with_feature_node == 'true'}

@@ -87,8 +87,9 @@ def node(executable: str, params_file, arguments: Iterable[Tuple[str, str]] = ()
     return OpaqueFunction(function=start)
 
 
-def lifecycle_node(executable: str, params_file,
-                   arguments: Iterable[Tuple[str, str]] = ()) -> OpaqueFunction:
+def lifecycle_node(executable: str, params_file, arguments: Iterable[Tuple[str, str]] = (),
+                   fixed: Dict[str, object] = None, remappings=(),
+                   **options) -> OpaqueFunction:
     """
     Start one of the package's lifecycle nodes; drive it to active when it does not itself.
 
@@ -101,15 +102,22 @@ def lifecycle_node(executable: str, params_file,
     :param executable: the node's executable, also its name and its schema's key
     :param params_file: the parameter file (a path or a substitution)
     :param arguments: (launch argument, parameter) pairs passed when the argument is not ''
+    :param fixed: parameters always set, over the file (e.g. use_sim_time for a replay)
+    :param remappings: (from, to) topic remappings, substitutions allowed
+    :param options: options of the whole action (e.g. condition: no node and no transitions
+        when false)
     :return: the action
     """
     def start(context):
-        given = _given(context, executable, arguments)
+        given = {**_given(context, executable, arguments), **(fixed or {})}
         path = (params_file if isinstance(params_file, str)
                 else perform_substitutions(context, [params_file]))
         autostart = given.get('autostart', _file_value(path, executable, 'autostart'))
+        # LifecycleNode needs a namespace: '' puts the node and its lifecycle services at the
+        # root, as a plain Node started by these files was.
         node = LifecycleNode(package=PACKAGE, executable=executable, name=executable,
-                             namespace='', output='screen', parameters=[params_file, given])
+                             namespace='', output='screen', parameters=[params_file, given],
+                             remappings=list(remappings))
         if autostart:
             return [node]
 
@@ -122,7 +130,7 @@ def lifecycle_node(executable: str, params_file,
                     target_lifecycle_node=node, goal_state='inactive',
                     entities=[change_state(Transition.TRANSITION_ACTIVATE)])),
                 change_state(Transition.TRANSITION_CONFIGURE)]
-    return OpaqueFunction(function=start)
+    return OpaqueFunction(function=start, **options)
 
 
 def _given(context, executable: str, arguments: Iterable[Tuple[str, str]]) -> dict:

@@ -28,7 +28,7 @@ class Topic(NamedTuple):
 
     @property
     def in_bag(self) -> str:
-        """The topic's name in a bag written by the bag tools (``/corners``)."""
+        """Name the topic in a bag written by the bag tools (``/corners``)."""
         return f'/{self.name}'
 
 

@@ -136,7 +136,7 @@ def plan_options(p: argparse.ArgumentParser) -> None:
                         'steady speed (default: it stands still)')
     p.add_argument('--truth', type=argparse.FileType('w', bufsize=1), metavar='FILE',
                    help="log the sensor's true pose: a CSV row (" + ', '.join(TRUTH_COLUMNS)
-                        + ') per batch of samples, time on the wall clock')
+                        + ') per batch of samples, time on the wall clock (default: none)')
 
 
 def plan_scene(args) -> tuple:

@@ -4,11 +4,9 @@
 """The Jazzy ``main()`` every wctls_ros node shares, and its parameter declarations."""
 
 import difflib
-import gc
 import os
 import re
 import sys
-import threading
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 import rclpy
@@ -187,11 +185,6 @@ def run_node(name: str, make_node, spin=spin_forever, config_errors=(ValueError,
             if node is not None:
                 node.destroy_node()
             rclpy.try_shutdown()
-            # The process ends: its objects need not be collected one by one at exit (0.8 s
-            # with numba loaded, 0.1 s frozen). Not while another thread still runs (the
-            # compiled pipeline loading): LLVM then aborted at exit.
-            if threading.active_count() == 1:
-                gc.freeze()
     return 0
 
 

@@ -33,6 +33,13 @@ def leftovers(marker):
     return found.stdout.split()
 
 
+def summary_rows(out):
+    """Return the demo's summary table (summary.md) as measure -> value."""
+    table = (out / 'summary.md').read_text().split('\n\n')[0]
+    rows = dict(line.strip('|').split('|')[:2] for line in table.splitlines()[2:])
+    return {name.strip(): value.strip() for name, value in rows.items()}
+
+
 def test_demo_records_a_bag_and_writes_the_table_and_the_figure(tmp_path):
     out = tmp_path / 'demo'
     result = subprocess.run([str(installed_executable('demo')), '--seconds', '3',
@@ -61,9 +68,7 @@ def test_demo_records_a_bag_and_writes_the_table_and_the_figure(tmp_path):
     assert (out / 'scan.png').stat().st_size > 10000
     # The shipped default (generic preset) on the emulated S1: most corners are true, their
     # covariance honest.
-    table = (out / 'summary.md').read_text().split('\n\n')[0]
-    rows = dict(line.strip('|').split('|')[:2] for line in table.splitlines()[2:])
-    rows = {name.strip(): value.strip() for name, value in rows.items()}
+    rows = summary_rows(out)
     matched = float(rows['corners within 10 cm of a true one'].split('(')[1].split()[0])
     assert matched > 90.0, rows
     assert 0.5 < float(rows['NEES against the truth (mean; 2 = calibrated)'].split()[0]) < 5.0
@@ -179,9 +184,7 @@ def test_the_dock_demo_records_and_summarises_the_dock_poses(tmp_path):
     with AnyReader([out / 'bag']) as bag:
         counts = {topic: info.msgcount for topic, info in bag.topics.items()}
     assert counts.get('/detected_dock_pose_with_covariance', 0) >= 10, counts
-    table = (out / 'summary.md').read_text().split('\n\n')[0]
-    rows = dict(line.strip('|').split('|')[:2] for line in table.splitlines()[2:])
-    rows = {name.strip(): value.strip() for name, value in rows.items()}
+    rows = summary_rows(out)
     median_mm, median_deg = (float(v) for v in rows[
         'dock error against the truth (median mm, deg)'].split(','))
     # The example dock 1 m ahead, the shipped generic noise model on the emulated S1.
@@ -200,9 +203,7 @@ def test_the_moving_demo_follows_the_emulated_robot_with_the_odometry(tmp_path):
     with AnyReader([out / 'bag']) as bag:
         counts = {topic: info.msgcount for topic, info in bag.topics.items()}
     assert counts.get('/odom', 0) >= 60, counts
-    table = (out / 'summary.md').read_text().split('\n\n')[0]
-    rows = dict(line.strip('|').split('|')[:2] for line in table.splitlines()[2:])
-    rows = {name.strip(): value.strip() for name, value in rows.items()}
+    rows = summary_rows(out)
     # 12 s at 0.1 m/s round the circle: the odometry against the emulator's own true poses.
     path_m = float(rows['odometry poses, true path (m)'].split(',')[1])
     assert 0.8 < path_m < 1.4, rows

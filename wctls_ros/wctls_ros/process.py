@@ -18,6 +18,8 @@ import contextlib
 import ctypes
 import gc
 import os
+import pathlib
+import shutil
 import signal
 import threading
 from typing import Iterator, List, Optional
@@ -106,19 +108,23 @@ def check_stop() -> None:
 
 
 @contextlib.contextmanager
-def ending_at_once(prog: str) -> Iterator[None]:
+def ending_at_once(prog: str, removing: Optional[pathlib.Path] = None) -> Iterator[None]:
     """
     Within the block, a stop signal ends the tool at once: 128 + N, one line on standard error.
 
-    For a step of a tool that writes nothing and offers no safe point, such as loading the
-    compiled pipeline, reading a bag or the stillness test (seconds each on a busy machine).
+    For a step of a tool that offers no safe point, such as loading the compiled pipeline,
+    reading a bag, the stillness test or drawing the figures (seconds each on a busy machine).
     Ending the process never lands in numba as an exception would; the line is written without
     taking a lock. A signal noted before the block is left to the next :func:`check_stop`.
 
     :param prog: the tool's name, for the line
+    :param removing: a folder the step writes into (a staging folder), removed before the end so
+        that a stopped tool leaves nothing behind; None when the step writes nothing
     :return: nothing (a context manager)
     """
     def end(number: int, _frame) -> None:
+        if removing is not None:
+            shutil.rmtree(removing, ignore_errors=True)
         os.write(2, f'{prog}: stopped by {signal.Signals(number).name}\n'.encode())
         os._exit(128 + number)
 

@@ -168,14 +168,16 @@ def _evaluate(args, methods, argv) -> int:
                   for m in methods) + '), so none could be compared with its scatter; '
               'nothing written', file=sys.stderr)
         return NO_CORNER_EXIT
-    from .report import summary_rows, write_report
     command = 'evaluate ' + ' '.join(shlex.quote(a) for a in
                                      (sys.argv[1:] if argv is None else argv))
     notes = [origin, f'stillness check: {still.describe()}']
     try:
         with owned_folder(args.out, 'evaluate') as staging:
-            written = write_report(evaluation, staging, args.title or str(args.bag), command,
-                                   notes)
+            # Importing matplotlib and drawing: steps of a second or two beside a busy machine.
+            with ending_at_once('evaluate', removing=staging):
+                from .report import summary_rows, write_report
+                written = write_report(evaluation, staging, args.title or str(args.bag),
+                                       command, notes)
             check_stop()                # before the files move in: a stop leaves nothing
     except OSError as error:                # a full disk, a file-size limit, no permission
         raise ValueError(f'cannot write {args.out}: {error.strerror or error}') from error

@@ -331,8 +331,11 @@ def run(args, argv) -> int:
                                       (sys.argv[1:] if argv is None else argv))
         try:
             with owned_folder(args.out, 'score') as staging:
-                written = write_score(table, staging, args.title or pathlib.Path(args.bag).name,
-                                      command, notes)
+                # Drawing the figures: a step of a second or two beside a busy machine.
+                with ending_at_once('score', removing=staging):
+                    written = write_score(table, staging,
+                                          args.title or pathlib.Path(args.bag).name, command,
+                                          notes)
                 check_stop()            # before the files move in: a stop leaves nothing
         except OSError as error:            # a full disk, a file-size limit, no permission
             raise UserError(f'cannot write {args.out}: {error.strerror or error}') from error

@@ -8,7 +8,8 @@ For slam_toolbox on a robot without wheel odometry: odometry_node publishes nav_
 ``odom`` and, with ``publish_tf:=true``, the TF odom -> base_link that slam_toolbox looks up
 (its ``odom_frame`` odom, ``base_frame`` base_link); base_link -> laser must come from the
 robot's description (robot_state_publisher or a static transform), and the laser's pose on the
-robot is given to odometry_node in its parameter file (laser_x_m, laser_y_m, laser_yaw_deg).
+robot is given to odometry_node in its parameter file (laser_x_m, laser_y_m, laser_yaw_deg), or
+read from that transform on /tf_static with ``mount_from_tf: true``.
 """
 
 from launch import LaunchDescription

@@ -2,15 +2,17 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-odometry_node's TF (``publish_tf``) through the real rclpy, with a tf2_msgs built for the test.
+odometry_node's TF through the real rclpy, with a tf2_msgs built for the test.
 
 Every ROS install has tf2_msgs; the PyPI ROS wheels these tests run on do not. So the test
-builds the one message the node publishes, tf2_msgs/TFMessage, from the definition ros2/geometry2
+builds the one message the node uses, tf2_msgs/TFMessage, from the definition ros2/geometry2
 publishes for Jazzy (``geometry_msgs/TransformStamped[] transforms``), with colcon into the
-test's temporary folder, and runs the node and a subscriber in a child process that alone has
-it on its paths: nothing lands where a user's ROS install would find it. Where tf2_msgs is
-installed, the child uses that one. The RPLIDAR car's scans go in; every scan's transform
-odom -> base_link must carry the Odometry's stamp, frames and pose.
+test's temporary folder, and runs the node and its peer in a child process that alone has it
+on its paths: nothing lands where a user's ROS install would find it. Where tf2_msgs is
+installed, the child uses that one. ``publish_tf``: the RPLIDAR car's scans go in; every
+scan's transform odom -> base_link must carry the Odometry's stamp, frames and pose.
+``mount_from_tf``: with the laser's mount on /tf_static (a chain of two static transforms),
+the odometry must be the one the mount's parameters give, the scans before it left out.
 """
 
 import json
@@ -21,7 +23,9 @@ import subprocess
 import sys
 import textwrap
 
+import numpy as np
 import pytest
+from wctls_ros.odometry_messages import planar_mount
 
 pytest.importorskip('rclpy')
 
@@ -59,8 +63,27 @@ ament_package()
 TF_MESSAGE = 'geometry_msgs/TransformStamped[] transforms\n'
 
 
+@pytest.fixture(scope='module')
+def child_environment(tmp_path_factory):
+    """Return the environment of a child process that imports tf2_msgs and the node harness."""
+    environment = tf2_msgs_environment(tmp_path_factory.mktemp('tf2_msgs_workspace'))
+    # The child imports the harness of test_odometry_node and the root conftest's spin_until.
+    here = pathlib.Path(__file__).resolve().parent
+    environment['PYTHONPATH'] = os.pathsep.join(
+        [str(here), str(here.parents[1]), environment.get('PYTHONPATH', '')])
+    return environment
+
+
+def run_child(code: str, environment: dict, *arguments: str):
+    """Run a child's code with arguments; return the JSON it printed last."""
+    child = subprocess.run([sys.executable, '-c', code, *arguments], env=environment,
+                           capture_output=True, text=True, timeout=300)
+    assert child.returncode == 0, child.stderr[-3000:]
+    return json.loads(child.stdout.strip().splitlines()[-1])
+
+
 def tf2_msgs_environment(workspace: pathlib.Path) -> dict:
-    """Return the environment of a child that imports tf2_msgs: built here unless installed."""
+    """Return an environment in which tf2_msgs imports: built here unless installed."""
     try:
         import tf2_msgs.msg  # noqa: F401
         return dict(os.environ)
@@ -123,16 +146,8 @@ CHILD = textwrap.dedent(f"""
 
 
 @pytest.mark.skipif(not RECORDING.is_dir(), reason='no recording')
-def test_every_scan_gives_the_transform_of_its_odometry(tmp_path):
-    environment = tf2_msgs_environment(tmp_path / 'tf2_msgs_workspace')
-    # The child imports the harness of test_odometry_node and the root conftest's spin_until.
-    here = pathlib.Path(__file__).resolve().parent
-    environment['PYTHONPATH'] = os.pathsep.join(
-        [str(here), str(here.parents[1]), environment.get('PYTHONPATH', '')])
-    child = subprocess.run([sys.executable, '-c', CHILD], env=environment, capture_output=True,
-                           text=True, timeout=300)
-    assert child.returncode == 0, child.stderr[-3000:]
-    *rows, last = json.loads(child.stdout.strip().splitlines()[-1])
+def test_every_scan_gives_the_transform_of_its_odometry(child_environment):
+    *rows, last = run_child(CHILD, child_environment)
     odometry = [row['odometry'] for row in rows]
     messages = last['tf']
     assert len(odometry) == SCANS and len(messages) == SCANS
@@ -146,3 +161,96 @@ def test_every_scan_gives_the_transform_of_its_odometry(tmp_path):
         assert math.remainder(transform[9] - yaw, 2 * math.pi) == pytest.approx(0.0, abs=1e-9)
     # The car drove: the transforms follow a pose that moves, not a constant.
     assert math.hypot(odometry[-1][4], odometry[-1][5]) > 0.5
+
+
+def quaternion_of(roll_rad=0.0, pitch_rad=0.0, yaw_rad=0.0):
+    """Return (x, y, z, w) of rotations about x, then y, then z (rad), as a quaternion."""
+    cr, sr = math.cos(roll_rad / 2), math.sin(roll_rad / 2)
+    cp, sp = math.cos(pitch_rad / 2), math.sin(pitch_rad / 2)
+    cy, sy = math.cos(yaw_rad / 2), math.sin(yaw_rad / 2)
+    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
+
+
+def test_a_chain_of_static_transforms_gives_the_mount_on_the_plane():
+    # base_link -> plate: 1 m ahead, turned 90 deg left; plate -> laser: 0.5 m along the
+    # plate's x (the robot's y), turned 90 deg more, 0.2 m up. By hand: (1, 0.5), 180 deg.
+    transforms = {'plate': ('base_link', (1.0, 0.0, 0.3), quaternion_of(yaw_rad=math.pi / 2)),
+                  'laser': ('plate', (0.5, 0.0, 0.2), quaternion_of(yaw_rad=math.pi / 2))}
+    x, y, yaw = planar_mount(transforms, 'base_link', 'laser')
+    assert (x, y) == pytest.approx((1.0, 0.5), abs=1e-12)
+    assert abs(math.remainder(yaw - math.pi, 2 * math.pi)) < 1e-12
+    assert planar_mount(transforms, 'base_link', 'base_link') == (0.0, 0.0, 0.0)
+    assert planar_mount(transforms, 'base_link', 'camera') is None       # not (yet) known
+    assert planar_mount({'laser': ('plate', (0, 0, 0), (0, 0, 0, 1))}, 'base_link',
+                        'laser') is None
+
+
+def test_a_tilted_upside_down_or_looping_mount_is_refused():
+    level = planar_mount({'laser': ('base_link', (0.1, 0.0, 0.2),
+                                    quaternion_of(roll_rad=math.radians(1.5), yaw_rad=0.3))},
+                         'base_link', 'laser')
+    assert level[2] == pytest.approx(0.3, abs=1e-3)
+    with pytest.raises(ValueError, match='3.0 deg from the plane'):
+        planar_mount({'laser': ('base_link', (0, 0, 0), quaternion_of(pitch_rad=math.radians(3)))},
+                     'base_link', 'laser')
+    with pytest.raises(ValueError, match='upside down'):
+        planar_mount({'laser': ('base_link', (0, 0, 0), quaternion_of(roll_rad=math.pi))},
+                     'base_link', 'laser')
+    with pytest.raises(ValueError, match='loop'):
+        planar_mount({'laser': ('plate', (0, 0, 0), (0, 0, 0, 1)),
+                      'plate': ('laser', (0, 0, 0), (0, 0, 0, 1))}, 'base_link', 'laser')
+
+
+# The child: the car's scans through odometry_node, its mount given as parameters or, with
+# mount_from_tf, on /tf_static as a chain of two transforms published after the first scans
+# (a late robot_state_publisher); the poses after the mount is known, and whether an Odometry
+# came for any of the scans before.
+MOUNT_CHILD = textwrap.dedent(f"""
+    import json, sys
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from geometry_msgs.msg import TransformStamped
+    from tf2_msgs.msg import TFMessage
+    from conftest import spin_until
+    from test_odometry_node import Harness, PARAMETERS, pose_of, recorded_scans
+    from wctls_ros.odometry_node import TF_STATIC_QOS
+
+    from_tf = sys.argv[1] == 'tf'
+    rclpy.init()
+    executor = SingleThreadedExecutor()
+    parameters = dict(PARAMETERS)
+    if from_tf:
+        del parameters['laser_x_m']
+        parameters['mount_from_tf'] = True
+    harness = Harness(rclpy.get_default_context(), executor, parameters)
+    scans = recorded_scans()[0][:{SCANS}]
+    if from_tf:
+        for scan in scans[:3]:
+            harness.scans.publish(scan)
+        spin_until(executor, lambda: False, timeout_s=1.0)
+        static = harness.peer.create_publisher(TFMessage, '/tf_static', TF_STATIC_QOS)
+        chain = []
+        for child, parent, x in (('plate', 'base_link', -0.05), ('laser', 'plate', -0.07)):
+            moved = TransformStamped(child_frame_id=child)
+            moved.header.frame_id = parent
+            moved.transform.translation.x, moved.transform.translation.z = x, 0.1
+            moved.transform.rotation.w = 1.0
+            chain.append(moved)
+        static.publish(TFMessage(transforms=chain))
+    early = len(harness.odometry)
+    poses = [list(pose_of(harness.exchange(scan))) for scan in scans[3:]]
+    print(json.dumps({{'early': early, 'poses': poses}}))
+""")
+
+
+@pytest.mark.skipif(not RECORDING.is_dir(), reason='no recording')
+def test_the_mount_from_tf_static_gives_the_odometry_of_the_same_mount_as_parameters(
+        child_environment):
+    given = run_child(MOUNT_CHILD, child_environment, 'parameters')
+    from_tf = run_child(MOUNT_CHILD, child_environment, 'tf')
+    assert from_tf['early'] == 0                # the scans before the mount: left out
+    assert len(from_tf['poses']) == len(given['poses']) == SCANS - 3
+    np.testing.assert_allclose(from_tf['poses'], given['poses'], rtol=0.0, atol=1e-9)
+    # The mount matters: the robot's track differs from the laser's.
+    assert math.hypot(*given['poses'][-1][:2]) > 0.5

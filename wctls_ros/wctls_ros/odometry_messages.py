@@ -9,11 +9,12 @@ in the child frame, the step over the time since the previous scan. The 6x6 cova
 (x, y, yaw) in rows and columns 0, 1 and 5 (as feature_node's corners); z, roll and pitch,
 which a planar odometry does not measure, get UNMEASURED_VARIANCE on the diagonal so that a
 filter that fuses them by mistake gives them no weight. A twist with no time to divide by (the
-first scan) is zero with UNMEASURED_VARIANCE on every axis.
+first scan) is zero with UNMEASURED_VARIANCE on every axis. :func:`planar_mount` reads the
+laser's pose on the robot from the static transforms of ``/tf_static``.
 """
 
 import math
-from typing import Mapping
+from typing import Mapping, Optional, Tuple
 
 import numpy as np
 
@@ -99,3 +100,53 @@ def transform_message(classes: Mapping[str, type], update: OdometryUpdate, heade
     stamped = classes['geometry_msgs/msg/TransformStamped'](
         header=header, child_frame_id=child_frame_id, transform=moved)
     return classes['tf2_msgs/msg/TFMessage'](transforms=[stamped])
+
+
+# A laser whose scan plane is tilted this far from the robot's is refused, rad.
+MAX_MOUNT_TILT_RAD = math.radians(2.0)
+
+
+def _rotation(quaternion) -> np.ndarray:
+    """Return the rotation matrix of a quaternion (x, y, z, w), normalised first."""
+    x, y, z, w = np.asarray(quaternion, dtype=float) / np.linalg.norm(quaternion)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def planar_mount(transforms: Mapping[str, tuple], base_frame: str,
+                 laser_frame: str) -> Optional[Tuple[float, float, float]]:
+    """
+    Return the laser's pose on the robot from static transforms, as (x m, y m, yaw rad).
+
+    The chain from the laser's frame up to the robot's is composed in 3D (a mount may hang from
+    other frames: base_link -> plate -> laser), then projected on the robot's plane.
+
+    :param transforms: child frame -> (parent frame, translation (x, y, z) m, rotation
+        quaternion (x, y, z, w)), as ``/tf_static`` gives them
+    :param base_frame: the robot's frame
+    :param laser_frame: the scan's frame
+    :return: the mount, or None while the chain is incomplete
+    :raises ValueError: when the laser's scan plane is tilted or upside down on the robot's
+        (a planar odometry of a mirrored scan would turn the wrong way), or the frames loop
+    """
+    rotation, translation = np.eye(3), np.zeros(3)
+    frame, seen = laser_frame, set()
+    while frame != base_frame:
+        if frame in seen:
+            raise ValueError(f'the static transforms loop through {frame!r}')
+        seen.add(frame)
+        if frame not in transforms:
+            return None
+        frame, offset, quaternion = transforms[frame]
+        parent = _rotation(quaternion)
+        rotation, translation = parent @ rotation, parent @ translation + np.asarray(offset)
+    tilt = math.acos(min(1.0, max(-1.0, float(rotation[2, 2]))))
+    if tilt > MAX_MOUNT_TILT_RAD:
+        raise ValueError(
+            f'the scan plane of {laser_frame!r} is {math.degrees(tilt):.1f} deg from the plane '
+            f'of {base_frame!r}' + (' (mounted upside down)' if tilt > math.pi / 2 else '')
+            + ': a planar odometry needs it level; give laser_x_m, laser_y_m and '
+            'laser_yaw_deg with mount_from_tf false for a scan flipped upstream')
+    return (float(translation[0]), float(translation[1]),
+            math.atan2(float(rotation[1, 0]), float(rotation[0, 0])))

@@ -10,20 +10,23 @@ extraction costs 0.1 ms a scan compiled (docs/performance.md). Publishes ``odom`
 (nav_msgs/Odometry, REP-105: frame ``odom_frame``, child ``base_frame``, the pose and the
 twist with their covariances, :mod:`wctls_ros.odometry_messages`) with the scan's stamp and,
 with ``publish_tf``, the transform odom -> base_frame on ``/tf``. The laser's pose on the robot
-is a parameter (``laser_x_m``, ``laser_y_m``, ``laser_yaw_deg``). ``/diagnostics`` (1 Hz)
-counts the scans by status: tracking, degenerate (the constant-velocity prior filled in what
-the landmarks leave free), prior (too few landmarks), reinitialized (nothing consistent
-associated). A malformed scan is a throttled warning and a prior step, never a crash or a NaN.
+is a parameter (``laser_x_m``, ``laser_y_m``, ``laser_yaw_deg``) or, with ``mount_from_tf``,
+read from ``/tf_static`` (scans before it is known are left out, with a throttled warning).
+``/diagnostics`` (1 Hz) counts the scans by status: tracking, degenerate (the constant-velocity
+prior filled in what the landmarks leave free), prior (too few landmarks), reinitialized
+(nothing consistent associated), and those left out waiting for the mount. A malformed scan is
+a throttled warning and a prior step, never a crash or a NaN.
 """
 
 import importlib
+import math
 import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import Odometry as OdometryMessage
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
 from std_msgs.msg import Header
 
@@ -32,13 +35,16 @@ from .core import start as start_core
 from .frontend.frames import landmarks_from_features
 from .frontend.odometry import Odometry, on_robot, STATUSES
 from .node_main import declare_parameters, run_node
-from .odometry_messages import (odometry_message, ODOMETRY_TYPES, transform_message,
-                                TRANSFORM_TYPES)
+from .odometry_messages import (odometry_message, ODOMETRY_TYPES, planar_mount,
+                                transform_message, TRANSFORM_TYPES)
 from .outputs import ODOMETRY
 from .params import ODOMETRY_NODE, odometry_settings
 
 WARN_PERIOD_S = 5.0
 DIAGNOSTICS_PERIOD_S = 1.0
+# What robot_state_publisher gives /tf_static: every static transform, kept for late joiners.
+TF_STATIC_QOS = QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                           reliability=ReliabilityPolicy.RELIABLE)
 
 
 def _rclpy_classes(names) -> dict:
@@ -57,20 +63,29 @@ class OdometryNode(Node):
         super().__init__('odometry_node', **kwargs)
         self._settings = odometry_settings(declare_parameters(self, ODOMETRY_NODE))
         settings = self._settings
-        # The laser's odometry starts at its mount: odom is the robot's first pose.
-        self._odometry = Odometry(settings.odometry, settings.mount)
         self._classes = _rclpy_classes(ODOMETRY_TYPES)
         self._odom = self.create_publisher(OdometryMessage, ODOMETRY.name, 10)
         self._tf = None
-        if settings.publish_tf:
+        # The mount and the odometry that starts at it (odom is the robot's first pose); with
+        # mount_from_tf both wait for /tf_static.
+        self._mount = None if settings.mount_from_tf else settings.mount
+        self._odometry = None if self._mount is None else Odometry(settings.odometry,
+                                                                   self._mount)
+        self._static: dict = {}
+        self._waiting = 0
+        if settings.publish_tf or settings.mount_from_tf:
             # tf2_msgs is on every ROS install; the PyPI wheels lack it.
             try:
                 from tf2_msgs.msg import TFMessage
             except ImportError as error:
-                raise ValueError('publish_tf needs the tf2_msgs package, which this install '
-                                 'lacks: sudo apt install ros-jazzy-tf2-msgs') from error
+                raise ValueError(f'{"publish_tf" if settings.publish_tf else "mount_from_tf"} '
+                                 'needs the tf2_msgs package, which this install lacks: sudo '
+                                 'apt install ros-jazzy-tf2-msgs') from error
+        if settings.publish_tf:
             self._tf_classes = _rclpy_classes(TRANSFORM_TYPES)
             self._tf = self.create_publisher(TFMessage, '/tf', 100)
+        if settings.mount_from_tf:
+            self.create_subscription(TFMessage, '/tf_static', self._on_static, TF_STATIC_QOS)
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._counts = dict.fromkeys(STATUSES, 0)
         self._malformed = 0
@@ -82,9 +97,43 @@ class OdometryNode(Node):
             f'{self.resolve_topic_name("scan")}' + (' (and TF)' if settings.publish_tf else ''))
         self.get_logger().info(start_core().describe())
 
+    def _on_static(self, message) -> None:
+        for transform in message.transforms:
+            moved = transform.transform
+            self._static[transform.child_frame_id] = (
+                transform.header.frame_id,
+                (moved.translation.x, moved.translation.y, moved.translation.z),
+                (moved.rotation.x, moved.rotation.y, moved.rotation.z, moved.rotation.w))
+
+    def _mount_known(self, laser_frame: str) -> bool:
+        """Tell whether the mount is known, looking it up on /tf_static's transforms first."""
+        if self._odometry is not None:
+            return True
+        base = self._settings.base_frame
+        try:
+            self._mount = planar_mount(self._static, base, laser_frame)
+        except ValueError as error:
+            self.get_logger().error(f'{error}; scans are left out',
+                                    throttle_duration_sec=WARN_PERIOD_S)
+            return False
+        if self._mount is None:
+            self.get_logger().warning(
+                f'waiting for the transform {base} -> {laser_frame!r} on /tf_static (the '
+                "laser's mount); scans are left out until then",
+                throttle_duration_sec=WARN_PERIOD_S)
+            return False
+        x, y, yaw = self._mount
+        self.get_logger().info(f'laser mount from /tf_static: x {x:.3f} m, y {y:.3f} m, yaw '
+                               f'{math.degrees(yaw):.2f} deg')
+        self._odometry = Odometry(self._settings.odometry, self._mount)
+        return True
+
     def _on_scan(self, scan: LaserScan) -> None:
         started = time.perf_counter()
         settings = self._settings
+        if not self._mount_known(scan.header.frame_id):
+            self._waiting += 1
+            return
         features, problems = scan_features(scan, settings.config)
         if problems:
             self._malformed += 1
@@ -95,7 +144,7 @@ class OdometryNode(Node):
                                             settings.config.max_landmark_angle_sigma_rad)
         stamp = scan.header.stamp
         laser = self._odometry.update(stamp.sec + 1e-9 * stamp.nanosec, landmarks)
-        update = on_robot(laser, settings.mount)
+        update = on_robot(laser, self._mount)
         self._counts[update.status] += 1
         if update.status == 'reinitialized':
             self.get_logger().warning(
@@ -113,11 +162,14 @@ class OdometryNode(Node):
         seconds, self._seconds = self._seconds, []
         values = {f'scans {status}': count for status, count in self._counts.items()}
         values['scans malformed'] = self._malformed
+        values['scans left out waiting for the mount'] = self._waiting
         values['processing time max (ms)'] = f'{1e3 * max(seconds or [0.0]):.2f}'
         level = DiagnosticStatus.OK if seconds else DiagnosticStatus.WARN
         status = DiagnosticStatus(
             level=level, name=f'{self.get_fully_qualified_name()}: odometry',
-            message='odometry' if seconds else 'no scans', hardware_id=self._settings.base_frame,
+            message=('odometry' if seconds else 'waiting for the laser mount on /tf_static'
+                     if self._odometry is None else 'no scans'),
+            hardware_id=self._settings.base_frame,
             values=[KeyValue(key=key, value=str(value)) for key, value in values.items()])
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()

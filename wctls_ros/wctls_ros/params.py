@@ -281,6 +281,9 @@ ODOMETRY_NODE = FEATURE_NODE[:1 + len(fields(FeatureConfig))] + (
                Limits(-100.0, 100.0)),
     _read_only('laser_yaw_deg', 0.0, "The laser's heading on the robot, deg",
                Limits(-180.0, 180.0)),
+    _read_only('mount_from_tf', False, "Take the laser's pose on the robot from /tf_static "
+               "(base_frame -> the scan's frame, through any static chain) instead of laser_x_m, "
+               'laser_y_m and laser_yaw_deg; scans before it is known are left out'),
     Parameter('max_hypotheses', _ODOMETRY.max_hypotheses, 'Motion hypotheses scored per scan '
               'at most', Limits(1, 100000), setting='max_hypotheses'),
     Parameter('max_step_m', _ODOMETRY.max_step_m, 'Largest motion between two scans, m',
@@ -318,6 +321,7 @@ class OdometrySettings(NamedTuple):
     :ivar odom_frame: the pose's frame
     :ivar base_frame: the robot's frame
     :ivar publish_tf: whether the transform odom -> base_frame is published
+    :ivar mount_from_tf: whether the mount comes from /tf_static instead of ``mount``
     """
 
     config: FeatureConfig
@@ -326,6 +330,7 @@ class OdometrySettings(NamedTuple):
     odom_frame: str
     base_frame: str
     publish_tf: bool
+    mount_from_tf: bool
 
 
 def odometry_settings(values: Dict[str, Value]) -> OdometrySettings:
@@ -343,7 +348,7 @@ def odometry_settings(values: Dict[str, Value]) -> OdometrySettings:
                             (float(values['laser_x_m']), float(values['laser_y_m']),
                              math.radians(float(values['laser_yaw_deg']))),
                             str(values['odom_frame']), str(values['base_frame']),
-                            bool(values['publish_tf']))
+                            bool(values['publish_tf']), bool(values['mount_from_tf']))
 
 
 class FeatureSettings(NamedTuple):

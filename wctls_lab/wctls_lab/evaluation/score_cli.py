@@ -34,6 +34,7 @@ import numpy as np
 from wctls_ros.cli import bounded, Parser, start_core, USER_ERROR, UserError
 from wctls_ros.core import FeatureConfig, METHODS
 from wctls_ros.extras import explains_missing_extras, require
+from wctls_ros.frontend.tracking import Motion
 from wctls_ros.output_folders import claim, owned_folder
 from wctls_ros.params import feature_settings, load_parameters, SENSOR
 from wctls_ros.process import check_stop, ending_at_once, stop_signals, Stopped
@@ -45,7 +46,7 @@ from .scans import load_json_scans, load_scans, StaticScans
 from .score import (markdown_table, RECURRING_PRESENCE, REOBSERVATION_COLUMNS, score_scans,
                     write_score)
 from .tracks import run_tracker, track_figures, track_lines
-from .trajectory import score_trajectory
+from .trajectory import run_odometry, score_trajectory
 from .truth import load_truth, Truth, TRUTH_FILE
 
 
@@ -126,7 +127,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--odometry', action='store_true',
                    help='with poses: also run the odometry from the features (the first '
                    "method's) and compare its trajectory with the poses: RPE per metre, ATE "
-                   "after SE(2) alignment, step NEES with the poses' sigmas as their jitter")
+                   "after SE(2) alignment, step NEES with the poses' sigmas as their jitter; "
+                   "with --tracks, the tracks again with the odometry's steps as the motion")
     p.add_argument('--out', default=None, help='folder for table.md, table.csv, corners.csv, '
                    'score.png: a new or empty folder, or an earlier output of score, which is '
                    'replaced (default: print only)')
@@ -235,13 +237,23 @@ def _track_lines(args, scans: StaticScans, config: FeatureConfig, truth: Optiona
                             scans.range_min, scans.range_max, scans.stamps_ns[known],
                             scans.source)
         poses = poses[known]
-    run = run_tracker(scans, config, poses, step_m, step_rad)
-    lines = [f'{len(scans)} scans, steps of sigma {1e3 * step_m:g} mm and '
-             f'{math.degrees(step_rad):g} deg; tracker {1e3 * run.seconds_per_scan:.2f} ms '
-             'per scan']
-    return lines + track_lines([track_figures(run, kind, truth, max(args.pose_sigma_m, 1e-3),
-                                              max(pose_sigma_rad, 1e-3))
-                                for kind in ('corner', 'line')])
+    runs = [(f'steps of sigma {1e3 * step_m:g} mm and {math.degrees(step_rad):g} deg',
+             run_tracker(scans, config, poses, step_m, step_rad))]
+    if args.odometry:
+        # As a robot without a reference runs it: the odometry's own steps and covariances.
+        odometry = run_odometry(scans, config)
+        motions = [Motion(step, covariance) for step, covariance
+                   in zip(odometry.steps, odometry.step_covariances)]
+        runs.append(('steps and covariances of the odometry from the features',
+                     run_tracker(scans, config, poses, motions=motions)))
+    lines = []
+    for steps, run in runs:
+        lines.append(f'{len(scans)} scans, {steps}; tracker {1e3 * run.seconds_per_scan:.2f} ms '
+                     'per scan')
+        lines += track_lines([track_figures(run, kind, truth, max(args.pose_sigma_m, 1e-3),
+                                            max(pose_sigma_rad, 1e-3))
+                              for kind in ('corner', 'line')])
+    return lines
 
 
 def run(args, argv) -> int:

@@ -6,7 +6,9 @@ The landmark tracker's figures on a recording: how long ids last, how often they
 
 The tracker (:mod:`wctls_ros.frontend.tracking`) runs over the scans with the motion between
 consecutive poses (a still recording: no motion), each step given ``step_sigma_m`` and
-``step_sigma_rad``. Per kind (corners, line landmarks), over the tracks ever confirmed:
+``step_sigma_rad``, or with given motions (the odometry's own steps and covariances, as a
+robot without a reference runs it); the poses then only judge the tracks. Per kind (corners,
+line landmarks), over the tracks ever confirmed:
 
 - **confirmed tracks**, and their **length**: scans from the first observation to the last
   (median, p90), and the metres the sensor travelled meanwhile (with poses);
@@ -36,8 +38,9 @@ import numpy as np
 from wctls_ros.core import FeatureConfig
 from wctls_ros.frontend.frames import overlapping, to_world_points, world_landmarks, wrap_angle
 from wctls_ros.frontend.tracking import (chi2_quantile_even, CONFIRMED, Detections,
-                                         detections_of, steps_from_poses, TEST_GATE_PROBABILITY,
-                                         TrackedScan, Tracker, TrackerConfig, View)
+                                         detections_of, Motion, steps_from_poses,
+                                         TEST_GATE_PROBABILITY, TrackedScan, Tracker,
+                                         TrackerConfig, View)
 
 from .analysis import features_per_scan
 from .reobservation import TRACK_GATE_2DOF
@@ -71,7 +74,8 @@ class TrackRun:
 
 def run_tracker(scans: StaticScans, config: FeatureConfig, poses: Optional[np.ndarray] = None,
                 step_sigma_m: float = 0.0, step_sigma_rad: float = 0.0,
-                tracker_config: Optional[TrackerConfig] = None) -> TrackRun:
+                tracker_config: Optional[TrackerConfig] = None,
+                motions: Optional[Sequence[Motion]] = None) -> TrackRun:
     """
     Extract every scan's landmarks and track them.
 
@@ -82,10 +86,15 @@ def run_tracker(scans: StaticScans, config: FeatureConfig, poses: Optional[np.nd
     :param step_sigma_m: the sigma of each step's dx and dy, m
     :param step_sigma_rad: the sigma of each step's dyaw, rad
     :param tracker_config: the tracker's rules (defaults: :class:`TrackerConfig`)
+    :param motions: each scan's step since the previous one, T of them, instead of the steps
+        between the poses (which then only judge the tracks)
     :return: the run
     """
     poses = np.zeros((len(scans), 3)) if poses is None else np.asarray(poses, dtype=float)
-    motions = steps_from_poses(poses, step_sigma_m, step_sigma_rad)
+    if motions is None:
+        motions = steps_from_poses(poses, step_sigma_m, step_sigma_rad)
+    elif len(motions) != len(scans):
+        raise ValueError(f'{len(motions)} motions for {len(scans)} scans')
     tracker = Tracker(tracker_config)
     detections, tracked = [], []
     spent = 0.0

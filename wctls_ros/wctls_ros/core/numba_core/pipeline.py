@@ -18,7 +18,7 @@ import numpy as np
 
 from ._jit import jit, jit_inline, use_disk_cache
 from ._order import wrapped
-from .corners import corner_candidates, walls_end_at
+from .corners import corner_candidates, corner_covariance, walls_end_at
 from .lines import fit_segments, residual_chi2_dof
 from .model_error import with_model_error
 from .noise import range_sigma_of_returns
@@ -216,15 +216,15 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
                       line_covariance, walls.line_offset_jacobian, walls.start_xy_m,
                       walls.end_xy_m, walls.first_position, walls.last_position,
                       walls.num_points, walls.residual_chi2_dof)
-    corner_covariance = corner_candidates(published, corners.first_segment,
-                                          corners.second_segment, 0.0,
-                                          settings.common_range_sigma_m).covariance
+    published_covariance = corner_covariance(published, corners.first_segment,
+                                             corners.second_segment,
+                                             settings.common_range_sigma_m)
     segments_found = SegmentArrays(
         walls.angle_rad, walls.radius_m, normal_covariance, walls.line, line_covariance,
         walls.line_offset_jacobian, walls.start_xy_m, walls.end_xy_m,
         contour.beam_index[walls.first_position], contour.beam_index[walls.last_position],
         walls.num_points, walls.residual_chi2_dof)
-    corners_found = CornerArrays(corners.xy_m, corners.yaw_rad, corner_covariance,
+    corners_found = CornerArrays(corners.xy_m, corners.yaw_rad, published_covariance,
                                  corners.opening_angle_rad, corners.first_segment,
                                  corners.second_segment, corners.end_seen)
     # #plausibility: nothing published whose covariance gates nothing.

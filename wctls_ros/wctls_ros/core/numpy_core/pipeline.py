@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from .corners import corner_candidates, walls_end_at
+from .corners import corner_candidates, corner_covariance, walls_end_at
 from .lines import fit_lines, normal_jacobian
 from .model_error import flatness_covariance, line_from_normal_jacobian, residual_factor
 from .noise import scan_range_sigma
@@ -297,9 +297,8 @@ def _corner_covariances(walls: SegmentSet, corners: CornerSet,
     """Return the corners with covariances propagated from the walls' (model error included)."""
     if not len(corners):
         return corners
-    again = corner_candidates(walls, corners.first_segment, corners.second_segment, 0.0,
-                              config.common_range_sigma_m)
-    return replace(corners, covariance=again.covariance)
+    return replace(corners, covariance=corner_covariance(
+        walls, corners.first_segment, corners.second_segment, config.common_range_sigma_m))
 
 
 def _residual_chi2_dof(returns: SegmentReturns, fits: LineFits, usable: np.ndarray,

@@ -123,8 +123,8 @@ def find_corners(line: np.ndarray, line_covariance: np.ndarray,
     Intersect the given pairs of segments that are not close to parallel.
 
     A pair is rejected when its lines are closer to parallel than ``min_angle_rad``; whether
-    both walls really end at the intersection is :func:`walls_end_at`'s question. The corners
-    of :func:`corner_candidates`, for lines given as arrays.
+    both walls really end at the intersection is :func:`walls_end_at`'s question, not asked
+    here. The corners of :func:`corner_candidates`, for lines given as arrays.
 
     :param line: (a, b, c) of every segment in the method's form, shape (S, 3)
     :param line_covariance: covariance of (a, b, c), shape (S, 3, 3)
@@ -136,7 +136,7 @@ def find_corners(line: np.ndarray, line_covariance: np.ndarray,
     :param line_offset_jacobian: d(a, b, c) / d(range offset common to the scan), (S, 3), per m
     :param common_range_sigma_m: std of that common offset, m: it moves both lines together, so
         its part of the corner covariance is sigma^2 j j^T with j = J_1 g_1 + J_2 g_2
-    :return: the corners that pass both tests
+    :return: the corners that pass (``end_seen`` is True: the ends were not tested)
     """
     count = len(line)
     if line_offset_jacobian is None:                 # no common offset to propagate

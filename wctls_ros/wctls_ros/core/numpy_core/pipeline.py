@@ -271,11 +271,15 @@ def _returns_of(contour: _Contour, segments: SegmentRanges) -> SegmentReturns:
 
 def _with_model_error(walls: SegmentSet, config: FeatureConfig) -> SegmentSet:
     """
-    Return the walls with the model error in their line covariances (:mod:`.model_error`).
+    Return the walls with the model error in their covariances (docs/derivation.md#model-error).
 
-    The (angle, radius) covariance gets the common-mode range offset too, which corners
-    propagate separately through the line offset Jacobian (its effect on two walls is
-    correlated).
+    The (angle, radius) covariance N becomes f N (f of (D17), when ``residual_scaling``) plus
+    the flatness term of (D18) (:mod:`.model_error`). The line's own (a, b, c) covariance gets
+    the same addition through d(a, b, c) / d(angle, radius)
+    (:func:`~.model_error.line_from_normal_jacobian`). The published (angle, radius) covariance
+    also gets the common-mode range offset, o o^T with o = sigma_c d(angle, radius) / d(a, b, c)
+    d(a, b, c) / d offset; the (a, b, c) covariance does not, since corners propagate that offset
+    with its correlation between the two walls ((D15)-(D16)).
     """
     normal = walls.covariance
     if config.residual_scaling:

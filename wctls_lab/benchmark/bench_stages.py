@@ -76,27 +76,28 @@ def earlier_core(commit):
     Return the feature core of an earlier commit, imported as a package of its own.
 
     Its files come out of git into a folder under the user's cache, kept between runs so that
-    numba's cache beside them is too. Cores before the split into numba_core/ and numpy_core/
-    (the 2026-11-27 one) are one flat package with the same entry points.
+    numba's cache beside them is too: the whole package, since a core may import from it (the
+    compile process's ``..process``), imported under a name of its own so that its modules are
+    not today's. Cores before the split into numba_core/ and numpy_core/ (the 2026-11-27 one) are
+    one flat package with the same entry points.
     """
     full = subprocess.run(['git', '-C', str(REPOSITORY), 'rev-parse', commit], check=True,
                           capture_output=True, text=True).stdout.strip()
     base = pathlib.Path(os.environ.get('XDG_CACHE_HOME') or pathlib.Path.home() / '.cache')
     folder = base / 'wctls_ros' / 'bench_stages' / full
-    core = folder / 'wctls_ros' / 'wctls_ros' / 'core'
-    if not core.is_dir():
+    package = folder / 'wctls_ros' / 'wctls_ros'
+    if not (package / '__init__.py').is_file():
         archive = subprocess.run(['git', '-C', str(REPOSITORY), 'archive', full,
-                                  'wctls_ros/wctls_ros/core'], check=True,
+                                  'wctls_ros/wctls_ros'], check=True,
                                  capture_output=True).stdout
         with tarfile.open(fileobj=io.BytesIO(archive)) as files:
             files.extractall(folder, filter='data')
-    name = f'wctls_core_{full[:7]}'
-    spec = importlib.util.spec_from_file_location(name, core / '__init__.py',
-                                                  submodule_search_locations=[str(core)])
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
+    name = f'wctls_ros_{full[:7]}'
+    spec = importlib.util.spec_from_file_location(name, package / '__init__.py',
+                                                  submodule_search_locations=[str(package)])
+    sys.modules[name] = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(sys.modules[name])
+    return importlib.import_module(f'{name}.core')
 
 
 class StageClock:

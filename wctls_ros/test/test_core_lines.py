@@ -8,7 +8,10 @@ import math
 import numpy as np
 import pytest
 from wctls_ros.core import find_corners, fit_lines, intersect, METHODS, nees, segment_returns
+from wctls_ros.core.numba_core import corners as compiled_corners
 from wctls_ros.core.numba_core.lines import normal_form, utls, wctls, wtls
+from wctls_ros.core.numpy_core import corners as numpy_corners
+from wctls_ros.core.records import Walls
 
 RANGE_SIGMA = 0.05
 BEARING_SIGMA = math.radians(0.391)
@@ -156,6 +159,51 @@ def test_joint_corner_covariance_matches_finite_differences():
     numeric = jac @ block @ jac.T
     analytic = corner_of(fits).covariance[0]
     assert np.abs(numeric - analytic).max() / np.abs(analytic).max() < 1e-5
+
+
+def bisector_state(line, inside_xy):
+    """
+    Return a corner's (x, y, yaw), computed here: where two lines meet, and their bisector.
+
+    :param line: (a, b, c) of the two walls, shape (2, 3)
+    :param inside_xy: a point on each wall on the side of its returns, shape (2, 2), m
+    """
+    corner = np.linalg.solve(line[:, :2], -line[:, 2])
+    directions = np.column_stack([-line[:, 1], line[:, 0]])
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    directions *= np.sign(((inside_xy - corner) * directions).sum(axis=1))[:, None]
+    bisector = directions.sum(axis=0)
+    return np.array([*corner, math.atan2(bisector[1], bisector[0])])
+
+
+@pytest.mark.parametrize('core', [numpy_corners, compiled_corners], ids=['numpy', 'compiled'])
+def test_corner_covariance_matches_finite_differences(core):
+    # Both walls' full line covariances, and a range offset common to the scan that moves both
+    # lines together (line k by its offset Jacobian): the covariance of the corner state of two
+    # WCTLS lines (not normalised) against central differences over the six line parameters and
+    # the offset.
+    corner, directions, common_sigma = np.array([1.8, 1.1]), (math.pi + 0.2, -math.pi / 2), 0.02
+    fits = fit_lines('wctls', two_walls(corner, *directions, (35, 25), np.random.default_rng(6)),
+                     RANGE_SIGMA, BEARING_SIGMA)
+    inside = corner + 0.7 * np.array([[math.cos(d), math.sin(d)] for d in directions])
+    jacobian = np.zeros((3, 7))
+    steps = [(j, fits.line.flat[j], np.eye(6)[j].reshape(2, 3)) for j in range(6)]
+    steps.append((6, 0.0, fits.line_offset_jacobian))
+    for column, value, direction in steps:
+        h = 1e-7 * max(1.0, abs(value))
+        jacobian[:, column] = (bisector_state(fits.line + h * direction, inside)
+                               - bisector_state(fits.line - h * direction, inside)) / (2 * h)
+    inputs = np.zeros((7, 7))
+    inputs[:3, :3], inputs[3:6, 3:6] = fits.line_covariance
+    inputs[6, 6] = common_sigma ** 2
+    numeric = jacobian @ inputs @ jacobian.T
+    positions, unread = np.zeros(2, np.intp), np.zeros((2, 2))
+    walls = Walls(fits.angle_rad, fits.radius_m, fits.normal_covariance, fits.line,
+                  fits.line_covariance, fits.line_offset_jacobian, unread, unread, positions,
+                  positions, positions, np.zeros(2))
+    analytic = core.corner_covariance(walls, np.array([0]), np.array([1]), common_sigma)
+    assert analytic.shape == (1, 3, 3)
+    assert np.abs(numeric - analytic[0]).max() / np.abs(analytic[0]).max() < 1e-5
 
 
 def test_intersection_is_the_common_point_of_both_lines():

@@ -25,8 +25,9 @@ compiled_segmentation = pytest.importorskip('wctls_ros.core.numba_core.segmentat
 STEPS = [
     (numpy_segmentation, compiled_segmentation, ('pass_budget', 'trim_ambiguous', 'trim_offset')),
     (numpy_corners, compiled_corners, (
-        'corner_candidates', 'end_window', 'along_wall', 'corner_zone', 'without_object_in_front',
-        'reaches', 'goes_on', 'blocked', 'short_of_corner', 'seen_through')),
+        'corner_candidates', 'corner_covariance', 'end_window', 'along_wall', 'corner_zone',
+        'without_object_in_front', 'reaches', 'goes_on', 'blocked', 'short_of_corner',
+        'seen_through')),
 ]
 SAME_ARGUMENTS = [(numpy_module, compiled_module, name)
                   for numpy_module, compiled_module, names in STEPS for name in names]

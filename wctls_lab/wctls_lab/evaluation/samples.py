@@ -12,11 +12,11 @@ were dropped before propagating to the corner (``--propagation diagonal``, an an
 paper's gap, never what the node does).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from wctls_ros.core import extract_features, FeatureConfig, find_corners
+from wctls_ros.core import corner_covariance, extract_features, FeatureConfig
 from wctls_ros.process import check_stop
 
 from ..simulation import NoiseModel
@@ -90,9 +90,9 @@ def scan_corners(ranges: np.ndarray, angle_min: float, angle_increment: float,
                                 range_max)
     corners, segments = features.corners, features.segments
     first, second = corners.first_segment, corners.second_segment
-    # The same corners again (no rejection: they passed already) from diagonal line covariances.
-    diagonal = find_corners(segments.line, segments.line_covariance * np.eye(3),
-                            segments.start_xy_m, segments.end_xy_m, first, second, 0.0,
-                            segments.line_offset_jacobian, config.common_range_sigma_m)
+    # The covariance of the same corners from diagonal line covariances.
+    diagonal = corner_covariance(
+        replace(segments, line_covariance=segments.line_covariance * np.eye(3)), first, second,
+        config.common_range_sigma_m)
     return features, ScanCorners(corners.xy_m.copy(), corners.covariance[:, :2, :2],
-                                 diagonal.covariance[:, :2, :2], np.column_stack([first, second]))
+                                 diagonal[:, :2, :2], np.column_stack([first, second]))

@@ -19,14 +19,14 @@ The pipeline has two implementations with the same results: compiled loops (numb
 compiled one when numba gives it and the numpy one otherwise (:mod:`.runtime`, where the
 environment variable ``WCTLS_ROS_CORE`` can force either); importing this package imports no
 numba. The line fits and corner intersections offered on their own (:func:`fit_lines`,
-:func:`find_corners`, ...) are the numpy implementation's.
+:func:`find_corners`, :func:`corner_covariance`, ...) are the numpy implementation's.
 """
 
 from .config import FeatureConfig, METHODS, validation_errors
 from .features import (Corner, CornerSet, Features, LineFits, Segment, segment_returns,
                        SegmentReturns, SegmentSet)
 from .landmarks import angle_sigma_rad, line_landmarks
-from .numpy_core.corners import find_corners, intersect
+from .numpy_core.corners import corner_covariance, find_corners, intersect
 from .numpy_core.lines import fit_lines, normal_form
 from .runtime import CoreStatus, CoreUnavailable, extract_features, start, status, warm_up
 from .scan import scan_to_points, ScanError, ScanPoints
@@ -35,7 +35,8 @@ from .uncertainty import confidence_scale, Ellipse, ellipse, nees
 __all__ = [
     'Corner', 'CoreStatus', 'CoreUnavailable', 'CornerSet', 'Ellipse', 'FeatureConfig',
     'Features', 'LineFits', 'METHODS', 'ScanError', 'ScanPoints', 'Segment', 'SegmentReturns',
-    'SegmentSet', 'angle_sigma_rad', 'confidence_scale', 'ellipse', 'extract_features',
-    'find_corners', 'fit_lines', 'intersect', 'line_landmarks', 'nees', 'normal_form',
-    'scan_to_points', 'segment_returns', 'start', 'status', 'validation_errors', 'warm_up',
+    'SegmentSet', 'angle_sigma_rad', 'confidence_scale', 'corner_covariance', 'ellipse',
+    'extract_features', 'find_corners', 'fit_lines', 'intersect', 'line_landmarks', 'nees',
+    'normal_form', 'scan_to_points', 'segment_returns', 'start', 'status', 'validation_errors',
+    'warm_up',
 ]

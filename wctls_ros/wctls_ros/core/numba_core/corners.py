@@ -45,40 +45,21 @@ def corner_candidates(walls, first_wall, second_wall, min_angle_rad, common_rang
     :param common_range_sigma_m: std of the range offset common to the scan, m
     :return: the :class:`~.records.CornerCandidates` of the pairs that passed
     """
-    line, line_covariance = walls.line, walls.line_covariance
-    start_xy_m, end_xy_m = walls.start_xy_m, walls.end_xy_m
-    line_offset_jacobian = walls.line_offset_jacobian
+    line, start_xy_m, end_xy_m = walls.line, walls.start_xy_m, walls.end_xy_m
     pairs = first_wall.size
     first_kept, second_kept = np.empty(pairs, np.intp), np.empty(pairs, np.intp)
-    xy = np.empty((pairs, 2))
-    yaw = np.empty(pairs)
-    covariance = np.empty((pairs, 3, 3))
-    opening = np.empty(pairs)
+    xy, yaw, opening = np.empty((pairs, 2)), np.empty(pairs), np.empty(pairs)
     found = 0
     min_sine = math.sin(min_angle_rad)
     pair = np.empty(2, np.intp)
-    u, w = np.empty(2), np.empty(2)
-    normal_x, normal_y, norm = np.empty(2), np.empty(2), np.empty(2)
+    normal_x, normal_y = np.empty(2), np.empty(2)
     direction_x, direction_y = np.empty(2), np.empty(2)
-    upper = np.empty(6)
-    common = np.empty(3)
     for p in range(pairs):
         pair[0], pair[1] = first_wall[p], second_wall[p]
-        one, two = line[pair[0]], line[pair[1]]
-        det = one[0] * two[1] - two[0] * one[1]
-        inv_det = 1.0 / det
-        x = (one[1] * two[2] - two[1] * one[2]) * inv_det
-        y = (two[0] * one[2] - one[0] * two[2]) * inv_det
-        # A^-1 e_k = (u_k, -w_k): the partner's b and a over the determinant of the row whose
-        # own line is k (the second row's is -det).
-        u[0], w[0] = two[1] * inv_det, two[0] * inv_det
-        u[1], w[1] = one[1] * (1.0 / -det), one[0] * (1.0 / -det)
+        x, y, _ = _intersection(line[pair[0]], line[pair[1]])
         for k in range(2):
-            a, b = line[pair[k], 0], line[pair[k], 1]
-            norm[k] = math.hypot(a, b)
-            normal_x[k], normal_y[k] = a / norm[k], b / norm[k]
-        sine = abs(normal_x[0] * normal_y[1] - normal_y[0] * normal_x[1])
-        if not sine >= min_sine:
+            normal_x[k], normal_y[k], _ = _unit_normal(line[pair[k]])
+        if not abs(normal_x[0] * normal_y[1] - normal_y[0] * normal_x[1]) >= min_sine:
             continue
         # Unit vectors from the corner along each wall, towards the middle of its returns,
         # held as (-x, y).
@@ -99,13 +80,49 @@ def corner_candidates(walls, first_wall, second_wall, min_angle_rad, common_rang
         xy[found, 0], xy[found, 1] = x, y
         yaw[found] = math.atan2(bisector_y * toward_sensor, bisector_x * -toward_sensor)
         opening[found] = between if concave else 2.0 * np.pi - between
-        # Three quadratic forms of each C_k: h^T C h, g^T C h, g^T C g (g = (-gx, gy, 0)).
+        found += 1
+    first_kept, second_kept = first_kept[:found], second_kept[:found]
+    return CornerCandidates(xy[:found], yaw[:found],
+                            corner_covariance(walls, first_kept, second_kept,
+                                              common_range_sigma_m),
+                            opening[:found], first_kept, second_kept)
+
+
+@jit
+def corner_covariance(walls, first_wall, second_wall, common_range_sigma_m):
+    """
+    Compiled twin of :func:`..numpy_core.corners.corner_covariance`, one pair at a time.
+
+    Each wall adds its three quadratic forms (and its share of the common offset's j) to the
+    upper triangle, which is mirrored at the end.
+
+    :param walls: the walls (their line, line_covariance and line_offset_jacobian are read)
+    :param first_wall: earlier wall of each corner, shape (C,)
+    :param second_wall: later wall of each corner, shape (C,)
+    :param common_range_sigma_m: std of the range offset common to the scan, m (0: none)
+    :return: shape (C, 3, 3)
+    """
+    line, line_covariance = walls.line, walls.line_covariance
+    line_offset_jacobian = walls.line_offset_jacobian
+    covariance = np.empty((first_wall.size, 3, 3))
+    pair = np.empty(2, np.intp)
+    u, w = np.empty(2), np.empty(2)
+    upper, common = np.empty(6), np.empty(3)
+    for p in range(first_wall.size):
+        pair[0], pair[1] = first_wall[p], second_wall[p]
+        one, two = line[pair[0]], line[pair[1]]
+        x, y, inv_det = _intersection(one, two)
+        # A^-1 e_k = (u_k, -w_k): the partner's b and a over the determinant of the row whose
+        # own line is k (the second row's is -det).
+        u[0], w[0] = two[1] * inv_det, two[0] * inv_det
+        u[1], w[1] = one[1] * -inv_det, one[0] * -inv_det
         upper[:] = 0.0
         common[:] = 0.0
         for k in range(2):
             c = line_covariance[pair[k]]
-            half_inv_norm = 0.5 / norm[k]
-            gradient_x, gradient_y = normal_y[k] * half_inv_norm, normal_x[k] * half_inv_norm
+            normal_x, normal_y, norm = _unit_normal(line[pair[k]])
+            half_inv_norm = 0.5 / norm
+            gradient_x, gradient_y = normal_y * half_inv_norm, normal_x * half_inv_norm
             moved_a = c[0, 0] * x + c[0, 1] * y + c[0, 2]
             moved_b = c[1, 0] * x + c[1, 1] * y + c[1, 2]
             along_h = x * (moved_a + c[2, 0]) + y * (moved_b + c[2, 1]) + c[2, 2]
@@ -125,16 +142,32 @@ def corner_candidates(walls, first_wall, second_wall, min_angle_rad, common_rang
                 common[2] += gradient_x * offset[0] - gradient_y * offset[1]
         upper[1] = -upper[1]
         upper[4] = -upper[4]
-        if common_range_sigma_m > 0.0:
-            for entry in range(6):
-                upper[entry] += (common_range_sigma_m * common[_UPPER_ROWS[entry]]
-                                 * (common_range_sigma_m * common[_UPPER_COLUMNS[entry]]))
         for entry in range(6):
             row, column = _UPPER_ROWS[entry], _UPPER_COLUMNS[entry]
-            covariance[found, row, column] = covariance[found, column, row] = upper[entry]
-        found += 1
-    return CornerCandidates(xy[:found], yaw[:found], covariance[:found], opening[:found],
-                            first_kept[:found], second_kept[:found])
+            if common_range_sigma_m > 0.0:
+                upper[entry] += (common_range_sigma_m * common[row]
+                                 * (common_range_sigma_m * common[column]))
+            covariance[p, row, column] = covariance[p, column, row] = upper[entry]
+    return covariance
+
+
+@jit
+def _intersection(one, two):
+    """
+    Return where two lines (a, b, c) meet, by Cramer's rule, and 1 / det A.
+
+    :return: (x m, y m, 1 / (a_1 b_2 - a_2 b_1)); inf or NaN for parallel lines
+    """
+    inv_det = 1.0 / (one[0] * two[1] - two[0] * one[1])
+    return ((one[1] * two[2] - two[1] * one[2]) * inv_det,
+            (two[0] * one[2] - one[0] * two[2]) * inv_det, inv_det)
+
+
+@jit
+def _unit_normal(line):
+    """Return the unit normal (x, y) of a line (a, b, c) and the norm of its (a, b)."""
+    norm = math.hypot(line[0], line[1])
+    return line[0] / norm, line[1] / norm, norm
 
 
 @jit

@@ -43,7 +43,7 @@ def _fits(method: str, returns: SegmentReturns, range_sigma: float,
 
 def utls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
     """
-    Unweighted algebraic fit of eqs. (2)-(4) with the covariance of eqs. (6)-(7) (corrected).
+    Compiled twin of :func:`..numpy_core.lines.utls`.
 
     :param returns: the segments' returns
     :param range_sigma: range noise std, m
@@ -56,7 +56,7 @@ def utls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
 
 def wtls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
     """
-    Weighted algebraic fit of eqs. (8)-(12) with the covariance of eqs. (14)-(15) (corrected).
+    Compiled twin of :func:`..numpy_core.lines.wtls`.
 
     :param returns: the segments' returns
     :param range_sigma: range noise std, m
@@ -69,11 +69,7 @@ def wtls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
 
 def wctls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
     """
-    Weighted conformal fit of eqs. (16)-(23): the normalised line from the point Q.
-
-    Q is the weighted least-squares solution of x_Q x - y_Q y = 1 with the WTLS weights, and C_Q
-    its exact first-order covariance (docs/derivation.md#wctls, (D9); the paper never defines
-    C_Q).
+    Compiled twin of :func:`..numpy_core.lines.wctls`.
 
     :param returns: the segments' returns
     :param range_sigma: range noise std, m
@@ -86,14 +82,14 @@ def wctls(returns: SegmentReturns, range_sigma: float, bearing_sigma: float):
 
 
 def normal_jacobian(line: np.ndarray) -> np.ndarray:
-    """Return d(angle, radius) / d(a, b, c) of implicit lines, shape (S, 2, 3)."""
+    """Compiled twin of :func:`..numpy_core.lines.normal_jacobian`: shape (S, 2, 3)."""
     with np.errstate(divide='ignore', invalid='ignore'):
         return normal_jacobians(np.asarray(line, dtype=float))
 
 
 def normal_form(line: np.ndarray, line_covariance: np.ndarray):
     """
-    Convert implicit lines a x + b y + c = 0 to x cos(angle) + y sin(angle) = radius >= 0.
+    Compiled twin of :func:`..numpy_core.lines.normal_form` (its Jacobian compiled).
 
     :param line: (a, b, c), shape (S, 3)
     :param line_covariance: shape (S, 3, 3)
@@ -110,7 +106,7 @@ def normal_form(line: np.ndarray, line_covariance: np.ndarray):
 def fit_lines(method: str, returns: SegmentReturns, range_sigma: float,
               bearing_sigma: float) -> LineFits:
     """
-    Fit every segment with one method and report it in both forms.
+    Compiled twin of :func:`..numpy_core.lines.fit_lines`.
 
     :param method: 'utls', 'wtls', 'wctls' or 'ml'
     :param returns: the segments' returns (each segment with >= 2 returns)
@@ -130,10 +126,10 @@ _UTLS, _WTLS, _WCTLS, _ML = (METHODS.index(method) for method in ('utls', 'wtls'
 @jit
 def _moment_sums(x, y, rho, first, stop, weighted):
     """
-    Return the sums S_g = sum w z and S_M = sum w z z^T of returns first..stop-1.
+    Compiled twin of :func:`..numpy_core.lines._weighted_sums` for the returns first..stop-1.
 
-    :return: (sum w x, sum w y, sum w x^2, sum w y^2, sum w x y), w = 1 / rho^2 when weighted
-        (eq. (8) up to its constant factor), else 1
+    :return: (sum w x, sum w y, sum w x^2, sum w y^2, sum w x y), w = 1 / rho^2 when weighted,
+        else 1
     """
     s_x = s_y = s_xx = s_yy = s_xy = 0.0
     for i in range(first, stop):
@@ -151,30 +147,7 @@ def _moment_sums(x, y, rho, first, stop, weighted):
 @jit
 def _lever_segment(x, y, rho, first, stop, range_sigma, bearing_sigma, weighted, scaled):
     """
-    Fit p of one segment and sum the first-order covariance of its coordinates u.
-
-    UTLS, WTLS and WCTLS all rest on the least-squares solution p of p.z = 1: S_M p = S_g with
-    S_M = sum w z z^T and S_g = sum w z. The (a, b, c) of eqs. (2)-(4) / (10)-(12) are
-    (a, b) = adj(S_M) S_g and c = -det S_M, so (a, b, c) = s (p, -1) with s = det S_M; WCTLS
-    gives (-p, 1) / |p| (eqs. (19)-(21) with Q = F p); and all have the normal form
-    angle = atan2(p_y, p_x), radius = 1 / |p|. A return moves p by S_M^-1 (dS_g - dS_M p):
-
-        dp/drho_i   = -(w_i / rho_i) S_M^-1 z_i           (eq. (8): w z z^T is free of rho)
-        dp/drho_i   = ((1 - 2 p.z_i) / rho_i) S_M^-1 z_i  (unit weights)
-        dp/dtheta_i = w_i S_M^-1 q_i,  q_i = (1 - p.z_i) z_perp_i - (p.z_perp_i) z_i
-
-    and s by d ln s = tr(S_M^-1 dS_M): 2 w_i z_i^T S_M^-1 z_perp_i per bearing, and per range 0
-    (eq. (8)) or 2 z_i^T S_M^-1 z_i / rho_i (unit weights). These are the Jacobians (7), (15)
-    and (22) in other coordinates. With Pi = [p_perp, p]^T S_M^-1 (2x2 per segment), Pi dp =
-    (p_perp.dp, p.dp) = (|p|^2 d angle, -|p|^3 d radius), and z^T S_M^-1 v =
-    (p_perp.z (Pi v)_1 + p.z (Pi v)_2) / |p|^2. Each return's derivatives are projected before
-    their products are summed: summing z z^T and applying S_M^-1 on both sides afterwards would
-    lose digits on short, distant segments, where S_M is ill-conditioned.
-
-    The weights are those of eq. (8) up to its constant factor: w_i = 1 / rho_i^2. The factor
-    1 / (range_sigma bearing_sigma)^2 is left out: it scales (a_w, b_w, c_w) by a constant,
-    which cancels in the normal form, in the WCTLS point Q and in every corner, and it is
-    undefined for a zero bearing sigma.
+    Compiled twin of :func:`..numpy_core.lines._lever_sums` for one segment.
 
     :return: ((a, b, c), p_x, p_y, 1 / |p|, the covariance of u as (k, k), its offset
         Jacobian (k,)), k = 3 if scaled else 2
@@ -266,11 +239,10 @@ def _times(jacobian, vector, out):
 @jit
 def fit_segments(method_code, rho, theta, x, y, offsets, counts, noise):
     """
-    Fit every segment with one method, in its own form and in normal form (:func:`fit_lines`).
+    Compiled twin of :func:`..numpy_core.lines.fit_lines`, one segment at a time.
 
-    UTLS and WTLS: eqs. (2)-(4) / (8)-(12) with the covariance of (6)-(7) / (14)-(15)
-    (corrected); WCTLS: eqs. (16)-(23) with C_Q of (D9); ML: Gauss-Newton from the WTLS line
-    with the inverse Fisher information (docs/derivation.md#maximum-likelihood).
+    The returns come as arrays laid end to end and the method as its code, so that the pipeline's
+    compiled function calls it; :func:`fit_lines` wraps it for Python.
 
     :param method_code: METHODS.index of the method: utls 0, wtls 1, wctls 2, ml 3
     :param rho: ranges of the returns laid end to end, shape (P,), m
@@ -353,16 +325,7 @@ def fit_segments(method_code, rho, theta, x, y, offsets, counts, noise):
 @jit
 def _ml_sums(x, y, rho, first, stop, angle, radius, range_sigma, bearing_sigma, sums):
     """
-    Write the Gauss-Newton sums of one segment at the line (angle, radius) into ``sums``.
-
-    With the residual d_i = rho_i cos(theta_i - angle) - radius, its gradient (g_i, -1) by
-    (angle, radius) and s_i^-2 as iv_i, the sums are C = sum iv, B = sum iv g, A = sum iv g^2
-    (the Fisher information F = [[A, -B], [-B, C]]), sum iv d, sum iv g d, sum iv
-    cos(theta_i - angle), sum iv g cos(theta_i - angle). The variances s_i^2 use the range to
-    the current line along each beam instead of the measured range: a weight computed from the
-    noisy range would correlate with the residual and bias the line (by several mm at grazing
-    incidence). rho cos(theta - angle) and rho sin(theta - angle) are x cos + y sin and
-    y cos - x sin of the angle, so no trigonometric function runs per return.
+    Compiled twin of :func:`..numpy_core.lines._ml_sums` for one segment, written into ``sums``.
 
     :param sums: shape (7,), for sum iv, iv g, iv g^2, iv d, iv g d, iv cos, iv g cos
     """
@@ -389,14 +352,7 @@ def _ml_sums(x, y, rho, first, stop, angle, radius, range_sigma, bearing_sigma, 
 @jit
 def _ml_fits(rho, theta, x, y, offsets, counts, noise):
     """
-    Return the maximum-likelihood lines of every segment (Pfister et al. 2003), from WTLS.
-
-    Minimises sum d_i^2 / s_i^2 by Gauss-Newton, the variances re-evaluated at each iterate;
-    all segments iterate together until every step is below ML_STEP_TOLERANCE (or
-    ML_MAX_ITERATIONS). The covariance is the inverse Fisher information F^-1 =
-    [[C, B], [B, A]] / det F, and the offset Jacobian d(angle, radius) / d(offset of every
-    range) is -F^-1 (sum iv g cos, -sum iv cos), from the estimating equations
-    sum_i s_i^-2 (g_i, -1) d_i = 0 (first order).
+    Compiled twin of :func:`..numpy_core.lines.ml`, starting from the WTLS line it fits itself.
 
     :return: (angle (S,) rad, radius (S,) m, covariance of (angle, radius) (S, 2, 2),
         d(angle, radius) / d offset (S, 2))
@@ -451,11 +407,8 @@ def _ml_fits(rho, theta, x, y, offsets, counts, noise):
 @jit
 def residual_chi2_dof(rho, x, y, offsets, counts, lines, noise):
     """
-    Return each fit's residual chi2 per degree of freedom (docs/derivation.md#model-error).
+    Compiled twin of :func:`..numpy_core.pipeline._residual_chi2_dof`, one return at a time.
 
-    The residual of return i from the line (angle, radius) is d_i = rho_i cos(theta_i - angle)
-    - radius, whose variance under the noise model is range_sigma^2 cos^2(theta_i - angle) +
-    bearing_sigma^2 rho_i^2 sin^2(theta_i - angle) (docs/derivation.md#maximum-likelihood).
     With x_i = rho_i cos theta_i and y_i = rho_i sin theta_i, rho_i cos(theta_i - angle) =
     x_i cos angle + y_i sin angle and rho_i sin(theta_i - angle) = y_i cos angle - x_i sin
     angle: no sine or cosine per return.
@@ -486,7 +439,7 @@ def residual_chi2_dof(rho, x, y, offsets, counts, lines, noise):
 @jit
 def normal_jacobians(line):
     """
-    Return d(angle, radius) / d(a, b, c) of implicit lines a x + b y + c = 0.
+    Compiled twin of :func:`..numpy_core.lines.normal_jacobian`, one line at a time.
 
     :param line: (a, b, c), shape (S, 3)
     :return: shape (S, 2, 3); NaN where a = b = 0

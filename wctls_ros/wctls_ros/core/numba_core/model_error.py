@@ -42,13 +42,7 @@ def _flatness(angle_rad, start_x, start_y, end_x, end_y, flatness_sigma_m):
 def flatness_covariance(angle_rad: np.ndarray, start_xy_m: np.ndarray, end_xy_m: np.ndarray,
                         flatness_sigma_m: float) -> np.ndarray:
     """
-    Return the (angle, radius) covariance of walls whose ends are each off by flatness_sigma.
-
-    With the two ends displaced across the line by independent d_1, d_2 ~ N(0, sigma^2), the
-    line moves by d_0 = (d_1 + d_2) / 2 at the middle of the segment and turns by
-    d_angle = (d_2 - d_1) / L: Var(d_0) = sigma^2 / 2, Var(angle) = 2 sigma^2 / L^2, and
-    radius = m . n (m the middle, n the unit normal) moves by d_0 + (m . t) d_angle with
-    t = (-sin angle, cos angle) (docs/derivation.md#model-error, (D18)).
+    Compiled twin of :func:`..numpy_core.model_error.flatness_covariance`, one wall at a time.
 
     :param angle_rad: normal angles, shape (S,), rad
     :param start_xy_m: first end of each wall, shape (S, 2), m
@@ -69,12 +63,7 @@ def flatness_covariance(angle_rad: np.ndarray, start_xy_m: np.ndarray, end_xy_m:
 @jit
 def residual_factor(chi2_dof: float, returns: int) -> float:
     """
-    Return the a-posteriori variance factor of a fit (docs/derivation.md#model-error, (D17)).
-
-    On a straight wall under the right noise model chi2 / dof has mean 1 and standard
-    deviation sqrt(2 / dof), dof = returns - 2; the factor counts only the excess beyond that
-    one standard deviation, so that clean walls keep their covariance (its mean is 1.07 at
-    8 returns, 1.02 at 50).
+    Compiled twin of :func:`..numpy_core.model_error.residual_factor` for one fit.
 
     :param chi2_dof: residual chi2 per degree of freedom
     :param returns: returns of the fit
@@ -88,17 +77,7 @@ def residual_factor(chi2_dof: float, returns: int) -> float:
 def with_model_error(walls: Walls, residual_scaling: bool, flatness_sigma_m: float,
                      common_range_sigma_m: float):
     """
-    Return the walls' covariances with the model error (docs/derivation.md#model-error).
-
-    The (angle, radius) covariance N becomes f N (f of (D17), when ``residual_scaling``) plus
-    the flatness term of (D18). The line's own (a, b, c) covariance gets the same addition
-    through d(a, b, c) / d(angle, radius) = lambda [[-sin angle, 0], [cos angle, 0], [0, -1]]:
-    each method's (a, b, c) is lambda (cos angle, sin angle, -radius), and the corner does not
-    depend on lambda's own variation (docs/derivation.md#the-wctls-corner-equals-the-wtls-corner).
-    The published (angle, radius) covariance also gets the common-mode range offset, o o^T with
-    o = sigma_c d(angle, radius) / d(a, b, c) d(a, b, c) / d offset; the (a, b, c) covariance
-    does not, since corners propagate that offset with its correlation between the two walls
-    ((D15)-(D16)).
+    Compiled twin of :func:`..numpy_core.pipeline._with_model_error`, one wall at a time.
 
     :param walls: the walls, their covariances from the sensor noise alone
     :param residual_scaling: apply the variance factor of (D17)

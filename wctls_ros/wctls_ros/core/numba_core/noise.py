@@ -32,7 +32,9 @@ def scan_range_sigma(points: ScanPoints) -> float:
 @jit
 def range_sigma_of_returns(index, range_m):
     """
-    Return :func:`scan_range_sigma` of the returns with these beam indices and ranges.
+    Compiled twin of :func:`..numpy_core.noise.scan_range_sigma` on the returns' arrays.
+
+    Its medians are :func:`._order.median`'s loops.
 
     :param index: beam index of every return, shape (n,)
     :param range_m: range of every return, shape (n,), m

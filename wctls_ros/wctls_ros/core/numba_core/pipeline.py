@@ -18,7 +18,7 @@ import numpy as np
 
 from ._jit import jit, jit_inline, use_disk_cache
 from ._order import wrapped
-from .corners import corner_candidates, walls_end_at
+from .corners import corner_candidates, corner_covariance, walls_end_at
 from .lines import fit_segments, residual_chi2_dof
 from .model_error import with_model_error
 from .noise import range_sigma_of_returns
@@ -113,7 +113,7 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
                      config: FeatureConfig = _DEFAULT_CONFIG, range_min_m: float = 0.0,
                      range_max_m: float = math.inf) -> Features:
     """
-    Extract segments and corners from one scan, in compiled loops.
+    Compiled twin of :func:`..numpy_core.pipeline.extract_features`.
 
     :func:`wctls_ros.core.extract_features` states the arguments, the result and the errors.
     """
@@ -216,15 +216,15 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
                       line_covariance, walls.line_offset_jacobian, walls.start_xy_m,
                       walls.end_xy_m, walls.first_position, walls.last_position,
                       walls.num_points, walls.residual_chi2_dof)
-    corner_covariance = corner_candidates(published, corners.first_segment,
-                                          corners.second_segment, 0.0,
-                                          settings.common_range_sigma_m).covariance
+    published_covariance = corner_covariance(published, corners.first_segment,
+                                             corners.second_segment,
+                                             settings.common_range_sigma_m)
     segments_found = SegmentArrays(
         walls.angle_rad, walls.radius_m, normal_covariance, walls.line, line_covariance,
         walls.line_offset_jacobian, walls.start_xy_m, walls.end_xy_m,
         contour.beam_index[walls.first_position], contour.beam_index[walls.last_position],
         walls.num_points, walls.residual_chi2_dof)
-    corners_found = CornerArrays(corners.xy_m, corners.yaw_rad, corner_covariance,
+    corners_found = CornerArrays(corners.xy_m, corners.yaw_rad, published_covariance,
                                  corners.opening_angle_rad, corners.first_segment,
                                  corners.second_segment, corners.end_seen)
     # #plausibility: nothing published whose covariance gates nothing.
@@ -258,11 +258,9 @@ def _no_corners():
 @jit
 def _split_threshold(rho, noise, threshold_m, noise_sigmas):
     """
-    Return the IEPF split distance of every return, m.
+    Compiled twin of the IEPF split distance of :func:`..numpy_core.pipeline._split`.
 
-    The paper's split distance, but never within iepf_noise_sigmas of a return's noise (more on
-    dense scans, :meth:`~wctls_ros.core.scan.BeamDensity.rarer`): a threshold of 2 sigma splits
-    a straight wall at its noise in most scans.
+    :return: the split distance of every return, shape (n,), m
     """
     threshold = np.empty(rho.size)
     for i in range(rho.size):
@@ -276,7 +274,7 @@ def _split_threshold(rho, noise, threshold_m, noise_sigmas):
 
 @jit
 def _large_enough(x, y, segments, settings):
-    """Return which segments have min_segment_points returns and min_segment_length."""
+    """Compiled twin of :func:`..numpy_core.pipeline._large_enough`: which to keep."""
     count, start, stop = x.size, segments.start, segments.stop
     keep = np.empty(start.size, np.bool_)
     for s in range(start.size):
@@ -311,12 +309,9 @@ def _in_scan_order(beam_of_position, beam_count, start, stop):
 @jit_inline
 def _fit_walls(contour, start, stop, noise, settings):
     """
-    Fit every segment with the configured method and keep the ones that are walls.
+    Compiled twin of :func:`..numpy_core.pipeline._fit_walls`.
 
-    A segment is left out when its fit is degenerate (non-finite, or a covariance that is not
-    positive definite) or when it lies within min_wall_beam_angle of the beam to its middle:
-    returns strung along the beams are mixed pixels or grazing veils, not a wall. A segment
-    crossing the seam of a full turn runs past the last position (positions wrap).
+    A segment crossing the seam of a full turn runs past the last position (positions wrap).
 
     :return: the kept :class:`~.records.Walls`
     """
@@ -353,7 +348,7 @@ def _fit_walls(contour, start, stop, noise, settings):
 
 @jit
 def _feet(x, y, position, angle, radius):
-    """Return the feet of the perpendiculars from the returns at ``position`` to the lines, m."""
+    """Compiled twin of :func:`..numpy_core.pipeline._project`, the returns at ``position``."""
     foot = np.empty((position.size, 2))
     for s in range(position.size):
         c, s_ = math.cos(angle[s]), math.sin(angle[s])
@@ -364,7 +359,7 @@ def _feet(x, y, position, angle, radius):
 
 @jit
 def _usable(line, line_covariance, angle, radius, normal_covariance):
-    """Return whether a fit is finite everywhere with a positive-definite normal covariance."""
+    """Compiled twin of :func:`..numpy_core.pipeline._finite_and_positive` for one fit."""
     total = line.sum() + line_covariance.sum() + angle + radius + normal_covariance.sum()
     return (np.isfinite(total) and normal_covariance[0, 0] > 0.0
             and normal_covariance[0, 0] * normal_covariance[1, 1] > normal_covariance[0, 1] ** 2)
@@ -373,10 +368,7 @@ def _usable(line, line_covariance, angle, radius, normal_covariance):
 @jit_inline
 def _corners(contour, walls, grid, noise, settings, density):
     """
-    Intersect neighbouring walls (across the seam on a full turn) and keep the real corners.
-
-    A pair makes a corner when its walls are not close to parallel (min_corner_angle) and both
-    end at the intersection (:func:`~.corners.walls_end_at`).
+    Compiled twin of :func:`..numpy_core.pipeline._corners`.
 
     :return: the corners, their covariance the walls' before the model error
         (:class:`~.records.CornerArrays`)

@@ -14,10 +14,7 @@ from ..scan import _LARGEST_RANGE
 def valid_returns(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, range_min_m,
                   range_max_m):
     """
-    Return the valid returns of a scan in beam order, as Cartesian points.
-
-    Invalid per REP-117: NaN, +-inf, ranges outside [range_min_m, range_max_m], and 0 (a point
-    at the sensor itself, never a wall return).
+    Compiled twin of :func:`..scan.scan_to_points`, on :func:`..scan.scan_geometry`'s beams.
 
     :param ranges_m: ranges, shape (N,), m
     :param cos: cos of every beam's bearing, shape (N,)

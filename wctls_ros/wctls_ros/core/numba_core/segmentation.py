@@ -27,9 +27,7 @@ from ..rules import (BUDGET_EXTRA_PASSES, BUDGET_LEVELS_PER_DOUBLING, JOINABLE_S
 @jit
 def pass_budget(count: int) -> int:
     """
-    Return how many whole-contour passes IEPF (and merging) may make on a scan.
-
-    :func:`..numpy_core.segmentation.pass_budget` compiled, whose docstring says why the bound.
+    Compiled twin of :func:`..numpy_core.segmentation.pass_budget`.
 
     :param count: number of returns in the scan
     :return: the number of passes, 2 ceil(log2 count) + 8
@@ -53,20 +51,7 @@ def _reach_factor(beams, step_rad, lambda_rad):
 @jit
 def breakpoints_of(returns, grid, noise, lambda_rad, max_missing_beams, noise_sigmas):
     """
-    Mark where the adaptive breakpoint rule of Borges and Aldon separates neighbouring returns.
-
-    Neighbours i-1 and i are separated when their distance exceeds
-    ``r sin(dphi) / sin(lambda - dphi) + k sqrt(range_sigma^2 + (r bearing_sigma)^2)``
-    (r the smaller of the two ranges, dphi their bearing difference, so that missing beams widen
-    the allowance; the last term is k sigma of a return's position noise, where Borges and Aldon
-    have the range noise alone; k = 3 up to 1080 beams per turn, more on denser scans,
-    :func:`~wctls_ros.core.scan.beam_density`), when ``dphi >= lambda``, or when more than
-    ``max_missing_beams`` beams between them have no valid return (nothing is known of what
-    lies there: two collinear surfaces either side of a dark or open gap are not one wall). The
-    rule is symmetric, so reversing the beam order changes nothing. With 3 sigma, noise alone
-    separates one pair of returns in a few hundred on a wall, so a separation is joinable
-    (merging may restore it) unless it is a gap or the distance exceeds the allowance by more
-    than 5 sqrt(2) sigma: a discontinuity (an occlusion, a range jump).
+    Compiled twin of :func:`..numpy_core.segmentation.breakpoints`, one pair of neighbours at once.
 
     :param returns: the scan's valid returns in beam order
     :param grid: the scan's beams
@@ -121,11 +106,7 @@ def breakpoints_of(returns, grid, noise, lambda_rad, max_missing_beams, noise_si
 @jit
 def chains_of(returns, separated):
     """
-    Group the returns into chains between breakpoints, in circular order.
-
-    A closed contour (a full turn without any breakpoint) is cut at the farthest return s and at
-    the return farthest from s, both left out like IEPF split points, into two arcs of one
-    chain: a choice that depends neither on where the scan's seam lies nor on the beam order.
+    Compiled twin of :func:`..numpy_core.segmentation.chains`.
 
     :param returns: the scan's valid returns in beam order
     :param separated: where returns start a new chain (from :func:`breakpoints_of`), shape (n,)
@@ -162,15 +143,11 @@ def chains_of(returns, separated):
 @jit
 def split_iepf(x_m, y_m, runs, threshold_m, max_levels):
     """
-    Split runs of returns where a return lies farther than a threshold from the run's chord.
+    Compiled twin of :func:`..numpy_core.segmentation.iterative_end_point_fit`, depth first.
 
-    Depth first, a piece at a time: each piece is measured against its chord and cut at its
-    farthest return (farthest in units of each return's own threshold, the first of equals)
-    when that is beyond the threshold. The return at a split is the one nearest the corner and
-    belongs to neither side (it would otherwise be shared, or bias one wall); merging restores
-    it when the two sides turn out to be one line. A piece made by ``max_levels`` splits that
-    would still split is not straight and is left out (:func:`pass_budget` keeps the work
-    O(n log n) on any input).
+    A piece at a time, where the twin splits every piece of a level in one pass: a piece's depth
+    stands for the twin's pass, and the right part of every split waits on a stack while the left
+    one is split.
 
     :param x_m: x of the returns in circular order, shape (n,), m
     :param y_m: y of the returns in circular order, shape (n,), m
@@ -235,14 +212,9 @@ def split_iepf(x_m, y_m, runs, threshold_m, max_levels):
 @jit
 def moment_line(x_m, y_m, first, stop, range_sigma_m, bearing_sigma_rad):
     """
-    Fit the returns at positions [first, stop) (modulo n) from their sums alone.
+    Compiled twin of :func:`..numpy_core.segmentation.moment_fit` for one segment.
 
-    Orthogonal regression with an isotropic covariance, meant for segmentation decisions, not
-    for the published covariance. Each return is taken to scatter
-    isotropically with variance range_sigma^2 + bearing_sigma^2 rho^2 (an upper bound of its
-    scatter across the line), which gives Var(angle) = s2 / (N L), Cov(angle, radius) = d Var
-    (angle), Var(radius) = s2 / N + d^2 Var(angle), with L the variance of the returns along the
-    line and d the offset of their centroid from the foot of the perpendicular.
+    Sums the returns at positions [first, stop) (modulo n) itself, where the twin takes the sums.
 
     :param x_m: x of the returns in circular order, shape (n,), m
     :param y_m: y of the returns in circular order, shape (n,), m
@@ -283,18 +255,9 @@ def moment_line(x_m, y_m, first, stop, range_sigma_m, bearing_sigma_rad):
 @jit
 def merge_segments(x_m, y_m, segments, circular, joinable, noise, chi2_threshold, max_passes):
     """
-    Merge neighbouring segments that are statistically the same line.
+    Compiled twin of :func:`..numpy_core.segmentation.merge_collinear`.
 
-    Neighbours are consecutive segments on one chain, or on two chains that touch (no return
-    between them) across a break that noise can explain (``joinable``: e.g. a bearing error at
-    grazing incidence); never across a discontinuity or a long run of missing beams, where two
-    surfaces that happen to be collinear would make a phantom wall. Each pass fits every
-    segment, computes for each neighbouring pair the squared Mahalanobis distance of the
-    difference of their (angle, radius) under the sum of the two covariances (independent
-    returns), and merges the pairs below ``chi2_threshold``, lowest first, each segment at most
-    once per pass. A merged segment spans both, including any return between them left out by
-    the split. Passes repeat until nothing merges, or ``max_passes`` have run (the segments are
-    then valid but some neighbours stay apart). The fits are :func:`moment_line`'s.
+    Each pass refits every segment from its returns with :func:`moment_line`.
 
     :param x_m: x of the returns in circular order, shape (n,), m
     :param y_m: y of the returns in circular order, shape (n,), m
@@ -348,7 +311,7 @@ def _merge_fits(x_m, y_m, start, stop, noise):
 def _merge_distances(angle, radius, covariance, start, stop, chain, n, circular, joinable,
                      chi2_threshold):
     """
-    Return the merge test of every segment with its successor.
+    Compiled twin of :func:`..numpy_core.segmentation._merge_distances`, one pair at a time.
 
     :return: (the squared Mahalanobis distance of each pair that may merge and passes, inf for
         the others, shape (S,); the stop of each pair merged, shape (S,); how many pass)
@@ -381,7 +344,7 @@ def _merge_distances(angle, radius, covariance, start, stop, chain, n, circular,
 
 @jit
 def _root(parent, label):
-    """Return the chain a chain label was joined into (union-find's root)."""
+    """Compiled twin of :func:`..numpy_core.segmentation._root`, over an array of parents."""
     while parent[label] != label:
         label = parent[label]
     return label
@@ -390,9 +353,7 @@ def _root(parent, label):
 @jit
 def _merge_lowest_first(start, stop, chain, distance, merged_stop, candidates):
     """
-    Merge the passing pairs, lowest distance first, each segment at most once.
-
-    Chains joined by a merged segment are one chain from then on (union by root).
+    Compiled twin of :func:`..numpy_core.segmentation._merge_lowest_first`.
 
     :return: the merged segments' start, stop and chain, shape (S',) each
     """

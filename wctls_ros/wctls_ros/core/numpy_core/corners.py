@@ -123,8 +123,8 @@ def find_corners(line: np.ndarray, line_covariance: np.ndarray,
     Intersect the given pairs of segments that are not close to parallel.
 
     A pair is rejected when its lines are closer to parallel than ``min_angle_rad``; whether
-    both walls really end at the intersection is :func:`walls_end_at`'s question. The corners
-    of :func:`corner_candidates`, for lines given as arrays.
+    both walls really end at the intersection is :func:`walls_end_at`'s question, not asked
+    here. The corners of :func:`corner_candidates`, for lines given as arrays.
 
     :param line: (a, b, c) of every segment in the method's form, shape (S, 3)
     :param line_covariance: covariance of (a, b, c), shape (S, 3, 3)
@@ -136,7 +136,7 @@ def find_corners(line: np.ndarray, line_covariance: np.ndarray,
     :param line_offset_jacobian: d(a, b, c) / d(range offset common to the scan), (S, 3), per m
     :param common_range_sigma_m: std of that common offset, m: it moves both lines together, so
         its part of the corner covariance is sigma^2 j j^T with j = J_1 g_1 + J_2 g_2
-    :return: the corners that pass both tests
+    :return: the corners that pass (``end_seen`` is True: the ends were not tested)
     """
     count = len(line)
     if line_offset_jacobian is None:                 # no common offset to propagate
@@ -159,11 +159,10 @@ def corner_candidates(walls: SegmentSet, first_wall: np.ndarray, second_wall: np
 
     Whether both walls really end at the intersection is :func:`walls_end_at`'s question.
 
-    For each pair: the corner z = -A^-1 (c_1, c_2) (the paper's eqs. (24)-(25)), the bisector's
-    yaw towards the open side the sensor sees, the opening angle, and the joint covariance of
-    (x, y, yaw) of (D11)-(D14): sum_k J_k C_k J_k^T with dz/dL_k = -A^-1 e_k h^T, h = (x, y, 1),
-    d yaw / dL_k = g_k = (-b_k, a_k, 0) / (2 (a_k^2 + b_k^2)); plus sigma^2 j j^T for the range
-    offset common to the scan, j = sum_k J_k dL_k / d offset ((D15)-(D16)).
+    For each pair: the corner z = -A^-1 (c_1, c_2) (the paper's eqs. (24)-(25)); the pair is
+    rejected when the walls' unit normals have a cross product below sin(``min_angle_rad``).
+    For the others: the bisector's yaw towards the open side the sensor sees, the opening
+    angle, and the joint covariance of (x, y, yaw) (:func:`corner_covariance`).
 
     For every pair at once.
 
@@ -172,25 +171,18 @@ def corner_candidates(walls: SegmentSet, first_wall: np.ndarray, second_wall: np
     :param first_wall: earlier wall of each pair, shape (k,)
     :param second_wall: later wall of each pair, shape (k,)
     :param min_angle_rad: smallest angle between the two walls, rad
-    :param common_range_sigma_m: std of the range offset common to the scan, m: it moves both
-        lines together, so its part of the corner covariance is sigma^2 j j^T with
-        j = J_1 g_1 + J_2 g_2
+    :param common_range_sigma_m: std of the range offset common to the scan, m
     :return: the candidates of the pairs that passed
     """
-    line, line_covariance = walls.line, walls.line_covariance
-    start_xy_m, end_xy_m = walls.start_xy_m, walls.end_xy_m
     pairs = np.array([first_wall, second_wall, first_wall], dtype=np.intp)   # see _solve
     pair = pairs[:2]
-    lines = line.T.take(pairs, 1)
-    start, end = start_xy_m.T.take(pair, 1), end_xy_m.T.take(pair, 1)
-    covariance = line_covariance.reshape(-1, 9).T.take(pair, 1)
+    lines = walls.line.T.take(pairs, 1)
+    start, end = walls.start_xy_m.T.take(pair, 1), walls.end_xy_m.T.take(pair, 1)
     # Nearly parallel lines meet at inf / NaN: such pairs are carried along with the others and
     # dropped with the rest of the rejected ones at the end.
     with np.errstate(all='ignore'):
-        x, y, u, w = _solve(lines[0], lines[1], lines[2])
-        a, b = lines[0, :2], lines[1, :2]
-        norm = np.hypot(a, b)
-        normal_x, normal_y = a / norm, b / norm
+        x, y, _, _ = _solve(lines[0], lines[1], lines[2])
+        normal_x, normal_y, _ = _unit_normals(lines[0, :2], lines[1, :2])
         sine = abs(normal_x[0] * normal_y[1] - normal_y[0] * normal_x[1])
         from_start_x, from_start_y = x - start[0], y - start[1]
         from_end_x, from_end_y = x - end[0], y - end[1]
@@ -212,10 +204,43 @@ def corner_candidates(walls: SegmentSet, first_wall: np.ndarray, second_wall: np
         toward_sensor = np.where(concave, 1.0, -1.0)
         yaw = np.arctan2(bisector_y * toward_sensor, bisector_x * -toward_sensor)
         opening = np.where(concave, between, 2.0 * np.pi - between)
+    first_kept, second_kept = pair[0][kept], pair[1][kept]
+    return CornerCandidates(np.array([x[0], y[0]]).T.take(kept, 0), yaw[kept],
+                            corner_covariance(walls, first_kept, second_kept,
+                                              common_range_sigma_m),
+                            opening[kept], first_kept, second_kept)
 
-        # Joint covariance of (x, y, yaw): line k moves the position by -A^-1 e_k h^T dL_k and
-        # the yaw by g_k^T dL_k, so three quadratic forms of each C_k are all that is needed.
-        # Here g_k = (-gradient_x, gradient_y, 0).
+
+def corner_covariance(walls: SegmentSet, first_wall: np.ndarray, second_wall: np.ndarray,
+                      common_range_sigma_m: float) -> np.ndarray:
+    """
+    Return the joint covariance of (x, y, yaw) of the corners of pairs of walls.
+
+    (D11)-(D14): sum_k J_k C_k J_k^T over the two walls' line covariances C_k, with
+    dz/dL_k = -A^-1 e_k h^T at the corner z, h = (x, y, 1), and d yaw / dL_k = g_k =
+    (-b_k, a_k, 0) / (2 (a_k^2 + b_k^2)), so that only three quadratic forms of each C_k enter:
+    h^T C_k h, g_k^T C_k h and g_k^T C_k g_k. Plus sigma^2 j j^T for the range offset common to
+    the scan, which moves both lines together: j = J_1 dL_1 / d offset + J_2 dL_2 / d offset
+    ((D15)-(D16)). The upper triangle is computed and mirrored, so the matrix is exactly
+    symmetric. The walls of a pair must not be parallel (their corner is inf).
+
+    For every pair at once.
+
+    :param walls: the walls (their line, line_covariance and line_offset_jacobian are read)
+    :param first_wall: earlier wall of each corner, shape (C,)
+    :param second_wall: later wall of each corner, shape (C,)
+    :param common_range_sigma_m: std of the range offset common to the scan, m (0: none)
+    :return: shape (C, 3, 3), over (x m, y m, yaw rad)
+    """
+    pairs = np.array([first_wall, second_wall, first_wall], dtype=np.intp)   # see _solve
+    pair = pairs[:2]
+    lines = walls.line.T.take(pairs, 1)
+    covariance = walls.line_covariance.reshape(-1, 9).T.take(pair, 1)
+    with np.errstate(all='ignore'):
+        x, y, u, w = _solve(lines[0], lines[1], lines[2])
+        normal_x, normal_y, norm = _unit_normals(lines[0, :2], lines[1, :2])
+        # Line k moves the position by -A^-1 e_k h^T dL_k and the yaw by g_k^T dL_k, with
+        # g_k = (-gradient_x, gradient_y, 0).
         half_inv_norm = 0.5 / norm
         gradient_x, gradient_y = normal_y * half_inv_norm, normal_x * half_inv_norm
         moved_a, moved_b, along_h = _covariance_times_h(covariance, x, y)
@@ -237,9 +262,19 @@ def corner_candidates(walls: SegmentSet, first_wall: np.ndarray, second_wall: np
                               gradient_x * offset_a - gradient_y * offset_b])
             common = common_range_sigma_m * (shift[:, 0] + shift[:, 1])
             upper += common[_UPPER_ROW] * common[_UPPER_COLUMN]
-    covariance = upper.take(kept, 1).T.take(_UPPER_TO_FULL, 1).reshape(-1, 3, 3)
-    return CornerCandidates(np.array([x[0], y[0]]).T.take(kept, 0), yaw[kept], covariance,
-                            opening[kept], pair[0][kept], pair[1][kept])
+    return upper.T.take(_UPPER_TO_FULL, 1).reshape(-1, 3, 3)
+
+
+def _unit_normals(a: np.ndarray, b: np.ndarray):
+    """
+    Return the unit normals of lines a x + b y + c = 0 and the norms of their (a, b).
+
+    :param a: a of the lines, any shape
+    :param b: b of the lines, the same shape
+    :return: (x of the unit normal, its y, sqrt(a^2 + b^2)), each that shape
+    """
+    norm = np.hypot(a, b)
+    return a / norm, b / norm, norm
 
 
 def end_window(contour: Returns, after_first: np.ndarray, before_second: np.ndarray,

@@ -344,7 +344,11 @@ def ml(returns: SegmentReturns, range_sigma: float, bearing_sigma: float,
 
     Minimises sum d_i^2 / s_i^2, d_i = rho_i cos(theta_i - angle) - radius,
     s_i^2 = range_sigma^2 cos^2(theta_i - angle) + bearing_sigma^2 rho_i^2 sin^2(theta_i - angle),
-    by Gauss-Newton with the variances re-evaluated at each iterate.
+    by Gauss-Newton with the variances re-evaluated at each iterate; all segments iterate
+    together until every step is below ML_STEP_TOLERANCE (or ML_MAX_ITERATIONS). The covariance
+    is the inverse Fisher information F^-1 = [[C, B], [B, A]] / det F (:func:`_ml_sums`), and
+    the offset Jacobian d(angle, radius) / d(offset of every range) is -F^-1 (sum iv g cos,
+    -sum iv cos), from the estimating equations sum_i s_i^-2 (g_i, -1) d_i = 0 (first order).
 
     :param returns: the segments' returns
     :param range_sigma: range noise std, m
@@ -430,6 +434,10 @@ def fit_lines(method: str, returns: SegmentReturns, range_sigma: float,
               bearing_sigma: float) -> LineFits:
     """
     Fit every segment with one method and report it in both forms.
+
+    UTLS and WTLS: eqs. (2)-(4) / (8)-(12) with the covariance of (6)-(7) / (14)-(15)
+    (corrected); WCTLS: eqs. (16)-(23) with C_Q of (D9); ML: Gauss-Newton from the WTLS line
+    with the inverse Fisher information (docs/derivation.md#maximum-likelihood).
 
     :param method: 'utls', 'wtls', 'wctls' or 'ml'
     :param returns: the segments' returns (each segment with >= 2 returns)

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from .corners import corner_candidates, walls_end_at
+from .corners import corner_candidates, corner_covariance, walls_end_at
 from .lines import fit_lines, normal_jacobian
 from .model_error import flatness_covariance, line_from_normal_jacobian, residual_factor
 from .noise import scan_range_sigma
@@ -271,11 +271,15 @@ def _returns_of(contour: _Contour, segments: SegmentRanges) -> SegmentReturns:
 
 def _with_model_error(walls: SegmentSet, config: FeatureConfig) -> SegmentSet:
     """
-    Return the walls with the model error in their line covariances (:mod:`.model_error`).
+    Return the walls with the model error in their covariances (docs/derivation.md#model-error).
 
-    The (angle, radius) covariance gets the common-mode range offset too, which corners
-    propagate separately through the line offset Jacobian (its effect on two walls is
-    correlated).
+    The (angle, radius) covariance N becomes f N (f of (D17), when ``residual_scaling``) plus
+    the flatness term of (D18) (:mod:`.model_error`). The line's own (a, b, c) covariance gets
+    the same addition through d(a, b, c) / d(angle, radius)
+    (:func:`~.model_error.line_from_normal_jacobian`). The published (angle, radius) covariance
+    also gets the common-mode range offset, o o^T with o = sigma_c d(angle, radius) / d(a, b, c)
+    d(a, b, c) / d offset; the (a, b, c) covariance does not, since corners propagate that offset
+    with its correlation between the two walls ((D15)-(D16)).
     """
     normal = walls.covariance
     if config.residual_scaling:
@@ -297,9 +301,8 @@ def _corner_covariances(walls: SegmentSet, corners: CornerSet,
     """Return the corners with covariances propagated from the walls' (model error included)."""
     if not len(corners):
         return corners
-    again = corner_candidates(walls, corners.first_segment, corners.second_segment, 0.0,
-                              config.common_range_sigma_m)
-    return replace(corners, covariance=again.covariance)
+    return replace(corners, covariance=corner_covariance(
+        walls, corners.first_segment, corners.second_segment, config.common_range_sigma_m))
 
 
 def _residual_chi2_dof(returns: SegmentReturns, fits: LineFits, usable: np.ndarray,

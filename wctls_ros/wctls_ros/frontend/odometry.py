@@ -51,6 +51,10 @@ SEARCH_SLACK_M = 0.05
 SEARCH_SLACK_RAD = math.radians(2.0)
 # A refined hypothesis that associates this share of the smaller scan's landmarks ends the search.
 ENOUGH_SHARE = 0.9
+# The hypotheses are drawn from pairs of at most this many corners and as many lines of each scan,
+# the best known: the pairs of pairs grow as the fourth power of the landmarks (at 32, 496 pairs
+# of one scan against 992 of the other, per kind). No recording of data/ has more than 24.
+PAIR_LANDMARKS = 32
 
 
 @dataclass(frozen=True)
@@ -433,6 +437,24 @@ def _line_chi2(previous: Landmarks, current: Landmarks, steps: np.ndarray,
     return chi2
 
 
+def _best_known(landmarks: Landmarks) -> Landmarks:
+    """
+    Return the PAIR_LANDMARKS best-known corners and lines of a scan, for the hypotheses.
+
+    Corners by the trace of their covariance, lines by their angle's variance (a hypothesis takes
+    its rotation from the angles); the corners' walls are left out (-1), the hypotheses do not
+    use them.
+    """
+    if len(landmarks.corner_xy) <= PAIR_LANDMARKS and len(landmarks.line) <= PAIR_LANDMARKS:
+        return landmarks
+    corners = np.sort(np.argsort(np.trace(landmarks.corner_cov, axis1=1, axis2=2),
+                                 kind='stable')[:PAIR_LANDMARKS])
+    lines = np.sort(np.argsort(landmarks.line_cov[:, 0, 0], kind='stable')[:PAIR_LANDMARKS])
+    return Landmarks(landmarks.corner_xy[corners], landmarks.corner_cov[corners],
+                     np.full((len(corners), 2), -1), landmarks.line[lines],
+                     landmarks.line_cov[lines], landmarks.line_ends[lines])
+
+
 def _search_chi2(previous: Landmarks, current: Landmarks, steps: np.ndarray):
     """Return the corner and the line pairs' chi2 in the search's gate, (H, P, C) each or None."""
     return (_corner_chi2(previous, current, steps, True)
@@ -709,8 +731,9 @@ def estimate_step(previous: Landmarks, current: Landmarks, prior_step: np.ndarra
     landmarks_cur = len(current.corner_xy) + len(current.line)
     if min(landmarks_prev, landmarks_cur) < 2:
         return StepEstimate(prior_step.copy(), prior_covariance.copy(), 'prior')
-    steps = np.concatenate([corner_hypotheses(previous, current),
-                            line_hypotheses(previous, current)])
+    search_prev, search_cur = _best_known(previous), _best_known(current)
+    steps = np.concatenate([corner_hypotheses(search_prev, search_cur),
+                            line_hypotheses(search_prev, search_cur)])
     steps = steps[np.hypot(steps[:, 0], steps[:, 1]) <= config.max_step_m]
     if len(steps) > config.max_hypotheses:
         rng = np.random.default_rng(config.seed)

@@ -24,7 +24,7 @@ from wctls_lab.evaluation.trajectory import (align_se2, reference_step_covarianc
 from wctls_ros.frontend.frames import Landmarks
 from wctls_ros.frontend.odometry import (change_frame, chi2_quantile, compose, compose_jacobians,
                                          estimate_step, inverse, Odometry, OdometryConfig,
-                                         residuals)
+                                         PAIR_LANDMARKS, residuals)
 
 DATA = pathlib.Path(__file__).resolve().parents[2] / 'data'
 
@@ -126,6 +126,19 @@ def test_a_30_degree_turn_is_found_without_a_prior_and_its_covariance_holds():
     empirical = np.cov(errors.T)
     ratio = np.sqrt(np.diag(covariances.mean(axis=0)) / np.diag(empirical))
     assert np.all((0.85 <= ratio) & (ratio <= 1.15))
+
+
+def test_a_scene_of_more_landmarks_than_the_pairs_take_is_matched_whole():
+    """Beyond PAIR_LANDMARKS corners the hypotheses come from some; the fit takes them all."""
+    rng = np.random.default_rng(5)
+    pillars = rng.uniform((-3.5, -2.0), (3.5, 2.0), (PAIR_LANDMARKS + 16, 2))
+    truth = np.array([0.4, 0.25, math.radians(-25.0)])
+    estimate = estimate_step(observe((0.0, 0.0, 0.0), rng, pillars, []),
+                             observe(truth, rng, pillars, []), np.zeros(3), np.eye(3))
+    assert estimate.status == 'tracking'
+    assert estimate.corners == len(pillars)
+    error = estimate.step - truth
+    assert error @ np.linalg.solve(estimate.covariance, error) < 16.27    # chi2 3 dof, 99.9 %
 
 
 def test_a_corridor_leaves_its_axis_to_the_prior_with_the_priors_covariance():

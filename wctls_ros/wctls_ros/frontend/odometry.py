@@ -51,6 +51,10 @@ SEARCH_SLACK_M = 0.05
 SEARCH_SLACK_RAD = math.radians(2.0)
 # A refined hypothesis that associates this share of the smaller scan's landmarks ends the search.
 ENOUGH_SHARE = 0.9
+# The hypotheses are drawn from pairs of at most this many corners and as many lines of each scan,
+# the best known: the pairs of pairs grow as the fourth power of the landmarks (at 32, 496 pairs
+# of one scan against 992 of the other, per kind). No recording of data/ has more than 24.
+PAIR_LANDMARKS = 32
 
 
 @dataclass(frozen=True)
@@ -238,9 +242,14 @@ def _inverse_2x2(matrix: np.ndarray) -> np.ndarray:
     """Return the inverses of (..., 2, 2) matrices (singular ones: inf on the diagonal)."""
     a, b, c, d = matrix[..., 0, 0], matrix[..., 0, 1], matrix[..., 1, 0], matrix[..., 1, 1]
     det = a * d - b * c
+    out = np.empty(matrix.shape)
     with np.errstate(divide='ignore', invalid='ignore'):
-        out = np.stack([np.stack([d, -b], -1), np.stack([-c, a], -1)], -2) / det[..., None, None]
-    return np.where(np.isfinite(out), out, np.inf)
+        out[..., 0, 0] = d / det
+        out[..., 0, 1] = -b / det
+        out[..., 1, 0] = -c / det
+        out[..., 1, 1] = a / det
+    out[~np.isfinite(out)] = np.inf
+    return out
 
 
 def _pair_indices(count: int) -> Tuple[np.ndarray, np.ndarray]:
@@ -341,84 +350,131 @@ def line_hypotheses(previous: Landmarks, current: Landmarks) -> np.ndarray:
     return out[np.isfinite(out).all(axis=1)]
 
 
-def _moved_corners(current: Landmarks, steps: np.ndarray) -> np.ndarray:
-    """Return the current corners moved into the previous frame by each step, (H, C, 2)."""
-    cos, sin = np.cos(steps[:, 2])[:, None], np.sin(steps[:, 2])[:, None]
-    x, y = current.corner_xy[None, :, 0], current.corner_xy[None, :, 1]
-    return np.stack([steps[:, :1] + cos * x - sin * y, steps[:, 1:2] + sin * x + cos * y], -1)
+def _quadratic_2x2(error_0, error_1, s00, s01, s10, s11):
+    """
+    Return e^T S^-1 e of 2-vectors and 2x2 matrices given by their components (any one shape).
+
+    The closed form of the inverse, elementwise: one pass over arrays of any shape, with no
+    (..., 2, 2) arrays built. A matrix that is not positive definite gives inf (outside any
+    gate).
+    """
+    det = s00 * s11 - s01 * s10
+    form = s11 * error_0 * error_0 - (s01 + s10) * error_0 * error_1 + s00 * error_1 * error_1
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return np.where(det > 0.0, form / det, np.inf)
 
 
 def _corner_chi2(previous: Landmarks, current: Landmarks, steps: np.ndarray,
                  search: bool = False) -> np.ndarray:
-    """Return the squared Mahalanobis distances of every corner pair under each step, (H, P, C)."""
-    moved = _moved_corners(current, steps)
-    error = previous.corner_xy[None, :, None, :] - moved[:, None, :, :]
-    rot = np.stack([np.stack([np.cos(steps[:, 2]), -np.sin(steps[:, 2])], -1),
-                    np.stack([np.sin(steps[:, 2]), np.cos(steps[:, 2])], -1)], -2)
-    cur_cov = rot[:, None] @ current.corner_cov[None] @ rot[:, None].transpose(0, 1, 3, 2)
-    innovation = previous.corner_cov[None, :, None] + cur_cov[:, None]
-    if search:
-        innovation = innovation + SEARCH_SLACK_M ** 2 * np.eye(2)
-    return np.einsum('hpci,hpcij,hpcj->hpc', error, _inverse_2x2(innovation), error)
-
-
-def _line_errors(previous: Landmarks, current: Landmarks, steps: np.ndarray):
     """
-    Return every line pair's error under each step and its covariance.
+    Return the squared Mahalanobis distances of every corner pair under each step, (H, P, C).
 
-    The current line moved into the previous frame is (angle + dyaw, r + t . n), n its moved
-    normal, with covariance J C J^T, J = [[1, 0], [t . n_perp, 1]] (as :func:`.frames.to_world`
-    with an exact pose); its normal is not flipped (:func:`line_hypotheses`).
-
-    :return: (error (H, P, C, 2) of (angle rad, radius m), innovation covariance
-        (H, P, C, 2, 2))
+    The error p - (R q + t) and its covariance C_p + R C_q R^T (+ the search's slack), by
+    components: the (H, C) parts of the moved corners once, broadcast over the P previous ones.
     """
-    angle = current.line[None, :, 0] + steps[:, 2:3]
-    lever = -steps[:, :1] * np.sin(angle) + steps[:, 1:2] * np.cos(angle)
-    radius = current.line[None, :, 1] + steps[:, :1] * np.cos(angle) + steps[:, 1:2] * np.sin(
-        angle)
-    jacobian = np.zeros(angle.shape + (2, 2))
-    jacobian[..., 0, 0] = 1.0
-    jacobian[..., 1, 0] = lever
-    jacobian[..., 1, 1] = 1.0
-    cur_cov = jacobian @ current.line_cov[None] @ jacobian.transpose(0, 1, 3, 2)
-    error = np.stack([wrap_angle(angle[:, None, :] - previous.line[None, :, None, 0]),
-                      radius[:, None, :] - previous.line[None, :, None, 1]], -1)
-    return error, previous.line_cov[None, :, None] + cur_cov[:, None]
+    cos, sin = np.cos(steps[:, 2:3]), np.sin(steps[:, 2:3])
+    x, y = current.corner_xy[:, 0], current.corner_xy[:, 1]
+    moved_x = steps[:, :1] + cos * x - sin * y
+    moved_y = steps[:, 1:2] + sin * x + cos * y
+    error_x = previous.corner_xy[None, :, None, 0] - moved_x[:, None, :]
+    error_y = previous.corner_xy[None, :, None, 1] - moved_y[:, None, :]
+    cov = current.corner_cov
+    # R C, then (R C) R^T, each (H, C).
+    rc00, rc01 = cos * cov[:, 0, 0] - sin * cov[:, 1, 0], cos * cov[:, 0, 1] - sin * cov[:, 1, 1]
+    rc10, rc11 = sin * cov[:, 0, 0] + cos * cov[:, 1, 0], sin * cov[:, 0, 1] + cos * cov[:, 1, 1]
+    slack = SEARCH_SLACK_M ** 2 if search else 0.0
+    prev = previous.corner_cov[None, :, None]
+    return _quadratic_2x2(
+        error_x, error_y,
+        prev[..., 0, 0] + (rc00 * cos - rc01 * sin + slack)[:, None],
+        prev[..., 0, 1] + (rc00 * sin + rc01 * cos)[:, None],
+        prev[..., 1, 0] + (rc10 * cos - rc11 * sin)[:, None],
+        prev[..., 1, 1] + (rc10 * sin + rc11 * cos + slack)[:, None])
 
 
 def _line_chi2(previous: Landmarks, current: Landmarks, steps: np.ndarray,
                search: bool = False) -> np.ndarray:
-    """Return the squared Mahalanobis distances of every line pair under each step, (H, P, C)."""
-    error, innovation = _line_errors(previous, current, steps)
-    if search:
-        innovation = innovation + np.diag([SEARCH_SLACK_RAD ** 2, SEARCH_SLACK_M ** 2])
-    chi2 = np.einsum('hpci,hpcij,hpcj->hpc', error, _inverse_2x2(innovation), error)
-    # Two pieces of one infinite line metres apart are not one landmark: the moved segment
-    # must overlap the previous one along its line.
-    ends = _moved_corners(Landmarks(current.line_ends.reshape(-1, 2), current.corner_cov[:0],
-                                    current.corner_lines[:0], current.line, current.line_cov,
-                                    current.line_ends), steps)
-    shared = overlapping(ends.reshape(-1, 2, 2), previous.line_ends).reshape(
-        len(steps), len(current.line), len(previous.line))
-    return np.where(shared.transpose(0, 2, 1), chi2, np.inf)
+    """
+    Return the squared Mahalanobis distances of every line pair under each step, (H, P, C).
+
+    The current line moved into the previous frame is (angle + dyaw, r + t . n), n its moved
+    normal, with covariance J C J^T, J = [[1, 0], [t . n_perp, 1]] (as :func:`.frames.to_world`
+    with an exact pose); its normal is not flipped (:func:`line_hypotheses`). A pair inside the
+    99 % gate whose segments do not overlap along the line is inf: two pieces of one infinite
+    line metres apart are not one landmark. Values above the gate are left as they are (the
+    overlap, the costly part, is tested only where it decides).
+    """
+    angle = current.line[None, :, 0] + steps[:, 2:3]
+    cos, sin = np.cos(angle), np.sin(angle)
+    lever = -steps[:, :1] * sin + steps[:, 1:2] * cos
+    radius = current.line[None, :, 1] + steps[:, :1] * cos + steps[:, 1:2] * sin
+    error_angle = wrap_angle(angle[:, None, :] - previous.line[None, :, None, 0])
+    error_radius = radius[:, None, :] - previous.line[None, :, None, 1]
+    cov = current.line_cov
+    # J C, then (J C) J^T, each (H, C).
+    jc10 = lever * cov[:, 0, 0] + cov[:, 1, 0]
+    jc11 = lever * cov[:, 0, 1] + cov[:, 1, 1]
+    slack_rad, slack_m = (SEARCH_SLACK_RAD ** 2, SEARCH_SLACK_M ** 2) if search else (0.0, 0.0)
+    prev = previous.line_cov[None, :, None]
+    chi2 = _quadratic_2x2(
+        error_angle, error_radius,
+        prev[..., 0, 0] + (cov[:, 0, 0] + slack_rad)[None, None],
+        prev[..., 0, 1] + (cov[:, 0, 0] * lever + cov[:, 0, 1])[:, None],
+        prev[..., 1, 0] + jc10[:, None],
+        prev[..., 1, 1] + (jc10 * lever + jc11 + slack_m)[:, None])
+    h, p, c = np.nonzero(chi2 <= CHI2_2DOF_99)
+    if len(h):
+        # Each moved segment that has a pair in the gate, against every previous segment.
+        rows, row = np.unique(h * len(current.line) + c, return_inverse=True)
+        hypothesis, segment = np.divmod(rows, len(current.line))
+        step = steps[hypothesis]
+        cos_h, sin_h = np.cos(step[:, 2:]), np.sin(step[:, 2:])
+        x, y = current.line_ends[segment, :, 0], current.line_ends[segment, :, 1]
+        moved = np.stack([step[:, :1] + cos_h * x - sin_h * y,
+                          step[:, 1:2] + sin_h * x + cos_h * y], -1)
+        shared = overlapping(moved, previous.line_ends)[row.ravel(), p]
+        chi2[h[~shared], p[~shared], c[~shared]] = np.inf
+    return chi2
 
 
-def score_hypotheses(previous: Landmarks, current: Landmarks, steps: np.ndarray) -> np.ndarray:
+def _best_known(landmarks: Landmarks) -> Landmarks:
+    """
+    Return the PAIR_LANDMARKS best-known corners and lines of a scan, for the hypotheses.
+
+    Corners by the trace of their covariance, lines by their angle's variance (a hypothesis takes
+    its rotation from the angles); the corners' walls are left out (-1), the hypotheses do not
+    use them.
+    """
+    if len(landmarks.corner_xy) <= PAIR_LANDMARKS and len(landmarks.line) <= PAIR_LANDMARKS:
+        return landmarks
+    corners = np.sort(np.argsort(np.trace(landmarks.corner_cov, axis1=1, axis2=2),
+                                 kind='stable')[:PAIR_LANDMARKS])
+    lines = np.sort(np.argsort(landmarks.line_cov[:, 0, 0], kind='stable')[:PAIR_LANDMARKS])
+    return Landmarks(landmarks.corner_xy[corners], landmarks.corner_cov[corners],
+                     np.full((len(corners), 2), -1), landmarks.line[lines],
+                     landmarks.line_cov[lines], landmarks.line_ends[lines])
+
+
+def _search_chi2(previous: Landmarks, current: Landmarks, steps: np.ndarray):
+    """Return the corner and the line pairs' chi2 in the search's gate, (H, P, C) each or None."""
+    return (_corner_chi2(previous, current, steps, True)
+            if len(previous.corner_xy) and len(current.corner_xy) else None,
+            _line_chi2(previous, current, steps, True)
+            if len(previous.line) and len(current.line) else None)
+
+
+def score_hypotheses(chi2s, count: int) -> np.ndarray:
     """
     Return how many current landmarks each step brings inside the 99 % gate of one previous.
 
-    :param previous: the previous scan's landmarks
-    :param current: the current scan's landmarks
-    :param steps: candidate steps, shape (H, 3)
+    :param chi2s: the corner and the line pairs' chi2 in the search's gate under each step,
+        :func:`_search_chi2`
+    :param count: the steps, H
     :return: per step, the landmarks in the gate, with the fraction of their summed chi2 below
         1 subtracted so that equal counts rank by their fit, shape (H,)
     """
-    total = np.zeros(len(steps))
-    for chi2 in (_corner_chi2(previous, current, steps, True) if len(previous.corner_xy) and len(
-            current.corner_xy) else None,
-                 _line_chi2(previous, current, steps, True) if len(previous.line) and len(
-            current.line) else None):
+    total = np.zeros(count)
+    for chi2 in chi2s:
         if chi2 is None:
             continue
         best = np.min(chi2, axis=1)
@@ -428,17 +484,37 @@ def score_hypotheses(previous: Landmarks, current: Landmarks, steps: np.ndarray)
     return total
 
 
-def _one_to_one(chi2: np.ndarray, gate: float) -> List[Tuple[int, int]]:
-    """Return (previous, current) pairs inside the gate, best first, each landmark once."""
-    pairs = np.argwhere(chi2 <= gate)
-    order = np.argsort(chi2[pairs[:, 0], pairs[:, 1]], kind='stable')
-    taken_p, taken_c, out = set(), set(), []
-    for p, c in pairs[order]:
+def _one_to_one(chi2: Optional[np.ndarray]) -> Tuple[List[Tuple[int, int]], float]:
+    """
+    Return (previous, current) pairs inside the 99 % gate, best first, each landmark once.
+
+    :param chi2: the pairs' chi2, shape (P, C), or None (no pairs)
+    :return: (the pairs, the sum of their chi2)
+    """
+    if chi2 is None:
+        return [], 0.0
+    pairs = np.argwhere(chi2 <= CHI2_2DOF_99)
+    values = chi2[pairs[:, 0], pairs[:, 1]]
+    order = np.argsort(values, kind='stable')
+    taken_p, taken_c, out, total = set(), set(), [], 0.0
+    for (p, c), value in zip(pairs[order].tolist(), values[order].tolist()):
         if p not in taken_p and c not in taken_c:
-            taken_p.add(int(p))
-            taken_c.add(int(c))
-            out.append((int(p), int(c)))
-    return out
+            taken_p.add(p)
+            taken_c.add(c)
+            out.append((p, c))
+            total += value
+    return out, total
+
+
+def _associate(previous: Landmarks, current: Landmarks, step: np.ndarray, search: bool):
+    """Return :func:`associate`'s corner and line pairs and the sum of their chi2."""
+    steps = np.asarray(step, dtype=float)[None]
+    corners, corner_chi2 = _one_to_one(
+        _corner_chi2(previous, current, steps, search)[0]
+        if len(previous.corner_xy) and len(current.corner_xy) else None)
+    lines, line_chi2 = _one_to_one(_line_chi2(previous, current, steps, search)[0]
+                                   if len(previous.line) and len(current.line) else None)
+    return corners, lines, corner_chi2 + line_chi2
 
 
 def associate(previous: Landmarks, current: Landmarks, step: np.ndarray,
@@ -452,12 +528,70 @@ def associate(previous: Landmarks, current: Landmarks, step: np.ndarray,
     :param search: widen the gate by the search's slack (a hypothesis, not yet a fit)
     :return: (corner pairs, line pairs), each a list of (previous index, current index)
     """
-    steps = np.asarray(step, dtype=float)[None]
-    corners = (_one_to_one(_corner_chi2(previous, current, steps, search)[0], CHI2_2DOF_99)
-               if len(previous.corner_xy) and len(current.corner_xy) else [])
-    lines = (_one_to_one(_line_chi2(previous, current, steps, search)[0], CHI2_2DOF_99)
-             if len(previous.line) and len(current.line) else [])
+    corners, lines, _ = _associate(previous, current, step, search)
     return corners, lines
+
+
+@dataclass(frozen=True)
+class _Pairs:
+    """
+    The associated landmarks' values, gathered once for a fit, each with its covariance.
+
+    Corners: p of the previous scan, q of the current one, shape (Kc, 2); lines: (angle rad,
+    radius m) of the previous and of the current scan, shape (Kl, 2).
+    """
+
+    corner_p: np.ndarray
+    corner_p_cov: np.ndarray
+    corner_q: np.ndarray
+    corner_q_cov: np.ndarray
+    line_p: np.ndarray
+    line_p_cov: np.ndarray
+    line_c: np.ndarray
+    line_c_cov: np.ndarray
+
+
+def _gather(previous: Landmarks, current: Landmarks, corners, lines) -> _Pairs:
+    """Return the values of the pairs (previous index, current index) for :func:`_residuals`."""
+    cp, cc = (np.array(corners, dtype=np.intp).reshape(-1, 2).T)
+    lp, lc = (np.array(lines, dtype=np.intp).reshape(-1, 2).T)
+    return _Pairs(previous.corner_xy[cp], previous.corner_cov[cp], current.corner_xy[cc],
+                  current.corner_cov[cc], previous.line[lp], previous.line_cov[lp],
+                  current.line[lc], current.line_cov[lc])
+
+
+def _residuals(pairs: _Pairs, step: np.ndarray):
+    """Return :func:`residuals` of gathered pairs."""
+    corners, lines = len(pairs.corner_p), len(pairs.line_p)
+    error = np.empty((corners + lines, 2))
+    jac = np.zeros((corners + lines, 2, 3))
+    cov = np.empty((corners + lines, 2, 2))
+    cos, sin = math.cos(step[2]), math.sin(step[2])
+    if corners:
+        q = pairs.corner_q
+        rot = rotation(step[2])
+        error[:corners] = pairs.corner_p - (q @ rot.T + step[:2])
+        jac[:corners, 0, 0] = jac[:corners, 1, 1] = -1.0
+        jac[:corners, 0, 2] = sin * q[:, 0] + cos * q[:, 1]
+        jac[:corners, 1, 2] = -cos * q[:, 0] + sin * q[:, 1]
+        cov[:corners] = pairs.corner_p_cov + rot @ pairs.corner_q_cov @ rot.T
+    if lines:
+        angle = pairs.line_c[:, 0] + step[2]
+        cos_n, sin_n = np.cos(angle), np.sin(angle)
+        lever = -step[0] * sin_n + step[1] * cos_n
+        error[corners:, 0] = wrap_angle(angle - pairs.line_p[:, 0])
+        error[corners:, 1] = (pairs.line_c[:, 1] + step[0] * cos_n + step[1] * sin_n
+                              - pairs.line_p[:, 1])
+        jac[corners:, 0, 2] = 1.0
+        jac[corners:, 1, 0] = cos_n
+        jac[corners:, 1, 1] = sin_n
+        jac[corners:, 1, 2] = lever
+        # The moved line's covariance J C J^T, J = [[1, 0], [lever, 1]] (see _line_chi2).
+        moved = np.zeros((lines, 2, 2))
+        moved[:, 0, 0] = moved[:, 1, 1] = 1.0
+        moved[:, 1, 0] = lever
+        cov[corners:] = pairs.line_p_cov + moved @ pairs.line_c_cov @ moved.transpose(0, 2, 1)
+    return error, jac, cov
 
 
 def residuals(previous: Landmarks, current: Landmarks, step: np.ndarray, corners, lines):
@@ -475,43 +609,16 @@ def residuals(previous: Landmarks, current: Landmarks, step: np.ndarray, corners
     :param lines: line pairs (previous, current)
     :return: (residuals (K, 2), Jacobians (K, 2, 3), covariances (K, 2, 2)), corners first
     """
-    step = np.asarray(step, dtype=float)
-    out_e, out_j, out_s = [], [], []
-    if corners:
-        p, c = np.array(corners).T
-        rot = rotation(step[2])
-        q = current.corner_xy[c]
-        out_e.append(previous.corner_xy[p] - (q @ rot.T + step[:2]))
-        jac = np.zeros((len(p), 2, 3))
-        jac[:, :, :2] = -np.eye(2)
-        jac[:, 0, 2] = math.sin(step[2]) * q[:, 0] + math.cos(step[2]) * q[:, 1]
-        jac[:, 1, 2] = -math.cos(step[2]) * q[:, 0] + math.sin(step[2]) * q[:, 1]
-        out_j.append(jac)
-        out_s.append(previous.corner_cov[p] + rot @ current.corner_cov[c] @ rot.T)
-    if lines:
-        p, c = np.array(lines).T
-        angle = current.line[c, 0] + step[2]
-        cos, sin = np.cos(angle), np.sin(angle)
-        lever = -step[0] * sin + step[1] * cos
-        out_e.append(np.column_stack([wrap_angle(angle - previous.line[p, 0]),
-                                      current.line[c, 1] + step[0] * cos + step[1] * sin
-                                      - previous.line[p, 1]]))
-        jac = np.zeros((len(p), 2, 3))
-        jac[:, 0, 2] = 1.0
-        jac[:, 1, 0] = cos
-        jac[:, 1, 1] = sin
-        jac[:, 1, 2] = lever
-        out_j.append(jac)
-        # The moved line's covariance J C J^T, J = [[1, 0], [lever, 1]] (see _line_errors).
-        moved = np.zeros((len(p), 2, 2))
-        moved[:, 0, 0] = 1.0
-        moved[:, 1, 0] = lever
-        moved[:, 1, 1] = 1.0
-        out_s.append(previous.line_cov[p] + moved @ current.line_cov[c]
-                     @ moved.transpose(0, 2, 1))
-    if not out_e:
-        return np.zeros((0, 2)), np.zeros((0, 2, 3)), np.zeros((0, 2, 2))
-    return np.concatenate(out_e), np.concatenate(out_j), np.concatenate(out_s)
+    return _residuals(_gather(previous, current, corners, lines),
+                      np.asarray(step, dtype=float))
+
+
+def _normal_equations(pairs: _Pairs, step: np.ndarray):
+    """Return the information J^T S^-1 J (3, 3), the gradient J^T S^-1 e (3,), e and S^-1."""
+    error, jac, cov = _residuals(pairs, step)
+    weight = _inverse_2x2(cov)
+    return (np.einsum('kia,kij,kjb->ab', jac, weight, jac),
+            np.einsum('kia,kij,kj->a', jac, weight, error), error, weight)
 
 
 def fit(previous: Landmarks, current: Landmarks, start: np.ndarray, corners, lines,
@@ -532,20 +639,16 @@ def fit(previous: Landmarks, current: Landmarks, start: np.ndarray, corners, lin
     :return: (step, the landmarks' information (3, 3) without the prior, chi2 of the landmarks)
     """
     step = np.asarray(start, dtype=float).copy()
+    pairs = _gather(previous, current, corners, lines)
     prior_information = np.linalg.inv(prior[1]) if prior is not None else np.zeros((3, 3))
-    information = np.zeros((3, 3))
     for _ in range(FIT_ITERATIONS):
-        error, jac, cov = residuals(previous, current, step, corners, lines)
-        weight = _inverse_2x2(cov)
-        information = np.einsum('kia,kij,kjb->ab', jac, weight, jac)
-        gradient = np.einsum('kia,kij,kj->a', jac, weight, error)
-        normal = information + prior_information
+        information, gradient, _, _ = _normal_equations(pairs, step)
         if prior is not None:
             difference = step - prior[0]
             difference[2] = float(wrap_angle(difference[2]))
             gradient = gradient + prior_information @ difference
         try:
-            update = -np.linalg.solve(normal, gradient)
+            update = -np.linalg.solve(information + prior_information, gradient)
         except np.linalg.LinAlgError:
             break
         if not np.isfinite(update).all():
@@ -554,39 +657,39 @@ def fit(previous: Landmarks, current: Landmarks, start: np.ndarray, corners, lin
         step[2] = float(wrap_angle(step[2]))
         if np.abs(update).max() < 1e-6:
             break
-    error, jac, cov = residuals(previous, current, step, corners, lines)
-    weight = _inverse_2x2(cov)
-    information = np.einsum('kia,kij,kjb->ab', jac, weight, jac)
-    chi2 = float(np.einsum('ki,kij,kj->', error, weight, error))
-    return step, information, chi2
-
-
-def _prune(previous: Landmarks, current: Landmarks, step: np.ndarray, corners, lines):
-    """Return the pairs whose own residual lies inside the 99 % gate at the step."""
-    error, _, cov = residuals(previous, current, step, corners, lines)
-    chi2 = np.einsum('ki,kij,kj->k', error, _inverse_2x2(cov), error)
-    inside = chi2 <= CHI2_2DOF_99
-    return ([pair for pair, keep in zip(corners, inside[:len(corners)]) if keep],
-            [pair for pair, keep in zip(lines, inside[len(corners):]) if keep])
+    information, _, error, weight = _normal_equations(pairs, step)
+    return step, information, float(np.einsum('ki,kij,kj->', error, weight, error))
 
 
 def _chi2(previous: Landmarks, current: Landmarks, step: np.ndarray, corners, lines) -> float:
     """Return the chi-square of the pairs' residuals at a step."""
-    error, _, cov = residuals(previous, current, step, corners, lines)
-    return float(np.einsum('ki,kij,kj->', error, _inverse_2x2(cov), error))
+    _, _, error, weight = _normal_equations(_gather(previous, current, corners, lines),
+                                            np.asarray(step, dtype=float))
+    return float(np.einsum('ki,kij,kj->', error, weight, error))
 
 
-def _refine(previous: Landmarks, current: Landmarks, start: np.ndarray):
-    """Return a hypothesis refined: associated, fitted, associated again and pruned (twice)."""
+def _refine(previous: Landmarks, current: Landmarks, start: np.ndarray, chi2s, index: int):
+    """
+    Return a hypothesis refined: associated, fitted and associated again (twice), and the chi2.
+
+    The first association is in the search's gate, whose chi2 the scoring computed for every
+    hypothesis (``chi2s`` of :func:`_search_chi2`, ``index`` the start's). The pairs each later
+    association returns lie inside the unwidened gate at the step of that association: no pair
+    is left to prune, and their chi2 is the sum the association took.
+    """
     step = np.asarray(start, dtype=float)
-    corners, lines = associate(previous, current, step, True)
+    corners, _ = _one_to_one(None if chi2s[0] is None else chi2s[0][index])
+    lines, _ = _one_to_one(None if chi2s[1] is None else chi2s[1][index])
+    chi2 = math.nan
     for _ in range(2):
         if len(corners) + len(lines) < 2:
             break
         step, _, _ = fit(previous, current, step, corners, lines)
-        corners, lines = associate(previous, current, step)
-        corners, lines = _prune(previous, current, step, corners, lines)
-    return step, (corners, lines)
+        corners, lines, chi2 = _associate(previous, current, step, False)
+    if math.isnan(chi2):
+        # Not fitted: the pairs of the widened gate, their chi2 in the unwidened one.
+        chi2 = _chi2(previous, current, step, corners, lines)
+    return step, (corners, lines), chi2
 
 
 def is_degenerate(information: np.ndarray, config: OdometryConfig) -> bool:
@@ -628,20 +731,23 @@ def estimate_step(previous: Landmarks, current: Landmarks, prior_step: np.ndarra
     landmarks_cur = len(current.corner_xy) + len(current.line)
     if min(landmarks_prev, landmarks_cur) < 2:
         return StepEstimate(prior_step.copy(), prior_covariance.copy(), 'prior')
-    steps = np.concatenate([corner_hypotheses(previous, current),
-                            line_hypotheses(previous, current)])
+    search_prev, search_cur = _best_known(previous), _best_known(current)
+    steps = np.concatenate([corner_hypotheses(search_prev, search_cur),
+                            line_hypotheses(search_prev, search_cur)])
     steps = steps[np.hypot(steps[:, 0], steps[:, 1]) <= config.max_step_m]
     if len(steps) > config.max_hypotheses:
         rng = np.random.default_rng(config.seed)
         steps = steps[rng.choice(len(steps), config.max_hypotheses, replace=False)]
     steps = np.concatenate([prior_step[None], np.zeros((1, 3)), steps])
-    scores = score_hypotheses(previous, current, steps)
+    chi2s = _search_chi2(previous, current, steps)
+    scores = score_hypotheses(chi2s, len(steps))
     best_count, best_chi2 = -1, math.inf
     step, corners, lines = prior_step, [], []
     # The best few hypotheses are each refined: a hypothesis from a short baseline can lie
     # outside the gate of landmarks that a fit from it brings in.
     starts: List[np.ndarray] = []
-    for start in steps[np.argsort(-scores, kind='stable')]:
+    for index in np.argsort(-scores, kind='stable'):
+        start = steps[index]
         if len(starts) == REFINED_HYPOTHESES:
             break
         # Hypotheses of one motion from different pairs: refining one of them is enough.
@@ -650,14 +756,14 @@ def estimate_step(previous: Landmarks, current: Landmarks, prior_step: np.ndarra
                for other in starts):
             continue
         starts.append(start)
-        refined, pairs = _refine(previous, current, start)
+        refined, pairs, fit_chi2 = _refine(previous, current, start, chi2s, index)
         count = len(pairs[0]) + len(pairs[1]) if math.hypot(
             refined[0], refined[1]) <= config.max_step_m else 0
         # Equal support (a symmetric room): the motion the prior expects, then the better fit.
         away = refined - prior_step
         away[2] = float(wrap_angle(away[2]))
-        chi2 = (_chi2(previous, current, refined, *pairs)
-                + float(away @ np.linalg.solve(prior_covariance, away))) if count else math.inf
+        chi2 = (fit_chi2 + float(away @ np.linalg.solve(prior_covariance, away))
+                if count else math.inf)
         if count > best_count or (count == best_count and chi2 < best_chi2):
             best_count, best_chi2 = count, chi2
             step, (corners, lines) = refined, pairs

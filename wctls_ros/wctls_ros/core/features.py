@@ -88,7 +88,7 @@ class Corner:
 _COLUMNS: Dict[type, Dict[str, Tuple[np.dtype, Tuple[int, ...]]]] = {}
 
 
-def _columns(table: Any) -> Dict[str, Tuple[np.dtype, Tuple[int, ...]]]:
+def _columns(table: Type['_Columns']) -> Dict[str, Tuple[np.dtype, Tuple[int, ...]]]:
     """Return each field's dtype and the shape of one row, as the field table declares them."""
     if table not in _COLUMNS:
         declared, columns = get_type_hints(table, include_extras=True), {}
@@ -109,10 +109,9 @@ class _Columns:
     Each field is declared with its array type (``FloatArray``, ``IndexArray``, ``FlagArray``)
     and the shape of one feature's row: ``Annotated[FloatArray, ()]`` is a number per feature,
     shape (n,), ``Annotated[FloatArray, (2, 2)]`` shape (n, 2, 2). From these declarations come
-    the sets with no or some features
-    (:meth:`empty`, :meth:`filled`), the selection of rows (:meth:`select`), the check of a
-    set's arrays (:meth:`problems`) and the compiled core's record of the same fields
-    (:mod:`.records`).
+    the sets with no or some features (:meth:`empty`, :meth:`filled`), the selection of rows
+    (:meth:`select`), the check of a set's arrays (:meth:`problems`) and the compiled core's
+    record of the same fields (:mod:`.records`).
     """
 
     __dataclass_fields__: ClassVar[Dict[str, Any]]

@@ -29,7 +29,12 @@ PerCorner = TypeVar('PerCorner')
 
 
 def _arrays_of(name: str, table: Any) -> Any:
-    """Return a named tuple of the fields of a field table, in their order."""
+    """
+    Return a named tuple of the fields of a field table, in their order.
+
+    A type checker cannot read the fields of a named tuple made from a table; nothing typed
+    reads these (the compiled kernels are not).
+    """
     return collections.namedtuple(name, table.__dataclass_fields__, module=__name__)
 
 

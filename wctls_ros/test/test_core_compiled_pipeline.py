@@ -21,9 +21,9 @@ import pytest
 from wctls_lab.evaluation.scans import load_json_scans, load_scans
 from wctls_lab.simulation import load_floor_plan, NoiseModel, simulate_recording
 from wctls_lab.simulation.adversarial import peeling_wall
-from wctls_ros.core import CornerSet, FeatureConfig, METHODS, numpy_core, SegmentSet
+from wctls_ros.core import FeatureConfig, METHODS, numpy_core
 # The compiled pipeline itself, whatever wctls_ros.core.runtime would choose.
-from wctls_ros.core.numba_core.pipeline import _no_corners, _no_segments, extract_features
+from wctls_ros.core.numba_core.pipeline import extract_features
 
 # One of the suite's slowest modules: make test-fast leaves it out.
 pytestmark = pytest.mark.slow
@@ -91,7 +91,7 @@ def real_scans():
 
 
 def assert_same(fast, reference, where):
-    """Assert equal features: integers and flags exactly, values within RELATIVE."""
+    """Assert equal features (integers and flags exactly, values within RELATIVE), as declared."""
     assert fast.work_limited == reference.work_limited, where
     assert fast.noise_implausible == reference.noise_implausible, where
     assert fast.implausible_features == reference.implausible_features, where
@@ -100,6 +100,9 @@ def assert_same(fast, reference, where):
             <= RELATIVE * reference.range_sigma_m), where
     for group in ('segments', 'corners'):
         ours, theirs = getattr(fast, group), getattr(reference, group)
+        # Each field's dtype and row shape as its table declares, every value finite.
+        assert not ours.problems() and not theirs.problems(), (where, group, ours.problems(),
+                                                               theirs.problems())
         for name in theirs.__dataclass_fields__:
             a, b = getattr(ours, name), getattr(theirs, name)
             assert a.shape == b.shape, (where, group, name, a.shape, b.shape)
@@ -148,12 +151,3 @@ def test_the_comparison_sees_a_difference_of_a_billionth():
     nudged = replace(reference.corners, xy_m=reference.corners.xy_m * (1.0 + 3.0 * RELATIVE))
     with pytest.raises(AssertionError):
         assert_same(replace(reference, corners=nudged), reference, 'nudged')
-
-
-def test_a_scan_without_segments_has_the_shapes_of_the_empty_sets():
-    # The compiled pipeline writes its empty arrays itself: they are the public sets' own.
-    for found, empty in ((_no_segments(), SegmentSet.empty()), (_no_corners(), CornerSet.empty())):
-        assert found._fields == tuple(empty.__dataclass_fields__)
-        for name in found._fields:
-            assert getattr(found, name).shape == getattr(empty, name).shape, name
-            assert getattr(found, name).dtype == getattr(empty, name).dtype, name

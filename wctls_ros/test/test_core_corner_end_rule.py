@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 from wctls_ros.core import SegmentSet
 from wctls_ros.core.numpy_core import corners as numpy_corners
-from wctls_ros.core.records import AlongWall, CornerEndRule, EndWindow, Noise, WallAtCorner, Walls
+from wctls_ros.core.records import (AlongWall, CornerEndRule, EndWindow, Noise, SegmentArrays,
+                                    WallAtCorner)
 
 compiled = pytest.importorskip('wctls_ros.core.numba_core.corners')
 
@@ -71,19 +72,13 @@ def test_a_wall_at_its_corner_points_inward_with_the_corners_spread_and_the_beam
     angle, radius = np.array([math.pi / 2, 0.0]), np.array([1.0, 1.0])
     start, end = np.array([[-1.0, 1.0], [1.0, 3.0]]), np.array([[0.8, 1.0], [1.0, 1.2]])
     covariance = np.diag([0.02 ** 2, 0.01 ** 2, 0.0])
+    walls = SegmentSet.filled(2, angle_rad=angle, radius_m=radius, start_xy_m=start,
+                              end_xy_m=end)                   # all wall_at_corner reads
     if core == 'numba':
-        two = np.zeros(2, np.intp)
-        walls = Walls(angle, radius, np.zeros((2, 2, 2)), np.zeros((2, 3)), np.zeros((2, 3, 3)),
-                      np.zeros((2, 3)), start, end, two, two, two, np.zeros(2))
-
         def at(wall, corner):
-            return compiled.wall_at_corner(walls, wall, *corner, covariance, 0.01, RULE)
+            return compiled.wall_at_corner(SegmentArrays(**vars(walls)), wall, *corner,
+                                           covariance, 0.01, RULE)
     else:
-        two = np.zeros(2, np.intp)
-        walls = SegmentSet(angle, radius, np.zeros((2, 2, 2)), np.zeros((2, 3)),
-                           np.zeros((2, 3, 3)), np.zeros((2, 3)), start, end, two, two, two,
-                           np.zeros(2))
-
         def at(wall, corner):
             found = numpy_corners.wall_at_corner(walls, np.array([wall]), np.array([corner]),
                                                  covariance[None], 0.01, RULE)

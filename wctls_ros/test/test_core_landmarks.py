@@ -24,11 +24,7 @@ def segments_with_angle_sigmas(sigmas_rad) -> SegmentSet:
     covariance[:, 0, 0] = np.square(sigmas_rad)
     covariance[:, 1, 1] = 1e-4
     covariance[:, 0, 1] = covariance[:, 1, 0] = 0.5 * np.asarray(sigmas_rad) * 1e-2
-    empty = SegmentSet.empty()
-    return SegmentSet(np.zeros(count), np.ones(count), covariance, np.zeros((count, 3)),
-                      np.zeros((count, 3, 3)), np.zeros((count, 3)), np.zeros((count, 2)),
-                      np.ones((count, 2)), np.arange(count), np.arange(count) + 9,
-                      np.full(count, 10), np.ones(count)) if count else empty
+    return SegmentSet.filled(count, covariance=covariance)     # all angle_sigma_rad reads
 
 
 def test_the_rule_keeps_the_segments_within_the_angle_bound():

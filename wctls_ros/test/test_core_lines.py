@@ -7,11 +7,12 @@ import math
 
 import numpy as np
 import pytest
-from wctls_ros.core import find_corners, fit_lines, intersect, METHODS, nees, segment_returns
+from wctls_ros.core import (find_corners, fit_lines, intersect, METHODS, nees, segment_returns,
+                            SegmentSet)
 from wctls_ros.core.numba_core import corners as compiled_corners
 from wctls_ros.core.numba_core.lines import normal_form, utls, wctls, wtls
 from wctls_ros.core.numpy_core import corners as numpy_corners
-from wctls_ros.core.records import Walls
+from wctls_ros.core.records import SegmentArrays
 
 RANGE_SIGMA = 0.05
 BEARING_SIGMA = math.radians(0.391)
@@ -197,10 +198,9 @@ def test_corner_covariance_matches_finite_differences(core):
     inputs[:3, :3], inputs[3:6, 3:6] = fits.line_covariance
     inputs[6, 6] = common_sigma ** 2
     numeric = jacobian @ inputs @ jacobian.T
-    positions, unread = np.zeros(2, np.intp), np.zeros((2, 2))
-    walls = Walls(fits.angle_rad, fits.radius_m, fits.normal_covariance, fits.line,
-                  fits.line_covariance, fits.line_offset_jacobian, unread, unread, positions,
-                  positions, positions, np.zeros(2))
+    walls = SegmentArrays(**vars(SegmentSet.filled(
+        2, line=fits.line, line_covariance=fits.line_covariance,
+        line_offset_jacobian=fits.line_offset_jacobian)))     # all corner_covariance reads
     analytic = core.corner_covariance(walls, np.array([0]), np.array([1]), common_sigma)
     assert analytic.shape == (1, 3, 3)
     assert np.abs(numeric - analytic[0]).max() / np.abs(analytic[0]).max() < 1e-5

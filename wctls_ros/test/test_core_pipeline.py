@@ -4,6 +4,7 @@
 """The per-scan pipeline: scan conversion, segmentation, corners, hostile input, properties."""
 
 import collections
+from dataclasses import fields, replace
 import math
 import time
 
@@ -13,8 +14,8 @@ import pytest
 from wctls_lab.simulation import (floor_plan_from_dict, full_turn_bearings, NOISELESS,
                                   NoiseModel, simulate_ranges)
 from wctls_lab.simulation.adversarial import peeling_wall
-from wctls_ros.core import (extract_features, FeatureConfig, fit_lines, nees, scan_to_points,
-                            ScanError, segment_returns)
+from wctls_ros.core import (CornerSet, extract_features, FeatureConfig, fit_lines, nees,
+                            scan_to_points, ScanError, Segment, segment_returns, SegmentSet)
 from wctls_ros.core.records import BeamGrid, Lines, Noise, Returns, Segments
 
 ROOM = {'name': 'room', 'polylines': [
@@ -111,6 +112,30 @@ def test_corner_fields_are_consistent():
     assert sum(concave) == 4 and len(concave) == 5
     assert all(s.radius_m >= 0 for s in segments)
     assert [s.first_index for s in segments] == sorted(s.first_index for s in segments)
+
+
+def test_the_sets_hold_what_their_field_tables_declare_and_say_where_not():
+    ranges, angle_min, increment, _ = room_scan()
+    segments = extract_features(ranges, angle_min, increment, SMALL_NOISE_CONFIG).segments
+    # A segment's row has the table's fields in its order, numbers as Python numbers.
+    assert [field.name for field in fields(Segment)] == list(segments.__dataclass_fields__)
+    row = segments[1]
+    assert type(row.angle_rad) is float and type(row.num_points) is int
+    assert row.covariance.shape == (2, 2) and row.line.shape == (3,)
+    assert not segments.problems() and not SegmentSet.empty().problems()
+    assert not CornerSet.empty().problems() and len(SegmentSet.empty()) == 0
+    broken = replace(segments, covariance=segments.covariance[:, :1],
+                     first_index=segments.first_index.astype(np.int32),
+                     num_points=segments.num_points[1:],
+                     residual_chi2_dof=np.where(np.arange(len(segments)) == 2, np.inf,
+                                                segments.residual_chi2_dof))
+    assert [problem.split(':')[0] for problem in broken.problems()] == [
+        'covariance', 'first_index', 'num_points', 'residual_chi2_dof']
+    # Rows selected and rows made up keep the table's dtypes and shapes.
+    assert not segments.select([2, 0]).problems()
+    assert SegmentSet.filled(3, radius_m=np.ones(3)).problems() == [
+        f'{name}: not finite' for name, value in vars(SegmentSet.empty()).items()
+        if value.dtype == float and name != 'radius_m']
 
 
 def test_a_wall_crossing_the_seam_is_one_segment():

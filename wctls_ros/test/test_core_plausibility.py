@@ -18,7 +18,7 @@ from wctls_lab.simulation import load_floor_plan, NoiseModel, simulate_recording
 from wctls_ros.core import FeatureConfig
 from wctls_ros.core.numba_core.pipeline import extract_features as compiled
 from wctls_ros.core.numpy_core.pipeline import extract_features as in_numpy
-from wctls_ros.core.plausibility import (corner_sigma_m, MAX_SIGMA_RATIO, plausible,
+from wctls_ros.core.plausibility import (corner_sigma_m, kept, MAX_SIGMA_RATIO, plausible,
                                          segment_sigma_m)
 from wctls_ros.core.records import CornerArrays, SegmentArrays
 
@@ -75,20 +75,23 @@ def _beyond_the_bound(features):
                    corners=replace(features.corners, covariance=corner_covariance))
 
 
-def test_the_compiled_bounds_drop_and_renumber_as_the_numpy_ones():
+def test_the_compiled_bounds_keep_what_the_numpy_ones_keep():
     pipeline = pytest.importorskip('wctls_ros.core.numba_core.pipeline')
     plausibility = pytest.importorskip('wctls_ros.core.numba_core.plausibility')
     features = in_numpy(*_room_scan(), GENERIC)
     for case in (features, _beyond_the_bound(features)):
         expected = plausible(case, GENERIC, features.range_sigma_m)
-        segments, corners, dropped = plausibility.plausible_arrays(
-            SegmentArrays(*(getattr(case.segments, name) for name in SegmentArrays._fields)),
-            CornerArrays(*(getattr(case.corners, name) for name in CornerArrays._fields)),
+        keep_segment, keep_corner = plausibility.plausible(
+            SegmentArrays(**vars(case.segments)), CornerArrays(**vars(case.corners)),
             features.range_sigma_m, pipeline._settings(GENERIC))
-        assert dropped == expected.implausible_features
-        for found, wanted in ((segments, expected.segments), (corners, expected.corners)):
-            for name in found._fields:
-                assert np.array_equal(getattr(found, name), getattr(wanted, name)), name
+        if keep_segment is None:                # all pass
+            assert keep_corner is None and expected.implausible_features == 0
+            continue
+        found = kept(case, keep_segment, keep_corner)
+        assert found.implausible_features == expected.implausible_features
+        for group in ('segments', 'corners'):
+            for name, wanted in vars(getattr(expected, group)).items():
+                assert np.array_equal(getattr(getattr(found, group), name), wanted), name
     assert expected.implausible_features >= 2
 
 

@@ -5,11 +5,10 @@
 The steps both cores have by the same name take the same arguments, so a rule reads alike.
 
 The numpy core batches over segments or corners where the compiled one loops, but a step that
-hands on records (Segments, Lines, Noise, Walls, CornerCandidates, the corner end rule's) takes
-them by the same names in the same order in both, and a change to one reads the same in the
-other. The steps listed are those that agree today; a step added to both belongs here. Not yet:
-walls_end_at, whose walls in the numpy core (a SegmentSet) carry beam indices and so take their
-positions apart, and wall_at_corner, whose corners the numpy core takes batched as (x, y) rows.
+hands on records (Segments, Lines, Noise, the walls, CornerCandidates, the corner end rule's)
+takes them by the same names in the same order in both, and a change to one reads the same in
+the other. The steps listed are those that agree today; a step added to both belongs here. Not
+yet: wall_at_corner, whose corners the numpy core takes batched as (x, y) rows.
 """
 
 import inspect
@@ -27,7 +26,7 @@ STEPS = [
     (numpy_corners, compiled_corners, (
         'corner_candidates', 'corner_covariance', 'end_window', 'along_wall', 'corner_zone',
         'without_object_in_front', 'reaches', 'goes_on', 'blocked', 'short_of_corner',
-        'seen_through')),
+        'seen_through', 'walls_end_at')),
 ]
 SAME_ARGUMENTS = [(numpy_module, compiled_module, name)
                   for numpy_module, compiled_module, names in STEPS for name in names]

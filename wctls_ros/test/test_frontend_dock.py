@@ -92,11 +92,8 @@ def face_lines(apex, yaw, shape):
 
 def two_segments(lines, covariances):
     """Return a SegmentSet of two segments with the given lines (the fit reads no more)."""
-    empty = SegmentSet.empty()
-    fields = {name: np.zeros((2,) + getattr(empty, name).shape[1:],
-                             getattr(empty, name).dtype) for name in empty.__dataclass_fields__}
-    fields.update(angle_rad=lines[:, 0], radius_m=lines[:, 1], covariance=covariances)
-    return SegmentSet(**fields)
+    return SegmentSet.filled(2, angle_rad=lines[:, 0], radius_m=lines[:, 1],
+                             covariance=covariances)
 
 
 def test_the_apex_fit_is_exact_and_its_covariance_that_of_finite_differences():

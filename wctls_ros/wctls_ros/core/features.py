@@ -11,8 +11,18 @@ to convert to messages) and read one at a time as small records (``Segment``, ``
 
 from dataclasses import dataclass
 import math
+from typing import (Annotated, Any, ClassVar, Dict, get_args, get_type_hints, List, Tuple, Type,
+                    TypeVar)
 
 import numpy as np
+from numpy.typing import NDArray
+
+# The array types of the field tables, and the dtype of each.
+FloatArray = NDArray[np.float64]
+IndexArray = NDArray[np.intp]
+FlagArray = NDArray[np.bool_]
+_DTYPES = {FloatArray: np.dtype(np.float64), IndexArray: np.dtype(np.intp),
+           FlagArray: np.dtype(np.bool_)}
 
 
 @dataclass(frozen=True)
@@ -20,35 +30,18 @@ class Segment:
     """
     One straight segment: the line x cos(angle) + y sin(angle) = radius and its extent.
 
-    :ivar angle_rad: normal angle, from the sensor towards the line, rad in (-pi, pi]
-    :ivar radius_m: distance of the line from the sensor, m (>= 0)
-    :ivar covariance: covariance of (angle, radius), shape (2, 2): rad^2, rad m, m^2 (all noise
-        terms of the configuration, the common-mode range offset included)
-    :ivar line: (a, b, c) of a x + b y + c = 0 as the method defines them, shape (3,)
-    :ivar line_covariance: covariance of (a, b, c) from the independent per-return noise,
-        shape (3, 3)
-    :ivar line_offset_jacobian: d(a, b, c) / d(range offset common to every return of the
-        scan), shape (3,), per m (the common-mode part of the covariance is sigma^2 g g^T)
-    :ivar start_xy_m: first return projected on the line, shape (2,), m
-    :ivar end_xy_m: last return projected on the line, shape (2,), m
-    :ivar first_index: beam index of the first return in the scan's ranges
-    :ivar last_index: beam index of the last return (smaller than first_index on a segment
-        that crosses the seam of a full turn)
-    :ivar num_points: number of returns fitted
-    :ivar residual_chi2_dof: sum of the squared residuals from the line, each over the
-        variance of the return across the line, per degree of freedom (num_points - 2): about 1
-        when the wall is straight and the noise model right, above it when the wall bows or the
-        noise is larger than modelled
+    A row of a :class:`SegmentSet`, whose field table says what each field is, in what unit:
+    a number, or an array of the row's shape there.
     """
 
     angle_rad: float
     radius_m: float
-    covariance: np.ndarray
-    line: np.ndarray
-    line_covariance: np.ndarray
-    line_offset_jacobian: np.ndarray
-    start_xy_m: np.ndarray
-    end_xy_m: np.ndarray
+    covariance: FloatArray
+    line: FloatArray
+    line_covariance: FloatArray
+    line_offset_jacobian: FloatArray
+    start_xy_m: FloatArray
+    end_xy_m: FloatArray
     first_index: int
     last_index: int
     num_points: int
@@ -75,7 +68,7 @@ class Corner:
     x_m: float
     y_m: float
     yaw_rad: float
-    covariance: np.ndarray
+    covariance: FloatArray
     opening_angle_rad: float
     first_segment: int
     second_segment: int
@@ -92,66 +85,147 @@ class Corner:
         return self.covariance[:2, :2]
 
 
-class _Rows:
-    """Iteration over a struct of arrays one row (record) at a time."""
+_COLUMNS: Dict[type, Dict[str, Tuple[np.dtype, Tuple[int, ...]]]] = {}
+
+
+def _columns(table: Type['_Columns']) -> Dict[str, Tuple[np.dtype, Tuple[int, ...]]]:
+    """Return each field's dtype and the shape of one row, as the field table declares them."""
+    if table not in _COLUMNS:
+        declared, columns = get_type_hints(table, include_extras=True), {}
+        for name in table.__dataclass_fields__:
+            array, row_shape = get_args(declared[name])
+            columns[name] = _DTYPES[array], row_shape
+        _COLUMNS[table] = columns
+    return _COLUMNS[table]
+
+
+Table = TypeVar('Table', bound='_Columns')
+
+
+class _Columns:
+    """
+    A field table: arrays with one row per feature, the fields of a frozen dataclass.
+
+    Each field is declared with its array type (``FloatArray``, ``IndexArray``, ``FlagArray``)
+    and the shape of one feature's row: ``Annotated[FloatArray, ()]`` is a number per feature,
+    shape (n,), ``Annotated[FloatArray, (2, 2)]`` shape (n, 2, 2). From these declarations come
+    the sets with no or some features (:meth:`empty`, :meth:`filled`), the selection of rows
+    (:meth:`select`), the check of a set's arrays (:meth:`problems`) and the compiled core's
+    record of the same fields (:mod:`.records`).
+    """
+
+    __dataclass_fields__: ClassVar[Dict[str, Any]]
+    # Whether every float of every row is finite (the pipelines drop a feature that is not).
+    all_finite: ClassVar[bool] = False
+
+    def __len__(self) -> int:
+        return len(getattr(self, next(iter(self.__dataclass_fields__))))
+
+    def select(self: Table, keep: np.ndarray) -> Table:
+        """
+        Return the rows where ``keep`` selects (a boolean or index array).
+
+        :param keep: selection over the rows
+        :return: the selected rows
+        """
+        return type(self)(*(getattr(self, name)[keep] for name in self.__dataclass_fields__))
+
+    @classmethod
+    def filled(cls: Type[Table], count: int, **given: np.ndarray) -> Table:
+        """
+        Return ``count`` rows with the given fields, the others NaN (0 or False, not floats).
+
+        :param count: how many rows
+        :param given: fields by name, each with ``count`` rows
+        :return: the rows
+        """
+        blank = {name: np.full((count,) + row_shape, np.nan if dtype.kind == 'f' else 0, dtype)
+                 for name, (dtype, row_shape) in _columns(cls).items()}
+        return cls(**{**blank, **given})
+
+    @classmethod
+    def empty(cls: Type[Table]) -> Table:
+        """
+        Return a set without rows.
+
+        :return: the empty set
+        """
+        return cls.filled(0)
+
+    def problems(self) -> List[str]:
+        """
+        Return where the arrays disagree with the field table, one line each (none: they agree).
+
+        A field must have the declared dtype and as many rows as the first field, each of the
+        declared shape; with ``all_finite``, every float must be finite.
+
+        :return: the disagreements
+        """
+        found, count = [], len(self)
+        for name, (dtype, row_shape) in _columns(type(self)).items():
+            value = getattr(self, name)
+            if value.dtype != dtype or value.shape != (count,) + row_shape:
+                found.append(f'{name}: {value.dtype} {value.shape}, not {dtype} '
+                             f'{(count,) + row_shape}')
+            elif self.all_finite and dtype.kind == 'f' and not np.isfinite(value).all():
+                found.append(f'{name}: not finite')
+        return found
+
+
+class _Rows(_Columns):
+    """A field table read one row (record) at a time."""
 
     def __iter__(self):
         return (self[i] for i in range(len(self)))
 
 
+def _number(entry):
+    """Return a row's entry of a field, a Python number where it is one number."""
+    return entry.item() if entry.ndim == 0 else entry
+
+
 @dataclass(frozen=True)
 class SegmentSet(_Rows):
     """
-    The segments of one scan as arrays, one row per segment (fields as in :class:`Segment`).
+    The segments of one scan as arrays, one row per segment (a :class:`Segment`).
 
-    Shapes: angle_rad, radius_m, first_index, last_index, num_points, residual_chi2_dof (S,);
-    covariance (S, 2, 2); line, line_offset_jacobian (S, 3); line_covariance (S, 3, 3);
-    start_xy_m, end_xy_m (S, 2).
+    :ivar angle_rad: normal angle, from the sensor towards the line, rad in (-pi, pi]
+    :ivar radius_m: distance of the line from the sensor, m (>= 0)
+    :ivar covariance: covariance of (angle, radius): rad^2, rad m, m^2 (all noise terms of the
+        configuration, the common-mode range offset included)
+    :ivar line: (a, b, c) of a x + b y + c = 0 as the method defines them
+    :ivar line_covariance: covariance of (a, b, c) from the independent per-return noise
+    :ivar line_offset_jacobian: d(a, b, c) / d(range offset common to every return of the
+        scan), per m (the common-mode part of the covariance is sigma^2 g g^T)
+    :ivar start_xy_m: first return projected on the line, m
+    :ivar end_xy_m: last return projected on the line, m
+    :ivar first_index: beam index of the first return in the scan's ranges
+    :ivar last_index: beam index of the last return (smaller than first_index on a segment
+        that crosses the seam of a full turn)
+    :ivar num_points: number of returns fitted
+    :ivar residual_chi2_dof: sum of the squared residuals from the line, each over the
+        variance of the return across the line, per degree of freedom (num_points - 2): about 1
+        when the wall is straight and the noise model right, above it when the wall bows or the
+        noise is larger than modelled
     """
 
-    angle_rad: np.ndarray
-    radius_m: np.ndarray
-    covariance: np.ndarray
-    line: np.ndarray
-    line_covariance: np.ndarray
-    line_offset_jacobian: np.ndarray
-    start_xy_m: np.ndarray
-    end_xy_m: np.ndarray
-    first_index: np.ndarray
-    last_index: np.ndarray
-    num_points: np.ndarray
-    residual_chi2_dof: np.ndarray
+    all_finite = True
 
-    def __len__(self):
-        return len(self.angle_rad)
+    angle_rad: Annotated[FloatArray, ()]
+    radius_m: Annotated[FloatArray, ()]
+    covariance: Annotated[FloatArray, (2, 2)]
+    line: Annotated[FloatArray, (3,)]
+    line_covariance: Annotated[FloatArray, (3, 3)]
+    line_offset_jacobian: Annotated[FloatArray, (3,)]
+    start_xy_m: Annotated[FloatArray, (2,)]
+    end_xy_m: Annotated[FloatArray, (2,)]
+    first_index: Annotated[IndexArray, ()]
+    last_index: Annotated[IndexArray, ()]
+    num_points: Annotated[IndexArray, ()]
+    residual_chi2_dof: Annotated[FloatArray, ()]
 
     def __getitem__(self, i: int) -> Segment:
-        return Segment(float(self.angle_rad[i]), float(self.radius_m[i]), self.covariance[i],
-                       self.line[i], self.line_covariance[i], self.line_offset_jacobian[i],
-                       self.start_xy_m[i], self.end_xy_m[i], int(self.first_index[i]),
-                       int(self.last_index[i]), int(self.num_points[i]),
-                       float(self.residual_chi2_dof[i]))
-
-    def select(self, keep: np.ndarray) -> 'SegmentSet':
-        """
-        Return the segments where ``keep`` selects (a boolean or index array).
-
-        :param keep: selection over the segments
-        :return: the selected segments
-        """
-        return SegmentSet(*(getattr(self, name)[keep] for name in self.__dataclass_fields__))
-
-    @staticmethod
-    def empty() -> 'SegmentSet':
-        """
-        Return a set without segments.
-
-        :return: the empty set
-        """
-        return SegmentSet(np.zeros(0), np.zeros(0), np.zeros((0, 2, 2)), np.zeros((0, 3)),
-                          np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros((0, 2)),
-                          np.zeros((0, 2)), np.zeros(0, np.intp), np.zeros(0, np.intp),
-                          np.zeros(0, np.intp), np.zeros(0))
+        return Segment(*(_number(getattr(self, name)[i]) for name in self.__dataclass_fields__))
 
 
 @dataclass(frozen=True)
@@ -159,47 +233,25 @@ class CornerSet(_Rows):
     """
     The corners of one scan as arrays, one row per corner (fields as in :class:`Corner`).
 
-    Shapes: xy_m (C, 2); yaw_rad, opening_angle_rad, first_segment, second_segment (C,);
-    covariance (C, 3, 3) over (x, y, yaw); end_seen (C, 2), column 0 the first wall.
+    The field table of corners: xy_m is (x_m, y_m) and end_seen (first_end_seen,
+    second_end_seen) of a :class:`Corner`; covariance is over (x, y, yaw).
     """
 
-    xy_m: np.ndarray
-    yaw_rad: np.ndarray
-    covariance: np.ndarray
-    opening_angle_rad: np.ndarray
-    first_segment: np.ndarray
-    second_segment: np.ndarray
-    end_seen: np.ndarray
+    all_finite = True
 
-    def __len__(self):
-        return len(self.yaw_rad)
+    xy_m: Annotated[FloatArray, (2,)]
+    yaw_rad: Annotated[FloatArray, ()]
+    covariance: Annotated[FloatArray, (3, 3)]
+    opening_angle_rad: Annotated[FloatArray, ()]
+    first_segment: Annotated[IndexArray, ()]
+    second_segment: Annotated[IndexArray, ()]
+    end_seen: Annotated[FlagArray, (2,)]
 
     def __getitem__(self, i: int) -> Corner:
         return Corner(float(self.xy_m[i, 0]), float(self.xy_m[i, 1]), float(self.yaw_rad[i]),
                       self.covariance[i], float(self.opening_angle_rad[i]),
                       int(self.first_segment[i]), int(self.second_segment[i]),
                       bool(self.end_seen[i, 0]), bool(self.end_seen[i, 1]))
-
-    def select(self, keep: np.ndarray) -> 'CornerSet':
-        """
-        Return the corners where ``keep`` selects (a boolean or index array).
-
-        :param keep: selection over the corners
-        :return: the selected corners
-        """
-        return CornerSet(self.xy_m[keep], self.yaw_rad[keep], self.covariance[keep],
-                         self.opening_angle_rad[keep], self.first_segment[keep],
-                         self.second_segment[keep], self.end_seen[keep])
-
-    @staticmethod
-    def empty() -> 'CornerSet':
-        """
-        Return a set without corners.
-
-        :return: the empty set
-        """
-        return CornerSet(np.zeros((0, 2)), np.zeros(0), np.zeros((0, 3, 3)), np.zeros(0),
-                         np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros((0, 2), bool))
 
 
 @dataclass(frozen=True)
@@ -274,7 +326,7 @@ def segment_returns(rho, theta, offsets, counts, x=None, y=None) -> SegmentRetur
 
 
 @dataclass(frozen=True)
-class LineFits:
+class LineFits(_Columns):
     """
     Fitted lines of S segments, in the method's own form and in normal form.
 
@@ -288,21 +340,10 @@ class LineFits:
     :ivar normal_offset_jacobian: d(angle, radius) / d(common range offset), (S, 2): rad/m, m/m
     """
 
-    line: np.ndarray
-    line_covariance: np.ndarray
-    angle_rad: np.ndarray
-    radius_m: np.ndarray
-    normal_covariance: np.ndarray
-    line_offset_jacobian: np.ndarray
-    normal_offset_jacobian: np.ndarray
-
-    def select(self, keep: np.ndarray) -> 'LineFits':
-        """
-        Return the fits where ``keep`` selects (a boolean or index array over the segments).
-
-        :param keep: selection over the segments
-        :return: the selected fits
-        """
-        return LineFits(self.line[keep], self.line_covariance[keep], self.angle_rad[keep],
-                        self.radius_m[keep], self.normal_covariance[keep],
-                        self.line_offset_jacobian[keep], self.normal_offset_jacobian[keep])
+    line: Annotated[FloatArray, (3,)]
+    line_covariance: Annotated[FloatArray, (3, 3)]
+    angle_rad: Annotated[FloatArray, ()]
+    radius_m: Annotated[FloatArray, ()]
+    normal_covariance: Annotated[FloatArray, (2, 2)]
+    line_offset_jacobian: Annotated[FloatArray, (3,)]
+    normal_offset_jacobian: Annotated[FloatArray, (2,)]

@@ -116,13 +116,28 @@ def plausible(features: Features, config: FeatureConfig, range_sigma_m: float) -
                    & (corner_sigma_m(corners) <= MAX_SIGMA_RATIO * return_noise_m(
                        np.hypot(corners.xy_m[:, 0], corners.xy_m[:, 1]), config,
                        range_sigma_m)))
+    return kept(Features(features.method, segments, corners, features.work_limited,
+                         range_sigma_m), keep_segment, keep_corner)
+
+
+def kept(features: Features, keep_segment: np.ndarray, keep_corner: np.ndarray) -> Features:
+    """
+    Return the segments and corners that pass the bound, the others counted as dropped.
+
+    Both pipelines' last step (the compiled one's bounds are :mod:`.numba_core.plausibility`).
+
+    :param features: the features
+    :param keep_segment: which segments pass, shape (S,)
+    :param keep_corner: which corners pass (those of a dropped segment do not), shape (C,)
+    :return: the features that pass, ``implausible_features`` the number of the others
+    """
     dropped = int(np.count_nonzero(~keep_segment) + np.count_nonzero(~keep_corner))
-    if dropped:
-        # Corners name their walls by index: renumber them over the segments kept.
-        renumber = np.cumsum(keep_segment) - 1
-        corners = corners.select(keep_corner)
-        corners = replace(corners, first_segment=renumber[corners.first_segment],
-                          second_segment=renumber[corners.second_segment])
-        segments = segments.select(keep_segment)
-    return Features(features.method, segments, corners, features.work_limited, range_sigma_m,
-                    implausible_features=dropped)
+    if not dropped:
+        return features
+    # Corners name their walls by index: renumber them over the segments kept.
+    renumber = np.cumsum(keep_segment) - 1
+    corners = features.corners.select(keep_corner)
+    corners = replace(corners, first_segment=renumber[corners.first_segment],
+                      second_segment=renumber[corners.second_segment])
+    return replace(features, segments=features.segments.select(keep_segment), corners=corners,
+                   implausible_features=dropped)

@@ -11,17 +11,35 @@ that reads the record without a change to the calls in between. A record of arra
 references to them (no copy). The compiled core (:mod:`.numba_core`) passes them between its
 kernels; the numpy core's end trims (:mod:`.numpy_core.segmentation`), corner candidates and
 corner end rule (:mod:`.numpy_core.corners`) take the same records, the rule's fields arrays over
-all candidate corners at once where the compiled one has a number per corner. Plain Python
-classes: importing this module imports no numba.
+all candidate corners at once where the compiled one has a number per corner. The compiled
+core's segments and corners are the field tables of :class:`~.features.SegmentSet` and
+:class:`~.features.CornerSet` as named tuples (numba compiles no dataclass): the same fields in
+the same order. Plain Python classes: importing this module imports no numba.
 """
 
-from typing import Any, NamedTuple
+import collections
+from typing import Any, Generic, NamedTuple, TypeVar
 
-import numpy as np
+from .features import CornerSet, FlagArray, FloatArray, IndexArray, SegmentSet
 
 # A number of one corner in the compiled core, which takes the corners one at a time, and an
-# array of it over every corner in the numpy core's corner end rule.
-PerCorner = Any
+# array of it over every corner in the numpy core's corner end rule: float or FloatArray, int
+# or IndexArray.
+PerCorner = TypeVar('PerCorner')
+
+
+def _arrays_of(name: str, table: Any) -> Any:
+    """
+    Return a named tuple of the fields of a field table, in their order.
+
+    A type checker cannot read the fields of a named tuple made from a table; nothing typed
+    reads these (the compiled kernels are not).
+    """
+    return collections.namedtuple(name, table.__dataclass_fields__, module=__name__)
+
+
+SegmentArrays = _arrays_of('SegmentArrays', SegmentSet)
+CornerArrays = _arrays_of('CornerArrays', CornerSet)
 
 
 class Settings(NamedTuple):
@@ -76,11 +94,11 @@ class Returns(NamedTuple):
     :ivar y_m: its y, shape (n,), m
     """
 
-    beam_index: np.ndarray
-    range_m: np.ndarray
-    bearing_rad: np.ndarray
-    x_m: np.ndarray
-    y_m: np.ndarray
+    beam_index: IndexArray
+    range_m: FloatArray
+    bearing_rad: FloatArray
+    x_m: FloatArray
+    y_m: FloatArray
 
 
 class BeamGrid(NamedTuple):
@@ -106,9 +124,9 @@ class Segments(NamedTuple):
     :ivar chain: the chain (run between breakpoints) it lies on, shape (S,)
     """
 
-    start: np.ndarray
-    stop: np.ndarray
-    chain: np.ndarray
+    start: IndexArray
+    stop: IndexArray
+    chain: IndexArray
 
 
 class Lines(NamedTuple):
@@ -119,89 +137,8 @@ class Lines(NamedTuple):
     :ivar radius_m: radius, shape (S,), m
     """
 
-    angle_rad: np.ndarray
-    radius_m: np.ndarray
-
-
-class Walls(NamedTuple):
-    """
-    The fitted segments that are walls (the fields of a SegmentSet, at positions).
-
-    :ivar angle_rad: normal angle of each line, shape (S,), rad
-    :ivar radius_m: radius of each line, shape (S,), m
-    :ivar normal_covariance: covariance of (angle, radius), shape (S, 2, 2)
-    :ivar line: (a, b, c) in the method's form, shape (S, 3)
-    :ivar line_covariance: covariance of (a, b, c), shape (S, 3, 3)
-    :ivar line_offset_jacobian: d(a, b, c) / d(range offset common to the scan), (S, 3), per m
-    :ivar start_xy_m: first return projected on the line, shape (S, 2), m
-    :ivar end_xy_m: last return projected on the line, shape (S, 2), m
-    :ivar first_position: position of the first return in the circular order, shape (S,)
-    :ivar last_position: position of the last return, shape (S,)
-    :ivar num_points: returns fitted, shape (S,)
-    :ivar residual_chi2_dof: residual chi2 per degree of freedom of the fit, shape (S,)
-    """
-
-    angle_rad: np.ndarray
-    radius_m: np.ndarray
-    normal_covariance: np.ndarray
-    line: np.ndarray
-    line_covariance: np.ndarray
-    line_offset_jacobian: np.ndarray
-    start_xy_m: np.ndarray
-    end_xy_m: np.ndarray
-    first_position: np.ndarray
-    last_position: np.ndarray
-    num_points: np.ndarray
-    residual_chi2_dof: np.ndarray
-
-
-class SegmentArrays(NamedTuple):
-    """The arrays of a :class:`~wctls_ros.core.features.SegmentSet`, its fields in its order."""
-
-    angle_rad: np.ndarray
-    radius_m: np.ndarray
-    covariance: np.ndarray
-    line: np.ndarray
-    line_covariance: np.ndarray
-    line_offset_jacobian: np.ndarray
-    start_xy_m: np.ndarray
-    end_xy_m: np.ndarray
-    first_index: np.ndarray
-    last_index: np.ndarray
-    num_points: np.ndarray
-    residual_chi2_dof: np.ndarray
-
-
-class CornerArrays(NamedTuple):
-    """The arrays of a :class:`~wctls_ros.core.features.CornerSet`, its fields in its order."""
-
-    xy_m: np.ndarray
-    yaw_rad: np.ndarray
-    covariance: np.ndarray
-    opening_angle_rad: np.ndarray
-    first_segment: np.ndarray
-    second_segment: np.ndarray
-    end_seen: np.ndarray
-
-
-class ScanResult(NamedTuple):
-    """
-    What the compiled pipeline finds in one scan.
-
-    :ivar segments: the walls
-    :ivar corners: the corners between them
-    :ivar work_limited: whether the work bound stopped splitting or merging
-    :ivar range_sigma_m: the range noise the scan was processed with, m (NaN: too few returns)
-    :ivar noise_implausible: the range noise exceeded ``max_range_sigma_m``: no features
-    :ivar implausible_features: segments and corners left out by the plausibility bound
-    """
-
-    segments: SegmentArrays
-    corners: CornerArrays
-    work_limited: bool
-    range_sigma_m: float
-    noise_implausible: bool
-    implausible_features: int
+    angle_rad: FloatArray
+    radius_m: FloatArray
 
 
 class CornerCandidates(NamedTuple):
@@ -216,12 +153,12 @@ class CornerCandidates(NamedTuple):
     :ivar second_wall: the later wall, shape (C,)
     """
 
-    xy_m: np.ndarray
-    yaw_rad: np.ndarray
-    covariance: np.ndarray
-    opening_angle_rad: np.ndarray
-    first_wall: np.ndarray
-    second_wall: np.ndarray
+    xy_m: FloatArray
+    yaw_rad: FloatArray
+    covariance: FloatArray
+    opening_angle_rad: FloatArray
+    first_wall: IndexArray
+    second_wall: IndexArray
 
 
 class CornerEndRule(NamedTuple):
@@ -242,7 +179,7 @@ class CornerEndRule(NamedTuple):
     run_sigmas: float
 
 
-class EndWindow(NamedTuple):
+class EndWindow(NamedTuple, Generic[PerCorner]):
     """
     The returns the corner end rule looks at between two walls, in the circular order.
 
@@ -259,15 +196,15 @@ class EndWindow(NamedTuple):
         numpy core: per corner)
     """
 
-    x_m: np.ndarray
-    y_m: np.ndarray
-    sigma_m: np.ndarray
-    line_tolerance_m: np.ndarray
-    in_window: np.ndarray
+    x_m: FloatArray
+    y_m: FloatArray
+    sigma_m: FloatArray
+    line_tolerance_m: FloatArray
+    in_window: FlagArray
     between: PerCorner
 
 
-class WallAtCorner(NamedTuple):
+class WallAtCorner(NamedTuple, Generic[PerCorner]):
     """
     One wall of a corner, seen from the corner.
 
@@ -300,6 +237,6 @@ class AlongWall(NamedTuple):
     :ivar on_line: whether it lies on the wall's line (within its line tolerance), (W,)
     """
 
-    in_front_m: np.ndarray
-    along_m: np.ndarray
-    on_line: np.ndarray
+    in_front_m: FloatArray
+    along_m: FloatArray
+    on_line: FlagArray

@@ -439,12 +439,13 @@ def seen_through(corner_x_m, corner_y_m, wall, other, contour, start, stop, nois
 
 
 @jit_inline
-def walls_end_at(candidates, walls, contour, step_rad, noise, rule):
+def walls_end_at(candidates, walls, positions, contour, step_rad, noise, rule):
     """
     Compiled twin of :func:`..numpy_core.corners.walls_end_at`, one corner at a time.
 
     :param candidates: the candidate corners
     :param walls: the walls
+    :param positions: positions of every wall's first and last return, shape (2, S)
     :param contour: the returns in circular order
     :param step_rad: bearing step between beams, rad
     :param noise: the noise (the rule decides with its deciding_sigma_m)
@@ -452,12 +453,13 @@ def walls_end_at(candidates, walls, contour, step_rad, noise, rule):
     :return: (corners both walls end at (C,), whether each wall's end was seen (C, 2), column 0
         the first wall)
     """
+    first_position, last_position = positions[0], positions[1]
     corners = candidates.xy_m.shape[0]
     keep = np.zeros(corners, np.bool_)
     seen = np.zeros((corners, 2), np.bool_)
     for c in range(corners):
         one, two = candidates.first_wall[c], candidates.second_wall[c]
-        after_first, before_second = walls.last_position[one], walls.first_position[two]
+        after_first, before_second = last_position[one], first_position[two]
         corner_x, corner_y = candidates.xy_m[c, 0], candidates.xy_m[c, 1]
         window = end_window(contour, after_first, before_second, noise, rule)
         first = wall_at_corner(walls, one, corner_x, corner_y, candidates.covariance[c],
@@ -487,7 +489,7 @@ def walls_end_at(candidates, walls, contour, step_rad, noise, rule):
             # return up to its own first.
             keep[c] = not (
                 seen_through(corner_x, corner_y, first, second, contour, after_first + 1,
-                             walls.last_position[two], noise, rule)
+                             last_position[two], noise, rule)
                 or seen_through(corner_x, corner_y, second, first, contour,
-                                walls.first_position[one], before_second - 1, noise, rule))
+                                first_position[one], before_second - 1, noise, rule))
     return keep, seen

@@ -24,7 +24,6 @@ import numpy as np
 
 from ._jit import jit
 from .lines import normal_jacobians
-from ..records import Walls
 
 
 @jit
@@ -74,18 +73,19 @@ def residual_factor(chi2_dof: float, returns: int) -> float:
 
 
 @jit
-def with_model_error(walls: Walls, residual_scaling: bool, flatness_sigma_m: float,
+def with_model_error(walls, residual_scaling: bool, flatness_sigma_m: float,
                      common_range_sigma_m: float):
     """
     Compiled twin of :func:`..numpy_core.pipeline._with_model_error`, one wall at a time.
 
-    :param walls: the walls, their covariances from the sensor noise alone
+    :param walls: the walls (:data:`~.records.SegmentArrays`), their covariances from the sensor
+        noise alone
     :param residual_scaling: apply the variance factor of (D17)
     :param flatness_sigma_m: std of each wall end's offset from the line, m (0: none)
     :param common_range_sigma_m: std of the range offset common to the scan, m
     :return: (covariance of (angle, radius) (S, 2, 2), covariance of (a, b, c) (S, 3, 3))
     """
-    line, angle_rad, normal_covariance = walls.line, walls.angle_rad, walls.normal_covariance
+    line, angle_rad, normal_covariance = walls.line, walls.angle_rad, walls.covariance
     line_covariance, line_offset_jacobian = walls.line_covariance, walls.line_offset_jacobian
     start_xy_m, end_xy_m = walls.start_xy_m, walls.end_xy_m
     chi2_dof, num_points = walls.residual_chi2_dof, walls.num_points

@@ -7,7 +7,8 @@ The per-scan pipeline of the paper's Algorithm 1: returns -> segments -> lines -
 One compiled function (:func:`_features_of_scan`) runs every step on a scan, as loops over its
 returns (numba), the plausibility bounds included; :func:`extract_features` checks the scan's
 geometry, hands it the configuration prepared once per configuration and beam layout, and wraps
-the arrays it returns in the frozen result dataclasses: no other Python runs per scan.
+the arrays it returns in the frozen result dataclasses: no other Python runs per scan (but on
+the rare scan whose features the plausibility bounds drop, :func:`..plausibility.kept`).
 """
 
 import functools
@@ -22,14 +23,15 @@ from .corners import corner_candidates, corner_covariance, walls_end_at
 from .lines import fit_segments, residual_chi2_dof
 from .model_error import with_model_error
 from .noise import range_sigma_of_returns
-from .plausibility import plausible_arrays
+from .plausibility import plausible
 from .scan import valid_returns
 from .segmentation import (breakpoints_of, chains_of, merge_segments, pass_budget, split_iepf,
                            trim_ambiguous, trim_offset)
 from ..config import FeatureConfig, METHODS
 from ..features import CornerSet, Features, SegmentSet
-from ..records import (BeamGrid, CornerArrays, CornerEndRule, Lines, Noise, Returns, ScanResult,
-                       SegmentArrays, Segments, Settings, Walls)
+from ..plausibility import kept
+from ..records import (BeamGrid, CornerArrays, CornerEndRule, Lines, Noise, Returns,
+                       SegmentArrays, Segments, Settings)
 from ..scan import beam_density, scan_geometry, ScanError
 
 _DEFAULT_CONFIG = FeatureConfig()
@@ -123,13 +125,17 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
                         f'({config.max_beams})')
     ranges, full_turn, cos, sin = scan_geometry(ranges_m, angle_min_rad, angle_increment_rad)
     prepared = _LATEST.get(config, float(angle_increment_rad), ranges.size)
-    found = _features_of_scan(
+    (segments, corners, keep_segment, keep_corner, work_limited, range_sigma_m,
+     noise_implausible) = _features_of_scan(
         ranges, cos, sin, float(angle_min_rad), prepared.angle_increment_rad,
         float(max(range_min_m, config.range_min_m)), float(min(range_max_m, config.range_max_m)),
         full_turn, prepared.settings, prepared.density)
-    return Features(config.method, SegmentSet(*found.segments), CornerSet(*found.corners),
-                    found.work_limited, found.range_sigma_m, found.noise_implausible,
-                    found.implausible_features)
+    if segments is None:
+        return Features(config.method, SegmentSet.empty(), CornerSet.empty(), work_limited,
+                        range_sigma_m, noise_implausible)
+    features = Features(config.method, SegmentSet(*segments), CornerSet(*corners),
+                        work_limited, range_sigma_m)
+    return features if keep_segment is None else kept(features, keep_segment, keep_corner)
 
 
 @jit
@@ -152,20 +158,24 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     :param full_turn: the beams cover a full turn (the first and last are neighbours)
     :param settings: the configuration
     :param density: the rules that count returns, at this scan's beam spacing
-    :return: the scan's :class:`~.records.ScanResult`
+    :return: (the walls, :data:`~.records.SegmentArrays`, and the corners between them,
+        :data:`~.records.CornerArrays`: None when the scan has none; which walls and which
+        corners pass the plausibility bounds: None when all do; whether the work bound stopped
+        splitting or merging; the range noise the scan was processed with, m (NaN: too few
+        returns); whether it exceeded ``max_range_sigma_m``, and the scan gives no features)
     """
     returns = valid_returns(ranges_m, cos, sin, angle_min_rad, angle_increment_rad,
                             range_min_m, range_max_m)
     count = returns.beam_index.size
     if count < settings.min_segment_points:
-        return ScanResult(_no_segments(), _no_corners(), False, math.nan, False, 0)
+        return None, None, None, None, False, math.nan, False
     # #range-noise-from-the-scan
     range_sigma = settings.range_sigma_m
     if settings.range_sigma_from_scan:
         range_sigma = max(range_sigma, range_sigma_of_returns(returns.beam_index, returns.range_m))
     # #plausibility: a scan whose own noise is beyond the bound is no scan of surfaces.
     if not range_sigma <= settings.max_range_sigma_m:
-        return ScanResult(_no_segments(), _no_corners(), False, range_sigma, True, 0)
+        return None, None, None, None, False, range_sigma, True
     # #decision-noise: every decision tolerates the model error on top of the sensor noise;
     # the fits weigh the returns by the sensor noise alone.
     noise = Noise(range_sigma, settings.bearing_sigma_rad,
@@ -185,7 +195,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
         x, y, runs, _split_threshold(contour.range_m, noise, settings.iepf_threshold_m,
                                      density.iepf_noise_sigmas), budget)
     if segments.start.size == 0:
-        return ScanResult(_no_segments(), _no_corners(), unsplit, range_sigma, False, 0)
+        return None, None, None, None, unsplit, range_sigma, False
     segments, lines, unmerged = merge_segments(x, y, segments, full_turn, joinable[order], noise,
                                                settings.merge_chi2, budget)
     work_limited = unsplit or unmerged
@@ -193,7 +203,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     segments = Segments(segments.start[keep], segments.stop[keep], segments.chain[keep])
     lines = Lines(lines.angle_rad[keep], lines.radius_m[keep])
     if segments.start.size == 0:
-        return ScanResult(_no_segments(), _no_corners(), work_limited, range_sigma, False, 0)
+        return None, None, None, None, work_limited, range_sigma, False
     segments = trim_ambiguous(segments, full_turn, x, y, lines, noise,
                               settings.min_segment_points, density.end_window)
     if settings.end_offset_sigmas > 0.0:
@@ -202,57 +212,33 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     # #utls, #wtls, #wctls or #maximum-likelihood: the configured fit with its covariance, in
     # scan order of the walls' first returns.
     start, stop = _in_scan_order(contour.beam_index, ranges_m.size, segments.start, segments.stop)
-    walls = _fit_walls(contour, start, stop, noise, settings)
+    walls, positions = _fit_walls(contour, start, stop, noise, settings)
     if walls.angle_rad.size == 0:
-        return ScanResult(_no_segments(), _no_corners(), work_limited, range_sigma, False, 0)
+        return None, None, None, None, work_limited, range_sigma, False
     # #corners: which pairs are corners is decided with the decision noise; the published
     # covariances add the model error to the fits' (#model-error).
-    corners = _corners(contour, walls, grid, noise, settings, density)
+    corners = _corners(contour, walls, positions, grid, noise, settings, density)
     # #model-error (D17), (D18), then #corners and #common-mode-range-offset, (D11)-(D16).
-    normal_covariance, line_covariance = with_model_error(
+    covariance, line_covariance = with_model_error(
         walls, settings.residual_scaling, settings.wall_flatness_sigma_m,
         settings.common_range_sigma_m)
-    published = Walls(walls.angle_rad, walls.radius_m, normal_covariance, walls.line,
-                      line_covariance, walls.line_offset_jacobian, walls.start_xy_m,
-                      walls.end_xy_m, walls.first_position, walls.last_position,
-                      walls.num_points, walls.residual_chi2_dof)
-    published_covariance = corner_covariance(published, corners.first_segment,
-                                             corners.second_segment,
-                                             settings.common_range_sigma_m)
-    segments_found = SegmentArrays(
-        walls.angle_rad, walls.radius_m, normal_covariance, walls.line, line_covariance,
-        walls.line_offset_jacobian, walls.start_xy_m, walls.end_xy_m,
-        contour.beam_index[walls.first_position], contour.beam_index[walls.last_position],
-        walls.num_points, walls.residual_chi2_dof)
-    corners_found = CornerArrays(corners.xy_m, corners.yaw_rad, published_covariance,
-                                 corners.opening_angle_rad, corners.first_segment,
-                                 corners.second_segment, corners.end_seen)
+    published_walls = SegmentArrays(
+        angle_rad=walls.angle_rad, radius_m=walls.radius_m, covariance=covariance,
+        line=walls.line, line_covariance=line_covariance,
+        line_offset_jacobian=walls.line_offset_jacobian, start_xy_m=walls.start_xy_m,
+        end_xy_m=walls.end_xy_m, first_index=walls.first_index, last_index=walls.last_index,
+        num_points=walls.num_points, residual_chi2_dof=walls.residual_chi2_dof)
+    published_corners = CornerArrays(
+        xy_m=corners.xy_m, yaw_rad=corners.yaw_rad,
+        covariance=corner_covariance(published_walls, corners.first_segment,
+                                     corners.second_segment, settings.common_range_sigma_m),
+        opening_angle_rad=corners.opening_angle_rad, first_segment=corners.first_segment,
+        second_segment=corners.second_segment, end_seen=corners.end_seen)
     # #plausibility: nothing published whose covariance gates nothing.
-    segments_found, corners_found, dropped = plausible_arrays(segments_found, corners_found,
-                                                              range_sigma, settings)
-    return ScanResult(segments_found, corners_found, work_limited, range_sigma, False, dropped)
-
-
-@jit
-def _no_segments():
-    """
-    Return the arrays of a SegmentSet without segments.
-
-    The shapes and types of :meth:`~wctls_ros.core.features.SegmentSet.empty`, which a test
-    holds them to. (Flags passed in would compile it twice: a literal False and a bool.)
-    """
-    no_index = np.zeros(0, np.intp)
-    return SegmentArrays(np.zeros(0), np.zeros(0), np.zeros((0, 2, 2)), np.zeros((0, 3)),
-                         np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros((0, 2)),
-                         np.zeros((0, 2)), no_index, no_index, no_index, np.zeros(0))
-
-
-@jit
-def _no_corners():
-    """Return the arrays of a CornerSet without corners (as :meth:`..features.CornerSet.empty`)."""
-    no_index = np.zeros(0, np.intp)
-    return CornerArrays(np.zeros((0, 2)), np.zeros(0), np.zeros((0, 3, 3)), np.zeros(0),
-                        no_index, no_index, np.zeros((0, 2), np.bool_))
+    keep_segment, keep_corner = plausible(published_walls, published_corners, range_sigma,
+                                          settings)
+    return (published_walls, published_corners, keep_segment, keep_corner, work_limited,
+            range_sigma, False)
 
 
 @jit
@@ -313,7 +299,8 @@ def _fit_walls(contour, start, stop, noise, settings):
 
     A segment crossing the seam of a full turn runs past the last position (positions wrap).
 
-    :return: the kept :class:`~.records.Walls`
+    :return: (the walls kept, :data:`~.records.SegmentArrays` before the model error, in scan
+        order; the positions of their first and last returns in the contour, shape (2, S))
     """
     rho, theta, x, y = contour.range_m, contour.bearing_rad, contour.x_m, contour.y_m
     count, segments = x.size, start.size
@@ -341,9 +328,18 @@ def _fit_walls(contour, start, stop, noise, settings):
         along_beam = abs(math.cos(math.atan2(middle_y, middle_x) - angle[s]))
         keep[s] = _usable(line[s], line_covariance[s], angle[s], radius[s],
                           normal_covariance[s]) and along_beam >= min_along_beam
-    return Walls(angle[keep], radius[keep], normal_covariance[keep], line[keep],
-                 line_covariance[keep], line_offset[keep], start_xy[keep], end_xy[keep],
-                 start[keep], last[keep], counts[keep], chi2_dof[keep])
+    first, last = start[keep], last[keep]
+    positions = np.empty((2, first.size), np.intp)
+    for s in range(first.size):
+        positions[0, s], positions[1, s] = first[s], last[s]
+    walls = SegmentArrays(
+        angle_rad=angle[keep], radius_m=radius[keep], covariance=normal_covariance[keep],
+        line=line[keep], line_covariance=line_covariance[keep],
+        line_offset_jacobian=line_offset[keep], start_xy_m=start_xy[keep],
+        end_xy_m=end_xy[keep], first_index=contour.beam_index[first],
+        last_index=contour.beam_index[last], num_points=counts[keep],
+        residual_chi2_dof=chi2_dof[keep])
+    return walls, positions
 
 
 @jit
@@ -366,12 +362,12 @@ def _usable(line, line_covariance, angle, radius, normal_covariance):
 
 
 @jit_inline
-def _corners(contour, walls, grid, noise, settings, density):
+def _corners(contour, walls, positions, grid, noise, settings, density):
     """
     Compiled twin of :func:`..numpy_core.pipeline._corners`.
 
     :return: the corners, their covariance the walls' before the model error
-        (:class:`~.records.CornerArrays`)
+        (:data:`~.records.CornerArrays`)
     """
     count = walls.angle_rad.size
     pairs = count if grid.full_turn and count >= 3 else count - 1   # the last meets the first
@@ -379,10 +375,12 @@ def _corners(contour, walls, grid, noise, settings, density):
     second_wall = (first_wall + 1) % max(count, 1)
     candidates = corner_candidates(walls, first_wall, second_wall, settings.min_corner_angle_rad,
                                    settings.common_range_sigma_m)
-    keep, seen = walls_end_at(candidates, walls, contour, grid.step_rad, noise,
+    keep, seen = walls_end_at(candidates, walls, positions, contour, grid.step_rad, noise,
                               CornerEndRule(density.corner_end_sigmas,
                                             settings.corner_end_floor_m, density.corner_window,
                                             settings.end_offset_sigmas))
-    return CornerArrays(candidates.xy_m[keep], candidates.yaw_rad[keep],
-                        candidates.covariance[keep], candidates.opening_angle_rad[keep],
-                        candidates.first_wall[keep], candidates.second_wall[keep], seen[keep])
+    return CornerArrays(xy_m=candidates.xy_m[keep], yaw_rad=candidates.yaw_rad[keep],
+                        covariance=candidates.covariance[keep],
+                        opening_angle_rad=candidates.opening_angle_rad[keep],
+                        first_segment=candidates.first_wall[keep],
+                        second_segment=candidates.second_wall[keep], end_seen=seen[keep])

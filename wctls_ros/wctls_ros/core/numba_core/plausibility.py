@@ -4,8 +4,9 @@
 """
 Compiled twin of :mod:`wctls_ros.core.plausibility`: the bounds on a scan's features, in loops.
 
-The pipeline's compiled function applies them to its own result, so that no Python runs per
-scan after it (docs/derivation.md#plausibility).
+The pipeline's compiled function tells which of its features pass them
+(docs/derivation.md#plausibility); on the rare scan with features beyond them (none of the
+benchmark's), :func:`..plausibility.kept` drops the others, as in the numpy pipeline.
 """
 
 import math
@@ -14,7 +15,6 @@ import numpy as np
 
 from ._jit import jit
 from ..plausibility import MAX_SIGMA_RATIO
-from ..records import CornerArrays, SegmentArrays
 
 
 @jit
@@ -26,19 +26,19 @@ def _return_noise_m(range_m, range_sigma_m, settings):
 
 
 @jit
-def plausible_arrays(segments, corners, range_sigma_m, settings):
+def plausible(segments, corners, range_sigma_m, settings):
     """
-    Compiled twin of :func:`..plausibility.plausible` on the pipeline's arrays.
+    Compiled twin of the bounds of :func:`..plausibility.plausible`: which features pass.
 
     A corner's worst std is the square root of the larger eigenvalue of its (x, y) covariance
     [[a, b], [b, c]], (a + c) / 2 + sqrt(((a - c) / 2)^2 + b^2), in closed form.
 
-    :param segments: the walls, :class:`~.records.SegmentArrays`
-    :param corners: the corners between them, :class:`~.records.CornerArrays`
+    :param segments: the walls, :data:`~.records.SegmentArrays`
+    :param corners: the corners between them, :data:`~.records.CornerArrays`
     :param range_sigma_m: the range noise the scan was processed with, m
     :param settings: the configuration (:class:`~.records.Settings`)
-    :return: (the segments that pass, the corners that pass renumbered over them, the number of
-        segments and corners dropped)
+    :return: (which segments pass (S,), which corners pass (C,); a corner of a segment that does
+        not, does not), or (None, None) when all do
     """
     segment_count, corner_count = segments.angle_rad.size, corners.yaw_rad.size
     keep_segment = np.empty(segment_count, np.bool_)
@@ -60,24 +60,6 @@ def plausible_arrays(segments, corners, range_sigma_m, settings):
                           and math.sqrt(max(largest, 0.0)) <= MAX_SIGMA_RATIO * _return_noise_m(
                               math.hypot(corners.xy_m[c, 0], corners.xy_m[c, 1]), range_sigma_m,
                               settings))
-    kept_segments, kept_corners = keep_segment.sum(), keep_corner.sum()
-    dropped = segment_count - kept_segments + corner_count - kept_corners
-    if dropped == 0:
-        return segments, corners, 0
-    # Corners name their walls by index: renumber them over the segments kept.
-    renumber = np.cumsum(keep_segment) - 1
-    return (SegmentArrays(segments.angle_rad[keep_segment], segments.radius_m[keep_segment],
-                          segments.covariance[keep_segment], segments.line[keep_segment],
-                          segments.line_covariance[keep_segment],
-                          segments.line_offset_jacobian[keep_segment],
-                          segments.start_xy_m[keep_segment], segments.end_xy_m[keep_segment],
-                          segments.first_index[keep_segment], segments.last_index[keep_segment],
-                          segments.num_points[keep_segment],
-                          segments.residual_chi2_dof[keep_segment]),
-            CornerArrays(corners.xy_m[keep_corner], corners.yaw_rad[keep_corner],
-                         corners.covariance[keep_corner],
-                         corners.opening_angle_rad[keep_corner],
-                         renumber[corners.first_segment[keep_corner]],
-                         renumber[corners.second_segment[keep_corner]],
-                         corners.end_seen[keep_corner]),
-            dropped)
+    if keep_segment.all() and keep_corner.all():
+        return None, None
+    return keep_segment, keep_corner

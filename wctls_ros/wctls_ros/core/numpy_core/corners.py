@@ -24,7 +24,7 @@ from typing import Optional
 
 import numpy as np
 
-from ..features import CornerSet, SegmentSet
+from ..features import CornerSet, FloatArray, IndexArray, SegmentSet
 from ..records import (AlongWall, CornerCandidates, CornerEndRule, EndWindow, Noise, Returns,
                        WallAtCorner)
 from ..rules import CORNER_MISSING_BEAMS
@@ -141,15 +141,15 @@ def find_corners(line: np.ndarray, line_covariance: np.ndarray,
     count = len(line)
     if line_offset_jacobian is None:                 # no common offset to propagate
         line_offset_jacobian, common_range_sigma_m = np.zeros((count, 3)), 0.0
-    unread = np.full(count, np.nan)                  # fields corner_candidates does not read
-    no_index = np.zeros(count, np.intp)
-    walls = SegmentSet(unread, unread, np.full((count, 2, 2), np.nan), line, line_covariance,
-                       line_offset_jacobian, start_xy_m, end_xy_m, no_index, no_index, no_index,
-                       unread)
+    # The other fields corner_candidates does not read.
+    walls = SegmentSet.filled(count, line=line, line_covariance=line_covariance,
+                              line_offset_jacobian=line_offset_jacobian, start_xy_m=start_xy_m,
+                              end_xy_m=end_xy_m)
     found = corner_candidates(walls, first, second, min_angle_rad, common_range_sigma_m)
-    return CornerSet(found.xy_m, found.yaw_rad, found.covariance, found.opening_angle_rad,
-                     found.first_wall, found.second_wall,
-                     np.ones((found.yaw_rad.size, 2), dtype=bool))
+    return CornerSet(xy_m=found.xy_m, yaw_rad=found.yaw_rad, covariance=found.covariance,
+                     opening_angle_rad=found.opening_angle_rad, first_segment=found.first_wall,
+                     second_segment=found.second_wall,
+                     end_seen=np.ones((found.yaw_rad.size, 2), dtype=bool))
 
 
 def corner_candidates(walls: SegmentSet, first_wall: np.ndarray, second_wall: np.ndarray,
@@ -278,7 +278,7 @@ def _unit_normals(a: np.ndarray, b: np.ndarray):
 
 
 def end_window(contour: Returns, after_first: np.ndarray, before_second: np.ndarray,
-               noise: Noise, rule: CornerEndRule) -> EndWindow:
+               noise: Noise, rule: CornerEndRule) -> EndWindow[IndexArray]:
     """
     Gather the returns between two walls that the corner end rule looks at, for every corner.
 
@@ -309,7 +309,7 @@ def end_window(contour: Returns, after_first: np.ndarray, before_second: np.ndar
 
 def wall_at_corner(walls: SegmentSet, wall: np.ndarray, corner_xy_m: np.ndarray,
                    corner_covariance: np.ndarray, step_rad: float,
-                   rule: CornerEndRule) -> WallAtCorner:
+                   rule: CornerEndRule) -> WallAtCorner[FloatArray]:
     """
     Describe one wall of every corner as seen from the corner.
 
@@ -342,8 +342,8 @@ def wall_at_corner(walls: SegmentSet, wall: np.ndarray, corner_xy_m: np.ndarray,
                         rule.sigmas * along_sigma + rule.floor_m)
 
 
-def along_wall(window: EndWindow, wall: WallAtCorner, corner_x_m: np.ndarray,
-               corner_y_m: np.ndarray) -> AlongWall:
+def along_wall(window: EndWindow[IndexArray], wall: WallAtCorner[FloatArray],
+               corner_x_m: np.ndarray, corner_y_m: np.ndarray) -> AlongWall:
     """
     Place the returns of every end window with respect to one wall of its corner.
 
@@ -366,8 +366,8 @@ def along_wall(window: EndWindow, wall: WallAtCorner, corner_x_m: np.ndarray,
                      window.in_window & (np.abs(in_front) <= window.line_tolerance_m))
 
 
-def corner_zone(window: EndWindow, corner_x_m: np.ndarray, corner_y_m: np.ndarray,
-                first: WallAtCorner, second: WallAtCorner, noise: Noise,
+def corner_zone(window: EndWindow[IndexArray], corner_x_m: np.ndarray, corner_y_m: np.ndarray,
+                first: WallAtCorner[FloatArray], second: WallAtCorner[FloatArray], noise: Noise,
                 rule: CornerEndRule) -> np.ndarray:
     """
     Tell which returns of every end window lie so close to the corner that they fit either wall.
@@ -392,8 +392,9 @@ def corner_zone(window: EndWindow, corner_x_m: np.ndarray, corner_y_m: np.ndarra
                                         window.y_m - corner_y_m[:, None]) <= zone[:, None])
 
 
-def without_object_in_front(window: EndWindow, wall: WallAtCorner, placed: AlongWall,
-                            at_corner: np.ndarray, rule: CornerEndRule) -> np.ndarray:
+def without_object_in_front(window: EndWindow[IndexArray], wall: WallAtCorner[FloatArray],
+                            placed: AlongWall, at_corner: np.ndarray,
+                            rule: CornerEndRule) -> np.ndarray:
     """
     Return which returns lie on a wall's line, less a run that lies in front of it together.
 
@@ -419,7 +420,7 @@ def without_object_in_front(window: EndWindow, wall: WallAtCorner, placed: Along
     return placed.on_line & ~(claimed & (together > rule.run_sigmas)[:, None])
 
 
-def reaches(wall: WallAtCorner, placed: AlongWall, on_line: np.ndarray,
+def reaches(wall: WallAtCorner[FloatArray], placed: AlongWall, on_line: np.ndarray,
             at_corner: np.ndarray) -> np.ndarray:
     """
     Tell which returns of every end window the wall reaches: in the corner zone, or on its line.
@@ -434,9 +435,9 @@ def reaches(wall: WallAtCorner, placed: AlongWall, on_line: np.ndarray,
     return at_corner | (on_line & (placed.along_m >= -wall.tolerance_m[:, None]))
 
 
-def goes_on(first: WallAtCorner, second: WallAtCorner, first_placed: AlongWall,
-            second_placed: AlongWall, first_on_line: np.ndarray, second_on_line: np.ndarray,
-            at_corner: np.ndarray) -> np.ndarray:
+def goes_on(first: WallAtCorner[FloatArray], second: WallAtCorner[FloatArray],
+            first_placed: AlongWall, second_placed: AlongWall, first_on_line: np.ndarray,
+            second_on_line: np.ndarray, at_corner: np.ndarray) -> np.ndarray:
     """
     Tell at which corners a wall's line carries returns past the corner.
 
@@ -454,9 +455,9 @@ def goes_on(first: WallAtCorner, second: WallAtCorner, first_placed: AlongWall,
     return (~at_corner & (first_past | second_past)).any(axis=1)
 
 
-def blocked(window: EndWindow, first: WallAtCorner, second: WallAtCorner,
-            first_placed: AlongWall, second_placed: AlongWall, first_here: np.ndarray,
-            second_here: np.ndarray, at_corner: np.ndarray) -> np.ndarray:
+def blocked(window: EndWindow[IndexArray], first: WallAtCorner[FloatArray],
+            second: WallAtCorner[FloatArray], first_placed: AlongWall, second_placed: AlongWall,
+            first_here: np.ndarray, second_here: np.ndarray, at_corner: np.ndarray) -> np.ndarray:
     """
     Tell at which corners anything lies between the two walls' reaches.
 
@@ -480,7 +481,7 @@ def blocked(window: EndWindow, first: WallAtCorner, second: WallAtCorner,
     return (interrupts & (~occluder | ~outside)).any(axis=1)
 
 
-def short_of_corner(wall: WallAtCorner, placed: AlongWall, on_line: np.ndarray,
+def short_of_corner(wall: WallAtCorner[FloatArray], placed: AlongWall, on_line: np.ndarray,
                     here: np.ndarray) -> np.ndarray:
     """
     Return how far a wall's own returns stop short of each corner, in beams beyond its tolerance.
@@ -498,9 +499,9 @@ def short_of_corner(wall: WallAtCorner, placed: AlongWall, on_line: np.ndarray,
     return np.maximum(gap - wall.tolerance_m, 0.0) / wall.spacing_m
 
 
-def seen_through(corner_x_m: np.ndarray, corner_y_m: np.ndarray, wall: WallAtCorner,
-                 other: WallAtCorner, contour: Returns, start: np.ndarray, stop: np.ndarray,
-                 noise: Noise, rule: CornerEndRule) -> np.ndarray:
+def seen_through(corner_x_m: np.ndarray, corner_y_m: np.ndarray, wall: WallAtCorner[FloatArray],
+                 other: WallAtCorner[FloatArray], contour: Returns, start: np.ndarray,
+                 stop: np.ndarray, noise: Noise, rule: CornerEndRule) -> np.ndarray:
     """
     Tell whether the other wall is seen through a wall between its segment and the corner.
 
@@ -636,11 +637,12 @@ def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.
     return keep, np.column_stack([first_short <= 1.0, second_short <= 1.0])
 
 
-def _corners(wall: WallAtCorner, kept: np.ndarray) -> WallAtCorner:
+def _corners(wall: WallAtCorner[FloatArray], kept: np.ndarray) -> WallAtCorner[FloatArray]:
     """Return the walls of some corners of a WallAtCorner over every corner."""
     return WallAtCorner(*(field[kept] for field in wall))
 
 
-def _stacked(one: WallAtCorner, other: WallAtCorner) -> WallAtCorner:
+def _stacked(one: WallAtCorner[FloatArray],
+             other: WallAtCorner[FloatArray]) -> WallAtCorner[FloatArray]:
     """Return the walls of two sets of tests, one's first."""
     return WallAtCorner(*(np.concatenate([a, b]) for a, b in zip(one, other)))

@@ -251,10 +251,11 @@ def _fit_walls(contour: _Contour, segments: SegmentRanges, config: FeatureConfig
     fits, segments, counts = fits.select(usable), segments.select(usable), counts[usable]
     start_xy, end_xy, last = start_xy[usable], end_xy[usable], last[usable]
     walls = SegmentSet(
-        fits.angle_rad, fits.radius_m, fits.normal_covariance, fits.line,
-        fits.line_covariance, fits.line_offset_jacobian, start_xy, end_xy,
-        points.index[order[segments.start]], points.index[order[last]], counts,
-        _residual_chi2_dof(returns, fits, usable, config))
+        angle_rad=fits.angle_rad, radius_m=fits.radius_m, covariance=fits.normal_covariance,
+        line=fits.line, line_covariance=fits.line_covariance,
+        line_offset_jacobian=fits.line_offset_jacobian, start_xy_m=start_xy, end_xy_m=end_xy,
+        first_index=points.index[order[segments.start]], last_index=points.index[order[last]],
+        num_points=counts, residual_chi2_dof=_residual_chi2_dof(returns, fits, usable, config))
     return walls, np.stack([segments.start, last])
 
 
@@ -354,9 +355,11 @@ def _corners(contour: _Contour, walls: SegmentSet, positions: np.ndarray, noise:
         candidates, walls, positions, returns, abs(contour.points.angle_increment_rad), noise,
         CornerEndRule(density.rarer(config.corner_end_sigmas), config.corner_end_floor_m,
                       density.corner_window, config.end_offset_sigmas))
-    return CornerSet(candidates.xy_m[keep], candidates.yaw_rad[keep], candidates.covariance[keep],
-                     candidates.opening_angle_rad[keep], candidates.first_wall[keep],
-                     candidates.second_wall[keep], seen[keep])
+    return CornerSet(xy_m=candidates.xy_m[keep], yaw_rad=candidates.yaw_rad[keep],
+                     covariance=candidates.covariance[keep],
+                     opening_angle_rad=candidates.opening_angle_rad[keep],
+                     first_segment=candidates.first_wall[keep],
+                     second_segment=candidates.second_wall[keep], end_seen=seen[keep])
 
 
 def _project(x_m: np.ndarray, y_m: np.ndarray, first: np.ndarray, last: np.ndarray,

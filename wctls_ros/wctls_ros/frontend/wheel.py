@@ -204,6 +204,9 @@ class WheelPoses:
         """
         Return the robot's step between two stamps, in the robot's frame at the first.
 
+        Until a step is given again after the source's time ran back, a step it cannot give is
+        refused as 'backwards', whatever else it lacks.
+
         :param from_s: the previous scan's stamp, s
         :param to_s: the current scan's stamp, s
         :return: (the step (dx m, dy m, dyaw rad) or None; the covariance the source states
@@ -213,11 +216,10 @@ class WheelPoses:
         if not (math.isfinite(from_s) and math.isfinite(to_s)) or to_s < from_s:
             return None, None, WHEEL_MISSING[2]
         first, why = self.pose_at(from_s)
-        if first is None:
-            return None, None, why
-        second, why = self.pose_at(to_s)
-        if second is None:
-            return None, None, why
+        second, why = (None, why) if first is None else self.pose_at(to_s)
+        if first is None or second is None:
+            # Since the source's time ran back, whatever is missing is missing for that.
+            return None, None, WHEEL_MISSING[2] if self._jumped else why
         self._jumped = False
         rate = self._rates[max(0, bisect_right(self._stamps, to_s) - 1)]
         stated = None if rate is None else rate * (to_s - from_s) ** 2

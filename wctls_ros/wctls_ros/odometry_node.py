@@ -45,7 +45,7 @@ from .frontend.odometry import Odometry, on_robot, STATUSES
 from .frontend.wheel import laser_prior, WHEEL_ADDED, WHEEL_MISSING, WheelPoses
 from .node_main import declare_parameters, run_node
 from .odometry_messages import (odometry_message, ODOMETRY_TYPES, planar_mount,
-                                transform_message, TRANSFORM_TYPES)
+                                transform_message, TRANSFORM_TYPES, UNMEASURED_VARIANCE)
 from .outputs import ODOMETRY
 from .params import ODOMETRY_NODE, odometry_settings
 
@@ -167,8 +167,10 @@ class OdometryNode(Node):
                 f'{self._settings.base_frame} -> laser)')
         pose = message.pose.pose
         q = pose.orientation
-        covariance = np.asarray(message.twist.covariance, dtype=float).reshape(6, 6)[
-            np.ix_(_PLANAR, _PLANAR)]
+        # Drivers mark an unmeasured axis with a huge variance (up to DBL_MAX): capped at the
+        # 1e6 of odometry_messages, which keeps it unmeasured and the arithmetic finite.
+        covariance = np.clip(np.asarray(message.twist.covariance, dtype=float).reshape(6, 6)[
+            np.ix_(_PLANAR, _PLANAR)], -UNMEASURED_VARIANCE, UNMEASURED_VARIANCE)
         self._add_wheel(message.header.stamp, (pose.position.x, pose.position.y,
                                                planar_yaw(q.x, q.y, q.z, q.w)),
                         covariance if np.any(covariance != 0.0) else None)

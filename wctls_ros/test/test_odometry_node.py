@@ -243,6 +243,20 @@ def test_the_wheel_odometrys_step_at_the_scans_stamps_is_the_prior(ros_context, 
     assert values['wheel prior: steps the landmarks rejected'] == '0'
 
 
+def test_a_wheel_axis_marked_unmeasured_stays_unmeasured_and_finite(ros_context, executor):
+    # A driver's "not measured": DBL_MAX on the lateral velocity.
+    harness = WheelHarness(ros_context, executor)
+    harness.send_wheel([wheel_message(0.02 * k, (4e-4, 1.7e308, 9e-4)) for k in range(11)])
+    first = harness.exchange(empty_scan(0.05))
+    second = harness.exchange(empty_scan(0.15))
+    step, dt = step_of(second, first)
+    assert np.allclose(step, compose(inverse(arc(0.05)), arc(0.15)), atol=5e-5)
+    twist = np.array(second.twist.covariance).reshape(6, 6)
+    assert np.isfinite(twist).all()
+    assert twist[1, 1] == pytest.approx(1e6, rel=1e-6)          # capped, still unmeasured
+    assert twist[0, 0] == pytest.approx(4e-4 + 0.002 ** 2 / dt ** 2, rel=1e-6)
+
+
 def test_without_wheel_messages_the_constant_velocity_fills_in_and_says_why(
         ros_context, executor):
     harness = WheelHarness(ros_context, executor, dict(WHEEL_PARAMETERS, wheel_timeout_s=0.2))

@@ -884,8 +884,7 @@ def _with_prior(previous: Landmarks, current: Landmarks, prior: Prior,
         away[:, 2] = wrap_angle(away[:, 2])
         return np.einsum('hi,ij,hj->h', away, spread, away) <= gate
 
-    steps = _hypotheses(previous, current, config, prior.step,
-                        lambda steps: inside(steps))
+    steps = _hypotheses(previous, current, config, prior.step, inside)
     zero = np.zeros((1, 3))
     if inside(zero)[0]:
         steps = np.concatenate([steps[:1], zero, steps[1:]])

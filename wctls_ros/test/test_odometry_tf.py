@@ -13,6 +13,8 @@ installed, the child uses that one. ``publish_tf``: the RPLIDAR car's scans go i
 scan's transform odom -> base_link must carry the Odometry's stamp, frames and pose.
 ``mount_from_tf``: with the laser's mount on /tf_static (a chain of two static transforms),
 the odometry must be the one the mount's parameters give, the scans before it left out.
+``wheel_odometry_tf_frame``: the wheel odometry as odom -> base_link on /tf; the steps of scans
+without landmarks must be its own, interpolated at their stamps.
 """
 
 import json
@@ -254,3 +256,60 @@ def test_the_mount_from_tf_static_gives_the_odometry_of_the_same_mount_as_parame
     np.testing.assert_allclose(from_tf['poses'], given['poses'], rtol=0.0, atol=1e-9)
     # The mount matters: the robot's track differs from the laser's.
     assert math.hypot(*given['poses'][-1][:2]) > 0.5
+
+
+# The child: the wheel odometry as the transform odom -> base_link on /tf (a robot's wheel
+# odometry node), scans without landmarks, the steps of the published Odometry.
+WHEEL_CHILD = textwrap.dedent("""
+    import json, math
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from geometry_msgs.msg import TransformStamped
+    from tf2_msgs.msg import TFMessage
+    from conftest import spin_until
+    from test_odometry_node import (arc, empty_scan, Harness, pose_of, step_of,
+                                    WHEEL_PARAMETERS, WHEEL_START_S)
+
+    rclpy.init()
+    executor = SingleThreadedExecutor()
+    parameters = dict(WHEEL_PARAMETERS, wheel_odometry_topic='',
+                      wheel_odometry_tf_frame='odom')
+    harness = Harness(rclpy.get_default_context(), executor, parameters)
+    tf = harness.peer.create_publisher(TFMessage, '/tf', 100)
+    assert spin_until(executor, lambda: tf.get_subscription_count() > 0)
+    transforms = []
+    for k in range(51):
+        moved = TransformStamped(child_frame_id='base_link')
+        moved.header.frame_id = 'odom'
+        moved.header.stamp.sec, moved.header.stamp.nanosec = divmod(
+            round((WHEEL_START_S + 0.02 * k) * 1e9), 10 ** 9)
+        x, y, yaw = arc(0.02 * k)
+        moved.transform.translation.x, moved.transform.translation.y = x, y
+        moved.transform.rotation.z, moved.transform.rotation.w = math.sin(yaw / 2), math.cos(
+            yaw / 2)
+        transforms.append(moved)
+    # Another transform in the same message, of another frame: not the wheel's.
+    other = TransformStamped(child_frame_id='camera')
+    other.header.frame_id = 'base_link'
+    tf.publish(TFMessage(transforms=transforms[:25] + [other]))
+    tf.publish(TFMessage(transforms=transforms[25:]))
+    kept = harness.node._wheel._stamps
+    assert spin_until(executor, lambda: len(kept) == 51, timeout_s=10.0)
+    stamps = [0.05 + 0.1 * k for k in range(10)]
+    messages = [harness.exchange(empty_scan(t)) for t in stamps]
+    steps = [list(step_of(messages[k], messages[k - 1])[0]) for k in range(1, len(messages))]
+    print(json.dumps({'stamps': stamps, 'steps': steps, 'pose': list(pose_of(messages[-1]))}))
+""")
+
+
+def test_the_wheel_odometry_from_tf_gives_the_prior(child_environment):
+    from test_odometry_node import arc
+    from wctls_ros.frontend.odometry import compose, inverse
+    result = run_child(WHEEL_CHILD, child_environment)
+    stamps = result['stamps']
+    assert len(result['steps']) == len(stamps) - 1
+    for k, step in enumerate(result['steps'], start=1):
+        assert np.allclose(step, compose(inverse(arc(stamps[k - 1])), arc(stamps[k])),
+                           atol=5e-5)
+    assert np.allclose(result['pose'], compose(inverse(arc(stamps[0])), arc(stamps[-1])),
+                       atol=2e-4)

@@ -28,6 +28,7 @@ from .core import FeatureConfig, METHODS
 from .core.config import field_description, field_limits, Limits
 from .frontend.dock import DockShape, TrackSettings
 from .frontend.odometry import OdometryConfig
+from .frontend.wheel import WheelModel
 from .plain_yaml import load_without_aliases
 from .sensors import DEFAULT_SENSOR, PRESET_PARAMETERS, sensor_presets
 
@@ -307,8 +308,66 @@ ODOMETRY_NODE = FEATURE_NODE[:1 + len(fields(FeatureConfig))] + (
               setting='prior_sigma_rad', to_setting=math.radians),
 )
 
+# The wheel odometry as the prior (docs/odometry.md#wheel-odometry-as-the-prior).
+_WHEEL = WheelModel()
+WHEEL_PARAMETERS = (
+    _read_only('wheel_odometry_topic', '', "The robot's wheel odometry, nav_msgs/Odometry (the "
+               'pose of base_frame in its own odom frame): its step between two scans, '
+               'interpolated at their stamps, is the prior; empty: none (the constant '
+               'velocity)'),
+    _read_only('wheel_odometry_tf_frame', '', 'Take the wheel odometry from /tf instead: the '
+               "transform from this frame (the wheel odometry's, e.g. odom) to base_frame; "
+               'needs publish_tf false; empty: none'),
+    _read_only('wheel_timeout_s', 0.5, 'A scan later than the newest wheel pose by more than '
+               'this, or between two wheel poses further apart, has no wheel prior (the '
+               'constant velocity fills in, counted on /diagnostics), s', Limits(0.001, 60.0)),
+    _read_only('wheel_use_message_covariance', True, "The wheel step's covariance from the "
+               "Odometry's twist covariance times the time between the scans squared (plus "
+               'the floors below) where its x, y, yaw block is not zero; false: always the '
+               'model below'),
+    _read_only('wheel_sigma_per_m', _WHEEL.sigma_per_m, "The wheel step's std in x and y per "
+               'metre travelled, m per m (sigma = this x distance + wheel_sigma_floor_m)',
+               Limits(0.0, 10.0)),
+    _read_only('wheel_sigma_floor_m', _WHEEL.floor_m, "The wheel step's std in x and y of "
+               'every step, m', Limits(1e-6, 10.0)),
+    _read_only('wheel_sigma_per_rad', _WHEEL.sigma_per_rad, "The wheel step's yaw std per "
+               'radian turned, rad per rad (sigma = this x turn + wheel_sigma_floor_deg)',
+               Limits(0.0, 10.0)),
+    _read_only('wheel_sigma_floor_deg', round(math.degrees(_WHEEL.floor_rad), 6),
+               "The wheel step's yaw std of every step, deg", Limits(1e-4, 90.0)),
+)
+ODOMETRY_NODE += WHEEL_PARAMETERS
+
 SCHEMAS = {'feature_node': FEATURE_NODE, 'bag_replay': BAG_REPLAY,
            'odometry_node': ODOMETRY_NODE}
+
+
+class WheelSettings(NamedTuple):
+    """
+    Where odometry_node takes the wheel odometry from, and its step's covariance.
+
+    :ivar topic: the nav_msgs/Odometry topic ('' : not a topic)
+    :ivar tf_frame: the frame whose transform to base_frame on /tf is the wheel's pose ('':
+        not from TF)
+    :ivar timeout_s: the longest gap the wheel's poses may leave, s
+    :ivar use_message_covariance: take the covariance from the message where it states one
+    :ivar model: the covariance otherwise
+    """
+
+    topic: str
+    tf_frame: str
+    timeout_s: float
+    use_message_covariance: bool
+    model: WheelModel
+
+    @property
+    def enabled(self) -> bool:
+        """
+        Return whether a wheel odometry is read.
+
+        :return: True with a topic or a TF frame
+        """
+        return bool(self.topic or self.tf_frame)
 
 
 class OdometrySettings(NamedTuple):
@@ -322,6 +381,7 @@ class OdometrySettings(NamedTuple):
     :ivar base_frame: the robot's frame
     :ivar publish_tf: whether the transform odom -> base_frame is published
     :ivar mount_from_tf: whether the mount comes from /tf_static instead of ``mount``
+    :ivar wheel: the wheel odometry as the prior
     """
 
     config: FeatureConfig
@@ -331,6 +391,7 @@ class OdometrySettings(NamedTuple):
     base_frame: str
     publish_tf: bool
     mount_from_tf: bool
+    wheel: WheelSettings
 
 
 def odometry_settings(values: Dict[str, Value]) -> OdometrySettings:
@@ -344,11 +405,27 @@ def odometry_settings(values: Dict[str, Value]) -> OdometrySettings:
     settings = _settings(ODOMETRY_NODE, values)
     feature = {k: v for k, v in settings.items() if k in FeatureConfig.__dataclass_fields__}
     odometry = {k: v for k, v in settings.items() if k in OdometryConfig.__dataclass_fields__}
+    wheel = WheelSettings(
+        str(values['wheel_odometry_topic']), str(values['wheel_odometry_tf_frame']),
+        float(values['wheel_timeout_s']), bool(values['wheel_use_message_covariance']),
+        WheelModel(float(values['wheel_sigma_per_m']), float(values['wheel_sigma_floor_m']),
+                   float(values['wheel_sigma_per_rad']),
+                   math.radians(float(values['wheel_sigma_floor_deg']))))
+    problems = []
+    if wheel.topic and wheel.tf_frame:
+        problems.append('give the wheel odometry as wheel_odometry_topic or as '
+                        'wheel_odometry_tf_frame, not both')
+    if wheel.tf_frame and values['publish_tf']:
+        problems.append(f'wheel_odometry_tf_frame {wheel.tf_frame!r} reads the wheel '
+                        f"odometry's transform to {values['base_frame']!r} from /tf: publish_tf "
+                        'must be false (base_frame would have two parents)')
+    if problems:
+        raise ConfigError('; '.join(problems))
     return OdometrySettings(FeatureConfig(**feature), OdometryConfig(**odometry),
                             (float(values['laser_x_m']), float(values['laser_y_m']),
                              math.radians(float(values['laser_yaw_deg']))),
                             str(values['odom_frame']), str(values['base_frame']),
-                            bool(values['publish_tf']), bool(values['mount_from_tf']))
+                            bool(values['publish_tf']), bool(values['mount_from_tf']), wheel)
 
 
 class FeatureSettings(NamedTuple):

@@ -25,13 +25,13 @@ Pure numpy.
 from dataclasses import dataclass
 import math
 import time
-from typing import Dict, List, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from wctls_ros.core import extract_features, FeatureConfig
 from wctls_ros.frontend.frames import landmarks_from_features, wrap_angle
 from wctls_ros.frontend.odometry import (compose, compose_jacobians, inverse, inverse_jacobian,
-                                         Odometry, OdometryConfig)
+                                         Odometry, OdometryConfig, Prior)
 
 from .scans import StaticScans
 
@@ -211,6 +211,8 @@ class OdometryRun:
     :ivar step_covariances: their covariances, shape (T, 3, 3)
     :ivar statuses: each scan's status
     :ivar odometry_s: the odometry's time per scan (the extraction left out), s
+    :ivar prior_sources: the prior each scan's step took ('constant_velocity' or 'wheel')
+    :ivar prior_rejected: whether the landmarks rejected the prior handed in with each scan
     """
 
     stamps_s: np.ndarray
@@ -220,26 +222,32 @@ class OdometryRun:
     step_covariances: np.ndarray
     statuses: Tuple[str, ...]
     odometry_s: float
+    prior_sources: Tuple[str, ...] = ()
+    prior_rejected: Tuple[bool, ...] = ()
 
 
 def run_odometry(scans: StaticScans, config: FeatureConfig,
-                 odometry_config: OdometryConfig = OdometryConfig()) -> OdometryRun:
+                 odometry_config: OdometryConfig = OdometryConfig(),
+                 priors: Optional[Sequence[Optional[Prior]]] = None) -> OdometryRun:
     """
     Extract every scan's landmarks and run the odometry over them.
 
     :param scans: consecutive scans
     :param config: the pipeline configuration
     :param odometry_config: the odometry's settings
+    :param priors: per scan, the laser's step from the scan before from another source
+        (wheel odometry) with its covariance, or None (the constant velocity); None: none
     :return: the run
     """
     odometry = Odometry(odometry_config)
     updates, spent = [], 0.0
-    for ranges, stamp_ns in zip(scans.ranges, scans.stamps_ns):
+    for k, (ranges, stamp_ns) in enumerate(zip(scans.ranges, scans.stamps_ns)):
         features = extract_features(ranges, scans.angle_min, scans.angle_increment, config,
                                     scans.range_min, scans.range_max)
         landmarks = landmarks_from_features(features, config.max_landmark_angle_sigma_rad)
+        prior = None if priors is None else priors[k]
         start = time.perf_counter()
-        updates.append(odometry.update(stamp_ns * 1e-9, landmarks))
+        updates.append(odometry.update(stamp_ns * 1e-9, landmarks, prior))
         spent += time.perf_counter() - start
 
     def stacked(name: str, shape: Tuple[int, ...]) -> np.ndarray:
@@ -248,7 +256,8 @@ def run_odometry(scans: StaticScans, config: FeatureConfig,
     return OdometryRun(stacked('stamp_s', ()), stacked('pose', (3,)),
                        stacked('pose_covariance', (3, 3)), stacked('step', (3,)),
                        stacked('step_covariance', (3, 3)), tuple(u.status for u in updates),
-                       spent / max(len(updates), 1))
+                       spent / max(len(updates), 1), tuple(u.prior_source for u in updates),
+                       tuple(u.prior_rejected for u in updates))
 
 
 def score_trajectory(scans: StaticScans, config: FeatureConfig, poses: np.ndarray,

@@ -15,18 +15,22 @@ status (docs/odometry.md gives the equations):
   covariance the inverse of the fit's information (J^T S^-1 J)^-1 from the landmarks'
   covariances;
 - **degenerate**: the landmarks constrain the step, but not along every direction (a corridor,
-  one wall): the constant-velocity prior joins the fit as one more measurement, so the estimate
-  along what the landmarks miss is the prior's, with the prior's grown covariance;
-- **prior**: too few landmarks in one of the scans: the step is the constant-velocity prior with
-  its grown covariance;
+  one wall): the prior joins the fit as one more measurement, so the estimate along what the
+  landmarks miss is the prior's, with the prior's grown covariance;
+- **prior**: too few landmarks in one of the scans: the step is the prior with its covariance;
 - **reinitialized**: landmarks on both sides, but no consistent association (a kidnap, a wrong
   association, a scene that changed): the step is the prior with the reinitialization's wide
   covariance, the velocity is forgotten, and the next scan is matched against this one.
 
+The prior is the constant velocity of the last good step, or a step handed in per scan with its
+covariance (:class:`Prior`: wheel odometry). A handed-in prior is independent of the
+landmarks: it gates the hypothesis search and joins every fit by its information; a step the
+landmarks fix and the prior contradicts rejects it (docs/odometry.md#wheel-odometry-as-the-prior).
+
 All units SI: m, rad; covariances in m^2, m rad, rad^2. Pure numpy, no ROS.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 from typing import List, Optional, Tuple
 
@@ -35,6 +39,8 @@ import numpy as np
 from .frames import finite_only, Landmarks, overlapping, rotation, wrap_angle
 
 STATUSES = ('tracking', 'degenerate', 'prior', 'reinitialized')
+# Where a step's prior came from: the constant velocity of the last good step, or handed in.
+PRIOR_SOURCES = ('constant_velocity', 'wheel')
 # 99 % points of the chi-square distribution with 1 and 2 degrees of freedom.
 CHI2_1DOF_99 = 6.635
 CHI2_2DOF_99 = 9.210
@@ -51,6 +57,9 @@ SEARCH_SLACK_M = 0.05
 SEARCH_SLACK_RAD = math.radians(2.0)
 # A refined hypothesis that associates this share of the smaller scan's landmarks ends the search.
 ENOUGH_SHARE = 0.9
+# A handed-in prior whose gate associates fewer than ENOUGH_SHARE of the landmarks is rejected
+# when a search outside its gate associates this many times as many.
+REJECTING_SHARE = 2.0
 # The hypotheses are drawn from pairs of at most this many corners and as many lines of each scan,
 # the best known: the pairs of pairs grow as the fourth power of the landmarks (at 32, 496 pairs
 # of one scan against 992 of the other, per kind). No recording of data/ has more than 24.
@@ -98,6 +107,42 @@ class OdometryConfig:
 
 
 @dataclass(frozen=True)
+class Prior:
+    """
+    A step between two scans from a source other than the landmarks (wheel odometry).
+
+    Independent of the landmarks, with its own covariance: it seeds and gates the hypothesis
+    search and joins the fit by its information (docs/odometry.md#wheel-odometry-as-the-prior).
+
+    :ivar step: the current scan's pose in the previous scan's frame, the laser's (dx m, dy m,
+        dyaw rad), shape (3,)
+    :ivar covariance: its covariance, shape (3, 3), positive definite
+    :raises ValueError: on a step or covariance that is not finite, or a covariance that is not
+        symmetric positive definite
+    """
+
+    step: np.ndarray
+    covariance: np.ndarray
+
+    def __post_init__(self):
+        step = np.asarray(self.step, dtype=float).reshape(-1)
+        covariance = np.asarray(self.covariance, dtype=float)
+        if step.shape != (3,) or covariance.shape != (3, 3):
+            raise ValueError(f'a prior is a step of 3 values and a 3x3 covariance, got shapes '
+                             f'{step.shape} and {covariance.shape}')
+        if not (np.isfinite(step).all() and np.isfinite(covariance).all()):
+            raise ValueError('a prior must be finite')
+        if not np.allclose(covariance, covariance.T, rtol=1e-9, atol=1e-15):
+            raise ValueError('a prior covariance must be symmetric')
+        try:
+            np.linalg.cholesky(covariance)
+        except np.linalg.LinAlgError:
+            raise ValueError('a prior covariance must be positive definite') from None
+        object.__setattr__(self, 'step', step)
+        object.__setattr__(self, 'covariance', 0.5 * (covariance + covariance.T))
+
+
+@dataclass(frozen=True)
 class StepEstimate:
     """
     The motion between two scans.
@@ -109,6 +154,13 @@ class StepEstimate:
     :ivar corners: corners associated
     :ivar lines: line landmarks associated
     :ivar chi2: the fit's chi-square over its degrees of freedom (NaN without a fit)
+    :ivar prior_source: the prior the estimate took (one of PRIOR_SOURCES): a hypothesis, the
+        step where the landmarks say nothing, and with 'wheel' one more measurement of the fit
+    :ivar prior_rejected: a prior handed in that the landmarks contradict (the estimate is
+        theirs, with the constant-velocity prior where they leave a direction free)
+    :ivar prior_gain: d step / d prior step, shape (3, 3), where a handed-in prior joined the
+        fit ((I + P^-1)^-1 P^-1), else None: what the step owes the prior, for its covariance
+        with what the prior came from
     """
 
     step: np.ndarray
@@ -117,6 +169,9 @@ class StepEstimate:
     corners: int = 0
     lines: int = 0
     chi2: float = math.nan
+    prior_source: str = PRIOR_SOURCES[0]
+    prior_rejected: bool = False
+    prior_gain: Optional[np.ndarray] = None
 
 
 @dataclass(frozen=True)
@@ -133,6 +188,8 @@ class OdometryUpdate:
     :ivar status: one of STATUSES
     :ivar corners: corners associated
     :ivar lines: line landmarks associated
+    :ivar prior_source: as in :class:`StepEstimate`
+    :ivar prior_rejected: as in :class:`StepEstimate`
     """
 
     stamp_s: float
@@ -144,6 +201,8 @@ class OdometryUpdate:
     status: str
     corners: int
     lines: int
+    prior_source: str = PRIOR_SOURCES[0]
+    prior_rejected: bool = False
 
 
 def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -668,14 +727,17 @@ def _chi2(previous: Landmarks, current: Landmarks, step: np.ndarray, corners, li
     return float(np.einsum('ki,kij,kj->', error, weight, error))
 
 
-def _refine(previous: Landmarks, current: Landmarks, start: np.ndarray, chi2s, index: int):
+def _refine(previous: Landmarks, current: Landmarks, start: np.ndarray, chi2s, index: int,
+            prior: Optional[Tuple[np.ndarray, np.ndarray]] = None):
     """
     Return a hypothesis refined: associated, fitted and associated again (twice), and the chi2.
 
     The first association is in the search's gate, whose chi2 the scoring computed for every
     hypothesis (``chi2s`` of :func:`_search_chi2`, ``index`` the start's). The pairs each later
     association returns lie inside the unwidened gate at the step of that association: no pair
-    is left to prune, and their chi2 is the sum the association took.
+    is left to prune, and their chi2 is the sum the association took. With a prior (step,
+    covariance) the fits take it as a measurement: pairs that leave a direction free (two
+    parallel walls) then do not send the step astray along it.
     """
     step = np.asarray(start, dtype=float)
     corners, _ = _one_to_one(None if chi2s[0] is None else chi2s[0][index])
@@ -684,7 +746,7 @@ def _refine(previous: Landmarks, current: Landmarks, start: np.ndarray, chi2s, i
     for _ in range(2):
         if len(corners) + len(lines) < 2:
             break
-        step, _, _ = fit(previous, current, step, corners, lines)
+        step, _, _ = fit(previous, current, step, corners, lines, prior)
         corners, lines, chi2 = _associate(previous, current, step, False)
     if math.isnan(chi2):
         # Not fitted: the pairs of the widened gate, their chi2 in the unwidened one.
@@ -711,34 +773,17 @@ def is_degenerate(information: np.ndarray, config: OdometryConfig) -> bool:
     return bool(np.linalg.eigvalsh(0.5 * (scaled + scaled.T))[0] < 1.0)
 
 
-def estimate_step(previous: Landmarks, current: Landmarks, prior_step: np.ndarray,
-                  prior_covariance: np.ndarray,
-                  config: OdometryConfig = OdometryConfig()) -> StepEstimate:
+def _search(previous: Landmarks, current: Landmarks, steps: np.ndarray, prior_step: np.ndarray,
+            prior_covariance: np.ndarray, config: OdometryConfig, fused: bool = False):
     """
-    Return the motion between two scans from their landmarks.
+    Return the best association of the hypotheses: (its step, corner pairs, line pairs).
 
-    :param previous: the previous scan's landmarks (its frame is the step's)
-    :param current: the current scan's landmarks
-    :param prior_step: the constant-velocity prediction (dx m, dy m, dyaw rad): a hypothesis
-        among the others and the estimate where the landmarks say nothing
-    :param prior_covariance: its covariance, shape (3, 3)
-    :param config: the settings
-    :return: the estimate (never NaN)
+    The best-scored hypotheses, one per motion, are each refined (with ``fused``, by fits that
+    take the prior as a measurement); the one with most pairs wins, on a tie the one nearer
+    the prior by its covariance (docs/odometry.md#hypotheses).
     """
-    prior_step = np.asarray(prior_step, dtype=float)
-    prior_covariance = np.asarray(prior_covariance, dtype=float)
-    landmarks_prev = len(previous.corner_xy) + len(previous.line)
-    landmarks_cur = len(current.corner_xy) + len(current.line)
-    if min(landmarks_prev, landmarks_cur) < 2:
-        return StepEstimate(prior_step.copy(), prior_covariance.copy(), 'prior')
-    search_prev, search_cur = _best_known(previous), _best_known(current)
-    steps = np.concatenate([corner_hypotheses(search_prev, search_cur),
-                            line_hypotheses(search_prev, search_cur)])
-    steps = steps[np.hypot(steps[:, 0], steps[:, 1]) <= config.max_step_m]
-    if len(steps) > config.max_hypotheses:
-        rng = np.random.default_rng(config.seed)
-        steps = steps[rng.choice(len(steps), config.max_hypotheses, replace=False)]
-    steps = np.concatenate([prior_step[None], np.zeros((1, 3)), steps])
+    fewest = min(len(previous.corner_xy) + len(previous.line),
+                 len(current.corner_xy) + len(current.line))
     chi2s = _search_chi2(previous, current, steps)
     scores = score_hypotheses(chi2s, len(steps))
     best_count, best_chi2 = -1, math.inf
@@ -756,7 +801,8 @@ def estimate_step(previous: Landmarks, current: Landmarks, prior_step: np.ndarra
                for other in starts):
             continue
         starts.append(start)
-        refined, pairs, fit_chi2 = _refine(previous, current, start, chi2s, index)
+        refined, pairs, fit_chi2 = _refine(previous, current, start, chi2s, index,
+                                           (prior_step, prior_covariance) if fused else None)
         count = len(pairs[0]) + len(pairs[1]) if math.hypot(
             refined[0], refined[1]) <= config.max_step_m else 0
         # Equal support (a symmetric room): the motion the prior expects, then the better fit.
@@ -767,8 +813,180 @@ def estimate_step(previous: Landmarks, current: Landmarks, prior_step: np.ndarra
         if count > best_count or (count == best_count and chi2 < best_chi2):
             best_count, best_chi2 = count, chi2
             step, (corners, lines) = refined, pairs
-        if best_count >= ENOUGH_SHARE * min(landmarks_prev, landmarks_cur):
+        if best_count >= ENOUGH_SHARE * fewest:
             break                       # nothing else could associate much more
+    return step, corners, lines
+
+
+def _hypotheses(previous: Landmarks, current: Landmarks, config: OdometryConfig,
+                extra: np.ndarray, keep=None) -> np.ndarray:
+    """
+    Return the steps to score: ``extra`` first, then those of the landmark pairs.
+
+    The pairs' steps beyond ``max_step_m`` are dropped, and those ``keep`` (a function of the
+    steps, shape (H, 3) -> (H,) bool) refuses; at most ``max_hypotheses`` of them, drawn at
+    random (seeded).
+    """
+    search_prev, search_cur = _best_known(previous), _best_known(current)
+    steps = np.concatenate([corner_hypotheses(search_prev, search_cur),
+                            line_hypotheses(search_prev, search_cur)])
+    steps = steps[np.hypot(steps[:, 0], steps[:, 1]) <= config.max_step_m]
+    if keep is not None and len(steps):
+        steps = steps[keep(steps)]
+    if len(steps) > config.max_hypotheses:
+        rng = np.random.default_rng(config.seed)
+        steps = steps[rng.choice(len(steps), config.max_hypotheses, replace=False)]
+    return np.concatenate([np.asarray(extra, dtype=float).reshape(-1, 3), steps])
+
+
+def prior_innovation(information: np.ndarray, step: np.ndarray, prior: Prior,
+                     config: OdometryConfig = OdometryConfig()) -> float:
+    """
+    Return how far a prior lies from what the landmarks say, as a chi-square (3 dof at most).
+
+    At the fused step x* (the landmarks' fit with the prior), r = x* - x_prior and W = P^-1:
+    d^T (C_landmarks + P)^-1 d = r^T W r + (W r)^T I^+ (W r), I the landmarks' information
+    and I^+ its pseudo-inverse (the directions the landmarks leave free count nothing); exact
+    for a linear fit (docs/odometry.md#wheel-odometry-as-the-prior).
+
+    :param information: the landmarks' information at the fused step, shape (3, 3)
+    :param step: the fused step (dx m, dy m, dyaw rad)
+    :param prior: the prior
+    :param config: its degenerate thresholds scale the pseudo-inverse
+    :return: the chi-square
+    """
+    away = np.asarray(step, dtype=float) - prior.step
+    away[2] = float(wrap_angle(away[2]))
+    weighted = np.linalg.solve(prior.covariance, away)
+    scale = np.diag([config.degenerate_sigma_m, config.degenerate_sigma_m,
+                     config.degenerate_sigma_rad])
+    scaled = scale @ information @ scale
+    inverse_information = scale @ np.linalg.pinv(0.5 * (scaled + scaled.T), rcond=1e-9,
+                                                 hermitian=True) @ scale
+    return float(away @ weighted + weighted @ inverse_information @ weighted)
+
+
+def _with_prior(previous: Landmarks, current: Landmarks, prior: Prior,
+                config: OdometryConfig) -> Tuple[Optional[StepEstimate], bool]:
+    """
+    Return the step from the hypotheses inside a handed-in prior's gate, fused with the prior.
+
+    :return: (the estimate, or None when no association inside the gate is consistent with
+        the landmarks and the prior; whether landmarks associated there contradict the prior)
+    """
+    gate = chi2_quantile(config.consistency_probability, 3)
+    # The search's slack widens the prior's gate as it widens the landmarks'.
+    spread = np.linalg.inv(prior.covariance + np.diag(
+        [SEARCH_SLACK_M ** 2, SEARCH_SLACK_M ** 2, SEARCH_SLACK_RAD ** 2]))
+
+    def inside(steps: np.ndarray) -> np.ndarray:
+        away = steps - prior.step
+        away[:, 2] = wrap_angle(away[:, 2])
+        return np.einsum('hi,ij,hj->h', away, spread, away) <= gate
+
+    steps = _hypotheses(previous, current, config, prior.step, inside)
+    zero = np.zeros((1, 3))
+    if inside(zero)[0]:
+        steps = np.concatenate([steps[:1], zero, steps[1:]])
+    step, corners, lines = _search(previous, current, steps, prior.step, prior.covariance,
+                                   config, True)
+    matched = len(corners) + len(lines)
+    if not matched:
+        return None, False
+    step, information, chi2 = fit(previous, current, step, corners, lines,
+                                  (prior.step, prior.covariance))
+    # The statuses are the landmarks' (their information at the fused step), as without it.
+    degenerate = matched < config.min_matches or is_degenerate(information, config)
+    if not np.isfinite(step).all() or not np.isfinite(information).all():
+        return None, False
+    prior_information = np.linalg.inv(prior.covariance)
+    away = step - prior.step
+    away[2] = float(wrap_angle(away[2]))
+    chi2 += float(away @ prior_information @ away)
+    dof = 2 * matched
+    if (chi2 > chi2_quantile(config.consistency_probability, dof)
+            or prior_innovation(information, step, prior, config) > gate):
+        return None, True
+    covariance = np.linalg.inv(information + prior_information)
+    covariance = 0.5 * (covariance + covariance.T)
+    if not np.isfinite(covariance).all():
+        return None, False
+    return StepEstimate(step, covariance, 'degenerate' if degenerate else 'tracking',
+                        len(corners), len(lines), chi2 / dof, PRIOR_SOURCES[1],
+                        prior_gain=covariance @ prior_information), False
+
+
+def estimate_step(previous: Landmarks, current: Landmarks, prior_step: np.ndarray,
+                  prior_covariance: np.ndarray, config: OdometryConfig = OdometryConfig(),
+                  wheel: Optional[Prior] = None) -> StepEstimate:
+    """
+    Return the motion between two scans from their landmarks.
+
+    With a prior handed in (``wheel``): the hypotheses inside its gate are searched first and
+    the fit takes it as one more measurement; when nothing there is consistent, or what is
+    associates fewer than ENOUGH_SHARE of the landmarks, the search also runs as without it,
+    and a step the landmarks then find (associating REJECTING_SHARE times as many, in the
+    second case) rejects it (docs/odometry.md#wheel-odometry-as-the-prior).
+
+    :param previous: the previous scan's landmarks (its frame is the step's)
+    :param current: the current scan's landmarks
+    :param prior_step: the constant-velocity prediction (dx m, dy m, dyaw rad): a hypothesis
+        among the others and the estimate where the landmarks say nothing
+    :param prior_covariance: its covariance, shape (3, 3)
+    :param config: the settings
+    :param wheel: a step from another source with its covariance (wheel odometry), or None
+    :return: the estimate (never NaN)
+    """
+    prior_step = np.asarray(prior_step, dtype=float)
+    prior_covariance = np.asarray(prior_covariance, dtype=float)
+    fewest = min(len(previous.corner_xy) + len(previous.line),
+                 len(current.corner_xy) + len(current.line))
+    if wheel is None:
+        return _estimate(previous, current, prior_step, prior_covariance, config)
+    if fewest < 2:
+        return StepEstimate(wheel.step.copy(), wheel.covariance.copy(), 'prior',
+                            prior_source=PRIOR_SOURCES[1])
+    fused, contradicted = _with_prior(previous, current, wheel, config)
+    matched = 0 if fused is None else fused.corners + fused.lines
+    if fused is not None and matched >= ENOUGH_SHARE * fewest:
+        return fused
+    # Refined with the constant velocity as a measurement: two parallel walls alone then
+    # still say the turn and the distance across, against which the prior is judged.
+    estimate = _estimate(previous, current, prior_step, prior_covariance, config, True)
+    if (estimate.status in ('tracking', 'degenerate') and (fused is None or (
+            estimate.corners + estimate.lines >= max(REJECTING_SHARE * matched,
+                                                     config.min_matches)))) or contradicted:
+        # The landmarks found a step the prior's gate left out (or one that associates far
+        # more of them), or those in its gate contradict it: the prior is wrong (a wheel that
+        # slipped, a robot carried).
+        return replace(estimate, prior_rejected=True)
+    if fused is not None:
+        return fused
+    # Nothing associated either way: the handed-in step, independent of the scans, stands.
+    covariance = wheel.covariance.copy()
+    if estimate.status == 'reinitialized':
+        covariance += np.diag([config.reinit_sigma_m ** 2, config.reinit_sigma_m ** 2,
+                               config.reinit_sigma_rad ** 2])
+    return replace(estimate, step=wheel.step.copy(), covariance=covariance,
+                   prior_source=PRIOR_SOURCES[1])
+
+
+def _estimate(previous: Landmarks, current: Landmarks, prior_step: np.ndarray,
+              prior_covariance: np.ndarray, config: OdometryConfig,
+              fused: bool = False) -> StepEstimate:
+    """
+    Return :func:`estimate_step` with the constant-velocity prior alone.
+
+    With ``fused`` the refinements' fits take the prior as a measurement (:func:`_search`).
+    """
+    landmarks_prev = len(previous.corner_xy) + len(previous.line)
+    landmarks_cur = len(current.corner_xy) + len(current.line)
+    if min(landmarks_prev, landmarks_cur) < 2:
+        return StepEstimate(prior_step.copy(), prior_covariance.copy(), 'prior')
+    steps = _hypotheses(previous, current, config,
+                        np.concatenate([prior_step[None], np.zeros((1, 3))]))
+    step, corners, lines = _search(previous, current, steps, prior_step, prior_covariance,
+                                   config, fused)
     matched = len(corners) + len(lines)
     reinit = StepEstimate(prior_step.copy(), np.diag(
         [config.reinit_sigma_m ** 2, config.reinit_sigma_m ** 2, config.reinit_sigma_rad ** 2])
@@ -811,7 +1029,8 @@ class Odometry:
     with both 0, every scan is the next one's reference (scan to scan). Matched against a
     keyframe, a still sensor does not drift, and its pose covariance does not grow, scan by
     scan (docs/odometry.md#keyframes). The constant-velocity prior is the last good step per
-    second times the time since, its covariance that step's grown by the prior's growth.
+    second times the time since, its covariance that step's grown by the prior's growth; a
+    step handed in with a scan (:class:`Prior`, wheel odometry) takes its place for that scan.
     """
 
     def __init__(self, config: OdometryConfig = OdometryConfig(),
@@ -855,36 +1074,65 @@ class Odometry:
         self._last = np.zeros(3)
         self._last_covariance = np.zeros((3, 3))
 
-    def update(self, stamp_s: float, landmarks: Landmarks) -> OdometryUpdate:
+    def _relative(self, step: np.ndarray,
+                  covariance: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """Return a step from the last scan as the pose in the keyframe's frame, covariance."""
+        by_last, by_step = compose_jacobians(self._last, step)
+        return compose(self._last, step), (by_last @ self._last_covariance @ by_last.T
+                                           + by_step @ covariance @ by_step.T)
+
+    def _step_covariance(self, estimate: StepEstimate, wheel: Optional[Prior]) -> np.ndarray:
+        """
+        Return the covariance of the step from the last scan, last^-1 (+) relative.
+
+        The last scan's pose and this match are taken as independent, except through a
+        handed-in prior, last (+) wheel, that joined the fit: the match owes it
+        prior_gain, so cov(relative, last) = prior_gain d(last (+) wheel)/d last C_last
+        (docs/odometry.md#keyframes). Along a corridor's axis, where the step is the wheel's
+        alone, the step's covariance is then the wheel's.
+        """
+        by_inverse, by_relative = compose_jacobians(inverse(self._last), estimate.step)
+        by_last = by_inverse @ inverse_jacobian(self._last)
+        covariance = (by_last @ self._last_covariance @ by_last.T
+                      + by_relative @ estimate.covariance @ by_relative.T)
+        if estimate.prior_gain is not None and wheel is not None:
+            through, _ = compose_jacobians(self._last, wheel.step)
+            cross = by_relative @ estimate.prior_gain @ through @ self._last_covariance \
+                @ by_last.T
+            covariance = covariance + cross + cross.T
+        return covariance
+
+    def update(self, stamp_s: float, landmarks: Landmarks,
+               wheel: Optional[Prior] = None) -> OdometryUpdate:
         """
         Take one scan's landmarks.
 
         :param stamp_s: the scan's stamp, s (a stamp not after the previous one: a step of 0 s)
         :param landmarks: its landmarks in the sensor frame (those with a value that is not
             finite are left out)
+        :param wheel: the step since the previous scan from another source (wheel odometry),
+            in the laser's frame, with its covariance; None: the constant-velocity prior
         :return: the odometry of this scan
         """
         landmarks = finite_only(landmarks)
         dt_s = stamp_s - self._stamp_s if math.isfinite(self._stamp_s) else 0.0
         dt_s = dt_s if math.isfinite(dt_s) and dt_s > 0.0 else 0.0
         prior_step, prior_covariance = self._prior(dt_s)
-        # The prior of the scan's pose in the keyframe's frame: the last one's, one step on.
-        by_last, by_prior = compose_jacobians(self._last, prior_step)
-        prior_relative = compose(self._last, prior_step)
-        prior_relative_covariance = (by_last @ self._last_covariance @ by_last.T
-                                     + by_prior @ prior_covariance @ by_prior.T)
+        # The priors of the scan's pose in the keyframe's frame: the last one's, one step on.
+        prior_relative, prior_relative_covariance = self._relative(prior_step, prior_covariance)
         if self._reference is None:
             estimate = StepEstimate(np.zeros(3), np.zeros((3, 3)), 'prior')
         else:
+            wheel_relative = None if wheel is None else Prior(
+                *self._relative(wheel.step, wheel.covariance))
             estimate = estimate_step(self._reference, landmarks, prior_relative,
-                                     prior_relative_covariance, self.config)
+                                     prior_relative_covariance, self.config, wheel_relative)
+        if estimate.prior_source == PRIOR_SOURCES[1] and wheel is not None:
+            prior_step = wheel.step
         matched = estimate.status in ('tracking', 'degenerate')
-        # The step from the last scan: last^-1 (+) relative (the two taken as independent).
-        by_inverse, by_relative = compose_jacobians(inverse(self._last), estimate.step)
-        by_last = by_inverse @ inverse_jacobian(self._last)
+        # The step from the last scan: last^-1 (+) relative.
         step = compose(inverse(self._last), estimate.step)
-        step_covariance = (by_last @ self._last_covariance @ by_last.T
-                           + by_relative @ estimate.covariance @ by_relative.T)
+        step_covariance = self._step_covariance(estimate, wheel)
         if not matched:
             # The prior or a reinitialization: its covariance is the step's own.
             step, step_covariance = prior_step.copy(), estimate.covariance.copy()
@@ -916,7 +1164,8 @@ class Odometry:
         self._stamp_s = stamp_s if math.isfinite(stamp_s) else self._stamp_s
         return OdometryUpdate(stamp_s, dt_s, step, 0.5 * (step_covariance + step_covariance.T),
                               self.pose.copy(), self.pose_covariance.copy(), estimate.status,
-                              estimate.corners, estimate.lines)
+                              estimate.corners, estimate.lines, estimate.prior_source,
+                              estimate.prior_rejected)
 
 
 def on_robot(update: OdometryUpdate, mount: np.ndarray) -> OdometryUpdate:
@@ -937,4 +1186,5 @@ def on_robot(update: OdometryUpdate, mount: np.ndarray) -> OdometryUpdate:
     return OdometryUpdate(update.stamp_s, update.dt_s, step, step_covariance,
                           compose(update.pose, inverse(mount)),
                           by_pose @ update.pose_covariance @ by_pose.T, update.status,
-                          update.corners, update.lines)
+                          update.corners, update.lines, update.prior_source,
+                          update.prior_rejected)

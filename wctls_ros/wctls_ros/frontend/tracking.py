@@ -499,13 +499,15 @@ class Tracker:
                  ) -> np.ndarray:
         """Return each detection's track (-1: none): clusters of gated pairs, JCBB in each."""
         matched = np.full(len(gated), -1, dtype=np.intp)
-        for detections, tracks in _clusters(gated):
-            if len(detections) == 1 and len(tracks) == 1:
-                matched[detections[0]] = tracks[0]
-                continue
+        # A pair alone in its row and its column is a cluster of its own: matched as it is.
+        alone = gated & (gated.sum(axis=1) == 1)[:, None] & (gated.sum(axis=0) == 1)
+        detections, tracks = np.nonzero(alone)
+        matched[detections] = tracks
+        for detections_of_cluster, tracks_of_cluster in _clusters(gated & ~alone):
             search = _JointSearch(gated, squared, error, innovation, by_step[:, :2], step_cov,
-                                  self._joint_gate, self.config.max_hypotheses)
-            for n, k in search.best(detections):
+                                  tracks_of_cluster, self._joint_gate,
+                                  self.config.max_hypotheses)
+            for n, k in search.best(detections_of_cluster):
                 matched[n] = k
         return matched
 
@@ -529,8 +531,7 @@ class Tracker:
         tracks.cov[rows] = 0.5 * (updated + updated.transpose(0, 2, 1))
         tracks.persistent[rows] = cov[pairs] - white
         if kind == LINE:
-            for n, k in zip(pairs, rows):
-                tracks.ends[k] = spanned(ends[n], tracks.ends[k])
+            tracks.ends[rows] = spanned(ends[pairs], tracks.ends[rows])
         tracks.hits[rows] += 1
         tracks.misses[rows] = 0
         tracks.last_scan[rows] = self._scan
@@ -552,7 +553,8 @@ class Tracker:
         tracks.state[lose] = LOST
         drop = ((tracks.state == TENTATIVE) & (tracks.misses >= rules.drop_tentative_misses)
                 | (self._scan - tracks.last_scan > rules.memory_scans))
-        tracks.keep(~drop)
+        if drop.any():
+            tracks.keep(~drop)
 
     def _identify(self, kind: str, value: np.ndarray, cov: np.ndarray, ends: np.ndarray,
                   matched_ids: np.ndarray, squared_distance: np.ndarray) -> Identified:
@@ -563,13 +565,23 @@ class Tracker:
         self._next_id += len(fresh)
         ids = matched_ids.copy()
         ids[new] = fresh
+        if len(fresh):
+            self._start_tracks(tracks, fresh, value[new], cov[new], ends[new])
+        # A matched track is never dropped: every id has its row.
+        rows = np.searchsorted(tracks.ids, ids) if len(ids) else np.zeros(0, dtype=np.intp)
+        return Identified(ids, tracks.state[rows].copy(), tracks.hits[rows].copy(),
+                          self._scan - tracks.first_scan[rows], squared_distance)
+
+    def _start_tracks(self, tracks: _Tracks, fresh: np.ndarray, value: np.ndarray,
+                      cov: np.ndarray, ends: np.ndarray) -> None:
+        """Append a track of ids ``fresh`` for each of the unmatched detections given."""
         first_state = CONFIRMED if self.config.confirm_hits <= 1 else TENTATIVE
         tracks.ids = np.concatenate([tracks.ids, fresh])
-        tracks.mean = np.concatenate([tracks.mean, value[new]])
-        tracks.cov = np.concatenate([tracks.cov, self._white * cov[new]])
+        tracks.mean = np.concatenate([tracks.mean, value])
+        tracks.cov = np.concatenate([tracks.cov, self._white * cov])
         tracks.persistent = np.concatenate([tracks.persistent,
-                                            (1.0 - self._white) * cov[new]])
-        tracks.ends = np.concatenate([tracks.ends, ends[new]])
+                                            (1.0 - self._white) * cov])
+        tracks.ends = np.concatenate([tracks.ends, ends])
         tracks.state = np.concatenate([tracks.state, np.full(len(fresh), first_state,
                                                              dtype=np.int8)])
         tracks.hits = np.concatenate([tracks.hits, np.ones(len(fresh), dtype=np.int64)])
@@ -577,10 +589,6 @@ class Tracker:
         now = np.full(len(fresh), self._scan, dtype=np.int64)
         tracks.first_scan = np.concatenate([tracks.first_scan, now])
         tracks.last_scan = np.concatenate([tracks.last_scan, now])
-        # A matched track is never dropped: every id has its row.
-        rows = np.searchsorted(tracks.ids, ids) if len(ids) else np.zeros(0, dtype=np.intp)
-        return Identified(ids, tracks.state[rows].copy(), tracks.hits[rows].copy(),
-                          self._scan - tracks.first_scan[rows], squared_distance)
 
     def landmarks(self, kind: Optional[str] = None) -> List[Landmark]:
         """
@@ -605,8 +613,9 @@ def _clusters(gated: np.ndarray) -> List[Tuple[List[int], List[int]]]:
     Return the connected clusters of gated (detection, track) pairs.
 
     :param gated: shape (N, K): which pairs pass the individual gate
-    :return: (detections, tracks) of each cluster with at least one pair
+    :return: (detections, in ascending order, and tracks) of each cluster with at least one pair
     """
+    pairs = np.argwhere(gated).tolist()
     parent = list(range(gated.shape[0] + gated.shape[1]))
 
     def root(node: int) -> int:
@@ -616,25 +625,31 @@ def _clusters(gated: np.ndarray) -> List[Tuple[List[int], List[int]]]:
         return node
 
     offset = gated.shape[0]
-    for n, k in np.argwhere(gated):
-        parent[root(int(n))] = root(offset + int(k))
+    for n, k in pairs:
+        parent[root(n)] = root(offset + k)
     clusters: Dict[int, Tuple[List[int], List[int]]] = {}
-    for n, k in np.argwhere(gated):
-        cluster = clusters.setdefault(root(int(n)), ([], []))
-        if int(n) not in cluster[0]:
-            cluster[0].append(int(n))
-        if int(k) not in cluster[1]:
-            cluster[1].append(int(k))
+    for n, k in pairs:
+        cluster = clusters.setdefault(root(n), ([], []))
+        if n not in cluster[0]:
+            cluster[0].append(n)
+        if k not in cluster[1]:
+            cluster[1].append(k)
     return list(clusters.values())
 
 
 class _JointSearch:
     """Joint compatibility branch and bound over one cluster (Neira and Tardos 2001)."""
 
-    def __init__(self, gated, squared, error, innovation, by_step, step_cov, joint_gate,
-                 max_nodes: int):
+    def __init__(self, gated, squared, error, innovation, by_step, step_cov, tracks,
+                 joint_gate, max_nodes: int):
         self.gated, self.squared, self.error = gated, squared, error
-        self.innovation, self.by_step, self.step_cov = innovation, by_step, step_cov
+        self.innovation = innovation
+        # The shared step's cross covariance of every two of the cluster's tracks: G_k Q G_j^T,
+        # by their place in ``tracks``.
+        self.place = np.full(gated.shape[1], -1, dtype=np.intp)
+        self.place[tracks] = np.arange(len(tracks))
+        by_step = by_step[tracks]
+        self.shared = (by_step @ step_cov)[:, None] @ by_step[None].transpose(0, 1, 3, 2)
         self.joint_gate, self.nodes_left = joint_gate, max_nodes
         self.best_pairs: List[Tuple[int, int]] = []
         self.best_squared = math.inf
@@ -642,17 +657,14 @@ class _JointSearch:
 
     def joint_squared(self, pairs: Sequence[Tuple[int, int]]) -> float:
         """Return the stacked innovation's squared Mahalanobis distance of a hypothesis."""
-        size = len(pairs)
-        stacked = np.zeros((2 * size, 2 * size))
-        vector = np.zeros(2 * size)
-        for a, (n, k) in enumerate(pairs):
-            vector[2 * a:2 * a + 2] = self.error[n, k]
-            for b, (_, j) in enumerate(pairs):
-                if a == b:
-                    stacked[2 * a:2 * a + 2, 2 * a:2 * a + 2] = self.innovation[n, k]
-                else:       # the shared step: cov(track k, track j) = G_k Q G_j^T
-                    stacked[2 * a:2 * a + 2, 2 * b:2 * b + 2] = (
-                        self.by_step[k] @ self.step_cov @ self.by_step[j].T)
+        detections, tracks = np.array(pairs, dtype=np.intp).reshape(-1, 2).T
+        size = len(tracks)
+        # Off the diagonal the shared step: cov(track k, track j) = G_k Q G_j^T.
+        place = self.place[tracks]
+        blocks = self.shared[place[:, None], place[None, :]]
+        blocks[np.arange(size), np.arange(size)] = self.innovation[detections, tracks]
+        stacked = blocks.transpose(0, 2, 1, 3).reshape(2 * size, 2 * size)
+        vector = self.error[detections, tracks].reshape(-1)
         return float(vector @ np.linalg.solve(stacked, vector))
 
     def best(self, detections: List[int]) -> List[Tuple[int, int]]:
@@ -695,6 +707,8 @@ class _JointSearch:
         for k in sorted(np.flatnonzero(self.gated[n]), key=lambda k: self.squared[n, k]):
             if int(k) in used:
                 continue
+            if self.nodes_left <= 0:      # out of nodes: nothing below can change the best
+                return
             candidate = pairs + [(n, int(k))]
             squared = self.joint_squared(candidate)
             if squared <= self.joint_gate(len(candidate)):

@@ -527,7 +527,10 @@ class Tracker:
         gain = np.linalg.solve(prior + white, prior).transpose(0, 2, 1)   # P (P + R)^-1
         tracks.mean[rows] += np.einsum('kij,kj->ki', gain, error)
         tracks.mean[rows, angle] = wrap_angle(tracks.mean[rows, angle])
-        updated = prior - gain @ prior
+        # P - P (P + R)^-1 P, written P (P + R)^-1 R: no difference of two nearly equal terms
+        # where a track far less certain than its observation (a lost odometry's step) shrinks
+        # to about R, which would lose digits to rounding (1e-9 of 1e3 m^2 down to 1e-4).
+        updated = gain @ white
         tracks.cov[rows] = 0.5 * (updated + updated.transpose(0, 2, 1))
         tracks.persistent[rows] = cov[pairs] - white
         if kind == LINE:

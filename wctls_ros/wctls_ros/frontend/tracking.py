@@ -41,25 +41,29 @@ view (:class:`View`): inside the scan's bearings and range, and not behind a ret
 the landmark by ``occlusion_margin_m``; without a view every landmark counts as in view. A track
 unseen for ``memory_scans`` scans is forgotten. Ids start at 1 and are never reused.
 
-Pure numpy; no rclpy.
+**Two implementations.** The numpy steps of :class:`Tracker` are the specification; compiled
+twins of them (numba, ``core/numba_core/tracking.py``) take one compiled call per kind of
+landmark and scan, with the same ids and estimates within 1e-9. The tracker runs the compiled
+one whenever the compiled feature pipeline serves (:func:`wctls_ros.core.runtime.compiled_tracker`:
+numba installed, the core loaded), the numpy one otherwise; ``Tracker(compiled=...)`` forces
+either. No rclpy, and no numba import here.
 """
 
 from dataclasses import dataclass, field
 import math
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from .frames import (overlapping, relative_step, spanned, step_corners, step_lines, step_points,
                      wrap_angle)
-from ..core import line_landmarks
+from ..core import line_landmarks, runtime
+from ..core.records import TrackRules
+from ..core.rules import CONFIRMED, LOST, TENTATIVE
 
 CORNER = 'corner'
 LINE = 'line'
 KINDS = (CORNER, LINE)
-TENTATIVE = 0
-CONFIRMED = 1
-LOST = 2
 # A state's name by its code.
 STATES = ('tentative', 'confirmed', 'lost')
 # The tested share of re-observations: the 95 % gate (chi2, 2 dof).
@@ -408,11 +412,18 @@ class Tracker:
     Call :meth:`update` once per scan, in order.
     """
 
-    def __init__(self, config: Optional[TrackerConfig] = None):
+    def __init__(self, config: Optional[TrackerConfig] = None,
+                 compiled: Optional[bool] = None):
         """
         Start with no tracks.
 
         :param config: the rules (defaults: :class:`TrackerConfig`)
+        :param compiled: None: the compiled twin on every scan the compiled core serves
+            (:func:`~wctls_ros.core.runtime.compiled_tracker`), the numpy steps on the others;
+            True: the compiled twin always (the compiled core is loaded, or compiled, first);
+            False: the numpy steps always
+        :raises wctls_ros.core.CoreUnavailable: with ``compiled`` True, when numba cannot give
+            the compiled core (not installed, too old, ``WCTLS_ROS_CORE=numpy``)
         """
         self.config = config or TrackerConfig()
         self._tracks = {CORNER: _Tracks(3, 2), LINE: _Tracks(2, 0)}
@@ -421,6 +432,21 @@ class Tracker:
         self._joint_gates: Dict[int, float] = {}
         # The share of an observation's covariance that is new in every scan.
         self._white = 1.0 - self.config.persistent_share
+        self._compiled = compiled
+        self._forced_kernels: Any = None
+        if compiled:
+            self._forced_kernels = runtime.compiled_tracker(wait=True)
+            if self._forced_kernels is None:
+                status = runtime.status()
+                raise runtime.CoreUnavailable(
+                    'the compiled tracker needs the compiled core: '
+                    f'{status.reason if status is not None else "not started"}')
+        rules = self.config
+        self._rules = TrackRules(float(self._white), int(rules.confirm_hits),
+                                 int(rules.drop_tentative_misses), int(rules.lose_misses),
+                                 int(rules.memory_scans), int(rules.max_hypotheses),
+                                 float(rules.occlusion_margin_m))
+        self._gates = np.array([math.nan, self._joint_gate(1)])
 
     def _joint_gate(self, pairs: int) -> float:
         """Return the chi2 gate of ``pairs`` pairings (2 dof each)."""
@@ -428,6 +454,19 @@ class Tracker:
             self._joint_gates[pairs] = chi2_quantile_even(self.config.gate_probability,
                                                           2 * pairs)
         return self._joint_gates[pairs]
+
+    def _gate_table(self, pairs: int) -> np.ndarray:
+        """Return the joint gates of 0 (NaN) to at least ``pairs`` pairings, for the kernels."""
+        if len(self._gates) <= pairs:
+            self._gates = np.array([math.nan] + [self._joint_gate(size)
+                                                 for size in range(1, pairs + 1)])
+        return self._gates
+
+    def _kernels(self) -> Any:
+        """Return the compiled tracker's kernels for this scan, or None for the numpy steps."""
+        if self._compiled is None:
+            return runtime.compiled_tracker()
+        return self._forced_kernels
 
     def update(self, detections: Detections, motion: Motion,
                view: Optional[View] = None) -> TrackedScan:
@@ -440,14 +479,51 @@ class Tracker:
         :return: the detections' ids, states, hits and ages
         """
         self._scan += 1
+        corner_ends = np.repeat(detections.corner_pose[:, None, :2], 2, axis=1)
+        kernels = self._kernels()
+        if kernels is not None:
+            return self._update_compiled(kernels, detections, corner_ends, motion, view)
         corner_step = self._predict(CORNER, motion)
         line_step = self._predict(LINE, motion)
         corners = self._associate(CORNER, detections.corner_pose, detections.corner_cov,
-                                  np.repeat(detections.corner_pose[:, None, :2], 2, axis=1),
-                                  corner_step, motion.covariance, view)
+                                  corner_ends, corner_step, motion.covariance, view)
         lines = self._associate(LINE, detections.line, detections.line_cov,
                                 detections.line_ends, line_step, motion.covariance, view)
         return TrackedScan(corners, lines)
+
+    def _update_compiled(self, kernels: Any, detections: Detections, corner_ends: np.ndarray,
+                         motion: Motion, view: Optional[View]) -> TrackedScan:
+        """Run :meth:`update`'s steps by the compiled kernels (``numba_core/tracking.py``)."""
+        if view is None:
+            seen, ranges, angle_min, increment, reach = False, np.zeros(1), 0.0, 1.0, 0.0
+        else:
+            seen, ranges = True, np.ascontiguousarray(view.ranges_m, dtype=float)
+            angle_min, increment, reach = (float(view.angle_min_rad),
+                                           float(view.angle_increment_rad),
+                                           float(view.range_max_m))
+        step = np.ascontiguousarray(motion.step)
+        step_cov = np.ascontiguousarray(motion.covariance)
+        identified = []
+        for kind, value, cov, ends in ((CORNER, detections.corner_pose, detections.corner_cov,
+                                        corner_ends),
+                                       (LINE, detections.line, detections.line_cov,
+                                        detections.line_ends)):
+            # The kernels' argument types, so that nothing compiles again for another layout.
+            value, cov, ends = (np.ascontiguousarray(array, dtype=float)
+                                for array in (value, cov, ends))
+            tracks = self._tracks[kind]
+            matched, squared_distance, keep = kernels.update_tracks(
+                kind == LINE, value, cov, ends, tracks.mean, tracks.cov, tracks.persistent,
+                tracks.ends, tracks.state, tracks.hits, tracks.misses, tracks.last_scan, step,
+                step_cov, self._gate_table(min(len(value), len(tracks.ids))), self._rules,
+                self._scan, seen, ranges, angle_min, increment, reach)
+            matched_ids = np.where(matched >= 0, tracks.ids[np.maximum(matched, 0)]
+                                   if len(tracks.ids) else 0, 0)
+            if not keep.all():
+                tracks.keep(keep)
+            identified.append(self._identify(kind, value, cov, ends, matched_ids,
+                                             squared_distance))
+        return TrackedScan(*identified)
 
     def _predict(self, kind: str, motion: Motion) -> np.ndarray:
         """Move one kind's tracks by the step; return d track / d step, shape (K, d, 3)."""

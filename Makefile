@@ -32,7 +32,7 @@ OLDEST_VENV := .venv-oldest
 OLDEST_STAMP := $(OLDEST_VENV)/.deps.stamp
 OLDEST_TESTS := $(addprefix wctls_ros/test/,test_core_compiled_pipeline.py test_core_lines.py \
                   test_core_pipeline.py test_core_precompile.py test_core_segmentation.py \
-                  test_rplidar_scan.py) wctls_lab/test/test_simulation.py
+                  test_rplidar_scan.py test_tracking_compiled.py) wctls_lab/test/test_simulation.py
 STOCK_VENV := .venv-stock
 STOCK_DEPS_STAMP := $(STOCK_VENV)/.deps.stamp
 STOCK_STAMP := $(STOCK_VENV)/.executables.stamp

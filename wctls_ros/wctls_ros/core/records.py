@@ -240,3 +240,22 @@ class AlongWall(NamedTuple):
     in_front_m: FloatArray
     along_m: FloatArray
     on_line: FlagArray
+
+
+class TrackRules(NamedTuple):
+    """
+    The landmark tracker's rules as its compiled kernels read them (one record per tracker).
+
+    The fields of :class:`wctls_ros.frontend.tracking.TrackerConfig` of the same names, and:
+
+    :ivar white_share: the share of an observation's covariance that is new in every scan,
+        1 - ``persistent_share``
+    """
+
+    white_share: float
+    confirm_hits: int
+    drop_tentative_misses: int
+    lose_misses: int
+    memory_scans: int
+    max_hypotheses: int
+    occlusion_margin_m: float

@@ -50,3 +50,9 @@ ML_MAX_ITERATIONS = 8
 # #corners: a corner may sit one beam without a return beyond a wall's last return (a dropout
 # there), reported with that wall's end not seen; farther, it is an extrapolation, not a corner.
 CORNER_MISSING_BEAMS = 1
+
+# #landmark-tracks: a track's state by code, in the tracker (wctls_ros.frontend.tracking) and its
+# compiled kernels (numba_core/tracking.py): new, seen often enough, missed too often in view.
+TENTATIVE = 0
+CONFIRMED = 1
+LOST = 2

@@ -36,7 +36,7 @@ import subprocess
 import sys
 import threading
 import time
-from typing import Callable, List, Optional
+from typing import Any, Callable, List, Optional
 
 from . import numpy_core
 from .config import FeatureConfig
@@ -111,6 +111,8 @@ class CoreStatus:
 Listener = Callable[[CoreStatus], None]
 _lock = threading.Lock()
 _extract: Callable[..., Features] = numpy_core.extract_features
+# The compiled tracker's kernels (numba_core.tracking), loaded with the compiled pipeline.
+_tracker: Any = None
 _status: Optional[CoreStatus] = None
 _compiler: Optional[subprocess.Popen] = None
 _listeners: List[Listener] = []
@@ -146,6 +148,25 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
         start()
     return _extract(ranges_m, angle_min_rad, angle_increment_rad, config, range_min_m,
                     range_max_m)
+
+
+def compiled_tracker(wait: bool = False) -> Any:
+    """
+    Return the landmark tracker's compiled kernels while the compiled core serves, else None.
+
+    The kernels (:mod:`.numba_core.tracking`, the twin of
+    :class:`wctls_ros.frontend.tracking.Tracker`'s numpy steps) are compiled and loaded with
+    the compiled pipeline: None while numba is missing, too old or failed, while the compiled
+    core is still loading or compiling, before :func:`start`, and with ``WCTLS_ROS_CORE=numpy``.
+
+    :param wait: start the choice first and wait for the compiled core (``start(wait=True)``)
+    :return: the module of the kernels, or None
+    :raises CoreUnavailable: with ``wait``, when ``WCTLS_ROS_CORE=numba`` and numba cannot give
+        the core
+    """
+    if wait:
+        start(wait=True)
+    return _tracker
 
 
 def status() -> Optional[CoreStatus]:
@@ -301,11 +322,11 @@ def _bring_in_compiled(asked: str, on_compile: Optional[Callable[[], None]],
     :return: the status: numba, or numpy with the reason the compiled core failed
     :raises CoreUnavailable: when ``asked`` is 'numba' and the compiled core fails
     """
-    global _extract
+    global _extract, _tracker
     started = time.perf_counter()
     try:
         import numba
-        from .numba_core import pipeline, precompile
+        from .numba_core import pipeline, precompile, tracking
         compiled_here = not precompile.pipeline_is_cached()
         if compiled_here:
             if on_compile is not None:
@@ -319,6 +340,7 @@ def _bring_in_compiled(asked: str, on_compile: Optional[Callable[[], None]],
             raise CoreUnavailable(reason) from error
         return CoreStatus('numpy', reason)
     _extract = pipeline.extract_features
+    _tracker = tracking
     return CoreStatus('numba', f'numba {numba.__version__}', seconds=time.perf_counter() - started,
                       compiled_here=compiled_here)
 

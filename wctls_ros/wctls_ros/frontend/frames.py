@@ -224,17 +224,19 @@ def overlapping(ends: np.ndarray, track_ends: np.ndarray) -> np.ndarray:
 
 def spanned(ends: np.ndarray, track_ends: np.ndarray) -> np.ndarray:
     """
-    Return a segment's ends stretched over the stretch of its track seen before.
+    Return segments' ends stretched over the stretch of their tracks seen before.
 
-    :param ends: the segment's ends, shape (2, 2), m
-    :param track_ends: the track's ends, shape (2, 2), m
-    :return: the ends of the union of both extents along the segment's line, shape (2, 2)
+    :param ends: the segments' ends, shape (..., 2, 2), m
+    :param track_ends: their tracks' ends, shape (..., 2, 2), m
+    :return: the ends of the union of both extents along each segment's line, shape (..., 2, 2)
     """
-    direction = ends[1] - ends[0]
-    direction = direction / max(float(np.linalg.norm(direction)), 1e-12)
-    along = np.concatenate([ends, track_ends]) @ direction
-    foot = ends[0] - along[0] * direction
-    return foot + np.array([along.min(), along.max()])[:, None] * direction
+    direction = ends[..., 1, :] - ends[..., 0, :]
+    direction = direction / np.maximum(np.linalg.norm(direction, axis=-1), 1e-12)[..., None]
+    along = np.einsum('...ei,...i->...e', np.concatenate([ends, track_ends], axis=-2),
+                      direction)
+    foot = ends[..., 0, :] - along[..., :1] * direction
+    extent = np.stack([along.min(axis=-1), along.max(axis=-1)], axis=-1)
+    return foot[..., None, :] + extent[..., None] * direction[..., None, :]
 
 
 def to_world(landmarks: Landmarks, pose: np.ndarray, pose_cov: np.ndarray):

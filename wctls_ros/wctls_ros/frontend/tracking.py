@@ -41,25 +41,29 @@ view (:class:`View`): inside the scan's bearings and range, and not behind a ret
 the landmark by ``occlusion_margin_m``; without a view every landmark counts as in view. A track
 unseen for ``memory_scans`` scans is forgotten. Ids start at 1 and are never reused.
 
-Pure numpy; no rclpy.
+**Two implementations.** The numpy steps of :class:`Tracker` are the specification; compiled
+twins of them (numba, ``core/numba_core/tracking.py``) take one compiled call per kind of
+landmark and scan, with the same ids and estimates within 1e-9. The tracker runs the compiled
+one whenever the compiled feature pipeline serves (:func:`wctls_ros.core.runtime.compiled_tracker`:
+numba installed, the core loaded), the numpy one otherwise; ``Tracker(compiled=...)`` forces
+either. No rclpy, and no numba import here.
 """
 
 from dataclasses import dataclass, field
 import math
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from .frames import (overlapping, relative_step, spanned, step_corners, step_lines, step_points,
                      wrap_angle)
-from ..core import line_landmarks
+from ..core import line_landmarks, runtime
+from ..core.records import TrackRules
+from ..core.rules import CONFIRMED, LOST, TENTATIVE
 
 CORNER = 'corner'
 LINE = 'line'
 KINDS = (CORNER, LINE)
-TENTATIVE = 0
-CONFIRMED = 1
-LOST = 2
 # A state's name by its code.
 STATES = ('tentative', 'confirmed', 'lost')
 # The tested share of re-observations: the 95 % gate (chi2, 2 dof).
@@ -408,11 +412,18 @@ class Tracker:
     Call :meth:`update` once per scan, in order.
     """
 
-    def __init__(self, config: Optional[TrackerConfig] = None):
+    def __init__(self, config: Optional[TrackerConfig] = None,
+                 compiled: Optional[bool] = None):
         """
         Start with no tracks.
 
         :param config: the rules (defaults: :class:`TrackerConfig`)
+        :param compiled: None: the compiled twin on every scan the compiled core serves
+            (:func:`~wctls_ros.core.runtime.compiled_tracker`), the numpy steps on the others;
+            True: the compiled twin always (the compiled core is loaded, or compiled, first);
+            False: the numpy steps always
+        :raises wctls_ros.core.CoreUnavailable: with ``compiled`` True, when numba cannot give
+            the compiled core (not installed, too old, ``WCTLS_ROS_CORE=numpy``)
         """
         self.config = config or TrackerConfig()
         self._tracks = {CORNER: _Tracks(3, 2), LINE: _Tracks(2, 0)}
@@ -421,6 +432,21 @@ class Tracker:
         self._joint_gates: Dict[int, float] = {}
         # The share of an observation's covariance that is new in every scan.
         self._white = 1.0 - self.config.persistent_share
+        self._compiled = compiled
+        self._forced_kernels: Any = None
+        if compiled:
+            self._forced_kernels = runtime.compiled_tracker(wait=True)
+            if self._forced_kernels is None:
+                status = runtime.status()
+                raise runtime.CoreUnavailable(
+                    'the compiled tracker needs the compiled core: '
+                    f'{status.reason if status is not None else "not started"}')
+        rules = self.config
+        self._rules = TrackRules(float(self._white), int(rules.confirm_hits),
+                                 int(rules.drop_tentative_misses), int(rules.lose_misses),
+                                 int(rules.memory_scans), int(rules.max_hypotheses),
+                                 float(rules.occlusion_margin_m))
+        self._gates = np.array([math.nan, self._joint_gate(1)])
 
     def _joint_gate(self, pairs: int) -> float:
         """Return the chi2 gate of ``pairs`` pairings (2 dof each)."""
@@ -428,6 +454,19 @@ class Tracker:
             self._joint_gates[pairs] = chi2_quantile_even(self.config.gate_probability,
                                                           2 * pairs)
         return self._joint_gates[pairs]
+
+    def _gate_table(self, pairs: int) -> np.ndarray:
+        """Return the joint gates of 0 (NaN) to at least ``pairs`` pairings, for the kernels."""
+        if len(self._gates) <= pairs:
+            self._gates = np.array([math.nan] + [self._joint_gate(size)
+                                                 for size in range(1, pairs + 1)])
+        return self._gates
+
+    def _kernels(self) -> Any:
+        """Return the compiled tracker's kernels for this scan, or None for the numpy steps."""
+        if self._compiled is None:
+            return runtime.compiled_tracker()
+        return self._forced_kernels
 
     def update(self, detections: Detections, motion: Motion,
                view: Optional[View] = None) -> TrackedScan:
@@ -440,14 +479,51 @@ class Tracker:
         :return: the detections' ids, states, hits and ages
         """
         self._scan += 1
+        corner_ends = np.repeat(detections.corner_pose[:, None, :2], 2, axis=1)
+        kernels = self._kernels()
+        if kernels is not None:
+            return self._update_compiled(kernels, detections, corner_ends, motion, view)
         corner_step = self._predict(CORNER, motion)
         line_step = self._predict(LINE, motion)
         corners = self._associate(CORNER, detections.corner_pose, detections.corner_cov,
-                                  np.repeat(detections.corner_pose[:, None, :2], 2, axis=1),
-                                  corner_step, motion.covariance, view)
+                                  corner_ends, corner_step, motion.covariance, view)
         lines = self._associate(LINE, detections.line, detections.line_cov,
                                 detections.line_ends, line_step, motion.covariance, view)
         return TrackedScan(corners, lines)
+
+    def _update_compiled(self, kernels: Any, detections: Detections, corner_ends: np.ndarray,
+                         motion: Motion, view: Optional[View]) -> TrackedScan:
+        """Run :meth:`update`'s steps by the compiled kernels (``numba_core/tracking.py``)."""
+        if view is None:
+            seen, ranges, angle_min, increment, reach = False, np.zeros(1), 0.0, 1.0, 0.0
+        else:
+            seen, ranges = True, np.ascontiguousarray(view.ranges_m, dtype=float)
+            angle_min, increment, reach = (float(view.angle_min_rad),
+                                           float(view.angle_increment_rad),
+                                           float(view.range_max_m))
+        step = np.ascontiguousarray(motion.step)
+        step_cov = np.ascontiguousarray(motion.covariance)
+        identified = []
+        for kind, value, cov, ends in ((CORNER, detections.corner_pose, detections.corner_cov,
+                                        corner_ends),
+                                       (LINE, detections.line, detections.line_cov,
+                                        detections.line_ends)):
+            # The kernels' argument types, so that nothing compiles again for another layout.
+            value, cov, ends = (np.ascontiguousarray(array, dtype=float)
+                                for array in (value, cov, ends))
+            tracks = self._tracks[kind]
+            matched, squared_distance, keep = kernels.update_tracks(
+                kind == LINE, value, cov, ends, tracks.mean, tracks.cov, tracks.persistent,
+                tracks.ends, tracks.state, tracks.hits, tracks.misses, tracks.last_scan, step,
+                step_cov, self._gate_table(min(len(value), len(tracks.ids))), self._rules,
+                self._scan, seen, ranges, angle_min, increment, reach)
+            matched_ids = np.where(matched >= 0, tracks.ids[np.maximum(matched, 0)]
+                                   if len(tracks.ids) else 0, 0)
+            if not keep.all():
+                tracks.keep(keep)
+            identified.append(self._identify(kind, value, cov, ends, matched_ids,
+                                             squared_distance))
+        return TrackedScan(*identified)
 
     def _predict(self, kind: str, motion: Motion) -> np.ndarray:
         """Move one kind's tracks by the step; return d track / d step, shape (K, d, 3)."""
@@ -499,13 +575,15 @@ class Tracker:
                  ) -> np.ndarray:
         """Return each detection's track (-1: none): clusters of gated pairs, JCBB in each."""
         matched = np.full(len(gated), -1, dtype=np.intp)
-        for detections, tracks in _clusters(gated):
-            if len(detections) == 1 and len(tracks) == 1:
-                matched[detections[0]] = tracks[0]
-                continue
+        # A pair alone in its row and its column is a cluster of its own: matched as it is.
+        alone = gated & (gated.sum(axis=1) == 1)[:, None] & (gated.sum(axis=0) == 1)
+        detections, tracks = np.nonzero(alone)
+        matched[detections] = tracks
+        for detections_of_cluster, tracks_of_cluster in _clusters(gated & ~alone):
             search = _JointSearch(gated, squared, error, innovation, by_step[:, :2], step_cov,
-                                  self._joint_gate, self.config.max_hypotheses)
-            for n, k in search.best(detections):
+                                  tracks_of_cluster, self._joint_gate,
+                                  self.config.max_hypotheses)
+            for n, k in search.best(detections_of_cluster):
                 matched[n] = k
         return matched
 
@@ -525,12 +603,14 @@ class Tracker:
         gain = np.linalg.solve(prior + white, prior).transpose(0, 2, 1)   # P (P + R)^-1
         tracks.mean[rows] += np.einsum('kij,kj->ki', gain, error)
         tracks.mean[rows, angle] = wrap_angle(tracks.mean[rows, angle])
-        updated = prior - gain @ prior
+        # P - P (P + R)^-1 P, written P (P + R)^-1 R: no difference of two nearly equal terms
+        # where a track far less certain than its observation (a lost odometry's step) shrinks
+        # to about R, which would lose digits to rounding (1e-9 of 1e3 m^2 down to 1e-4).
+        updated = gain @ white
         tracks.cov[rows] = 0.5 * (updated + updated.transpose(0, 2, 1))
         tracks.persistent[rows] = cov[pairs] - white
         if kind == LINE:
-            for n, k in zip(pairs, rows):
-                tracks.ends[k] = spanned(ends[n], tracks.ends[k])
+            tracks.ends[rows] = spanned(ends[pairs], tracks.ends[rows])
         tracks.hits[rows] += 1
         tracks.misses[rows] = 0
         tracks.last_scan[rows] = self._scan
@@ -552,7 +632,8 @@ class Tracker:
         tracks.state[lose] = LOST
         drop = ((tracks.state == TENTATIVE) & (tracks.misses >= rules.drop_tentative_misses)
                 | (self._scan - tracks.last_scan > rules.memory_scans))
-        tracks.keep(~drop)
+        if drop.any():
+            tracks.keep(~drop)
 
     def _identify(self, kind: str, value: np.ndarray, cov: np.ndarray, ends: np.ndarray,
                   matched_ids: np.ndarray, squared_distance: np.ndarray) -> Identified:
@@ -563,13 +644,23 @@ class Tracker:
         self._next_id += len(fresh)
         ids = matched_ids.copy()
         ids[new] = fresh
+        if len(fresh):
+            self._start_tracks(tracks, fresh, value[new], cov[new], ends[new])
+        # A matched track is never dropped: every id has its row.
+        rows = np.searchsorted(tracks.ids, ids) if len(ids) else np.zeros(0, dtype=np.intp)
+        return Identified(ids, tracks.state[rows].copy(), tracks.hits[rows].copy(),
+                          self._scan - tracks.first_scan[rows], squared_distance)
+
+    def _start_tracks(self, tracks: _Tracks, fresh: np.ndarray, value: np.ndarray,
+                      cov: np.ndarray, ends: np.ndarray) -> None:
+        """Append a track of ids ``fresh`` for each of the unmatched detections given."""
         first_state = CONFIRMED if self.config.confirm_hits <= 1 else TENTATIVE
         tracks.ids = np.concatenate([tracks.ids, fresh])
-        tracks.mean = np.concatenate([tracks.mean, value[new]])
-        tracks.cov = np.concatenate([tracks.cov, self._white * cov[new]])
+        tracks.mean = np.concatenate([tracks.mean, value])
+        tracks.cov = np.concatenate([tracks.cov, self._white * cov])
         tracks.persistent = np.concatenate([tracks.persistent,
-                                            (1.0 - self._white) * cov[new]])
-        tracks.ends = np.concatenate([tracks.ends, ends[new]])
+                                            (1.0 - self._white) * cov])
+        tracks.ends = np.concatenate([tracks.ends, ends])
         tracks.state = np.concatenate([tracks.state, np.full(len(fresh), first_state,
                                                              dtype=np.int8)])
         tracks.hits = np.concatenate([tracks.hits, np.ones(len(fresh), dtype=np.int64)])
@@ -577,10 +668,6 @@ class Tracker:
         now = np.full(len(fresh), self._scan, dtype=np.int64)
         tracks.first_scan = np.concatenate([tracks.first_scan, now])
         tracks.last_scan = np.concatenate([tracks.last_scan, now])
-        # A matched track is never dropped: every id has its row.
-        rows = np.searchsorted(tracks.ids, ids) if len(ids) else np.zeros(0, dtype=np.intp)
-        return Identified(ids, tracks.state[rows].copy(), tracks.hits[rows].copy(),
-                          self._scan - tracks.first_scan[rows], squared_distance)
 
     def landmarks(self, kind: Optional[str] = None) -> List[Landmark]:
         """
@@ -605,8 +692,9 @@ def _clusters(gated: np.ndarray) -> List[Tuple[List[int], List[int]]]:
     Return the connected clusters of gated (detection, track) pairs.
 
     :param gated: shape (N, K): which pairs pass the individual gate
-    :return: (detections, tracks) of each cluster with at least one pair
+    :return: (detections, in ascending order, and tracks) of each cluster with at least one pair
     """
+    pairs = np.argwhere(gated).tolist()
     parent = list(range(gated.shape[0] + gated.shape[1]))
 
     def root(node: int) -> int:
@@ -616,25 +704,31 @@ def _clusters(gated: np.ndarray) -> List[Tuple[List[int], List[int]]]:
         return node
 
     offset = gated.shape[0]
-    for n, k in np.argwhere(gated):
-        parent[root(int(n))] = root(offset + int(k))
+    for n, k in pairs:
+        parent[root(n)] = root(offset + k)
     clusters: Dict[int, Tuple[List[int], List[int]]] = {}
-    for n, k in np.argwhere(gated):
-        cluster = clusters.setdefault(root(int(n)), ([], []))
-        if int(n) not in cluster[0]:
-            cluster[0].append(int(n))
-        if int(k) not in cluster[1]:
-            cluster[1].append(int(k))
+    for n, k in pairs:
+        cluster = clusters.setdefault(root(n), ([], []))
+        if n not in cluster[0]:
+            cluster[0].append(n)
+        if k not in cluster[1]:
+            cluster[1].append(k)
     return list(clusters.values())
 
 
 class _JointSearch:
     """Joint compatibility branch and bound over one cluster (Neira and Tardos 2001)."""
 
-    def __init__(self, gated, squared, error, innovation, by_step, step_cov, joint_gate,
-                 max_nodes: int):
+    def __init__(self, gated, squared, error, innovation, by_step, step_cov, tracks,
+                 joint_gate, max_nodes: int):
         self.gated, self.squared, self.error = gated, squared, error
-        self.innovation, self.by_step, self.step_cov = innovation, by_step, step_cov
+        self.innovation = innovation
+        # The shared step's cross covariance of every two of the cluster's tracks: G_k Q G_j^T,
+        # by their place in ``tracks``.
+        self.place = np.full(gated.shape[1], -1, dtype=np.intp)
+        self.place[tracks] = np.arange(len(tracks))
+        by_step = by_step[tracks]
+        self.shared = (by_step @ step_cov)[:, None] @ by_step[None].transpose(0, 1, 3, 2)
         self.joint_gate, self.nodes_left = joint_gate, max_nodes
         self.best_pairs: List[Tuple[int, int]] = []
         self.best_squared = math.inf
@@ -642,17 +736,14 @@ class _JointSearch:
 
     def joint_squared(self, pairs: Sequence[Tuple[int, int]]) -> float:
         """Return the stacked innovation's squared Mahalanobis distance of a hypothesis."""
-        size = len(pairs)
-        stacked = np.zeros((2 * size, 2 * size))
-        vector = np.zeros(2 * size)
-        for a, (n, k) in enumerate(pairs):
-            vector[2 * a:2 * a + 2] = self.error[n, k]
-            for b, (_, j) in enumerate(pairs):
-                if a == b:
-                    stacked[2 * a:2 * a + 2, 2 * a:2 * a + 2] = self.innovation[n, k]
-                else:       # the shared step: cov(track k, track j) = G_k Q G_j^T
-                    stacked[2 * a:2 * a + 2, 2 * b:2 * b + 2] = (
-                        self.by_step[k] @ self.step_cov @ self.by_step[j].T)
+        detections, tracks = np.array(pairs, dtype=np.intp).reshape(-1, 2).T
+        size = len(tracks)
+        # Off the diagonal the shared step: cov(track k, track j) = G_k Q G_j^T.
+        place = self.place[tracks]
+        blocks = self.shared[place[:, None], place[None, :]]
+        blocks[np.arange(size), np.arange(size)] = self.innovation[detections, tracks]
+        stacked = blocks.transpose(0, 2, 1, 3).reshape(2 * size, 2 * size)
+        vector = self.error[detections, tracks].reshape(-1)
         return float(vector @ np.linalg.solve(stacked, vector))
 
     def best(self, detections: List[int]) -> List[Tuple[int, int]]:
@@ -695,6 +786,8 @@ class _JointSearch:
         for k in sorted(np.flatnonzero(self.gated[n]), key=lambda k: self.squared[n, k]):
             if int(k) in used:
                 continue
+            if self.nodes_left <= 0:      # out of nodes: nothing below can change the best
+                return
             candidate = pairs + [(n, int(k))]
             squared = self.joint_squared(candidate)
             if squared <= self.joint_gate(len(candidate)):

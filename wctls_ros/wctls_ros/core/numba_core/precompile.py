@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-The pipeline compiled before the first scan, or loaded from numba's on-disk cache.
+The pipeline and the tracker's kernels compiled before the first scan, or loaded from the cache.
 
 From the cache the compiled pipeline loads in a fraction of a second. Without it (the first run
 on a machine, or after an upgrade) numba compiles it: 16-20 s of CPU on a 2-core EPYC VM. Nobody
@@ -18,8 +18,13 @@ import time
 
 import numpy as np
 
+from . import tracking
 from ._jit import cache_folder, use_disk_cache
 from .pipeline import _features_of_scan, extract_features
+from ..records import TrackRules
+
+# The compiled functions that Python calls, each compiled once for the types it is called with.
+_ENTRY_POINTS = (_features_of_scan, tracking.update_tracks)
 
 
 def warm_up() -> float:
@@ -38,20 +43,47 @@ def warm_up() -> float:
     bearing = angle_min + increment * np.arange(beams)
     square_room = 2.0 / np.maximum(np.abs(np.cos(bearing)), np.abs(np.sin(bearing)))
     extract_features(square_room, angle_min, increment)
+    _track_once(square_room, angle_min, increment)
     return time.perf_counter() - started
+
+
+def _track_once(ranges_m: np.ndarray, angle_min_rad: float, angle_increment_rad: float) -> None:
+    """
+    Compile the tracker's kernels: one scan of a corner and a line against a track of each.
+
+    With the argument types :class:`wctls_ros.frontend.tracking.Tracker` calls them with
+    (corners and lines share them: one compile).
+    """
+    rules = TrackRules(0.95, 3, 1, 3, 50, 200, 0.2)
+    gates = np.array([math.nan, 9.21, 13.28])
+    for dims, value in ((3, np.array([[1.0, 1.0, 0.5]])), (2, np.array([[0.5, 2.0]]))):
+        cov = np.tile(1e-4 * np.eye(dims), (1, 1, 1))
+        ends = np.array([[[1.0, 1.0], [1.0, 1.0]]]) if dims == 3 else np.array(
+            [[[2.0, -1.0], [2.0, 1.0]]])
+        tracking.update_tracks(
+            dims == 2, value, cov, ends, value.copy(), cov.copy(), np.zeros_like(cov),
+            ends.copy(), np.zeros(1, np.int8), np.ones(1, np.int64), np.zeros(1, np.int64),
+            np.zeros(1, np.int64), np.zeros(3), 1e-6 * np.eye(3), gates, rules, 1, True,
+            ranges_m, angle_min_rad, angle_increment_rad, 10.0)
 
 
 def pipeline_is_cached() -> bool:
     """
     Return whether numba's cache holds the compiled pipeline, or cannot hold anything.
 
-    Either way no compile of its own is needed: the pipeline loads, or nothing would be kept.
-    Sets up the cache first (:func:`._jit.use_disk_cache`): stale kernels are not the pipeline.
+    Either way no compile of its own is needed: the pipeline (the tracker's kernels with it)
+    loads, or nothing would be kept. Sets up the cache first (:func:`._jit.use_disk_cache`):
+    stale kernels are not the pipeline.
     """
     use_disk_cache()
     folder = cache_folder()
-    function = getattr(_features_of_scan, 'py_func', None)   # None: NUMBA_DISABLE_JIT is set
-    if folder is None or function is None:
+    if folder is None:
         return True
-    name = f'{function.__module__.rsplit(".", 1)[-1]}.{function.__qualname__}'
-    return bool(glob.glob(os.path.join(glob.escape(folder), f'{name}-*.nbi')))
+    for entry in _ENTRY_POINTS:
+        function = getattr(entry, 'py_func', None)   # None: NUMBA_DISABLE_JIT is set
+        if function is None:
+            return True
+        name = f'{function.__module__.rsplit(".", 1)[-1]}.{function.__qualname__}'
+        if not glob.glob(os.path.join(glob.escape(folder), f'{name}-*.nbi')):
+            return False
+    return True

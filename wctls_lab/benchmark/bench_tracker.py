@@ -8,9 +8,10 @@ Benchmark the landmark tracker's time per scan against the number of landmarks i
 A synthetic scene of L landmarks (default 10, 20 and 40; half corners, half line landmarks) is
 seen from a sensor that steps 5 cm and 1 deg a scan, each landmark observed with 1 cm of noise,
 the step given 1 cm and 0.5 deg of sigma. Extraction is not timed: only
-:meth:`~wctls_ros.frontend.tracking.Tracker.update`. Prints, per L, the median and p90 time per
-scan over the scans after the first 20 (the tracks are confirmed by then) and the share of the
-scans' detections that kept their track's id.
+:meth:`~wctls_ros.frontend.tracking.Tracker.update`. Prints, per L and tracker (the numpy
+steps, and their compiled twin when numba can give it), the median and p90 time per scan over
+the scans after the first 20 (the tracks are confirmed by then) and the share of the scans'
+detections that kept their track's id.
 
 Usage: python bench_tracker.py [--landmarks L ...] [--scans N]
 """
@@ -20,6 +21,7 @@ import math
 import time
 
 import numpy as np
+from wctls_ros.core import CoreUnavailable
 from wctls_ros.frontend.frames import rotation
 from wctls_ros.frontend.tracking import Detections, Motion, Tracker
 
@@ -60,11 +62,11 @@ def observe(corner, line, pose, rng: np.random.Generator) -> Detections:
     return Detections(noisy, cov, sensed, line_cov, ends)
 
 
-def run(landmarks: int, scans: int, seed: int = 1):
+def run(landmarks: int, scans: int, compiled: bool, seed: int = 1):
     """Return (median s, p90 s, share of detections that kept their id) of one scene."""
     rng = np.random.default_rng(seed)
     corner, line = scene(landmarks, rng)
-    tracker = Tracker()
+    tracker = Tracker(compiled=compiled)
     pose = np.zeros(3)
     times, kept, total = [], 0, 0
     first_ids = None
@@ -91,11 +93,16 @@ def main() -> None:
     parser.add_argument('--landmarks', type=int, nargs='+', default=[10, 20, 40])
     parser.add_argument('--scans', type=int, default=220)
     args = parser.parse_args()
-    print('| landmarks in view | median ms / scan | p90 ms / scan | ids kept |')
-    print('|---|---|---|---|')
+    print('| landmarks in view | tracker | median ms / scan | p90 ms / scan | ids kept |')
+    print('|---|---|---|---|---|')
     for count in args.landmarks:
-        median, p90, kept = run(count, args.scans)
-        print(f'| {count} | {1e3 * median:.3f} | {1e3 * p90:.3f} | {kept:.3f} |')
+        for name, compiled in (('numpy', False), ('numba', True)):
+            try:
+                median, p90, kept = run(count, args.scans, compiled)
+            except CoreUnavailable as error:
+                print(f'| {count} | {name} | - | - | {error} |')
+                continue
+            print(f'| {count} | {name} | {1e3 * median:.3f} | {1e3 * p90:.3f} | {kept:.3f} |')
 
 
 if __name__ == '__main__':

@@ -291,3 +291,48 @@ def test_a_capsule_cut_within_its_header_after_another_cut_short_is_not_misread(
                                                     / 40) / 64.0 % 360.0).ravel()[samples.slot],
                                atol=1e-9)
     assert {0, 1, 4} <= set(np.unique(samples.slot[kept] // 40).tolist()) <= {0, 1, 2, 4}
+
+
+def right_or_absent(samples, starts, distances):
+    """Tell whether every published sample is its slot's true one (angle and distance)."""
+    true_angle = ((starts[:, None] + STEP_Q6 * np.arange(40) / 40) / 64.0 % 360.0).ravel()
+    filled = samples.distance_mm > 0
+    return (np.allclose(samples.angle_deg[filled], true_angle[samples.slot[filled]], atol=1e-9)
+            and (samples.distance_mm[filled] == distances.ravel()[samples.slot[filled]]).all())
+
+
+def test_a_replayed_capsule_is_taken_out_and_its_s_flag_restarts_nothing():
+    data, starts, distances = smooth_capsules(12)
+    capsules = np.frombuffer(data, np.uint8).reshape(12, 84)
+    # The first capsule (S flag set) sent again after capsule 5, capsule 3 again after 8: what a
+    # USB-serial adapter sending a buffer twice does. Each is intact, its checksum passes.
+    replayed = np.concatenate([capsules[:6], capsules[:1], capsules[6:9], capsules[3:4],
+                               capsules[9:]])
+    samples, counts = decode(replayed.tobytes())
+    np.testing.assert_array_equal(samples.slot, np.arange(11 * 40))
+    np.testing.assert_array_equal(samples.distance_mm, distances[:11].ravel())
+    assert right_or_absent(samples, starts, distances)
+
+
+@pytest.mark.parametrize('packet', [(4 * 84 + 10, 64), (5 * 84 - 10, 64), (6 * 84 - 20, 40)],
+                         ids=['no header', 'a header', 'a short packet'])
+def test_a_packet_delivered_twice_is_never_read_as_a_capsule_that_lost_bytes(packet):
+    # Bytes are gained, not lost: a capsule with a packet twice is longer than its start
+    # angles allow, and one cut at a repeated header is a copy of its own first bytes.
+    data, starts, distances = smooth_capsules(14)
+    raw = np.frombuffer(data, np.uint8)
+    at, size = packet
+    samples, counts = decode(np.insert(raw, at + size, raw[at:at + size]).tobytes())
+    assert right_or_absent(samples, starts, distances)
+    assert len(np.unique(samples.slot[samples.distance_mm > 0] // 40)) >= 11
+
+
+@pytest.mark.parametrize('first', [4 * 84 + 40, 5 * 84 + 60, 6 * 84 + 1])
+def test_swapped_packets_give_no_capsule_another_ones_samples(first):
+    # A packet swapped with the next moves the headers in both by a packet.
+    data, starts, distances = smooth_capsules(12)
+    raw = np.frombuffer(data, np.uint8).copy()
+    raw[first:first + 128] = np.roll(raw[first:first + 128], 64)
+    samples, counts = decode(raw.tobytes())
+    assert right_or_absent(samples, starts, distances)
+    assert len(np.unique(samples.slot[samples.distance_mm > 0] // 40)) >= 8

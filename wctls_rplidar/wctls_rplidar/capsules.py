@@ -91,16 +91,17 @@ _MAD_TO_SIGMA = 1.4826 / math.sqrt(6.0)
 _STEEPEST = math.tan(math.radians(80.0))
 
 _DISTANCE_OFFSETS = 4 + 2 * np.arange(SAMPLES_PER_CAPSULE)
+_NO_ANGLE_FIELD = 0x7FFF        # a start angle field beyond 360 degrees: no angle
 
 
 class _Frame:
     """One capsule's raw content once framed (mutable working record of the decoder)."""
 
     __slots__ = ('slot', 'angle_field', 'distances', 'readable', 'clean', 'realigned', 'cut',
-                 'end', 'placement', 'suspect')
+                 'end', 'placement', 'suspect', 'key')
 
     def __init__(self, slot, angle_field, distances, readable, clean, realigned, end,
-                 cut=False):
+                 cut=False, key=None):
         self.slot = slot
         self.angle_field = angle_field
         self.distances = distances
@@ -111,6 +112,7 @@ class _Frame:
         self.end = end
         self.placement = None
         self.suspect = not clean
+        self.key = key                  # its bytes when framed whole, else None
 
 
 class DenseCapsuleDecoder:
@@ -167,26 +169,31 @@ class DenseCapsuleDecoder:
         """
         Cut regions into capsules, realigning those that lost bytes.
 
-        An overlong region (framed on a false header) has unreadable samples.
+        An overlong region (framed on a false header) or a tangled one has unreadable samples.
 
         :param raw: the bytes held by the framer
         :param regions: the complete regions in them
         :param offset: the stream offset of ``raw[0]``
         :return: the capsules, a list of ``_Frame``
         """
-        aligned = self._aligned(raw, [region for region in regions if not region.lost], offset)
+        aligned = self._aligned(raw, [region for region in regions
+                                      if not region.lost and not region.tangled], offset)
         noise_mm = min(_SIGMAS * math.sqrt(2.0) * self._noise.sigma_mm, _JUMP_MM / 2.0)
-        short = [region for region in regions if region.lost > 0]
+        short = [region for region in regions if region.lost > 0 and not region.tangled]
         realigned = _realign(raw, short, [region.lost for region in short], self._max_mm,
                              noise_mm)
         frames = []
-        for pos, count, end, slot, shift, cut in regions:
-            if shift == 0:
+        for pos, count, end, slot, shift, cut, tangled in regions:
+            if shift == 0 and not tangled:
                 frames += [next(aligned) for _ in range(count)]
                 continue
-            if shift < 0:
+            if shift < 0 or tangled:
+                # Only the first start angle is known (behind the header framing found; in a
+                # tangled region the others' places are not).
                 at = pos + CAPSULE_SIZE * np.arange(count) + 2
-                frames += [_Frame(slot + j, int(raw[at[j]]) | int(raw[at[j] + 1]) << 8,
+                fields = [int(raw[a]) | int(raw[a + 1]) << 8 if j == 0 or not tangled
+                          else _NO_ANGLE_FIELD for j, a in enumerate(at.tolist())]
+                frames += [_Frame(slot + j, fields[j],
                                   np.zeros(SAMPLES_PER_CAPSULE, np.int64),
                                   np.zeros(SAMPLES_PER_CAPSULE, bool), False, False,
                                   offset + min(end, pos + CAPSULE_SIZE * (j + 1)), True)
@@ -221,8 +228,9 @@ class DenseCapsuleDecoder:
         values = fields[:, 0::2] | (fields[:, 1::2] << 8)
         readable = np.ones(SAMPLES_PER_CAPSULE, bool)
         return iter([_Frame(slot, int(row[0]), row[1:], readable, ok, False,
-                            offset + start + CAPSULE_SIZE)
-                     for slot, row, ok, start in zip(slots, values, clean, starts)])
+                            offset + start + CAPSULE_SIZE, key=capsule.tobytes())
+                     for slot, row, ok, start, capsule in zip(slots, values, clean, starts,
+                                                              capsules)])
 
     def _check_distances(self, frames: list, placed: np.ndarray) -> np.ndarray:
         """

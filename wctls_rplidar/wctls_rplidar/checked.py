@@ -169,7 +169,8 @@ def with_checksum(capsules: np.ndarray) -> bytes:
 class _Frame:
     """One capsule once framed (mutable working record of the decoder)."""
 
-    __slots__ = ('slot', 'angle_field', 'raw', 'clean', 'cut', 'end', 'placement', 'suspect')
+    __slots__ = ('slot', 'angle_field', 'raw', 'clean', 'cut', 'end', 'placement', 'suspect',
+                 'key')
 
     def __init__(self, slot, angle_field, raw, clean, cut, end):
         self.slot = slot
@@ -180,6 +181,7 @@ class _Frame:
         self.end = end
         self.placement = None
         self.suspect = not clean
+        self.key = None if raw is None else raw.tobytes()
 
 
 class CheckedCapsuleDecoder:
@@ -254,18 +256,19 @@ class CheckedCapsuleDecoder:
         """
         size = self._layout.size
         frames = []
-        for pos, count, end, slot, lost, cut in regions:
+        for pos, count, end, slot, lost, cut, tangled in regions:
             for j in range(count):
                 at = pos + size * j
                 frame_end = offset + min(end, at + size)
-                if not lost:
+                if not lost and not tangled:
                     capsule = raw[at:at + size].copy()
                     frames.append(_Frame(slot + j, self._framer.angle_field(capsule, 0),
                                          capsule, bool(checksum_passes(capsule[None])[0]),
                                          False, frame_end))
                     continue
                 field = self._framer.angle_field(raw, pos) if j == 0 else _NO_ANGLE_FIELD
-                frames.append(_Frame(slot + j, field, None, False, cut or lost < 0, frame_end))
+                frames.append(_Frame(slot + j, field, None, False, cut or lost < 0 or tangled,
+                                     frame_end))
         self._counts['frames'] += len(frames)
         self._counts['damaged_frames'] += sum(not f.clean for f in frames)
         return frames

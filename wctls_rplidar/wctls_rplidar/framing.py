@@ -32,6 +32,7 @@ format's layout; an overlong region's are unreadable), places each capsule with 
 :class:`~wctls_rplidar.checked.CheckedCapsuleDecoder`.
 """
 
+import collections
 from dataclasses import dataclass
 from typing import NamedTuple, Optional
 
@@ -51,6 +52,12 @@ _MAX_EXACT_REGION = 8
 # Angles: tolerance for a suspect start angle (1/8 degree), the share of a sweep allowed for one
 # whose checksum passed, and how far (capsules, about a turn) a prediction reaches.
 _ANGLE_TOLERANCE_Q8 = 32
+# A header starts the capsule a whole number of sweeps on within this (1/256 degree) plus this
+# share of a sweep per capsule: bytes gained before it are a contradiction (CapsuleFramer).
+_GAIN_TOLERANCE_Q8 = 32
+_GAIN_SWEEP_SHARE = 128
+# Steps between headers that must be found (and most of them agree) to stand for the sweep.
+_STEPS_AGREEING = 3
 _CLEAN_ANGLE_SHARE = 8
 _PREDICTION_REACH = 24
 # A prediction this few capsules old outranks a run of two observed angles; after this many
@@ -59,6 +66,13 @@ _PREDICTION_REACH = 24
 _FRESH_GAP = 2
 _RESTART_AFTER = 8
 _SWEEP_WEIGHT = 1.0 / 8.0
+# Capsules compared with their predecessors for repeats, and capsules every one is suspect for
+# after a sign of damage the checksum cannot see (CapsulePlacer).
+_REPEAT_WINDOW = 32
+_UNSEEN_DAMAGE_MEMORY = 1024
+# Contradictions within that many capsules that say a line gains or moves bytes (a false header
+# in sequence makes one every few thousand capsules on a line that corrupts or loses bytes).
+_MOVED_BYTES_EVIDENCE = 3
 # The line counts as damaged while this share of the recent capsules fails (weight 1/32).
 _DAMAGED_SHARE = 0.5
 _DAMAGE_WEIGHT = 1.0 / 32.0
@@ -80,6 +94,8 @@ class Region(NamedTuple):
     :ivar lost: bytes it lost: its capsules' bytes minus its length (negative: too long)
     :ivar cut: it lost more bytes than scattered losses take (12 per 84-byte capsule, 6 per
         further one: they average out over capsules): a run of them
+    :ivar tangled: the start angles of its headers say it gained bytes or holds them out of
+        order (see :meth:`CapsuleFramer._gained`)
     """
 
     pos: int
@@ -88,11 +104,17 @@ class Region(NamedTuple):
     slot: int
     lost: int
     cut: bool
+    tangled: bool = False
 
     @property
     def overlong(self) -> bool:
         """Tell whether it is longer than its capsules: framed on a false header."""
         return self.lost < 0
+
+    @property
+    def unreadable(self) -> bool:
+        """Tell whether its samples cannot be read: overlong or tangled."""
+        return self.lost < 0 or self.tangled
 
 
 class CapsuleFramer:
@@ -120,6 +142,11 @@ class CapsuleFramer:
         self._synced = False        # _buffer[0] starts a capsule header
         self._slot = 0              # capsule index of the capsule at _buffer[0]
         self._gap_from = None       # stream offset where sync was lost
+        # Regions whose start angles said bytes were gained or a header repeated: what a line
+        # that loses and corrupts bytes never does (CapsulePlacer reads it).
+        self.contradictions = 0
+        self._after_contradiction = False   # the last region contradicted its start angles
+        self._known_sweep_q8 = None     # the last sweep known (see _sweep_q8)
 
     def split(self, data: bytes) -> tuple:
         """
@@ -146,10 +173,17 @@ class CapsuleFramer:
                     pos = keep
                     break
                 pos = self._regain_sync(pos, pos + int(found[0]))
+            seen = self.contradictions
             step = self._next_header(raw, headers, pos)
             if step is None:
                 break
-            count, end = step
+            count, end, tangled = step
+            if count == 0 and end is not None:
+                # The header at ``end`` repeats this one's start angle: the bytes from here to
+                # it are a copy of the capsule's first bytes (a packet delivered twice).
+                self._counts['discarded_bytes'] += end - pos
+                pos = end
+                continue
             if count == 0:
                 # No header where the next capsules should begin: this one leads nowhere.
                 self._synced = False
@@ -159,8 +193,12 @@ class CapsuleFramer:
                 pos += 1
                 continue
             lost = count * self._size - (end - pos)
+            if self._after_contradiction and not (count == 1 and not lost and not tangled):
+                # Its first header may be one a packet moved: its bytes are no better.
+                tangled = True
+            self._after_contradiction = self.contradictions != seen
             regions.append(Region(pos, count, end, self._slot, lost,
-                                  2 * lost > (count + 1) * self._max_shift))
+                                  2 * lost > (count + 1) * self._max_shift, tangled))
             self._slot += count
             pos = end
         offset = self._offset
@@ -202,6 +240,145 @@ class CapsuleFramer:
     def _next_header(self, raw: np.ndarray, headers: np.ndarray, pos: int):
         """
         Find where the capsules after the one at ``pos`` end.
+
+        :return: ``(n, end, tangled)``: n capsules end at the header at ``end``, their bytes
+            tangled or not (see :meth:`_gained`); ``(0, None, False)`` when no header lies where
+            one should; ``(0, end, False)`` when the header at ``end`` repeats this one; None
+            until enough bytes have arrived
+        """
+        step = self._spaced_header(raw, headers, pos)
+        if step == (1, pos + self._size):
+            # One capsule between headers its size apart: nothing to doubt in its framing (a
+            # false header among its samples has a random start angle).
+            return 1, pos + self._size, False
+        repeat = self._repeated(raw, headers, pos)
+        if repeat is not None:
+            self.contradictions += 1
+            return 0, repeat, False
+        if step is None or step[1] is None:
+            return None if step is None else (0, None, False)
+        return self._gained(raw, headers, pos, *step)
+
+    def _repeated(self, raw: np.ndarray, headers: np.ndarray, pos: int) -> Optional[int]:
+        """
+        Find a header within a capsule after this one with its start angle: a copy of it.
+
+        :return: its index, None when there is none
+        """
+        this = start_q8(self.angle_field(raw, pos))
+        last = min(pos + self._size, raw.size - self._head)
+        if this is None or last <= pos:
+            return None
+        for at in (np.flatnonzero(headers[pos + 1:last + 1]) + pos + 1).tolist():
+            following = start_q8(self.angle_field(raw, at))
+            if following is not None and abs(wrap_q8(following - this)) <= _GAIN_TOLERANCE_Q8:
+                return at
+        return None
+
+    def _gained(self, raw: np.ndarray, headers: np.ndarray, pos: int, count: int, end: int):
+        """
+        Check a region whose headers are not a capsule apart against their start angles.
+
+        A header whose start angle lies ``m`` sweeps on from this one's (within
+        :data:`_GAIN_TOLERANCE_Q8` plus a share of a sweep per capsule), less than a capsule from
+        where ``m`` capsules would put it, starts the capsule ``m`` on. Along the stream those
+        headers must follow in order of ``m``, each at most its capsules' bytes after the one
+        before: bytes are lost, never gained. Where they are not
+        (a USB packet delivered twice, or swapped with the next: its headers move by a packet),
+        the spacing of headers alone would read capsules that lost bytes, or intact capsules
+        with another's bytes among theirs: the region is tangled (unreadable), and holds the
+        capsules its last header's start angle says. Otherwise the first of those headers ends
+        the region, holding ``m`` capsules. A first header with this one's start angle
+        (``m = 0``) repeats it: what lies before it is a copy. ``m`` is at most
+        :data:`_MAX_EXACT_REGION`.
+
+        :param raw: the received bytes
+        :param headers: where sync nibbles are
+        :param pos: this capsule's header
+        :param count: capsules the spacing of headers gives the region
+        :param end: the header after the region
+        :return: ``(count, end, tangled)``, ``count`` corrected; ``(0, end, False)`` when the
+            header at ``end`` repeats this one
+        """
+        sweep_q8 = self._sweep_q8(raw, headers)
+        this = start_q8(self.angle_field(raw, pos))
+        if this is None:
+            return count, end, False
+        previous_at, previous_m, tangled, end_m, first = pos, 0, False, None, None
+        for at in (np.flatnonzero(headers[pos + 1:end + 1]) + pos + 1).tolist():
+            following = start_q8(self.angle_field(raw, at))
+            if following is None:
+                continue
+            ahead = (following - this + _GAIN_TOLERANCE_Q8) % FULL_TURN_Q8 - _GAIN_TOLERANCE_Q8
+            capsules = round(ahead / sweep_q8)
+            if not (0 <= capsules <= _MAX_EXACT_REGION and abs(ahead - capsules * sweep_q8)
+                    <= _GAIN_TOLERANCE_Q8 + capsules * sweep_q8 / _GAIN_SWEEP_SHARE
+                    and abs(at - pos - capsules * self._size) < self._size):
+                continue        # not in sequence, or too far from its place to be moved
+            if capsules == 0 and previous_at == pos:
+                self.contradictions += 1
+                return 0, at, False
+            tangled |= (capsules <= previous_m
+                        or at - previous_at > (capsules - previous_m) * self._size)
+            first = first or (capsules, at)
+            previous_at, previous_m = at, capsules
+            end_m = capsules if at == end else None
+        if tangled:
+            self.contradictions += 1
+            return end_m or count, end, True
+        if first is not None:
+            # The first header in sequence ends the region (what the spacing alone found after it
+            # may be a capsule on); a region that lost a run of bytes.
+            return first[0], first[1], False
+        return count, end, False
+
+    def _headers_sweep_q8(self, raw: np.ndarray, headers: np.ndarray) -> Optional[float]:
+        """
+        Return the sweep the headers received show, before the angle track has measured one.
+
+        Each pair of consecutive headers about ``n`` capsules apart (within the bytes those may
+        lose) steps ``n`` sweeps; the median step stands for the sweep when most steps agree
+        with it (headers a line moved or a false header's disagree).
+
+        :param raw: the received bytes
+        :param headers: where sync nibbles are
+        :return: 1/256 degree; None without enough agreement
+        """
+        at = np.flatnonzero(headers[:max(raw.size - self._head + 1, 0)])
+        if at.size < _STEPS_AGREEING + 1:
+            return None
+        fields = raw[at + self._angle_at].astype(np.int64) | (
+            raw[at + self._angle_at + 1].astype(np.int64) << 8)
+        angles = (fields & 0x7FFF) << 2
+        spacing = np.diff(at)
+        capsules = np.maximum(np.rint(spacing / self._size), 1)
+        fits = ((np.abs(spacing - capsules * self._size) <= capsules * self._max_shift)
+                & (capsules <= _MAX_REGION) & (angles[1:] < FULL_TURN_Q8)
+                & (angles[:-1] < FULL_TURN_Q8))
+        steps = (np.diff(angles) % FULL_TURN_Q8)[fits] / capsules[fits]
+        if steps.size < _STEPS_AGREEING:
+            return None
+        median = float(np.median(steps))
+        agreeing = np.abs(steps - median) <= _ANGLE_TOLERANCE_Q8
+        return median if median > 0 and 2 * np.count_nonzero(agreeing) > steps.size else None
+
+    def _sweep_q8(self, raw: np.ndarray, headers: np.ndarray) -> float:
+        """
+        Return the sweep the angle track measured, else the one the headers show.
+
+        :return: 1/256 degree; the last one known while neither is; the nominal one before any
+        """
+        measured = self._angles.measured_sweep_q8()
+        if measured is None and self._known_sweep_q8 is None:
+            measured = self._headers_sweep_q8(raw, headers)
+        # The last one known stands in while the angle track starts over; before any, the
+        # nominal one (as for a capsule cut short).
+        self._known_sweep_q8 = measured or self._known_sweep_q8
+        return self._known_sweep_q8 or self._angles.sweep_deg() * 256.0
+
+    def _spaced_header(self, raw: np.ndarray, headers: np.ndarray, pos: int):
+        """
+        Find where the capsules after the one at ``pos`` end, by the spacing of headers.
 
         :return: ``(n, end)``: n capsules end at the header at ``end``; ``(0, None)`` when no
             header lies where one should; None until enough bytes have arrived
@@ -265,7 +442,21 @@ class CapsulePlacer:
 
     It follows how damaged the line is: while most recent capsules fail their checksum, a
     passing one vouches for nothing (1 in 256 damaged capsules passes the 8-bit checksum), and
-    every capsule is suspect.
+    every capsule is suspect. A line can also damage capsules in ways the checksum cannot see:
+    two bit flips at one bit position, or bytes swapped within a capsule (an XOR checksum does
+    not see the order of bytes). Such a line shows it in the capsules it leaves legible: an
+    intact capsule out of sequence (a start angle flipped, a copy of an earlier capsule), a
+    header whose start angle says bytes were gained (:attr:`CapsuleFramer.contradictions`). For
+    :data:`_UNSEEN_DAMAGE_MEMORY` capsules after such a sign every capsule is suspect, its
+    samples checked as those of a damaged one. A line that gains or moves bytes can also put
+    another capsule's samples into a damaged one where its framing and start angle are right,
+    and those samples are plausible among themselves: for as many capsules after
+    :data:`_MOVED_BYTES_EVIDENCE` contradictions within as many, a capsule that failed its
+    checksum is not published at all (its placement withdrawn). A capsule identical to one of
+    the last :data:`_REPEAT_WINDOW` slots, and less than a turn, before it (a frame or USB
+    buffer sent again) is taken out of the stream: the
+    capsules after it move back a slot, and it does not restart the angle track with the S
+    flag of the first capsule it may copy.
 
     :param angles: the stream's start angle track
     :param framer: the stream's framer (told of capsules lost without a trace)
@@ -278,21 +469,58 @@ class CapsulePlacer:
         self._framer = framer
         self._counts = counts
         self._damage = 0.0
+        self._recent = collections.deque()     # (slot, bytes) of recent intact capsules
+        self._contradictions = 0
+        self._since_unseen_damage = _UNSEEN_DAMAGE_MEMORY
+        self._placed = 0                        # capsules placed so far
+        self._contradicted = collections.deque()   # when (in capsules placed) they were
+        self._moved_bytes_until = 0
 
     def place(self, frames: list, next_field: int):
         """
         Place each capsule, in stream order.
 
-        :param frames: the capsules, records with ``slot``, ``angle_field`` and ``clean``
-            (checksum passed) read, ``placement`` (:class:`Placement`) set and ``suspect``
-            raised here; ``slot`` moves on by the capsules lost before it without a trace
+        :param frames: the capsules, records with ``slot``, ``angle_field``, ``clean``
+            (checksum passed) and ``key`` (its bytes when whole, else None) read,
+            ``placement`` (:class:`Placement`) set and ``suspect`` raised here; ``slot`` moves
+            on by the capsules lost before it without a trace (back by the repeats before it)
         :param next_field: the start angle field of the capsule after the last
         """
+        if self._framer.contradictions != self._contradictions:
+            self._contradicted.extend([self._placed] * (self._framer.contradictions
+                                                        - self._contradictions))
+            self._contradictions = self._framer.contradictions
+            self._since_unseen_damage = 0
+            while self._contradicted[0] < self._placed - _UNSEEN_DAMAGE_MEMORY:
+                self._contradicted.popleft()
+            if len(self._contradicted) >= _MOVED_BYTES_EVIDENCE:
+                # Not a false header's chance: the line gains or moves bytes.
+                self._moved_bytes_until = self._placed + _UNSEEN_DAMAGE_MEMORY
+        # Within less than a turn: a still scene seen by a noiseless device repeats a turn on.
+        window = min(_REPEAT_WINDOW, int(FULL_TURN_Q8 / (256.0 * self._angles.sweep_deg())) - 1)
+        for frame in frames:
+            if frame.key is None or not frame.clean:
+                continue
+            while self._recent and self._recent[0][0] < frame.slot - window:
+                self._recent.popleft()
+            if any(key == frame.key for _, key in self._recent):
+                frame.placement = Placement(None, None, False, -1)
+                frame.suspect = True
+                self._since_unseen_damage = 0
+            else:
+                self._recent.append((frame.slot, frame.key))
         slip = 0
         for i, frame in enumerate(frames):
+            if frame.placement is not None:
+                slip -= 1                   # a repeat: the capsules after it move back
+                continue
             self._damage += _DAMAGE_WEIGHT * ((not frame.clean) - self._damage)
             damaged_line = self._damage > _DAMAGED_SHARE
-            after = frames[i + 1] if i + 1 < len(frames) else None
+            unseen_damage = self._since_unseen_damage < _UNSEEN_DAMAGE_MEMORY
+            moved_bytes = self._placed < self._moved_bytes_until
+            self._since_unseen_damage += 1
+            self._placed += 1
+            after = next((f for f in frames[i + 1:] if f.placement is None), None)
             frame.slot += slip
             # On a damaged line a passing checksum does not vouch for a start angle either.
             placement = self._angles.place(
@@ -307,9 +535,13 @@ class CapsulePlacer:
                 frame.slot += placement.slip
                 self._counts['frames'] += max(placement.slip, 0)
                 self._counts['lost_frames'] += max(placement.slip, 0)
-            frame.placement = placement
+            # Withdrawn after it served the angle track: bytes may have moved into it.
+            frame.placement = placement if frame.clean or not moved_bytes else (
+                Placement(None, None, placement.replaced, placement.slip))
             self._counts['replaced_angles'] += placement.replaced
-            frame.suspect |= placement.replaced or damaged_line
+            if frame.clean and placement.replaced and not damaged_line:
+                self._since_unseen_damage = 0       # intact, yet out of sequence
+            frame.suspect |= placement.replaced or damaged_line or unseen_damage
         self._framer.slip(slip)
 
 
@@ -367,6 +599,10 @@ class AngleTrack:
     def sweep_deg(self) -> float:
         """Return one capsule's sweep, degrees (the nominal one until measured)."""
         return (self._sweep or self._nominal_sweep_q8) / 256.0
+
+    def measured_sweep_q8(self) -> Optional[float]:
+        """Return one capsule's sweep as measured, 1/256 degree; None until measured."""
+        return self._sweep
 
     def place(self, slot: int, field: int, clean: bool, next_slot: int, next_field: int,
               next_clean: bool) -> tuple:

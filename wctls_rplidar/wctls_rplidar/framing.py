@@ -265,9 +265,11 @@ class CapsuleFramer:
 
         :return: its index, None when there is none
         """
-        this = start_q8(self.angle_field(raw, pos))
         last = min(pos + self._size, raw.size - self._head)
-        if this is None or last <= pos:
+        if last <= pos:
+            return None     # this header's own bytes have not all arrived
+        this = start_q8(self.angle_field(raw, pos))
+        if this is None:
             return None
         for at in (np.flatnonzero(headers[pos + 1:last + 1]) + pos + 1).tolist():
             following = start_q8(self.angle_field(raw, at))

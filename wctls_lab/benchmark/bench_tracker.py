@@ -3,32 +3,53 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-Benchmark the landmark tracker's time per scan against the number of landmarks in view.
+Benchmark the landmark tracker's time per scan, numpy and numba side by side.
 
 A synthetic scene of L landmarks (default 10, 20 and 40; half corners, half line landmarks) is
 seen from a sensor that steps 5 cm and 1 deg a scan, each landmark observed with 1 cm of noise,
-the step given 1 cm and 0.5 deg of sigma. Extraction is not timed: only
-:meth:`~wctls_ros.frontend.tracking.Tracker.update`. Prints, per L and tracker (the numpy
-steps, and their compiled twin when numba can give it), the median and p90 time per scan over
-the scans after the first 20 (the tracks are confirmed by then) and the share of the scans'
-detections that kept their track's id.
+the step given 1 cm and 0.5 deg of sigma; and real recordings of data/ as ``score --tracks``
+tracks them (default the gh25 robot and the RPLIDAR car, their poses' steps given 71 mm and
+1.4 deg). Extraction is not timed: only :meth:`~wctls_ros.frontend.tracking.Tracker.update`,
+the numpy steps (``compiled=False``) and the compiled twin (``compiled=True``) on the same
+detections, scan by scan in turn (the order rotating), so that the machine's load falls on
+both alike; with ``--baseline COMMIT`` the tracker of that commit too (taken out of git into a
+cache folder and imported under a name of its own). Prints, per scene, the median and p90 time
+per scan over the scans after the first 20 (the synthetic tracks are confirmed by then) and,
+for the synthetic scenes, the share of the scans' detections that kept their first id.
 
-Usage: python bench_tracker.py [--landmarks L ...] [--scans N]
+Usage: python bench_tracker.py [--landmarks L ...] [--scans N] [--recordings NAME ...]
+[--baseline COMMIT]
 """
 
 import argparse
+import importlib
+import importlib.util
+import io
 import math
+import os
+import pathlib
+import subprocess
+import sys
+import tarfile
 import time
 
 import numpy as np
-from wctls_ros.core import CoreUnavailable
+from wctls_lab.evaluation import load_scans
+from wctls_lab.evaluation.analysis import features_per_scan
+from wctls_ros.core import FeatureConfig, warm_up
 from wctls_ros.frontend.frames import rotation
-from wctls_ros.frontend.tracking import Detections, Motion, Tracker
+from wctls_ros.frontend.poses import load_poses, poses_at
+from wctls_ros.frontend.tracking import (Detections, detections_of, Motion, steps_from_poses,
+                                         Tracker, View)
 
+REPOSITORY = pathlib.Path(__file__).resolve().parents[2]
 NOISE_M = 0.01
 STEP = np.array([0.05, 0.0, math.radians(1.0)])
 STEP_COV = np.diag([0.01 ** 2, 0.01 ** 2, math.radians(0.5) ** 2])
 WARM_UP_SCANS = 20
+# The moving recordings and their laser's offset on the robot (each laser_mount.yaml).
+MOUNTS = {'tuw_gh25_moving': 0.12, 'mrpt_malaga_moving': 0.78, 'rplidar_barc_moving': -0.12}
+POSE_SIGMA_M, POSE_SIGMA_RAD = 0.05, math.radians(1.0)
 
 
 def scene(landmarks: int, rng: np.random.Generator):
@@ -62,29 +83,90 @@ def observe(corner, line, pose, rng: np.random.Generator) -> Detections:
     return Detections(noisy, cov, sensed, line_cov, ends)
 
 
-def run(landmarks: int, scans: int, compiled: bool, seed: int = 1):
-    """Return (median s, p90 s, share of detections that kept their id) of one scene."""
+def synthetic(landmarks: int, scans: int, seed: int = 1):
+    """Return the (detections, motion, view) of each scan of a synthetic scene."""
     rng = np.random.default_rng(seed)
     corner, line = scene(landmarks, rng)
-    tracker = Tracker(compiled=compiled)
-    pose = np.zeros(3)
-    times, kept, total = [], 0, 0
-    first_ids = None
+    pose, out = np.zeros(3), []
     for t in range(scans):
         if t:
             pose = pose + np.concatenate([rotation(pose[2]) @ STEP[:2], STEP[2:]])
-        found = observe(corner, line, pose, rng)
-        start = time.perf_counter()
-        tracked = tracker.update(found, Motion(STEP, STEP_COV) if t else Motion.still())
-        spent = time.perf_counter() - start
-        ids = np.concatenate([tracked.corners.ids, tracked.lines.ids])
-        if t == 0:
-            first_ids = ids
-        if t >= WARM_UP_SCANS:
-            times.append(spent)
-            kept += int(np.sum(ids == first_ids))
-            total += len(ids)
-    return float(np.median(times)), float(np.percentile(times, 90)), kept / max(total, 1)
+        out.append((observe(corner, line, pose, rng),
+                    Motion(STEP, STEP_COV) if t else Motion.still(), None))
+    return out
+
+
+def recorded(name: str):
+    """Return the (detections, motion, view) of each scan of a moving recording of data/."""
+    recording = load_scans(REPOSITORY / 'data' / name)
+    poses = poses_at(load_poses(REPOSITORY / 'data' / name / 'poses.csv'),
+                     recording.stamps_ns * 1e-9, (MOUNTS[name], 0.0, 0.0))
+    known = np.isfinite(poses).all(axis=1)
+    motions = steps_from_poses(poses[known], math.sqrt(2.0) * POSE_SIGMA_M,
+                               math.sqrt(2.0) * POSE_SIGMA_RAD)
+    config = FeatureConfig()
+    detections = [detections_of(features, config.max_landmark_angle_sigma_rad)
+                  for (features, _), seen in zip(features_per_scan(recording, config), known)
+                  if seen]
+    views = [View(recording.angle_min, recording.angle_increment, ranges, recording.range_max)
+             for ranges in recording.ranges[known]]
+    return list(zip(detections, motions, views))
+
+
+def earlier_tracker(commit: str):
+    """
+    Return the Tracker class of an earlier commit, imported as a package of its own.
+
+    Its files come out of git into a folder under the user's cache, kept between runs, and are
+    imported under a name of their own so that its modules are not today's.
+    """
+    full = subprocess.run(['git', '-C', str(REPOSITORY), 'rev-parse', commit], check=True,
+                          capture_output=True, text=True).stdout.strip()
+    base = pathlib.Path(os.environ.get('XDG_CACHE_HOME') or pathlib.Path.home() / '.cache')
+    folder = base / 'wctls_ros' / 'bench_tracker' / full
+    package = folder / 'wctls_ros' / 'wctls_ros'
+    if not (package / '__init__.py').is_file():
+        archive = subprocess.run(['git', '-C', str(REPOSITORY), 'archive', full,
+                                  'wctls_ros/wctls_ros'], check=True,
+                                 capture_output=True).stdout
+        with tarfile.open(fileobj=io.BytesIO(archive)) as files:
+            files.extractall(folder, filter='data')
+    name = f'wctls_ros_{full[:7]}'
+    spec = importlib.util.spec_from_file_location(name, package / '__init__.py',
+                                                  submodule_search_locations=[str(package)])
+    sys.modules[name] = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(sys.modules[name])
+    return importlib.import_module(f'{name}.frontend.tracking').Tracker
+
+
+def run(scans, contenders):
+    """
+    Track the same scans with every contender, scan by scan in turn.
+
+    :param scans: (detections, motion, view) of each scan
+    :param contenders: name -> a new tracker
+    :return: (name -> per-scan seconds after the warm-up, share of detections that kept their
+        first id with the first contender)
+    """
+    trackers = {name: make() for name, make in contenders.items()}
+    times = {name: [] for name in trackers}
+    names = list(trackers)
+    kept, total, first_ids = 0, 0, None
+    for t, (detections, motion, view) in enumerate(scans):
+        turn = names[t % len(names):] + names[:t % len(names)]
+        for name in turn:
+            start = time.perf_counter()
+            tracked = trackers[name].update(detections, motion, view)
+            spent = time.perf_counter() - start
+            if t >= WARM_UP_SCANS:
+                times[name].append(spent)
+            if name == names[0]:
+                ids = np.concatenate([tracked.corners.ids, tracked.lines.ids])
+                first_ids = ids if t == 0 else first_ids
+                if t >= WARM_UP_SCANS and len(ids) == len(first_ids):
+                    kept += int(np.sum(ids == first_ids))
+                    total += len(ids)
+    return times, kept / total if total else math.nan
 
 
 def main() -> None:
@@ -92,17 +174,32 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[1])
     parser.add_argument('--landmarks', type=int, nargs='+', default=[10, 20, 40])
     parser.add_argument('--scans', type=int, default=220)
+    parser.add_argument('--recordings', nargs='*', default=['tuw_gh25_moving',
+                                                            'rplidar_barc_moving'],
+                        choices=sorted(MOUNTS))
+    parser.add_argument('--baseline', default=None,
+                        help='time the tracker of this commit too (e.g. main)')
     args = parser.parse_args()
-    print('| landmarks in view | tracker | median ms / scan | p90 ms / scan | ids kept |')
-    print('|---|---|---|---|---|')
-    for count in args.landmarks:
-        for name, compiled in (('numpy', False), ('numba', True)):
-            try:
-                median, p90, kept = run(count, args.scans, compiled)
-            except CoreUnavailable as error:
-                print(f'| {count} | {name} | - | - | {error} |')
-                continue
-            print(f'| {count} | {name} | {1e3 * median:.3f} | {1e3 * p90:.3f} | {kept:.3f} |')
+    print(f'compiled core ready in {warm_up():.1f} s; load {os.getloadavg()[0]:.2f}')
+    contenders = {'numpy': lambda: Tracker(compiled=False),
+                  'numba': lambda: Tracker(compiled=True)}
+    if args.baseline:
+        earlier = earlier_tracker(args.baseline)
+        contenders[args.baseline] = earlier
+    header = ' | '.join(f'{name} median, p90 ms' for name in contenders)
+    print(f'| scene | {header} | numpy / numba | ids kept |')
+    print('|---' * (len(contenders) + 3) + '|')
+    scenes = [(f'{count} landmarks', lambda count=count: synthetic(count, args.scans))
+              for count in args.landmarks]
+    scenes += [(name, lambda name=name: recorded(name)) for name in args.recordings]
+    for title, scans in scenes:
+        times, kept = run(scans(), contenders)
+        cells = ' | '.join(f'{1e3 * np.median(times[name]):.3f}, '
+                           f'{1e3 * np.percentile(times[name], 90):.3f}' for name in contenders)
+        ratio = np.median(times['numpy']) / np.median(times['numba'])
+        share = '-' if title in args.recordings else f'{kept:.3f}'
+        print(f'| {title} | {cells} | {ratio:.1f} | {share} |')
+    print(f'load {os.getloadavg()[0]:.2f}')
 
 
 if __name__ == '__main__':

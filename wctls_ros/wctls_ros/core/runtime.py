@@ -7,9 +7,11 @@ Which implementation of the feature pipeline runs: the compiled one (numba) or t
 Both compute the same features: the tests hold them to the same segments and corners, every
 value within 1e-9 relative, on every scan of the test corpus. The compiled one
 (:mod:`.numba_core`) takes about a twentieth of the numpy one's time per scan (``SPEEDUP``), but
-it needs numba (``OLDEST_NUMBA`` or newer) and compiles once per machine, 12-45 s on a 2-core VM,
+it needs numba (``OLDEST_NUMBA`` or newer) and compiles once per machine, 20-60 s on a 2-core VM,
 after which it loads from numba's disk cache in about a second. The numpy one
-(:mod:`.numpy_core`) needs numpy alone.
+(:mod:`.numpy_core`) needs numpy alone. The landmark tracker's compiled kernels
+(:mod:`.numba_core.tracking`) are compiled and loaded with the compiled pipeline, and serve
+the tracker while it serves (:func:`compiled_tracker`).
 
 The environment variable ``WCTLS_ROS_CORE`` chooses:
 
@@ -97,7 +99,7 @@ class CoreStatus:
             meanwhile = (f'; the numpy one serves meanwhile (about {SPEEDUP}x slower per scan)'
                          if self.pending else '')
             return ('compiling the feature pipeline for this machine in another process, '
-                    f'15-45 s once per machine{meanwhile}')
+                    f'20-60 s once per machine{meanwhile}')
         if self.pending:
             return ('numpy feature pipeline for now: the compiled one is loading in the '
                     'background')

@@ -25,9 +25,9 @@ and no fastmath, so that NaN compares and rounding are IEEE as in the numpy refe
 hold the kernels to. numba types each kernel from the arguments of its first call, lazily: the
 pipeline's compiled function types all of its callees in one compile.
 
-The first run on a machine compiles every kernel (15-20 s of CPU on a 2-core EPYC VM, in a
-process of its own while the numpy pipeline serves: :mod:`..runtime`), so the kernels avoid what
-costs compile time without need:
+The first run on a machine compiles every kernel (the pipeline's 15-22 s of CPU on a 2-core EPYC
+VM, the tracker's 8 s more, in a process of its own while the numpy pipeline serves:
+:mod:`..runtime`), so the kernels avoid what costs compile time without need:
 an array assigned to a slice (``a[:-1] = b[1:]``) makes numba compile its shape-mismatch message
 (string formatting), 1.7 s for the one such line the core had; the core's kernels write those as
 loops. And numba builds each compiled function's machine code with its callees linked in, so a step

@@ -5,7 +5,8 @@
 The pipeline and the tracker's kernels compiled before the first scan, or loaded from the cache.
 
 From the cache the compiled pipeline loads in a fraction of a second. Without it (the first run
-on a machine, or after an upgrade) numba compiles it: 16-20 s of CPU on a 2-core EPYC VM. Nobody
+on a machine, or after an upgrade) numba compiles it: 16-22 s of CPU on a 2-core EPYC VM, and
+the tracker's kernels 8 s more (21.6 s against 29.7 s measured one after the other). Nobody
 waits for that: :mod:`..runtime` runs it in a process of its own while the numpy pipeline serves
 (helper processes that compiled kernels beside it once saved a third of the wait, when the first
 scan waited for it).

@@ -185,29 +185,9 @@ def innovations(is_line, value, cov, white_share, mean, track_cov):
             error[n, k, 0], error[n, k, 1] = e0, e1
             innovation[n, k, 0, 0], innovation[n, k, 0, 1] = s00, s01
             innovation[n, k, 1, 0], innovation[n, k, 1, 1] = s10, s11
-            squared[n, k] = _squared_2x2(s00, s01, s10, s11, e0, e1)
+            squared[n, k] = (e0 * (s11 * e0 - s01 * e1) + e1 * (s00 * e1 - s10 * e0)) / (
+                s00 * s11 - s01 * s10)
     return error, innovation, squared
-
-
-@jit
-def _squared_2x2(s00, s01, s10, s11, e0, e1):
-    """
-    Return e^T S^-1 e of a 2x2 S, solved as LAPACK's LU with partial pivoting solves it.
-
-    The same operations as numpy's solve in the same order, not the closed form: an innovation
-    covariance whose track is much less certain than its observation is ill-conditioned, and
-    the closed form's rounding differs there by up to 1e-10 relative.
-    """
-    if abs(s10) > abs(s00):                 # the pivot: swap the rows of S and e
-        s00, s01, s10, s11 = s10, s11, s00, s01
-        b0, b1 = e1, e0
-    else:
-        b0, b1 = e0, e1
-    lower = s10 * (1.0 / s00)
-    upper = s11 - lower * s01
-    x1 = (b1 - lower * b0) / upper
-    x0 = (b0 - s01 * x1) / s00
-    return e0 * x0 + e1 * x1
 
 
 @jit

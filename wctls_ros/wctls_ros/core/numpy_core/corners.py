@@ -319,25 +319,31 @@ def wall_at_corner(walls: SegmentSet, wall: np.ndarray, corner_xy_m: np.ndarray,
     at the corner (the range times the bearing step over the incidence, at most 1000 times the
     step), and the tolerance along the wall, ``sigmas`` times that deviation plus ``floor_m``.
 
-    For every corner at once.
+    For every corner at once, and for both walls of every corner at once when ``wall`` has a
+    row for each (shape (2, C)).
 
     :param walls: the walls
-    :param wall: which wall of each corner, shape (C,)
+    :param wall: which wall of each corner, shape (C,) or (2, C)
     :param corner_xy_m: the corners, shape (C, 2), m
     :param corner_covariance: their (x, y, yaw) covariance, shape (C, 3, 3)
     :param step_rad: bearing step between beams, rad
     :param rule: the rule's tolerances
-    :return: the walls, each field shape (C,)
+    :return: the walls, each field the shape of ``wall``
     """
     corner_x, corner_y = corner_xy_m[:, 0], corner_xy_m[:, 1]
-    normal_x, normal_y = np.cos(walls.angle_rad[wall]), np.sin(walls.angle_rad[wall])
+    angle = walls.angle_rad[wall]
+    normal_x, normal_y = np.cos(angle), np.sin(angle)
     middle = 0.5 * (walls.start_xy_m[wall] + walls.end_xy_m[wall])
-    inward = np.stack([-normal_y, normal_x])                                # (2, C)
-    inward *= np.copysign(1.0, ((middle.T - corner_xy_m.T) * inward).sum(axis=0))
-    along_sigma = np.sqrt(np.einsum('ic,cij,jc->c', inward, corner_covariance[:, :2, :2], inward))
+    middle_x, middle_y = middle[..., 0], middle[..., 1]
+    side = np.copysign(1.0, (middle_x - corner_x) * -normal_y + (middle_y - corner_y) * normal_x)
+    inward_x, inward_y = -normal_y * side, normal_x * side
+    xx, xy = corner_covariance[:, 0, 0], corner_covariance[:, 0, 1]
+    yx, yy = corner_covariance[:, 1, 0], corner_covariance[:, 1, 1]
+    along_sigma = np.sqrt(inward_x * xx * inward_x + inward_x * xy * inward_y
+                          + inward_y * yx * inward_x + inward_y * yy * inward_y)
     corner_range = np.hypot(corner_x, corner_y)
     incidence = np.abs(normal_x * corner_x + normal_y * corner_y) / corner_range
-    return WallAtCorner(normal_x, normal_y, walls.radius_m[wall], inward[0], inward[1],
+    return WallAtCorner(normal_x, normal_y, walls.radius_m[wall], inward_x, inward_y,
                         along_sigma, corner_range * step_rad / np.maximum(incidence, 1e-3),
                         rule.sigmas * along_sigma + rule.floor_m)
 
@@ -351,18 +357,18 @@ def along_wall(window: EndWindow[IndexArray], wall: WallAtCorner[FloatArray],
     line, its distance from the corner into the wall, and whether it lies on the line (within
     its line tolerance; only the window's own returns).
 
-    For every corner at once.
+    For every corner at once (for both walls at once when the wall's fields are (2, C)).
 
     :param window: the end windows
     :param wall: the wall of each corner
     :param corner_x_m: x of the corners, shape (C,), m
     :param corner_y_m: y of the corners, shape (C,), m
-    :return: each field shape (C, W)
+    :return: each field shape (C, W) ((2, C, W))
     """
-    offset = window.x_m * wall.normal_x[:, None] + window.y_m * wall.normal_y[:, None]
-    in_front = wall.radius_m[:, None] - offset
-    return AlongWall(in_front, ((window.x_m - corner_x_m[:, None]) * wall.inward_x[:, None]
-                                + (window.y_m - corner_y_m[:, None]) * wall.inward_y[:, None]),
+    offset = window.x_m * wall.normal_x[..., None] + window.y_m * wall.normal_y[..., None]
+    in_front = wall.radius_m[..., None] - offset
+    return AlongWall(in_front, ((window.x_m - corner_x_m[:, None]) * wall.inward_x[..., None]
+                                + (window.y_m - corner_y_m[:, None]) * wall.inward_y[..., None]),
                      window.in_window & (np.abs(in_front) <= window.line_tolerance_m))
 
 
@@ -406,18 +412,18 @@ def without_object_in_front(window: EndWindow[IndexArray], wall: WallAtCorner[Fl
     (their line was fitted without them, so the plain sum is already a deleted-residual test,
     as :func:`~.segmentation.trim_offset`'s). The facing ends are the wall's own.
 
-    For every corner at once.
+    For every corner at once (for both walls at once when the wall's fields are (2, C)).
 
-    :return: shape (C, W)
+    :return: shape (C, W) ((2, C, W))
     """
-    claimed = placed.on_line & (placed.along_m >= -wall.tolerance_m[:, None]) & ~at_corner
-    claimed[:, 0] = claimed[:, -1] = False
-    run = claimed.sum(axis=1)
-    together = (np.where(claimed, placed.in_front_m / window.sigma_m, 0.0).sum(axis=1)
-                / np.sqrt(np.maximum(run, 1)))
     if rule.run_sigmas <= 0.0:
         return placed.on_line
-    return placed.on_line & ~(claimed & (together > rule.run_sigmas)[:, None])
+    claimed = placed.on_line & (placed.along_m >= -wall.tolerance_m[..., None]) & ~at_corner
+    claimed[..., 0] = claimed[..., -1] = False
+    run = claimed.sum(axis=-1)
+    together = (np.where(claimed, placed.in_front_m / window.sigma_m, 0.0).sum(axis=-1)
+                / np.sqrt(np.maximum(run, 1)))
+    return placed.on_line & ~(claimed & (together > rule.run_sigmas)[..., None])
 
 
 def reaches(wall: WallAtCorner[FloatArray], placed: AlongWall, on_line: np.ndarray,
@@ -428,11 +434,11 @@ def reaches(wall: WallAtCorner[FloatArray], placed: AlongWall, on_line: np.ndarr
     docs/derivation.md#corners, "Corner end rule": a return on the wall's line reaches the
     corner when it lies no farther past it than the wall's tolerance along it.
 
-    For every corner at once.
+    For every corner at once (for both walls at once when the wall's fields are (2, C)).
 
-    :return: shape (C, W)
+    :return: shape (C, W) ((2, C, W))
     """
-    return at_corner | (on_line & (placed.along_m >= -wall.tolerance_m[:, None]))
+    return at_corner | (on_line & (placed.along_m >= -wall.tolerance_m[..., None]))
 
 
 def goes_on(first: WallAtCorner[FloatArray], second: WallAtCorner[FloatArray],
@@ -491,11 +497,11 @@ def short_of_corner(wall: WallAtCorner[FloatArray], placed: AlongWall, on_line: 
     over the beam spacing there. More than ``1 + CORNER_MISSING_BEAMS``: the corner is an
     extrapolation across an unseen stretch; at most 1: the wall's end was seen.
 
-    For every corner at once.
+    For every corner at once (for both walls at once when the wall's fields are (2, C)).
 
-    :return: shape (C,) (inf: none of its returns reaches the corner)
+    :return: shape (C,) ((2, C); inf: none of its returns reaches the corner)
     """
-    gap = np.where(on_line & here, np.maximum(placed.along_m, 0.0), np.inf).min(axis=1)
+    gap = np.where(on_line & here, np.maximum(placed.along_m, 0.0), np.inf).min(axis=-1)
     return np.maximum(gap - wall.tolerance_m, 0.0) / wall.spacing_m
 
 
@@ -533,29 +539,27 @@ def seen_through(corner_x_m: np.ndarray, corner_y_m: np.ndarray, wall: WallAtCor
     """
     start, stop = np.atleast_1d(start), np.atleast_1d(stop)
     lengths = (stop - start) % len(contour.x_m) + 1
-    test = np.repeat(np.arange(lengths.size), lengths)
-
-    def per_return(value) -> np.ndarray:
-        """Return a per-test number at every return of that test's stretch."""
-        return np.atleast_1d(value)[test]
-    crossing = (np.arange(test.size) - np.repeat(np.cumsum(lengths) - lengths, lengths)
-                + start[test])
+    test = np.arange(lengths.size).repeat(lengths)
+    ends = np.cumsum(lengths)
+    crossing = np.arange(ends[-1]) + (start - (ends - lengths)).repeat(lengths)
+    # Every per-test number at every return of its test's stretch, in one gather.
+    (radius, normal_x, normal_y, inward_x, inward_y, tolerance, other_radius, other_normal_x,
+     other_normal_y, corner_x, corner_y) = np.array(
+        [wall.radius_m, wall.normal_x, wall.normal_y, wall.inward_x, wall.inward_y,
+         wall.tolerance_m, other.radius_m, other.normal_x, other.normal_y, corner_x_m,
+         corner_y_m], dtype=float).reshape(11, -1)[:, test]
     x, y = contour.x_m.take(crossing, mode='wrap'), contour.y_m.take(crossing, mode='wrap')
     sigma = np.sqrt(noise.deciding_sigma_m ** 2 + (x ** 2 + y ** 2) * noise.bearing_sigma_rad ** 2)
     line_tolerance = rule.sigmas * sigma + rule.floor_m
-    radius = per_return(wall.radius_m)
-    offset = x * per_return(wall.normal_x) + y * per_return(wall.normal_y)
-    on_other = np.abs(per_return(other.radius_m) - x * per_return(other.normal_x)
-                      - y * per_return(other.normal_y))
+    offset = x * normal_x + y * normal_y
+    on_other = np.abs(other_radius - x * other_normal_x - y * other_normal_y)
     with np.errstate(divide='ignore', invalid='ignore'):
         to_line = radius / offset
-    along = ((x * to_line - per_return(corner_x_m)) * per_return(wall.inward_x)
-             + (y * to_line - per_return(corner_y_m)) * per_return(wall.inward_y))
-    tested = ((on_other <= line_tolerance) & (offset > 0.0) & (radius - offset <= line_tolerance)
-              & (along > per_return(wall.tolerance_m)))
-    run = np.bincount(test[tested], minlength=lengths.size)
-    behind = np.bincount(test[tested], ((offset - radius) / sigma)[tested], lengths.size)
-    with np.errstate(divide='ignore', invalid='ignore'):
+        along = (x * to_line - corner_x) * inward_x + (y * to_line - corner_y) * inward_y
+        tested = ((on_other <= line_tolerance) & (offset > 0.0)
+                  & (radius - offset <= line_tolerance) & (along > tolerance))
+        run = np.bincount(test[tested], minlength=lengths.size)
+        behind = np.bincount(test[tested], ((offset - radius) / sigma)[tested], lengths.size)
         return (run > 0) & (behind / np.sqrt(run) > rule.run_sigmas)
 
 
@@ -604,45 +608,40 @@ def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.
     after_first, before_second = last_position[one], first_position[two]
     corner_x, corner_y = candidates.xy_m[:, 0], candidates.xy_m[:, 1]
     window = end_window(contour, after_first, before_second, noise, rule)
-    first = wall_at_corner(walls, one, candidates.xy_m, candidates.covariance, step_rad, rule)
-    second = wall_at_corner(walls, two, candidates.xy_m, candidates.covariance, step_rad, rule)
-    first_placed = along_wall(window, first, corner_x, corner_y)
-    second_placed = along_wall(window, second, corner_x, corner_y)
+    # Both walls of every corner at once where a step takes one wall: row 0 of every field
+    # the first wall's, row 1 the second's.
+    both = wall_at_corner(walls, np.array([one, two]), candidates.xy_m, candidates.covariance,
+                          step_rad, rule)
+    first, second = _row(both, 0), _row(both, 1)
+    placed = along_wall(window, both, corner_x, corner_y)
+    first_placed, second_placed = _row(placed, 0), _row(placed, 1)
     at_corner = corner_zone(window, corner_x, corner_y, first, second, noise, rule)
-    first_on_line = without_object_in_front(window, first, first_placed, at_corner, rule)
-    second_on_line = without_object_in_front(window, second, second_placed, at_corner, rule)
-    first_here = reaches(first, first_placed, first_on_line, at_corner)
-    second_here = reaches(second, second_placed, second_on_line, at_corner)
-    first_short = short_of_corner(first, first_placed, first_on_line, first_here)
-    second_short = short_of_corner(second, second_placed, second_on_line, second_here)
-    keep = ((window.between <= rule.window) & first_here[:, 0] & second_here[:, -1]
-            & ~goes_on(first, second, first_placed, second_placed, first_on_line,
-                       second_on_line, at_corner)
-            & ~blocked(window, first, second, first_placed, second_placed, first_here,
-                       second_here, at_corner)
-            & (first_short <= 1.0 + CORNER_MISSING_BEAMS)
-            & (second_short <= 1.0 + CORNER_MISSING_BEAMS))
+    on_line = without_object_in_front(window, both, placed, at_corner, rule)
+    here = reaches(both, placed, on_line, at_corner)
+    short = short_of_corner(both, placed, on_line, here)
+    keep = ((window.between <= rule.window) & here[0, :, 0] & here[1, :, -1]
+            & ~goes_on(first, second, first_placed, second_placed, on_line[0], on_line[1],
+                       at_corner)
+            & ~blocked(window, first, second, first_placed, second_placed, here[0], here[1],
+                       at_corner)
+            & (short[0] <= 1.0 + CORNER_MISSING_BEAMS)
+            & (short[1] <= 1.0 + CORNER_MISSING_BEAMS))
     kept = np.flatnonzero(keep)
     if rule.run_sigmas > 0.0 and kept.size:
         # The first wall's stretch is crossed by the sight lines after its last return up to the
         # second wall's last; the second's by those from the first wall's first return up to
-        # its own first: both tests of every corner left, in one call.
-        first_kept, second_kept = _corners(first, kept), _corners(second, kept)
+        # its own first: both tests of every corner left, in one call, the first walls' first.
+        fields = np.array(both)[:, :, kept]
+        twice = np.concatenate((kept, kept))
         seen = seen_through(
-            np.tile(corner_x[kept], 2), np.tile(corner_y[kept], 2),
-            _stacked(first_kept, second_kept), _stacked(second_kept, first_kept), contour,
+            corner_x[twice], corner_y[twice], WallAtCorner(*fields.reshape(8, -1)),
+            WallAtCorner(*fields[:, ::-1].reshape(8, -1)), contour,
             np.concatenate([after_first[kept] + 1, first_position[one[kept]]]),
             np.concatenate([last_position[two[kept]], before_second[kept] - 1]), noise, rule)
         keep[kept] = ~(seen[:kept.size] | seen[kept.size:])
-    return keep, np.column_stack([first_short <= 1.0, second_short <= 1.0])
+    return keep, np.ascontiguousarray((short <= 1.0).T)
 
 
-def _corners(wall: WallAtCorner[FloatArray], kept: np.ndarray) -> WallAtCorner[FloatArray]:
-    """Return the walls of some corners of a WallAtCorner over every corner."""
-    return WallAtCorner(*(field[kept] for field in wall))
-
-
-def _stacked(one: WallAtCorner[FloatArray],
-             other: WallAtCorner[FloatArray]) -> WallAtCorner[FloatArray]:
-    """Return the walls of two sets of tests, one's first."""
-    return WallAtCorner(*(np.concatenate([a, b]) for a, b in zip(one, other)))
+def _row(record, row: int):
+    """Return the record of one wall of a record whose fields hold both walls' rows."""
+    return type(record)(*(field[row] for field in record))

@@ -4,7 +4,9 @@
 """The per-scan pipeline of the paper's Algorithm 1 in numpy: returns -> segments -> corners."""
 
 from dataclasses import dataclass, replace
+import functools
 import math
+from typing import NamedTuple, Optional
 
 import numpy as np
 
@@ -23,6 +25,75 @@ from ..records import CornerEndRule, Lines, Noise, Returns
 from ..scan import beam_density, BeamDensity, scan_to_points, ScanError, ScanPoints
 
 _DEFAULT_CONFIG = FeatureConfig()
+
+
+class _Prepared(NamedTuple):
+    """
+    What a configuration's rules become at one beam layout: worked out once, not per scan.
+
+    :ivar config: the configuration
+    :ivar angle_increment_rad: the layout's bearing step, rad
+    :ivar beam_count: the layout's number of beams
+    :ivar density: the rules that count returns, at this spacing (docs/derivation.md#density)
+    :ivar iepf_noise_sigmas: the IEPF split distance's sigmas, at this spacing
+    :ivar corner_rule: the corner end rule's tolerances, at this spacing
+    :ivar min_wall_beam_sine: sin(min_wall_beam_angle)
+    """
+
+    config: FeatureConfig
+    angle_increment_rad: float
+    beam_count: int
+    density: BeamDensity
+    iepf_noise_sigmas: float
+    corner_rule: CornerEndRule
+    min_wall_beam_sine: float
+
+
+@functools.lru_cache(maxsize=64)
+def _prepare(config: FeatureConfig, angle_increment_rad: float, beam_count: int) -> _Prepared:
+    """Return a configuration's rules at a beam layout (one per distinct pair)."""
+    density = beam_density(angle_increment_rad, beam_count)
+    return _Prepared(config, angle_increment_rad, beam_count, density,
+                     density.rarer(config.iepf_noise_sigmas),
+                     CornerEndRule(density.rarer(config.corner_end_sigmas),
+                                   config.corner_end_floor_m, density.corner_window,
+                                   config.end_offset_sigmas),
+                     math.sin(config.min_wall_beam_angle_rad))
+
+
+class _LatestPrepared:
+    """
+    The rules prepared for the latest configuration and beam layout.
+
+    A node or a bag replay extracts every scan with the same FeatureConfig object and layout:
+    comparing them by identity costs well under a microsecond, where hashing the configuration
+    for the cache of :func:`_prepare` costs several. One record, replaced whole, so that threads
+    extracting at once each see a consistent one.
+    """
+
+    def __init__(self) -> None:
+        self.prepared: Optional[_Prepared] = None
+
+    def get(self, config: FeatureConfig, angle_increment_rad: float,
+            beam_count: int) -> _Prepared:
+        """
+        Return the rules for a configuration and beam layout, prepared at most once in a row.
+
+        :param config: the configuration
+        :param angle_increment_rad: the scan's bearing step, rad
+        :param beam_count: the scan's number of beams
+        :return: the prepared rules
+        """
+        prepared = self.prepared
+        if (prepared is None or prepared.config is not config
+                or prepared.angle_increment_rad != angle_increment_rad
+                or prepared.beam_count != beam_count):
+            prepared = _prepare(config, angle_increment_rad, beam_count)
+            self.prepared = prepared
+        return prepared
+
+
+_LATEST = _LatestPrepared()
 
 
 def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
@@ -55,43 +126,45 @@ def _extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float
                             max(range_min_m, config.range_min_m),
                             min(range_max_m, config.range_max_m))
     if len(points) < config.min_segment_points:
-        return Features(config.method, SegmentSet.empty(), CornerSet.empty())
+        return _nothing(config)
     # #range-noise-from-the-scan, and #plausibility: nothing published that says "unknown".
     range_sigma = _range_sigma_of_the_scan(config, points)
     if not noise_is_plausible(range_sigma, config):
         return implausible_scan(config.method, range_sigma)
-    config = replace(config, range_sigma_m=range_sigma)
-    return plausible(_features_of(points, angle_increment_rad, config), config, range_sigma)
-
-
-def _features_of(points: ScanPoints, angle_increment_rad: float,
-                 config: FeatureConfig) -> Features:
-    """Find the features of a scan's returns, its range noise in ``config`` (Algorithm 1)."""
-    nothing = Features(config.method, SegmentSet.empty(), CornerSet.empty())
     # #decision-noise: every decision tolerates the model error on top of the sensor noise;
     # the fits weigh the returns by the sensor noise alone.
-    decisions = _deciding(config)
-    noise = Noise(config.range_sigma_m, config.bearing_sigma_rad, decisions.range_sigma_m)
-    # #density: the rules that count returns, at this scan's beam spacing.
-    density = beam_density(angle_increment_rad, points.beam_count)
+    noise = Noise(range_sigma, config.bearing_sigma_rad,
+                  math.hypot(range_sigma, config.model_error_sigma_m))
+    prepared = _LATEST.get(config, float(angle_increment_rad), points.beam_count)
+    return plausible(_features_of(points, noise, prepared), config, range_sigma)
+
+
+def _nothing(config: FeatureConfig, work_limited: bool = False) -> Features:
+    """Return the features of a scan that has none."""
+    return Features(config.method, SegmentSet.empty(), CornerSet.empty(), work_limited)
+
+
+def _features_of(points: ScanPoints, noise: Noise, prepared: _Prepared) -> Features:
+    """Find the features of a scan's returns with the scan's noise (Algorithm 1)."""
+    config, density = prepared.config, prepared.density
     # #segmentation-statistics: breakpoints, IEPF, merging, the size rules, the end trims.
-    contour = _Contour.of(points, decisions, density)
-    segments, unsplit = _split(contour, decisions, density)
+    contour = _Contour.of(points, noise, config, density)
+    segments, unsplit = _split(contour, noise, config, prepared)
     if not len(segments):
-        return replace(nothing, work_limited=unsplit)
-    segments, lines, unmerged = _merge(contour, segments, decisions)
+        return _nothing(config, unsplit)
+    segments, lines, unmerged = _merge(contour, segments, noise, config)
     segments, lines = _large_enough(contour, segments, lines, config)
     work_limited = unsplit or unmerged
     if not len(segments):
-        return replace(nothing, work_limited=work_limited)
+        return _nothing(config, work_limited)
     segments = _trim_ends(contour, segments, lines, noise, config, density)
     # #utls, #wtls, #wctls or #maximum-likelihood: the configured fit with its covariance.
-    walls, positions = _fit_walls(contour, segments, config)
+    walls, positions = _fit_walls(contour, segments, noise, prepared)
     if not len(walls):
-        return replace(nothing, work_limited=work_limited)
+        return _nothing(config, work_limited)
     # #corners: which pairs are corners is decided with the decision noise; the published
     # covariances add the model error to the fits' (#model-error).
-    corners = _corners(contour, walls, positions, noise, decisions, density)
+    corners = _corners(contour, walls, positions, noise, prepared)
     # #model-error (D17), (D18), then #corners and #common-mode-range-offset, (D11)-(D16).
     walls = _with_model_error(walls, config)
     return Features(config.method, walls, _corner_covariances(walls, corners, config),
@@ -105,20 +178,6 @@ def _range_sigma_of_the_scan(config: FeatureConfig, points: ScanPoints) -> float
     return max(config.range_sigma_m, scan_range_sigma(points))
 
 
-def _deciding(config: FeatureConfig) -> FeatureConfig:
-    """
-    Return the config the decisions use: the model error added to the range noise.
-
-    A return strays from the ideal wall by its measurement noise and by the model error (a
-    bowed or rough wall, a rounded corner, a mixed return): each decision tolerates both, in
-    quadrature (docs/derivation.md#decision-noise).
-    """
-    if config.model_error_sigma_m == 0.0:
-        return config
-    return replace(config, range_sigma_m=math.hypot(config.range_sigma_m,
-                                                    config.model_error_sigma_m))
-
-
 @dataclass(frozen=True)
 class _Contour:
     """
@@ -127,6 +186,7 @@ class _Contour:
     :ivar points: the returns in beam order
     :ivar breaks: where the breakpoint rule separates neighbours (beam order)
     :ivar chains: the runs between breakpoints, and the circular order
+    :ivar index: beam indices in circular order
     :ivar rho: ranges in circular order, m
     :ivar theta: bearings in circular order, rad
     :ivar x: x in circular order, m
@@ -136,27 +196,29 @@ class _Contour:
     points: ScanPoints
     breaks: Breaks
     chains: Chains
+    index: np.ndarray
     rho: np.ndarray
     theta: np.ndarray
     x: np.ndarray
     y: np.ndarray
 
     @staticmethod
-    def of(points: ScanPoints, config: FeatureConfig, density: BeamDensity) -> '_Contour':
+    def of(points: ScanPoints, noise: Noise, config: FeatureConfig,
+           density: BeamDensity) -> '_Contour':
         """Cut the returns into chains at breakpoints (Borges and Aldon) and order them."""
-        breaks = breakpoints(points, config.range_sigma_m, config.bearing_sigma_rad,
+        breaks = breakpoints(points, noise.deciding_sigma_m, noise.bearing_sigma_rad,
                              config.breakpoint_lambda_rad, config.merge_max_missing_beams,
                              density.breakpoint_sigmas)
         runs = chains(points, breaks.separated)
         order = runs.order
-        return _Contour(points, breaks, runs, points.range_m[order], points.bearing_rad[order],
-                        points.x_m[order], points.y_m[order])
+        return _Contour(points, breaks, runs, points.index[order], points.range_m[order],
+                        points.bearing_rad[order], points.x_m[order], points.y_m[order])
 
     def __len__(self):
         return len(self.x)
 
 
-def _split(contour: _Contour, config: FeatureConfig, density: BeamDensity):
+def _split(contour: _Contour, noise: Noise, config: FeatureConfig, prepared: _Prepared):
     """
     Split the chains into straight segments by Iterative End Point Fit.
 
@@ -167,17 +229,18 @@ def _split(contour: _Contour, config: FeatureConfig, density: BeamDensity):
 
     :return: (the segments, positions in the contour; whether the work bound stopped splitting)
     """
-    threshold: np.ndarray = np.full(len(contour), config.iepf_threshold_m)
     if config.iepf_noise_sigmas > 0.0:
-        noise = np.sqrt(config.range_sigma_m ** 2
-                        + (contour.rho * config.bearing_sigma_rad) ** 2)
-        threshold = np.maximum(threshold, density.rarer(config.iepf_noise_sigmas) * noise)
+        return_noise = np.sqrt(noise.deciding_sigma_m ** 2
+                               + (contour.rho * noise.bearing_sigma_rad) ** 2)
+        threshold = np.maximum(config.iepf_threshold_m, prepared.iepf_noise_sigmas * return_noise)
+    else:
+        threshold = np.full(len(contour), config.iepf_threshold_m)
     runs = contour.chains
     return iterative_end_point_fit(contour.x, contour.y, runs.start, runs.stop, runs.chain,
                                    threshold, pass_budget(len(contour)))
 
 
-def _merge(contour: _Contour, segments: SegmentRanges, config: FeatureConfig):
+def _merge(contour: _Contour, segments: SegmentRanges, noise: Noise, config: FeatureConfig):
     """
     Merge statistically collinear neighbours, never across a discontinuity.
 
@@ -190,10 +253,10 @@ def _merge(contour: _Contour, segments: SegmentRanges, config: FeatureConfig):
     sums = piece_sums(moment_terms(contour.x, contour.y), segments)
 
     def quick(pieces: SegmentRanges):
-        return moment_fit(sums.over(pieces), config.range_sigma_m, config.bearing_sigma_rad)
+        return moment_fit(sums.over(pieces), noise.deciding_sigma_m, noise.bearing_sigma_rad)
 
     runs = contour.chains
-    joinable = contour.breaks.joinable[runs.order][sums.edges[:-1]]   # before each piece
+    joinable = contour.breaks.joinable[runs.order[sums.edges[:-1]]]   # before each piece
     pieces, (angle, radius, _), unmerged = merge_collinear(
         sums.pieces(segments), contour.points.full_turn, sums.edges.size - 1, quick,
         config.merge_chi2, pass_budget(len(contour)), joinable)
@@ -208,6 +271,8 @@ def _large_enough(contour: _Contour, segments: SegmentRanges, lines: Lines,
     dx, dy = x[last] - x[first], y[last] - y[first]
     keep = ((segments.stop - first >= config.min_segment_points)
             & (dx * dx + dy * dy >= config.min_segment_length_m ** 2))
+    if keep.all():
+        return segments, lines
     return segments.select(keep), Lines(lines.angle_rad[keep], lines.radius_m[keep])
 
 
@@ -227,7 +292,7 @@ def _trim_ends(contour: _Contour, segments: SegmentRanges, lines: Lines, noise: 
     return segments
 
 
-def _fit_walls(contour: _Contour, segments: SegmentRanges, config: FeatureConfig):
+def _fit_walls(contour: _Contour, segments: SegmentRanges, noise: Noise, prepared: _Prepared):
     """
     Fit every segment with the configured method and keep the ones that are walls.
 
@@ -237,26 +302,29 @@ def _fit_walls(contour: _Contour, segments: SegmentRanges, config: FeatureConfig
 
     :return: (the walls in scan order, their first and last positions in the contour (2, S))
     """
-    n, points, order = len(contour), contour.points, contour.chains.order
-    first_index = points.index[order[segments.start]]
-    segments = segments.select(np.argsort(first_index, kind='stable'))
+    n, config = len(contour), prepared.config
+    segments = segments.select(np.argsort(contour.index[segments.start], kind='stable'))
     returns = _returns_of(contour, segments)
     counts = returns.counts
-    fits = fit_lines(config.method, returns, config.range_sigma_m, config.bearing_sigma_rad)
+    fits = fit_lines(config.method, returns, noise.range_sigma_m, noise.bearing_sigma_rad)
+    chi2_dof = _residual_chi2_dof(returns, fits, noise)
     last = (segments.stop - 1) % n
     start_xy, end_xy = _project(contour.x, contour.y, segments.start, last, fits)
     middle = 0.5 * (start_xy + end_xy)
     along_beam = np.abs(np.cos(np.arctan2(middle[:, 1], middle[:, 0]) - fits.angle_rad))
-    usable = _finite_and_positive(fits) & (along_beam >= math.sin(config.min_wall_beam_angle_rad))
-    fits, segments, counts = fits.select(usable), segments.select(usable), counts[usable]
-    start_xy, end_xy, last = start_xy[usable], end_xy[usable], last[usable]
+    usable = _finite_and_positive(fits) & (along_beam >= prepared.min_wall_beam_sine)
+    start = segments.start
+    if not usable.all():
+        fits, start, counts, chi2_dof = (fits.select(usable), start[usable], counts[usable],
+                                         chi2_dof[usable])
+        start_xy, end_xy, last = start_xy[usable], end_xy[usable], last[usable]
     walls = SegmentSet(
         angle_rad=fits.angle_rad, radius_m=fits.radius_m, covariance=fits.normal_covariance,
         line=fits.line, line_covariance=fits.line_covariance,
         line_offset_jacobian=fits.line_offset_jacobian, start_xy_m=start_xy, end_xy_m=end_xy,
-        first_index=points.index[order[segments.start]], last_index=points.index[order[last]],
-        num_points=counts, residual_chi2_dof=_residual_chi2_dof(returns, fits, usable, config))
-    return walls, np.stack([segments.start, last])
+        first_index=contour.index[start], last_index=contour.index[last], num_points=counts,
+        residual_chi2_dof=chi2_dof)
+    return walls, np.array([start, last])
 
 
 def _returns_of(contour: _Contour, segments: SegmentRanges) -> SegmentReturns:
@@ -291,8 +359,8 @@ def _with_model_error(walls: SegmentSet, config: FeatureConfig) -> SegmentSet:
     jacobian = line_from_normal_jacobian(walls.line, walls.angle_rad)
     line_covariance = walls.line_covariance + jacobian @ (normal - walls.covariance) @ (
         jacobian.transpose(0, 2, 1))
-    offset = config.common_range_sigma_m * np.einsum('sij,sj->si', normal_jacobian(walls.line),
-                                                     walls.line_offset_jacobian)
+    offset = config.common_range_sigma_m * (
+        normal_jacobian(walls.line) * walls.line_offset_jacobian[:, None, :]).sum(axis=2)
     return replace(walls, covariance=normal + offset[:, :, None] * offset[:, None, :],
                    line_covariance=line_covariance)
 
@@ -306,42 +374,34 @@ def _corner_covariances(walls: SegmentSet, corners: CornerSet,
         walls, corners.first_segment, corners.second_segment, config.common_range_sigma_m))
 
 
-def _residual_chi2_dof(returns: SegmentReturns, fits: LineFits, usable: np.ndarray,
-                       config: FeatureConfig) -> np.ndarray:
+def _residual_chi2_dof(returns: SegmentReturns, fits: LineFits, noise: Noise) -> np.ndarray:
     """
-    Return each kept fit's residual chi2 per degree of freedom.
+    Return each fit's residual chi2 per degree of freedom.
 
     The residual of return i from the line (angle, radius) is d_i = rho_i cos(theta_i - angle)
     - radius, whose variance under the noise model is range_sigma^2 cos^2(theta_i - angle) +
     bearing_sigma^2 rho_i^2 sin^2(theta_i - angle) (docs/derivation.md#maximum-likelihood).
 
-    :return: shape (S,) for the kept fits (usable selects them among the segments of returns)
+    :return: shape (S,)
     """
-    kept = usable.nonzero()[0]
-    angle = np.repeat(fits.angle_rad, returns.counts[kept])
-    radius = np.repeat(fits.radius_m, returns.counts[kept])
-    member = np.repeat(usable, returns.counts)
-    rho, theta = returns.rho[member], returns.theta[member]
-    incidence = theta - angle
-    residual = rho * np.cos(incidence) - radius
-    variance = ((config.range_sigma_m * np.cos(incidence)) ** 2
-                + (config.bearing_sigma_rad * rho * np.sin(incidence)) ** 2)
-    counts = returns.counts[kept]
-    if not len(kept):
-        return np.zeros(0)
-    chi2 = np.add.reduceat(residual * residual / variance, np.cumsum(counts) - counts)
+    counts = returns.counts
+    incidence = returns.theta - fits.angle_rad.repeat(counts)
+    residual = returns.rho * np.cos(incidence) - fits.radius_m.repeat(counts)
+    variance = ((noise.range_sigma_m * np.cos(incidence)) ** 2
+                + (noise.bearing_sigma_rad * returns.rho * np.sin(incidence)) ** 2)
+    chi2 = np.add.reduceat(residual * residual / variance, returns.offsets)
     return chi2 / np.maximum(counts - 2, 1)
 
 
 def _corners(contour: _Contour, walls: SegmentSet, positions: np.ndarray, noise: Noise,
-             config: FeatureConfig, density: BeamDensity) -> CornerSet:
+             prepared: _Prepared) -> CornerSet:
     """
     Intersect neighbouring walls (across the seam on a full turn) and keep the real corners.
 
     A pair makes a corner when its walls are not close to parallel (min_corner_angle) and both
     end at the intersection (:func:`~.corners.walls_end_at`).
     """
-    count = len(walls)
+    config, count = prepared.config, len(walls)
     first = np.arange(count - 1)
     if contour.points.full_turn and count >= 3:
         first = np.arange(count)               # the last wall meets the first at the seam
@@ -349,17 +409,16 @@ def _corners(contour: _Contour, walls: SegmentSet, positions: np.ndarray, noise:
                                    config.min_corner_angle_rad, config.common_range_sigma_m)
     if not candidates.yaw_rad.size:
         return CornerSet.empty()
-    returns = Returns(contour.points.index[contour.chains.order], contour.rho, contour.theta,
-                      contour.x, contour.y)
-    keep, seen = walls_end_at(
-        candidates, walls, positions, returns, abs(contour.points.angle_increment_rad), noise,
-        CornerEndRule(density.rarer(config.corner_end_sigmas), config.corner_end_floor_m,
-                      density.corner_window, config.end_offset_sigmas))
-    return CornerSet(xy_m=candidates.xy_m[keep], yaw_rad=candidates.yaw_rad[keep],
-                     covariance=candidates.covariance[keep],
-                     opening_angle_rad=candidates.opening_angle_rad[keep],
-                     first_segment=candidates.first_wall[keep],
-                     second_segment=candidates.second_wall[keep], end_seen=seen[keep])
+    returns = Returns(contour.index, contour.rho, contour.theta, contour.x, contour.y)
+    keep, seen = walls_end_at(candidates, walls, positions, returns,
+                              abs(contour.points.angle_increment_rad), noise,
+                              prepared.corner_rule)
+    corners = CornerSet(xy_m=candidates.xy_m, yaw_rad=candidates.yaw_rad,
+                        covariance=candidates.covariance,
+                        opening_angle_rad=candidates.opening_angle_rad,
+                        first_segment=candidates.first_wall,
+                        second_segment=candidates.second_wall, end_seen=seen)
+    return corners if keep.all() else corners.select(keep)
 
 
 def _project(x_m: np.ndarray, y_m: np.ndarray, first: np.ndarray, last: np.ndarray,
@@ -375,14 +434,12 @@ def _project(x_m: np.ndarray, y_m: np.ndarray, first: np.ndarray, last: np.ndarr
     :return: (first returns projected (S, 2), last returns projected (S, 2)), m
     """
     c, s = np.cos(fits.angle_rad), np.sin(fits.angle_rad)
-    feet = []
-    for position in (first, last):
-        x, y = x_m[position], y_m[position]
-        offset = x * c + y * s - fits.radius_m
-        foot = np.empty((position.size, 2))
-        foot[:, 0], foot[:, 1] = x - offset * c, y - offset * s
-        feet.append(foot)
-    return feet
+    position = np.array([first, last])                 # both ends at once: rows 0 and 1
+    x, y = x_m[position], y_m[position]
+    offset = x * c + y * s - fits.radius_m
+    feet = np.empty(position.shape + (2,))
+    feet[..., 0], feet[..., 1] = x - offset * c, y - offset * s
+    return feet[0], feet[1]
 
 
 def _finite_and_positive(fits: LineFits) -> np.ndarray:

@@ -608,29 +608,35 @@ def trim_offset(segments: SegmentRanges, x_m: np.ndarray, y_m: np.ndarray, lines
     start, stop = segments.start, segments.stop
     angle_rad, radius_m = lines.angle_rad, lines.radius_m
     range_sigma_m, bearing_sigma_rad = noise.deciding_sigma_m, noise.bearing_sigma_rad
-    # Each segment's sums of t, t^2, e, t e and rho^2 in its line's frame, from its moment
-    # sums (prefix sums over the contour walked twice).
-    terms = moment_terms(np.tile(x_m, 2), np.tile(y_m, 2))
-    prefix = np.concatenate((np.zeros((7, 1)), np.cumsum(terms, axis=1)), axis=1)
-    returns, sx, sy, sxx, syy, sxy, srr = prefix[:, stop] - prefix[:, start]
-    c, s = np.cos(angle_rad), np.sin(angle_rad)
-    whole_t = c * sy - s * sx
-    whole = np.array([whole_t, c * c * syy - 2.0 * c * s * sxy + s * s * sxx,
-                      c * sx + s * sy - returns * radius_m,
-                      (c * c - s * s) * sxy + c * s * (syy - sxx) - radius_m * whole_t, srr])
-    # Columns [0, S) walk back from the segments' ends, columns [S, 2 S) forward from their
-    # starts; row k - 1 holds the sums over the k returns nearest the end.
-    position = _end_windows(stop - 1, start, window)
+    # Every segment's returns laid end to end, each in its line's frame (t along, e across),
+    # and each segment's sums of t, t^2, e, t e and rho^2.
+    returns = stop - start
+    offsets = np.cumsum(returns) - returns
+    position = np.arange(offsets[-1] + returns[-1]) + (start - offsets).repeat(returns)
     x, y = x_m.take(position, mode='wrap'), y_m.take(position, mode='wrap')
-    c, s, radius = np.tile(c, 2), np.tile(s, 2), np.tile(radius_m, 2)
-    t, e = y * c - x * s, x * c + y * s - radius
-    rho2 = x * x + y * y
-    weight = 1.0 / np.sqrt(range_sigma_m ** 2 + rho2 * bearing_sigma_rad ** 2)
+    c, s, radius = np.array([np.cos(angle_rad), np.sin(angle_rad), radius_m]).repeat(returns,
+                                                                                     axis=1)
+    # Per return: t, t^2, e, t e, rho^2 and the weight 1 / sigma.
+    terms = np.empty((6, position.size))
+    t, _, e, _, rho2, _ = terms
+    np.subtract(y * c, x * s, out=t)
+    np.subtract(x * c + y * s, radius, out=e)
+    np.multiply(t, t, out=terms[1])
+    np.multiply(t, e, out=terms[3])
+    np.add(x * x, y * y, out=rho2)
+    np.divide(1.0, np.sqrt(range_sigma_m ** 2 + rho2 * bearing_sigma_rad ** 2), out=terms[5])
+    whole = np.add.reduceat(terms[:5], offsets, axis=1)
+    # Columns [0, S) walk back from the segments' ends, columns [S, 2 S) forward from their
+    # starts; row k - 1 holds the sums over the k returns nearest the end. A window longer than
+    # its segment reads on into the next segment's returns: those k exceed the segment's room,
+    # and are never cut at.
+    near = terms.take(_end_windows(offsets + returns - 1, offsets, window), axis=1, mode='clip')
+    t, e, weight = near[0], near[2], near[5]
     rest_t, rest_tt, rest_e, rest_te, rest_rr = (
-        np.tile(whole, 2)[:, None, :] - np.cumsum([t, t * t, e, t * e, rho2], axis=1))
+        np.concatenate((whole, whole), axis=1)[:, None, :] - np.cumsum(near[:5], axis=1))
     sum_z, sum_w, sum_tw = np.cumsum([e * weight, weight, t * weight], axis=1)
     k = np.arange(1, window + 1)[:, None]
-    m = np.tile(returns, 2) - k
+    m = np.concatenate((returns, returns)) - k
     with np.errstate(divide='ignore', invalid='ignore'):
         mean_t, mean_e = rest_t / m, rest_e / m
         spread = rest_tt - m * mean_t * mean_t                              # S_tt

@@ -336,3 +336,25 @@ def test_swapped_packets_give_no_capsule_another_ones_samples(first):
     samples, counts = decode(raw.tobytes())
     assert right_or_absent(samples, starts, distances)
     assert len(np.unique(samples.slot[samples.distance_mm > 0] // 40)) >= 8
+
+
+def test_two_bits_flipped_at_one_position_make_every_capsule_checked():
+    # The same bit flipped in two bytes of a capsule leaves its XOR checksum as it was. Two
+    # lone spikes that one flipped bit each explains, at one bit position, tell the line
+    # flips bits: from then on every capsule is checked by its neighbours, also one whose
+    # second flip moved a distance too little to see (its spike is rejected all the same).
+    data, starts, distances = smooth_capsules(12)
+    raw = np.frombuffer(data, np.uint8).copy()
+    for at, bit in ((4 * 84 + 4 + 2 * 10 + 1, 0x02), (4 * 84 + 4 + 2 * 25 + 1, 0x02),
+                    (7 * 84 + 4 + 2 * 5 + 1, 0x08), (7 * 84 + 4 + 2 * 30, 0x08)):
+        raw[at] ^= bit
+    assert (np.frombuffer(encode_dense_capsules(starts, distances, np.arange(12) == 0),
+                          np.uint8).reshape(12, 84)[:, :2] == raw.reshape(12, 84)[:, :2]).all()
+    samples, counts = decode(raw.tobytes())
+    assert counts.damaged_frames == 0
+    np.testing.assert_array_equal(samples.slot, np.arange(11 * 40))
+    published = samples.distance_mm > 0
+    error = np.abs(samples.distance_mm - distances[:11].ravel())[published]
+    assert error.max() == 8                                # the flip too small to see
+    assert samples.distance_mm[[4 * 40 + 10, 4 * 40 + 25, 7 * 40 + 5]].tolist() == [0, 0, 0]
+    assert counts.rejected_samples == 3

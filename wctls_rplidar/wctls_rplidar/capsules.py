@@ -84,6 +84,12 @@ _SIGMAS = 4.0
 _SIGMA_FLOOR_MM = 3.0
 _SIGMA_PRIOR_MM = 50.0
 _SIGMA_WINDOW = 512
+# A double bit flip: a repaired spike lies this many sigmas from its prediction, after a change
+# of at least this many tolerances (the check's at its usual sigmas).
+_REPAIR_SIGMAS = 2.0
+_REPAIR_MIN_TOLERANCES = 2.0
+# The share of a capsule's samples that may be spikes for one to tell of a flipped bit.
+_MAX_SPIKE_SHARE = 1.0 / 8.0
 # A second difference of three samples with independent noise sigma has std sqrt(6) sigma; the
 # midpoint prediction's residual sqrt(1.5) sigma and an extrapolation's sqrt(6) sigma.
 _MAD_TO_SIGMA = 1.4826 / math.sqrt(6.0)
@@ -243,8 +249,18 @@ class DenseCapsuleDecoder:
         suspect = np.array([f.suspect for f in frames])
         self._noise.update(np.where(readable, distances, 0.0))
         keep = readable & (distances <= self._max_mm)
+        step_rad = math.radians(self._angles.sweep_deg() / SAMPLES_PER_CAPSULE)
+        trusted = placed & ~suspect
+        if trusted.any():
+            shown = unseen_flips(
+                np.count_nonzero(trusted), flip_repairs(
+                    distances[trusted], keep[trusted], *_flip_deltas(distances[trusted]),
+                    self._noise.sigma_mm, step_rad, np.array([f.slot for f in frames])[trusted]))
+            if shown.any():
+                # The checksum let damage by: no capsule of the batch vouches for its samples.
+                self._placer.note_unseen_damage()
+                suspect[:] = True
         if suspect.any():
-            step_rad = math.radians(self._angles.sweep_deg() / SAMPLES_PER_CAPSULE)
             keep[suspect] &= (distances[suspect] == 0) | supported_by_neighbours(
                 distances[suspect], keep[suspect], self._noise.sigma_mm, step_rad)
         self._counts['rejected_samples'] += int(np.count_nonzero(~keep[placed]))
@@ -337,6 +353,19 @@ class RangeNoise:
         window = np.concatenate(self._window)[-_SIGMA_WINDOW:]
         self._window, self._unmeasured, self._measured = [window], 0, True
         self.sigma_mm = max(_SIGMA_FLOOR_MM, _MAD_TO_SIGMA * float(np.median(window)))
+
+
+def _flip_deltas(distances: np.ndarray) -> tuple:
+    """
+    Return how each distance changes when one bit of its two bytes flips, and which bit.
+
+    :param distances: dense capsules' distances, shape (capsules, 40), whole mm
+    :return: ``(deltas, bits)`` as :func:`flip_repairs` takes them
+    """
+    d = distances.astype(np.int64)[..., None]
+    j = np.arange(16)
+    offsets = _DISTANCE_OFFSETS[:, None] + j // 8
+    return (d ^ (1 << j)) - d, np.broadcast_to(offsets * 8 + j % 8, d.shape[:2] + (16,))
 
 
 def _realign(raw: np.ndarray, regions: list, shifts: list, max_mm: int, noise_mm: float):
@@ -480,7 +509,8 @@ def _path_end(scores: np.ndarray, length: int, last_shift: int) -> tuple:
 
 
 def supported_by_neighbours(distances: np.ndarray, usable: np.ndarray, sigma_mm: float,
-                            step_rad: float) -> np.ndarray:
+                            step_rad: float, sigmas: float = _SIGMAS,
+                            between: bool = False) -> np.ndarray:
     """
     Tell which distances a neighbour pair in the same capsule predicts (step 4).
 
@@ -488,6 +518,8 @@ def supported_by_neighbours(distances: np.ndarray, usable: np.ndarray, sigma_mm:
     :param usable: which distances may predict others (readable, in range)
     :param sigma_mm: range noise scale, mm
     :param step_rad: angle between samples, rad
+    :param sigmas: noise sigmas allowed (the steepness limit keeps the usual ones)
+    :param between: only the pair on both sides predicts
     :return: per distance, True when predicted within tolerance
     """
     shape = distances.shape
@@ -510,7 +542,7 @@ def supported_by_neighbours(distances: np.ndarray, usable: np.ndarray, sigma_mm:
     midpoint = 0.5 * (before + after)
     forward = 2.0 * before - before2
     backward = 2.0 * after - after2
-    noise_mid, noise_end = _SIGMAS * math.sqrt(1.5) * sigma_mm, _SIGMAS * math.sqrt(6.0) * sigma_mm
+    noise_mid, noise_end = sigmas * math.sqrt(1.5) * sigma_mm, sigmas * math.sqrt(6.0) * sigma_mm
     bend_mid, flat_mid = surface(midpoint, 0.5 * (after - before))
     bend_forward, flat_forward = surface(before, before - before2)
     bend_backward, flat_backward = surface(after, after - after2)
@@ -520,4 +552,87 @@ def supported_by_neighbours(distances: np.ndarray, usable: np.ndarray, sigma_mm:
                     & (np.abs(distances - forward) <= noise_end + bend_forward))
     fits_backward = (ok_a & ok_a2 & flat_backward
                      & (np.abs(distances - backward) <= noise_end + bend_backward))
-    return fits_mid | fits_forward | fits_backward
+    return fits_mid if between else fits_mid | fits_forward | fits_backward
+
+
+def unseen_flips(count: int, *repairs: tuple) -> np.ndarray:
+    """
+    Tell which capsules that passed their checksum show bits flipped that it cannot see.
+
+    Flipping one bit at the same position in two bytes leaves an XOR checksum as it was: two
+    lone spikes that one flipped bit each repairs (:func:`flip_repairs`), at the same bit
+    position of two different bytes (not neighbours), are both of one. Real
+    geometry rarely shows one such spike and two at one bit position almost never: the
+    evidence that a line flips bits.
+
+    :param count: capsules
+    :param repairs: ``(capsule, sample, bit)`` arrays of :func:`flip_repairs`, joined
+    :return: per capsule, True when it shows a double flip
+    """
+    capsule, sample, bit = (np.concatenate(column) for column in zip(*repairs))
+    shown = np.zeros(count, bool)
+    for i in np.unique(capsule).tolist():
+        here = capsule == i
+        for position in np.unique(bit[here] % 8).tolist():
+            at = here & (bit % 8 == position)
+            apart = np.unique(sample[at])
+            if (apart.size >= 2 and apart[-1] - apart[0] >= 2
+                    and np.unique(bit[at] // 8).size >= 2):
+                shown[i] = True
+    return shown
+
+
+def flip_repairs(distances: np.ndarray, usable: np.ndarray, deltas: np.ndarray,
+                 bits: np.ndarray, sigma_mm: float, step_rad: float,
+                 slots: Optional[np.ndarray] = None, spacing: int = 1) -> tuple:
+    """
+    Find the lone spikes of capsules that one flipped bit each repairs.
+
+    A lone spike is a sample no neighbour pair predicts (within :data:`_SIGMAS` noise sigmas)
+    that one flipped bit puts where the neighbours on both sides predict it (within
+    :data:`_REPAIR_SIGMAS`), by a change of at least :data:`_REPAIR_MIN_TOLERANCES`
+    tolerances, in a capsule with at most :data:`_MAX_SPIKE_SHARE` of its samples spikes. A
+    capsule's first and last samples have their neighbours in the capsules before and after
+    it, when those are among the ones given.
+
+    :param distances: the capsules' distances, shape (capsules, samples), mm (0: no return)
+    :param usable: which distances are readable and in range
+    :param deltas: each sample's distance change when one bit of its bytes flips, shape
+        (capsules, samples, bits), mm
+    :param bits: which bit that is, ``byte * 8 + bit`` (-1: none), same shape
+    :param sigma_mm: the range noise scale, mm
+    :param step_rad: angle between the samples given, rad
+    :param slots: the capsules' stream indices (consecutive ones are neighbours)
+    :param spacing: the capsule's samples between two given (their index in the repairs)
+    :return: ``(capsule, sample, bit)`` of each repair, arrays
+    """
+    count, per = distances.shape
+    # Each capsule's samples between the last two of the one before and the first two after.
+    d = np.zeros((count, per + 4))
+    ok = np.zeros((count, per + 4), bool)
+    d[:, 2:-2], ok[:, 2:-2] = distances, usable
+    if slots is not None and count > 1:
+        index = {slot: i for i, slot in enumerate(np.asarray(slots).tolist())}
+        for i, slot in enumerate(np.asarray(slots).tolist()):
+            for j, side, source in ((index.get(slot - 1), slice(0, 2), slice(per - 2, per)),
+                                    (index.get(slot + 1), slice(per + 2, per + 4), slice(0, 2))):
+                if j is not None:
+                    d[i, side], ok[i, side] = distances[j, source], usable[j, source]
+    lone = ok & (d > 0) & ~supported_by_neighbours(d, ok, sigma_mm, step_rad)
+    lone[:, :2] = lone[:, -2:] = False
+    # Among neighbours that mostly agree: where few do, spikes tell of no flipped bit.
+    rows = np.flatnonzero(lone.any(axis=1) & (np.count_nonzero(lone, axis=1)
+                                              <= _MAX_SPIKE_SHARE * per))
+    least_mm = _REPAIR_MIN_TOLERANCES * _SIGMAS * math.sqrt(1.5) * sigma_mm
+    found = []
+    for b in range(deltas.shape[2]):
+        change = np.zeros((rows.size, per + 4))
+        change[:, 2:-2] = deltas[rows, :, b]
+        trial = np.where(lone[rows], d[rows] + change, d[rows])
+        fits = (lone[rows] & (trial > 0) & (np.abs(change) >= least_mm)
+                & supported_by_neighbours(trial, ok[rows], sigma_mm, step_rad, _REPAIR_SIGMAS,
+                                          True))[:, 2:-2] & (bits[rows, :, b] >= 0)
+        capsule, sample = np.nonzero(fits)
+        found.append((rows[capsule], sample * spacing, bits[rows[capsule], sample, b]))
+    return tuple(np.concatenate(column) if found else np.zeros(0, np.int64)
+                 for column in zip(*found)) if found else (np.zeros(0, np.int64),) * 3

@@ -29,7 +29,8 @@ from typing import Optional
 
 import numpy as np
 
-from .capsules import CapsuleSamples, RangeNoise, supported_by_neighbours
+from .capsules import (CapsuleSamples, flip_repairs, RangeNoise, supported_by_neighbours,
+                       unseen_flips)
 from .framing import AngleTrack, CapsuleFramer, CapsulePlacer, placeable
 from .protocol import Samples, StreamCounts
 
@@ -86,6 +87,39 @@ class CapsuleLayout:
         :return: shape (n, samples), bool
         """
         return supported_by_neighbours(distance_mm, usable, sigma_mm, step_rad)
+
+    def unseen_flips(self, capsules: np.ndarray, distance_mm: np.ndarray, usable: np.ndarray,
+                     sigma_mm: float, step_rad: float, slots: np.ndarray) -> np.ndarray:
+        """
+        Tell which intact capsules show bits flipped that their checksum cannot see.
+
+        By default :func:`~wctls_rplidar.capsules.unseen_flips` of the repairs
+        :meth:`flip_deltas` allows.
+
+        :param capsules: the capsules, shape (n, size), uint8
+        :param distance_mm: their distances, shape (n, samples), mm
+        :param usable: which distances are readable and in range
+        :param sigma_mm: the range noise scale, mm
+        :param step_rad: angle between samples, rad
+        :param slots: the capsules' stream indices
+        :return: the capsules that show a double flip, shape (n,)
+        """
+        flips = self.flip_deltas(capsules, distance_mm)
+        if flips is None:
+            return np.zeros(len(capsules), bool)
+        return unseen_flips(len(capsules), flip_repairs(
+            distance_mm, usable, *flips, sigma_mm, step_rad, slots))
+
+    def flip_deltas(self, capsules: np.ndarray, distance_mm: np.ndarray) -> Optional[tuple]:
+        """
+        Tell how each distance changes when one bit of its bytes flips, and which bit that is.
+
+        :param capsules: intact capsules, shape (n, size), uint8
+        :param distance_mm: their distances as read, shape (n, samples), mm
+        :return: ``(deltas, bits)`` as :func:`~wctls_rplidar.capsules.flip_repairs` takes them;
+            None for a layout that does not say (its capsules then show no double flips)
+        """
+        return None
 
     def device_times_us(self, capsules: np.ndarray) -> Optional[np.ndarray]:
         """
@@ -289,9 +323,18 @@ class CheckedCapsuleDecoder:
         suspect = np.array([f.suspect for f in frames])
         self._noise.update(np.where(readable, distances, 0.0))
         usable = readable & (distances <= self._max_mm)
+        step_rad = math.radians(self._angles.sweep_deg() / per)
+        trusted = ~suspect & readable.any(axis=1)
+        if trusted.any():
+            shown = self._layout.unseen_flips(
+                np.array(whole)[trusted], distances[trusted], usable[trusted],
+                self._noise.sigma_mm, step_rad, np.array([f.slot for f in frames])[trusted])
+            if shown.any():
+                # The checksum let damage by: no capsule of the batch vouches for its samples.
+                self._placer.note_unseen_damage()
+                suspect[:] = True
         vouched = usable & ~suspect[:, None]
         if suspect.any():
-            step_rad = math.radians(self._angles.sweep_deg() / per)
             plausible = self._layout.plausible(distances[suspect], corrections[suspect],
                                                usable[suspect], self._noise.sigma_mm, step_rad)
             vouched[suspect] = usable[suspect] & (distances[suspect] > 0) & plausible

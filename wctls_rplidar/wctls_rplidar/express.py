@@ -102,6 +102,15 @@ class ExpressLayout(CapsuleLayout):
         _, _, distance_mm, correction_q3 = decode_express_capsules(capsules)
         return distance_mm, correction_q3 / 8.0
 
+    def flip_deltas(self, capsules: np.ndarray, distance_mm: np.ndarray) -> tuple:
+        """Return each distance's change by a flip of one of its field's bits 2-15, and which."""
+        d = np.rint(distance_mm).astype(np.int64)[..., None]
+        j = np.arange(2, 16)
+        field_at = 4 + 5 * (np.arange(EXPRESS_SAMPLES_PER_CAPSULE) // 2) + 2 * (
+            np.arange(EXPRESS_SAMPLES_PER_CAPSULE) % 2)
+        bits = (field_at[:, None] + j // 8) * 8 + j % 8
+        return (d ^ (1 << (j - 2))) - d, np.broadcast_to(bits, d.shape[:2] + (j.size,))
+
     def plausible(self, distance_mm: np.ndarray, correction_deg: np.ndarray,
                   usable: np.ndarray, sigma_mm: float, step_rad: float) -> np.ndarray:
         """

@@ -38,6 +38,7 @@ unreadable, as is a distance that decodes negative.
 
 import numpy as np
 
+from .capsules import flip_repairs, unseen_flips
 from .checked import CapsuleLayout, CheckedCapsuleDecoder, with_checksum
 
 ULTRA_CAPSULE_SIZE = 132
@@ -206,6 +207,58 @@ class UltraLayout(CapsuleLayout):
                                | (successors[:, 5].astype(np.int64) & 0xF) << 8, -1)
         distances = decode_ultra_capsules(capsules, next_majors)
         return distances, offset_deg(np.maximum(distances, 0))
+
+    def flip_deltas(self, capsules: np.ndarray, distance_mm: np.ndarray) -> tuple:
+        """
+        Return each predicted sample's change by a flip of one bit of its prediction, and which.
+
+        A major's bits move three samples together, which no lone spike shows: they are left
+        out, as is the last cabin's third sample (its base is the next capsule's major).
+        """
+        count = len(capsules)
+        combined = np.ascontiguousarray(capsules[:, 4:]).view('<u4').astype(np.int64)
+        scaled = combined & 0xFFF
+        _, level = varbitscale_decode(scaled)
+        major, _ = varbitscale_decode(scaled)
+        level_after = np.concatenate([level[:, 1:], np.zeros((count, 1), np.int64)], axis=1)
+        major_after = np.concatenate([major[:, 1:], np.zeros((count, 1), np.int64)], axis=1)
+        first_level = np.where((major == 0) & (major_after != 0), level_after, level)
+        i = np.arange(10)
+        deltas = np.zeros((count, _CABINS, 3, 10))
+        bits = np.full((count, _CABINS, 3, 10), -1, np.int64)
+        cabin_at = 4 + 4 * np.arange(_CABINS)[:, None]
+        for k, (first_bit, shift) in ((1, (12, first_level)), (2, (22, level_after))):
+            raw = (combined[..., None] >> first_bit) & 0x3FF
+            before, after = _signed10(raw), _signed10(raw ^ (1 << i))
+            sendable = ~np.isin(before, _NO_RETURN) & ~np.isin(after, _NO_RETURN)
+            deltas[:, :, k] = np.where(sendable, (after - before) << shift[..., None], 0)
+            bits[:, :, k] = np.where(sendable, (cabin_at + (first_bit + i) // 8) * 8
+                                     + (first_bit + i) % 8, -1)
+        bits[:, -1, 2] = -1
+        return (deltas.reshape(count, ULTRA_SAMPLES_PER_CAPSULE, 10),
+                bits.reshape(count, ULTRA_SAMPLES_PER_CAPSULE, 10))
+
+    def unseen_flips(self, capsules: np.ndarray, distance_mm: np.ndarray, usable: np.ndarray,
+                     sigma_mm: float, step_rad: float, slots: np.ndarray) -> np.ndarray:
+        """
+        Tell which intact capsules show bits flipped that their checksum cannot see.
+
+        In the predictions' bits as every layout's; in the majors' among the majors alone,
+        three samples apart (a flipped major moves its three samples together).
+        """
+        combined = np.ascontiguousarray(capsules[:, 4:]).view('<u4').astype(np.int64)
+        scaled = combined & 0xFFF
+        major, _ = varbitscale_decode(scaled)
+        j = np.arange(12)
+        flipped, _ = varbitscale_decode(scaled[..., None] ^ (1 << j))
+        bits = (4 + 4 * np.arange(_CABINS)[:, None] + j // 8) * 8 + j % 8
+        majors = flip_repairs(major.astype(np.float64), usable[:, 0::3],
+                              (flipped - major[..., None]).astype(np.float64),
+                              np.broadcast_to(bits, flipped.shape), sigma_mm, 3.0 * step_rad,
+                              slots, spacing=3)
+        predictions = flip_repairs(distance_mm, usable, *self.flip_deltas(capsules, distance_mm),
+                                   sigma_mm, step_rad, slots)
+        return unseen_flips(len(capsules), majors, predictions)
 
     def plausible(self, distance_mm: np.ndarray, correction_deg: np.ndarray,
                   usable: np.ndarray, sigma_mm: float, step_rad: float) -> np.ndarray:

@@ -97,12 +97,16 @@ def decode_ultra_dense_fields(raw: np.ndarray) -> tuple:
     high = capsules['cabins']['high'].astype(np.int64)
     fields = np.stack([low[..., 0] | ((high & 0xF) << 16), low[..., 1] | ((high >> 4) << 16)],
                       axis=-1).reshape(len(capsules), ULTRA_DENSE_SAMPLES_PER_CAPSULE)
+    return (capsules['time_us'].astype(np.int64), capsules['start_angle'].astype(np.int64),
+            _field_distance_q2(fields), fields & 0x3)
+
+
+def _field_distance_q2(fields: np.ndarray) -> np.ndarray:
+    """Return the distances of 20-bit sample fields, 1/4 mm (before the SDK's smoothing)."""
     scale = fields & 0x3
     bits = np.array(_VALUE_BITS)[scale]
     value = (fields >> 2) & ((1 << bits) - 1)
-    distance_q2 = 4 * (np.array(SCALE_BASE_MM)[scale] + np.array(SCALE_STEP_MM)[scale] * value)
-    return (capsules['time_us'].astype(np.int64), capsules['start_angle'].astype(np.int64),
-            distance_q2, scale)
+    return 4 * (np.array(SCALE_BASE_MM)[scale] + np.array(SCALE_STEP_MM)[scale] * value)
 
 
 class UltraDenseLayout(CapsuleLayout):
@@ -133,6 +137,27 @@ class UltraDenseLayout(CapsuleLayout):
         self._last_q2 = last
         distance_q2[received] = np.array(values, np.int64).reshape(-1, self.samples)
         return distance_q2 / 4.0, np.zeros(distance_q2.shape)
+
+    def flip_deltas(self, capsules: np.ndarray, distance_mm: np.ndarray) -> tuple:
+        """
+        Return each distance's change by a flip of one bit of its 20-bit field, and which bit.
+
+        Bits 0-15 of sample 2c's and 2c + 1's fields are their u16, bits 16-19 the low and high
+        nibble of the cabin's fifth byte; a flipped scale bit rescales the whole value.
+        """
+        raw = np.ascontiguousarray(capsules, np.uint8).view(_CAPSULE_DTYPE)[:, 0]
+        low = raw['cabins']['low'].astype(np.int64)
+        high = raw['cabins']['high'].astype(np.int64)
+        fields = np.stack([low[..., 0] | ((high & 0xF) << 16),
+                           low[..., 1] | ((high >> 4) << 16)],
+                          axis=-1).reshape(len(raw), self.samples)[..., None]
+        j = np.arange(20)
+        before, after = (_field_distance_q2(f) for f in (fields, fields ^ (1 << j)))
+        k = np.arange(self.samples)[:, None]
+        cabin_at = 10 + 5 * (k // 2)
+        bits = np.where(j < 16, (cabin_at + 2 * (k % 2) + j // 8) * 8 + j % 8,
+                        (cabin_at + 4) * 8 + (j - 16) + 4 * (k % 2))
+        return (after - before) / 4.0, np.broadcast_to(bits, fields.shape[:2] + (j.size,))
 
     def device_times_us(self, capsules: np.ndarray) -> Optional[np.ndarray]:
         """Return the capsules' timestamps, microseconds on the device's clock."""

@@ -267,7 +267,7 @@ class CapsuleFramer:
         """
         last = min(pos + self._size, raw.size - self._head)
         if last <= pos:
-            return None     # this header's own bytes have not all arrived
+            return None
         this = start_q8(self.angle_field(raw, pos))
         if this is None:
             return None
@@ -447,8 +447,10 @@ class CapsulePlacer:
     every capsule is suspect. A line can also damage capsules in ways the checksum cannot see:
     two bit flips at one bit position, or bytes swapped within a capsule (an XOR checksum does
     not see the order of bytes). Such a line shows it in the capsules it leaves legible: an
-    intact capsule out of sequence (a start angle flipped, a copy of an earlier capsule), a
-    header whose start angle says bytes were gained (:attr:`CapsuleFramer.contradictions`). For
+    intact capsule out of sequence (a start angle flipped, a copy of an earlier capsule) or
+    with an S flag after the first, a header whose start angle says bytes were gained
+    (:attr:`CapsuleFramer.contradictions`), two bits flipped at one position that the
+    decoder's samples show (:meth:`note_unseen_damage`). For
     :data:`_UNSEEN_DAMAGE_MEMORY` capsules after such a sign every capsule is suspect, its
     samples checked as those of a damaged one. A line that gains or moves bytes can also put
     another capsule's samples into a damaged one where its framing and start angle are right,
@@ -477,6 +479,10 @@ class CapsulePlacer:
         self._placed = 0                        # capsules placed so far
         self._contradicted = collections.deque()   # when (in capsules placed) they were
         self._moved_bytes_until = 0
+
+    def note_unseen_damage(self):
+        """Take a sign of damage the checksum cannot see that the samples showed."""
+        self._since_unseen_damage = 0
 
     def place(self, frames: list, next_field: int):
         """
@@ -541,8 +547,10 @@ class CapsulePlacer:
             frame.placement = placement if frame.clean or not moved_bytes else (
                 Placement(None, None, placement.replaced, placement.slip))
             self._counts['replaced_angles'] += placement.replaced
-            if frame.clean and placement.replaced and not damaged_line:
-                self._since_unseen_damage = 0       # intact, yet out of sequence
+            if frame.clean and not damaged_line and (
+                    placement.replaced or (frame.angle_field & 0x8000 and self._placed > 1)):
+                # Intact, yet out of sequence, or an S flag after the first capsule.
+                self._since_unseen_damage = 0
             frame.suspect |= placement.replaced or damaged_line or unseen_damage
         self._framer.slip(slip)
 
@@ -619,8 +627,9 @@ class AngleTrack:
         :param next_clean: the same of the successor (False when not known yet)
         :return: the :class:`Placement`
         """
-        if clean and field & 0x8000:
-            # The device (re)started its stream here, as the SDK takes the S flag.
+        if clean and field & 0x8000 and not self._in_sequence(slot, field):
+            # The device (re)started its stream here, as the SDK takes the S flag (one on a
+            # start angle in sequence is a flipped bit: the stream goes on).
             self._reference = self._sweep = self._previous = None
         observed, following = start_q8(field), start_q8(next_field)
         tolerance = self._tolerance(clean)
@@ -661,6 +670,13 @@ class AngleTrack:
             return Placement(start, None, replaced, slip)   # before a restart: dropped (SDK)
         # The next start angle is damaged or far: sweep as the capsules before.
         return Placement(start, self._sweep, replaced, slip)
+
+    def _in_sequence(self, slot: int, field: int) -> bool:
+        """Tell whether a start angle is the predicted one, as a capsule's that passed."""
+        predicted, _ = self._predict(slot)
+        observed = start_q8(field)
+        return (predicted is not None and observed is not None
+                and abs(wrap_q8(observed - predicted)) <= self._tolerance(True))
 
     def _slip(self, beyond_q8: int, gap: int, runs_on: bool, tolerance: float) -> int:
         """

@@ -338,6 +338,8 @@ class ReturnsFit:
     :ivar reach_m: how far from the apex each face (right, left) is seen without a break, m
         (NaN: not at all)
     :ivar spacing_m: the returns' spacing along each face at its outer end, m
+    :ivar past_end: per face, the returns past its end and ``face_tolerance_m`` (up to
+        BEYOND_M farther) that lie on its line, and those farther than it or none
     :ivar opening_angle_rad: the opening angle of the two faces' own lines, rad
     :ivar chi2: the fit's weighted squared residuals
     """
@@ -347,6 +349,7 @@ class ReturnsFit:
     returns: Tuple[int, int]
     reach_m: Tuple[float, float]
     spacing_m: Tuple[float, float]
+    past_end: Tuple[Tuple[int, int], Tuple[int, int]]
     opening_angle_rad: float
     chi2: float
 
@@ -398,7 +401,8 @@ def _beams(returns: DockReturns, pose: Tuple[float, float, float], shape: DockSh
     rho = returns.ranges_m[index]
     bearing = returns.angle_min_rad + increment * index
     with np.errstate(invalid='ignore'):
-        valid = np.isfinite(rho) & (rho >= returns.range_min_m) & (rho <= returns.range_max_m)
+        valid = (np.isfinite(rho) & (rho > 0.0) & (rho >= returns.range_min_m)
+                 & (rho <= returns.range_max_m))
     rho = np.where(valid, rho, 1.0)
     across = ON_FACE_SIGMAS ** 2 * (returns.range_sigma_m ** 2
                                     + returns.model_error_sigma_m ** 2)
@@ -415,6 +419,7 @@ class _Pass(NamedTuple):
     counts: np.ndarray      # (2,): returns fitted per face
     reach: list             # per face, m (NaN: not seen); empty unless final
     spans: list             # per face, (first, last) position of its fitted returns, m
+    past_end: list          # per face, returns past its end on its line, and farther
 
 
 def _assign(beams: _Beams, returns: DockReturns, pose: Tuple[float, float, float],
@@ -463,9 +468,15 @@ def _assign(beams: _Beams, returns: DockReturns, pose: Tuple[float, float, float
         0, 2, 1)
     scalars = np.stack([weight.sum(axis=1), (weight * inverse * inverse).sum(axis=1)], axis=1)
     if not final:
-        return _Pass(sums, scalars, counts, [], [])
+        return _Pass(sums, scalars, counts, [], [], [])
+    tolerated = length + shape.face_tolerance_m
     with np.errstate(invalid='ignore'):
-        beyond = (along > length) & (along <= length + beyond_m) & ~sees[::-1]
+        beyond = (along > length) & (along <= tolerated + beyond_m) & ~sees[::-1] & (hit > 0.0)
+        # Past the end and its tolerance (eq. D8): on the face's line, or farther (none).
+        past = beyond & (along > tolerated)
+        farther = ~beams.valid | (~on & (beams.rho > hit))
+    past_end = np.stack([np.count_nonzero(past & on, axis=1),
+                         np.count_nonzero(past & farther, axis=1)], axis=1).tolist()
     looked_at = (sees | beyond) & beams.valid
     reach, spans = [], []
     for k in range(2):
@@ -482,7 +493,7 @@ def _assign(beams: _Beams, returns: DockReturns, pose: Tuple[float, float, float
         reach.append(float(along[k, where[seen]].max()) if seen.any() else math.nan)
         fitted = along[k, used[k]]
         spans.append((float(fitted.min()), float(fitted.max())))
-    return _Pass(sums, scalars, counts, reach, spans)
+    return _Pass(sums, scalars, counts, reach, spans, past_end)
 
 
 def _face_sums(taken: _Pass) -> list:
@@ -603,7 +614,7 @@ def fit_returns(returns: DockReturns, start: Tuple[float, float, float],
     :return: the fit; None when a face has fewer than MIN_FACE_RETURNS returns on it or the
         equations are singular
     """
-    beyond = shape.face_tolerance_m + BEYOND_M
+    beyond = shape.face_tolerance_m + BEYOND_M           # the window's extent past the ends
     (_, _, nx0, ny0, _), (_, _, nx1, ny1, _) = _faces(0.0, 0.0, 0.0, shape)
     normal_offsets = (math.atan2(ny0, nx0), math.atan2(ny1, nx1))
     pose = (float(start[0]), float(start[1]), float(start[2]))
@@ -612,7 +623,7 @@ def fit_returns(returns: DockReturns, start: Tuple[float, float, float],
         return None
     taken: Optional[_Pass] = None
     for final in (False, True):
-        taken = _assign(beams, returns, pose, shape, beyond, final)
+        taken = _assign(beams, returns, pose, shape, BEYOND_M, final)
         if taken is None:
             return None
         face_sums = _face_sums(taken)
@@ -653,6 +664,7 @@ def fit_returns(returns: DockReturns, start: Tuple[float, float, float],
     return ReturnsFit(np.array([x, y, _wrap(yaw)]), covariance,
                       (int(taken.counts[0]), int(taken.counts[1])),
                       (taken.reach[0], taken.reach[1]), _spacing(returns, pose, shape),
+                      (tuple(taken.past_end[0]), tuple(taken.past_end[1])),
                       _own_lines_angle(face_sums, pose, shape), chi2)
 
 
@@ -705,10 +717,7 @@ def _docks_of_returns(returns: DockReturns, starts: list, shape: DockShape) -> L
         fit = fit_returns(returns, start, shape)
         if fit is None:
             continue
-        misfits = [_reach_misfit(fit.reach_m[k], fit.spacing_m[k], face_m, shape)
-                   for k, face_m in enumerate((shape.right_face_m, shape.left_face_m))]
-        misfit = max(*misfits, abs(fit.opening_angle_rad - shape.opening_angle_rad)
-                     / max(shape.angle_tolerance_rad, 1e-12))
+        misfit = returns_misfit(fit, shape)
         if not misfit <= 1.0:
             continue
         # Two starts (a face in two segments) that found the same dock: the better one.
@@ -729,22 +738,41 @@ def _docks_of_returns(returns: DockReturns, starts: list, shape: DockShape) -> L
     return docks
 
 
-def _reach_misfit(reach_m: float, spacing_m: float, face_m: float, shape: DockShape) -> float:
-    """Return how far a face's reach is from its length, in its tolerance (<= 1 fits)."""
-    if not math.isfinite(reach_m):
-        return math.inf
-    return _face_misfit(reach_m, spacing_m, face_m, shape)
+def returns_misfit(fit: ReturnsFit, shape: DockShape) -> float:
+    """
+    Return how far a fit's faces are from the dock's, in tolerances (<= 1: the dock; eq. D8-D9).
+
+    The largest of: each face's shortfall, its length less its reach less one return spacing,
+    over ``face_shortfall_m``; twice the share of the returns past its end and tolerance that
+    lie on its line, among those on it and those farther (the face goes on when they are
+    more; nearer ones hide it); the faces' own opening angle's error over
+    ``angle_tolerance_rad``.
+
+    :param fit: the fit
+    :param shape: the dock
+    :return: the misfit
+    """
+    misfits = [abs(fit.opening_angle_rad - shape.opening_angle_rad)
+               / max(shape.angle_tolerance_rad, 1e-12)]
+    for reach, spacing, (on, farther), face_m in zip(
+            fit.reach_m, fit.spacing_m, fit.past_end, (shape.right_face_m, shape.left_face_m)):
+        if not math.isfinite(reach):
+            return math.inf
+        misfits.append(max(face_m - reach - spacing, 0.0) / max(shape.face_shortfall_m, 1e-9))
+        misfits.append(2.0 * on / max(on + farther, 1))
+    return max(misfits)
 
 
 def _corner_starts(segments: SegmentSet, corners: CornerSet, shape: DockShape,
                    tried: set) -> List[Tuple[float, float, float]]:
     """Return the starts of the corners near the dock's angle (their pairs go into tried)."""
+    # Every corner's pair is tried here or not at all: the core saw its angle.
+    tried.update(zip(corners.first_segment.tolist(), corners.second_segment.tolist()))
     angle_error = np.abs(corners.opening_angle_rad - shape.opening_angle_rad)
     longest = max(shape.right_face_m, shape.left_face_m) + shape.face_tolerance_m + BEYOND_M
     starts = []
     for k in np.flatnonzero(angle_error <= 2.0 * shape.angle_tolerance_rad).tolist():
         pair = (int(corners.first_segment[k]), int(corners.second_segment[k]))
-        tried.add(pair)
         if _farther_than(segments, pair, corners.xy_m[k].tolist(), longest):
             continue
         start = _pair_start(segments, pair, corners.xy_m[k].tolist(),

@@ -256,6 +256,10 @@ MIN_FACE_RETURNS = 4
 BEYOND_M = 0.05
 # A start's window also holds the faces of a fit this much farther out, m.
 WINDOW_MARGIN_M = 0.05
+# The walk of a straight face's residuals from its own line, less its share of their total,
+# exceeds this times sqrt(N) once in a thousand (Monte Carlo: 1.08 at N = 15 returns, 1.14 at
+# 50, 1.18 at 150; eq. D10).
+STRAIGHT_BRIDGE = 1.2
 # Two fits whose apexes are closer than this are one dock, m.
 SAME_DOCK_M = 0.05
 
@@ -341,6 +345,9 @@ class ReturnsFit:
     :ivar past_end: per face, the returns past its end and ``face_tolerance_m`` (up to
         BEYOND_M farther) that lie on its line, and those farther than it or none
     :ivar opening_angle_rad: the opening angle of the two faces' own lines, rad
+    :ivar bends: per face, the largest excursion of the running sum of its returns' residuals
+        from its own line (over their deciding noise), less its share of their total, over
+        sqrt(N) (eq. D10; a straight face's exceeds STRAIGHT_BRIDGE once in a thousand)
     :ivar chi2: the fit's weighted squared residuals
     """
 
@@ -351,6 +358,7 @@ class ReturnsFit:
     spacing_m: Tuple[float, float]
     past_end: Tuple[Tuple[int, int], Tuple[int, int]]
     opening_angle_rad: float
+    bends: Tuple[float, float]
     chi2: float
 
 
@@ -420,6 +428,8 @@ class _Pass(NamedTuple):
     reach: list             # per face, m (NaN: not seen); empty unless final
     spans: list             # per face, (first, last) position of its fitted returns, m
     past_end: list          # per face, returns past its end on its line, and farther
+    own_sums: np.ndarray    # (2, 2, 3): the sums of each face's own line (eq. D9)
+    bends: list             # per face, its residuals' bridge over sqrt(N) (eq. D10)
 
 
 def _assign(beams: _Beams, returns: DockReturns, pose: Tuple[float, float, float],
@@ -441,7 +451,8 @@ def _assign(beams: _Beams, returns: DockReturns, pose: Tuple[float, float, float
         along = hit * projected[2:] - np.array([[ux0 * x + uy0 * y], [ux1 * x + uy1 * y]])
         cos2 = cosine * cosine
         offset = (beams.rho - hit) * cosine              # a return across the line, m
-        on = (offset * offset <= beams.gate_cos2 * cos2 + beams.gate) & beams.valid
+        gate2 = beams.gate_cos2 * cos2 + beams.gate
+        on = (offset * offset <= gate2) & beams.valid
         length = np.array([[length0], [length1]])
         meets = (hit > 0.0) & (along >= 0.0) & (along <= length)
     # Each beam sees the nearer face that its ray meets within the face's length.
@@ -452,12 +463,12 @@ def _assign(beams: _Beams, returns: DockReturns, pose: Tuple[float, float, float
     if counts.min() < MIN_FACE_RETURNS:
         return None
     sigma2 = returns.range_sigma_m ** 2
-    h2 = np.where(used, hit * hit, 1.0)
-    c2 = np.where(used, cos2, 1.0)
+    h2 = np.where(sees, hit * hit, 1.0)
+    c2 = np.where(sees, cos2, 1.0)
     # The inverse range, its second-order bias removed, and its weight (eq. D6).
     inverse = beams.inverse - sigma2 / (h2 * np.sqrt(h2))
-    weight = np.where(used, h2 * h2 / (sigma2 + returns.bearing_sigma_rad ** 2 * h2
-                                       * (1.0 - c2) / c2), 0.0)
+    weights = h2 * h2 / (sigma2 + returns.bearing_sigma_rad ** 2 * h2 * (1.0 - c2) / c2)
+    weight = np.where(used, weights, 0.0)
     columns = [np.broadcast_to(beams.directions, (2, 2, beams.rho.size)), inverse[:, None]]
     if final:
         ranged = 1.0 / h2                                # -d(1/rho)/d(rho)
@@ -468,7 +479,19 @@ def _assign(beams: _Beams, returns: DockReturns, pose: Tuple[float, float, float
         0, 2, 1)
     scalars = np.stack([weight.sum(axis=1), (weight * inverse * inverse).sum(axis=1)], axis=1)
     if not final:
-        return _Pass(sums, scalars, counts, [], [], [])
+        return _Pass(sums, scalars, counts, [], [], [], sums, [])
+    # Each face's own line (eq. D9), from its returns within the gate widened by the
+    # opening angle's tolerance: gated at the dock's line alone, it would lean towards it.
+    with np.errstate(invalid='ignore'):
+        own = sees & beams.valid & (np.abs(offset) <= np.sqrt(gate2) + np.maximum(along, 0.0)
+                                    * math.sin(shape.angle_tolerance_rad))
+    own_sums = (np.where(own, weights, 0.0)[:, None, :] * beams.directions) @ np.concatenate(
+        columns[:2], axis=1).transpose(0, 2, 1)
+    # Their residuals from that line over the deciding noise, for the test of straightness.
+    own_p = np.linalg.solve(own_sums[:, :, :2], own_sums[:, :, 2:])      # (2, 2, 1)
+    deciding = returns.range_sigma_m ** 2 + returns.model_error_sigma_m ** 2
+    standard = (inverse - (own_p * beams.directions).sum(axis=1)) * h2 / np.sqrt(
+        deciding + returns.bearing_sigma_rad ** 2 * h2 * (1.0 - c2) / c2)
     tolerated = length + shape.face_tolerance_m
     with np.errstate(invalid='ignore'):
         beyond = (along > length) & (along <= tolerated + beyond_m) & ~sees[::-1] & (hit > 0.0)
@@ -478,7 +501,7 @@ def _assign(beams: _Beams, returns: DockReturns, pose: Tuple[float, float, float
     past_end = np.stack([np.count_nonzero(past & on, axis=1),
                          np.count_nonzero(past & farther, axis=1)], axis=1).tolist()
     looked_at = (sees | beyond) & beams.valid
-    reach, spans = [], []
+    reach, spans, bends = [], [], []
     for k in range(2):
         # The face's reach (eq. D8): its returns along it and beyond its outer end, in the
         # order of the position their rays meet it (monotonic over the window), up to the
@@ -493,7 +516,15 @@ def _assign(beams: _Beams, returns: DockReturns, pose: Tuple[float, float, float
         reach.append(float(along[k, where[seen]].max()) if seen.any() else math.nan)
         fitted = along[k, used[k]]
         spans.append((float(fitted.min()), float(fitted.max())))
-    return _Pass(sums, scalars, counts, reach, spans, past_end)
+        # A face is straight (eq. D10): the running sum of its residuals, less its share of
+        # their total, stays within STRAIGHT_BRIDGE sqrt(N).
+        walk = np.cumsum(standard[k, own[k]])
+        if len(walk) > 2:
+            bridge = walk - walk[-1] * np.arange(1, len(walk) + 1) / len(walk)
+            bends.append(float(np.abs(bridge).max()) / math.sqrt(len(walk)))
+        else:
+            bends.append(math.inf)
+    return _Pass(sums, scalars, counts, reach, spans, past_end, own_sums, bends)
 
 
 def _face_sums(taken: _Pass) -> list:
@@ -565,12 +596,12 @@ def _gauss_newton(face_sums: list, normal_offsets, pose, steps: int = 4):
     return x, y, yaw
 
 
-def _own_lines_angle(face_sums: list, pose: Tuple[float, float, float],
+def _own_lines_angle(own_sums: np.ndarray, pose: Tuple[float, float, float],
                      shape: DockShape) -> float:
     """Return the opening angle between the faces' own lines, p = A^-1 b (eq. D9)."""
     directions = []
-    for (axx, axy, ayy, bx, by, _), (ux, uy, _, _, _) in zip(
-            face_sums, _faces(pose[0], pose[1], pose[2], shape)):
+    for ((axx, axy, bx), (_, ayy, by)), (ux, uy, _, _, _) in zip(
+            own_sums.tolist(), _faces(pose[0], pose[1], pose[2], shape)):
         px, py = ayy * bx - axy * by, axx * by - axy * bx     # det A times p
         dx, dy = -py, px                                 # along the line
         directions.append((dx, dy) if dx * ux + dy * uy >= 0.0 else (-dx, -dy))
@@ -665,7 +696,8 @@ def fit_returns(returns: DockReturns, start: Tuple[float, float, float],
                       (int(taken.counts[0]), int(taken.counts[1])),
                       (taken.reach[0], taken.reach[1]), _spacing(returns, pose, shape),
                       (tuple(taken.past_end[0]), tuple(taken.past_end[1])),
-                      _own_lines_angle(face_sums, pose, shape), chi2)
+                      _own_lines_angle(taken.own_sums, pose, shape),
+                      (taken.bends[0], taken.bends[1]), chi2)
 
 
 def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape,
@@ -760,6 +792,7 @@ def returns_misfit(fit: ReturnsFit, shape: DockShape) -> float:
             return math.inf
         misfits.append(max(face_m - reach - spacing, 0.0) / max(shape.face_shortfall_m, 1e-9))
         misfits.append(2.0 * on / max(on + farther, 1))
+    misfits += [bend / STRAIGHT_BRIDGE for bend in fit.bends]
     return max(misfits)
 
 

@@ -6,15 +6,17 @@ A docking station seen by a 2D LiDAR: two straight faces meeting at an apex, fou
 
 A dock is described by :class:`DockShape`: the length of its right and left faces and the
 opening angle between them through the side the robot sees (below 180 deg a V the robot faces
-into, above 180 deg a wedge pointing at the robot, 90 deg an L), with tolerances. Each corner
-of a scan whose opening angle and faces' lengths match is a candidate (:func:`find_docks`);
-its pose is the dock frame: origin at the apex, x along the bisector away from the robot's
-side (the way a robot docking forwards faces), y to the left, moved to a stated reference
-point. The apex frame is fitted to the corner's two walls knowing the dock's opening angle,
-with the covariance of the fit from the walls' own, and moved to the reference point with it
-(docs/docking.md, eq. D1-D3). :func:`track_dock` keeps the candidates that agree with the
-last ones (a chi2 gate over the pose difference, with the motion allowed in between, eq. D4)
-and confirms a dock only after a few agreeing scans.
+into, above 180 deg a wedge pointing at the robot, 90 deg an L), with tolerances. Its pose is
+the dock frame: origin at the apex, x along the bisector away from the robot's side (the way
+a robot docking forwards faces), y to the left, moved to a stated reference point.
+:func:`find_docks` starts from the corners and the pairs of segments near the dock's angle,
+fits the apex frame to the lines knowing the opening angle (eq. D1), then to the scan's
+returns themselves (:func:`fit_returns`, eq. D5-D7), and keeps the fits whose faces reach
+their ends and no farther, are straight and meet at the angle (eq. D8-D10); without the
+returns, the corners that match, with their line fit. The pose is moved to the reference
+point with its covariance (eq. D2-D3; docs/docking.md). :func:`track_dock` keeps the
+candidates that agree with the last ones (a chi2 gate over the pose difference, with the
+motion allowed in between, eq. D4) and confirms a dock only after a few agreeing scans.
 
 Everything is in the scan's frame: m, rad. Pure numpy; no ROS.
 """

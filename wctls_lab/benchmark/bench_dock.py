@@ -5,6 +5,10 @@
 """
 Measure the dock detector (wctls_ros.frontend.dock): accuracy, NEES, detection, false docks, time.
 
+Two detectors side by side on the same scans, each with its own tracker: "corners", the dock
+from the corners alone (find_docks without the returns, the way before the fit to the returns),
+and "returns", the dock fitted to the scan's returns (what feature_node and process_bag run).
+
 1. Simulated S1-like scans (1080 beams, 2 cm range noise, 1/3 deg bins, mixed pixels, dropouts)
    of environment A lived in (clutter, a walking person, rough walls) with the example dock (a
    V of two 0.30 m faces, 120 deg) against its east wall, seen from 0.3 to 3 m along lines at
@@ -37,8 +41,8 @@ from wctls_lab.simulation import (BUNDLED_PLANS, floor_plan_from_dict, full_turn
                                   load_floor_plan, ray_hits, Scene, SENSOR_MODELS,
                                   simulate_scan)
 from wctls_ros.core import extract_features, start
-from wctls_ros.frontend.dock import (DockShape, find_docks, track_dock, TrackerState,
-                                     TrackSettings, wrap_angle)
+from wctls_ros.frontend.dock import (dock_returns, DockShape, find_docks, track_dock,
+                                     TrackerState, TrackSettings, wrap_angle)
 from wctls_ros.params import defaults, FEATURE_NODE, feature_settings
 
 DATA = pathlib.Path(__file__).resolve().parents[2] / 'data'
@@ -49,6 +53,15 @@ VIEWS_DEG = (-60, -30, 0, 30, 60)
 # (distance, view) -> the dock's bearings in the scan, deg; 0 elsewhere.
 BEARINGS_DEG = {(1.0, 0): (-60, 0, 60)}
 SCAN_PERIOD_S = 0.1
+DETECTORS = ('corners', 'returns')
+
+
+def detect(detector, features, ranges, angle_min, increment, config):
+    """Return one scan's dock candidates by a detector: 'corners' or 'returns'."""
+    if detector == 'corners':
+        return find_docks(features.segments, features.corners, SHAPE)
+    return find_docks(features.segments, features.corners, SHAPE,
+                      dock_returns(ranges, angle_min, increment, config, features.range_sigma_m))
 
 
 def dock_polygon(apex, shape):
@@ -89,30 +102,31 @@ def nees3(pose, truth):
 
 
 def run_scans(plan, pose, count, config, rng, walk_time_s=0.0):
-    """Yield (scene, features, elapsed extraction s) for ``count`` scans from one pose."""
+    """Yield (scene, ranges, features, elapsed extraction s) for ``count`` scans from a pose."""
     angle_min, increment, bearings = full_turn_bearings()
     for t in range(count):
         scene = plan.scene(pose, walk_time_s + SCAN_PERIOD_S * t)
         ranges = simulate_scan(scene, bearings, SENSOR_MODELS['s1_like'], rng)
         started = time.perf_counter()
         features = extract_features(ranges, angle_min, increment, config)
-        yield scene, features, time.perf_counter() - started
+        yield scene, ranges, features, time.perf_counter() - started
 
 
 def accuracy(config, count):
-    """Print the sweep of part 1."""
+    """Print the sweep of part 1: per line, the corners' figures, then the returns'."""
     plan = dock_plan()
     half = SHAPE.opening_angle_rad / 2.0
     tips = (APEX + SHAPE.right_face_m * np.array([-math.cos(half), -math.sin(half)]),
             APEX + SHAPE.left_face_m * np.array([-math.cos(half), math.sin(half)]))
-    _, increment, _ = full_turn_bearings()
+    angle_min, increment, _ = full_turn_bearings()
     rng = np.random.default_rng(46)
-    print('distance m | view deg | bearings deg | in view | detected % | once confirmed % | '
-          'median error mm | median yaw error deg | mean NEES (3 dof)')
+    print('distance m | view deg | bearings deg | in view | detector | detected % | '
+          'once confirmed % | median error mm | median yaw error deg | mean NEES (3 dof)')
     for distance in DISTANCES_M:
         for view in VIEWS_DEG:
-            in_view = detected = in_view_after = detected_after = 0
-            errors, yaw_errors, nees = [], [], []
+            figures = {d: {'detected': 0, 'after': 0, 'in_view_after': 0, 'errors': [],
+                           'yaw': [], 'nees': []} for d in DETECTORS}
+            in_view = 0
             bearings = BEARINGS_DEG.get((distance, view), (0,))
             for bearing in bearings:
                 direction = math.radians(view)
@@ -126,32 +140,43 @@ def accuracy(config, count):
                 if not fully_in_view(Scene.of_walls(plan.scene(pose).walls_m), faces,
                                      increment):
                     continue
-                state, confirmed = TrackerState(), False
-                for t, (scene, features, _) in enumerate(
+                states = {d: TrackerState() for d in DETECTORS}
+                confirmed = dict.fromkeys(DETECTORS, False)
+                for t, (scene, ranges, features, _) in enumerate(
                         run_scans(plan, pose, count, config, rng, walk_time_s=rng.uniform(0, 3))):
-                    state, report = track_dock(
-                        state, find_docks(features.segments, features.corners, SHAPE),
-                        SCAN_PERIOD_S * t, TrackSettings())
-                    # The scans after the tracker's first report: the steady rate.
-                    after, confirmed = confirmed, confirmed or report is not None
-                    if not fully_in_view(scene, faces, increment):
-                        continue
-                    in_view += 1
-                    in_view_after += after
-                    if report is None:
-                        continue
-                    detected += 1
-                    detected_after += after
-                    errors.append(1e3 * math.hypot(*(report.vector[:2] - truth[:2])))
-                    yaw_errors.append(abs(math.degrees(wrap_angle(report.yaw_rad - truth[2]))))
-                    nees.append(nees3(report, truth))
-            rate = 100.0 * detected / in_view if in_view else math.nan
-            steady = 100.0 * detected_after / in_view_after if in_view_after else math.nan
+                    shown = fully_in_view(scene, faces, increment)
+                    in_view += shown
+                    for detector in DETECTORS:
+                        states[detector], report = track_dock(
+                            states[detector], detect(detector, features, ranges, angle_min,
+                                                     increment, config),
+                            SCAN_PERIOD_S * t, TrackSettings())
+                        # The scans after the tracker's first report: the steady rate.
+                        after = confirmed[detector]
+                        confirmed[detector] = after or report is not None
+                        figure = figures[detector]
+                        figure['in_view_after'] += shown and after
+                        if not shown or report is None:
+                            continue
+                        figure['detected'] += 1
+                        figure['after'] += after
+                        figure['errors'].append(1e3 * math.hypot(*(report.vector[:2]
+                                                                   - truth[:2])))
+                        figure['yaw'].append(abs(math.degrees(wrap_angle(report.yaw_rad
+                                                                         - truth[2]))))
+                        figure['nees'].append(nees3(report, truth))
             if not in_view:
                 continue
-            print(f'{distance:10.1f} | {view:8d} | {",".join(map(str, bearings)):>12} | '
-                  f'{in_view:7d} | {rate:10.1f} | {steady:16.1f} | {_median(errors):15.1f} | '
-                  f'{_median(yaw_errors):20.2f} | {_mean(nees):6.2f}', flush=True)
+            for detector in DETECTORS:
+                figure = figures[detector]
+                rate = 100.0 * figure['detected'] / in_view
+                # Each detector's own confirmation: its scans after its first report.
+                steady = (100.0 * figure['after'] / figure['in_view_after']
+                          if figure['in_view_after'] else math.nan)
+                print(f'{distance:10.1f} | {view:8d} | {",".join(map(str, bearings)):>12} | '
+                      f'{in_view:7d} | {detector:>8} | {rate:10.1f} | {steady:16.1f} | '
+                      f'{_median(figure["errors"]):15.1f} | {_median(figure["yaw"]):20.2f} | '
+                      f'{_mean(figure["nees"]):6.2f}', flush=True)
 
 
 def _median(values):
@@ -185,90 +210,107 @@ def look_alikes(config, count):
         rooms[f'{name} (no dock)'] = ({'name': name, 'base': name},
                                       [(x + dx, y + dy, yaw) for dx, dy, yaw in offsets])
     rng = np.random.default_rng(7)
+    angle_min, increment, _ = full_turn_bearings()
     for name, (spec, poses) in rooms.items():
         plan = floor_plan_from_dict(spec)
-        candidates = reports = scans = 0
+        candidates, reports, scans = dict.fromkeys(DETECTORS, 0), dict.fromkeys(DETECTORS, 0), 0
         for pose in poses:
-            state = TrackerState()
-            for t, (_, features, _) in enumerate(run_scans(plan, pose, count, config, rng)):
-                found = find_docks(features.segments, features.corners, SHAPE)
-                state, report = track_dock(state, found, SCAN_PERIOD_S * t, TrackSettings())
-                candidates += len(found)
-                reports += report is not None
+            states = {d: TrackerState() for d in DETECTORS}
+            for t, (_, ranges, features, _) in enumerate(run_scans(plan, pose, count, config,
+                                                                   rng)):
+                for detector in DETECTORS:
+                    found = detect(detector, features, ranges, angle_min, increment, config)
+                    states[detector], report = track_dock(states[detector], found,
+                                                          SCAN_PERIOD_S * t, TrackSettings())
+                    candidates[detector] += len(found)
+                    reports[detector] += report is not None
                 scans += 1
-        print(f'{name}: {scans} scans, {candidates} candidates, {reports} docks reported',
-              flush=True)
+        print(f'{name}: {scans} scans; ' + '; '.join(
+            f'{d}: {candidates[d]} candidates, {reports[d]} docks reported' for d in DETECTORS),
+            flush=True)
 
 
 def real_recordings(config_for):
     """Print part 2 for the shipped recordings."""
     paths = sorted(DATA.glob('*/*.mcap')) + sorted((DATA / 'lms111_building').glob('*.json'))
-    total_scans = total_candidates = total_reports = 0
+    total_scans = 0
+    totals = {d: [0, 0] for d in DETECTORS}
     for path in paths:
         scans = load_json_scans(path) if path.suffix == '.json' else load_scans(path)
         config = config_for(path)
-        state = TrackerState()
-        candidates = reports = 0
+        states = {d: TrackerState() for d in DETECTORS}
+        counts = {d: [0, 0] for d in DETECTORS}
         for k, ranges in enumerate(scans.ranges):
             features = extract_features(ranges, scans.angle_min, scans.angle_increment, config)
-            found = find_docks(features.segments, features.corners, SHAPE)
             stamp_s = (scans.stamps_ns[k] - scans.stamps_ns[0]) * 1e-9 if len(
                 scans.stamps_ns) else 0.0
-            state, report = track_dock(state, found, float(stamp_s), TrackSettings())
-            candidates += len(found)
-            reports += report is not None
+            for detector in DETECTORS:
+                found = detect(detector, features, ranges, scans.angle_min,
+                               scans.angle_increment, config)
+                states[detector], report = track_dock(states[detector], found, float(stamp_s),
+                                                      TrackSettings())
+                counts[detector][0] += len(found)
+                counts[detector][1] += report is not None
         total_scans += len(scans.ranges)
-        total_candidates += candidates
-        total_reports += reports
-        print(f'{path.parent.name}/{path.name}: {len(scans.ranges)} scans, {candidates} '
-              f'candidates, {reports} docks reported')
-    print(f'all recordings: {total_scans} scans, {total_candidates} candidates, '
-          f'{total_reports} docks reported')
+        for detector in DETECTORS:
+            totals[detector] = [t + c for t, c in zip(totals[detector], counts[detector])]
+        print(f'{path.parent.name}/{path.name}: {len(scans.ranges)} scans; ' + '; '.join(
+            f'{d}: {counts[d][0]} candidates, {counts[d][1]} docks reported' for d in DETECTORS))
+    print(f'all recordings: {total_scans} scans; ' + '; '.join(
+        f'{d}: {totals[d][0]} candidates, {totals[d][1]} docks reported' for d in DETECTORS))
 
 
 def timing(config, count):
     """
-    Print part 3: the detector's time beside the extraction's, per scan.
+    Print part 3: each detector's time beside the extraction's, per scan.
 
     Wall time per scan (median, p99), and CPU time (``time.process_time``) over five passes of
-    the same scans, which a loaded machine's preemption does not inflate.
+    the same scans, which a loaded machine's preemption does not inflate; the detectors
+    alternate scan by scan.
     """
     plan = dock_plan()
     pose = (APEX[0] - 1.0, APEX[1], 0.0)
     rng = np.random.default_rng(3)
-    extraction, detection, features_of = [], [], []
-    state = TrackerState()
-    for t, (_, features, elapsed) in enumerate(run_scans(plan, pose, count, config, rng)):
-        started = time.perf_counter()
-        found = find_docks(features.segments, features.corners, SHAPE)
-        state, _ = track_dock(state, found, SCAN_PERIOD_S * t, TrackSettings())
-        detection.append(time.perf_counter() - started)
+    angle_min, increment, _ = full_turn_bearings()
+    extraction, scans = [], []
+    detection = {d: [] for d in DETECTORS}
+    states = {d: TrackerState() for d in DETECTORS}
+    for t, (_, ranges, features, elapsed) in enumerate(run_scans(plan, pose, count, config,
+                                                                 rng)):
+        for detector in DETECTORS:
+            started = time.perf_counter()
+            found = detect(detector, features, ranges, angle_min, increment, config)
+            states[detector], _ = track_dock(states[detector], found, SCAN_PERIOD_S * t,
+                                             TrackSettings())
+            detection[detector].append(time.perf_counter() - started)
         extraction.append(elapsed)
-        features_of.append(features)
-    print(f'{count} scans at 1 m, wall time: extraction median '
-          f'{1e3 * statistics.median(extraction):.3f} ms, find_docks + track_dock median '
-          f'{1e3 * statistics.median(detection):.3f} ms, p99 '
-          f'{1e3 * float(np.percentile(detection, 99)):.3f} ms '
-          f'({statistics.median(detection) / statistics.median(extraction):.2f}x the extraction)')
-    angle_min, increment, bearings = full_turn_bearings()
-    scans = [simulate_scan(plan.scene(pose, SCAN_PERIOD_S * k), bearings,
-                           SENSOR_MODELS['s1_like'], rng) for k in range(len(features_of))]
+        scans.append((ranges, features))
+    extraction_ms = 1e3 * statistics.median(extraction)
+    print(f'{count} scans at 1 m, wall time: extraction median {extraction_ms:.3f} ms; '
+          + '; '.join(f'{d}: find_docks + track_dock median '
+                      f'{1e3 * statistics.median(detection[d]):.3f} ms, p99 '
+                      f'{1e3 * float(np.percentile(detection[d], 99)):.3f} ms '
+                      f'({1e3 * statistics.median(detection[d]) / extraction_ms:.2f}x the '
+                      'extraction)' for d in DETECTORS))
     passes = 5
     started = time.process_time()
     for _ in range(passes):
-        for ranges in scans:
+        for ranges, _ in scans:
             extract_features(ranges, angle_min, increment, config)
     extraction_s = (time.process_time() - started) / (passes * len(scans))
-    started = time.process_time()
-    for _ in range(passes):
-        state = TrackerState()
-        for t, features in enumerate(features_of):
-            state, _ = track_dock(state, find_docks(features.segments, features.corners, SHAPE),
-                                  SCAN_PERIOD_S * t, TrackSettings())
-    detection_s = (time.process_time() - started) / (passes * len(features_of))
-    print(f'CPU time per scan ({passes} passes): extraction {1e3 * extraction_s:.3f} ms, '
-          f'find_docks + track_dock {1e3 * detection_s:.3f} ms '
-          f'({detection_s / extraction_s:.2f}x the extraction)')
+    cpu = {}
+    for detector in DETECTORS:
+        started = time.process_time()
+        for _ in range(passes):
+            state = TrackerState()
+            for t, (ranges, features) in enumerate(scans):
+                state, _ = track_dock(state, detect(detector, features, ranges, angle_min,
+                                                    increment, config),
+                                      SCAN_PERIOD_S * t, TrackSettings())
+        cpu[detector] = (time.process_time() - started) / (passes * len(scans))
+    print(f'CPU time per scan ({passes} passes): extraction {1e3 * extraction_s:.3f} ms; '
+          + '; '.join(f'{d}: find_docks + track_dock {1e3 * cpu[d]:.3f} ms '
+                      f'({cpu[d] / extraction_s:.2f}x the extraction)' for d in DETECTORS))
 
 
 def main():

@@ -50,7 +50,7 @@ from .conversions import (copy_header, corner_array, dock_marker, dock_pose_mess
 from .core import (CoreStatus, CornerSet, Features, line_landmarks, SegmentSet,
                    start as start_core, status as core_status)
 from .extras import missing_extra
-from .frontend.dock import find_docks, track_dock, TrackerState
+from .frontend.dock import dock_returns, find_docks, track_dock, TrackerState
 from .landmark_messages import landmark_array, landmark_markers, LandmarkStream
 from .landmark_publishers import bridge_names, BridgePublishers
 from .node_main import declare_parameters, run_node
@@ -437,7 +437,7 @@ class FeatureNode(LifecycleNode):
                 self._markers.publish(types.serialize(
                     marker_array(features, header, self._style, types, is_landmark=is_landmark)))
             if self._dock is not None and self._detecting:
-                self._publish_dock(features, header, types)
+                self._publish_dock(features, scan, header, types)
         except Exception:  # noqa: B902 - only a shutdown (Ctrl-C mid-callback) is expected here
             if self.context.ok():
                 raise
@@ -445,10 +445,12 @@ class FeatureNode(LifecycleNode):
         self._count('processed')
         self._recent.seconds.append(time.perf_counter() - started)
 
-    def _publish_dock(self, features: Features, header, types: MessageTypes) -> None:
-        """Look for the dock among the features; publish its pose once the tracker confirms it."""
+    def _publish_dock(self, features: Features, scan, header, types: MessageTypes) -> None:
+        """Look for the dock in the scan; publish its pose once the tracker confirms it."""
         stamp_s = header.stamp.sec + 1e-9 * header.stamp.nanosec
-        candidates = find_docks(features.segments, features.corners, self._dock.shape)
+        returns = dock_returns(scan.ranges, scan.angle_min, scan.angle_increment, self._config,
+                               features.range_sigma_m, scan.range_min, scan.range_max)
+        candidates = find_docks(features.segments, features.corners, self._dock.shape, returns)
         self._dock_track, dock = track_dock(self._dock_track, candidates, stamp_s,
                                             self._dock.tracking)
         if dock is None:

@@ -58,7 +58,7 @@ from ..conversions import (corner_array, dock_pose_messages, laser_scan, line_se
                            marker_array, MessageTypes, scan_features)
 from ..core import CornerSet, line_landmarks, METHODS, SegmentSet, start
 from ..extras import explains_missing_extras
-from ..frontend.dock import find_docks, track_dock, TrackerState
+from ..frontend.dock import dock_returns, find_docks, track_dock, TrackerState
 from ..frontend.frames import Landmarks, landmarks_from_features
 from ..frontend.tracking import detections_of, View
 from ..outputs import CORNERS, DOCK_OUTPUTS, FEATURES, LINES, MARKERS
@@ -257,8 +257,11 @@ class ScanWork:
         for method, (corners_topic, lines_topic, markers_topic) in self.topics.items():
             features, problems = scan_features(scan, self.configs[method])
             if self.dock is not None and method == self.dock_method:
+                returns = dock_returns(scan.ranges, scan.angle_min, scan.angle_increment,
+                                       self.configs[method], features.range_sigma_m,
+                                       scan.range_min, scan.range_max)
                 dock = (header, find_docks(features.segments, features.corners,
-                                           self.dock.shape))
+                                           self.dock.shape, returns))
             if self.odometry and scan_landmarks is None:
                 scan_landmarks = landmarks_from_features(
                     features, self.configs[method].max_landmark_angle_sigma_rad)

@@ -6,26 +6,28 @@ A docking station seen by a 2D LiDAR: two straight faces meeting at an apex, fou
 
 A dock is described by :class:`DockShape`: the length of its right and left faces and the
 opening angle between them through the side the robot sees (below 180 deg a V the robot faces
-into, above 180 deg a wedge pointing at the robot, 90 deg an L), with tolerances. Each corner
-of a scan whose opening angle and faces' lengths match is a candidate (:func:`find_docks`);
-its pose is the dock frame: origin at the apex, x along the bisector away from the robot's
-side (the way a robot docking forwards faces), y to the left, moved to a stated reference
-point. The apex frame is fitted to the corner's two walls knowing the dock's opening angle,
-with the covariance of the fit from the walls' own, and moved to the reference point with it
-(docs/docking.md, eq. D1-D3). :func:`track_dock` keeps the candidates that agree with the
-last ones (a chi2 gate over the pose difference, with the motion allowed in between, eq. D4)
-and confirms a dock only after a few agreeing scans.
+into, above 180 deg a wedge pointing at the robot, 90 deg an L), with tolerances. Its pose is
+the dock frame: origin at the apex, x along the bisector away from the robot's side (the way
+a robot docking forwards faces), y to the left, moved to a stated reference point.
+:func:`find_docks` starts from the corners and the pairs of segments near the dock's angle,
+fits the apex frame to the lines knowing the opening angle (eq. D1), then to the scan's
+returns themselves (:func:`fit_returns`, eq. D5-D7), and keeps the fits whose faces reach
+their ends and no farther, are straight and meet at the angle (eq. D8-D10); without the
+returns, the corners that match, with their line fit. The pose is moved to the reference
+point with its covariance (eq. D2-D3; docs/docking.md). :func:`track_dock` keeps the
+candidates that agree with the last ones (a chi2 gate over the pose difference, with the
+motion allowed in between, eq. D4) and confirms a dock only after a few agreeing scans.
 
 Everything is in the scan's frame: m, rad. Pure numpy; no ROS.
 """
 
 from dataclasses import dataclass
 import math
-from typing import List, Optional, Tuple
+from typing import List, NamedTuple, Optional, Tuple
 
 import numpy as np
 
-from ..core import CornerSet, SegmentSet
+from ..core import CornerSet, FeatureConfig, SegmentSet
 
 # P(chi2 with 3 dof <= 16.27) = 99.9 %: the gate of a pose difference.
 CHI2_3DOF_999 = 16.266
@@ -247,24 +249,666 @@ def _inverse3(matrix: list) -> Optional[list]:
     return [[value / det for value in row] for row in cofactors]
 
 
-def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape) -> List[DockPose]:
-    """
-    Return every corner of a scan that has the dock's shape, as a dock pose (eq. D1-D3).
+# A return lies on a face (or its extension) within this many standard deviations of its
+# deciding noise (eq. D19 of derivation.md): the fit's gate and a face's reach (eq. D8).
+ON_FACE_SIGMAS = 3.0
+# The returns of a face must count at least this many to be fitted.
+MIN_FACE_RETURNS = 4
+# How far beyond a face's outer end (and its tolerance) its returns are looked at, m.
+BEYOND_M = 0.05
+# A start's window also holds the faces of a fit this much farther out, m.
+WINDOW_MARGIN_M = 0.05
+# The walk of a straight face's residuals from its own line, less its share of their total,
+# exceeds this times sqrt(N) once in a thousand (Monte Carlo: 1.08 at N = 15 returns, 1.14 at
+# 50, 1.18 at 150; eq. D10).
+STRAIGHT_BRIDGE = 1.2
+# Two fits whose apexes are closer than this are one dock, m.
+SAME_DOCK_M = 0.05
 
-    A corner matches when both its walls are seen up to it, its opening angle is within the
-    tolerance of the dock's, its walls lie on either side of its bisector, and each wall, from
-    the apex to its outer end, is as long as its face: at most ``face_tolerance_m`` longer,
-    and at most ``face_shortfall_m`` plus one return spacing shorter (the edge lies between
-    the last return on the face and the next; the extraction may leave a few returns by a
-    dock's edge out). Which wall is the right face follows from the side of the apex frame
-    its outer end lies on, not from the scan order (the seam of a turn). The pose is
-    :func:`fit_apex`'s, moved to the reference point (:func:`reference_pose`).
+
+@dataclass(frozen=True)
+class DockReturns:
+    """
+    One scan's returns and the noise model the core processed it with.
+
+    What the fit of the dock to its returns needs (docs/docking.md, eq. D5-D9).
+
+    :ivar ranges_m: the scan's ranges, shape (N,), m (NaN, inf or outside the limits: none)
+    :ivar angle_min_rad: bearing of beam 0, rad
+    :ivar angle_increment_rad: bearing step, rad (either sign)
+    :ivar range_sigma_m: the scan's range noise (``Features.range_sigma_m``), m
+    :ivar bearing_sigma_rad: bearing noise, rad
+    :ivar model_error_sigma_m: how far a return may stray from the model beyond its noise
+        (the decisions' widening, eq. D19 of derivation.md), m
+    :ivar common_range_sigma_m: std of the scan's common range offset (eq. D16 there), m
+    :ivar flatness_sigma_m: each end of a face may lie this far off its line (as eq. D18
+        there), m; 0: the faces are flat
+    :ivar residual_scaling: scale the covariance by the fit's excess chi2 (eq. D17 there)
+    :ivar range_min_m: shortest valid range, m
+    :ivar range_max_m: longest valid range, m
+    """
+
+    ranges_m: np.ndarray
+    angle_min_rad: float
+    angle_increment_rad: float
+    range_sigma_m: float
+    bearing_sigma_rad: float
+    model_error_sigma_m: float = 0.0
+    common_range_sigma_m: float = 0.0
+    flatness_sigma_m: float = 0.0
+    residual_scaling: bool = True
+    range_min_m: float = 0.0
+    range_max_m: float = math.inf
+
+    @property
+    def full_turn(self) -> bool:
+        """Tell whether the beams go all the way round (the window may cross the seam)."""
+        return len(self.ranges_m) * abs(self.angle_increment_rad) >= 2.0 * math.pi - 1e-6
+
+
+def dock_returns(ranges_m, angle_min_rad: float, angle_increment_rad: float,
+                 config: FeatureConfig, range_sigma_m: float, range_min_m: float = 0.0,
+                 range_max_m: float = math.inf) -> DockReturns:
+    """
+    Bundle a scan's returns with the noise model of the configuration it was processed with.
+
+    The faces are taken as flat: ``wall_flatness_sigma_m`` is the building's walls', not a
+    dock's (set ``flatness_sigma_m`` of the result for a dock of bowed faces).
+
+    :param ranges_m: the ranges, shape (N,), m
+    :param angle_min_rad: bearing of beam 0, rad
+    :param angle_increment_rad: bearing step, rad
+    :param config: the core's configuration (its noise model)
+    :param range_sigma_m: the scan's range noise (``Features.range_sigma_m``; NaN: the
+        configuration's ``range_sigma_m``), m
+    :param range_min_m: the scan's range_min, m
+    :param range_max_m: the scan's range_max, m
+    :return: the bundle
+    """
+    sigma = range_sigma_m if math.isfinite(range_sigma_m) else config.range_sigma_m
+    return DockReturns(np.asarray(ranges_m, dtype=float), float(angle_min_rad),
+                       float(angle_increment_rad), float(sigma), config.bearing_sigma_rad,
+                       config.model_error_sigma_m, config.common_range_sigma_m, 0.0,
+                       config.residual_scaling, max(float(range_min_m), config.range_min_m),
+                       min(float(range_max_m), config.range_max_m))
+
+
+@dataclass(frozen=True)
+class ReturnsFit:
+    """
+    The dock fitted to the returns of a scan (eq. D5-D9), in the apex frame.
+
+    :ivar pose: (x, y, yaw) of the apex frame, shape (3,), m, m, rad
+    :ivar covariance: its covariance, shape (3, 3)
+    :ivar returns: returns fitted on the right and the left face
+    :ivar reach_m: how far from the apex each face (right, left) is seen without a break, m
+        (NaN: not at all)
+    :ivar spacing_m: the returns' spacing along each face at its outer end, m
+    :ivar past_end: per face, the returns past its end and ``face_tolerance_m`` (up to
+        BEYOND_M farther) that lie on its line, and those farther than it or none
+    :ivar opening_angle_rad: the opening angle of the two faces' own lines, rad
+    :ivar bends: per face, the largest excursion of the running sum of its returns' residuals
+        from its own line (over their deciding noise), less its share of their total, over
+        sqrt(N) (eq. D10; a straight face's exceeds STRAIGHT_BRIDGE once in a thousand)
+    :ivar chi2: the fit's weighted squared residuals
+    """
+
+    pose: np.ndarray
+    covariance: np.ndarray
+    returns: Tuple[int, int]
+    reach_m: Tuple[float, float]
+    spacing_m: Tuple[float, float]
+    past_end: Tuple[Tuple[int, int], Tuple[int, int]]
+    opening_angle_rad: float
+    bends: Tuple[float, float]
+    chi2: float
+
+
+def _faces(x: float, y: float, yaw: float, shape: DockShape) -> list:
+    """Return each face's (outward direction, normal, length): right then left (eq. D5)."""
+    half = 0.5 * shape.opening_angle_rad
+    c, s = math.cos(yaw), math.sin(yaw)
+    faces = []
+    for side, length in ((-1.0, shape.right_face_m), (1.0, shape.left_face_m)):
+        dx, dy = -math.cos(half), side * math.sin(half)
+        ux, uy = c * dx - s * dy, s * dx + c * dy
+        faces.append((ux, uy, -uy, ux, length))
+    return faces
+
+
+class _Beams(NamedTuple):
+    """The returns of a start's window, and what every pass over them reads."""
+
+    rho: np.ndarray          # ranges, (M,), m (1 where there is no return)
+    directions: np.ndarray   # (2, M): cos, sin of the bearings
+    valid: np.ndarray        # (M,): a return
+    inverse: np.ndarray      # (M,): 1 / rho
+    gate_cos2: np.ndarray    # (M,): the squared gate on a return's offset is
+    gate: np.ndarray         # gate_cos2 cos^2 + gate, cos that of the beam on the face, m^2
+
+
+def _beams(returns: DockReturns, pose: Tuple[float, float, float], shape: DockShape,
+           beyond_m: float) -> Optional[_Beams]:
+    """Return the beams that may see the dock at ``pose``, its faces extended by beyond_m."""
+    x, y, yaw = pose
+    points = [(x, y)]
+    for ux, uy, _, _, length in _faces(x, y, yaw, shape):
+        points.append((x + (length + beyond_m) * ux, y + (length + beyond_m) * uy))
+    apex_bearing = math.atan2(y, x)
+    offsets = [_wrap(math.atan2(py, px) - apex_bearing) for px, py in points]
+    increment, count = returns.angle_increment_rad, len(returns.ranges_m)
+    centre = (apex_bearing - returns.angle_min_rad) / increment
+    if returns.full_turn:
+        centre %= count
+    ends = [centre + offset / increment for offset in offsets]
+    first, last = math.floor(min(ends)) - 1, math.ceil(max(ends)) + 1
+    if last - first > count:
+        return None
+    index = np.arange(first, last + 1)
+    index = index % count if returns.full_turn else index[(index >= 0) & (index < count)]
+    if len(index) < 2 * MIN_FACE_RETURNS:
+        return None
+    rho = returns.ranges_m[index]
+    bearing = returns.angle_min_rad + increment * index
+    with np.errstate(invalid='ignore'):
+        valid = (np.isfinite(rho) & (rho > 0.0) & (rho >= returns.range_min_m)
+                 & (rho <= returns.range_max_m))
+    rho = np.where(valid, rho, 1.0)
+    across = ON_FACE_SIGMAS ** 2 * (returns.range_sigma_m ** 2
+                                    + returns.model_error_sigma_m ** 2)
+    along = (ON_FACE_SIGMAS * returns.bearing_sigma_rad) ** 2 * rho * rho
+    return _Beams(rho, np.stack([np.cos(bearing), np.sin(bearing)]), valid, 1.0 / rho,
+                  across - along, along)
+
+
+class _Pass(NamedTuple):
+    """What one pass over the window's returns gives (:func:`_assign`)."""
+
+    sums: np.ndarray        # (2, 2, J): per face, sum w u_i column_j (u: cos, sin of a beam)
+    scalars: np.ndarray     # (2, 2): per face, sum w and sum w inverse^2
+    counts: np.ndarray      # (2,): returns fitted per face
+    reach: list             # per face, m (NaN: not seen); empty unless final
+    spans: list             # per face, (first, last) position of its fitted returns, m
+    past_end: list          # per face, returns past its end on its line, and farther
+    own_sums: np.ndarray    # (2, 2, 3): the sums of each face's own line (eq. D9)
+    bends: list             # per face, its residuals' bridge over sqrt(N) (eq. D10)
+
+
+def _assign(beams: _Beams, returns: DockReturns, pose: Tuple[float, float, float],
+            shape: DockShape, beyond_m: float, final: bool) -> Optional[_Pass]:
+    """
+    Assign the window's returns to the faces the dock at ``pose`` predicts they hit.
+
+    Then sum what the fit needs (eq. D5-D8); both faces at once, as rows 0 (right) and 1
+    (left).
+
+    :return: the pass; None when a face has fewer than MIN_FACE_RETURNS returns on it
+    """
+    x, y, yaw = pose
+    (ux0, uy0, nx0, ny0, length0), (ux1, uy1, nx1, ny1, length1) = _faces(x, y, yaw, shape)
+    projected = np.array([[nx0, ny0], [nx1, ny1], [ux0, uy0], [ux1, uy1]]) @ beams.directions
+    cosine = projected[:2]                               # cos(bearing - normal), (2, M)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        hit = np.array([[nx0 * x + ny0 * y], [nx1 * x + ny1 * y]]) / cosine   # its range, m
+        along = hit * projected[2:] - np.array([[ux0 * x + uy0 * y], [ux1 * x + uy1 * y]])
+        cos2 = cosine * cosine
+        offset = (beams.rho - hit) * cosine              # a return across the line, m
+        gate2 = beams.gate_cos2 * cos2 + beams.gate
+        on = (offset * offset <= gate2) & beams.valid
+        length = np.array([[length0], [length1]])
+        meets = (hit > 0.0) & (along >= 0.0) & (along <= length)
+    # Each beam sees the nearer face that its ray meets within the face's length.
+    both, nearer_right = meets[0] & meets[1], hit[0] <= hit[1]
+    sees = meets & np.stack([~both | nearer_right, ~both | ~nearer_right])
+    used = sees & on
+    counts = np.count_nonzero(used, axis=1)
+    if counts.min() < MIN_FACE_RETURNS:
+        return None
+    sigma2 = returns.range_sigma_m ** 2
+    h2 = np.where(sees, hit * hit, 1.0)
+    c2 = np.where(sees, cos2, 1.0)
+    # The inverse range, its second-order bias removed, and its weight (eq. D6).
+    inverse = beams.inverse - sigma2 / (h2 * np.sqrt(h2))
+    weights = h2 * h2 / (sigma2 + returns.bearing_sigma_rad ** 2 * h2 * (1.0 - c2) / c2)
+    weight = np.where(used, weights, 0.0)
+    columns = [np.broadcast_to(beams.directions, (2, 2, beams.rho.size)), inverse[:, None]]
+    if final:
+        ranged = 1.0 / h2                                # -d(1/rho)/d(rho)
+        shifted = ranged / np.where(used, cosine, 1.0)   # ... per shift of the face
+        columns += [ranged[:, None], shifted[:, None], (shifted * along)[:, None]]
+    # sums[k, i, j]: over face k, the sum of w u_i column_j.
+    sums = (weight[:, None, :] * beams.directions) @ np.concatenate(columns, axis=1).transpose(
+        0, 2, 1)
+    scalars = np.stack([weight.sum(axis=1), (weight * inverse * inverse).sum(axis=1)], axis=1)
+    if not final:
+        return _Pass(sums, scalars, counts, [], [], [], sums, [])
+    # Each face's own line (eq. D9), from its returns within the gate widened by the
+    # opening angle's tolerance: gated at the dock's line alone, it would lean towards it.
+    with np.errstate(invalid='ignore'):
+        own = sees & beams.valid & (np.abs(offset) <= np.sqrt(gate2) + np.maximum(along, 0.0)
+                                    * math.sin(shape.angle_tolerance_rad))
+    own_sums = (np.where(own, weights, 0.0)[:, None, :] * beams.directions) @ np.concatenate(
+        columns[:2], axis=1).transpose(0, 2, 1)
+    # Their residuals from that line over the deciding noise, for the test of straightness.
+    own_p = np.linalg.solve(own_sums[:, :, :2], own_sums[:, :, 2:])      # (2, 2, 1)
+    deciding = returns.range_sigma_m ** 2 + returns.model_error_sigma_m ** 2
+    standard = (inverse - (own_p * beams.directions).sum(axis=1)) * h2 / np.sqrt(
+        deciding + returns.bearing_sigma_rad ** 2 * h2 * (1.0 - c2) / c2)
+    tolerated = length + shape.face_tolerance_m
+    with np.errstate(invalid='ignore'):
+        beyond = (along > length) & (along <= tolerated + beyond_m) & ~sees[::-1] & (hit > 0.0)
+        # Past the end and its tolerance (eq. D8): on the face's line, or farther (none).
+        past = beyond & (along > tolerated)
+        farther = ~beams.valid | (~on & (beams.rho > hit))
+    past_end = np.stack([np.count_nonzero(past & on, axis=1),
+                         np.count_nonzero(past & farther, axis=1)], axis=1).tolist()
+    looked_at = (sees | beyond) & beams.valid
+    reach, spans, bends = [], [], []
+    for k in range(2):
+        # The face's reach (eq. D8): its returns along it and beyond its outer end, in the
+        # order of the position their rays meet it (monotonic over the window), up to the
+        # first two in a row off its line.
+        where = np.flatnonzero(looked_at[k])
+        if len(where) > 1 and along[k, where[0]] > along[k, where[-1]]:
+            where = where[::-1]
+        seen = on[k, where]
+        breaks = np.flatnonzero(~(seen[:-1] | seen[1:]))
+        if len(breaks):
+            where, seen = where[:breaks[0]], seen[:breaks[0]]
+        reach.append(float(along[k, where[seen]].max()) if seen.any() else math.nan)
+        fitted = along[k, used[k]]
+        spans.append((float(fitted.min()), float(fitted.max())))
+        # A face is straight (eq. D10): the running sum of its residuals, less its share of
+        # their total, stays within STRAIGHT_BRIDGE sqrt(N).
+        walk = np.cumsum(standard[k, own[k]])
+        if len(walk) > 2:
+            bridge = walk - walk[-1] * np.arange(1, len(walk) + 1) / len(walk)
+            bends.append(float(np.abs(bridge).max()) / math.sqrt(len(walk)))
+        else:
+            bends.append(math.inf)
+    return _Pass(sums, scalars, counts, reach, spans, past_end, own_sums, bends)
+
+
+def _face_sums(taken: _Pass) -> list:
+    """Return per face (sum w u u^T: xx, xy, yy; sum w u / rho: x, y; sum w / rho^2)."""
+    sums, scalars = taken.sums.tolist(), taken.scalars.tolist()
+    return [(s[0][0], s[0][1], s[1][1], s[0][2], s[1][2], c[1]) for s, c in zip(sums, scalars)]
+
+
+def _face_line(normal_offset: float, x: float, y: float, yaw: float):
+    """Return p = n / r of a face (eq. D6) and dp / d(x, y, yaw), 2 x 3; None through (0, 0)."""
+    nx, ny = math.cos(yaw + normal_offset), math.sin(yaw + normal_offset)
+    radius = nx * x + ny * y
+    if abs(radius) < 1e-9:
+        return None
+    inverse2 = 1.0 / (radius * radius)
+    turn = (nx * y - ny * x) * inverse2                  # (n_perp . a) / r^2
+    return ((nx / radius, ny / radius),
+            ((-nx * nx * inverse2, -nx * ny * inverse2, -ny / radius - nx * turn),
+             (-ny * nx * inverse2, -ny * ny * inverse2, nx / radius - ny * turn)))
+
+
+def _normal_equations(face_sums: list, normal_offsets: Tuple[float, float], x: float,
+                      y: float, yaw: float):
+    """
+    Return J^T W J, J^T W e and chi2 of the two faces' returns at the apex frame (eq. D6).
+
+    The residual of a return is 1/rho - p_k . u (u its beam's direction, p_k = n_k / r_k of
+    its face): linear in p_k, so each face's weighted sums of u u^T, u / rho and 1 / rho^2
+    give its share, and J = -u^T dp_k/ds. None when a face's line passes through the sensor.
+    """
+    h00 = h01 = h02 = h11 = h12 = h22 = g0 = g1 = g2 = chi2 = 0.0
+    for (axx, axy, ayy, bx, by, cc), offset in zip(face_sums, normal_offsets):
+        line = _face_line(offset, x, y, yaw)
+        if line is None:
+            return None
+        (px, py), ((j0, j1, j2), (k0, k1, k2)) = line
+        # A p - b is half the gradient of chi2 = p^T A p - 2 p^T b + c in p.
+        rx, ry = axx * px + axy * py - bx, axy * px + ayy * py - by
+        chi2 += px * (rx - bx) + py * (ry - by) + cc
+        a0, a1, a2 = axx * j0 + axy * k0, axx * j1 + axy * k1, axx * j2 + axy * k2
+        b0, b1, b2 = axy * j0 + ayy * k0, axy * j1 + ayy * k1, axy * j2 + ayy * k2
+        h00 += j0 * a0 + k0 * b0
+        h01 += j0 * a1 + k0 * b1
+        h02 += j0 * a2 + k0 * b2
+        h11 += j1 * a1 + k1 * b1
+        h12 += j1 * a2 + k1 * b2
+        h22 += j2 * a2 + k2 * b2
+        g0 += j0 * rx + k0 * ry
+        g1 += j1 * rx + k1 * ry
+        g2 += j2 * rx + k2 * ry
+    return [[h00, h01, h02], [h01, h11, h12], [h02, h12, h22]], [g0, g1, g2], chi2
+
+
+def _gauss_newton(face_sums: list, normal_offsets, pose, steps: int = 4):
+    """Minimise the faces' chi2 over the apex frame from ``pose`` (eq. D6); None if singular."""
+    x, y, yaw = pose
+    for _ in range(steps):
+        equations = _normal_equations(face_sums, normal_offsets, x, y, yaw)
+        inverse = None if equations is None else _inverse3(equations[0])
+        if inverse is None:
+            return None
+        (i0, i1, i2), g = inverse, equations[1]
+        dx = -(i0[0] * g[0] + i0[1] * g[1] + i0[2] * g[2])
+        dy = -(i1[0] * g[0] + i1[1] * g[1] + i1[2] * g[2])
+        dt = -(i2[0] * g[0] + i2[1] * g[1] + i2[2] * g[2])
+        x, y, yaw = x + dx, y + dy, yaw + dt
+        if abs(dx) + abs(dy) < 1e-6 and abs(dt) < 1e-6:
+            break
+    return x, y, yaw
+
+
+def _own_lines_angle(own_sums: np.ndarray, pose: Tuple[float, float, float],
+                     shape: DockShape) -> float:
+    """Return the opening angle between the faces' own lines, p = A^-1 b (eq. D9)."""
+    directions = []
+    for ((axx, axy, bx), (_, ayy, by)), (ux, uy, _, _, _) in zip(
+            own_sums.tolist(), _faces(pose[0], pose[1], pose[2], shape)):
+        px, py = ayy * bx - axy * by, axx * by - axy * bx     # det A times p
+        dx, dy = -py, px                                 # along the line
+        directions.append((dx, dy) if dx * ux + dy * uy >= 0.0 else (-dx, -dy))
+    (ax, ay), (bx, by) = directions
+    norm = math.hypot(ax, ay) * math.hypot(bx, by)
+    if not norm > 0.0:
+        return math.nan
+    between = math.acos(max(-1.0, min(1.0, (ax * bx + ay * by) / norm)))
+    return between if shape.opening_angle_rad < math.pi else 2.0 * math.pi - between
+
+
+def _spacing(returns: DockReturns, pose, shape: DockShape) -> Tuple[float, float]:
+    """Return the returns' spacing along each face at its outer end, m."""
+    x, y, yaw = pose
+    spacing = []
+    for ux, uy, nx, ny, length in _faces(x, y, yaw, shape):
+        tip_x, tip_y = x + length * ux, y + length * uy
+        tip_range = math.hypot(tip_x, tip_y)
+        cosine = abs(nx * tip_x + ny * tip_y) / max(tip_range, 1e-12)
+        spacing.append(abs(returns.angle_increment_rad) * tip_range / max(cosine, 1e-3))
+    return spacing[0], spacing[1]
+
+
+def fit_returns(returns: DockReturns, start: Tuple[float, float, float],
+                shape: DockShape) -> Optional[ReturnsFit]:
+    """
+    Fit the dock's two faces, at its opening angle, to the scan's returns (eq. D5-D9).
+
+    From the start (x, y, yaw) of the apex frame, each return of the window is assigned to the
+    face its ray meets first within the face's length (eq. D5) and kept when it lies on that
+    face within ON_FACE_SIGMAS of its deciding noise; Gauss-Newton on the weighted squared
+    residuals of the inverse ranges, from the weighted sums of each face's returns (eq. D6);
+    the assignment is made again at that pose and the fit repeated. Cov = f (J^T W J)^-1 plus
+    the common range offset (and the faces' flatness, when set) carried through the fit (eq.
+    D7). Each face's reach (eq. D8) and the two faces' own opening angle (eq. D9) are what
+    :func:`find_docks` tests.
+
+    :param returns: the scan's returns and noise model
+    :param start: the apex frame's start (x, y, yaw), m, m, rad
+    :param shape: the dock
+    :return: the fit; None when a face has fewer than MIN_FACE_RETURNS returns on it or the
+        equations are singular
+    """
+    beyond = shape.face_tolerance_m + BEYOND_M           # the window's extent past the ends
+    (_, _, nx0, ny0, _), (_, _, nx1, ny1, _) = _faces(0.0, 0.0, 0.0, shape)
+    normal_offsets = (math.atan2(ny0, nx0), math.atan2(ny1, nx1))
+    pose = (float(start[0]), float(start[1]), float(start[2]))
+    beams = _beams(returns, pose, shape, beyond + WINDOW_MARGIN_M)
+    if beams is None:
+        return None
+    taken: Optional[_Pass] = None
+    for final in (False, True):
+        taken = _assign(beams, returns, pose, shape, BEYOND_M, final)
+        if taken is None:
+            return None
+        face_sums = _face_sums(taken)
+        # The first pass only gives the second its assignment: two steps do.
+        fitted = _gauss_newton(face_sums, normal_offsets, pose, 4 if final else 2)
+        if fitted is None or not all(math.isfinite(v) for v in fitted):
+            return None
+        pose = fitted
+    x, y, yaw = pose
+    equations = _normal_equations(face_sums, normal_offsets, x, y, yaw)
+    inverse = None if equations is None else _inverse3(equations[0])
+    if inverse is None or taken is None or equations is None:
+        return None
+    chi2 = equations[2]
+    dof = int(taken.counts.sum()) - 3
+    scale = 1.0
+    if returns.residual_scaling and dof > 0:
+        scale = max(1.0, chi2 / dof - math.sqrt(2.0 / dof))
+    # What moves the fit besides the returns' own noise, as gradients of J^T W e (eq. D7):
+    # the scan's common range offset, and each face's two ends off its line.
+    moves, variances = [np.zeros(3)], [returns.common_range_sigma_m ** 2]
+    for sums, (first, last), offset in zip(taken.sums.tolist(), taken.spans, normal_offsets):
+        _, (jx, jy) = _face_line(offset, x, y, yaw)
+        jacobian = np.array([jx, jy]).T                  # (3, 2): dp / ds transposed
+        moves[0] = moves[0] + jacobian @ (sums[0][3], sums[1][3])
+        if returns.flatness_sigma_m > 0.0 and last > first:
+            # A face's end moves each return by its weight lambda along the face (0 at the
+            # first return, 1 at the last): sum w u lambda / (rho^2 cos) from two sums.
+            far = [(sums[i][5] - first * sums[i][4]) / (last - first) for i in range(2)]
+            moves += [jacobian @ (sums[0][4] - far[0], sums[1][4] - far[1]), jacobian @ far]
+            variances += [returns.flatness_sigma_m ** 2] * 2
+    information = np.array(inverse)
+    moved = information @ np.array(moves).T               # (3, K): d pose / d disturbance
+    covariance = scale * information + (moved * variances) @ moved.T
+    covariance = 0.5 * (covariance + covariance.T)
+    if not np.isfinite(covariance).all():
+        return None
+    return ReturnsFit(np.array([x, y, _wrap(yaw)]), covariance,
+                      (int(taken.counts[0]), int(taken.counts[1])),
+                      (taken.reach[0], taken.reach[1]), _spacing(returns, pose, shape),
+                      (tuple(taken.past_end[0]), tuple(taken.past_end[1])),
+                      _own_lines_angle(taken.own_sums, pose, shape),
+                      (taken.bends[0], taken.bends[1]), chi2)
+
+
+def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape,
+               returns: Optional[DockReturns] = None) -> List[DockPose]:
+    """
+    Return every place of a scan that has the dock's shape, as a dock pose.
+
+    With the scan's returns (the node's and ``process_bag``'s way), the dock is fitted to them
+    (:func:`fit_returns`, eq. D5-D9) from starts: the corners whose opening angle is within
+    twice the tolerance of the dock's, and when none of them is the dock, every two segments
+    neighbouring in scan order, or with one between them, whose lines meet at that angle near
+    their facing ends (the corner need not have been found). A fit is kept when each face's
+    reach (its returns on its line from the apex outward, the ones the extraction left out
+    of its segment too) is as long as the face, at most ``face_tolerance_m`` longer and at
+    most ``face_shortfall_m`` plus one return spacing shorter, and the faces' own lines meet
+    at the dock's angle within ``angle_tolerance_rad``.
+
+    Without the returns, from the corners alone (eq. D1): a corner matches when both its
+    walls are seen up to it, its opening angle is within the tolerance of the dock's, its
+    walls lie on either side of its bisector, and each wall, from the apex to its outer end,
+    is as long as its face in the same sense; its pose is :func:`fit_apex`'s.
+
+    Either way, which wall is the right face follows from the side of the apex frame its outer
+    end lies on, not from the scan order (the seam of a turn), and the pose is moved to the
+    reference point (:func:`reference_pose`, eq. D2-D3).
 
     :param segments: the scan's segments
     :param corners: the scan's corners (their segment indices point into ``segments``)
     :param shape: the dock
+    :param returns: the scan's returns and noise model (:func:`dock_returns`); None: the
+        corners alone
     :return: the candidates, best fitting first (usually none or one)
     """
+    if returns is None:
+        return _docks_of_corners(segments, corners, shape)
+    tried: set = set()
+    docks = _docks_of_returns(returns, _corner_starts(segments, corners, shape, tried), shape)
+    if not docks:
+        docks = _docks_of_returns(
+            returns, _segment_pair_starts(segments, shape, returns.full_turn, tried), shape)
+    return sorted(docks, key=lambda dock: dock.misfit)
+
+
+def _docks_of_returns(returns: DockReturns, starts: list, shape: DockShape) -> List[DockPose]:
+    """Return the fits from the starts that have the dock's shape, one per dock."""
+    docks: List[DockPose] = []
+    apexes: List[Tuple[float, float]] = []
+    for start in starts:
+        fit = fit_returns(returns, start, shape)
+        if fit is None:
+            continue
+        misfit = returns_misfit(fit, shape)
+        if not misfit <= 1.0:
+            continue
+        # Two starts (a face in two segments) that found the same dock: the better one.
+        apex = (float(fit.pose[0]), float(fit.pose[1]))
+        same = [k for k, (ax, ay) in enumerate(apexes)
+                if math.hypot(ax - apex[0], ay - apex[1]) < SAME_DOCK_M]
+        if same and docks[same[0]].misfit <= misfit:
+            continue
+        pose, covariance = reference_pose(fit.pose[:2], float(fit.pose[2]), fit.covariance,
+                                          shape)
+        dock = DockPose(float(pose[0]), float(pose[1]), float(pose[2]), covariance,
+                        float(misfit))
+        if same:
+            docks[same[0]], apexes[same[0]] = dock, apex
+        else:
+            docks.append(dock)
+            apexes.append(apex)
+    return docks
+
+
+def returns_misfit(fit: ReturnsFit, shape: DockShape) -> float:
+    """
+    Return how far a fit's faces are from the dock's, in tolerances (<= 1: the dock; eq. D8-D9).
+
+    The largest of: each face's shortfall, its length less its reach less one return spacing,
+    over ``face_shortfall_m``; twice the share of the returns past its end and tolerance that
+    lie on its line, among those on it and those farther (the face goes on when they are
+    more; nearer ones hide it); the faces' own opening angle's error over
+    ``angle_tolerance_rad``.
+
+    :param fit: the fit
+    :param shape: the dock
+    :return: the misfit
+    """
+    misfits = [abs(fit.opening_angle_rad - shape.opening_angle_rad)
+               / max(shape.angle_tolerance_rad, 1e-12)]
+    for reach, spacing, (on, farther), face_m in zip(
+            fit.reach_m, fit.spacing_m, fit.past_end, (shape.right_face_m, shape.left_face_m)):
+        if not math.isfinite(reach):
+            return math.inf
+        misfits.append(max(face_m - reach - spacing, 0.0) / max(shape.face_shortfall_m, 1e-9))
+        misfits.append(2.0 * on / max(on + farther, 1))
+    misfits += [bend / STRAIGHT_BRIDGE for bend in fit.bends]
+    return max(misfits)
+
+
+def _corner_starts(segments: SegmentSet, corners: CornerSet, shape: DockShape,
+                   tried: set) -> List[Tuple[float, float, float]]:
+    """Return the starts of the corners near the dock's angle (their pairs go into tried)."""
+    # Every corner's pair is tried here or not at all: the core saw its angle.
+    tried.update(zip(corners.first_segment.tolist(), corners.second_segment.tolist()))
+    angle_error = np.abs(corners.opening_angle_rad - shape.opening_angle_rad)
+    longest = max(shape.right_face_m, shape.left_face_m) + shape.face_tolerance_m + BEYOND_M
+    starts = []
+    for k in np.flatnonzero(angle_error <= 2.0 * shape.angle_tolerance_rad).tolist():
+        pair = (int(corners.first_segment[k]), int(corners.second_segment[k]))
+        if _farther_than(segments, pair, corners.xy_m[k].tolist(), longest):
+            continue
+        start = _pair_start(segments, pair, corners.xy_m[k].tolist(),
+                            float(wrap_angle(corners.yaw_rad[k] + math.pi)), shape)
+        if start is not None:
+            starts.append(start)
+    return starts
+
+
+def _farther_than(segments: SegmentSet, pair: Tuple[int, int], apex: list,
+                  distance_m: float) -> bool:
+    """Tell whether either segment of a pair reaches farther than distance_m from apex."""
+    for wall in pair:
+        for end in (segments.start_xy_m[wall], segments.end_xy_m[wall]):
+            x, y = end.tolist()
+            if math.hypot(x - apex[0], y - apex[1]) > distance_m:
+                return True
+    return False
+
+
+def _pair_start(segments: SegmentSet, pair: Tuple[int, int], apex: list, yaw: float,
+                shape: DockShape) -> Optional[Tuple[float, float, float]]:
+    """Return fit_apex's start of two segments meeting at apex (eq. D1); None if not a V."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    sides = []
+    for wall in pair:
+        (sx, sy), (ex, ey) = segments.start_xy_m[wall].tolist(), segments.end_xy_m[wall].tolist()
+        sides.append(c * (0.5 * (sy + ey) - apex[1]) - s * (0.5 * (sx + ex) - apex[0]))
+    if not sides[0] * sides[1] < 0.0:
+        return None
+    right, left = pair if sides[0] < 0.0 else pair[::-1]
+    fit = fit_apex(segments, right, left, np.array(apex), yaw, shape)
+    return (apex[0], apex[1], yaw) if fit is None else tuple(fit[0].tolist())
+
+
+def _segment_pair_starts(segments: SegmentSet, shape: DockShape, full_turn: bool,
+                         tried: set) -> List[Tuple[float, float, float]]:
+    """
+    Return the apex frames where two segments near in scan order meet at the dock's angle.
+
+    Pairs of neighbours and of segments one apart (a piece split off a face, or a short
+    segment between the faces), across the seam on a full turn, not yet tried; their lines'
+    opening angle within twice the tolerance, of the dock's kind (a V or a wedge), both
+    segments going out from the intersection no farther than the longer face and its
+    tolerance plus BEYOND_M, one on each side of the bisector. The start is
+    :func:`fit_apex`'s pose of the two lines (eq. D1).
+    """
+    count = len(segments)
+    if count < 2:
+        return []
+    first = np.arange(count)
+    pairs = []
+    for step in (1, 2):
+        second = first + step
+        keep = second < count
+        if full_turn:
+            second, keep = second % count, second % count != first
+        pairs.append(np.stack([first[keep], second[keep]], axis=1))
+    pair = np.concatenate(pairs)
+    angles = segments.angle_rad
+    between = np.abs(wrap_angle(angles[pair[:, 1]] - angles[pair[:, 0]]))
+    pair = pair[np.abs(between - abs(math.pi - shape.opening_angle_rad))
+                <= 2.0 * shape.angle_tolerance_rad]
+    longest = max(shape.right_face_m, shape.left_face_m) + shape.face_tolerance_m + BEYOND_M
+    concave = shape.opening_angle_rad < math.pi
+    starts = []
+    for i, j in pair.tolist():
+        if (i, j) in tried or (j, i) in tried:
+            continue
+        ai, aj = float(angles[i]), float(angles[j])
+        det = math.sin(aj - ai)
+        if abs(det) < 1e-9:
+            continue
+        ri, rj = float(segments.radius_m[i]), float(segments.radius_m[j])
+        px = (ri * math.sin(aj) - rj * math.sin(ai)) / det
+        py = (rj * math.cos(ai) - ri * math.cos(aj)) / det
+        if _farther_than(segments, (i, j), [px, py], longest):
+            continue
+        bx = by = 0.0
+        for wall in (i, j):
+            (sx, sy), (ex, ey) = segments.start_xy_m[wall].tolist(), segments.end_xy_m[
+                wall].tolist()
+            mx, my = 0.5 * (sx + ex) - px, 0.5 * (sy + ey) - py
+            middle = math.hypot(mx, my)
+            if not middle > 0.0:
+                break
+            bx, by = bx + mx / middle, by + my / middle    # the bisector
+        else:
+            if (bx * px + by * py < 0.0) != concave:
+                continue
+            # The apex frame's x axis points away from the robot's side (eq. D1).
+            yaw = math.atan2(-by, -bx) if concave else math.atan2(by, bx)
+            start = _pair_start(segments, (i, j), [px, py], yaw, shape)
+            if start is not None:
+                starts.append(start)
+    return starts
+
+
+def _docks_of_corners(segments: SegmentSet, corners: CornerSet,
+                      shape: DockShape) -> List[DockPose]:
+    """Return the corners that have the dock's shape, as dock poses (eq. D1-D3)."""
     # Most scans hold no corner of the dock's angle: one vectorised test, then a loop over few.
     # The tolerance alone, not widened by the angle's own std: a right-angle corner seen at a
     # grazing angle scatters by 5 deg and more, and would pass for a 120 deg dock.

@@ -24,8 +24,7 @@ Usage: python bench_stages.py [scans] [--against COMMIT] [--peer BINARY] [--prof
 
 import argparse
 import cProfile
-import importlib.util
-import io
+import importlib
 import os
 
 # One core: keep any BLAS thread pool from spreading the work.
@@ -35,14 +34,13 @@ os.environ['WCTLS_ROS_CORE'] = 'numba'
 
 import pathlib  # noqa: E402
 import pstats  # noqa: E402
-import subprocess  # noqa: E402
 import sys  # noqa: E402
-import tarfile  # noqa: E402
 import time  # noqa: E402
 
 # bench_core.py beside this script: the scans and the peer's driver protocol.
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from bench_core import peer_ms, scans  # noqa: E402
+from earlier import earlier_package  # noqa: E402
 import numpy as np  # noqa: E402
 from wctls_lab.evaluation.scans import load_scans  # noqa: E402
 from wctls_lab.simulation import full_turn_bearings, NoiseModel, simulate_ranges  # noqa: E402
@@ -73,31 +71,12 @@ def scan_sets(count):
 
 def earlier_core(commit):
     """
-    Return the feature core of an earlier commit, imported as a package of its own.
+    Return the feature core of an earlier commit (:func:`earlier.earlier_package`).
 
-    Its files come out of git into a folder under the user's cache, kept between runs so that
-    numba's cache beside them is too: the whole package, since a core may import from it (the
-    compile process's ``..process``), imported under a name of its own so that its modules are
-    not today's. Cores before the split into numba_core/ and numpy_core/ (the 2026-11-27 one) are
-    one flat package with the same entry points.
+    Cores before the split into numba_core/ and numpy_core/ (the 2026-11-27 one) are one flat
+    package with the same entry points.
     """
-    full = subprocess.run(['git', '-C', str(REPOSITORY), 'rev-parse', commit], check=True,
-                          capture_output=True, text=True).stdout.strip()
-    base = pathlib.Path(os.environ.get('XDG_CACHE_HOME') or pathlib.Path.home() / '.cache')
-    folder = base / 'wctls_ros' / 'bench_stages' / full
-    package = folder / 'wctls_ros' / 'wctls_ros'
-    if not (package / '__init__.py').is_file():
-        archive = subprocess.run(['git', '-C', str(REPOSITORY), 'archive', full,
-                                  'wctls_ros/wctls_ros'], check=True,
-                                 capture_output=True).stdout
-        with tarfile.open(fileobj=io.BytesIO(archive)) as files:
-            files.extractall(folder, filter='data')
-    name = f'wctls_ros_{full[:7]}'
-    spec = importlib.util.spec_from_file_location(name, package / '__init__.py',
-                                                  submodule_search_locations=[str(package)])
-    sys.modules[name] = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(sys.modules[name])
-    return importlib.import_module(f'{name}.core')
+    return importlib.import_module(f'{earlier_package(commit, "bench_stages")}.core')
 
 
 class StageClock:

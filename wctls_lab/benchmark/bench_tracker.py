@@ -23,16 +23,12 @@ Usage: python bench_tracker.py [--landmarks L ...] [--scans N] [--recordings NAM
 
 import argparse
 import importlib
-import importlib.util
-import io
 import math
 import os
 import pathlib
-import subprocess
-import sys
-import tarfile
 import time
 
+from earlier import earlier_package
 import numpy as np
 from wctls_lab.evaluation import load_scans
 from wctls_lab.evaluation.analysis import features_per_scan
@@ -114,28 +110,8 @@ def recorded(name: str):
 
 
 def earlier_tracker(commit: str):
-    """
-    Return the Tracker class of an earlier commit, imported as a package of its own.
-
-    Its files come out of git into a folder under the user's cache, kept between runs, and are
-    imported under a name of their own so that its modules are not today's.
-    """
-    full = subprocess.run(['git', '-C', str(REPOSITORY), 'rev-parse', commit], check=True,
-                          capture_output=True, text=True).stdout.strip()
-    base = pathlib.Path(os.environ.get('XDG_CACHE_HOME') or pathlib.Path.home() / '.cache')
-    folder = base / 'wctls_ros' / 'bench_tracker' / full
-    package = folder / 'wctls_ros' / 'wctls_ros'
-    if not (package / '__init__.py').is_file():
-        archive = subprocess.run(['git', '-C', str(REPOSITORY), 'archive', full,
-                                  'wctls_ros/wctls_ros'], check=True,
-                                 capture_output=True).stdout
-        with tarfile.open(fileobj=io.BytesIO(archive)) as files:
-            files.extractall(folder, filter='data')
-    name = f'wctls_ros_{full[:7]}'
-    spec = importlib.util.spec_from_file_location(name, package / '__init__.py',
-                                                  submodule_search_locations=[str(package)])
-    sys.modules[name] = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(sys.modules[name])
+    """Return the Tracker class of an earlier commit (:func:`earlier.earlier_package`)."""
+    name = earlier_package(commit, 'bench_tracker')
     return importlib.import_module(f'{name}.frontend.tracking').Tracker
 
 

@@ -16,7 +16,8 @@ line landmarks), over the tracks ever confirmed:
   corner a track's observations match (:func:`.score.match_detections`); without, each
   observation of a track that is not within the 99.99 % gate (chi2 2 dof 18.42) of the track's
   previous observation, both in the world frame with the pose's covariance
-  (``pose_sigma_m``, ``pose_sigma_rad``);
+  (``pose_sigma_m``, ``pose_sigma_rad``), a line written with its normal within 90 deg of the
+  other's (the line (alpha, r) is also (alpha + pi, -r));
 - **duplicates** (two confirmed tracks on one world landmark): with labels, two tracks whose
   observations mostly match the same true corner; without, two tracks never seen in one scan
   whose mean world positions (lines: world lines, and overlapping stretches) are within the

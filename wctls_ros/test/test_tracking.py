@@ -18,6 +18,9 @@ The landmark tracker against independent truth: Monte Carlo, a simulated walk, h
 - A false corner that moves or flickers is never confirmed; a corner hidden behind a nearer
   return is not missed, one in view and not seen is lost.
 - On the labelled still recording sick_lms111_static every confirmed corner is a labelled one.
+- The judge of ``score --tracks`` takes a line through the world's origin, written once with
+  r >= 0 and once with its normal turned round, as one line: no id switch, and a second track
+  on it is a duplicate; a jump of 1 m is a switch.
 """
 
 import math
@@ -27,14 +30,14 @@ import numpy as np
 import pytest
 from wctls_lab.evaluation import load_scans
 from wctls_lab.evaluation.score import match_detections
-from wctls_lab.evaluation.tracks import run_tracker, track_figures
+from wctls_lab.evaluation.tracks import run_tracker, track_figures, TrackRun
 from wctls_lab.evaluation.truth import load_truth
 from wctls_lab.simulation import floor_plan_from_dict, NoiseModel, simulate_recording
 from wctls_ros.core import extract_features, FeatureConfig
-from wctls_ros.frontend.frames import step_corners, step_lines
+from wctls_ros.frontend.frames import step_corners, step_lines, world_landmarks
 from wctls_ros.frontend.tracking import (
-    chi2_quantile_even, CONFIRMED, Detections, detections_of, LOST, Motion, steps_from_poses,
-    TENTATIVE, Tracker, TrackerConfig, View)
+    chi2_quantile_even, CONFIRMED, Detections, detections_of, Identified, LOST, Motion,
+    steps_from_poses, TENTATIVE, TrackedScan, Tracker, TrackerConfig, View)
 
 ROOM = {'name': 'room', 'polylines': [
     {'closed': True, 'points': [[0.0, 0.0], [4.5, 0.0], [4.5, 2.5], [1.5, 2.5], [1.5, 1.6],
@@ -250,3 +253,45 @@ def test_confirmed_corners_of_a_labelled_still_recording_are_all_labelled():
     assert figures.precision == 1.0
     assert figures.recall == 1.0
     assert figures.id_switches == 0 and figures.duplicates == 0
+
+
+# A wall 1 cm from the world's origin (normal -88.2 deg), seen from (0, 0) and from (0, 0.2) m:
+# from there a range 15 mm short puts it 5 mm beyond the origin, where the world frame, which
+# writes every line with r >= 0, turns its normal round (alpha 1.60 rad).
+WALL_ANGLE_RAD = -1.54
+SEEN_FROM = {'origin': np.zeros(3), 'north': np.array([0.0, 0.2, 0.0])}
+
+
+def wall_run(sightings):
+    """Return a TrackRun of one wall per scan: (track id, pose name, sensor-frame r m)."""
+    normal = np.array([math.cos(WALL_ANGLE_RAD), math.sin(WALL_ANGLE_RAD)])
+    along = np.array([-normal[1], normal[0]])
+    detections, tracked = [], []
+    for track, _, radius in sightings:
+        ends = np.array([[radius * normal - along, radius * normal + along]])
+        detections.append(Detections(np.zeros((0, 3)), np.zeros((0, 3, 3)),
+                                     np.array([[WALL_ANGLE_RAD, radius]]),
+                                     np.diag([1e-4, 1e-4])[None], ends))
+        lines = Identified(np.array([track]), np.array([CONFIRMED]), np.array([3]),
+                           np.array([3]), np.array([np.nan]))
+        empty = Identified(*(np.zeros(0, dtype=int),) * 4, np.zeros(0))
+        tracked.append(TrackedScan(empty, lines))
+    poses = np.array([SEEN_FROM[name] for _, name, _ in sightings])
+    return TrackRun(detections, tracked, poses, 0.0)
+
+
+def test_the_judge_takes_a_line_through_the_world_origin_as_one_line():
+    near_side = 0.01 + 0.2 * math.sin(-WALL_ANGLE_RAD) - 0.015      # the range 15 mm short
+    world_line = world_landmarks(np.zeros((0, 2)), np.zeros((0, 2, 2)),
+                                 np.array([[WALL_ANGLE_RAD, near_side]]), np.eye(2)[None],
+                                 SEEN_FROM['north'], np.zeros((3, 3)))[2]
+    assert world_line[0, 0] == pytest.approx(WALL_ANGLE_RAD + math.pi)      # turned round
+    assert world_line[0, 1] == pytest.approx(0.005, abs=1e-4)
+    one_track = wall_run([(1, 'origin', 0.01), (1, 'north', near_side),
+                          (1, 'north', near_side + 1.0)])
+    assert track_figures(one_track, 'line').id_switches == 1          # the 1 m jump only
+    two_tracks = wall_run([(1, 'origin', 0.01), (1, 'north', near_side),
+                           (2, 'north', near_side), (2, 'origin', 0.01)])
+    figures = track_figures(two_tracks, 'line')
+    assert figures.id_switches == 0
+    assert figures.duplicates == 1

@@ -16,7 +16,8 @@ line landmarks), over the tracks ever confirmed:
   corner a track's observations match (:func:`.score.match_detections`); without, each
   observation of a track that is not within the 99.99 % gate (chi2 2 dof 18.42) of the track's
   previous observation, both in the world frame with the pose's covariance
-  (``pose_sigma_m``, ``pose_sigma_rad``);
+  (``pose_sigma_m``, ``pose_sigma_rad``), a line written with its normal within 90 deg of the
+  other's (the line (alpha, r) is also (alpha + pi, -r));
 - **duplicates** (two confirmed tracks on one world landmark): with labels, two tracks whose
   observations mostly match the same true corner; without, two tracks never seen in one scan
   whose mean world positions (lines: world lines, and overlapping stretches) are within the
@@ -189,8 +190,26 @@ def _difference(kind: str, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return error
 
 
+def _facing(kind: str, value: np.ndarray, cov: np.ndarray, reference: np.ndarray):
+    """
+    Return a world landmark written as near a reference as it can be: (value, covariance).
+
+    A line (alpha, r) is also the line (alpha + pi, -r). The world frame writes every line
+    with r >= 0, so one that passes near the world's origin turns its normal round between two
+    observations (alpha -1.54, r 0.01 and alpha 1.58, r 0.13 on ``tuw_gh25_moving``); written
+    with its normal within 90 deg of the reference's, the two are compared as one line.
+    """
+    value = np.asarray(value, dtype=float)
+    if kind != 'line' or abs(wrap_angle(value[0] - reference[0])) <= 0.5 * math.pi:
+        return value, cov
+    turned = np.array([1.0, -1.0])
+    return (np.array([wrap_angle(value[0] + math.pi), -value[1]]),
+            cov * np.outer(turned, turned))
+
+
 def _squared(kind: str, a, a_cov, b, b_cov) -> float:
     """Return the squared Mahalanobis distance of two world landmarks."""
+    a, a_cov = _facing(kind, a, a_cov, b)
     error = _difference(kind, a, b)
     return float(error @ np.linalg.solve(a_cov + b_cov, error))
 
@@ -248,11 +267,12 @@ def _duplicates(kind: str, tracks: Dict[int, List[tuple]], world: Sequence[tuple
     scans = {i: {t for t, _ in tracks[i]} for i in ids}
     means, covs, ends = {}, {}, {}
     for i in ids:
-        values = np.array([world[t][0][n] for t, n in tracks[i]])
-        reference = values[0]
+        reference = world[tracks[i][0][0]][0][tracks[i][0][1]]
+        faced = [_facing(kind, world[t][0][n], world[t][1][n], reference) for t, n in tracks[i]]
         # Mean of the differences from the first, so that angles average across +-pi.
-        means[i] = reference + _difference(kind, values, reference).mean(axis=0)
-        covs[i] = np.mean([world[t][1][n] for t, n in tracks[i]], axis=0)
+        means[i] = reference + _difference(kind, np.array([value for value, _ in faced]),
+                                           reference).mean(axis=0)
+        covs[i] = np.mean([cov for _, cov in faced], axis=0)
         ends[i] = world[tracks[i][-1][0]][2][tracks[i][-1][1]]
     count = 0
     for a, i in enumerate(ids):

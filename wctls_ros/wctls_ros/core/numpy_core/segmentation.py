@@ -351,30 +351,35 @@ def iterative_end_point_fit(x_m: np.ndarray, y_m: np.ndarray, start: np.ndarray,
     boundary[start] = boundary[stop] = boundary[0] = boundary[count] = True
     # Distances are compared in units of each return's threshold.
     inv_threshold = 1.0 / np.broadcast_to(np.asarray(threshold_m, dtype=float), (count,))
+    xy = np.array([x_m, y_m])
     for level in range(max_levels + 1):
         edges = boundary.nonzero()[0]
-        first, last = edges[:-1], edges[1:] - 1
+        first = edges[:-1]
         counts = edges[1:] - first
-        x0, y0, x1, y1 = x_m[first], y_m[first], x_m[last], y_m[last]
-        dx, dy = x1 - x0, y1 - y0
-        # |chord x (return - chord start)|: the return's distance times the chord length.
-        cross = np.repeat(dx, counts) * y_m
-        cross -= np.repeat(dy, counts) * x_m
-        cross += np.repeat(x0 * y1 - y0 * x1, counts)
+        # Both ends of every chord in one gather each: rows x, y.
+        x0, y0 = start_xy = xy[:, first]
+        x1, y1 = end_xy = xy[:, edges[1:] - 1]
+        chord = end_xy - start_xy
+        # |chord x (return - chord start)|: the return's distance times the chord length; the
+        # chord's three numbers repeated to its returns in one step.
+        across = np.array([chord[0], chord[1], x0 * y1 - y0 * x1]).repeat(counts, axis=1)
+        cross = across[0] * y_m
+        cross -= across[1] * x_m
+        cross += across[2]
         np.abs(cross, out=cross)
         cross *= inv_threshold
         farthest = np.maximum.reduceat(cross, first)
-        chord2 = dx * dx + dy * dy
+        squared = chord * chord
+        chord2 = squared[0] + squared[1]
         # A chord too short to have a direction never splits (it would at distance 0).
         split = (farthest * farthest > chord2) & (chord2 > MIN_CHORD_M ** 2)
         if not split.any():
             break
         if level == max_levels:                  # out of passes: drop what is not straight
             break
-        farthest[~split] = np.inf
-        cut = (cross == np.repeat(farthest, counts)).nonzero()[0]
+        cut = (cross == np.where(split, farthest, np.inf).repeat(counts)).nonzero()[0]
         if cut.size > np.count_nonzero(split):       # ties: the first return at the maximum
-            piece = np.repeat(np.arange(first.size), counts)
+            piece = np.arange(first.size).repeat(counts)
             cut = cut[np.concatenate(([True], piece[cut[1:]] != piece[cut[:-1]]))]
         boundary[cut] = boundary[cut + 1] = True
     # Keep the straight pieces inside a run (not the returns between runs) with enough returns.

@@ -181,8 +181,8 @@ def corner_candidates(walls: SegmentSet, first_wall: np.ndarray, second_wall: np
     # Nearly parallel lines meet at inf / NaN: such pairs are carried along with the others and
     # dropped with the rest of the rejected ones at the end.
     with np.errstate(all='ignore'):
-        x, y, _, _ = _solve(lines[0], lines[1], lines[2])
-        normal_x, normal_y, _ = _unit_normals(lines[0, :2], lines[1, :2])
+        x, y, u, w = _solve(lines[0], lines[1], lines[2])
+        normal_x, normal_y, norm = _unit_normals(lines[0, :2], lines[1, :2])
         sine = abs(normal_x[0] * normal_y[1] - normal_y[0] * normal_x[1])
         from_start_x, from_start_y = x - start[0], y - start[1]
         from_end_x, from_end_y = x - end[0], y - end[1]
@@ -204,11 +204,12 @@ def corner_candidates(walls: SegmentSet, first_wall: np.ndarray, second_wall: np
         toward_sensor = np.where(concave, 1.0, -1.0)
         yaw = np.arctan2(bisector_y * toward_sensor, bisector_x * -toward_sensor)
         opening = np.where(concave, between, 2.0 * np.pi - between)
-    first_kept, second_kept = pair[0][kept], pair[1][kept]
-    return CornerCandidates(np.array([x[0], y[0]]).T.take(kept, 0), yaw[kept],
-                            corner_covariance(walls, first_kept, second_kept,
-                                              common_range_sigma_m),
-                            opening[kept], first_kept, second_kept)
+        # The covariance of the pairs kept, from the numbers above (not computed again).
+        pair = pair[:, kept]
+        covariance = _joint_covariance(walls, pair, *np.array(
+            [x, y, u, w, normal_x, normal_y, norm])[:, :, kept], common_range_sigma_m)
+    return CornerCandidates(np.array([x[0], y[0]]).T.take(kept, 0), yaw[kept], covariance,
+                            opening[kept], pair[0], pair[1])
 
 
 def corner_covariance(walls: SegmentSet, first_wall: np.ndarray, second_wall: np.ndarray,
@@ -233,35 +234,58 @@ def corner_covariance(walls: SegmentSet, first_wall: np.ndarray, second_wall: np
     :return: shape (C, 3, 3), over (x m, y m, yaw rad)
     """
     pairs = np.array([first_wall, second_wall, first_wall], dtype=np.intp)   # see _solve
-    pair = pairs[:2]
     lines = walls.line.T.take(pairs, 1)
-    covariance = walls.line_covariance.reshape(-1, 9).T.take(pair, 1)
     with np.errstate(all='ignore'):
         x, y, u, w = _solve(lines[0], lines[1], lines[2])
         normal_x, normal_y, norm = _unit_normals(lines[0, :2], lines[1, :2])
-        # Line k moves the position by -A^-1 e_k h^T dL_k and the yaw by g_k^T dL_k, with
-        # g_k = (-gradient_x, gradient_y, 0).
-        half_inv_norm = 0.5 / norm
-        gradient_x, gradient_y = normal_y * half_inv_norm, normal_x * half_inv_norm
-        moved_a, moved_b, along_h = _covariance_times_h(covariance, x, y)
-        cross = gradient_x * moved_a - gradient_y * moved_b                # -g^T C h
-        yaw_variance = (gradient_x * (gradient_x * covariance[0] - gradient_y * covariance[1])
-                        + gradient_y * (gradient_y * covariance[4]
-                                        - gradient_x * covariance[3]))    # g^T C g
-        xx, xy, yy = _position_covariance(u, w, along_h)
-        # -A^-1 e_k g^T C h, with A^-1 e_k = (u, -w).
-        x_yaw, y_yaw = u * cross, w * cross
-        upper = np.array([xx, xy, x_yaw[0] + x_yaw[1], yy, -(y_yaw[0] + y_yaw[1]),
-                          yaw_variance[0] + yaw_variance[1]])
-        if common_range_sigma_m > 0.0:
-            offset_a, offset_b, offset_c = walls.line_offset_jacobian.T.take(pair, 1)
-            offset_along_h = x * offset_a + y * offset_b + offset_c
-            # Each wall's share of -j = -sum_k (-A^-1 e_k h^T, g_k^T) dL_k / d offset (the sign
-            # drops out of j j^T).
-            shift = np.array([u * offset_along_h, -(w * offset_along_h),
-                              gradient_x * offset_a - gradient_y * offset_b])
-            common = common_range_sigma_m * (shift[:, 0] + shift[:, 1])
-            upper += common[_UPPER_ROW] * common[_UPPER_COLUMN]
+        return _joint_covariance(walls, pairs[:2], x, y, u, w, normal_x, normal_y, norm,
+                                 common_range_sigma_m)
+
+
+def _joint_covariance(walls: SegmentSet, pair: np.ndarray, x: np.ndarray, y: np.ndarray,
+                      u: np.ndarray, w: np.ndarray, normal_x: np.ndarray, normal_y: np.ndarray,
+                      norm: np.ndarray, common_range_sigma_m: float) -> np.ndarray:
+    """
+    Return :func:`corner_covariance` from the pairs' intersections and normals.
+
+    With floating-point warnings already silenced (parallel lines give inf).
+
+    :param walls: the walls
+    :param pair: the first and second wall of each corner, shape (2, C)
+    :param x: x of the intersections, shape (2, C) (:func:`_solve`)
+    :param y: y of the intersections, shape (2, C)
+    :param u: b of the partner line over the determinant, shape (2, C)
+    :param w: a of the partner line over the determinant, shape (2, C)
+    :param normal_x: x of each line's unit normal, shape (2, C) (:func:`_unit_normals`)
+    :param normal_y: y of that normal, shape (2, C)
+    :param norm: the norm of each line's (a, b), shape (2, C)
+    :param common_range_sigma_m: std of the range offset common to the scan, m (0: none)
+    :return: shape (C, 3, 3), over (x m, y m, yaw rad)
+    """
+    covariance = walls.line_covariance.reshape(-1, 9).T.take(pair, 1)
+    # Line k moves the position by -A^-1 e_k h^T dL_k and the yaw by g_k^T dL_k, with
+    # g_k = (-gradient_x, gradient_y, 0).
+    half_inv_norm = 0.5 / norm
+    gradient_x, gradient_y = normal_y * half_inv_norm, normal_x * half_inv_norm
+    moved_a, moved_b, along_h = _covariance_times_h(covariance, x, y)
+    cross = gradient_x * moved_a - gradient_y * moved_b                # -g^T C h
+    yaw_variance = (gradient_x * (gradient_x * covariance[0] - gradient_y * covariance[1])
+                    + gradient_y * (gradient_y * covariance[4]
+                                    - gradient_x * covariance[3]))    # g^T C g
+    xx, xy, yy = _position_covariance(u, w, along_h)
+    # -A^-1 e_k g^T C h, with A^-1 e_k = (u, -w).
+    x_yaw, y_yaw = u * cross, w * cross
+    upper = np.array([xx, xy, x_yaw[0] + x_yaw[1], yy, -(y_yaw[0] + y_yaw[1]),
+                      yaw_variance[0] + yaw_variance[1]])
+    if common_range_sigma_m > 0.0:
+        offset_a, offset_b, offset_c = walls.line_offset_jacobian.T.take(pair, 1)
+        offset_along_h = x * offset_a + y * offset_b + offset_c
+        # Each wall's share of -j = -sum_k (-A^-1 e_k h^T, g_k^T) dL_k / d offset (the sign
+        # drops out of j j^T).
+        shift = np.array([u * offset_along_h, -(w * offset_along_h),
+                          gradient_x * offset_a - gradient_y * offset_b])
+        common = common_range_sigma_m * (shift[:, 0] + shift[:, 1])
+        upper += common[_UPPER_ROW] * common[_UPPER_COLUMN]
     return upper.T.take(_UPPER_TO_FULL, 1).reshape(-1, 3, 3)
 
 
@@ -540,26 +564,33 @@ def seen_through(corner_x_m: np.ndarray, corner_y_m: np.ndarray, wall: WallAtCor
     start, stop = np.atleast_1d(start), np.atleast_1d(stop)
     lengths = (stop - start) % len(contour.x_m) + 1
     test = np.arange(lengths.size).repeat(lengths)
-    ends = np.cumsum(lengths)
+    ends = np.add.accumulate(lengths)
     crossing = np.arange(ends[-1]) + (start - (ends - lengths)).repeat(lengths)
-    # Every per-test number at every return of its test's stretch, in one gather.
-    (radius, normal_x, normal_y, inward_x, inward_y, tolerance, other_radius, other_normal_x,
-     other_normal_y, corner_x, corner_y) = np.array(
-        [wall.radius_m, wall.normal_x, wall.normal_y, wall.inward_x, wall.inward_y,
-         wall.tolerance_m, other.radius_m, other.normal_x, other.normal_y, corner_x_m,
-         corner_y_m], dtype=float).reshape(11, -1)[:, test]
+    # The lines' numbers at every return of its test's stretch, in one gather; what places a
+    # crossing along the wall only at the returns that lie on the other wall's line, next to
+    # this one's, the few that can be tested.
+    radius, normal_x, normal_y, other_radius, other_normal_x, other_normal_y = np.array(
+        [wall.radius_m, wall.normal_x, wall.normal_y, other.radius_m, other.normal_x,
+         other.normal_y], dtype=float).reshape(6, -1)[:, test]
     x, y = contour.x_m.take(crossing, mode='wrap'), contour.y_m.take(crossing, mode='wrap')
     sigma = np.sqrt(noise.deciding_sigma_m ** 2 + (x ** 2 + y ** 2) * noise.bearing_sigma_rad ** 2)
     line_tolerance = rule.sigmas * sigma + rule.floor_m
     offset = x * normal_x + y * normal_y
     on_other = np.abs(other_radius - x * other_normal_x - y * other_normal_y)
+    near = ((on_other <= line_tolerance) & (offset > 0.0)
+            & (radius - offset <= line_tolerance)).nonzero()[0]
+    near_test = test[near]
+    inward_x, inward_y, tolerance, corner_x, corner_y = np.array(
+        [wall.inward_x, wall.inward_y, wall.tolerance_m, corner_x_m, corner_y_m],
+        dtype=float).reshape(5, -1)[:, near_test]
+    x, y, radius, offset = x[near], y[near], radius[near], offset[near]
+    to_line = radius / offset
+    along = (x * to_line - corner_x) * inward_x + (y * to_line - corner_y) * inward_y
+    tested = along > tolerance
     with np.errstate(divide='ignore', invalid='ignore'):
-        to_line = radius / offset
-        along = (x * to_line - corner_x) * inward_x + (y * to_line - corner_y) * inward_y
-        tested = ((on_other <= line_tolerance) & (offset > 0.0)
-                  & (radius - offset <= line_tolerance) & (along > tolerance))
-        run = np.bincount(test[tested], minlength=lengths.size)
-        behind = np.bincount(test[tested], ((offset - radius) / sigma)[tested], lengths.size)
+        run = np.bincount(near_test[tested], minlength=lengths.size)
+        behind = np.bincount(near_test[tested], ((offset - radius) / sigma[near])[tested],
+                             lengths.size)
         return (run > 0) & (behind / np.sqrt(run) > rule.run_sigmas)
 
 
@@ -626,7 +657,7 @@ def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.
                        at_corner)
             & (short[0] <= 1.0 + CORNER_MISSING_BEAMS)
             & (short[1] <= 1.0 + CORNER_MISSING_BEAMS))
-    kept = np.flatnonzero(keep)
+    kept = keep.nonzero()[0]
     if rule.run_sigmas > 0.0 and kept.size:
         # The first wall's stretch is crossed by the sight lines after its last return up to the
         # second wall's last; the second's by those from the first wall's first return up to

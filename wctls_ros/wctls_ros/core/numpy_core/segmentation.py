@@ -204,7 +204,8 @@ def piece_sums(values: np.ndarray, segments: SegmentRanges) -> PieceSums:
     pieces = edges.size - 1
     prefix = np.empty((2 * pieces + 1, values.shape[0]))
     prefix[0] = 0.0
-    np.cumsum(np.add.reduceat(values, edges[:-1], axis=1).T, axis=0, out=prefix[1:pieces + 1])
+    np.add.accumulate(np.add.reduceat(values, edges[:-1], axis=1).T, axis=0,
+                      out=prefix[1:pieces + 1])
     np.add(prefix[1:pieces + 1], prefix[pieces], out=prefix[pieces + 1:])
     return PieceSums(edges, prefix)
 
@@ -373,7 +374,8 @@ def iterative_end_point_fit(x_m: np.ndarray, y_m: np.ndarray, start: np.ndarray,
         chord2 = squared[0] + squared[1]
         # A chord too short to have a direction never splits (it would at distance 0).
         split = (farthest * farthest > chord2) & (chord2 > MIN_CHORD_M ** 2)
-        if not split.any():
+        # count_nonzero, not split.any(): a reduction method costs several us a call here.
+        if not np.count_nonzero(split):
             break
         if level == max_levels:                  # out of passes: drop what is not straight
             break
@@ -385,7 +387,8 @@ def iterative_end_point_fit(x_m: np.ndarray, y_m: np.ndarray, start: np.ndarray,
     # Keep the straight pieces inside a run (not the returns between runs) with enough returns.
     run = np.searchsorted(start, first, side='right') - 1
     keep = (edges[1:] - first >= MIN_FIT_RETURNS) & (run >= 0) & (first < stop[run]) & ~split
-    return SegmentRanges(first[keep], edges[1:][keep], chain[run[keep]]), bool(split.any())
+    return (SegmentRanges(first[keep], edges[1:][keep], chain[run[keep]]),
+            np.count_nonzero(split) > 0)
 
 
 def merge_collinear(segments: SegmentRanges, circular: bool, contour_length: int,
@@ -543,23 +546,26 @@ def trim_ambiguous(segments: SegmentRanges, circular: bool, x_m: np.ndarray, y_m
     if not k.size:
         return segments
     j = second[k]
-    cos_k, sin_k, cos_j, sin_j = (np.cos(angle_rad[k]), np.sin(angle_rad[k]),
-                                  np.cos(angle_rad[j]), np.sin(angle_rad[j]))
+    # Every line's cos, sin and radius, for the two segments of every meeting in two gathers.
+    line = np.array([np.cos(angle_rad), np.sin(angle_rad), radius_m])
+    cos_k, sin_k, radius_k = line[:, k]
+    cos_j, sin_j, radius_j = line[:, j]
     sine = sin_j * cos_k - cos_j * sin_k                      # sin(angle_j - angle_k)
     # Parallel neighbours give inf / NaN here, and so no return inside reach.
-    corner_x = (radius_m[k] * sin_j - radius_m[j] * sin_k) / sine
-    corner_y = (radius_m[j] * cos_k - radius_m[k] * cos_j) / sine
+    corner_x = (radius_k * sin_j - radius_j * sin_k) / sine
+    corner_y = (radius_j * cos_k - radius_k * cos_j) / sine
     reach2 = 9.0 * (range_sigma_m ** 2
                     + (corner_x * corner_x + corner_y * corner_y) * bearing_sigma_rad ** 2
                     ) / (sine * sine)
     # Both meeting ends at once: columns [0, K) walk back from the ends of segments k, columns
-    # [K, 2 K) forward from the starts of segments j.
+    # [K, 2 K) forward from the starts of segments j (axis 1 of the (window, 2, K) views).
     position = _end_windows(stop[k] - 1, start[j], window)
-    dx = x_m.take(position, mode='wrap') - np.concatenate((corner_x, corner_x))
-    dy = y_m.take(position, mode='wrap') - np.concatenate((corner_y, corner_y))
+    halves = (window, 2, k.size)
+    dx = x_m.take(position, mode='wrap').reshape(halves) - corner_x
+    dy = y_m.take(position, mode='wrap').reshape(halves) - corner_y
     # The run from the end is the first return outside (a last row that is never inside).
     inside = np.zeros((window + 1, 2 * k.size), dtype=bool)
-    np.less(dx * dx + dy * dy, np.concatenate((reach2, reach2)), out=inside[:window])
+    np.less(dx * dx + dy * dy, reach2, out=inside[:window].reshape(halves))
     run = inside.argmin(axis=0)
     room = np.maximum(stop - start - min_returns, 0)
     meets_previous = np.concatenate((meets[-1:], meets[:-1]))
@@ -616,7 +622,7 @@ def trim_offset(segments: SegmentRanges, x_m: np.ndarray, y_m: np.ndarray, lines
     # Every segment's returns laid end to end, each in its line's frame (t along, e across),
     # and each segment's sums of t, t^2, e, t e and rho^2.
     returns = stop - start
-    offsets = np.cumsum(returns) - returns
+    offsets = np.add.accumulate(returns) - returns
     position = np.arange(offsets[-1] + returns[-1]) + (start - offsets).repeat(returns)
     x, y = x_m.take(position, mode='wrap'), y_m.take(position, mode='wrap')
     c, s, radius = np.array([np.cos(angle_rad), np.sin(angle_rad), radius_m]).repeat(returns,
@@ -634,14 +640,17 @@ def trim_offset(segments: SegmentRanges, x_m: np.ndarray, y_m: np.ndarray, lines
     # Columns [0, S) walk back from the segments' ends, columns [S, 2 S) forward from their
     # starts; row k - 1 holds the sums over the k returns nearest the end. A window longer than
     # its segment reads on into the next segment's returns: those k exceed the segment's room,
-    # and are never cut at.
-    near = terms.take(_end_windows(offsets + returns - 1, offsets, window), axis=1, mode='clip')
+    # and are never cut at. Both ends of a segment are axis 1 of the (window, 2, S) views, so
+    # that per-segment numbers broadcast to them.
+    halves = (window, 2, count)
+    near = terms.take(_end_windows(offsets + returns - 1, offsets, window), axis=1,
+                      mode='clip').reshape((6,) + halves)
     t, e, weight = near[0], near[2], near[5]
     rest_t, rest_tt, rest_e, rest_te, rest_rr = (
-        np.concatenate((whole, whole), axis=1)[:, None, :] - np.cumsum(near[:5], axis=1))
-    sum_z, sum_w, sum_tw = np.cumsum([e * weight, weight, t * weight], axis=1)
-    k = np.arange(1, window + 1)[:, None]
-    m = np.concatenate((returns, returns)) - k
+        whole[:, None, None, :] - np.add.accumulate(near[:5], axis=1))
+    sum_z, sum_w, sum_tw = np.add.accumulate(np.array([e * weight, weight, t * weight]), axis=1)
+    k = np.arange(1, window + 1)[:, None, None]
+    m = returns - k
     with np.errstate(divide='ignore', invalid='ignore'):
         mean_t, mean_e = rest_t / m, rest_e / m
         spread = rest_tt - m * mean_t * mean_t                              # S_tt
@@ -654,9 +663,10 @@ def trim_offset(segments: SegmentRanges, x_m: np.ndarray, y_m: np.ndarray, lines
     # Too few returns left for a cut, or a NaN line (never kept by the pipeline): no cut; nor
     # from the first k whose other returns lie at one point along the line (no line of theirs).
     spread_left = np.logical_and.accumulate(spread > 0.0, axis=0)
-    score[(k > np.concatenate((room, room))) | np.isnan(score) | ~spread_left] = -np.inf
+    score[(k > room) | np.isnan(score) | ~spread_left] = -np.inf
+    score = score.reshape(window, 2 * count)
     over = score.max(axis=0) > threshold_sigmas * threshold_sigmas
-    if not over.any():
+    if not np.count_nonzero(over):
         return segments
     cut = (score.argmax(axis=0) + 1) * over
     return _within_contour(start + cut[count:], stop - cut[:count], segments.chain, len(x_m))

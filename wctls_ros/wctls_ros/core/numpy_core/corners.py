@@ -205,9 +205,9 @@ def corner_candidates(walls: SegmentSet, first_wall: np.ndarray, second_wall: np
         yaw = np.arctan2(bisector_y * toward_sensor, bisector_x * -toward_sensor)
         opening = np.where(concave, between, 2.0 * np.pi - between)
         # The covariance of the pairs kept, from the numbers above (not computed again).
-        pair = pair[:, kept]
+        pair = pair.take(kept, axis=1)
         covariance = _joint_covariance(walls, pair, *np.array(
-            [x, y, u, w, normal_x, normal_y, norm])[:, :, kept], common_range_sigma_m)
+            [x, y, u, w, normal_x, normal_y, norm]).take(kept, axis=2), common_range_sigma_m)
     return CornerCandidates(np.array([x[0], y[0]]).T.take(kept, 0), yaw[kept], covariance,
                             opening[kept], pair[0], pair[1])
 
@@ -357,7 +357,7 @@ def wall_at_corner(walls: SegmentSet, wall: np.ndarray, corner_xy_m: np.ndarray,
     corner_x, corner_y = corner_xy_m[:, 0], corner_xy_m[:, 1]
     angle = walls.angle_rad[wall]
     normal_x, normal_y = np.cos(angle), np.sin(angle)
-    middle = 0.5 * (walls.start_xy_m[wall] + walls.end_xy_m[wall])
+    middle = 0.5 * (walls.start_xy_m.take(wall, axis=0) + walls.end_xy_m.take(wall, axis=0))
     middle_x, middle_y = middle[..., 0], middle[..., 1]
     side = np.copysign(1.0, (middle_x - corner_x) * -normal_y + (middle_y - corner_y) * normal_x)
     inward_x, inward_y = -normal_y * side, normal_x * side
@@ -444,8 +444,8 @@ def without_object_in_front(window: EndWindow[IndexArray], wall: WallAtCorner[Fl
         return placed.on_line
     claimed = placed.on_line & (placed.along_m >= -wall.tolerance_m[..., None]) & ~at_corner
     claimed[..., 0] = claimed[..., -1] = False
-    run = claimed.sum(axis=-1)
-    together = (np.where(claimed, placed.in_front_m / window.sigma_m, 0.0).sum(axis=-1)
+    run = np.add.reduce(claimed, axis=-1)
+    together = (np.add.reduce(np.where(claimed, placed.in_front_m / window.sigma_m, 0.0), axis=-1)
                 / np.sqrt(np.maximum(run, 1)))
     return placed.on_line & ~(claimed & (together > rule.run_sigmas)[..., None])
 
@@ -482,7 +482,7 @@ def goes_on(first: WallAtCorner[FloatArray], second: WallAtCorner[FloatArray],
                   & (first_placed.along_m < -first.tolerance_m[:, None]))
     second_past = (second_on_line & ~first_on_line
                    & (second_placed.along_m < -second.tolerance_m[:, None]))
-    return (~at_corner & (first_past | second_past)).any(axis=1)
+    return np.logical_or.reduce(~at_corner & (first_past | second_past), axis=1)
 
 
 def blocked(window: EndWindow[IndexArray], first: WallAtCorner[FloatArray],
@@ -502,13 +502,14 @@ def blocked(window: EndWindow[IndexArray], first: WallAtCorner[FloatArray],
     :return: shape (C,)
     """
     steps = np.arange(at_corner.shape[1])
-    first_anchor = np.where(first_here & ~at_corner, steps, 0).max(axis=1)
-    second_anchor = np.where(second_here & ~at_corner, steps, steps[-1]).min(axis=1)
+    first_anchor = np.maximum.reduce(np.where(first_here & ~at_corner, steps, 0), axis=1)
+    second_anchor = np.minimum.reduce(np.where(second_here & ~at_corner, steps, steps[-1]),
+                                      axis=1)
     occluder = (window.in_window & (first_placed.in_front_m > window.line_tolerance_m)
                 & (second_placed.in_front_m > window.line_tolerance_m))
     interrupts = window.in_window & ~first_here & ~second_here
     outside = (steps < first_anchor[:, None]) | (steps > second_anchor[:, None])
-    return (interrupts & (~occluder | ~outside)).any(axis=1)
+    return np.logical_or.reduce(interrupts & (~occluder | ~outside), axis=1)
 
 
 def short_of_corner(wall: WallAtCorner[FloatArray], placed: AlongWall, on_line: np.ndarray,
@@ -525,7 +526,8 @@ def short_of_corner(wall: WallAtCorner[FloatArray], placed: AlongWall, on_line: 
 
     :return: shape (C,) ((2, C); inf: none of its returns reaches the corner)
     """
-    gap = np.where(on_line & here, np.maximum(placed.along_m, 0.0), np.inf).min(axis=-1)
+    gap = np.minimum.reduce(np.where(on_line & here, np.maximum(placed.along_m, 0.0), np.inf),
+                            axis=-1)
     return np.maximum(gap - wall.tolerance_m, 0.0) / wall.spacing_m
 
 
@@ -571,7 +573,7 @@ def seen_through(corner_x_m: np.ndarray, corner_y_m: np.ndarray, wall: WallAtCor
     # this one's, the few that can be tested.
     radius, normal_x, normal_y, other_radius, other_normal_x, other_normal_y = np.array(
         [wall.radius_m, wall.normal_x, wall.normal_y, other.radius_m, other.normal_x,
-         other.normal_y], dtype=float).reshape(6, -1)[:, test]
+         other.normal_y], dtype=float).reshape(6, -1).take(test, axis=1)
     x, y = contour.x_m.take(crossing, mode='wrap'), contour.y_m.take(crossing, mode='wrap')
     sigma = np.sqrt(noise.deciding_sigma_m ** 2 + (x ** 2 + y ** 2) * noise.bearing_sigma_rad ** 2)
     line_tolerance = rule.sigmas * sigma + rule.floor_m
@@ -582,7 +584,7 @@ def seen_through(corner_x_m: np.ndarray, corner_y_m: np.ndarray, wall: WallAtCor
     near_test = test[near]
     inward_x, inward_y, tolerance, corner_x, corner_y = np.array(
         [wall.inward_x, wall.inward_y, wall.tolerance_m, corner_x_m, corner_y_m],
-        dtype=float).reshape(5, -1)[:, near_test]
+        dtype=float).reshape(5, -1).take(near_test, axis=1)
     x, y, radius, offset = x[near], y[near], radius[near], offset[near]
     to_line = radius / offset
     along = (x * to_line - corner_x) * inward_x + (y * to_line - corner_y) * inward_y
@@ -662,7 +664,7 @@ def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.
         # The first wall's stretch is crossed by the sight lines after its last return up to the
         # second wall's last; the second's by those from the first wall's first return up to
         # its own first: both tests of every corner left, in one call, the first walls' first.
-        fields = np.array(both)[:, :, kept]
+        fields = np.array(both).take(kept, axis=2)
         twice = np.concatenate((kept, kept))
         seen = seen_through(
             corner_x[twice], corner_y[twice], WallAtCorner(*fields.reshape(8, -1)),

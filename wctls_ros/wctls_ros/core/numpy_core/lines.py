@@ -190,7 +190,7 @@ def _algebraic_fits(returns: SegmentReturns, range_sigma: float, bearing_sigma: 
     """
     line, (px, py), inv_norm, pairs, offset = _lever_sums(returns, range_sigma, bearing_sigma,
                                                           weighted, True)
-    covariance = pairs.T[:, _SQUARE[3]].reshape(-1, 3, 3)
+    covariance = pairs.take(_SQUARE[3], axis=0).T.reshape(-1, 3, 3)
     inv_n2 = inv_norm * inv_norm
     jac = np.zeros((len(px), 3, 3))
     jac[:, 0, 0], jac[:, 0, 1], jac[:, 0, 2] = -py, px, 2.0 * px
@@ -216,7 +216,7 @@ def _conformal_fits(returns: SegmentReturns, range_sigma: float,
     _, (px, py), inv_norm, pairs, offset = _lever_sums(returns, range_sigma, bearing_sigma,
                                                        True, False)
     var_angle, var_radius, cov_angle_radius = pairs
-    normal = pairs.T[:, _SQUARE[2]].reshape(-1, 2, 2)
+    normal = pairs.take(_SQUARE[2], axis=0).T.reshape(-1, 2, 2)
     count = len(px)
     minus_cos, sin = px * -inv_norm, py * inv_norm
     line = np.empty((count, 3))

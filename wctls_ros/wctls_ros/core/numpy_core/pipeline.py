@@ -315,8 +315,13 @@ def _fit_walls(contour: _Contour, segments: SegmentRanges, noise: Noise, prepare
     along_beam = np.abs(np.cos(np.arctan2(middle[:, 1], middle[:, 0]) - fits.angle_rad))
     usable = _finite_and_positive(fits) & (along_beam >= prepared.min_wall_beam_sine)
     if np.count_nonzero(usable) < usable.size:
-        fits, counts, chi2_dof = fits.select(usable), counts[usable], chi2_dof[usable]
-        start_xy, end_xy, positions = start_xy[usable], end_xy[usable], positions[:, usable]
+        # take, not a boolean index: several times faster on arrays of more than one axis.
+        kept = usable.nonzero()[0]
+        fits = LineFits(*(getattr(fits, name).take(kept, axis=0)
+                          for name in fits.__dataclass_fields__))
+        counts, chi2_dof = counts[kept], chi2_dof[kept]
+        start_xy, end_xy = start_xy.take(kept, axis=0), end_xy.take(kept, axis=0)
+        positions = positions.take(kept, axis=1)
     walls = SegmentSet(
         angle_rad=fits.angle_rad, radius_m=fits.radius_m, covariance=fits.normal_covariance,
         line=fits.line, line_covariance=fits.line_covariance,
@@ -458,6 +463,7 @@ def _finite_and_positive(fits: LineFits) -> np.ndarray:
     """Return which fits are usable: finite everywhere, positive-definite normal covariance."""
     cov = fits.normal_covariance
     # A NaN or inf anywhere makes the row's total non-finite.
-    finite = np.isfinite(fits.line.sum(axis=1) + fits.line_covariance.sum(axis=(1, 2))
-                         + fits.angle_rad + fits.radius_m + cov.sum(axis=(1, 2)))
+    finite = np.isfinite(np.add.reduce(fits.line, axis=1)
+                         + np.add.reduce(fits.line_covariance, axis=(1, 2))
+                         + fits.angle_rad + fits.radius_m + np.add.reduce(cov, axis=(1, 2)))
     return finite & (cov[:, 0, 0] > 0.0) & (cov[:, 0, 0] * cov[:, 1, 1] > cov[:, 0, 1] ** 2)

@@ -358,8 +358,8 @@ def iterative_end_point_fit(x_m: np.ndarray, y_m: np.ndarray, start: np.ndarray,
         first = edges[:-1]
         counts = edges[1:] - first
         # Both ends of every chord in one gather each: rows x, y.
-        x0, y0 = start_xy = xy[:, first]
-        x1, y1 = end_xy = xy[:, edges[1:] - 1]
+        x0, y0 = start_xy = xy.take(first, axis=1)
+        x1, y1 = end_xy = xy.take(edges[1:] - 1, axis=1)
         chord = end_xy - start_xy
         # |chord x (return - chord start)|: the return's distance times the chord length; the
         # chord's three numbers repeated to its returns in one step.
@@ -457,7 +457,7 @@ def _merge_distances(segments: SegmentRanges, line_fit: tuple, circular: bool,
     angle, radius, covariance = line_fit
     distance = mahalanobis_squared_2x2(
         np.remainder(angle - angle[second] + np.pi, 2.0 * np.pi) - np.pi,
-        radius - radius[second], covariance + covariance[second])
+        radius - radius[second], covariance + covariance.take(second, axis=0))
     return distance, merged_stop, (pair_ok & (distance < chi2_threshold)).nonzero()[0]
 
 
@@ -548,8 +548,8 @@ def trim_ambiguous(segments: SegmentRanges, circular: bool, x_m: np.ndarray, y_m
     j = second[k]
     # Every line's cos, sin and radius, for the two segments of every meeting in two gathers.
     line = np.array([np.cos(angle_rad), np.sin(angle_rad), radius_m])
-    cos_k, sin_k, radius_k = line[:, k]
-    cos_j, sin_j, radius_j = line[:, j]
+    cos_k, sin_k, radius_k = line.take(k, axis=1)
+    cos_j, sin_j, radius_j = line.take(j, axis=1)
     sine = sin_j * cos_k - cos_j * sin_k                      # sin(angle_j - angle_k)
     # Parallel neighbours give inf / NaN here, and so no return inside reach.
     corner_x = (radius_k * sin_j - radius_j * sin_k) / sine
@@ -665,7 +665,7 @@ def trim_offset(segments: SegmentRanges, x_m: np.ndarray, y_m: np.ndarray, lines
     spread_left = np.logical_and.accumulate(spread > 0.0, axis=0)
     score[(k > room) | np.isnan(score) | ~spread_left] = -np.inf
     score = score.reshape(window, 2 * count)
-    over = score.max(axis=0) > threshold_sigmas * threshold_sigmas
+    over = np.maximum.reduce(score, axis=0) > threshold_sigmas * threshold_sigmas
     if not np.count_nonzero(over):
         return segments
     cut = (score.argmax(axis=0) + 1) * over

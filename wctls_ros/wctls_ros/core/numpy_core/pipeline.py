@@ -3,10 +3,10 @@
 
 """The per-scan pipeline of the paper's Algorithm 1 in numpy: returns -> segments -> corners."""
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 import functools
 import math
-from typing import NamedTuple, Optional
+from typing import NamedTuple, Optional, TypeVar
 
 import numpy as np
 
@@ -317,8 +317,7 @@ def _fit_walls(contour: _Contour, segments: SegmentRanges, noise: Noise, prepare
     if np.count_nonzero(usable) < usable.size:
         # take, not a boolean index: several times faster on arrays of more than one axis.
         kept = usable.nonzero()[0]
-        fits = LineFits(*(getattr(fits, name).take(kept, axis=0)
-                          for name in fits.__dataclass_fields__))
+        fits = _rows(fits, kept)
         counts, chi2_dof = counts[kept], chi2_dof[kept]
         start_xy, end_xy = start_xy.take(kept, axis=0), end_xy.take(kept, axis=0)
         positions = positions.take(kept, axis=1)
@@ -368,7 +367,7 @@ def _with_model_error(walls: SegmentSet, config: FeatureConfig) -> SegmentSet:
         offset = config.common_range_sigma_m * (
             normal_jacobian(walls.line) * walls.line_offset_jacobian[:, None, :]).sum(axis=2)
         published = normal + offset[:, :, None] * offset[:, None, :]
-    return replace(walls, covariance=published, line_covariance=line_covariance)
+    return _replaced(walls, covariance=published, line_covariance=line_covariance)
 
 
 def _corner_covariances(walls: SegmentSet, corners: CornerSet,
@@ -376,7 +375,7 @@ def _corner_covariances(walls: SegmentSet, corners: CornerSet,
     """Return the corners with covariances propagated from the walls' (model error included)."""
     if not len(corners):
         return corners
-    return replace(corners, covariance=corner_covariance(
+    return _replaced(corners, covariance=corner_covariance(
         walls, corners.first_segment, corners.second_segment, config.common_range_sigma_m))
 
 
@@ -436,7 +435,9 @@ def _corners(contour: _Contour, walls: SegmentSet, positions: np.ndarray, noise:
                         opening_angle_rad=candidates.opening_angle_rad,
                         first_segment=candidates.first_wall,
                         second_segment=candidates.second_wall, end_seen=seen)
-    return corners if np.count_nonzero(keep) == keep.size else corners.select(keep)
+    if np.count_nonzero(keep) == keep.size:
+        return corners
+    return _rows(corners, keep.nonzero()[0])
 
 
 def _project(x_m: np.ndarray, y_m: np.ndarray, positions: np.ndarray,
@@ -467,3 +468,22 @@ def _finite_and_positive(fits: LineFits) -> np.ndarray:
                          + np.add.reduce(fits.line_covariance, axis=(1, 2))
                          + fits.angle_rad + fits.radius_m + np.add.reduce(cov, axis=(1, 2)))
     return finite & (cov[:, 0, 0] > 0.0) & (cov[:, 0, 0] * cov[:, 1, 1] > cov[:, 0, 1] ** 2)
+
+
+Table = TypeVar('Table', LineFits, SegmentSet, CornerSet)
+
+
+def _rows(table: Table, rows: np.ndarray) -> Table:
+    """
+    Return some rows of a field table, by index.
+
+    The table's own ``select`` indexes every field; take along the first axis is several
+    times faster on the fields of more than one axis (a covariance's (n, 3, 3)).
+    """
+    return type(table)(*(getattr(table, name).take(rows, axis=0)
+                         for name in table.__dataclass_fields__))
+
+
+def _replaced(table: Table, **fields: np.ndarray) -> Table:
+    """Return a field table with some fields replaced (dataclasses.replace, at half its cost)."""
+    return type(table)(**{**vars(table), **fields})

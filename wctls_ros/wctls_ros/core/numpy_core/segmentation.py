@@ -186,7 +186,7 @@ class PieceSums:
         :param pieces: piece ranges, start in [0, m), stop in (start, start + m]
         :return: shape (S, k)
         """
-        return self.prefix[pieces.stop] - self.prefix[pieces.start]
+        return self.prefix.take(pieces.stop, axis=0) - self.prefix.take(pieces.start, axis=0)
 
 
 def piece_sums(values: np.ndarray, segments: SegmentRanges) -> PieceSums:

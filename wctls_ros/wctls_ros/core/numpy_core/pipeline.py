@@ -12,7 +12,7 @@ import numpy as np
 
 from .corners import corner_candidates, corner_covariance, walls_end_at
 from .lines import fit_lines, normal_jacobian
-from .model_error import flatness_covariance, line_from_normal_jacobian, residual_factor
+from .model_error import flatness_covariance, line_covariance_added, residual_factor
 from .noise import scan_range_sigma
 from .segmentation import (breakpoints, Breaks, Chains, chains, iterative_end_point_fit,
                            merge_collinear, moment_fit, moment_terms, pass_budget, piece_sums,
@@ -348,7 +348,7 @@ def _with_model_error(walls: SegmentSet, config: FeatureConfig) -> SegmentSet:
     The (angle, radius) covariance N becomes f N (f of (D17), when ``residual_scaling``) plus
     the flatness term of (D18) (:mod:`.model_error`). The line's own (a, b, c) covariance gets
     the same addition through d(a, b, c) / d(angle, radius)
-    (:func:`~.model_error.line_from_normal_jacobian`). The published (angle, radius) covariance
+    (:func:`~.model_error.line_covariance_added`). The published (angle, radius) covariance
     also gets the common-mode range offset, o o^T with o = sigma_c d(angle, radius) / d(a, b, c)
     d(a, b, c) / d offset; the (a, b, c) covariance does not, since corners propagate that offset
     with its correlation between the two walls ((D15)-(D16)).
@@ -359,9 +359,8 @@ def _with_model_error(walls: SegmentSet, config: FeatureConfig) -> SegmentSet:
     if config.wall_flatness_sigma_m > 0.0:
         normal = normal + flatness_covariance(walls.angle_rad, walls.start_xy_m, walls.end_xy_m,
                                               config.wall_flatness_sigma_m)
-    jacobian = line_from_normal_jacobian(walls.line, walls.angle_rad)
-    line_covariance = walls.line_covariance + jacobian @ (normal - walls.covariance) @ (
-        jacobian.transpose(0, 2, 1))
+    line_covariance = walls.line_covariance + line_covariance_added(
+        walls.line, walls.angle_rad, normal - walls.covariance)
     published = normal
     if config.common_range_sigma_m > 0.0:
         offset = config.common_range_sigma_m * (

@@ -568,31 +568,24 @@ def seen_through(corner_x_m: np.ndarray, corner_y_m: np.ndarray, wall: WallAtCor
     test = np.arange(lengths.size).repeat(lengths)
     ends = np.add.accumulate(lengths)
     crossing = np.arange(ends[-1]) + (start - (ends - lengths)).repeat(lengths)
-    # The lines' numbers at every return of its test's stretch, in one gather; what places a
-    # crossing along the wall only at the returns that lie on the other wall's line, next to
-    # this one's, the few that can be tested.
-    radius, normal_x, normal_y, other_radius, other_normal_x, other_normal_y = np.array(
-        [wall.radius_m, wall.normal_x, wall.normal_y, other.radius_m, other.normal_x,
-         other.normal_y], dtype=float).reshape(6, -1).take(test, axis=1)
+    # Every per-test number at every return of its test's stretch, in one gather.
+    (radius, normal_x, normal_y, inward_x, inward_y, tolerance, other_radius, other_normal_x,
+     other_normal_y, corner_x, corner_y) = np.array(
+        [wall.radius_m, wall.normal_x, wall.normal_y, wall.inward_x, wall.inward_y,
+         wall.tolerance_m, other.radius_m, other.normal_x, other.normal_y, corner_x_m,
+         corner_y_m], dtype=float).reshape(11, -1).take(test, axis=1)
     x, y = contour.x_m.take(crossing, mode='wrap'), contour.y_m.take(crossing, mode='wrap')
     sigma = np.sqrt(noise.deciding_sigma_m ** 2 + (x ** 2 + y ** 2) * noise.bearing_sigma_rad ** 2)
     line_tolerance = rule.sigmas * sigma + rule.floor_m
     offset = x * normal_x + y * normal_y
     on_other = np.abs(other_radius - x * other_normal_x - y * other_normal_y)
-    near = ((on_other <= line_tolerance) & (offset > 0.0)
-            & (radius - offset <= line_tolerance)).nonzero()[0]
-    near_test = test[near]
-    inward_x, inward_y, tolerance, corner_x, corner_y = np.array(
-        [wall.inward_x, wall.inward_y, wall.tolerance_m, corner_x_m, corner_y_m],
-        dtype=float).reshape(5, -1).take(near_test, axis=1)
-    x, y, radius, offset = x[near], y[near], radius[near], offset[near]
-    to_line = radius / offset
-    along = (x * to_line - corner_x) * inward_x + (y * to_line - corner_y) * inward_y
-    tested = along > tolerance
     with np.errstate(divide='ignore', invalid='ignore'):
-        run = np.bincount(near_test[tested], minlength=lengths.size)
-        behind = np.bincount(near_test[tested], ((offset - radius) / sigma[near])[tested],
-                             lengths.size)
+        to_line = radius / offset
+        along = (x * to_line - corner_x) * inward_x + (y * to_line - corner_y) * inward_y
+        tested = ((on_other <= line_tolerance) & (offset > 0.0)
+                  & (radius - offset <= line_tolerance) & (along > tolerance))
+        run = np.bincount(test[tested], minlength=lengths.size)
+        behind = np.bincount(test[tested], ((offset - radius) / sigma)[tested], lengths.size)
         return (run > 0) & (behind / np.sqrt(run) > rule.run_sigmas)
 
 

@@ -640,17 +640,14 @@ def trim_offset(segments: SegmentRanges, x_m: np.ndarray, y_m: np.ndarray, lines
     # Columns [0, S) walk back from the segments' ends, columns [S, 2 S) forward from their
     # starts; row k - 1 holds the sums over the k returns nearest the end. A window longer than
     # its segment reads on into the next segment's returns: those k exceed the segment's room,
-    # and are never cut at. Both ends of a segment are axis 1 of the (window, 2, S) views, so
-    # that per-segment numbers broadcast to them.
-    halves = (window, 2, count)
-    near = terms.take(_end_windows(offsets + returns - 1, offsets, window), axis=1,
-                      mode='clip').reshape((6,) + halves)
+    # and are never cut at.
+    near = terms.take(_end_windows(offsets + returns - 1, offsets, window), axis=1, mode='clip')
     t, e, weight = near[0], near[2], near[5]
     rest_t, rest_tt, rest_e, rest_te, rest_rr = (
-        whole[:, None, None, :] - np.add.accumulate(near[:5], axis=1))
+        np.concatenate((whole, whole), axis=1)[:, None, :] - np.add.accumulate(near[:5], axis=1))
     sum_z, sum_w, sum_tw = np.add.accumulate(np.array([e * weight, weight, t * weight]), axis=1)
-    k = np.arange(1, window + 1)[:, None, None]
-    m = returns - k
+    k = np.arange(1, window + 1)[:, None]
+    m = np.concatenate((returns, returns)) - k
     with np.errstate(divide='ignore', invalid='ignore'):
         mean_t, mean_e = rest_t / m, rest_e / m
         spread = rest_tt - m * mean_t * mean_t                              # S_tt
@@ -663,8 +660,7 @@ def trim_offset(segments: SegmentRanges, x_m: np.ndarray, y_m: np.ndarray, lines
     # Too few returns left for a cut, or a NaN line (never kept by the pipeline): no cut; nor
     # from the first k whose other returns lie at one point along the line (no line of theirs).
     spread_left = np.logical_and.accumulate(spread > 0.0, axis=0)
-    score[(k > room) | np.isnan(score) | ~spread_left] = -np.inf
-    score = score.reshape(window, 2 * count)
+    score[(k > np.concatenate((room, room))) | np.isnan(score) | ~spread_left] = -np.inf
     over = np.maximum.reduce(score, axis=0) > threshold_sigmas * threshold_sigmas
     if not np.count_nonzero(over):
         return segments

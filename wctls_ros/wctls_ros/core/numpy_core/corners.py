@@ -206,8 +206,10 @@ def corner_candidates(walls: SegmentSet, first_wall: np.ndarray, second_wall: np
         opening = np.where(concave, between, 2.0 * np.pi - between)
         # The covariance of the pairs kept, from the numbers above (not computed again).
         pair = pair.take(kept, axis=1)
-        covariance = _joint_covariance(walls, pair, *np.array(
-            [x, y, u, w, normal_x, normal_y, norm]).take(kept, axis=2), common_range_sigma_m)
+        at_x, at_y, at_u, at_w, at_normal_x, at_normal_y, at_norm = np.array(
+            [x, y, u, w, normal_x, normal_y, norm]).take(kept, axis=2)
+        covariance = _joint_covariance(walls, pair, at_x, at_y, at_u, at_w, at_normal_x,
+                                       at_normal_y, at_norm, common_range_sigma_m)
     return CornerCandidates(np.array([x[0], y[0]]).T.take(kept, 0), yaw[kept], covariance,
                             opening[kept], pair[0], pair[1])
 

@@ -50,10 +50,17 @@ def corner_sigma_m(corners: CornerSet) -> np.ndarray:
     """
     Return each corner's position std along its worst direction, m.
 
+    The larger eigenvalue of the (x, y) covariance [[a, b], [b, c]] in closed form,
+    (a + c) / 2 + sqrt(((a - c) / 2)^2 + b^2), as the compiled twin has it.
+
     :param corners: the corners
     :return: the square root of the larger eigenvalue of each (x, y) covariance, shape (C,)
     """
-    return np.sqrt(np.maximum(np.linalg.eigvalsh(corners.covariance[:, :2, :2])[:, -1], 0.0))
+    covariance = corners.covariance
+    a, b, c = covariance[:, 0, 0], covariance[:, 0, 1], covariance[:, 1, 1]
+    half_difference = 0.5 * (a - c)
+    largest = 0.5 * (a + c) + np.sqrt(half_difference * half_difference + b * b)
+    return np.sqrt(np.maximum(largest, 0.0))
 
 
 def segment_sigma_m(segments: SegmentSet) -> np.ndarray:
@@ -108,16 +115,20 @@ def plausible(features: Features, config: FeatureConfig, range_sigma_m: float) -
     :return: the features that pass, with ``range_sigma_m`` set and the drops counted
     """
     segments, corners = features.segments, features.corners
+    count = len(segments)
+    # The segments' middles and the corners, and their stds, in one array each.
     middle = 0.5 * (segments.start_xy_m + segments.end_xy_m)
-    bound = MAX_SIGMA_RATIO * return_noise_m(np.hypot(middle[:, 0], middle[:, 1]), config,
-                                             range_sigma_m)
-    keep_segment = segment_sigma_m(segments) <= bound
+    point = np.concatenate((middle, corners.xy_m))
+    within = (np.concatenate((segment_sigma_m(segments), corner_sigma_m(corners)))
+              <= MAX_SIGMA_RATIO * return_noise_m(np.hypot(point[:, 0], point[:, 1]), config,
+                                                  range_sigma_m))
+    found = Features(features.method, segments, corners, features.work_limited, range_sigma_m)
+    if np.count_nonzero(within) == within.size:
+        return found
+    keep_segment = within[:count]
     keep_corner = (keep_segment[corners.first_segment] & keep_segment[corners.second_segment]
-                   & (corner_sigma_m(corners) <= MAX_SIGMA_RATIO * return_noise_m(
-                       np.hypot(corners.xy_m[:, 0], corners.xy_m[:, 1]), config,
-                       range_sigma_m)))
-    return kept(Features(features.method, segments, corners, features.work_limited,
-                         range_sigma_m), keep_segment, keep_corner)
+                   & within[count:])
+    return kept(found, keep_segment, keep_corner)
 
 
 def kept(features: Features, keep_segment: np.ndarray, keep_corner: np.ndarray) -> Features:
@@ -135,7 +146,7 @@ def kept(features: Features, keep_segment: np.ndarray, keep_corner: np.ndarray) 
     if not dropped:
         return features
     # Corners name their walls by index: renumber them over the segments kept.
-    renumber = np.cumsum(keep_segment) - 1
+    renumber = np.add.accumulate(keep_segment, dtype=np.intp) - 1
     corners = features.corners.select(keep_corner)
     corners = replace(corners, first_segment=renumber[corners.first_segment],
                       second_segment=renumber[corners.second_segment])

@@ -181,8 +181,8 @@ def corner_candidates(walls: SegmentSet, first_wall: np.ndarray, second_wall: np
     # Nearly parallel lines meet at inf / NaN: such pairs are carried along with the others and
     # dropped with the rest of the rejected ones at the end.
     with np.errstate(all='ignore'):
-        x, y, _, _ = _solve(lines[0], lines[1], lines[2])
-        normal_x, normal_y, _ = _unit_normals(lines[0, :2], lines[1, :2])
+        x, y, u, w = _solve(lines[0], lines[1], lines[2])
+        normal_x, normal_y, norm = _unit_normals(lines[0, :2], lines[1, :2])
         sine = abs(normal_x[0] * normal_y[1] - normal_y[0] * normal_x[1])
         from_start_x, from_start_y = x - start[0], y - start[1]
         from_end_x, from_end_y = x - end[0], y - end[1]
@@ -204,11 +204,14 @@ def corner_candidates(walls: SegmentSet, first_wall: np.ndarray, second_wall: np
         toward_sensor = np.where(concave, 1.0, -1.0)
         yaw = np.arctan2(bisector_y * toward_sensor, bisector_x * -toward_sensor)
         opening = np.where(concave, between, 2.0 * np.pi - between)
-    first_kept, second_kept = pair[0][kept], pair[1][kept]
-    return CornerCandidates(np.array([x[0], y[0]]).T.take(kept, 0), yaw[kept],
-                            corner_covariance(walls, first_kept, second_kept,
-                                              common_range_sigma_m),
-                            opening[kept], first_kept, second_kept)
+        # The covariance of the pairs kept, from the numbers above (not computed again).
+        pair = pair.take(kept, axis=1)
+        at_x, at_y, at_u, at_w, at_normal_x, at_normal_y, at_norm = np.array(
+            [x, y, u, w, normal_x, normal_y, norm]).take(kept, axis=2)
+        covariance = _joint_covariance(walls, pair, at_x, at_y, at_u, at_w, at_normal_x,
+                                       at_normal_y, at_norm, common_range_sigma_m)
+    return CornerCandidates(np.array([x[0], y[0]]).T.take(kept, 0), yaw[kept], covariance,
+                            opening[kept], pair[0], pair[1])
 
 
 def corner_covariance(walls: SegmentSet, first_wall: np.ndarray, second_wall: np.ndarray,
@@ -233,35 +236,58 @@ def corner_covariance(walls: SegmentSet, first_wall: np.ndarray, second_wall: np
     :return: shape (C, 3, 3), over (x m, y m, yaw rad)
     """
     pairs = np.array([first_wall, second_wall, first_wall], dtype=np.intp)   # see _solve
-    pair = pairs[:2]
     lines = walls.line.T.take(pairs, 1)
-    covariance = walls.line_covariance.reshape(-1, 9).T.take(pair, 1)
     with np.errstate(all='ignore'):
         x, y, u, w = _solve(lines[0], lines[1], lines[2])
         normal_x, normal_y, norm = _unit_normals(lines[0, :2], lines[1, :2])
-        # Line k moves the position by -A^-1 e_k h^T dL_k and the yaw by g_k^T dL_k, with
-        # g_k = (-gradient_x, gradient_y, 0).
-        half_inv_norm = 0.5 / norm
-        gradient_x, gradient_y = normal_y * half_inv_norm, normal_x * half_inv_norm
-        moved_a, moved_b, along_h = _covariance_times_h(covariance, x, y)
-        cross = gradient_x * moved_a - gradient_y * moved_b                # -g^T C h
-        yaw_variance = (gradient_x * (gradient_x * covariance[0] - gradient_y * covariance[1])
-                        + gradient_y * (gradient_y * covariance[4]
-                                        - gradient_x * covariance[3]))    # g^T C g
-        xx, xy, yy = _position_covariance(u, w, along_h)
-        # -A^-1 e_k g^T C h, with A^-1 e_k = (u, -w).
-        x_yaw, y_yaw = u * cross, w * cross
-        upper = np.array([xx, xy, x_yaw[0] + x_yaw[1], yy, -(y_yaw[0] + y_yaw[1]),
-                          yaw_variance[0] + yaw_variance[1]])
-        if common_range_sigma_m > 0.0:
-            offset_a, offset_b, offset_c = walls.line_offset_jacobian.T.take(pair, 1)
-            offset_along_h = x * offset_a + y * offset_b + offset_c
-            # Each wall's share of -j = -sum_k (-A^-1 e_k h^T, g_k^T) dL_k / d offset (the sign
-            # drops out of j j^T).
-            shift = np.array([u * offset_along_h, -(w * offset_along_h),
-                              gradient_x * offset_a - gradient_y * offset_b])
-            common = common_range_sigma_m * (shift[:, 0] + shift[:, 1])
-            upper += common[_UPPER_ROW] * common[_UPPER_COLUMN]
+        return _joint_covariance(walls, pairs[:2], x, y, u, w, normal_x, normal_y, norm,
+                                 common_range_sigma_m)
+
+
+def _joint_covariance(walls: SegmentSet, pair: np.ndarray, x: np.ndarray, y: np.ndarray,
+                      u: np.ndarray, w: np.ndarray, normal_x: np.ndarray, normal_y: np.ndarray,
+                      norm: np.ndarray, common_range_sigma_m: float) -> np.ndarray:
+    """
+    Return :func:`corner_covariance` from the pairs' intersections and normals.
+
+    With floating-point warnings already silenced (parallel lines give inf).
+
+    :param walls: the walls
+    :param pair: the first and second wall of each corner, shape (2, C)
+    :param x: x of the intersections, shape (2, C) (:func:`_solve`)
+    :param y: y of the intersections, shape (2, C)
+    :param u: b of the partner line over the determinant, shape (2, C)
+    :param w: a of the partner line over the determinant, shape (2, C)
+    :param normal_x: x of each line's unit normal, shape (2, C) (:func:`_unit_normals`)
+    :param normal_y: y of that normal, shape (2, C)
+    :param norm: the norm of each line's (a, b), shape (2, C)
+    :param common_range_sigma_m: std of the range offset common to the scan, m (0: none)
+    :return: shape (C, 3, 3), over (x m, y m, yaw rad)
+    """
+    covariance = walls.line_covariance.reshape(-1, 9).T.take(pair, 1)
+    # Line k moves the position by -A^-1 e_k h^T dL_k and the yaw by g_k^T dL_k, with
+    # g_k = (-gradient_x, gradient_y, 0).
+    half_inv_norm = 0.5 / norm
+    gradient_x, gradient_y = normal_y * half_inv_norm, normal_x * half_inv_norm
+    moved_a, moved_b, along_h = _covariance_times_h(covariance, x, y)
+    cross = gradient_x * moved_a - gradient_y * moved_b                # -g^T C h
+    yaw_variance = (gradient_x * (gradient_x * covariance[0] - gradient_y * covariance[1])
+                    + gradient_y * (gradient_y * covariance[4]
+                                    - gradient_x * covariance[3]))    # g^T C g
+    xx, xy, yy = _position_covariance(u, w, along_h)
+    # -A^-1 e_k g^T C h, with A^-1 e_k = (u, -w).
+    x_yaw, y_yaw = u * cross, w * cross
+    upper = np.array([xx, xy, x_yaw[0] + x_yaw[1], yy, -(y_yaw[0] + y_yaw[1]),
+                      yaw_variance[0] + yaw_variance[1]])
+    if common_range_sigma_m > 0.0:
+        offset_a, offset_b, offset_c = walls.line_offset_jacobian.T.take(pair, 1)
+        offset_along_h = x * offset_a + y * offset_b + offset_c
+        # Each wall's share of -j = -sum_k (-A^-1 e_k h^T, g_k^T) dL_k / d offset (the sign
+        # drops out of j j^T).
+        shift = np.array([u * offset_along_h, -(w * offset_along_h),
+                          gradient_x * offset_a - gradient_y * offset_b])
+        common = common_range_sigma_m * (shift[:, 0] + shift[:, 1])
+        upper += common[_UPPER_ROW] * common[_UPPER_COLUMN]
     return upper.T.take(_UPPER_TO_FULL, 1).reshape(-1, 3, 3)
 
 
@@ -333,7 +359,7 @@ def wall_at_corner(walls: SegmentSet, wall: np.ndarray, corner_xy_m: np.ndarray,
     corner_x, corner_y = corner_xy_m[:, 0], corner_xy_m[:, 1]
     angle = walls.angle_rad[wall]
     normal_x, normal_y = np.cos(angle), np.sin(angle)
-    middle = 0.5 * (walls.start_xy_m[wall] + walls.end_xy_m[wall])
+    middle = 0.5 * (walls.start_xy_m.take(wall, axis=0) + walls.end_xy_m.take(wall, axis=0))
     middle_x, middle_y = middle[..., 0], middle[..., 1]
     side = np.copysign(1.0, (middle_x - corner_x) * -normal_y + (middle_y - corner_y) * normal_x)
     inward_x, inward_y = -normal_y * side, normal_x * side
@@ -420,8 +446,8 @@ def without_object_in_front(window: EndWindow[IndexArray], wall: WallAtCorner[Fl
         return placed.on_line
     claimed = placed.on_line & (placed.along_m >= -wall.tolerance_m[..., None]) & ~at_corner
     claimed[..., 0] = claimed[..., -1] = False
-    run = claimed.sum(axis=-1)
-    together = (np.where(claimed, placed.in_front_m / window.sigma_m, 0.0).sum(axis=-1)
+    run = np.add.reduce(claimed, axis=-1)
+    together = (np.add.reduce(np.where(claimed, placed.in_front_m / window.sigma_m, 0.0), axis=-1)
                 / np.sqrt(np.maximum(run, 1)))
     return placed.on_line & ~(claimed & (together > rule.run_sigmas)[..., None])
 
@@ -458,7 +484,7 @@ def goes_on(first: WallAtCorner[FloatArray], second: WallAtCorner[FloatArray],
                   & (first_placed.along_m < -first.tolerance_m[:, None]))
     second_past = (second_on_line & ~first_on_line
                    & (second_placed.along_m < -second.tolerance_m[:, None]))
-    return (~at_corner & (first_past | second_past)).any(axis=1)
+    return np.logical_or.reduce(~at_corner & (first_past | second_past), axis=1)
 
 
 def blocked(window: EndWindow[IndexArray], first: WallAtCorner[FloatArray],
@@ -478,13 +504,14 @@ def blocked(window: EndWindow[IndexArray], first: WallAtCorner[FloatArray],
     :return: shape (C,)
     """
     steps = np.arange(at_corner.shape[1])
-    first_anchor = np.where(first_here & ~at_corner, steps, 0).max(axis=1)
-    second_anchor = np.where(second_here & ~at_corner, steps, steps[-1]).min(axis=1)
+    first_anchor = np.maximum.reduce(np.where(first_here & ~at_corner, steps, 0), axis=1)
+    second_anchor = np.minimum.reduce(np.where(second_here & ~at_corner, steps, steps[-1]),
+                                      axis=1)
     occluder = (window.in_window & (first_placed.in_front_m > window.line_tolerance_m)
                 & (second_placed.in_front_m > window.line_tolerance_m))
     interrupts = window.in_window & ~first_here & ~second_here
     outside = (steps < first_anchor[:, None]) | (steps > second_anchor[:, None])
-    return (interrupts & (~occluder | ~outside)).any(axis=1)
+    return np.logical_or.reduce(interrupts & (~occluder | ~outside), axis=1)
 
 
 def short_of_corner(wall: WallAtCorner[FloatArray], placed: AlongWall, on_line: np.ndarray,
@@ -501,7 +528,8 @@ def short_of_corner(wall: WallAtCorner[FloatArray], placed: AlongWall, on_line: 
 
     :return: shape (C,) ((2, C); inf: none of its returns reaches the corner)
     """
-    gap = np.where(on_line & here, np.maximum(placed.along_m, 0.0), np.inf).min(axis=-1)
+    gap = np.minimum.reduce(np.where(on_line & here, np.maximum(placed.along_m, 0.0), np.inf),
+                            axis=-1)
     return np.maximum(gap - wall.tolerance_m, 0.0) / wall.spacing_m
 
 
@@ -540,14 +568,14 @@ def seen_through(corner_x_m: np.ndarray, corner_y_m: np.ndarray, wall: WallAtCor
     start, stop = np.atleast_1d(start), np.atleast_1d(stop)
     lengths = (stop - start) % len(contour.x_m) + 1
     test = np.arange(lengths.size).repeat(lengths)
-    ends = np.cumsum(lengths)
+    ends = np.add.accumulate(lengths)
     crossing = np.arange(ends[-1]) + (start - (ends - lengths)).repeat(lengths)
     # Every per-test number at every return of its test's stretch, in one gather.
     (radius, normal_x, normal_y, inward_x, inward_y, tolerance, other_radius, other_normal_x,
      other_normal_y, corner_x, corner_y) = np.array(
         [wall.radius_m, wall.normal_x, wall.normal_y, wall.inward_x, wall.inward_y,
          wall.tolerance_m, other.radius_m, other.normal_x, other.normal_y, corner_x_m,
-         corner_y_m], dtype=float).reshape(11, -1)[:, test]
+         corner_y_m], dtype=float).reshape(11, -1).take(test, axis=1)
     x, y = contour.x_m.take(crossing, mode='wrap'), contour.y_m.take(crossing, mode='wrap')
     sigma = np.sqrt(noise.deciding_sigma_m ** 2 + (x ** 2 + y ** 2) * noise.bearing_sigma_rad ** 2)
     line_tolerance = rule.sigmas * sigma + rule.floor_m
@@ -626,12 +654,12 @@ def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.
                        at_corner)
             & (short[0] <= 1.0 + CORNER_MISSING_BEAMS)
             & (short[1] <= 1.0 + CORNER_MISSING_BEAMS))
-    kept = np.flatnonzero(keep)
+    kept = keep.nonzero()[0]
     if rule.run_sigmas > 0.0 and kept.size:
         # The first wall's stretch is crossed by the sight lines after its last return up to the
         # second wall's last; the second's by those from the first wall's first return up to
         # its own first: both tests of every corner left, in one call, the first walls' first.
-        fields = np.array(both)[:, :, kept]
+        fields = np.array(both).take(kept, axis=2)
         twice = np.concatenate((kept, kept))
         seen = seen_through(
             corner_x[twice], corner_y[twice], WallAtCorner(*fields.reshape(8, -1)),

@@ -135,8 +135,8 @@ def _lever_sums(returns: SegmentReturns, range_sigma: float, bearing_sigma: floa
     _, _, s_xx, s_yy, s_xy = sums
     pi_x = [a_x * s_yy - a_y * s_xy, b_x * s_yy - b_y * s_xy]     # Pi e_x
     pi_y = [a_y * s_xx - a_x * s_xy, b_y * s_xx - b_x * s_xy]     # Pi e_y
-    basis = np.stack([*pi_x, px, *pi_y, py, -pi_x[0], -pi_x[1], -px])
-    basis = np.repeat(basis, returns.counts, axis=1)
+    basis = np.array([*pi_x, px, *pi_y, py, -pi_x[0], -pi_x[1], -px])
+    basis = basis.repeat(returns.counts, axis=1)
     projected = basis[:6] * x
     projected += basis[3:] * y
     # Per return: Pi z_i (2 rows), p.z_i, Pi z_perp_i (2 rows), p.z_perp_i.
@@ -190,7 +190,7 @@ def _algebraic_fits(returns: SegmentReturns, range_sigma: float, bearing_sigma: 
     """
     line, (px, py), inv_norm, pairs, offset = _lever_sums(returns, range_sigma, bearing_sigma,
                                                           weighted, True)
-    covariance = pairs.T[:, _SQUARE[3]].reshape(-1, 3, 3)
+    covariance = pairs.take(_SQUARE[3], axis=0).T.reshape(-1, 3, 3)
     inv_n2 = inv_norm * inv_norm
     jac = np.zeros((len(px), 3, 3))
     jac[:, 0, 0], jac[:, 0, 1], jac[:, 0, 2] = -py, px, 2.0 * px
@@ -216,7 +216,7 @@ def _conformal_fits(returns: SegmentReturns, range_sigma: float,
     _, (px, py), inv_norm, pairs, offset = _lever_sums(returns, range_sigma, bearing_sigma,
                                                        True, False)
     var_angle, var_radius, cov_angle_radius = pairs
-    normal = pairs.T[:, _SQUARE[2]].reshape(-1, 2, 2)
+    normal = pairs.take(_SQUARE[2], axis=0).T.reshape(-1, 2, 2)
     count = len(px)
     minus_cos, sin = px * -inv_norm, py * inv_norm
     line = np.empty((count, 3))
@@ -366,7 +366,7 @@ def ml(returns: SegmentReturns, range_sigma: float, bearing_sigma: float,
         step = _ml_solve(sums, inv_det, 3)
         angle += step[0]
         radius += step[1]
-        if not (np.abs(step) > ML_STEP_TOLERANCE).any():
+        if not np.count_nonzero(np.abs(step) > ML_STEP_TOLERANCE):
             break
     sums, inv_det = _ml_sums(returns, inv_rho, angle, radius, range_sigma, bearing_sigma)
     offset = _ml_solve(sums, inv_det, 5)
@@ -399,8 +399,8 @@ def _ml_sums(returns, inv_rho, angle, radius, range_sigma, bearing_sigma):
     :return: (sums (7, S), 1 / det F (S,))
     """
     # Each segment's line, repeated to every one of its returns.
-    cos, sin, line_radius = (np.repeat(value, returns.counts)
-                             for value in (np.cos(angle), np.sin(angle), radius))
+    cos, sin, line_radius = np.array([np.cos(angle), np.sin(angle), radius]).repeat(
+        returns.counts, axis=1)
     x, y = returns.x, returns.y
     along = cos * x + sin * y                      # rho cos(theta - angle)
     across = -sin * x + cos * y                    # rho sin(theta - angle)

@@ -49,24 +49,39 @@ def flatness_covariance(angle_rad: np.ndarray, start_xy_m: np.ndarray, end_xy_m:
     return covariance
 
 
-def line_from_normal_jacobian(line: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
+def line_covariance_added(line: np.ndarray, angle_rad: np.ndarray,
+                          added: np.ndarray) -> np.ndarray:
     """
-    Return d(a, b, c) / d(angle, radius) of lines in their method's own scale.
+    Return an (angle, radius) covariance added to lines, as a covariance of their (a, b, c).
 
     Each method's (a, b, c) is lambda (cos angle, sin angle, -radius) for some lambda (its
     scale, e.g. det S_M for UTLS); the corner covariance does not depend on lambda's own
-    variation (docs/derivation.md#the-wctls-corner-equals-the-wtls-corner), so this is
-    lambda [[-sin angle, 0], [cos angle, 0], [0, -1]].
+    variation (docs/derivation.md#the-wctls-corner-equals-the-wtls-corner), so d(a, b, c) /
+    d(angle, radius) is J = lambda [[-sin angle, 0], [cos angle, 0], [0, -1]], and the result
+    J A J^T. Written out entry by entry: the products of J @ A @ J^T less those with J's three
+    zeros (which add nothing to a finite sum), without two batched matrix products.
 
     :param line: (a, b, c), shape (S, 3)
     :param angle_rad: normal angles, shape (S,), rad
-    :return: shape (S, 3, 2)
+    :param added: the covariance A added to (angle, radius), shape (S, 2, 2)
+    :return: shape (S, 3, 3)
     """
     cos, sin = np.cos(angle_rad), np.sin(angle_rad)
     scale = line[:, 0] * cos + line[:, 1] * sin
-    jacobian = np.zeros((len(angle_rad), 3, 2))
-    jacobian[:, 0, 0], jacobian[:, 1, 0], jacobian[:, 2, 1] = -sin, cos, -1.0
-    return jacobian * scale[:, None, None]
+    # The non-zero entries of J: d a / d angle, d b / d angle, d c / d radius.
+    a, b, c = -sin * scale, cos * scale, -1.0 * scale
+    # J A: rows (a A_00, a A_01), (b A_00, b A_01), (c A_10, c A_11).
+    a_angle, a_radius = a * added[:, 0, 0], a * added[:, 0, 1]
+    b_angle, b_radius = b * added[:, 0, 0], b * added[:, 0, 1]
+    c_angle, c_radius = c * added[:, 1, 0], c * added[:, 1, 1]
+    covariance = np.empty((len(angle_rad), 3, 3))
+    covariance[:, 0, 0], covariance[:, 0, 1], covariance[:, 0, 2] = (a_angle * a, a_angle * b,
+                                                                     a_radius * c)
+    covariance[:, 1, 0], covariance[:, 1, 1], covariance[:, 1, 2] = (b_angle * a, b_angle * b,
+                                                                     b_radius * c)
+    covariance[:, 2, 0], covariance[:, 2, 1], covariance[:, 2, 2] = (c_angle * a, c_angle * b,
+                                                                     c_radius * c)
+    return covariance
 
 
 def residual_factor(chi2_dof: np.ndarray, returns: np.ndarray) -> np.ndarray:

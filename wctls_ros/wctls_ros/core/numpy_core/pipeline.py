@@ -3,16 +3,16 @@
 
 """The per-scan pipeline of the paper's Algorithm 1 in numpy: returns -> segments -> corners."""
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 import functools
 import math
-from typing import NamedTuple, Optional
+from typing import NamedTuple, Optional, TypeVar
 
 import numpy as np
 
 from .corners import corner_candidates, corner_covariance, walls_end_at
 from .lines import fit_lines, normal_jacobian
-from .model_error import flatness_covariance, line_from_normal_jacobian, residual_factor
+from .model_error import flatness_covariance, line_covariance_added, residual_factor
 from .noise import scan_range_sigma
 from .segmentation import (breakpoints, Breaks, Chains, chains, iterative_end_point_fit,
                            merge_collinear, moment_fit, moment_terms, pass_budget, piece_sums,
@@ -271,7 +271,7 @@ def _large_enough(contour: _Contour, segments: SegmentRanges, lines: Lines,
     dx, dy = x[last] - x[first], y[last] - y[first]
     keep = ((segments.stop - first >= config.min_segment_points)
             & (dx * dx + dy * dy >= config.min_segment_length_m ** 2))
-    if keep.all():
+    if np.count_nonzero(keep) == keep.size:
         return segments, lines
     return segments.select(keep), Lines(lines.angle_rad[keep], lines.radius_m[keep])
 
@@ -307,31 +307,34 @@ def _fit_walls(contour: _Contour, segments: SegmentRanges, noise: Noise, prepare
     returns = _returns_of(contour, segments)
     counts = returns.counts
     fits = fit_lines(config.method, returns, noise.range_sigma_m, noise.bearing_sigma_rad)
-    chi2_dof = _residual_chi2_dof(returns, fits, noise)
-    last = (segments.stop - 1) % n
-    start_xy, end_xy = _project(contour.x, contour.y, segments.start, last, fits)
+    cos_sin_radius = np.array([np.cos(fits.angle_rad), np.sin(fits.angle_rad), fits.radius_m])
+    chi2_dof = _residual_chi2_dof(returns, cos_sin_radius, noise)
+    positions = np.array([segments.start, (segments.stop - 1) % n])
+    start_xy, end_xy = _project(contour.x, contour.y, positions, cos_sin_radius)
     middle = 0.5 * (start_xy + end_xy)
     along_beam = np.abs(np.cos(np.arctan2(middle[:, 1], middle[:, 0]) - fits.angle_rad))
     usable = _finite_and_positive(fits) & (along_beam >= prepared.min_wall_beam_sine)
-    start = segments.start
-    if not usable.all():
-        fits, start, counts, chi2_dof = (fits.select(usable), start[usable], counts[usable],
-                                         chi2_dof[usable])
-        start_xy, end_xy, last = start_xy[usable], end_xy[usable], last[usable]
+    if np.count_nonzero(usable) < usable.size:
+        # take, not a boolean index: several times faster on arrays of more than one axis.
+        kept = usable.nonzero()[0]
+        fits = _rows(fits, kept)
+        counts, chi2_dof = counts[kept], chi2_dof[kept]
+        start_xy, end_xy = start_xy.take(kept, axis=0), end_xy.take(kept, axis=0)
+        positions = positions.take(kept, axis=1)
     walls = SegmentSet(
         angle_rad=fits.angle_rad, radius_m=fits.radius_m, covariance=fits.normal_covariance,
         line=fits.line, line_covariance=fits.line_covariance,
         line_offset_jacobian=fits.line_offset_jacobian, start_xy_m=start_xy, end_xy_m=end_xy,
-        first_index=contour.index[start], last_index=contour.index[last], num_points=counts,
-        residual_chi2_dof=chi2_dof)
-    return walls, np.array([start, last])
+        first_index=contour.index[positions[0]], last_index=contour.index[positions[1]],
+        num_points=counts, residual_chi2_dof=chi2_dof)
+    return walls, positions
 
 
 def _returns_of(contour: _Contour, segments: SegmentRanges) -> SegmentReturns:
     """Return the segments' returns laid end to end (across the seam on a full turn)."""
     counts = segments.stop - segments.start
-    offsets = np.cumsum(counts) - counts
-    position = np.arange(offsets[-1] + counts[-1]) + np.repeat(segments.start - offsets, counts)
+    offsets = np.add.accumulate(counts) - counts
+    position = np.arange(offsets[-1] + counts[-1]) + (segments.start - offsets).repeat(counts)
     return segment_returns(contour.rho.take(position, mode='wrap'),
                            contour.theta.take(position, mode='wrap'), offsets, counts,
                            contour.x.take(position, mode='wrap'),
@@ -345,7 +348,7 @@ def _with_model_error(walls: SegmentSet, config: FeatureConfig) -> SegmentSet:
     The (angle, radius) covariance N becomes f N (f of (D17), when ``residual_scaling``) plus
     the flatness term of (D18) (:mod:`.model_error`). The line's own (a, b, c) covariance gets
     the same addition through d(a, b, c) / d(angle, radius)
-    (:func:`~.model_error.line_from_normal_jacobian`). The published (angle, radius) covariance
+    (:func:`~.model_error.line_covariance_added`). The published (angle, radius) covariance
     also gets the common-mode range offset, o o^T with o = sigma_c d(angle, radius) / d(a, b, c)
     d(a, b, c) / d offset; the (a, b, c) covariance does not, since corners propagate that offset
     with its correlation between the two walls ((D15)-(D16)).
@@ -356,13 +359,14 @@ def _with_model_error(walls: SegmentSet, config: FeatureConfig) -> SegmentSet:
     if config.wall_flatness_sigma_m > 0.0:
         normal = normal + flatness_covariance(walls.angle_rad, walls.start_xy_m, walls.end_xy_m,
                                               config.wall_flatness_sigma_m)
-    jacobian = line_from_normal_jacobian(walls.line, walls.angle_rad)
-    line_covariance = walls.line_covariance + jacobian @ (normal - walls.covariance) @ (
-        jacobian.transpose(0, 2, 1))
-    offset = config.common_range_sigma_m * (
-        normal_jacobian(walls.line) * walls.line_offset_jacobian[:, None, :]).sum(axis=2)
-    return replace(walls, covariance=normal + offset[:, :, None] * offset[:, None, :],
-                   line_covariance=line_covariance)
+    line_covariance = walls.line_covariance + line_covariance_added(
+        walls.line, walls.angle_rad, normal - walls.covariance)
+    published = normal
+    if config.common_range_sigma_m > 0.0:
+        offset = config.common_range_sigma_m * (
+            normal_jacobian(walls.line) * walls.line_offset_jacobian[:, None, :]).sum(axis=2)
+        published = normal + offset[:, :, None] * offset[:, None, :]
+    return _replaced(walls, covariance=published, line_covariance=line_covariance)
 
 
 def _corner_covariances(walls: SegmentSet, corners: CornerSet,
@@ -370,25 +374,37 @@ def _corner_covariances(walls: SegmentSet, corners: CornerSet,
     """Return the corners with covariances propagated from the walls' (model error included)."""
     if not len(corners):
         return corners
-    return replace(corners, covariance=corner_covariance(
+    return _replaced(corners, covariance=corner_covariance(
         walls, corners.first_segment, corners.second_segment, config.common_range_sigma_m))
 
 
-def _residual_chi2_dof(returns: SegmentReturns, fits: LineFits, noise: Noise) -> np.ndarray:
+def _residual_chi2_dof(returns: SegmentReturns, cos_sin_radius: np.ndarray,
+                       noise: Noise) -> np.ndarray:
     """
     Return each fit's residual chi2 per degree of freedom.
 
     The residual of return i from the line (angle, radius) is d_i = rho_i cos(theta_i - angle)
     - radius, whose variance under the noise model is range_sigma^2 cos^2(theta_i - angle) +
     bearing_sigma^2 rho_i^2 sin^2(theta_i - angle) (docs/derivation.md#maximum-likelihood).
+    With x_i = rho_i cos theta_i and y_i = rho_i sin theta_i, rho_i cos(theta_i - angle) =
+    x_i cos angle + y_i sin angle and rho_i sin(theta_i - angle) = y_i cos angle - x_i sin
+    angle: no sine or cosine per return (as in the compiled core).
 
+    :param returns: the segments' returns
+    :param cos_sin_radius: cos(angle), sin(angle) and radius of each fit, shape (3, S)
+    :param noise: the noise model (its range_sigma_m and bearing_sigma_rad)
     :return: shape (S,)
     """
-    counts = returns.counts
-    incidence = returns.theta - fits.angle_rad.repeat(counts)
-    residual = returns.rho * np.cos(incidence) - fits.radius_m.repeat(counts)
-    variance = ((noise.range_sigma_m * np.cos(incidence)) ** 2
-                + (noise.bearing_sigma_rad * returns.rho * np.sin(incidence)) ** 2)
+    counts, x, y = returns.counts, returns.x, returns.y
+    cos, sin, radius = cos_sin_radius.repeat(counts, axis=1)
+    along = x * cos
+    along += y * sin
+    residual = along - radius
+    scaled = noise.range_sigma_m * along / returns.rho
+    variance = scaled * scaled
+    if noise.bearing_sigma_rad != 0.0:            # else the term is 0
+        across = (y * cos - x * sin) * noise.bearing_sigma_rad
+        variance += across * across
     chi2 = np.add.reduceat(residual * residual / variance, returns.offsets)
     return chi2 / np.maximum(counts - 2, 1)
 
@@ -418,26 +434,27 @@ def _corners(contour: _Contour, walls: SegmentSet, positions: np.ndarray, noise:
                         opening_angle_rad=candidates.opening_angle_rad,
                         first_segment=candidates.first_wall,
                         second_segment=candidates.second_wall, end_seen=seen)
-    return corners if keep.all() else corners.select(keep)
+    if np.count_nonzero(keep) == keep.size:
+        return corners
+    return _rows(corners, keep.nonzero()[0])
 
 
-def _project(x_m: np.ndarray, y_m: np.ndarray, first: np.ndarray, last: np.ndarray,
-             fits: LineFits):
+def _project(x_m: np.ndarray, y_m: np.ndarray, positions: np.ndarray,
+             cos_sin_radius: np.ndarray):
     """
     Return the feet of the perpendiculars from each segment's end returns to its line.
 
     :param x_m: x of the returns in position order, shape (n,), m
     :param y_m: y of the returns in position order, shape (n,), m
-    :param first: position of each segment's first return, shape (S,)
-    :param last: position of each segment's last return, shape (S,)
-    :param fits: the S lines
+    :param positions: position of each segment's first return (row 0) and last (row 1),
+        shape (2, S)
+    :param cos_sin_radius: cos(angle), sin(angle) and radius of the S lines, shape (3, S)
     :return: (first returns projected (S, 2), last returns projected (S, 2)), m
     """
-    c, s = np.cos(fits.angle_rad), np.sin(fits.angle_rad)
-    position = np.array([first, last])                 # both ends at once: rows 0 and 1
-    x, y = x_m[position], y_m[position]
-    offset = x * c + y * s - fits.radius_m
-    feet = np.empty(position.shape + (2,))
+    c, s, radius = cos_sin_radius
+    x, y = x_m[positions], y_m[positions]               # both ends at once: rows 0 and 1
+    offset = x * c + y * s - radius
+    feet = np.empty(positions.shape + (2,))
     feet[..., 0], feet[..., 1] = x - offset * c, y - offset * s
     return feet[0], feet[1]
 
@@ -446,6 +463,26 @@ def _finite_and_positive(fits: LineFits) -> np.ndarray:
     """Return which fits are usable: finite everywhere, positive-definite normal covariance."""
     cov = fits.normal_covariance
     # A NaN or inf anywhere makes the row's total non-finite.
-    finite = np.isfinite(fits.line.sum(axis=1) + fits.line_covariance.sum(axis=(1, 2))
-                         + fits.angle_rad + fits.radius_m + cov.sum(axis=(1, 2)))
+    finite = np.isfinite(np.add.reduce(fits.line, axis=1)
+                         + np.add.reduce(fits.line_covariance, axis=(1, 2))
+                         + fits.angle_rad + fits.radius_m + np.add.reduce(cov, axis=(1, 2)))
     return finite & (cov[:, 0, 0] > 0.0) & (cov[:, 0, 0] * cov[:, 1, 1] > cov[:, 0, 1] ** 2)
+
+
+Table = TypeVar('Table', LineFits, SegmentSet, CornerSet)
+
+
+def _rows(table: Table, rows: np.ndarray) -> Table:
+    """
+    Return some rows of a field table, by index.
+
+    The table's own ``select`` indexes every field; take along the first axis is several
+    times faster on the fields of more than one axis (a covariance's (n, 3, 3)).
+    """
+    return type(table)(*(getattr(table, name).take(rows, axis=0)
+                         for name in table.__dataclass_fields__))
+
+
+def _replaced(table: Table, **fields: np.ndarray) -> Table:
+    """Return a field table with some fields replaced (dataclasses.replace, at half its cost)."""
+    return type(table)(**{**vars(table), **fields})

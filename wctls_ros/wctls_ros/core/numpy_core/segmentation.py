@@ -186,7 +186,7 @@ class PieceSums:
         :param pieces: piece ranges, start in [0, m), stop in (start, start + m]
         :return: shape (S, k)
         """
-        return self.prefix[pieces.stop] - self.prefix[pieces.start]
+        return self.prefix.take(pieces.stop, axis=0) - self.prefix.take(pieces.start, axis=0)
 
 
 def piece_sums(values: np.ndarray, segments: SegmentRanges) -> PieceSums:
@@ -204,7 +204,8 @@ def piece_sums(values: np.ndarray, segments: SegmentRanges) -> PieceSums:
     pieces = edges.size - 1
     prefix = np.empty((2 * pieces + 1, values.shape[0]))
     prefix[0] = 0.0
-    np.cumsum(np.add.reduceat(values, edges[:-1], axis=1).T, axis=0, out=prefix[1:pieces + 1])
+    np.add.accumulate(np.add.reduceat(values, edges[:-1], axis=1).T, axis=0,
+                      out=prefix[1:pieces + 1])
     np.add(prefix[1:pieces + 1], prefix[pieces], out=prefix[pieces + 1:])
     return PieceSums(edges, prefix)
 
@@ -351,36 +352,43 @@ def iterative_end_point_fit(x_m: np.ndarray, y_m: np.ndarray, start: np.ndarray,
     boundary[start] = boundary[stop] = boundary[0] = boundary[count] = True
     # Distances are compared in units of each return's threshold.
     inv_threshold = 1.0 / np.broadcast_to(np.asarray(threshold_m, dtype=float), (count,))
+    xy = np.array([x_m, y_m])
     for level in range(max_levels + 1):
         edges = boundary.nonzero()[0]
-        first, last = edges[:-1], edges[1:] - 1
+        first = edges[:-1]
         counts = edges[1:] - first
-        x0, y0, x1, y1 = x_m[first], y_m[first], x_m[last], y_m[last]
-        dx, dy = x1 - x0, y1 - y0
-        # |chord x (return - chord start)|: the return's distance times the chord length.
-        cross = np.repeat(dx, counts) * y_m
-        cross -= np.repeat(dy, counts) * x_m
-        cross += np.repeat(x0 * y1 - y0 * x1, counts)
+        # Both ends of every chord in one gather each: rows x, y.
+        x0, y0 = start_xy = xy.take(first, axis=1)
+        x1, y1 = end_xy = xy.take(edges[1:] - 1, axis=1)
+        chord = end_xy - start_xy
+        # |chord x (return - chord start)|: the return's distance times the chord length; the
+        # chord's three numbers repeated to its returns in one step.
+        across = np.array([chord[0], chord[1], x0 * y1 - y0 * x1]).repeat(counts, axis=1)
+        cross = across[0] * y_m
+        cross -= across[1] * x_m
+        cross += across[2]
         np.abs(cross, out=cross)
         cross *= inv_threshold
         farthest = np.maximum.reduceat(cross, first)
-        chord2 = dx * dx + dy * dy
+        squared = chord * chord
+        chord2 = squared[0] + squared[1]
         # A chord too short to have a direction never splits (it would at distance 0).
         split = (farthest * farthest > chord2) & (chord2 > MIN_CHORD_M ** 2)
-        if not split.any():
+        # count_nonzero, not split.any(): a reduction method costs several us a call here.
+        if not np.count_nonzero(split):
             break
         if level == max_levels:                  # out of passes: drop what is not straight
             break
-        farthest[~split] = np.inf
-        cut = (cross == np.repeat(farthest, counts)).nonzero()[0]
+        cut = (cross == np.where(split, farthest, np.inf).repeat(counts)).nonzero()[0]
         if cut.size > np.count_nonzero(split):       # ties: the first return at the maximum
-            piece = np.repeat(np.arange(first.size), counts)
+            piece = np.arange(first.size).repeat(counts)
             cut = cut[np.concatenate(([True], piece[cut[1:]] != piece[cut[:-1]]))]
         boundary[cut] = boundary[cut + 1] = True
     # Keep the straight pieces inside a run (not the returns between runs) with enough returns.
     run = np.searchsorted(start, first, side='right') - 1
     keep = (edges[1:] - first >= MIN_FIT_RETURNS) & (run >= 0) & (first < stop[run]) & ~split
-    return SegmentRanges(first[keep], edges[1:][keep], chain[run[keep]]), bool(split.any())
+    return (SegmentRanges(first[keep], edges[1:][keep], chain[run[keep]]),
+            bool(np.count_nonzero(split)))
 
 
 def merge_collinear(segments: SegmentRanges, circular: bool, contour_length: int,
@@ -449,7 +457,7 @@ def _merge_distances(segments: SegmentRanges, line_fit: tuple, circular: bool,
     angle, radius, covariance = line_fit
     distance = mahalanobis_squared_2x2(
         np.remainder(angle - angle[second] + np.pi, 2.0 * np.pi) - np.pi,
-        radius - radius[second], covariance + covariance[second])
+        radius - radius[second], covariance + covariance.take(second, axis=0))
     return distance, merged_stop, (pair_ok & (distance < chi2_threshold)).nonzero()[0]
 
 
@@ -538,23 +546,26 @@ def trim_ambiguous(segments: SegmentRanges, circular: bool, x_m: np.ndarray, y_m
     if not k.size:
         return segments
     j = second[k]
-    cos_k, sin_k, cos_j, sin_j = (np.cos(angle_rad[k]), np.sin(angle_rad[k]),
-                                  np.cos(angle_rad[j]), np.sin(angle_rad[j]))
+    # Every line's cos, sin and radius, for the two segments of every meeting in two gathers.
+    line = np.array([np.cos(angle_rad), np.sin(angle_rad), radius_m])
+    cos_k, sin_k, radius_k = line.take(k, axis=1)
+    cos_j, sin_j, radius_j = line.take(j, axis=1)
     sine = sin_j * cos_k - cos_j * sin_k                      # sin(angle_j - angle_k)
     # Parallel neighbours give inf / NaN here, and so no return inside reach.
-    corner_x = (radius_m[k] * sin_j - radius_m[j] * sin_k) / sine
-    corner_y = (radius_m[j] * cos_k - radius_m[k] * cos_j) / sine
+    corner_x = (radius_k * sin_j - radius_j * sin_k) / sine
+    corner_y = (radius_j * cos_k - radius_k * cos_j) / sine
     reach2 = 9.0 * (range_sigma_m ** 2
                     + (corner_x * corner_x + corner_y * corner_y) * bearing_sigma_rad ** 2
                     ) / (sine * sine)
     # Both meeting ends at once: columns [0, K) walk back from the ends of segments k, columns
-    # [K, 2 K) forward from the starts of segments j.
+    # [K, 2 K) forward from the starts of segments j (axis 1 of the (window, 2, K) views).
     position = _end_windows(stop[k] - 1, start[j], window)
-    dx = x_m.take(position, mode='wrap') - np.concatenate((corner_x, corner_x))
-    dy = y_m.take(position, mode='wrap') - np.concatenate((corner_y, corner_y))
+    halves = (window, 2, k.size)
+    dx = x_m.take(position, mode='wrap').reshape(halves) - corner_x
+    dy = y_m.take(position, mode='wrap').reshape(halves) - corner_y
     # The run from the end is the first return outside (a last row that is never inside).
     inside = np.zeros((window + 1, 2 * k.size), dtype=bool)
-    np.less(dx * dx + dy * dy, np.concatenate((reach2, reach2)), out=inside[:window])
+    np.less(dx * dx + dy * dy, reach2, out=inside[:window].reshape(halves))
     run = inside.argmin(axis=0)
     room = np.maximum(stop - start - min_returns, 0)
     meets_previous = np.concatenate((meets[-1:], meets[:-1]))
@@ -611,7 +622,7 @@ def trim_offset(segments: SegmentRanges, x_m: np.ndarray, y_m: np.ndarray, lines
     # Every segment's returns laid end to end, each in its line's frame (t along, e across),
     # and each segment's sums of t, t^2, e, t e and rho^2.
     returns = stop - start
-    offsets = np.cumsum(returns) - returns
+    offsets = np.add.accumulate(returns) - returns
     position = np.arange(offsets[-1] + returns[-1]) + (start - offsets).repeat(returns)
     x, y = x_m.take(position, mode='wrap'), y_m.take(position, mode='wrap')
     c, s, radius = np.array([np.cos(angle_rad), np.sin(angle_rad), radius_m]).repeat(returns,
@@ -633,8 +644,8 @@ def trim_offset(segments: SegmentRanges, x_m: np.ndarray, y_m: np.ndarray, lines
     near = terms.take(_end_windows(offsets + returns - 1, offsets, window), axis=1, mode='clip')
     t, e, weight = near[0], near[2], near[5]
     rest_t, rest_tt, rest_e, rest_te, rest_rr = (
-        np.concatenate((whole, whole), axis=1)[:, None, :] - np.cumsum(near[:5], axis=1))
-    sum_z, sum_w, sum_tw = np.cumsum([e * weight, weight, t * weight], axis=1)
+        np.concatenate((whole, whole), axis=1)[:, None, :] - np.add.accumulate(near[:5], axis=1))
+    sum_z, sum_w, sum_tw = np.add.accumulate(np.array([e * weight, weight, t * weight]), axis=1)
     k = np.arange(1, window + 1)[:, None]
     m = np.concatenate((returns, returns)) - k
     with np.errstate(divide='ignore', invalid='ignore'):
@@ -650,8 +661,8 @@ def trim_offset(segments: SegmentRanges, x_m: np.ndarray, y_m: np.ndarray, lines
     # from the first k whose other returns lie at one point along the line (no line of theirs).
     spread_left = np.logical_and.accumulate(spread > 0.0, axis=0)
     score[(k > np.concatenate((room, room))) | np.isnan(score) | ~spread_left] = -np.inf
-    over = score.max(axis=0) > threshold_sigmas * threshold_sigmas
-    if not over.any():
+    over = np.maximum.reduce(score, axis=0) > threshold_sigmas * threshold_sigmas
+    if not np.count_nonzero(over):
         return segments
     cut = (score.argmax(axis=0) + 1) * over
     return _within_contour(start + cut[count:], stop - cut[:count], segments.chain, len(x_m))

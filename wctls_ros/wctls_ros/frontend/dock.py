@@ -23,11 +23,11 @@ Everything is in the scan's frame: m, rad. Pure numpy; no ROS.
 
 from dataclasses import dataclass
 import math
-from typing import List, NamedTuple, Optional, Tuple
+from typing import Any, List, NamedTuple, Optional, Tuple
 
 import numpy as np
 
-from ..core import CornerSet, FeatureConfig, SegmentSet
+from ..core import CornerSet, FeatureConfig, runtime, SegmentSet
 
 # P(chi2 with 3 dof <= 16.27) = 99.9 %: the gate of a pose difference.
 CHI2_3DOF_999 = 16.266
@@ -627,8 +627,8 @@ def _spacing(returns: DockReturns, pose, shape: DockShape) -> Tuple[float, float
     return spacing[0], spacing[1]
 
 
-def fit_returns(returns: DockReturns, start: Tuple[float, float, float],
-                shape: DockShape) -> Optional[ReturnsFit]:
+def fit_returns(returns: DockReturns, start: Tuple[float, float, float], shape: DockShape,
+                compiled: Optional[bool] = None) -> Optional[ReturnsFit]:
     """
     Fit the dock's two faces, at its opening angle, to the scan's returns (eq. D5-D9).
 
@@ -641,12 +641,33 @@ def fit_returns(returns: DockReturns, start: Tuple[float, float, float],
     D7). Each face's reach (eq. D8) and the two faces' own opening angle (eq. D9) are what
     :func:`find_docks` tests.
 
+    These numpy steps are the specification; their compiled twin (numba,
+    ``core/numba_core/dock.py``) gives the same fit within 1e-9 relative in one compiled call,
+    and runs whenever the compiled core serves (:func:`wctls_ros.core.runtime.compiled_dock`).
+
     :param returns: the scan's returns and noise model
     :param start: the apex frame's start (x, y, yaw), m, m, rad
     :param shape: the dock
+    :param compiled: None: the compiled twin while the compiled core serves, else the numpy
+        steps; True: the compiled twin (the compiled core is loaded, or compiled, first);
+        False: the numpy steps
     :return: the fit; None when a face has fewer than MIN_FACE_RETURNS returns on it or the
         equations are singular
+    :raises wctls_ros.core.CoreUnavailable: with ``compiled`` True, when numba cannot give the
+        compiled core
     """
+    kernels = None
+    if compiled is None:
+        kernels = runtime.compiled_dock()
+    elif compiled:
+        kernels = runtime.compiled_dock(wait=True)
+        if kernels is None:
+            status = runtime.status()
+            raise runtime.CoreUnavailable(
+                'the compiled dock fit needs the compiled core: '
+                + (status.reason if status is not None else 'not started'))
+    if kernels is not None:
+        return _fit_returns_compiled(kernels, returns, start, shape)
     beyond = shape.face_tolerance_m + BEYOND_M           # the window's extent past the ends
     (_, _, nx0, ny0, _), (_, _, nx1, ny1, _) = _faces(0.0, 0.0, 0.0, shape)
     normal_offsets = (math.atan2(ny0, nx0), math.atan2(ny1, nx1))
@@ -700,6 +721,30 @@ def fit_returns(returns: DockReturns, start: Tuple[float, float, float],
                       (tuple(taken.past_end[0]), tuple(taken.past_end[1])),
                       _own_lines_angle(taken.own_sums, pose, shape),
                       (taken.bends[0], taken.bends[1]), chi2)
+
+
+def _fit_returns_compiled(kernels: Any, returns: DockReturns,
+                          start: Tuple[float, float, float],
+                          shape: DockShape) -> Optional[ReturnsFit]:
+    """Run :func:`fit_returns` by its compiled twin (``numba_core/dock.py``)."""
+    # Always the same argument types: numba compiles one version, the precompiled one.
+    values = kernels.fit_returns(
+        np.ascontiguousarray(returns.ranges_m, dtype=float), float(returns.angle_min_rad),
+        float(returns.angle_increment_rad), bool(returns.full_turn),
+        (float(returns.range_min_m), float(returns.range_max_m)),
+        (float(returns.range_sigma_m), float(returns.bearing_sigma_rad),
+         float(returns.model_error_sigma_m), float(returns.common_range_sigma_m),
+         float(returns.flatness_sigma_m)), bool(returns.residual_scaling),
+        (float(start[0]), float(start[1]), float(start[2])),
+        (float(shape.right_face_m), float(shape.left_face_m), float(shape.opening_angle_rad),
+         float(shape.face_tolerance_m), float(shape.angle_tolerance_rad)))
+    if not len(values):
+        return None
+    v = values.tolist()
+    return ReturnsFit(values[:3].copy(), values[3:12].reshape(3, 3).copy(),
+                      (int(v[12]), int(v[13])), (v[14], v[15]), (v[16], v[17]),
+                      ((int(v[18]), int(v[19])), (int(v[20]), int(v[21]))), v[22],
+                      (v[23], v[24]), v[25])
 
 
 def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape,

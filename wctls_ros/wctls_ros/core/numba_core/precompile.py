@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-The pipeline and the tracker's kernels compiled before the first scan, or loaded from the cache.
+The pipeline's, the tracker's and the dock's kernels compiled before the first scan, or loaded.
 
 From the cache the compiled pipeline loads in a fraction of a second. Without it (the first run
 on a machine, or after an upgrade) numba compiles it: 16-22 s of CPU on a 2-core EPYC VM, and
@@ -19,13 +19,13 @@ import time
 
 import numpy as np
 
-from . import tracking
+from . import dock, tracking
 from ._jit import cache_folder, use_disk_cache
 from .pipeline import _features_of_scan, extract_features
 from ..records import TrackRules
 
 # The compiled functions that Python calls, each compiled once for the types it is called with.
-_ENTRY_POINTS = (_features_of_scan, tracking.update_tracks)
+_ENTRY_POINTS = (_features_of_scan, tracking.update_tracks, dock.fit_returns)
 
 
 def warm_up() -> float:
@@ -45,6 +45,10 @@ def warm_up() -> float:
     square_room = 2.0 / np.maximum(np.abs(np.cos(bearing)), np.abs(np.sin(bearing)))
     extract_features(square_room, angle_min, increment)
     _track_once(square_room, angle_min, increment)
+    # The dock's fit, with the argument types wctls_ros.frontend.dock calls it with.
+    dock.fit_returns(square_room, angle_min, increment, True, (0.0, math.inf),
+                     (0.01, 0.001, 0.0, 0.0, 0.0), True, (1.9, 1.9, 0.785),
+                     (0.3, 0.3, 2.1, 0.03, 0.17))
     return time.perf_counter() - started
 
 

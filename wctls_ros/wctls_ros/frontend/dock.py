@@ -748,7 +748,8 @@ def _fit_returns_compiled(kernels: Any, returns: DockReturns,
 
 
 def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape,
-               returns: Optional[DockReturns] = None) -> List[DockPose]:
+               returns: Optional[DockReturns] = None,
+               compiled: Optional[bool] = None) -> List[DockPose]:
     """
     Return every place of a scan that has the dock's shape, as a dock pose.
 
@@ -776,24 +777,29 @@ def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape,
     :param shape: the dock
     :param returns: the scan's returns and noise model (:func:`dock_returns`); None: the
         corners alone
+    :param compiled: which fit to the returns runs (:func:`fit_returns`); None: the compiled
+        one while the compiled core serves
     :return: the candidates, best fitting first (usually none or one)
     """
     if returns is None:
         return _docks_of_corners(segments, corners, shape)
     tried: set = set()
-    docks = _docks_of_returns(returns, _corner_starts(segments, corners, shape, tried), shape)
+    docks = _docks_of_returns(returns, _corner_starts(segments, corners, shape, tried), shape,
+                              compiled)
     if not docks:
         docks = _docks_of_returns(
-            returns, _segment_pair_starts(segments, shape, returns.full_turn, tried), shape)
+            returns, _segment_pair_starts(segments, shape, returns.full_turn, tried), shape,
+            compiled)
     return sorted(docks, key=lambda dock: dock.misfit)
 
 
-def _docks_of_returns(returns: DockReturns, starts: list, shape: DockShape) -> List[DockPose]:
+def _docks_of_returns(returns: DockReturns, starts: list, shape: DockShape,
+                      compiled: Optional[bool]) -> List[DockPose]:
     """Return the fits from the starts that have the dock's shape, one per dock."""
     docks: List[DockPose] = []
     apexes: List[Tuple[float, float]] = []
     for start in starts:
-        fit = fit_returns(returns, start, shape)
+        fit = fit_returns(returns, start, shape, compiled)
         if fit is None:
             continue
         misfit = returns_misfit(fit, shape)

@@ -857,35 +857,42 @@ def _corner_starts(segments: SegmentSet, corners: CornerSet, shape: DockShape,
     angle_error = np.abs(corners.opening_angle_rad - shape.opening_angle_rad)
     longest = max(shape.right_face_m, shape.left_face_m) + shape.face_tolerance_m + BEYOND_M
     starts = []
-    for k in np.flatnonzero(angle_error <= 2.0 * shape.angle_tolerance_rad).tolist():
+    near = np.flatnonzero(angle_error <= 2.0 * shape.angle_tolerance_rad).tolist()
+    ends = _segment_ends(segments) if near else []
+    for k in near:
         pair = (int(corners.first_segment[k]), int(corners.second_segment[k]))
-        if _farther_than(segments, pair, corners.xy_m[k].tolist(), longest):
+        if _farther_than(ends, pair, corners.xy_m[k].tolist(), longest):
             continue
-        start = _pair_start(segments, pair, corners.xy_m[k].tolist(),
+        start = _pair_start(segments, ends, pair, corners.xy_m[k].tolist(),
                             float(wrap_angle(corners.yaw_rad[k] + math.pi)), shape)
         if start is not None:
             starts.append(start)
     return starts
 
 
-def _farther_than(segments: SegmentSet, pair: Tuple[int, int], apex: list,
-                  distance_m: float) -> bool:
-    """Tell whether either segment of a pair reaches farther than distance_m from apex."""
+def _segment_ends(segments: SegmentSet) -> list:
+    """Return each segment's (start x, start y, end x, end y), m, as plain floats."""
+    # The starts' loops read a few of them each: numpy's indexing would cost more than that.
+    return np.concatenate([segments.start_xy_m, segments.end_xy_m], axis=1).tolist()
+
+
+def _farther_than(ends: list, pair: Tuple[int, int], apex: list, distance_m: float) -> bool:
+    """Tell whether either segment of a pair (its ends: _segment_ends) reaches farther."""
     for wall in pair:
-        for end in (segments.start_xy_m[wall], segments.end_xy_m[wall]):
-            x, y = end.tolist()
-            if math.hypot(x - apex[0], y - apex[1]) > distance_m:
-                return True
+        sx, sy, ex, ey = ends[wall]
+        if (math.hypot(sx - apex[0], sy - apex[1]) > distance_m
+                or math.hypot(ex - apex[0], ey - apex[1]) > distance_m):
+            return True
     return False
 
 
-def _pair_start(segments: SegmentSet, pair: Tuple[int, int], apex: list, yaw: float,
-                shape: DockShape) -> Optional[Tuple[float, float, float]]:
+def _pair_start(segments: SegmentSet, ends: list, pair: Tuple[int, int], apex: list,
+                yaw: float, shape: DockShape) -> Optional[Tuple[float, float, float]]:
     """Return fit_apex's start of two segments meeting at apex (eq. D1); None if not a V."""
     c, s = math.cos(yaw), math.sin(yaw)
     sides = []
     for wall in pair:
-        (sx, sy), (ex, ey) = segments.start_xy_m[wall].tolist(), segments.end_xy_m[wall].tolist()
+        sx, sy, ex, ey = ends[wall]
         sides.append(c * (0.5 * (sy + ey) - apex[1]) - s * (0.5 * (sx + ex) - apex[0]))
     if not sides[0] * sides[1] < 0.0:
         return None
@@ -924,23 +931,25 @@ def _segment_pair_starts(segments: SegmentSet, shape: DockShape, full_turn: bool
                 <= 2.0 * shape.angle_tolerance_rad]
     longest = max(shape.right_face_m, shape.left_face_m) + shape.face_tolerance_m + BEYOND_M
     concave = shape.opening_angle_rad < math.pi
-    starts = []
+    starts: List[Tuple[float, float, float]] = []
+    if not len(pair):
+        return starts
+    ends, angle, radius = _segment_ends(segments), angles.tolist(), segments.radius_m.tolist()
     for i, j in pair.tolist():
         if (i, j) in tried or (j, i) in tried:
             continue
-        ai, aj = float(angles[i]), float(angles[j])
+        ai, aj = angle[i], angle[j]
         det = math.sin(aj - ai)
         if abs(det) < 1e-9:
             continue
-        ri, rj = float(segments.radius_m[i]), float(segments.radius_m[j])
+        ri, rj = radius[i], radius[j]
         px = (ri * math.sin(aj) - rj * math.sin(ai)) / det
         py = (rj * math.cos(ai) - ri * math.cos(aj)) / det
-        if _farther_than(segments, (i, j), [px, py], longest):
+        if _farther_than(ends, (i, j), [px, py], longest):
             continue
         bx = by = 0.0
         for wall in (i, j):
-            (sx, sy), (ex, ey) = segments.start_xy_m[wall].tolist(), segments.end_xy_m[
-                wall].tolist()
+            sx, sy, ex, ey = ends[wall]
             mx, my = 0.5 * (sx + ex) - px, 0.5 * (sy + ey) - py
             middle = math.hypot(mx, my)
             if not middle > 0.0:
@@ -951,7 +960,7 @@ def _segment_pair_starts(segments: SegmentSet, shape: DockShape, full_turn: bool
                 continue
             # The apex frame's x axis points away from the robot's side (eq. D1).
             yaw = math.atan2(-by, -bx) if concave else math.atan2(by, bx)
-            start = _pair_start(segments, (i, j), [px, py], yaw, shape)
+            start = _pair_start(segments, ends, (i, j), [px, py], yaw, shape)
             if start is not None:
                 starts.append(start)
     return starts

@@ -225,11 +225,11 @@ def fit_apex(segments: SegmentSet, right: int, left: int, apex_xy_m: np.ndarray,
         x += pxx * gx + pxy * gy + pxt * gt
         y += pxy * gx + pyy * gy + pyt * gt
         yaw += pxt * gx + pyt * gy + ptt * gt
-    pose = np.array([x, y, _wrap(yaw)])
-    if covariance is None or not (np.isfinite(pose).all()
-                                  and np.isfinite(np.array(covariance)).all()):
+    # Plain floats checked first: numpy's calls on a 3-vector cost more than the fit's steps.
+    if covariance is None or not all(math.isfinite(value) for value in (
+            x, y, yaw, *covariance[0], *covariance[1], *covariance[2])):
         return None
-    return pose, np.array(covariance)
+    return np.array([x, y, _wrap(yaw)]), np.array(covariance)
 
 
 def _wrap(angle_rad: float) -> float:
@@ -1107,7 +1107,7 @@ def _follow(track: Optional[Track], candidates: List[DockPose], stamp_s: float,
     chi2 = [pose_chi2(c, track.pose, stamp_s - track.stamp_s, settings) for c in candidates]
     if not chi2 or min(chi2) > settings.gate:
         return track, candidates
-    best = int(np.argmin(chi2))
+    best = min(range(len(chi2)), key=chi2.__getitem__)   # the first least, as np.argmin
     rest = candidates[:best] + candidates[best + 1:]
     return Track(candidates[best], stamp_s, track.detections + 1), rest
 

@@ -142,14 +142,16 @@ def _pass(rho, cos_b, sin_b, valid, gate_cos2, gate, x, y, yaw, shape, noise, fi
     tangent2 = np.empty((2, size))
     for k in range(2):
         for m in range(size):
-            h2, c2 = 1.0, 1.0
-            if sees[k, m]:
-                h2, c2 = hit[k, m] * hit[k, m], cosine[k, m] * cosine[k, m]
+            # Only the returns a face sees are fitted, gated or walked (the numpy twin's
+            # placeholders where it sees none are never read).
+            if not sees[k, m]:
+                continue
+            h2, c2 = hit[k, m] * hit[k, m], cosine[k, m] * cosine[k, m]
             h2s[k, m], tangent2[k, m] = h2, h2 * (1.0 - c2) / c2
             # The inverse range, its second-order bias removed, and its weight (eq. D6).
             inverse[k, m] = 1.0 / rho[m] - sigma2 / (h2 * math.sqrt(h2))
             weights[k, m] = h2 * h2 / (sigma2 + bearing2 * tangent2[k, m])
-            if not (sees[k, m] and on[k, m]):
+            if not on[k, m]:
                 continue
             w = weights[k, m]
             columns = (cos_b[m], sin_b[m], inverse[k, m], 1.0 / h2, 1.0 / h2 / cosine[k, m],

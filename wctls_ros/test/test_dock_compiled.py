@@ -2,13 +2,15 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-The compiled fit of the dock to the returns against the numpy one, start by start.
+The compiled dock detector against the numpy one: its starts, and its fit start by start.
 
-The numpy steps of :func:`~wctls_ros.frontend.dock.fit_returns` are the specification; their
-compiled twin (``core/numba_core/dock.py``), which find_docks runs whenever the compiled core
-serves, must give every start the same outcome (a fit or none), the same counts of returns per
-face and past each end, and the pose, covariance, reach, spacing, own opening angle, bends and
-chi2 within 1e-9 relative; and so find_docks the same docks. On the scans where it matters:
+The numpy steps of :func:`~wctls_ros.frontend.dock.find_docks` (the starts from the corners and
+the pairs of segments, and :func:`~wctls_ros.frontend.dock.fit_returns`) are the specification;
+their compiled twins (``core/numba_core/dock.py``), which find_docks runs whenever the compiled
+core serves, must give the same starts within 1e-9 relative, every start the same outcome (a fit
+or none), the same counts of returns per face and past each end, and the pose, covariance,
+reach, spacing, own opening angle, bends and chi2 within 1e-9 relative; and so find_docks the
+same docks. On the scans where it matters:
 S1-like scans of environment A lived in with the example dock from 0.3 to 3 m and 30 deg either
 side of its axis, a V of the dock's angle with a face too long, the same scans cut to a 180
 deg field of view (a window at the scan's edge) and with the faces' flatness set and no
@@ -131,12 +133,21 @@ def assert_close(compiled, reference, what):
 @pytest.mark.parametrize('case', CASES)
 def test_the_compiled_fit_gives_the_numpy_ones_fits_and_docks(case, compiled_core):
     scans, shape = CASES[case]()
-    fits = nones = docks = 0
+    fits = nones = docks = pairs = 0
     for k, (features, returns) in enumerate(scans):
         tried: set = set()
         starts = (dock._corner_starts(features.segments, features.corners, shape, tried)
                   + dock._segment_pair_starts(features.segments, shape, returns.full_turn,
                                               tried))
+        arrays = dock._twin_arrays(features.segments, features.corners)
+        twins = (compiled_core.corner_starts(*arrays, dock._shape_tuple(shape)).tolist()
+                 + compiled_core.segment_pair_starts(*arrays[:6], dock._shape_tuple(shape),
+                                                     returns.full_turn).tolist())
+        assert len(twins) == len(starts), (case, k)
+        if starts:
+            assert_close(twins, starts, (case, k, 'starts'))
+        pairs += len(starts) - len(dock._corner_starts(features.segments, features.corners,
+                                                       shape, set()))
         for start in starts:
             ours = fit_returns(returns, start, shape, compiled=True)
             theirs = fit_returns(returns, start, shape, compiled=False)
@@ -159,7 +170,7 @@ def test_the_compiled_fit_gives_the_numpy_ones_fits_and_docks(case, compiled_cor
         docks += len(theirs)
     # Each case exercises the fit: starts that give a fit, and (but for the dock seen whole)
     # docks found or refused.
-    assert fits >= 10, (fits, nones)
+    assert fits >= 10 and pairs >= 1, (fits, nones, pairs)
     if case.startswith('dock'):
         assert docks >= 40
     else:

@@ -656,18 +656,29 @@ def fit_returns(returns: DockReturns, start: Tuple[float, float, float], shape: 
     :raises wctls_ros.core.CoreUnavailable: with ``compiled`` True, when numba cannot give the
         compiled core
     """
-    kernels = None
-    if compiled is None:
-        kernels = runtime.compiled_dock()
-    elif compiled:
-        kernels = runtime.compiled_dock(wait=True)
-        if kernels is None:
-            status = runtime.status()
-            raise runtime.CoreUnavailable(
-                'the compiled dock fit needs the compiled core: '
-                + (status.reason if status is not None else 'not started'))
+    kernels = _dock_kernels(compiled)
     if kernels is not None:
         return _fit_returns_compiled(kernels, returns, start, shape)
+    return _fit_returns_numpy(returns, start, shape)
+
+
+def _dock_kernels(compiled: Optional[bool]) -> Any:
+    """Return the compiled twins' module (``numba_core/dock.py``), or None for numpy's steps."""
+    if compiled is None:
+        return runtime.compiled_dock()
+    if not compiled:
+        return None
+    kernels = runtime.compiled_dock(wait=True)
+    if kernels is None:
+        status = runtime.status()
+        raise runtime.CoreUnavailable('the compiled dock fit needs the compiled core: '
+                                      + (status.reason if status is not None else 'not started'))
+    return kernels
+
+
+def _fit_returns_numpy(returns: DockReturns, start: Tuple[float, float, float],
+                       shape: DockShape) -> Optional[ReturnsFit]:
+    """Run :func:`fit_returns` by its numpy steps, the specification."""
     beyond = shape.face_tolerance_m + BEYOND_M           # the window's extent past the ends
     (_, _, nx0, ny0, _), (_, _, nx1, ny1, _) = _faces(0.0, 0.0, 0.0, shape)
     normal_offsets = (math.atan2(ny0, nx0), math.atan2(ny1, nx1))
@@ -735,9 +746,7 @@ def _fit_returns_compiled(kernels: Any, returns: DockReturns,
         (float(returns.range_sigma_m), float(returns.bearing_sigma_rad),
          float(returns.model_error_sigma_m), float(returns.common_range_sigma_m),
          float(returns.flatness_sigma_m)), bool(returns.residual_scaling),
-        (float(start[0]), float(start[1]), float(start[2])),
-        (float(shape.right_face_m), float(shape.left_face_m), float(shape.opening_angle_rad),
-         float(shape.face_tolerance_m), float(shape.angle_tolerance_rad)))
+        (float(start[0]), float(start[1]), float(start[2])), _shape_tuple(shape))
     if not len(values):
         return None
     v = values.tolist()
@@ -777,29 +786,65 @@ def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape,
     :param shape: the dock
     :param returns: the scan's returns and noise model (:func:`dock_returns`); None: the
         corners alone
-    :param compiled: which fit to the returns runs (:func:`fit_returns`); None: the compiled
-        one while the compiled core serves
+    :param compiled: which implementation of the starts and the fit to the returns runs:
+        None: their compiled twins (``core/numba_core/dock.py``) while the compiled core
+        serves, else the numpy steps; True: the compiled twins; False: the numpy steps
     :return: the candidates, best fitting first (usually none or one)
     """
     if returns is None:
         return _docks_of_corners(segments, corners, shape)
+    kernels = _dock_kernels(compiled)
+    if kernels is not None:
+        # The compiled twins of the starts too: numpy's calls on a few segments would cost
+        # more than the fit.
+        arrays = _twin_arrays(segments, corners)
+        docks = _docks_of_returns(returns, kernels.corner_starts(
+            *arrays, _shape_tuple(shape)).tolist(), shape, kernels)
+        if not docks:
+            docks = _docks_of_returns(returns, kernels.segment_pair_starts(
+                *arrays[:6], _shape_tuple(shape), bool(returns.full_turn)).tolist(), shape,
+                kernels)
+        return sorted(docks, key=lambda dock: dock.misfit)
     tried: set = set()
     docks = _docks_of_returns(returns, _corner_starts(segments, corners, shape, tried), shape,
-                              compiled)
+                              None)
     if not docks:
         docks = _docks_of_returns(
             returns, _segment_pair_starts(segments, shape, returns.full_turn, tried), shape,
-            compiled)
+            None)
     return sorted(docks, key=lambda dock: dock.misfit)
 
 
+def _twin_arrays(segments: SegmentSet, corners: CornerSet) -> tuple:
+    """
+    Return the features as the compiled starts take them (``numba_core/dock.py``).
+
+    The segments' angles, radii, (alpha, r) covariances and ends (start x, y, end x, y), the
+    corners' segments (all six for both twins), their opening angles, apexes and yaws.
+    """
+    def floats(values):
+        return np.ascontiguousarray(values, dtype=float)
+    return (floats(segments.angle_rad), floats(segments.radius_m), floats(segments.covariance),
+            floats(np.concatenate([segments.start_xy_m, segments.end_xy_m], axis=1)),
+            np.ascontiguousarray(corners.first_segment, dtype=np.int64),
+            np.ascontiguousarray(corners.second_segment, dtype=np.int64),
+            floats(corners.opening_angle_rad), floats(corners.xy_m), floats(corners.yaw_rad))
+
+
+def _shape_tuple(shape: DockShape) -> Tuple[float, float, float, float, float]:
+    """Return the dock as the compiled twins take it (``numba_core/dock.py``)."""
+    return (float(shape.right_face_m), float(shape.left_face_m), float(shape.opening_angle_rad),
+            float(shape.face_tolerance_m), float(shape.angle_tolerance_rad))
+
+
 def _docks_of_returns(returns: DockReturns, starts: list, shape: DockShape,
-                      compiled: Optional[bool]) -> List[DockPose]:
+                      kernels: Any) -> List[DockPose]:
     """Return the fits from the starts that have the dock's shape, one per dock."""
     docks: List[DockPose] = []
     apexes: List[Tuple[float, float]] = []
     for start in starts:
-        fit = fit_returns(returns, start, shape, compiled)
+        fit = (_fit_returns_numpy(returns, start, shape) if kernels is None
+               else _fit_returns_compiled(kernels, returns, start, shape))
         if fit is None:
             continue
         misfit = returns_misfit(fit, shape)

@@ -451,3 +451,207 @@ def fit_returns(ranges, angle_min, increment, full_turn, range_limits, noise, re
             between = 2.0 * math.pi - between
     out[22], out[25] = between, chi2
     return out
+
+
+@jit
+def _wrap_half_open(angle):
+    """Compiled twin of the frontend's ``wrap_angle`` for one angle: into (-pi, pi], rad."""
+    return math.pi - (math.pi - angle) % (2.0 * math.pi)
+
+
+@jit
+def fit_apex(angle, radius, covariance, right, left, x, y, yaw, opening):
+    """
+    Compiled twin of :func:`wctls_ros.frontend.dock.fit_apex` (eq. D1).
+
+    :param angle: the segments' normal angles, shape (N,), rad
+    :param radius: their distances from the sensor, shape (N,), m
+    :param covariance: their (alpha, r) covariances, shape (N, 2, 2)
+    :param right: index of the right face's segment
+    :param left: index of the left face's segment
+    :param x: the start's apex x, m
+    :param y: the start's apex y, m
+    :param yaw: the start's yaw, rad
+    :param opening: the dock's opening angle, rad
+    :return: shape (12,): (x, y, yaw wrapped) and the covariance (row-major); shape (0,) where
+        the numpy twin gives None
+    """
+    half = 0.5 * opening
+    c, s = math.cos(yaw), math.sin(yaw)
+    sensor_x, sensor_y = -(c * x + s * y), s * x - c * y
+    faces = np.empty((2, 6))
+    for k in range(2):
+        wall = right if k == 0 else left
+        normal_x, normal_y = math.sin(half), (-1.0 if k == 0 else 1.0) * math.cos(half)
+        if normal_x * sensor_x + normal_y * sensor_y > 0.0:
+            normal_x, normal_y = -normal_x, -normal_y
+        caa, car, crr = covariance[wall, 0, 0], covariance[wall, 0, 1], covariance[wall, 1, 1]
+        det = caa * crr - car * car
+        if not (caa > 0.0 and det > 0.0):
+            return np.empty(0)
+        faces[k, 0], faces[k, 1], faces[k, 2] = math.atan2(normal_y, normal_x), angle[wall], (
+            radius[wall])
+        faces[k, 3], faces[k, 4], faces[k, 5] = crr / det, -car / det, caa / det
+    normal, inverse = np.zeros((3, 3)), np.zeros((3, 3))
+    for _ in range(2):
+        nxx = nxy = nyy = nxt = nyt = ntt = gx = gy = gt = 0.0
+        for k in range(2):
+            alpha = yaw + faces[k, 0]
+            ca, sa = math.cos(alpha), math.sin(alpha)
+            q = ca * y - sa * x
+            error_alpha = _wrap(faces[k, 1] - alpha)
+            error_radius = faces[k, 2] - (ca * x + sa * y)
+            waa, war, wrr = faces[k, 3], faces[k, 4], faces[k, 5]
+            u = waa * error_alpha + war * error_radius
+            v = war * error_alpha + wrr * error_radius
+            nxx += wrr * ca * ca
+            nxy += wrr * ca * sa
+            nyy += wrr * sa * sa
+            nxt += (war + wrr * q) * ca
+            nyt += (war + wrr * q) * sa
+            ntt += waa + 2.0 * war * q + wrr * q * q
+            gx += ca * v
+            gy += sa * v
+            gt += u + q * v
+        normal[0, 0], normal[0, 1], normal[0, 2] = nxx, nxy, nxt
+        normal[1, 0], normal[1, 1], normal[1, 2] = nxy, nyy, nyt
+        normal[2, 0], normal[2, 1], normal[2, 2] = nxt, nyt, ntt
+        if not _inverse3(normal, inverse):
+            return np.empty(0)
+        x += inverse[0, 0] * gx + inverse[0, 1] * gy + inverse[0, 2] * gt
+        y += inverse[0, 1] * gx + inverse[1, 1] * gy + inverse[1, 2] * gt
+        yaw += inverse[0, 2] * gx + inverse[1, 2] * gy + inverse[2, 2] * gt
+    out = np.empty(12)
+    out[0], out[1], out[2] = x, y, _wrap(yaw)
+    for i in range(3):
+        for j in range(3):
+            out[3 + 3 * i + j] = inverse[i, j]
+    for i in range(12):
+        if not math.isfinite(out[i]):
+            return np.empty(0)
+    return out
+
+
+@jit
+def _pair_start(angle, radius, covariance, ends, i, j, x, y, yaw, opening, starts, count):
+    """Compiled twin of ``_pair_start``: write the start as row ``count``; return the count."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    sides = np.empty(2)
+    for k in range(2):
+        wall = i if k == 0 else j
+        sides[k] = (c * (0.5 * (ends[wall, 1] + ends[wall, 3]) - y)
+                    - s * (0.5 * (ends[wall, 0] + ends[wall, 2]) - x))
+    if not sides[0] * sides[1] < 0.0:
+        return count
+    right, left = (i, j) if sides[0] < 0.0 else (j, i)
+    fit = fit_apex(angle, radius, covariance, right, left, x, y, yaw, opening)
+    if fit.size:
+        starts[count, 0], starts[count, 1], starts[count, 2] = fit[0], fit[1], fit[2]
+    else:
+        starts[count, 0], starts[count, 1], starts[count, 2] = x, y, yaw
+    return count + 1
+
+
+@jit
+def _farther_than(ends, i, j, x, y, distance):
+    """Compiled twin of ``_farther_than``: either segment reaches farther from (x, y)."""
+    for wall in (i, j):
+        if (math.hypot(ends[wall, 0] - x, ends[wall, 1] - y) > distance
+                or math.hypot(ends[wall, 2] - x, ends[wall, 3] - y) > distance):
+            return True
+    return False
+
+
+@jit
+def corner_starts(angle, radius, covariance, ends, first, second, corner_opening, corner_xy,
+                  corner_yaw, shape):
+    """
+    Compiled twin of the frontend's ``_corner_starts`` (eq. D1).
+
+    :param angle: the segments' normal angles, shape (N,), rad
+    :param radius: their distances, shape (N,), m
+    :param covariance: their (alpha, r) covariances, shape (N, 2, 2)
+    :param ends: their (start x, start y, end x, end y), shape (N, 4), m
+    :param first: each corner's first segment, shape (K,)
+    :param second: its second segment, shape (K,)
+    :param corner_opening: the corners' opening angles, shape (K,), rad
+    :param corner_xy: the corners, shape (K, 2), m
+    :param corner_yaw: their bisectors' directions, shape (K,), rad
+    :param shape: as :func:`fit_returns`'s
+    :return: the starts (x, y, yaw), shape (S, 3)
+    """
+    longest = max(shape[0], shape[1]) + shape[3] + BEYOND_M
+    starts = np.empty((first.size, 3))
+    count = 0
+    for k in range(first.size):
+        if not abs(corner_opening[k] - shape[2]) <= 2.0 * shape[4]:
+            continue
+        x, y = corner_xy[k, 0], corner_xy[k, 1]
+        if _farther_than(ends, first[k], second[k], x, y, longest):
+            continue
+        count = _pair_start(angle, radius, covariance, ends, first[k], second[k], x, y,
+                            _wrap_half_open(corner_yaw[k] + math.pi), shape[2], starts, count)
+    return starts[:count]
+
+
+@jit
+def segment_pair_starts(angle, radius, covariance, ends, first, second, shape, full_turn):
+    """
+    Compiled twin of the frontend's ``_segment_pair_starts`` (eq. D1).
+
+    :param angle: the segments' normal angles, shape (N,), rad
+    :param radius: their distances, shape (N,), m
+    :param covariance: their (alpha, r) covariances, shape (N, 2, 2)
+    :param ends: their (start x, start y, end x, end y), shape (N, 4), m
+    :param first: every corner's first segment (its pair was tried), shape (K,)
+    :param second: its second segment, shape (K,)
+    :param shape: as :func:`fit_returns`'s
+    :param full_turn: the beams go all the way round (pairs across the seam)
+    :return: the starts (x, y, yaw), shape (S, 3)
+    """
+    count = angle.size
+    longest = max(shape[0], shape[1]) + shape[3] + BEYOND_M
+    concave = shape[2] < math.pi
+    starts = np.empty((2 * count, 3))
+    made = 0
+    for step in (1, 2):
+        for i in range(count):
+            j = i + step
+            if full_turn:
+                j %= count
+                if j == i:
+                    continue
+            elif j >= count:
+                continue
+            between = abs(_wrap_half_open(angle[j] - angle[i]))
+            if not abs(between - abs(math.pi - shape[2])) <= 2.0 * shape[4]:
+                continue
+            tried = False
+            for k in range(first.size):
+                tried = tried or (first[k] == i and second[k] == j) or (
+                    first[k] == j and second[k] == i)
+            if tried:
+                continue
+            det = math.sin(angle[j] - angle[i])
+            if abs(det) < 1e-9:
+                continue
+            px = (radius[i] * math.sin(angle[j]) - radius[j] * math.sin(angle[i])) / det
+            py = (radius[j] * math.cos(angle[i]) - radius[i] * math.cos(angle[j])) / det
+            if _farther_than(ends, i, j, px, py, longest):
+                continue
+            bx = by = 0.0
+            seen = True
+            for wall in (i, j):
+                mx = 0.5 * (ends[wall, 0] + ends[wall, 2]) - px
+                my = 0.5 * (ends[wall, 1] + ends[wall, 3]) - py
+                middle = math.hypot(mx, my)
+                if not middle > 0.0:
+                    seen = False
+                    break
+                bx, by = bx + mx / middle, by + my / middle
+            if not seen or (bx * px + by * py < 0.0) != concave:
+                continue
+            yaw = math.atan2(-by, -bx) if concave else math.atan2(by, bx)
+            made = _pair_start(angle, radius, covariance, ends, i, j, px, py, yaw, shape[2],
+                               starts, made)
+    return starts[:made]

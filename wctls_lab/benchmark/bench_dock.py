@@ -24,9 +24,10 @@ and "returns", the dock fitted to the scan's returns (what feature_node and proc
    and every shipped real recording of data/ (none holds a dock): candidates (single scans
    that match) and reported docks (confirmed by the tracker).
 3. Time per scan of find_docks + track_dock beside the extraction (the compiled core): wall
-   time (median, p99) and CPU time.
+   time (median, p99) and CPU time; the fit to the returns also by its numpy steps ("numpy",
+   as where numba is missing) beside its compiled twin ("returns").
 
-Usage: python bench_dock.py [--scans N]
+Usage: python bench_dock.py [--scans N] [--parts accuracy false time]
 """
 
 import argparse
@@ -54,14 +55,19 @@ VIEWS_DEG = (-60, -30, 0, 30, 60)
 BEARINGS_DEG = {(1.0, 0): (-60, 0, 60)}
 SCAN_PERIOD_S = 0.1
 DETECTORS = ('corners', 'returns')
+# Timed also: the fit to the returns by its numpy steps, beside the compiled one.
+TIMED = DETECTORS + ('numpy',)
+PARTS = ('accuracy', 'false', 'time')
 
 
 def detect(detector, features, ranges, angle_min, increment, config):
-    """Return one scan's dock candidates by a detector: 'corners' or 'returns'."""
+    """Return one scan's dock candidates by a detector: 'corners', 'returns' or 'numpy'."""
     if detector == 'corners':
         return find_docks(features.segments, features.corners, SHAPE)
+    # 'returns': the compiled fit while the compiled core serves; 'numpy': its numpy steps.
     return find_docks(features.segments, features.corners, SHAPE,
-                      dock_returns(ranges, angle_min, increment, config, features.range_sigma_m))
+                      dock_returns(ranges, angle_min, increment, config, features.range_sigma_m),
+                      compiled=False if detector == 'numpy' else None)
 
 
 def dock_polygon(apex, shape):
@@ -273,11 +279,11 @@ def timing(config, count):
     rng = np.random.default_rng(3)
     angle_min, increment, _ = full_turn_bearings()
     extraction, scans = [], []
-    detection = {d: [] for d in DETECTORS}
-    states = {d: TrackerState() for d in DETECTORS}
+    detection = {d: [] for d in TIMED}
+    states = {d: TrackerState() for d in TIMED}
     for t, (_, ranges, features, elapsed) in enumerate(run_scans(plan, pose, count, config,
                                                                  rng)):
-        for detector in DETECTORS:
+        for detector in TIMED:
             started = time.perf_counter()
             found = detect(detector, features, ranges, angle_min, increment, config)
             states[detector], _ = track_dock(states[detector], found, SCAN_PERIOD_S * t,
@@ -291,7 +297,7 @@ def timing(config, count):
                       f'{1e3 * statistics.median(detection[d]):.3f} ms, p99 '
                       f'{1e3 * float(np.percentile(detection[d], 99)):.3f} ms '
                       f'({1e3 * statistics.median(detection[d]) / extraction_ms:.2f}x the '
-                      'extraction)' for d in DETECTORS))
+                      'extraction)' for d in TIMED))
     passes = 5
     started = time.process_time()
     for _ in range(passes):
@@ -299,7 +305,7 @@ def timing(config, count):
             extract_features(ranges, angle_min, increment, config)
     extraction_s = (time.process_time() - started) / (passes * len(scans))
     cpu = {}
-    for detector in DETECTORS:
+    for detector in TIMED:
         started = time.process_time()
         for _ in range(passes):
             state = TrackerState()
@@ -310,13 +316,15 @@ def timing(config, count):
         cpu[detector] = (time.process_time() - started) / (passes * len(scans))
     print(f'CPU time per scan ({passes} passes): extraction {1e3 * extraction_s:.3f} ms; '
           + '; '.join(f'{d}: find_docks + track_dock {1e3 * cpu[d]:.3f} ms '
-                      f'({cpu[d] / extraction_s:.2f}x the extraction)' for d in DETECTORS))
+                      f'({cpu[d] / extraction_s:.2f}x the extraction)' for d in TIMED))
 
 
 def main():
     """Run the three parts and print their figures."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--scans', type=int, default=30, help='scans per pose (default 30)')
+    parser.add_argument('--parts', nargs='+', choices=PARTS, default=PARTS,
+                        help='which parts to run (default all)')
     args = parser.parse_args()
     print(start(wait=True).describe())
     s1 = feature_settings(defaults(FEATURE_NODE, 'rplidar_s1')).config
@@ -332,13 +340,16 @@ def main():
             return hokuyo
         return generic
 
-    print('\n## 1. accuracy, NEES, detection (S1-like noise, environment A lived in)')
-    accuracy(s1, args.scans)
-    print('\n## 2. false docks')
-    look_alikes(s1, args.scans)
-    real_recordings(config_for)
-    print('\n## 3. time per scan')
-    timing(s1, max(args.scans, 200))
+    if 'accuracy' in args.parts:
+        print('\n## 1. accuracy, NEES, detection (S1-like noise, environment A lived in)')
+        accuracy(s1, args.scans)
+    if 'false' in args.parts:
+        print('\n## 2. false docks')
+        look_alikes(s1, args.scans)
+        real_recordings(config_for)
+    if 'time' in args.parts:
+        print('\n## 3. time per scan')
+        timing(s1, max(args.scans, 200))
 
 
 if __name__ == '__main__':

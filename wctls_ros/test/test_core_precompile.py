@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-The first start on a machine compiles the pipeline and the tracker's kernels; the next loads them.
+The first start on a machine compiles the pipeline's, tracker's and dock's kernels; the next loads.
 
 Each case runs a fresh interpreter with its own empty cache, as a first start does; numba's own
 compile events say which kernels that process compiled rather than loaded.
@@ -53,6 +53,6 @@ def run(code: str, cache, timeout: float = 300.0) -> subprocess.CompletedProcess
 def test_a_first_start_compiles_the_pipeline_and_the_next_loads_it(tmp_path):
     first = json.loads(run(FIRST_START, tmp_path).stdout)
     assert not first['cached_before'] and first['cached_after']
-    assert {'_features_of_scan', 'update_tracks'} <= set(first['compiled'])
+    assert {'_features_of_scan', 'update_tracks', 'fit_returns'} <= set(first['compiled'])
     again = json.loads(run(FIRST_START, tmp_path).stdout)
     assert again['cached_before'] and again['compiled'] == []

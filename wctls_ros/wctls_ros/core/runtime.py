@@ -10,8 +10,9 @@ value within 1e-9 relative, on every scan of the test corpus. The compiled one
 it needs numba (``OLDEST_NUMBA`` or newer) and compiles once per machine, 20-60 s on a 2-core VM,
 after which it loads from numba's disk cache in about a second. The numpy one
 (:mod:`.numpy_core`) needs numpy alone. The landmark tracker's compiled kernels
-(:mod:`.numba_core.tracking`) are compiled and loaded with the compiled pipeline, and serve
-the tracker while it serves (:func:`compiled_tracker`).
+(:mod:`.numba_core.tracking`) and the dock's fit to the returns (:mod:`.numba_core.dock`) are
+compiled and loaded with the compiled pipeline, and serve while it serves
+(:func:`compiled_tracker`, :func:`compiled_dock`).
 
 The environment variable ``WCTLS_ROS_CORE`` chooses:
 
@@ -115,6 +116,8 @@ _lock = threading.Lock()
 _extract: Callable[..., Features] = numpy_core.extract_features
 # The compiled tracker's kernels (numba_core.tracking), loaded with the compiled pipeline.
 _tracker: Any = None
+# The dock's compiled fit (numba_core.dock), loaded with it.
+_dock: Any = None
 _status: Optional[CoreStatus] = None
 _compiler: Optional[subprocess.Popen] = None
 _listeners: List[Listener] = []
@@ -169,6 +172,23 @@ def compiled_tracker(wait: bool = False) -> Any:
     if wait:
         start(wait=True)
     return _tracker
+
+
+def compiled_dock(wait: bool = False) -> Any:
+    """
+    Return the dock's compiled fit to the returns while the compiled core serves, else None.
+
+    The kernel (:mod:`.numba_core.dock`, the twin of :func:`wctls_ros.frontend.dock.fit_returns`)
+    is compiled and loaded with the compiled pipeline, as :func:`compiled_tracker`'s are.
+
+    :param wait: start the choice first and wait for the compiled core (``start(wait=True)``)
+    :return: the module of the kernel, or None
+    :raises CoreUnavailable: with ``wait``, when ``WCTLS_ROS_CORE=numba`` and numba cannot give
+        the core
+    """
+    if wait:
+        start(wait=True)
+    return _dock
 
 
 def status() -> Optional[CoreStatus]:
@@ -324,11 +344,11 @@ def _bring_in_compiled(asked: str, on_compile: Optional[Callable[[], None]],
     :return: the status: numba, or numpy with the reason the compiled core failed
     :raises CoreUnavailable: when ``asked`` is 'numba' and the compiled core fails
     """
-    global _extract, _tracker
+    global _extract, _tracker, _dock
     started = time.perf_counter()
     try:
         import numba
-        from .numba_core import pipeline, precompile, tracking
+        from .numba_core import dock, pipeline, precompile, tracking
         compiled_here = not precompile.pipeline_is_cached()
         if compiled_here:
             if on_compile is not None:
@@ -343,6 +363,7 @@ def _bring_in_compiled(asked: str, on_compile: Optional[Callable[[], None]],
         return CoreStatus('numpy', reason)
     _extract = pipeline.extract_features
     _tracker = tracking
+    _dock = dock
     return CoreStatus('numba', f'numba {numba.__version__}', seconds=time.perf_counter() - started,
                       compiled_here=compiled_here)
 

@@ -23,11 +23,11 @@ Everything is in the scan's frame: m, rad. Pure numpy; no ROS.
 
 from dataclasses import dataclass
 import math
-from typing import List, NamedTuple, Optional, Tuple
+from typing import Any, List, NamedTuple, Optional, Tuple
 
 import numpy as np
 
-from ..core import CornerSet, FeatureConfig, SegmentSet
+from ..core import CornerSet, FeatureConfig, runtime, SegmentSet
 
 # P(chi2 with 3 dof <= 16.27) = 99.9 %: the gate of a pose difference.
 CHI2_3DOF_999 = 16.266
@@ -225,11 +225,11 @@ def fit_apex(segments: SegmentSet, right: int, left: int, apex_xy_m: np.ndarray,
         x += pxx * gx + pxy * gy + pxt * gt
         y += pxy * gx + pyy * gy + pyt * gt
         yaw += pxt * gx + pyt * gy + ptt * gt
-    pose = np.array([x, y, _wrap(yaw)])
-    if covariance is None or not (np.isfinite(pose).all()
-                                  and np.isfinite(np.array(covariance)).all()):
+    # Plain floats checked first: numpy's calls on a 3-vector cost more than the fit's steps.
+    if covariance is None or not all(math.isfinite(value) for value in (
+            x, y, yaw, *covariance[0], *covariance[1], *covariance[2])):
         return None
-    return pose, np.array(covariance)
+    return np.array([x, y, _wrap(yaw)]), np.array(covariance)
 
 
 def _wrap(angle_rad: float) -> float:
@@ -627,8 +627,8 @@ def _spacing(returns: DockReturns, pose, shape: DockShape) -> Tuple[float, float
     return spacing[0], spacing[1]
 
 
-def fit_returns(returns: DockReturns, start: Tuple[float, float, float],
-                shape: DockShape) -> Optional[ReturnsFit]:
+def fit_returns(returns: DockReturns, start: Tuple[float, float, float], shape: DockShape,
+                compiled: Optional[bool] = None) -> Optional[ReturnsFit]:
     """
     Fit the dock's two faces, at its opening angle, to the scan's returns (eq. D5-D9).
 
@@ -641,12 +641,44 @@ def fit_returns(returns: DockReturns, start: Tuple[float, float, float],
     D7). Each face's reach (eq. D8) and the two faces' own opening angle (eq. D9) are what
     :func:`find_docks` tests.
 
+    These numpy steps are the specification; their compiled twin (numba,
+    ``core/numba_core/dock.py``) gives the same fit within 1e-9 relative in one compiled call,
+    and runs whenever the compiled core serves (:func:`wctls_ros.core.runtime.compiled_dock`).
+
     :param returns: the scan's returns and noise model
     :param start: the apex frame's start (x, y, yaw), m, m, rad
     :param shape: the dock
+    :param compiled: None: the compiled twin while the compiled core serves, else the numpy
+        steps; True: the compiled twin (the compiled core is loaded, or compiled, first);
+        False: the numpy steps
     :return: the fit; None when a face has fewer than MIN_FACE_RETURNS returns on it or the
         equations are singular
+    :raises wctls_ros.core.CoreUnavailable: with ``compiled`` True, when numba cannot give the
+        compiled core
     """
+    kernels = _dock_kernels(compiled)
+    if kernels is not None:
+        return _fit_returns_compiled(kernels, returns, start, shape)
+    return _fit_returns_numpy(returns, start, shape)
+
+
+def _dock_kernels(compiled: Optional[bool]) -> Any:
+    """Return the compiled twins' module (``numba_core/dock.py``), or None for numpy's steps."""
+    if compiled is None:
+        return runtime.compiled_dock()
+    if not compiled:
+        return None
+    kernels = runtime.compiled_dock(wait=True)
+    if kernels is None:
+        status = runtime.status()
+        raise runtime.CoreUnavailable('the compiled dock fit needs the compiled core: '
+                                      + (status.reason if status is not None else 'not started'))
+    return kernels
+
+
+def _fit_returns_numpy(returns: DockReturns, start: Tuple[float, float, float],
+                       shape: DockShape) -> Optional[ReturnsFit]:
+    """Run :func:`fit_returns` by its numpy steps, the specification."""
     beyond = shape.face_tolerance_m + BEYOND_M           # the window's extent past the ends
     (_, _, nx0, ny0, _), (_, _, nx1, ny1, _) = _faces(0.0, 0.0, 0.0, shape)
     normal_offsets = (math.atan2(ny0, nx0), math.atan2(ny1, nx1))
@@ -702,8 +734,31 @@ def fit_returns(returns: DockReturns, start: Tuple[float, float, float],
                       (taken.bends[0], taken.bends[1]), chi2)
 
 
+def _fit_returns_compiled(kernels: Any, returns: DockReturns,
+                          start: Tuple[float, float, float],
+                          shape: DockShape) -> Optional[ReturnsFit]:
+    """Run :func:`fit_returns` by its compiled twin (``numba_core/dock.py``)."""
+    # Always the same argument types: numba compiles one version, the precompiled one.
+    values = kernels.fit_returns(
+        np.ascontiguousarray(returns.ranges_m, dtype=float), float(returns.angle_min_rad),
+        float(returns.angle_increment_rad), bool(returns.full_turn),
+        (float(returns.range_min_m), float(returns.range_max_m)),
+        (float(returns.range_sigma_m), float(returns.bearing_sigma_rad),
+         float(returns.model_error_sigma_m), float(returns.common_range_sigma_m),
+         float(returns.flatness_sigma_m)), bool(returns.residual_scaling),
+        (float(start[0]), float(start[1]), float(start[2])), _shape_tuple(shape))
+    if not len(values):
+        return None
+    v = values.tolist()
+    return ReturnsFit(values[:3].copy(), values[3:12].reshape(3, 3).copy(),
+                      (int(v[12]), int(v[13])), (v[14], v[15]), (v[16], v[17]),
+                      ((int(v[18]), int(v[19])), (int(v[20]), int(v[21]))), v[22],
+                      (v[23], v[24]), v[25])
+
+
 def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape,
-               returns: Optional[DockReturns] = None) -> List[DockPose]:
+               returns: Optional[DockReturns] = None,
+               compiled: Optional[bool] = None) -> List[DockPose]:
     """
     Return every place of a scan that has the dock's shape, as a dock pose.
 
@@ -731,24 +786,65 @@ def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape,
     :param shape: the dock
     :param returns: the scan's returns and noise model (:func:`dock_returns`); None: the
         corners alone
+    :param compiled: which implementation of the starts and the fit to the returns runs:
+        None: their compiled twins (``core/numba_core/dock.py``) while the compiled core
+        serves, else the numpy steps; True: the compiled twins; False: the numpy steps
     :return: the candidates, best fitting first (usually none or one)
     """
     if returns is None:
         return _docks_of_corners(segments, corners, shape)
+    kernels = _dock_kernels(compiled)
+    if kernels is not None:
+        # The compiled twins of the starts too: numpy's calls on a few segments would cost
+        # more than the fit.
+        arrays = _twin_arrays(segments, corners)
+        docks = _docks_of_returns(returns, kernels.corner_starts(
+            *arrays, _shape_tuple(shape)).tolist(), shape, kernels)
+        if not docks:
+            docks = _docks_of_returns(returns, kernels.segment_pair_starts(
+                *arrays[:6], _shape_tuple(shape), bool(returns.full_turn)).tolist(), shape,
+                kernels)
+        return sorted(docks, key=lambda dock: dock.misfit)
     tried: set = set()
-    docks = _docks_of_returns(returns, _corner_starts(segments, corners, shape, tried), shape)
+    docks = _docks_of_returns(returns, _corner_starts(segments, corners, shape, tried), shape,
+                              None)
     if not docks:
         docks = _docks_of_returns(
-            returns, _segment_pair_starts(segments, shape, returns.full_turn, tried), shape)
+            returns, _segment_pair_starts(segments, shape, returns.full_turn, tried), shape,
+            None)
     return sorted(docks, key=lambda dock: dock.misfit)
 
 
-def _docks_of_returns(returns: DockReturns, starts: list, shape: DockShape) -> List[DockPose]:
+def _twin_arrays(segments: SegmentSet, corners: CornerSet) -> tuple:
+    """
+    Return the features as the compiled starts take them (``numba_core/dock.py``).
+
+    The segments' angles, radii, (alpha, r) covariances and ends (start x, y, end x, y), the
+    corners' segments (all six for both twins), their opening angles, apexes and yaws.
+    """
+    def floats(values):
+        return np.ascontiguousarray(values, dtype=float)
+    return (floats(segments.angle_rad), floats(segments.radius_m), floats(segments.covariance),
+            floats(np.concatenate([segments.start_xy_m, segments.end_xy_m], axis=1)),
+            np.ascontiguousarray(corners.first_segment, dtype=np.int64),
+            np.ascontiguousarray(corners.second_segment, dtype=np.int64),
+            floats(corners.opening_angle_rad), floats(corners.xy_m), floats(corners.yaw_rad))
+
+
+def _shape_tuple(shape: DockShape) -> Tuple[float, float, float, float, float]:
+    """Return the dock as the compiled twins take it (``numba_core/dock.py``)."""
+    return (float(shape.right_face_m), float(shape.left_face_m), float(shape.opening_angle_rad),
+            float(shape.face_tolerance_m), float(shape.angle_tolerance_rad))
+
+
+def _docks_of_returns(returns: DockReturns, starts: list, shape: DockShape,
+                      kernels: Any) -> List[DockPose]:
     """Return the fits from the starts that have the dock's shape, one per dock."""
     docks: List[DockPose] = []
     apexes: List[Tuple[float, float]] = []
     for start in starts:
-        fit = fit_returns(returns, start, shape)
+        fit = (_fit_returns_numpy(returns, start, shape) if kernels is None
+               else _fit_returns_compiled(kernels, returns, start, shape))
         if fit is None:
             continue
         misfit = returns_misfit(fit, shape)
@@ -806,35 +902,42 @@ def _corner_starts(segments: SegmentSet, corners: CornerSet, shape: DockShape,
     angle_error = np.abs(corners.opening_angle_rad - shape.opening_angle_rad)
     longest = max(shape.right_face_m, shape.left_face_m) + shape.face_tolerance_m + BEYOND_M
     starts = []
-    for k in np.flatnonzero(angle_error <= 2.0 * shape.angle_tolerance_rad).tolist():
+    near = np.flatnonzero(angle_error <= 2.0 * shape.angle_tolerance_rad).tolist()
+    ends = _segment_ends(segments) if near else []
+    for k in near:
         pair = (int(corners.first_segment[k]), int(corners.second_segment[k]))
-        if _farther_than(segments, pair, corners.xy_m[k].tolist(), longest):
+        if _farther_than(ends, pair, corners.xy_m[k].tolist(), longest):
             continue
-        start = _pair_start(segments, pair, corners.xy_m[k].tolist(),
+        start = _pair_start(segments, ends, pair, corners.xy_m[k].tolist(),
                             float(wrap_angle(corners.yaw_rad[k] + math.pi)), shape)
         if start is not None:
             starts.append(start)
     return starts
 
 
-def _farther_than(segments: SegmentSet, pair: Tuple[int, int], apex: list,
-                  distance_m: float) -> bool:
-    """Tell whether either segment of a pair reaches farther than distance_m from apex."""
+def _segment_ends(segments: SegmentSet) -> list:
+    """Return each segment's (start x, start y, end x, end y), m, as plain floats."""
+    # The starts' loops read a few of them each: numpy's indexing would cost more than that.
+    return np.concatenate([segments.start_xy_m, segments.end_xy_m], axis=1).tolist()
+
+
+def _farther_than(ends: list, pair: Tuple[int, int], apex: list, distance_m: float) -> bool:
+    """Tell whether either segment of a pair (its ends: _segment_ends) reaches farther."""
     for wall in pair:
-        for end in (segments.start_xy_m[wall], segments.end_xy_m[wall]):
-            x, y = end.tolist()
-            if math.hypot(x - apex[0], y - apex[1]) > distance_m:
-                return True
+        sx, sy, ex, ey = ends[wall]
+        if (math.hypot(sx - apex[0], sy - apex[1]) > distance_m
+                or math.hypot(ex - apex[0], ey - apex[1]) > distance_m):
+            return True
     return False
 
 
-def _pair_start(segments: SegmentSet, pair: Tuple[int, int], apex: list, yaw: float,
-                shape: DockShape) -> Optional[Tuple[float, float, float]]:
+def _pair_start(segments: SegmentSet, ends: list, pair: Tuple[int, int], apex: list,
+                yaw: float, shape: DockShape) -> Optional[Tuple[float, float, float]]:
     """Return fit_apex's start of two segments meeting at apex (eq. D1); None if not a V."""
     c, s = math.cos(yaw), math.sin(yaw)
     sides = []
     for wall in pair:
-        (sx, sy), (ex, ey) = segments.start_xy_m[wall].tolist(), segments.end_xy_m[wall].tolist()
+        sx, sy, ex, ey = ends[wall]
         sides.append(c * (0.5 * (sy + ey) - apex[1]) - s * (0.5 * (sx + ex) - apex[0]))
     if not sides[0] * sides[1] < 0.0:
         return None
@@ -873,23 +976,25 @@ def _segment_pair_starts(segments: SegmentSet, shape: DockShape, full_turn: bool
                 <= 2.0 * shape.angle_tolerance_rad]
     longest = max(shape.right_face_m, shape.left_face_m) + shape.face_tolerance_m + BEYOND_M
     concave = shape.opening_angle_rad < math.pi
-    starts = []
+    starts: List[Tuple[float, float, float]] = []
+    if not len(pair):
+        return starts
+    ends, angle, radius = _segment_ends(segments), angles.tolist(), segments.radius_m.tolist()
     for i, j in pair.tolist():
         if (i, j) in tried or (j, i) in tried:
             continue
-        ai, aj = float(angles[i]), float(angles[j])
+        ai, aj = angle[i], angle[j]
         det = math.sin(aj - ai)
         if abs(det) < 1e-9:
             continue
-        ri, rj = float(segments.radius_m[i]), float(segments.radius_m[j])
+        ri, rj = radius[i], radius[j]
         px = (ri * math.sin(aj) - rj * math.sin(ai)) / det
         py = (rj * math.cos(ai) - ri * math.cos(aj)) / det
-        if _farther_than(segments, (i, j), [px, py], longest):
+        if _farther_than(ends, (i, j), [px, py], longest):
             continue
         bx = by = 0.0
         for wall in (i, j):
-            (sx, sy), (ex, ey) = segments.start_xy_m[wall].tolist(), segments.end_xy_m[
-                wall].tolist()
+            sx, sy, ex, ey = ends[wall]
             mx, my = 0.5 * (sx + ex) - px, 0.5 * (sy + ey) - py
             middle = math.hypot(mx, my)
             if not middle > 0.0:
@@ -900,7 +1005,7 @@ def _segment_pair_starts(segments: SegmentSet, shape: DockShape, full_turn: bool
                 continue
             # The apex frame's x axis points away from the robot's side (eq. D1).
             yaw = math.atan2(-by, -bx) if concave else math.atan2(by, bx)
-            start = _pair_start(segments, (i, j), [px, py], yaw, shape)
+            start = _pair_start(segments, ends, (i, j), [px, py], yaw, shape)
             if start is not None:
                 starts.append(start)
     return starts
@@ -1047,7 +1152,7 @@ def _follow(track: Optional[Track], candidates: List[DockPose], stamp_s: float,
     chi2 = [pose_chi2(c, track.pose, stamp_s - track.stamp_s, settings) for c in candidates]
     if not chi2 or min(chi2) > settings.gate:
         return track, candidates
-    best = int(np.argmin(chi2))
+    best = min(range(len(chi2)), key=chi2.__getitem__)   # the first least, as np.argmin
     rest = candidates[:best] + candidates[best + 1:]
     return Track(candidates[best], stamp_s, track.detections + 1), rest
 

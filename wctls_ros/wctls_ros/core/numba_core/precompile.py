@@ -2,14 +2,14 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-The pipeline and the tracker's kernels compiled before the first scan, or loaded from the cache.
+The pipeline's, the tracker's and the dock's kernels compiled before the first scan, or loaded.
 
 From the cache the compiled pipeline loads in a fraction of a second. Without it (the first run
 on a machine, or after an upgrade) numba compiles it: 16-22 s of CPU on a 2-core EPYC VM, and
-the tracker's kernels 8 s more (21.6 s against 29.7 s measured one after the other). Nobody
-waits for that: :mod:`..runtime` runs it in a process of its own while the numpy pipeline serves
-(helper processes that compiled kernels beside it once saved a third of the wait, when the first
-scan waited for it).
+the tracker's kernels 8 s more (21.6 s against 29.7 s measured one after the other), the
+dock's about 10 s more (at load 8). Nobody waits for that: :mod:`..runtime` runs it in a
+process of its own while the numpy pipeline serves (helper processes that compiled kernels
+beside it once saved a third of the wait, when the first scan waited for it).
 """
 
 import glob
@@ -19,13 +19,14 @@ import time
 
 import numpy as np
 
-from . import tracking
+from . import dock, tracking
 from ._jit import cache_folder, use_disk_cache
 from .pipeline import _features_of_scan, extract_features
 from ..records import TrackRules
 
 # The compiled functions that Python calls, each compiled once for the types it is called with.
-_ENTRY_POINTS = (_features_of_scan, tracking.update_tracks)
+_ENTRY_POINTS = (_features_of_scan, tracking.update_tracks, dock.fit_returns,
+                 dock.corner_starts, dock.segment_pair_starts)
 
 
 def warm_up() -> float:
@@ -45,6 +46,7 @@ def warm_up() -> float:
     square_room = 2.0 / np.maximum(np.abs(np.cos(bearing)), np.abs(np.sin(bearing)))
     extract_features(square_room, angle_min, increment)
     _track_once(square_room, angle_min, increment)
+    _dock_once(square_room, angle_min, increment)
     return time.perf_counter() - started
 
 
@@ -66,6 +68,23 @@ def _track_once(ranges_m: np.ndarray, angle_min_rad: float, angle_increment_rad:
             ends.copy(), np.zeros(1, np.int8), np.ones(1, np.int64), np.zeros(1, np.int64),
             np.zeros(1, np.int64), np.zeros(3), 1e-6 * np.eye(3), gates, rules, 1, True,
             ranges_m, angle_min_rad, angle_increment_rad, 10.0)
+
+
+def _dock_once(ranges_m: np.ndarray, angle_min_rad: float, angle_increment_rad: float) -> None:
+    """
+    Compile the dock's kernels: the starts of two segments and a corner, the fit from one.
+
+    With the argument types :func:`wctls_ros.frontend.dock.find_docks` calls them with.
+    """
+    shape = (0.3, 0.3, 2.1, 0.03, 0.17)
+    segments = (np.array([0.5, -0.5]), np.array([1.5, 1.5]), np.tile(1e-4 * np.eye(2), (2, 1, 1)),
+                np.array([[1.8, 0.0, 1.7, 0.2], [1.8, 0.0, 1.7, -0.2]]), np.zeros(1, np.int64),
+                np.ones(1, np.int64))
+    dock.corner_starts(*segments, np.array([2.1]), np.array([[1.8, 0.0]]), np.array([0.0]),
+                       shape)
+    dock.segment_pair_starts(*segments, shape, True)
+    dock.fit_returns(ranges_m, angle_min_rad, angle_increment_rad, True, (0.0, math.inf),
+                     (0.01, 0.001, 0.0, 0.0, 0.0), True, (1.9, 1.9, 0.785), shape)
 
 
 def pipeline_is_cached() -> bool:

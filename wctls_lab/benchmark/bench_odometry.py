@@ -10,8 +10,9 @@ reference path, chosen on the reference), ATE after SE(2) alignment, the share o
 10 cm and 2 deg, the step NEES with the reference's jitter (per pose: the tracking system of
 the RPLIDAR car 5 mm and 0.5 deg, the SLAM-corrected keyframes of Malaga and gh25 1 cm and
 0.5 deg) and its share inside the 95 % gate, the statuses, and the odometry's time per scan
-(the extraction left out). Per still recording: the drift at its end and its largest. Both
-references, scan to keyframe (the default) and scan to scan, side by side in one run.
+(the extraction left out). Per still recording: the drift at its end and its largest. Every
+reference side by side in one run: scan to keyframe (the default), scan to scan, and scan to
+a local map of the landmarks of the last 3 and 10 scans (docs/odometry.md#local-map).
 
 With ``--wheel``: the moving recordings with and without a wheel odometry as the prior, side
 by side. No recording of data/ holds one, so it is synthetic: the reference's robot step
@@ -45,7 +46,9 @@ MOVING = {'rplidar_barc_moving': ('rplidar_a2', 0.005, 0.5),
 STILL = ('sick_lms111_static', 'sick_lms1xx_static', 'sick_lms511_static',
          'sick_tim781s_static')
 REFERENCES = {'keyframe': OdometryConfig(),
-              'scan to scan': OdometryConfig(keyframe_m=0.0, keyframe_rad=0.0)}
+              'scan to scan': OdometryConfig(keyframe_m=0.0, keyframe_rad=0.0),
+              'local map, 3 scans': OdometryConfig(map_memory_scans=3),
+              'local map, 10 scans': OdometryConfig(map_memory_scans=10)}
 
 
 def synthetic_wheel(robot: np.ndarray, mount: np.ndarray, seed: int = 0,

@@ -37,6 +37,7 @@ from typing import List, Optional, Tuple
 import numpy as np
 
 from .frames import finite_only, Landmarks, overlapping, rotation, wrap_angle
+from .local_map import fit_sensitivity, LocalMap, noise_covariance
 
 STATUSES = ('tracking', 'degenerate', 'prior', 'reinitialized')
 # Where a step's prior came from: the constant velocity of the last good step, or handed in.
@@ -88,6 +89,9 @@ class OdometryConfig:
     :ivar keyframe_m: match the scans against a keyframe until they lie this far from it, m
         (0 and keyframe_rad 0: scan to scan)
     :ivar keyframe_rad: ... or turned this far from it, rad
+    :ivar map_memory_scans: match each scan against a local map of the landmarks seen in the
+        last this many scans, fused (:mod:`.local_map`; the keyframes are then unused); 0 (the
+        default: on the recordings of data/ the map did not beat the keyframe): no map
     :ivar seed: seed of the hypothesis draw
     """
 
@@ -103,6 +107,7 @@ class OdometryConfig:
     max_step_m: float = 2.0
     keyframe_m: float = 0.1
     keyframe_rad: float = math.radians(3.0)
+    map_memory_scans: int = 0
     seed: int = 0
 
 
@@ -161,6 +166,7 @@ class StepEstimate:
     :ivar prior_gain: d step / d prior step, shape (3, 3), where a handed-in prior joined the
         fit ((I + P^-1)^-1 P^-1), else None: what the step owes the prior, for its covariance
         with what the prior came from
+    :ivar pairs: the fit's (corner pairs, line pairs), each (previous index, current index)
     """
 
     step: np.ndarray
@@ -172,6 +178,7 @@ class StepEstimate:
     prior_source: str = PRIOR_SOURCES[0]
     prior_rejected: bool = False
     prior_gain: Optional[np.ndarray] = None
+    pairs: Tuple[Tuple[Tuple[int, int], ...], Tuple[Tuple[int, int], ...]] = ((), ())
 
 
 @dataclass(frozen=True)
@@ -913,7 +920,8 @@ def _with_prior(previous: Landmarks, current: Landmarks, prior: Prior,
         return None, False
     return StepEstimate(step, covariance, 'degenerate' if degenerate else 'tracking',
                         len(corners), len(lines), chi2 / dof, PRIOR_SOURCES[1],
-                        prior_gain=covariance @ prior_information), False
+                        prior_gain=covariance @ prior_information,
+                        pairs=(tuple(corners), tuple(lines))), False
 
 
 def estimate_step(previous: Landmarks, current: Landmarks, prior_step: np.ndarray,
@@ -1017,7 +1025,8 @@ def _estimate(previous: Landmarks, current: Landmarks, prior_step: np.ndarray,
     if not np.isfinite(covariance).all():
         return reinit
     return StepEstimate(step, covariance, status, len(corners), len(lines),
-                        chi2 / dof if dof > 0 else math.nan)
+                        chi2 / dof if dof > 0 else math.nan,
+                        pairs=(tuple(corners), tuple(lines)))
 
 
 class Odometry:
@@ -1054,6 +1063,7 @@ class Odometry:
         self._velocity = np.zeros(3)            # per second
         self._velocity_covariance = np.zeros((3, 3))
         self._velocity_known = False
+        self._map: Optional[LocalMap] = None
 
     def _prior(self, dt_s: float) -> Tuple[np.ndarray, np.ndarray]:
         """Return the constant-velocity step over dt and its grown covariance."""
@@ -1102,6 +1112,62 @@ class Odometry:
             covariance = covariance + cross + cross.T
         return covariance
 
+    def _velocity_from(self, status: str, step: np.ndarray, covariance: np.ndarray,
+                       dt_s: float) -> None:
+        """Take a matched step as the constant velocity; a reinitialization forgets it."""
+        if status in ('tracking', 'degenerate') and dt_s > 0.0:
+            self._velocity = step / dt_s
+            self._velocity_covariance = covariance / dt_s ** 2
+            self._velocity_known = True
+        elif status == 'reinitialized':
+            self._velocity = np.zeros(3)
+            self._velocity_covariance = np.zeros((3, 3))
+            self._velocity_known = False
+
+    def _update_map(self, stamp_s: float, dt_s: float, landmarks: Landmarks,
+                    wheel: Optional[Prior], prior_step: np.ndarray,
+                    prior_covariance: np.ndarray) -> OdometryUpdate:
+        """
+        Take one scan against the local map (docs/odometry.md#local-map).
+
+        The scan is matched against the map moved into the last scan's frame; the step's and
+        the pose's covariances come from the map's joint covariance (:class:`.LocalMap`).
+        """
+        memory = self.config.map_memory_scans
+        if self._map is None:
+            self._map = LocalMap(self.pose, self.pose_covariance, landmarks, memory)
+            estimate = StepEstimate(np.zeros(3), np.zeros((3, 3)), 'prior')
+            step, step_covariance = np.zeros(3), np.zeros((3, 3))
+        else:
+            frame, frame_jacobian = self._map.in_frame()
+            estimate = estimate_step(frame, landmarks, prior_step, prior_covariance,
+                                     self.config, wheel)
+            step = estimate.step
+            if estimate.status == 'reinitialized':
+                # Nothing consistent associates: the map starts again from this scan.
+                step_covariance = estimate.covariance
+                by_pose, by_step = compose_jacobians(self.pose, step)
+                pose = compose(self.pose, step)
+                covariance = (by_pose @ self.pose_covariance @ by_pose.T
+                              + by_step @ step_covariance @ by_step.T)
+                self._map = LocalMap(pose, covariance, landmarks, memory)
+            else:
+                by_map, by_noise, noise = _match_sensitivity(frame, landmarks, estimate,
+                                                             prior_covariance, wheel)
+                pairs = estimate.pairs if estimate.status != 'prior' else ((), ())
+                moved = (compose(self._map.pose, step),
+                         *compose_jacobians(self._map.pose, step))
+                step_covariance = self._map.update(moved, by_map, by_noise, noise, landmarks,
+                                                   pairs[0], pairs[1], frame, frame_jacobian)
+        self.pose = self._map.pose.copy()
+        self.pose_covariance = self._map.covariance[:3, :3].copy()
+        self._velocity_from(estimate.status, step, step_covariance, dt_s)
+        self._stamp_s = stamp_s if math.isfinite(stamp_s) else self._stamp_s
+        return OdometryUpdate(stamp_s, dt_s, step.copy(), step_covariance.copy(),
+                              self.pose.copy(), self.pose_covariance.copy(), estimate.status,
+                              estimate.corners, estimate.lines, estimate.prior_source,
+                              estimate.prior_rejected)
+
     def update(self, stamp_s: float, landmarks: Landmarks,
                wheel: Optional[Prior] = None) -> OdometryUpdate:
         """
@@ -1118,6 +1184,9 @@ class Odometry:
         dt_s = stamp_s - self._stamp_s if math.isfinite(self._stamp_s) else 0.0
         dt_s = dt_s if math.isfinite(dt_s) and dt_s > 0.0 else 0.0
         prior_step, prior_covariance = self._prior(dt_s)
+        if self.config.map_memory_scans > 0:
+            return self._update_map(stamp_s, dt_s, landmarks, wheel, prior_step,
+                                    prior_covariance)
         # The priors of the scan's pose in the keyframe's frame: the last one's, one step on.
         prior_relative, prior_relative_covariance = self._relative(prior_step, prior_covariance)
         if self._reference is None:
@@ -1147,14 +1216,7 @@ class Odometry:
             self.pose = compose(self._reference_pose, estimate.step)
             self.pose_covariance = (by_pose @ self._reference_covariance @ by_pose.T
                                     + by_step @ estimate.covariance @ by_step.T)
-        if matched and dt_s > 0.0:
-            self._velocity = step / dt_s
-            self._velocity_covariance = step_covariance / dt_s ** 2
-            self._velocity_known = True
-        elif estimate.status == 'reinitialized':
-            self._velocity = np.zeros(3)
-            self._velocity_covariance = np.zeros((3, 3))
-            self._velocity_known = False
+        self._velocity_from(estimate.status, step, step_covariance, dt_s)
         far = (math.hypot(estimate.step[0], estimate.step[1]) > self.config.keyframe_m
                or abs(estimate.step[2]) > self.config.keyframe_rad)
         if not matched or far:
@@ -1166,6 +1228,51 @@ class Odometry:
                               self.pose.copy(), self.pose_covariance.copy(), estimate.status,
                               estimate.corners, estimate.lines, estimate.prior_source,
                               estimate.prior_rejected)
+
+
+def _match_sensitivity(frame: Landmarks, current: Landmarks, estimate: StepEstimate,
+                       prior_covariance: np.ndarray, wheel: Optional[Prior]):
+    """
+    Return a match's step as a function of the map, the scan's noise and the prior, to first order.
+
+    :return: (d step / d(the map's moved values), shape (3, 2 n); d step / d(the scan's
+        corners, its lines, the prior), shape (3, 2 C + 2 L + 3); that noise's covariance)
+    """
+    by_map = np.zeros((3, 2 * (len(frame.corner_xy) + len(frame.line))))
+    by_noise = np.zeros((3, 2 * (len(current.corner_xy) + len(current.line)) + 3))
+    # The prior that joined the fit: the wheel's, or the constant velocity's where degenerate.
+    prior = (wheel.covariance if estimate.prior_source == PRIOR_SOURCES[1] and wheel is not None
+             else prior_covariance)
+    if estimate.status not in ('tracking', 'degenerate'):
+        # The step is the prior's, with the estimate's covariance.
+        by_noise[:, -3:] = np.eye(3)
+        return by_map, by_noise, noise_covariance(current, estimate.covariance)
+    corners, lines = estimate.pairs
+    step = estimate.step
+    error, jacobian, cov = _residuals(_gather(frame, current, corners, lines), step)
+    weight = _inverse_2x2(cov)
+    information = np.einsum('kia,kij,kjb->ab', jacobian, weight, jacobian)
+    joined = estimate.prior_gain is not None or estimate.status == 'degenerate'
+    by_residual, by_prior = fit_sensitivity(jacobian, weight, information,
+                                            np.linalg.inv(prior) if joined else None)
+    turn = rotation(step[2])
+    count = len(frame.corner_xy)
+    for k, (m, c) in enumerate(corners):
+        # r = p - (R q + t): dr/dp = I, dr/dq = -R.
+        by_map[:, 2 * m:2 * m + 2] += by_residual[k]
+        by_noise[:, 2 * c:2 * c + 2] -= by_residual[k] @ turn
+    offset = len(corners)
+    first_line = 2 * len(current.corner_xy)
+    for k, (m, c) in enumerate(lines):
+        # r = (alpha_c + dyaw, r_c + t . n) - (alpha_p, r_p): dr/dp = -I, dr/dc = [[1, 0],
+        # [t . n_perp, 1]].
+        angle = current.line[c, 0] + step[2]
+        moved = np.array([[1.0, 0.0],
+                          [-step[0] * math.sin(angle) + step[1] * math.cos(angle), 1.0]])
+        by_map[:, 2 * (count + m):2 * (count + m) + 2] -= by_residual[offset + k]
+        by_noise[:, first_line + 2 * c:first_line + 2 * c + 2] += by_residual[offset + k] @ moved
+    by_noise[:, -3:] = by_prior
+    return by_map, by_noise, noise_covariance(current, prior)
 
 
 def on_robot(update: OdometryUpdate, mount: np.ndarray) -> OdometryUpdate:

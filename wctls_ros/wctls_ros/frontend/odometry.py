@@ -416,6 +416,47 @@ def line_hypotheses(previous: Landmarks, current: Landmarks) -> np.ndarray:
     return out[np.isfinite(out).all(axis=1)]
 
 
+def corner_line_hypotheses(previous: Landmarks, current: Landmarks) -> np.ndarray:
+    """
+    Return the steps that a corner and a line seen in both scans allow.
+
+    A rigid motion keeps a corner's signed distance from a line, d = p . n - r: a corner and a
+    line of the previous scan and of the current one are a pair when their distances agree
+    within the 99 % gate of their variances, n^T C_p n + g^T C_line g with g = (p . n_perp,
+    -1). The line's normals give the rotation (never flipped, as in :func:`line_hypotheses`),
+    the corner the translation, t = p - R q (docs/odometry.md#hypotheses). Where the walls
+    are parallel (a corridor), only such a pair fixes the motion along them.
+
+    :param previous: the previous scan's landmarks
+    :param current: the current scan's landmarks
+    :return: steps (dx m, dy m, dyaw rad), shape (H, 3)
+    """
+    if not all(len(s.corner_xy) and len(s.line) for s in (previous, current)):
+        return np.zeros((0, 3))
+
+    def distances(landmarks):
+        xy, angle = landmarks.corner_xy[:, None], landmarks.line[None, :, 0]
+        normal = np.stack([np.cos(angle), np.sin(angle)], -1)
+        lever = -xy[..., 0] * normal[..., 1] + xy[..., 1] * normal[..., 0]
+        distance = (xy * normal).sum(-1) - landmarks.line[None, :, 1]
+        cov, line_cov = landmarks.corner_cov[:, None], landmarks.line_cov[None]
+        var = (np.einsum('...i,...ij,...j->...', normal, cov, normal) + lever ** 2
+               * line_cov[..., 0, 0] - 2.0 * lever * line_cov[..., 0, 1] + line_cov[..., 1, 1])
+        return distance.ravel(), var.ravel()
+
+    d_prev, v_prev = distances(previous)
+    d_cur, v_cur = distances(current)
+    p, c = np.nonzero((d_prev[:, None] - d_cur[None, :]) ** 2
+                      <= CHI2_1DOF_99 * (v_prev[:, None] + v_cur[None, :]))
+    corner_p, line_p = np.divmod(p, len(previous.line))
+    corner_c, line_c = np.divmod(c, len(current.line))
+    yaw = wrap_angle(previous.line[line_p, 0] - current.line[line_c, 0])
+    cos, sin = np.cos(yaw), np.sin(yaw)
+    q = current.corner_xy[corner_c]
+    moved = np.column_stack([cos * q[:, 0] - sin * q[:, 1], sin * q[:, 0] + cos * q[:, 1]])
+    return np.column_stack([previous.corner_xy[corner_p] - moved, yaw])
+
+
 def _quadratic_2x2(error_0, error_1, s00, s01, s10, s11):
     """
     Return e^T S^-1 e of 2-vectors and 2x2 matrices given by their components (any one shape).
@@ -836,7 +877,8 @@ def _hypotheses(previous: Landmarks, current: Landmarks, config: OdometryConfig,
     """
     search_prev, search_cur = _best_known(previous), _best_known(current)
     steps = np.concatenate([corner_hypotheses(search_prev, search_cur),
-                            line_hypotheses(search_prev, search_cur)])
+                            line_hypotheses(search_prev, search_cur),
+                            corner_line_hypotheses(search_prev, search_cur)])
     steps = steps[np.hypot(steps[:, 0], steps[:, 1]) <= config.max_step_m]
     if keep is not None and len(steps):
         steps = steps[keep(steps)]
@@ -1063,6 +1105,7 @@ class Odometry:
         self._velocity = np.zeros(3)            # per second
         self._velocity_covariance = np.zeros((3, 3))
         self._velocity_known = False
+        self._velocity_dt_s = 0.0
         self._map: Optional[LocalMap] = None
 
     def _prior(self, dt_s: float) -> Tuple[np.ndarray, np.ndarray]:
@@ -1074,6 +1117,8 @@ class Odometry:
             # Before a first match the velocity is unknown: a motion of any size is as likely.
             growth = growth + np.diag([config.reinit_sigma_m ** 2, config.reinit_sigma_m ** 2,
                                        config.reinit_sigma_rad ** 2])
+        elif self._velocity_dt_s > 0.0:
+            growth = growth * max(1.0, dt_s / self._velocity_dt_s) ** 2
         return self._velocity * dt_s, self._velocity_covariance * dt_s ** 2 + growth
 
     def _keyframe(self, landmarks: Landmarks) -> None:
@@ -1117,6 +1162,7 @@ class Odometry:
         """Take a matched step as the constant velocity; a reinitialization forgets it."""
         if status in ('tracking', 'degenerate') and dt_s > 0.0:
             self._velocity = step / dt_s
+            self._velocity_dt_s = dt_s
             self._velocity_covariance = covariance / dt_s ** 2
             self._velocity_known = True
         elif status == 'reinitialized':

@@ -143,7 +143,7 @@ def kiss_icp(name: str, python: str) -> str:
     _, sigma_m, sigma_deg = MOVING[name]
     scans = load_scans(folder)
     angles = scans.angle_min + scans.angle_increment * np.arange(scans.ranges.shape[1])
-    clouds = {}
+    clouds = {'max_range': np.array(scans.range_max), 'count': np.array(len(scans.ranges))}
     for k, ranges in enumerate(scans.ranges):
         kept = np.isfinite(ranges) & (ranges >= scans.range_min) & (ranges <= scans.range_max)
         clouds[f'c{k}'] = np.column_stack([ranges[kept] * np.cos(angles[kept]),
@@ -151,7 +151,7 @@ def kiss_icp(name: str, python: str) -> str:
                                            np.zeros(kept.sum())]).astype(float)
     with tempfile.TemporaryDirectory() as folder_out:
         inputs, outputs = pathlib.Path(folder_out, 'in.npz'), pathlib.Path(folder_out, 'out.npz')
-        np.savez(inputs, max_range=scans.range_max, count=len(scans.ranges), **clouds)
+        np.savez(inputs, **clouds)
         subprocess.run([python, '-c', KISS_ICP, str(inputs), str(outputs)], check=True)
         result = np.load(outputs)
         laser, seconds = result['poses'], float(result['seconds'])

@@ -105,7 +105,7 @@ class LocalMap:
         self._scan = 0
         self.update((self.pose.copy(), np.eye(3), np.eye(3)), np.zeros((3, 0)),
                     np.zeros((3, 2 * _count(landmarks))), noise_covariance(landmarks), landmarks,
-                    [], [], None, np.zeros((0, 3)))
+                    [], [], self.in_frame()[0], np.zeros((0, 3)))
 
     @property
     def size(self) -> int:
@@ -153,7 +153,7 @@ class LocalMap:
                by_noise: np.ndarray,
                noise_covariance: np.ndarray, landmarks: Landmarks,
                corner_pairs: Sequence[Tuple[int, int]], line_pairs: Sequence[Tuple[int, int]],
-               frame: Optional[Landmarks], frame_jacobian: np.ndarray) -> np.ndarray:
+               frame: Landmarks, frame_jacobian: np.ndarray) -> np.ndarray:
         """
         Take a scan matched against :meth:`in_frame`: move the pose on, fuse, add, forget.
 
@@ -167,8 +167,7 @@ class LocalMap:
         :param landmarks: the scan's landmarks in its frame
         :param corner_pairs: (map index, scan index) of the associated corners
         :param line_pairs: (map index, scan index) of the associated lines
-        :param frame: :meth:`in_frame`'s landmarks (the gain's relative covariances; None
-            without pairs)
+        :param frame: :meth:`in_frame`'s landmarks (the gain's relative covariances)
         :param frame_jacobian: :meth:`in_frame`'s Jacobian
         :return: the step's covariance, shape (3, 3)
         """

@@ -32,7 +32,8 @@ def test_a_corner_and_a_wall_find_a_motion_far_from_the_prior():
         current = observe(truth, rng, PILLAR, CORRIDOR)
         hypotheses = corner_line_hypotheses(previous, current)
         assert np.min(np.abs(hypotheses - truth).max(axis=1)) < 0.05
-        estimate = estimate_step(previous, current, np.zeros(3), np.diag([0.01, 0.01, 0.03]))
+        # No velocity known yet: the prior's spread is the reinitialization's (1 m, 60 deg).
+        estimate = estimate_step(previous, current, np.zeros(3), np.diag([1.0, 1.0, 1.1]))
         assert estimate.status == 'tracking'
         error = estimate.step - truth
         errors.append(error @ np.linalg.solve(estimate.covariance, error))
@@ -55,3 +56,31 @@ def test_the_priors_growth_scales_with_the_gap_it_bridges():
                                             config.prior_sigma_rad]))
     assert np.all(stds[1] >= 10.0 * np.array([config.prior_sigma_m, config.prior_sigma_m,
                                               config.prior_sigma_rad]))
+
+
+def test_a_period_of_repeated_structure_that_associates_more_loses_to_the_prior():
+    """Two rows of pillars 1 m apart: the view moves on, the motion one period on sees more."""
+    rows = [(x, y) for x in range(-1, 4) for y in (-1.0, 1.0)]
+    truth = np.array([0.3, 0.0, 0.0])
+    rng = np.random.default_rng(6)
+    # The previous scan saw x = 0..3, the current sees x = -1..2: the true motion associates
+    # three pillars of each row, the motion 1 m further all four.
+    previous = observe((0.0, 0.0, 0.0), rng, np.array([p for p in rows if p[0] >= 0]), [])
+    current = observe(truth, rng, np.array([p for p in rows if p[0] <= 2]), [])
+    estimate = estimate_step(previous, current, truth, np.diag([0.01, 0.01, 0.003]))
+    assert estimate.status == 'tracking'
+    assert estimate.corners == 6
+    assert np.abs(estimate.step - truth).max() < 0.02
+
+
+def test_a_velocity_held_beyond_the_largest_step_is_forgotten():
+    """0.5 m/s over 10 s would be 5 m, beyond max_step_m: the prior is no motion, wide."""
+    config = OdometryConfig()
+    odometry = Odometry(config)
+    for k in range(4):
+        odometry.update(0.1 * k, observe((0.05 * k, 0.0, 0.0)))
+    update = odometry.update(10.3, observe((0.0, 0.0, 0.0), None, PILLAR[:0], []))
+    assert update.status == 'prior'
+    assert np.array_equal(update.step, np.zeros(3))
+    assert np.all(np.sqrt(update.step_covariance.diagonal())
+                  >= [config.reinit_sigma_m, config.reinit_sigma_m, config.reinit_sigma_rad])

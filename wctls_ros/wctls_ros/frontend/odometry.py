@@ -65,6 +65,9 @@ REJECTING_SHARE = 2.0
 # the best known: the pairs of pairs grow as the fourth power of the landmarks (at 32, 496 pairs
 # of one scan against 992 of the other, per kind). No recording of data/ has more than 24.
 PAIR_LANDMARKS = 32
+# A refined hypothesis this far from the prior (its chi-square, 3 dof at 99.9 %) counts one
+# associated landmark less: to win outside the prior's gate it must associate one more.
+PRIOR_PAIR_CHI2 = 16.27
 
 
 @dataclass(frozen=True)
@@ -827,14 +830,19 @@ def _search(previous: Landmarks, current: Landmarks, steps: np.ndarray, prior_st
     Return the best association of the hypotheses: (its step, corner pairs, line pairs).
 
     The best-scored hypotheses, one per motion, are each refined (with ``fused``, by fits that
-    take the prior as a measurement); the one with most pairs wins, on a tie the one nearer
-    the prior by its covariance (docs/odometry.md#hypotheses).
+    take the prior as a measurement); the one with most pairs less its chi-square from the
+    prior over PRIOR_PAIR_CHI2 wins, on a tie the one nearer the prior by its covariance
+    (docs/odometry.md#hypotheses).
     """
     fewest = min(len(previous.corner_xy) + len(previous.line),
                  len(current.corner_xy) + len(current.line))
     chi2s = _search_chi2(previous, current, steps)
-    scores = score_hypotheses(chi2s, len(steps))
-    best_count, best_chi2 = -1, math.inf
+    # Scored as they are ranked once refined: the landmarks less the prior's word.
+    away = steps - prior_step
+    away[:, 2] = wrap_angle(away[:, 2])
+    scores = score_hypotheses(chi2s, len(steps)) - np.einsum(
+        'hi,ij,hj->h', away, np.linalg.inv(prior_covariance), away) / PRIOR_PAIR_CHI2
+    best_rank, best_chi2 = -math.inf, math.inf
     step, corners, lines = prior_step, [], []
     # The best few hypotheses are each refined: a hypothesis from a short baseline can lie
     # outside the gate of landmarks that a fit from it brings in.
@@ -853,16 +861,18 @@ def _search(previous: Landmarks, current: Landmarks, steps: np.ndarray, prior_st
                                            (prior_step, prior_covariance) if fused else None)
         count = len(pairs[0]) + len(pairs[1]) if math.hypot(
             refined[0], refined[1]) <= config.max_step_m else 0
-        # Equal support (a symmetric room): the motion the prior expects, then the better fit.
+        # Ranked by the landmarks associated less the prior's word (PRIOR_PAIR_CHI2); equal
+        # (a symmetric room): the motion the prior expects, then the better fit.
         away = refined - prior_step
         away[2] = float(wrap_angle(away[2]))
-        chi2 = (fit_chi2 + float(away @ np.linalg.solve(prior_covariance, away))
-                if count else math.inf)
-        if count > best_count or (count == best_count and chi2 < best_chi2):
-            best_count, best_chi2 = count, chi2
+        prior_chi2 = float(away @ np.linalg.solve(prior_covariance, away))
+        chi2 = fit_chi2 + prior_chi2 if count else math.inf
+        rank = count - prior_chi2 / PRIOR_PAIR_CHI2 if count else -1.0
+        if rank > best_rank or (rank == best_rank and chi2 < best_chi2):
+            best_rank, best_chi2 = rank, chi2
             step, (corners, lines) = refined, pairs
-        if best_count >= ENOUGH_SHARE * fewest:
-            break                       # nothing else could associate much more
+        if best_rank >= ENOUGH_SHARE * fewest:
+            break                       # nothing else could rank much higher
     return step, corners, lines
 
 
@@ -1113,13 +1123,16 @@ class Odometry:
         config = self.config
         growth = np.diag([config.prior_sigma_m ** 2, config.prior_sigma_m ** 2,
                           config.prior_sigma_rad ** 2])
-        if not self._velocity_known:
+        step = self._velocity * dt_s
+        if not self._velocity_known or math.hypot(step[0], step[1]) > config.max_step_m:
             # Before a first match the velocity is unknown: a motion of any size is as likely.
-            growth = growth + np.diag([config.reinit_sigma_m ** 2, config.reinit_sigma_m ** 2,
-                                       config.reinit_sigma_rad ** 2])
-        elif self._velocity_dt_s > 0.0:
+            # Held so long that it would move further than any step, it says nothing either.
+            return np.zeros(3), growth + np.diag([config.reinit_sigma_m ** 2,
+                                                  config.reinit_sigma_m ** 2,
+                                                  config.reinit_sigma_rad ** 2])
+        if self._velocity_dt_s > 0.0:
             growth = growth * max(1.0, dt_s / self._velocity_dt_s) ** 2
-        return self._velocity * dt_s, self._velocity_covariance * dt_s ** 2 + growth
+        return step, self._velocity_covariance * dt_s ** 2 + growth
 
     def _keyframe(self, landmarks: Landmarks) -> None:
         """Make the scan just taken the reference."""

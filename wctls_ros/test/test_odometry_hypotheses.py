@@ -73,8 +73,8 @@ def test_a_period_of_repeated_structure_that_associates_more_loses_to_the_prior(
     assert np.abs(estimate.step - truth).max() < 0.02
 
 
-def test_a_velocity_held_beyond_the_largest_step_is_forgotten():
-    """0.5 m/s over 10 s would be 5 m, beyond max_step_m: the prior is no motion, wide."""
+def test_a_velocity_held_beyond_the_largest_step_gives_no_motion_where_nothing_matches():
+    """0.5 m/s over 10 s would be 5 m, beyond max_step_m: no motion, with the grown spread."""
     config = OdometryConfig()
     odometry = Odometry(config)
     for k in range(4):

@@ -1123,16 +1123,27 @@ class Odometry:
         config = self.config
         growth = np.diag([config.prior_sigma_m ** 2, config.prior_sigma_m ** 2,
                           config.prior_sigma_rad ** 2])
-        step = self._velocity * dt_s
-        if not self._velocity_known or math.hypot(step[0], step[1]) > config.max_step_m:
+        if not self._velocity_known:
             # Before a first match the velocity is unknown: a motion of any size is as likely.
-            # Held so long that it would move further than any step, it says nothing either.
-            return np.zeros(3), growth + np.diag([config.reinit_sigma_m ** 2,
-                                                  config.reinit_sigma_m ** 2,
-                                                  config.reinit_sigma_rad ** 2])
-        if self._velocity_dt_s > 0.0:
+            growth = growth + np.diag([config.reinit_sigma_m ** 2, config.reinit_sigma_m ** 2,
+                                       config.reinit_sigma_rad ** 2])
+        elif self._velocity_dt_s > 0.0:
             growth = growth * max(1.0, dt_s / self._velocity_dt_s) ** 2
-        return step, self._velocity_covariance * dt_s ** 2 + growth
+        return self._velocity * dt_s, self._velocity_covariance * dt_s ** 2 + growth
+
+    def _unmatched(self, estimate: StepEstimate, prior_step: np.ndarray) -> np.ndarray:
+        """
+        Return the step of a scan nothing matched: the prior's, or none beyond ``max_step_m``.
+
+        A constant velocity held so long that it would move further than any step still tells
+        the search where the motion points, but as a step it is none (a keyframed log's gap of
+        25 s extrapolated to 12 m); its covariance, grown with the gap, stays. A wheel's step
+        is measured, whatever its length.
+        """
+        if (estimate.prior_source == PRIOR_SOURCES[0]
+                and math.hypot(prior_step[0], prior_step[1]) > self.config.max_step_m):
+            return np.zeros(3)
+        return prior_step.copy()
 
     def _keyframe(self, landmarks: Landmarks) -> None:
         """Make the scan just taken the reference."""
@@ -1204,7 +1215,7 @@ class Odometry:
             step = estimate.step
             if estimate.status == 'reinitialized':
                 # Nothing consistent associates: the map starts again from this scan.
-                step_covariance = estimate.covariance
+                step, step_covariance = self._unmatched(estimate, step), estimate.covariance
                 by_pose, by_step = compose_jacobians(self.pose, step)
                 pose = compose(self.pose, step)
                 covariance = (by_pose @ self.pose_covariance @ by_pose.T
@@ -1263,7 +1274,8 @@ class Odometry:
         step_covariance = self._step_covariance(estimate, wheel)
         if not matched:
             # The prior or a reinitialization: its covariance is the step's own.
-            step, step_covariance = prior_step.copy(), estimate.covariance.copy()
+            step = self._unmatched(estimate, prior_step)
+            step_covariance = estimate.covariance.copy()
             if estimate.status == 'prior' and self._reference is None:
                 step_covariance = np.zeros((3, 3))
             by_pose, by_step = compose_jacobians(self.pose, step)

@@ -10,8 +10,9 @@ reference path, chosen on the reference), ATE after SE(2) alignment, the share o
 10 cm and 2 deg, the step NEES with the reference's jitter (per pose: the tracking system of
 the RPLIDAR car 5 mm and 0.5 deg, the SLAM-corrected keyframes of Malaga and gh25 1 cm and
 0.5 deg) and its share inside the 95 % gate, the statuses, and the odometry's time per scan
-(the extraction left out). Per still recording: the drift at its end and its largest. Both
-references, scan to keyframe (the default) and scan to scan, side by side in one run.
+(the extraction left out). Per still recording: the drift at its end and its largest. Every
+reference side by side in one run: scan to keyframe (the default), scan to scan, and scan to
+a local map of the landmarks of the last 3 and 10 scans (docs/odometry.md#local-map).
 
 With ``--wheel``: the moving recordings with and without a wheel odometry as the prior, side
 by side. No recording of data/ holds one, so it is synthetic: the reference's robot step
@@ -19,12 +20,19 @@ between two scans plus noise drawn (seeded) from the wheel model's covariance at
 defaults (5 % of the distance + 2 mm, 5 % of the turn + 0.2 deg), that covariance stated to
 the odometry; then the same steps with the reference's own jitter (as in the step NEES) added
 to the stated covariance. A wheel this good relative to the reference, tuned on nothing.
-Usage: python bench_odometry.py [--wheel] [recording ...]
+
+With ``--kiss PYTHON``: KISS-ICP too, in the interpreter PYTHON of a virtual environment that
+has it (``pip install kiss-icp``; not a dependency of ours): the scans as z = 0 clouds of their
+finite returns within range, deskew off, voxel 0.1 m, scored by the same code with its fixed
+0.1 covariance, its time per scan its ``register_frame``'s.
+Usage: python bench_odometry.py [--wheel] [--kiss PYTHON] [recording ...]
 """
 
 import math
 import pathlib
+import subprocess
 import sys
+import tempfile
 
 import numpy as np
 
@@ -45,7 +53,9 @@ MOVING = {'rplidar_barc_moving': ('rplidar_a2', 0.005, 0.5),
 STILL = ('sick_lms111_static', 'sick_lms1xx_static', 'sick_lms511_static',
          'sick_tim781s_static')
 REFERENCES = {'keyframe': OdometryConfig(),
-              'scan to scan': OdometryConfig(keyframe_m=0.0, keyframe_rad=0.0)}
+              'scan to scan': OdometryConfig(keyframe_m=0.0, keyframe_rad=0.0),
+              'local map, 3 scans': OdometryConfig(map_memory_scans=3),
+              'local map, 10 scans': OdometryConfig(map_memory_scans=10)}
 
 
 def synthetic_wheel(robot: np.ndarray, mount: np.ndarray, seed: int = 0,
@@ -104,6 +114,64 @@ def moving(name: str, reference: str, wheel: str = '') -> str:
     return row + f'{1e3 * run.odometry_s:.1f} |'
 
 
+# Run in KISS-ICP's interpreter: the clouds of argv[1] (npz) in, its poses and time out.
+KISS_ICP = """
+import math, sys, time
+import numpy as np
+from kiss_icp.config import KISSConfig
+from kiss_icp.kiss_icp import KissICP
+clouds = np.load(sys.argv[1])
+config = KISSConfig()
+config.data.deskew = False
+config.data.max_range = float(clouds['max_range'])
+config.mapping.voxel_size = 0.1
+odometry, poses, spent = KissICP(config), [], 0.0
+for k in range(int(clouds['count'])):
+    points = clouds[f'c{k}']
+    start = time.perf_counter()
+    odometry.register_frame(points, np.zeros(len(points)))
+    spent += time.perf_counter() - start
+    pose = odometry.last_pose
+    poses.append([pose[0, 3], pose[1, 3], math.atan2(pose[1, 0], pose[0, 0])])
+np.savez(sys.argv[2], poses=np.array(poses), seconds=spent / max(len(poses), 1))
+"""
+
+
+def kiss_icp(name: str, python: str) -> str:
+    """Return one table row of KISS-ICP on a moving recording, run by another interpreter."""
+    folder = DATA / name
+    _, sigma_m, sigma_deg = MOVING[name]
+    scans = load_scans(folder)
+    angles = scans.angle_min + scans.angle_increment * np.arange(scans.ranges.shape[1])
+    clouds = {'max_range': np.array(scans.range_max), 'count': np.array(len(scans.ranges))}
+    for k, ranges in enumerate(scans.ranges):
+        kept = np.isfinite(ranges) & (ranges >= scans.range_min) & (ranges <= scans.range_max)
+        clouds[f'c{k}'] = np.column_stack([ranges[kept] * np.cos(angles[kept]),
+                                           ranges[kept] * np.sin(angles[kept]),
+                                           np.zeros(kept.sum())]).astype(float)
+    with tempfile.TemporaryDirectory() as folder_out:
+        inputs, outputs = pathlib.Path(folder_out, 'in.npz'), pathlib.Path(folder_out, 'out.npz')
+        np.savez(inputs, **clouds)
+        subprocess.run([python, '-c', KISS_ICP, str(inputs), str(outputs)], check=True)
+        result = np.load(outputs)
+        laser, seconds = result['poses'], float(result['seconds'])
+    mount = load_without_aliases((folder / 'laser_mount.yaml').read_text())
+    mount = np.array([mount['x_m'], mount['y_m'], mount['yaw_rad']])
+    # Started at the mount, as ours: odom is the robot's first pose.
+    poses = np.array([compose(mount, pose) for pose in laser])
+    steps = np.zeros_like(poses)
+    steps[1:] = [compose(inverse(a), b) for a, b in zip(poses[:-1], poses[1:])]
+    reference = poses_at(load_poses(folder / 'poses.csv'), scans.stamps_ns * 1e-9, tuple(mount))
+    known = np.isfinite(reference).all(axis=1)
+    errors = trajectory_errors(poses[known], steps[known],
+                               np.repeat(0.1 * np.eye(3)[None], known.sum(), axis=0),
+                               reference[known], sigma_m, math.radians(sigma_deg))
+    return (f'| {name} | KISS-ICP | {errors.rpe_percent_per_m:.2f} | '
+            f'{errors.rpe_deg_per_m:.2f} | {errors.ate_m:.3f} | {100 * errors.steps_within:.1f} '
+            f'| {errors.nees_mean:.3g} | {100 * errors.nees_in_gate:.1f} | - | '
+            f'{1e3 * seconds:.1f} |')
+
+
 def still(name: str, reference: str) -> str:
     """Return one table row of a still recording."""
     scans = load_scans(DATA / name)
@@ -115,6 +183,10 @@ def still(name: str, reference: str) -> str:
 
 def main(names) -> None:
     """Print the tables."""
+    kiss = None
+    if '--kiss' in names:
+        at = names.index('--kiss')
+        kiss, names = names[at + 1], names[:at] + names[at + 2:]
     if names and names[0] == '--wheel':
         print('| recording | prior | RPE %/m | RPE deg/m | ATE m | steps within 10 cm, 2 deg % '
               '| step NEES mean (3) | inside 95 % gate % | statuses | wheel steps taken / '
@@ -138,6 +210,8 @@ def main(names) -> None:
     for name in (n for n in names if n in MOVING):
         for reference in REFERENCES:
             print(moving(name, reference), flush=True)
+        if kiss:
+            print(kiss_icp(name, kiss), flush=True)
     print('\n| still recording | reference | scans | drift at the end mm | largest drift mm | '
           'odometry ms/scan |')
     print('|---|---|---|---|---|---|')

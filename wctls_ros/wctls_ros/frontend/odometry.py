@@ -37,6 +37,7 @@ from typing import List, Optional, Tuple
 import numpy as np
 
 from .frames import finite_only, Landmarks, overlapping, rotation, wrap_angle
+from .local_map import fit_sensitivity, LocalMap, noise_covariance
 
 STATUSES = ('tracking', 'degenerate', 'prior', 'reinitialized')
 # Where a step's prior came from: the constant velocity of the last good step, or handed in.
@@ -64,6 +65,9 @@ REJECTING_SHARE = 2.0
 # the best known: the pairs of pairs grow as the fourth power of the landmarks (at 32, 496 pairs
 # of one scan against 992 of the other, per kind). No recording of data/ has more than 24.
 PAIR_LANDMARKS = 32
+# A refined hypothesis this far from the prior (its chi-square, 3 dof at 99.9 %) counts one
+# associated landmark less: to win outside the prior's gate it must associate one more.
+PRIOR_PAIR_CHI2 = 16.27
 
 
 @dataclass(frozen=True)
@@ -88,6 +92,9 @@ class OdometryConfig:
     :ivar keyframe_m: match the scans against a keyframe until they lie this far from it, m
         (0 and keyframe_rad 0: scan to scan)
     :ivar keyframe_rad: ... or turned this far from it, rad
+    :ivar map_memory_scans: match each scan against a local map of the landmarks seen in the
+        last this many scans, fused (:mod:`.local_map`; the keyframes are then unused); 0 (the
+        default: on the recordings of data/ the map did not beat the keyframe): no map
     :ivar seed: seed of the hypothesis draw
     """
 
@@ -103,6 +110,7 @@ class OdometryConfig:
     max_step_m: float = 2.0
     keyframe_m: float = 0.1
     keyframe_rad: float = math.radians(3.0)
+    map_memory_scans: int = 0
     seed: int = 0
 
 
@@ -161,6 +169,7 @@ class StepEstimate:
     :ivar prior_gain: d step / d prior step, shape (3, 3), where a handed-in prior joined the
         fit ((I + P^-1)^-1 P^-1), else None: what the step owes the prior, for its covariance
         with what the prior came from
+    :ivar pairs: the fit's (corner pairs, line pairs), each (previous index, current index)
     """
 
     step: np.ndarray
@@ -172,6 +181,7 @@ class StepEstimate:
     prior_source: str = PRIOR_SOURCES[0]
     prior_rejected: bool = False
     prior_gain: Optional[np.ndarray] = None
+    pairs: Tuple[Tuple[Tuple[int, int], ...], Tuple[Tuple[int, int], ...]] = ((), ())
 
 
 @dataclass(frozen=True)
@@ -407,6 +417,47 @@ def line_hypotheses(previous: Landmarks, current: Landmarks) -> np.ndarray:
     det = a1 * b2 - a2 * b1
     out = np.column_stack([(r1 * b2 - r2 * b1) / det, (a1 * r2 - a2 * r1) / det, yaw])
     return out[np.isfinite(out).all(axis=1)]
+
+
+def corner_line_hypotheses(previous: Landmarks, current: Landmarks) -> np.ndarray:
+    """
+    Return the steps that a corner and a line seen in both scans allow.
+
+    A rigid motion keeps a corner's signed distance from a line, d = p . n - r: a corner and a
+    line of the previous scan and of the current one are a pair when their distances agree
+    within the 99 % gate of their variances, n^T C_p n + g^T C_line g with g = (p . n_perp,
+    -1). The line's normals give the rotation (never flipped, as in :func:`line_hypotheses`),
+    the corner the translation, t = p - R q (docs/odometry.md#hypotheses). Where the walls
+    are parallel (a corridor), only such a pair fixes the motion along them.
+
+    :param previous: the previous scan's landmarks
+    :param current: the current scan's landmarks
+    :return: steps (dx m, dy m, dyaw rad), shape (H, 3)
+    """
+    if not all(len(s.corner_xy) and len(s.line) for s in (previous, current)):
+        return np.zeros((0, 3))
+
+    def distances(landmarks):
+        xy, angle = landmarks.corner_xy[:, None], landmarks.line[None, :, 0]
+        normal = np.stack([np.cos(angle), np.sin(angle)], -1)
+        lever = -xy[..., 0] * normal[..., 1] + xy[..., 1] * normal[..., 0]
+        distance = (xy * normal).sum(-1) - landmarks.line[None, :, 1]
+        cov, line_cov = landmarks.corner_cov[:, None], landmarks.line_cov[None]
+        var = (np.einsum('...i,...ij,...j->...', normal, cov, normal) + lever ** 2
+               * line_cov[..., 0, 0] - 2.0 * lever * line_cov[..., 0, 1] + line_cov[..., 1, 1])
+        return distance.ravel(), var.ravel()
+
+    d_prev, v_prev = distances(previous)
+    d_cur, v_cur = distances(current)
+    p, c = np.nonzero((d_prev[:, None] - d_cur[None, :]) ** 2
+                      <= CHI2_1DOF_99 * (v_prev[:, None] + v_cur[None, :]))
+    corner_p, line_p = np.divmod(p, len(previous.line))
+    corner_c, line_c = np.divmod(c, len(current.line))
+    yaw = wrap_angle(previous.line[line_p, 0] - current.line[line_c, 0])
+    cos, sin = np.cos(yaw), np.sin(yaw)
+    q = current.corner_xy[corner_c]
+    moved = np.column_stack([cos * q[:, 0] - sin * q[:, 1], sin * q[:, 0] + cos * q[:, 1]])
+    return np.column_stack([previous.corner_xy[corner_p] - moved, yaw])
 
 
 def _quadratic_2x2(error_0, error_1, s00, s01, s10, s11):
@@ -779,14 +830,19 @@ def _search(previous: Landmarks, current: Landmarks, steps: np.ndarray, prior_st
     Return the best association of the hypotheses: (its step, corner pairs, line pairs).
 
     The best-scored hypotheses, one per motion, are each refined (with ``fused``, by fits that
-    take the prior as a measurement); the one with most pairs wins, on a tie the one nearer
-    the prior by its covariance (docs/odometry.md#hypotheses).
+    take the prior as a measurement); the one with most pairs less its chi-square from the
+    prior over PRIOR_PAIR_CHI2 wins, on a tie the one nearer the prior by its covariance
+    (docs/odometry.md#hypotheses).
     """
     fewest = min(len(previous.corner_xy) + len(previous.line),
                  len(current.corner_xy) + len(current.line))
     chi2s = _search_chi2(previous, current, steps)
-    scores = score_hypotheses(chi2s, len(steps))
-    best_count, best_chi2 = -1, math.inf
+    # Scored as they are ranked once refined: the landmarks less the prior's word.
+    away = steps - prior_step
+    away[:, 2] = wrap_angle(away[:, 2])
+    scores = score_hypotheses(chi2s, len(steps)) - np.einsum(
+        'hi,ij,hj->h', away, np.linalg.inv(prior_covariance), away) / PRIOR_PAIR_CHI2
+    best_rank, best_chi2 = -math.inf, math.inf
     step, corners, lines = prior_step, [], []
     # The best few hypotheses are each refined: a hypothesis from a short baseline can lie
     # outside the gate of landmarks that a fit from it brings in.
@@ -805,16 +861,18 @@ def _search(previous: Landmarks, current: Landmarks, steps: np.ndarray, prior_st
                                            (prior_step, prior_covariance) if fused else None)
         count = len(pairs[0]) + len(pairs[1]) if math.hypot(
             refined[0], refined[1]) <= config.max_step_m else 0
-        # Equal support (a symmetric room): the motion the prior expects, then the better fit.
+        # Ranked by the landmarks associated less the prior's word (PRIOR_PAIR_CHI2); equal
+        # (a symmetric room): the motion the prior expects, then the better fit.
         away = refined - prior_step
         away[2] = float(wrap_angle(away[2]))
-        chi2 = (fit_chi2 + float(away @ np.linalg.solve(prior_covariance, away))
-                if count else math.inf)
-        if count > best_count or (count == best_count and chi2 < best_chi2):
-            best_count, best_chi2 = count, chi2
+        prior_chi2 = float(away @ np.linalg.solve(prior_covariance, away))
+        chi2 = fit_chi2 + prior_chi2 if count else math.inf
+        rank = count - prior_chi2 / PRIOR_PAIR_CHI2 if count else -1.0
+        if rank > best_rank or (rank == best_rank and chi2 < best_chi2):
+            best_rank, best_chi2 = rank, chi2
             step, (corners, lines) = refined, pairs
-        if best_count >= ENOUGH_SHARE * fewest:
-            break                       # nothing else could associate much more
+        if best_rank >= ENOUGH_SHARE * fewest:
+            break                       # nothing else could rank much higher
     return step, corners, lines
 
 
@@ -829,7 +887,8 @@ def _hypotheses(previous: Landmarks, current: Landmarks, config: OdometryConfig,
     """
     search_prev, search_cur = _best_known(previous), _best_known(current)
     steps = np.concatenate([corner_hypotheses(search_prev, search_cur),
-                            line_hypotheses(search_prev, search_cur)])
+                            line_hypotheses(search_prev, search_cur),
+                            corner_line_hypotheses(search_prev, search_cur)])
     steps = steps[np.hypot(steps[:, 0], steps[:, 1]) <= config.max_step_m]
     if keep is not None and len(steps):
         steps = steps[keep(steps)]
@@ -913,7 +972,8 @@ def _with_prior(previous: Landmarks, current: Landmarks, prior: Prior,
         return None, False
     return StepEstimate(step, covariance, 'degenerate' if degenerate else 'tracking',
                         len(corners), len(lines), chi2 / dof, PRIOR_SOURCES[1],
-                        prior_gain=covariance @ prior_information), False
+                        prior_gain=covariance @ prior_information,
+                        pairs=(tuple(corners), tuple(lines))), False
 
 
 def estimate_step(previous: Landmarks, current: Landmarks, prior_step: np.ndarray,
@@ -1017,7 +1077,8 @@ def _estimate(previous: Landmarks, current: Landmarks, prior_step: np.ndarray,
     if not np.isfinite(covariance).all():
         return reinit
     return StepEstimate(step, covariance, status, len(corners), len(lines),
-                        chi2 / dof if dof > 0 else math.nan)
+                        chi2 / dof if dof > 0 else math.nan,
+                        pairs=(tuple(corners), tuple(lines)))
 
 
 class Odometry:
@@ -1054,6 +1115,8 @@ class Odometry:
         self._velocity = np.zeros(3)            # per second
         self._velocity_covariance = np.zeros((3, 3))
         self._velocity_known = False
+        self._velocity_dt_s = 0.0
+        self._map: Optional[LocalMap] = None
 
     def _prior(self, dt_s: float) -> Tuple[np.ndarray, np.ndarray]:
         """Return the constant-velocity step over dt and its grown covariance."""
@@ -1064,7 +1127,23 @@ class Odometry:
             # Before a first match the velocity is unknown: a motion of any size is as likely.
             growth = growth + np.diag([config.reinit_sigma_m ** 2, config.reinit_sigma_m ** 2,
                                        config.reinit_sigma_rad ** 2])
+        elif self._velocity_dt_s > 0.0:
+            growth = growth * max(1.0, dt_s / self._velocity_dt_s) ** 2
         return self._velocity * dt_s, self._velocity_covariance * dt_s ** 2 + growth
+
+    def _unmatched(self, estimate: StepEstimate, prior_step: np.ndarray) -> np.ndarray:
+        """
+        Return the step of a scan nothing matched: the prior's, or none beyond ``max_step_m``.
+
+        A constant velocity held so long that it would move further than any step still tells
+        the search where the motion points, but as a step it is none (a keyframed log's gap of
+        25 s extrapolated to 12 m); its covariance, grown with the gap, stays. A wheel's step
+        is measured, whatever its length.
+        """
+        if (estimate.prior_source == PRIOR_SOURCES[0]
+                and math.hypot(prior_step[0], prior_step[1]) > self.config.max_step_m):
+            return np.zeros(3)
+        return prior_step.copy()
 
     def _keyframe(self, landmarks: Landmarks) -> None:
         """Make the scan just taken the reference."""
@@ -1102,6 +1181,63 @@ class Odometry:
             covariance = covariance + cross + cross.T
         return covariance
 
+    def _velocity_from(self, status: str, step: np.ndarray, covariance: np.ndarray,
+                       dt_s: float) -> None:
+        """Take a matched step as the constant velocity; a reinitialization forgets it."""
+        if status in ('tracking', 'degenerate') and dt_s > 0.0:
+            self._velocity = step / dt_s
+            self._velocity_dt_s = dt_s
+            self._velocity_covariance = covariance / dt_s ** 2
+            self._velocity_known = True
+        elif status == 'reinitialized':
+            self._velocity = np.zeros(3)
+            self._velocity_covariance = np.zeros((3, 3))
+            self._velocity_known = False
+
+    def _update_map(self, stamp_s: float, dt_s: float, landmarks: Landmarks,
+                    wheel: Optional[Prior], prior_step: np.ndarray,
+                    prior_covariance: np.ndarray) -> OdometryUpdate:
+        """
+        Take one scan against the local map (docs/odometry.md#local-map).
+
+        The scan is matched against the map moved into the last scan's frame; the step's and
+        the pose's covariances come from the map's joint covariance (:class:`.LocalMap`).
+        """
+        memory = self.config.map_memory_scans
+        if self._map is None:
+            self._map = LocalMap(self.pose, self.pose_covariance, landmarks, memory)
+            estimate = StepEstimate(np.zeros(3), np.zeros((3, 3)), 'prior')
+            step, step_covariance = np.zeros(3), np.zeros((3, 3))
+        else:
+            frame, frame_jacobian = self._map.in_frame()
+            estimate = estimate_step(frame, landmarks, prior_step, prior_covariance,
+                                     self.config, wheel)
+            step = estimate.step
+            if estimate.status == 'reinitialized':
+                # Nothing consistent associates: the map starts again from this scan.
+                step, step_covariance = self._unmatched(estimate, step), estimate.covariance
+                by_pose, by_step = compose_jacobians(self.pose, step)
+                pose = compose(self.pose, step)
+                covariance = (by_pose @ self.pose_covariance @ by_pose.T
+                              + by_step @ step_covariance @ by_step.T)
+                self._map = LocalMap(pose, covariance, landmarks, memory)
+            else:
+                by_map, by_noise, noise = _match_sensitivity(frame, landmarks, estimate,
+                                                             prior_covariance, wheel)
+                pairs = estimate.pairs if estimate.status != 'prior' else ((), ())
+                moved = (compose(self._map.pose, step),
+                         *compose_jacobians(self._map.pose, step))
+                step_covariance = self._map.update(moved, by_map, by_noise, noise, landmarks,
+                                                   pairs[0], pairs[1], frame, frame_jacobian)
+        self.pose = self._map.pose.copy()
+        self.pose_covariance = self._map.covariance[:3, :3].copy()
+        self._velocity_from(estimate.status, step, step_covariance, dt_s)
+        self._stamp_s = stamp_s if math.isfinite(stamp_s) else self._stamp_s
+        return OdometryUpdate(stamp_s, dt_s, step.copy(), step_covariance.copy(),
+                              self.pose.copy(), self.pose_covariance.copy(), estimate.status,
+                              estimate.corners, estimate.lines, estimate.prior_source,
+                              estimate.prior_rejected)
+
     def update(self, stamp_s: float, landmarks: Landmarks,
                wheel: Optional[Prior] = None) -> OdometryUpdate:
         """
@@ -1118,6 +1254,9 @@ class Odometry:
         dt_s = stamp_s - self._stamp_s if math.isfinite(self._stamp_s) else 0.0
         dt_s = dt_s if math.isfinite(dt_s) and dt_s > 0.0 else 0.0
         prior_step, prior_covariance = self._prior(dt_s)
+        if self.config.map_memory_scans > 0:
+            return self._update_map(stamp_s, dt_s, landmarks, wheel, prior_step,
+                                    prior_covariance)
         # The priors of the scan's pose in the keyframe's frame: the last one's, one step on.
         prior_relative, prior_relative_covariance = self._relative(prior_step, prior_covariance)
         if self._reference is None:
@@ -1135,7 +1274,8 @@ class Odometry:
         step_covariance = self._step_covariance(estimate, wheel)
         if not matched:
             # The prior or a reinitialization: its covariance is the step's own.
-            step, step_covariance = prior_step.copy(), estimate.covariance.copy()
+            step = self._unmatched(estimate, prior_step)
+            step_covariance = estimate.covariance.copy()
             if estimate.status == 'prior' and self._reference is None:
                 step_covariance = np.zeros((3, 3))
             by_pose, by_step = compose_jacobians(self.pose, step)
@@ -1147,14 +1287,7 @@ class Odometry:
             self.pose = compose(self._reference_pose, estimate.step)
             self.pose_covariance = (by_pose @ self._reference_covariance @ by_pose.T
                                     + by_step @ estimate.covariance @ by_step.T)
-        if matched and dt_s > 0.0:
-            self._velocity = step / dt_s
-            self._velocity_covariance = step_covariance / dt_s ** 2
-            self._velocity_known = True
-        elif estimate.status == 'reinitialized':
-            self._velocity = np.zeros(3)
-            self._velocity_covariance = np.zeros((3, 3))
-            self._velocity_known = False
+        self._velocity_from(estimate.status, step, step_covariance, dt_s)
         far = (math.hypot(estimate.step[0], estimate.step[1]) > self.config.keyframe_m
                or abs(estimate.step[2]) > self.config.keyframe_rad)
         if not matched or far:
@@ -1166,6 +1299,51 @@ class Odometry:
                               self.pose.copy(), self.pose_covariance.copy(), estimate.status,
                               estimate.corners, estimate.lines, estimate.prior_source,
                               estimate.prior_rejected)
+
+
+def _match_sensitivity(frame: Landmarks, current: Landmarks, estimate: StepEstimate,
+                       prior_covariance: np.ndarray, wheel: Optional[Prior]):
+    """
+    Return a match's step as a function of the map, the scan's noise and the prior, to first order.
+
+    :return: (d step / d(the map's moved values), shape (3, 2 n); d step / d(the scan's
+        corners, its lines, the prior), shape (3, 2 C + 2 L + 3); that noise's covariance)
+    """
+    by_map = np.zeros((3, 2 * (len(frame.corner_xy) + len(frame.line))))
+    by_noise = np.zeros((3, 2 * (len(current.corner_xy) + len(current.line)) + 3))
+    # The prior that joined the fit: the wheel's, or the constant velocity's where degenerate.
+    prior = (wheel.covariance if estimate.prior_source == PRIOR_SOURCES[1] and wheel is not None
+             else prior_covariance)
+    if estimate.status not in ('tracking', 'degenerate'):
+        # The step is the prior's, with the estimate's covariance.
+        by_noise[:, -3:] = np.eye(3)
+        return by_map, by_noise, noise_covariance(current, estimate.covariance)
+    corners, lines = estimate.pairs
+    step = estimate.step
+    error, jacobian, cov = _residuals(_gather(frame, current, corners, lines), step)
+    weight = _inverse_2x2(cov)
+    information = np.einsum('kia,kij,kjb->ab', jacobian, weight, jacobian)
+    joined = estimate.prior_gain is not None or estimate.status == 'degenerate'
+    by_residual, by_prior = fit_sensitivity(jacobian, weight, information,
+                                            np.linalg.inv(prior) if joined else None)
+    turn = rotation(step[2])
+    count = len(frame.corner_xy)
+    for k, (m, c) in enumerate(corners):
+        # r = p - (R q + t): dr/dp = I, dr/dq = -R.
+        by_map[:, 2 * m:2 * m + 2] += by_residual[k]
+        by_noise[:, 2 * c:2 * c + 2] -= by_residual[k] @ turn
+    offset = len(corners)
+    first_line = 2 * len(current.corner_xy)
+    for k, (m, c) in enumerate(lines):
+        # r = (alpha_c + dyaw, r_c + t . n) - (alpha_p, r_p): dr/dp = -I, dr/dc = [[1, 0],
+        # [t . n_perp, 1]].
+        angle = current.line[c, 0] + step[2]
+        moved = np.array([[1.0, 0.0],
+                          [-step[0] * math.sin(angle) + step[1] * math.cos(angle), 1.0]])
+        by_map[:, 2 * (count + m):2 * (count + m) + 2] -= by_residual[offset + k]
+        by_noise[:, first_line + 2 * c:first_line + 2 * c + 2] += by_residual[offset + k] @ moved
+    by_noise[:, -3:] = by_prior
+    return by_map, by_noise, noise_covariance(current, prior)
 
 
 def on_robot(update: OdometryUpdate, mount: np.ndarray) -> OdometryUpdate:

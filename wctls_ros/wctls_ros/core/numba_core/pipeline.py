@@ -200,8 +200,10 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
                                                settings.merge_chi2, budget)
     work_limited = unsplit or unmerged
     keep = _large_enough(x, y, segments, settings)
-    segments = Segments(segments.start[keep], segments.stop[keep], segments.chain[keep])
-    lines = Lines(lines.angle_rad[keep], lines.radius_m[keep])
+    every = keep.all()
+    segments = Segments(_rows(segments.start, keep, every), _rows(segments.stop, keep, every),
+                        _rows(segments.chain, keep, every))
+    lines = Lines(_rows(lines.angle_rad, keep, every), _rows(lines.radius_m, keep, every))
     if segments.start.size == 0:
         return None, None, None, None, work_limited, range_sigma, False
     segments = trim_ambiguous(segments, full_turn, x, y, lines, noise,
@@ -328,17 +330,19 @@ def _fit_walls(contour, start, stop, noise, settings):
         along_beam = abs(math.cos(math.atan2(middle_y, middle_x) - angle[s]))
         keep[s] = _usable(line[s], line_covariance[s], angle[s], radius[s],
                           normal_covariance[s]) and along_beam >= min_along_beam
-    first, last = start[keep], last[keep]
+    every = keep.all()
+    first, last = _rows(start, keep, every), _rows(last, keep, every)
     positions = np.empty((2, first.size), np.intp)
     for s in range(first.size):
         positions[0, s], positions[1, s] = first[s], last[s]
     walls = SegmentArrays(
-        angle_rad=angle[keep], radius_m=radius[keep], covariance=normal_covariance[keep],
-        line=line[keep], line_covariance=line_covariance[keep],
-        line_offset_jacobian=line_offset[keep], start_xy_m=start_xy[keep],
-        end_xy_m=end_xy[keep], first_index=contour.beam_index[first],
-        last_index=contour.beam_index[last], num_points=counts[keep],
-        residual_chi2_dof=chi2_dof[keep])
+        angle_rad=_rows(angle, keep, every), radius_m=_rows(radius, keep, every),
+        covariance=_rows(normal_covariance, keep, every), line=_rows(line, keep, every),
+        line_covariance=_rows(line_covariance, keep, every),
+        line_offset_jacobian=_rows(line_offset, keep, every),
+        start_xy_m=_rows(start_xy, keep, every), end_xy_m=_rows(end_xy, keep, every),
+        first_index=contour.beam_index[first], last_index=contour.beam_index[last],
+        num_points=_rows(counts, keep, every), residual_chi2_dof=_rows(chi2_dof, keep, every))
     return walls, positions
 
 
@@ -379,8 +383,21 @@ def _corners(contour, walls, positions, grid, noise, settings, density):
                               CornerEndRule(density.corner_end_sigmas,
                                             settings.corner_end_floor_m, density.corner_window,
                                             settings.end_offset_sigmas))
-    return CornerArrays(xy_m=candidates.xy_m[keep], yaw_rad=candidates.yaw_rad[keep],
-                        covariance=candidates.covariance[keep],
-                        opening_angle_rad=candidates.opening_angle_rad[keep],
-                        first_segment=candidates.first_wall[keep],
-                        second_segment=candidates.second_wall[keep], end_seen=seen[keep])
+    every = keep.all()
+    return CornerArrays(xy_m=_rows(candidates.xy_m, keep, every),
+                        yaw_rad=_rows(candidates.yaw_rad, keep, every),
+                        covariance=_rows(candidates.covariance, keep, every),
+                        opening_angle_rad=_rows(candidates.opening_angle_rad, keep, every),
+                        first_segment=_rows(candidates.first_wall, keep, every),
+                        second_segment=_rows(candidates.second_wall, keep, every),
+                        end_seen=_rows(seen, keep, every))
+
+
+@jit
+def _rows(values, keep, every):
+    """
+    Return the rows of ``values`` that ``keep`` selects: ``values`` itself when it selects all.
+
+    Nearly every scan keeps every wall and most keep every corner: no copy of them then.
+    """
+    return values if every else values[keep]

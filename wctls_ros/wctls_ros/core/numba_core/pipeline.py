@@ -187,8 +187,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
                                          settings.merge_max_missing_beams,
                                          density.breakpoint_sigmas)
     order, runs = chains_of(returns, separated)
-    contour = Returns(returns.beam_index[order], returns.range_m[order],
-                      returns.bearing_rad[order], returns.x_m[order], returns.y_m[order])
+    contour, joinable = _in_circular_order(returns, joinable, order)
     x, y = contour.x_m, contour.y_m
     budget = pass_budget(count)
     segments, unsplit = split_iepf(
@@ -196,7 +195,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
                                      density.iepf_noise_sigmas), budget)
     if segments.start.size == 0:
         return None, None, None, None, unsplit, range_sigma, False
-    segments, lines, unmerged = merge_segments(x, y, segments, full_turn, joinable[order], noise,
+    segments, lines, unmerged = merge_segments(x, y, segments, full_turn, joinable, noise,
                                                settings.merge_chi2, budget)
     work_limited = unsplit or unmerged
     keep = _large_enough(x, y, segments, settings)
@@ -258,6 +257,28 @@ def _split_threshold(rho, noise, threshold_m, noise_sigmas):
                               + (rho[i] * noise.bearing_sigma_rad) ** 2)
             threshold[i] = max(threshold[i], noise_sigmas * sigma)
     return threshold
+
+
+@jit
+def _in_circular_order(returns, joinable, order):
+    """
+    Return the returns and their joinable flags in circular order (a rotation of beam order).
+
+    In one pass, and none when the rotation is none (a scan short of a full turn, or one whose
+    first return starts a chain): the returns themselves then.
+    """
+    n = order.size
+    if n == 0 or order[0] == 0:
+        return returns, joinable
+    beam_index, joinable_in_order = np.empty(n, np.intp), np.empty(n, np.bool_)
+    range_m, bearing, x, y = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    for position in range(n):
+        i = order[position]
+        beam_index[position], range_m[position] = returns.beam_index[i], returns.range_m[i]
+        bearing[position], x[position], y[position] = (returns.bearing_rad[i], returns.x_m[i],
+                                                       returns.y_m[i])
+        joinable_in_order[position] = joinable[i]
+    return Returns(beam_index, range_m, bearing, x, y), joinable_in_order
 
 
 @jit

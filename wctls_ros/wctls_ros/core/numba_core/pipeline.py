@@ -158,11 +158,12 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     :param full_turn: the beams cover a full turn (the first and last are neighbours)
     :param settings: the configuration
     :param density: the rules that count returns, at this scan's beam spacing
-    :return: (the walls, :data:`~.records.SegmentArrays`, and the corners between them,
-        :data:`~.records.CornerArrays`: None when the scan has none; which walls and which
-        corners pass the plausibility bounds: None when all do; whether the work bound stopped
-        splitting or merging; the range noise the scan was processed with, m (NaN: too few
-        returns); whether it exceeded ``max_range_sigma_m``, and the scan gives no features)
+    :return: (the fields of the walls, :data:`~.records.SegmentArrays`, and of the corners
+        between them, :data:`~.records.CornerArrays`, as tuples: None when the scan has none;
+        which walls and which corners pass the plausibility bounds: None when all do; whether
+        the work bound stopped splitting or merging; the range noise the scan was processed
+        with, m (NaN: too few returns); whether it exceeded ``max_range_sigma_m``, and the scan
+        gives no features)
     """
     returns = valid_returns(ranges_m, cos, sin, angle_min_rad, angle_increment_rad,
                             range_min_m, range_max_m)
@@ -238,7 +239,9 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     # #plausibility: nothing published whose covariance gates nothing.
     keep_segment, keep_corner = plausible(published_walls, published_corners, range_sigma,
                                           settings)
-    return (published_walls, published_corners, keep_segment, keep_corner, work_limited,
+    # Their fields as plain tuples: Python gets a named tuple by calling its class, a
+    # microsecond per scan for the two.
+    return (published_walls[:], published_corners[:], keep_segment, keep_corner, work_limited,
             range_sigma, False)
 
 

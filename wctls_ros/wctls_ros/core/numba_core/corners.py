@@ -182,11 +182,23 @@ def end_window(contour, after_first, before_second, noise, rule):
     :param rule: the rule's tolerances
     :return: the :class:`~.records.EndWindow`
     """
-    count, width = contour.x_m.size, rule.window + 2
+    width = rule.window + 2
+    window = EndWindow(np.empty(width), np.empty(width), np.empty(width), np.empty(width),
+                       np.empty(width, np.bool_), 0)
+    return _fill_end_window(contour, after_first, before_second, noise, rule, window)
+
+
+@jit
+def _fill_end_window(contour, after_first, before_second, noise, rule, window):
+    """
+    Write :func:`end_window` into the arrays of ``window`` (W = rule.window + 2 wide).
+
+    :return: the window of those arrays, with its ``between``
+    """
+    count, width = contour.x_m.size, window.x_m.size
     between = (before_second - after_first - 1) % count
-    x, y, sigma = np.empty(width), np.empty(width), np.empty(width)
-    line_tolerance = np.empty(width)
-    in_window = np.empty(width, np.bool_)
+    x, y, sigma = window.x_m, window.y_m, window.sigma_m
+    line_tolerance, in_window = window.line_tolerance_m, window.in_window
     for s in range(width):
         position = wrapped(before_second if s == width - 1 else after_first + s, count)
         in_window[s] = s <= between or s == width - 1
@@ -216,16 +228,17 @@ def wall_at_corner(walls, wall, corner_x_m, corner_y_m, corner_covariance, step_
     middle_y = 0.5 * (walls.start_xy_m[wall, 1] + walls.end_xy_m[wall, 1])
     side = math.copysign(1.0, (middle_x - corner_x_m) * -normal_y
                          + (middle_y - corner_y_m) * normal_x)
-    inward = np.empty(2)
-    inward[0], inward[1] = -normal_y * side, normal_x * side
+    inward_x, inward_y = -normal_y * side, normal_x * side
+    # inward^T C inward, term by term in the order of the double sum over (i, j).
     variance = 0.0
-    for i in range(2):
-        for j in range(2):
-            variance += inward[i] * corner_covariance[i, j] * inward[j]
+    variance += inward_x * corner_covariance[0, 0] * inward_x
+    variance += inward_x * corner_covariance[0, 1] * inward_y
+    variance += inward_y * corner_covariance[1, 0] * inward_x
+    variance += inward_y * corner_covariance[1, 1] * inward_y
     along_sigma = math.sqrt(variance)
     corner_range = math.hypot(corner_x_m, corner_y_m)
     incidence = abs(normal_x * corner_x_m + normal_y * corner_y_m) / corner_range
-    return WallAtCorner(normal_x, normal_y, walls.radius_m[wall], inward[0], inward[1],
+    return WallAtCorner(normal_x, normal_y, walls.radius_m[wall], inward_x, inward_y,
                         along_sigma, corner_range * step_rad / max(incidence, 1e-3),
                         rule.sigmas * along_sigma + rule.floor_m)
 
@@ -242,14 +255,20 @@ def along_wall(window, wall, corner_x_m, corner_y_m):
     :return: the :class:`~.records.AlongWall`
     """
     width = window.x_m.size
-    in_front, along = np.empty(width), np.empty(width)
-    on_line = np.empty(width, np.bool_)
-    for s in range(width):
+    placed = AlongWall(np.empty(width), np.empty(width), np.empty(width, np.bool_))
+    _place_along_wall(window, wall, corner_x_m, corner_y_m, placed)
+    return placed
+
+
+@jit
+def _place_along_wall(window, wall, corner_x_m, corner_y_m, placed):
+    """Write :func:`along_wall` into the arrays of ``placed``."""
+    in_front, along, on_line = placed.in_front_m, placed.along_m, placed.on_line
+    for s in range(in_front.size):
         x, y = window.x_m[s], window.y_m[s]
         in_front[s] = wall.radius_m - (x * wall.normal_x + y * wall.normal_y)
         along[s] = (x - corner_x_m) * wall.inward_x + (y - corner_y_m) * wall.inward_y
         on_line[s] = window.in_window[s] and abs(in_front[s]) <= window.line_tolerance_m[s]
-    return AlongWall(in_front, along, on_line)
 
 
 @jit
@@ -266,16 +285,22 @@ def corner_zone(window, corner_x_m, corner_y_m, first, second, noise, rule):
     :param rule: the rule's tolerances
     :return: whether each return lies in the zone, shape (W,)
     """
+    at_corner = np.empty(window.x_m.size, np.bool_)
+    _mark_corner_zone(window, corner_x_m, corner_y_m, first, second, noise, rule, at_corner)
+    return at_corner
+
+
+@jit
+def _mark_corner_zone(window, corner_x_m, corner_y_m, first, second, noise, rule, at_corner):
+    """Write :func:`corner_zone` into ``at_corner``, shape (W,)."""
     sine = abs(first.normal_x * second.normal_y - first.normal_y * second.normal_x)
     corner_noise = math.sqrt(noise.deciding_sigma_m ** 2
                              + (math.hypot(corner_x_m, corner_y_m) * noise.bearing_sigma_rad) ** 2)
     zone = (rule.sigmas * math.hypot(corner_noise, max(first.along_sigma_m, second.along_sigma_m))
             / sine + rule.floor_m + min(first.spacing_m, second.spacing_m))
-    at_corner = np.empty(window.x_m.size, np.bool_)
     for s in range(at_corner.size):
         at_corner[s] = window.in_window[s] and math.hypot(window.x_m[s] - corner_x_m,
                                                           window.y_m[s] - corner_y_m) <= zone
-    return at_corner
 
 
 @jit
@@ -290,8 +315,17 @@ def without_object_in_front(window, wall, placed, at_corner, rule):
     :param rule: the rule's tolerances (``run_sigmas`` 0: no such test)
     :return: on the wall's line, shape (W,)
     """
+    on_line = np.empty(at_corner.size, np.bool_)
+    _clear_object_in_front(window, wall, placed, at_corner, rule, on_line)
+    return on_line
+
+
+@jit
+def _clear_object_in_front(window, wall, placed, at_corner, rule, on_line):
+    """Write :func:`without_object_in_front` into ``on_line``, shape (W,)."""
     width = at_corner.size
-    on_line = placed.on_line.copy()
+    for s in range(width):        # a loop, not on_line[:] = ... (see _jit.py)
+        on_line[s] = placed.on_line[s]
     run, together = 0, 0.0
     for s in range(1, width - 1):
         if on_line[s] and placed.along_m[s] >= -wall.tolerance_m and not at_corner[s]:
@@ -302,7 +336,6 @@ def without_object_in_front(window, wall, placed, at_corner, rule):
         for s in range(1, width - 1):
             if on_line[s] and placed.along_m[s] >= -wall.tolerance_m and not at_corner[s]:
                 on_line[s] = False
-    return on_line
 
 
 @jit
@@ -317,9 +350,15 @@ def reaches(wall, placed, on_line, at_corner):
     :return: shape (W,)
     """
     here = np.empty(at_corner.size, np.bool_)
+    _mark_reaches(wall, placed, on_line, at_corner, here)
+    return here
+
+
+@jit
+def _mark_reaches(wall, placed, on_line, at_corner, here):
+    """Write :func:`reaches` into ``here``, shape (W,)."""
     for s in range(here.size):
         here[s] = at_corner[s] or (on_line[s] and placed.along_m[s] >= -wall.tolerance_m)
-    return here
 
 
 @jit
@@ -457,22 +496,38 @@ def walls_end_at(candidates, walls, positions, contour, step_rad, noise, rule):
     corners = candidates.xy_m.shape[0]
     keep = np.zeros(corners, np.bool_)
     seen = np.zeros((corners, 2), np.bool_)
+    # Every corner's window, placements and flags are written into the same arrays, made once
+    # per scan (a dozen arrays per corner otherwise): the columns of (F, W) or (B, W) arrays,
+    # F = 8 numbers and B = 8 flags per column.
+    widest, count = rule.window + 2, contour.x_m.size
+    numbers, flags = np.empty((8, widest)), np.empty((8, widest), np.bool_)
     for c in range(corners):
         one, two = candidates.first_wall[c], candidates.second_wall[c]
         after_first, before_second = last_position[one], first_position[two]
         corner_x, corner_y = candidates.xy_m[c, 0], candidates.xy_m[c, 1]
-        window = end_window(contour, after_first, before_second, noise, rule)
+        # The columns past the returns between the walls are outside the window, where every
+        # step's flags are False: they change nothing, and a window of the facing ends and the
+        # returns between them (rule.window at most) gives the same result.
+        width = min((before_second - after_first - 1) % count, rule.window) + 2
+        window = _fill_end_window(contour, after_first, before_second, noise, rule, EndWindow(
+            numbers[0, :width], numbers[1, :width], numbers[2, :width], numbers[3, :width],
+            flags[0, :width], 0))
         first = wall_at_corner(walls, one, corner_x, corner_y, candidates.covariance[c],
                                step_rad, rule)
         second = wall_at_corner(walls, two, corner_x, corner_y, candidates.covariance[c],
                                 step_rad, rule)
-        first_placed = along_wall(window, first, corner_x, corner_y)
-        second_placed = along_wall(window, second, corner_x, corner_y)
-        at_corner = corner_zone(window, corner_x, corner_y, first, second, noise, rule)
-        first_on_line = without_object_in_front(window, first, first_placed, at_corner, rule)
-        second_on_line = without_object_in_front(window, second, second_placed, at_corner, rule)
-        first_here = reaches(first, first_placed, first_on_line, at_corner)
-        second_here = reaches(second, second_placed, second_on_line, at_corner)
+        first_placed = AlongWall(numbers[4, :width], numbers[5, :width], flags[1, :width])
+        second_placed = AlongWall(numbers[6, :width], numbers[7, :width], flags[2, :width])
+        _place_along_wall(window, first, corner_x, corner_y, first_placed)
+        _place_along_wall(window, second, corner_x, corner_y, second_placed)
+        at_corner = flags[3, :width]
+        _mark_corner_zone(window, corner_x, corner_y, first, second, noise, rule, at_corner)
+        first_on_line, second_on_line = flags[4, :width], flags[5, :width]
+        _clear_object_in_front(window, first, first_placed, at_corner, rule, first_on_line)
+        _clear_object_in_front(window, second, second_placed, at_corner, rule, second_on_line)
+        first_here, second_here = flags[6, :width], flags[7, :width]
+        _mark_reaches(first, first_placed, first_on_line, at_corner, first_here)
+        _mark_reaches(second, second_placed, second_on_line, at_corner, second_here)
         first_short = short_of_corner(first, first_placed, first_on_line, first_here)
         second_short = short_of_corner(second, second_placed, second_on_line, second_here)
         seen[c, 0], seen[c, 1] = first_short <= 1.0, second_short <= 1.0

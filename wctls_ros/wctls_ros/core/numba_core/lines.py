@@ -145,19 +145,24 @@ def _moment_sums(x, y, rho, first, stop, weighted):
 
 
 @jit
-def _lever_segment(x, y, rho, first, stop, range_sigma, bearing_sigma, weighted, scaled):
+def _lever_segment(x, y, rho, first, stop, range_sigma, bearing_sigma, weighted, scaled,
+                   covariance, offset):
     """
     Compiled twin of :func:`..numpy_core.lines._lever_sums` for one segment.
 
-    :return: ((a, b, c), p_x, p_y, 1 / |p|, the covariance of u as (k, k), its offset
-        Jacobian (k,)), k = 3 if scaled else 2
+    The per-return products are summed in scalars, not in small arrays: the compiler keeps
+    scalars in registers, where it must store every array entry (it cannot tell that an array
+    does not alias the returns), and the six distinct entries of each symmetric product are
+    summed once (a product is the same either way round, so the sums are too).
+
+    :param covariance: written: the covariance of u, its top-left (k, k) block, shape (3, 3)
+    :param offset: written: its offset Jacobian, the first k entries, shape (3,)
+    :return: (a, b, c, p_x, p_y, 1 / |p|), k = 3 if scaled else 2
     """
     s_x, s_y, s_xx, s_yy, s_xy = _moment_sums(x, y, rho, first, stop, weighted)
-    line = np.empty(3)
-    line[0], line[1], line[2] = (s_x * s_yy - s_y * s_xy, s_y * s_xx - s_x * s_xy,
-                                 s_xy * s_xy - s_xx * s_yy)
-    inv_det = -1.0 / line[2]
-    px, py = line[0] * inv_det, line[1] * inv_det
+    a, b, c = s_x * s_yy - s_y * s_xy, s_y * s_xx - s_x * s_xy, s_xy * s_xy - s_xx * s_yy
+    inv_det = -1.0 / c
+    px, py = a * inv_det, b * inv_det
     inv_norm = 1.0 / math.hypot(px, py)
     if scaled:
         to_angle = to_radius = inv_det
@@ -168,12 +173,11 @@ def _lever_segment(x, y, rho, first, stop, range_sigma, bearing_sigma, weighted,
     b_x, b_y = px * to_radius, py * to_radius
     pi_x0, pi_x1 = a_x * s_yy - a_y * s_xy, b_x * s_yy - b_y * s_xy          # Pi e_x
     pi_y0, pi_y1 = a_y * s_xx - a_x * s_xy, b_y * s_xx - b_x * s_xy          # Pi e_y
-    k = 3 if scaled else 2
-    # Three components always (the third 0 when not scaled): loops of a fixed length, which
-    # the compiler unrolls.
-    range_products, bearing_products = np.zeros((3, 3)), np.zeros((3, 3))
-    offset = np.zeros(3)
-    by_range, by_bearing = np.zeros(3), np.zeros(3)
+    # The upper triangles of the range and bearing products, and the offset.
+    range00 = range01 = range02 = range11 = range12 = range22 = 0.0
+    bearing00 = bearing01 = bearing02 = bearing11 = bearing12 = bearing22 = 0.0
+    offset0 = offset1 = offset2 = 0.0
+    by_range2 = by_bearing2 = 0.0              # the third components, when not scaled
     for i in range(first, stop):
         x_i, y_i, inv_rho = x[i], y[i], 1.0 / rho[i]
         # Pi z_i, p.z_i, Pi z_perp_i, p.z_perp_i.
@@ -184,31 +188,68 @@ def _lever_segment(x, y, rho, first, stop, range_sigma, bearing_sigma, weighted,
         # -du/drho_i (the sign is undone in the offset), then du/dtheta_i.
         if weighted:
             weight = inv_rho * inv_rho
-            by_range[0], by_range[1] = along0 * (weight * inv_rho), along1 * (weight * inv_rho)
+            by_range0, by_range1 = along0 * (weight * inv_rho), along1 * (weight * inv_rho)
         else:
             lever = (2.0 * ahead - 1.0) * inv_rho
-            by_range[0], by_range[1] = along0 * lever, along1 * lever
+            by_range0, by_range1 = along0 * lever, along1 * lever
         if scaled:
-            by_range[2] = 0.0 if weighted else (turn * along0 - ahead * along1) * inv_rho
-        by_bearing[0] = (1.0 - ahead) * across0 - turn * along0
-        by_bearing[1] = (1.0 - ahead) * across1 - turn * along1
+            by_range2 = 0.0 if weighted else (turn * along0 - ahead * along1) * inv_rho
+        by_bearing0 = (1.0 - ahead) * across0 - turn * along0
+        by_bearing1 = (1.0 - ahead) * across1 - turn * along1
         if scaled:
-            by_bearing[2] = ahead * across1 - turn * across0
+            by_bearing2 = ahead * across1 - turn * across0
         if weighted:
-            for r in range(3):
-                by_bearing[r] *= weight
-        for r in range(3):
-            offset[r] -= by_range[r]
-            for c in range(3):
-                range_products[r, c] += by_range[r] * by_range[c]
-                bearing_products[r, c] += by_bearing[r] * by_bearing[c]
-    covariance = np.empty((k, k))
-    for r in range(k):
-        for c in range(k):
-            covariance[r, c] = range_sigma ** 2 * range_products[r, c]
-            if bearing_sigma != 0.0:           # a zero bearing sigma adds nothing, not 0 * inf
-                covariance[r, c] += bearing_sigma ** 2 * bearing_products[r, c]
-    return line, px, py, inv_norm, covariance, offset[:k]
+            by_bearing0 *= weight
+            by_bearing1 *= weight
+            by_bearing2 *= weight
+        offset0 -= by_range0
+        offset1 -= by_range1
+        range00 += by_range0 * by_range0
+        range01 += by_range0 * by_range1
+        range11 += by_range1 * by_range1
+        bearing00 += by_bearing0 * by_bearing0
+        bearing01 += by_bearing0 * by_bearing1
+        bearing11 += by_bearing1 * by_bearing1
+        if scaled:
+            offset2 -= by_range2
+            range02 += by_range0 * by_range2
+            range12 += by_range1 * by_range2
+            range22 += by_range2 * by_range2
+            bearing02 += by_bearing0 * by_bearing2
+            bearing12 += by_bearing1 * by_bearing2
+            bearing22 += by_bearing2 * by_bearing2
+    _put_symmetric(covariance, range00, range01, range02, range11, range12, range22,
+                   range_sigma)
+    if bearing_sigma != 0.0:           # a zero bearing sigma adds nothing, not 0 * inf
+        _add_symmetric(covariance, bearing00, bearing01, bearing02, bearing11, bearing12,
+                       bearing22, bearing_sigma)
+    offset[0], offset[1], offset[2] = offset0, offset1, offset2
+    return a, b, c, px, py, inv_norm
+
+
+@jit
+def _put_symmetric(out, m00, m01, m02, m11, m12, m22, sigma):
+    """Write sigma^2 times the symmetric 3 x 3 matrix of the upper triangle m into ``out``."""
+    out[0, 0] = sigma ** 2 * m00
+    out[0, 1] = out[1, 0] = sigma ** 2 * m01
+    out[0, 2] = out[2, 0] = sigma ** 2 * m02
+    out[1, 1] = sigma ** 2 * m11
+    out[1, 2] = out[2, 1] = sigma ** 2 * m12
+    out[2, 2] = sigma ** 2 * m22
+
+
+@jit
+def _add_symmetric(out, m00, m01, m02, m11, m12, m22, sigma):
+    """Add sigma^2 times the symmetric 3 x 3 matrix of the upper triangle m to ``out``."""
+    out[0, 0] += sigma ** 2 * m00
+    out[0, 1] += sigma ** 2 * m01
+    out[1, 0] += sigma ** 2 * m01
+    out[0, 2] += sigma ** 2 * m02
+    out[2, 0] += sigma ** 2 * m02
+    out[1, 1] += sigma ** 2 * m11
+    out[1, 2] += sigma ** 2 * m12
+    out[2, 1] += sigma ** 2 * m12
+    out[2, 2] += sigma ** 2 * m22
 
 
 @jit
@@ -278,22 +319,26 @@ def fit_segments(method_code, rho, theta, x, y, offsets, counts, noise):
                 normal_offset)
     weighted, scaled = method_code != _UTLS, method_code != _WCTLS
     to_line = np.zeros((3, 3))
+    # Each segment's covariance of u and its offset Jacobian, written by _lever_segment: (k, k)
+    # and (k,) of them, k = 3 if scaled else 2.
+    pairs, whole_offset = np.empty((3, 3)), np.empty(3)
+    offset = whole_offset[:3 if scaled else 2]
     for s in range(count):
-        own, p_x, p_y, inv_norm, pairs, offset = _lever_segment(
+        own_a, own_b, own_c, p_x, p_y, inv_norm = _lever_segment(
             x, y, rho, offsets[s], offsets[s] + counts[s], range_sigma, bearing_sigma, weighted,
-            scaled)
+            scaled, pairs, whole_offset)
         angle[s], radius[s] = math.atan2(p_y, p_x), inv_norm
         if scaled:
             # (a, b, c) = s (p, -1): d(a, b, c) = K u, K = (s / |p|^2) [(p_perp, 0), (p, 0),
             # 2 (p, -1)] by columns; d(angle, radius) = (u_1 / |p|^2, -u_2 / |p|^3).
             inv_n2 = inv_norm * inv_norm
-            scale = -own[2] * inv_n2
+            scale = -own_c * inv_n2
             to_line[0, 0], to_line[0, 1], to_line[0, 2] = -p_y * scale, p_x * scale, (
                 2.0 * p_x * scale)
             to_line[1, 0], to_line[1, 1], to_line[1, 2] = p_x * scale, p_y * scale, (
                 2.0 * p_y * scale)
             to_line[2, 2] = -2.0 * scale
-            line[s, 0], line[s, 1], line[s, 2] = own[0], own[1], own[2]
+            line[s, 0], line[s, 1], line[s, 2] = own_a, own_b, own_c
             _sandwich(to_line, pairs, line_covariance[s])
             _times(to_line, offset, line_offset[s])
             to_angle, to_radius = inv_n2, -inv_n2 * inv_norm

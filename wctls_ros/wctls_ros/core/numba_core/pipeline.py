@@ -158,11 +158,12 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     :param full_turn: the beams cover a full turn (the first and last are neighbours)
     :param settings: the configuration
     :param density: the rules that count returns, at this scan's beam spacing
-    :return: (the walls, :data:`~.records.SegmentArrays`, and the corners between them,
-        :data:`~.records.CornerArrays`: None when the scan has none; which walls and which
-        corners pass the plausibility bounds: None when all do; whether the work bound stopped
-        splitting or merging; the range noise the scan was processed with, m (NaN: too few
-        returns); whether it exceeded ``max_range_sigma_m``, and the scan gives no features)
+    :return: (the fields of the walls, :data:`~.records.SegmentArrays`, and of the corners
+        between them, :data:`~.records.CornerArrays`, as tuples: None when the scan has none;
+        which walls and which corners pass the plausibility bounds: None when all do; whether
+        the work bound stopped splitting or merging; the range noise the scan was processed
+        with, m (NaN: too few returns); whether it exceeded ``max_range_sigma_m``, and the scan
+        gives no features)
     """
     returns = valid_returns(ranges_m, cos, sin, angle_min_rad, angle_increment_rad,
                             range_min_m, range_max_m)
@@ -187,8 +188,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
                                          settings.merge_max_missing_beams,
                                          density.breakpoint_sigmas)
     order, runs = chains_of(returns, separated)
-    contour = Returns(returns.beam_index[order], returns.range_m[order],
-                      returns.bearing_rad[order], returns.x_m[order], returns.y_m[order])
+    contour, joinable = _in_circular_order(returns, joinable, order)
     x, y = contour.x_m, contour.y_m
     budget = pass_budget(count)
     segments, unsplit = split_iepf(
@@ -196,12 +196,14 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
                                      density.iepf_noise_sigmas), budget)
     if segments.start.size == 0:
         return None, None, None, None, unsplit, range_sigma, False
-    segments, lines, unmerged = merge_segments(x, y, segments, full_turn, joinable[order], noise,
+    segments, lines, unmerged = merge_segments(x, y, segments, full_turn, joinable, noise,
                                                settings.merge_chi2, budget)
     work_limited = unsplit or unmerged
     keep = _large_enough(x, y, segments, settings)
-    segments = Segments(segments.start[keep], segments.stop[keep], segments.chain[keep])
-    lines = Lines(lines.angle_rad[keep], lines.radius_m[keep])
+    every = keep.all()
+    segments = Segments(_rows(segments.start, keep, every), _rows(segments.stop, keep, every),
+                        _rows(segments.chain, keep, every))
+    lines = Lines(_rows(lines.angle_rad, keep, every), _rows(lines.radius_m, keep, every))
     if segments.start.size == 0:
         return None, None, None, None, work_limited, range_sigma, False
     segments = trim_ambiguous(segments, full_turn, x, y, lines, noise,
@@ -237,7 +239,9 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
     # #plausibility: nothing published whose covariance gates nothing.
     keep_segment, keep_corner = plausible(published_walls, published_corners, range_sigma,
                                           settings)
-    return (published_walls, published_corners, keep_segment, keep_corner, work_limited,
+    # Their fields as plain tuples: Python gets a named tuple by calling its class, a
+    # microsecond per scan for the two.
+    return (published_walls[:], published_corners[:], keep_segment, keep_corner, work_limited,
             range_sigma, False)
 
 
@@ -256,6 +260,28 @@ def _split_threshold(rho, noise, threshold_m, noise_sigmas):
                               + (rho[i] * noise.bearing_sigma_rad) ** 2)
             threshold[i] = max(threshold[i], noise_sigmas * sigma)
     return threshold
+
+
+@jit
+def _in_circular_order(returns, joinable, order):
+    """
+    Return the returns and their joinable flags in circular order (a rotation of beam order).
+
+    In one pass, and none when the rotation is none (a scan short of a full turn, or one whose
+    first return starts a chain): the returns themselves then.
+    """
+    n = order.size
+    if n == 0 or order[0] == 0:
+        return returns, joinable
+    beam_index, joinable_in_order = np.empty(n, np.intp), np.empty(n, np.bool_)
+    range_m, bearing, x, y = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    for position in range(n):
+        i = order[position]
+        beam_index[position], range_m[position] = returns.beam_index[i], returns.range_m[i]
+        bearing[position], x[position], y[position] = (returns.bearing_rad[i], returns.x_m[i],
+                                                       returns.y_m[i])
+        joinable_in_order[position] = joinable[i]
+    return Returns(beam_index, range_m, bearing, x, y), joinable_in_order
 
 
 @jit
@@ -328,17 +354,19 @@ def _fit_walls(contour, start, stop, noise, settings):
         along_beam = abs(math.cos(math.atan2(middle_y, middle_x) - angle[s]))
         keep[s] = _usable(line[s], line_covariance[s], angle[s], radius[s],
                           normal_covariance[s]) and along_beam >= min_along_beam
-    first, last = start[keep], last[keep]
+    every = keep.all()
+    first, last = _rows(start, keep, every), _rows(last, keep, every)
     positions = np.empty((2, first.size), np.intp)
     for s in range(first.size):
         positions[0, s], positions[1, s] = first[s], last[s]
     walls = SegmentArrays(
-        angle_rad=angle[keep], radius_m=radius[keep], covariance=normal_covariance[keep],
-        line=line[keep], line_covariance=line_covariance[keep],
-        line_offset_jacobian=line_offset[keep], start_xy_m=start_xy[keep],
-        end_xy_m=end_xy[keep], first_index=contour.beam_index[first],
-        last_index=contour.beam_index[last], num_points=counts[keep],
-        residual_chi2_dof=chi2_dof[keep])
+        angle_rad=_rows(angle, keep, every), radius_m=_rows(radius, keep, every),
+        covariance=_rows(normal_covariance, keep, every), line=_rows(line, keep, every),
+        line_covariance=_rows(line_covariance, keep, every),
+        line_offset_jacobian=_rows(line_offset, keep, every),
+        start_xy_m=_rows(start_xy, keep, every), end_xy_m=_rows(end_xy, keep, every),
+        first_index=contour.beam_index[first], last_index=contour.beam_index[last],
+        num_points=_rows(counts, keep, every), residual_chi2_dof=_rows(chi2_dof, keep, every))
     return walls, positions
 
 
@@ -379,8 +407,21 @@ def _corners(contour, walls, positions, grid, noise, settings, density):
                               CornerEndRule(density.corner_end_sigmas,
                                             settings.corner_end_floor_m, density.corner_window,
                                             settings.end_offset_sigmas))
-    return CornerArrays(xy_m=candidates.xy_m[keep], yaw_rad=candidates.yaw_rad[keep],
-                        covariance=candidates.covariance[keep],
-                        opening_angle_rad=candidates.opening_angle_rad[keep],
-                        first_segment=candidates.first_wall[keep],
-                        second_segment=candidates.second_wall[keep], end_seen=seen[keep])
+    every = keep.all()
+    return CornerArrays(xy_m=_rows(candidates.xy_m, keep, every),
+                        yaw_rad=_rows(candidates.yaw_rad, keep, every),
+                        covariance=_rows(candidates.covariance, keep, every),
+                        opening_angle_rad=_rows(candidates.opening_angle_rad, keep, every),
+                        first_segment=_rows(candidates.first_wall, keep, every),
+                        second_segment=_rows(candidates.second_wall, keep, every),
+                        end_seen=_rows(seen, keep, every))
+
+
+@jit
+def _rows(values, keep, every):
+    """
+    Return the rows of ``values`` that ``keep`` selects: ``values`` itself when it selects all.
+
+    Nearly every scan keeps every wall and most keep every corner: no copy of them then.
+    """
+    return values if every else values[keep]

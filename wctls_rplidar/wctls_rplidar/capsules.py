@@ -263,6 +263,8 @@ class DenseCapsuleDecoder:
         if suspect.any():
             keep[suspect] &= (distances[suspect] == 0) | supported_by_neighbours(
                 distances[suspect], keep[suspect], self._noise.sigma_mm, step_rad)
+        if self._framer.damage.withheld:
+            keep[suspect] &= distances[suspect] == 0
         self._counts['rejected_samples'] += int(np.count_nonzero(~keep[placed]))
         return np.where(keep, distances, 0.0)
 

@@ -79,13 +79,14 @@ _DAMAGED_SHARE = 0.5
 _DAMAGE_WEIGHT = 1.0 / 32.0
 # The share of bytes damaged from which nothing is published (ByteDamage): there so many samples
 # are damaged that their neighbours' agreement vouches for wrong ones (at 10 % corrupted bytes
-# 0.1-0.3 % of the samples published were wrong, at 20 % 10-28 %). It is judged on the upper
-# bound, at this many standard errors, of the share of broken headers.
-WITHHELD_BYTE_DAMAGE = 0.085
-_BOUND_ERRORS = 2.0
+# 0.1-0.3 % of the samples published were wrong, at 20 % 10-45 %). It is judged on an upper
+# bound, this many standard errors above, of the share of broken headers.
+WITHHELD_BYTE_DAMAGE = 0.08
+_BOUND_ERRORS = 1.0
 # Capsules a measurement of the damage spans (a running mean up to it, then a decaying one: a
 # few seconds of capsules).
 _BYTE_DAMAGE_MEMORY = 256
+_BYTE_DAMAGE_FIRST = 32
 # A corrupted byte keeps its sync nibble with probability 15/255.
 _NIBBLE_CHANGED = 240.0 / 255.0
 
@@ -157,14 +158,18 @@ class ByteDamage:
         Tell whether the line may damage too many bytes for a suspect sample to be published.
 
         Judged on an upper bound of the share of broken headers (a broken one added to the
-        evidence, :data:`_BOUND_ERRORS` standard errors above): a few intact headers at the
-        start of a damaged stream are no evidence of a clean line.
+        evidence, :data:`_BOUND_ERRORS` standard error above): a few intact headers at the start
+        of a damaged stream are no evidence of a clean line. Where few capsules keep their
+        length (a line that loses bytes) their headers bound nothing: once
+        :data:`_BYTE_DAMAGE_FIRST` capsules were framed, the share measured counts there.
         """
-        seen = min(self._headers, _BYTE_DAMAGE_MEMORY)
-        broken = (self._broken * seen + 1.0) / (seen + 2.0)
-        bound = min(broken + _BOUND_ERRORS * math.sqrt(broken * (1.0 - broken) / max(seen, 1)),
-                    1.0)
-        return self._corrupted(bound) + self._moved >= WITHHELD_BYTE_DAMAGE
+        broken = self._broken
+        if self._capsules < _BYTE_DAMAGE_FIRST or 4 * self._headers >= self._capsules:
+            seen = min(self._headers, _BYTE_DAMAGE_MEMORY)
+            broken = (broken * seen + 1.0) / (seen + 2.0)
+            broken = min(broken + _BOUND_ERRORS * math.sqrt(
+                broken * (1.0 - broken) / max(seen, 1)), 1.0)
+        return self._corrupted(broken) + self._moved >= WITHHELD_BYTE_DAMAGE
 
     @staticmethod
     def _corrupted(broken: float) -> float:
@@ -280,8 +285,8 @@ class CapsuleFramer:
         kept = [r.pos + self._size * j for r in regions if not r.lost
                 for j in range(r.count)]
         self.damage.take(raw[np.array(kept, np.int64)[:, None] + np.arange(2)],
-                         sum(r.count for r in regions), sum(abs(r.lost) for r in regions),
-                         self._size)
+                         sum(r.count for r in regions),
+                         sum(max(r.lost, 0) for r in regions if not r.tangled), self._size)
         offset = self._offset
         self._buffer = buffer[pos:]
         self._offset += pos

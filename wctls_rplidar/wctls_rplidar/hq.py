@@ -91,15 +91,15 @@ class HqCapsuleDecoder:
     bytes, it does not add them, so its nodes are where they belong. Each node is then judged
     by itself and its neighbours, whose bytes are their own: its angle must lie the capsule's
     median step from both neighbours' (within a quarter step: a damaged angle byte is a jump,
-    and packets delivered out of order move runs of nodes) and its distance
-    must be predicted by a neighbour pair as in dense capsules (its bits above the mode's range,
-    always clear, are cleared first: they can only carry damage); its start flag counts only
-    when the flag byte is one of the two the device sends. Other nodes are published as no
-    return, at the angle their believed neighbours put them at. The top byte of every distance is
-    clear (40 m is below 2^18 quarter millimetres): its share set measures the share of bytes
+    and packets delivered out of order move runs of nodes) and its distance must be predicted
+    by a neighbour pair as in dense capsules (its bits above the mode's range, always clear, are
+    cleared first: they can only carry damage); its start flag counts only when the flag byte
+    is one of the two the device sends. Other nodes are published as no return, at the angle
+    their believed neighbours put them at. The top byte of every distance is clear (40 m is
+    below 2^18 quarter millimetres): the share of those set measures the share of bytes
     corrupted, and from :data:`~wctls_rplidar.framing.WITHHELD_BYTE_DAMAGE` on no node of a
-    damaged capsule is published (there neighbour pairs vouch for wrong distances). Its timestamp is believed when
-    it continues the step of the two capsules before it
+    damaged capsule is published (there neighbour pairs vouch for wrong distances). Its
+    timestamp is believed when it continues the step of the two capsules before it
     (:class:`~wctls_rplidar.checked.SteadyDeviceTimes`).
 
     :param us_per_sample: the scan mode's microseconds per sample (unused: the samples carry

@@ -27,10 +27,10 @@ clean link every node the check bits pass is published as it is.
 Where the damage is heavier than these checks can sort out (more than :data:`MAX_RESYNC_SHARE`
 resyncs per node over the last :data:`DAMAGE_MEMORY_NODES` nodes: from about 5 % corrupted or
 2-5 % dropped or inserted bytes on, where the emulator's streams showed 0.1-16 % of the nodes
-kept wrong; or more than :data:`MAX_OUT_OF_SEQUENCE_SHARE` of them dropped: from about 20 %
-frames with bits flipped in two bytes, which spoil both distance bytes of a tenth of the nodes
-at 30 %, 0.2-1.7 % of those kept wrong), no node is kept at all until the link recovers:
-nothing is published rather than a guess.
+kept wrong; or more than :data:`MAX_OUT_OF_SEQUENCE_SHARE` of them dropped, repeats of the
+nodes just before aside: from about 20 % frames with bits flipped in two bytes, which spoil
+both distance bytes of a tenth of the nodes at 30 %, 0.2-1.7 % of those kept wrong), no node is
+kept at all until the link recovers: nothing is published rather than a guess.
 """
 
 import math
@@ -55,6 +55,9 @@ MAX_OUT_OF_SEQUENCE_SHARE = 0.1
 # Bits flipped in both distance bytes (no check bit sees them) spoil a tenth of the nodes at 30 %
 # flipped frames: the range noise is measured on the lower quartile of second differences.
 _NOISE_QUANTILE = 0.25
+# A node sent again (a frame a link's buffer repeats) is out of sequence but no sign of damage to
+# its bytes: it repeats one of the nodes this few before it (a few frames, and repeats between).
+_REPEAT_NODES = 16
 _PLAUSIBLE_STEP_DEG = (0.05, 3.0)
 
 
@@ -103,7 +106,7 @@ class CheckedStandardNodeDecoder(StandardNodeDecoder):
         resyncs = super().counts.resyncs
         damaged = resyncs > self._seen_resyncs or not kept.all()
         self._recent.append((len(samples), resyncs - self._seen_resyncs,
-                             int(np.count_nonzero(~kept))))
+                             int(np.count_nonzero(~kept & ~_repeats(samples)))))
         self._seen_resyncs = resyncs
         while sum(nodes for nodes, _, _ in self._recent[1:]) >= DAMAGE_MEMORY_NODES:
             del self._recent[0]
@@ -166,3 +169,12 @@ class CheckedStandardNodeDecoder(StandardNodeDecoder):
         emptied = (distance > 0) & ~supported
         self._rejected += int(np.count_nonzero(emptied))
         return np.where(emptied, 0.0, distance)
+
+
+def _repeats(samples: Samples) -> np.ndarray:
+    """Tell which nodes repeat, angle and distance, one of the :data:`_REPEAT_NODES` before."""
+    angle, distance = samples.angle_deg, samples.distance_mm
+    repeated = np.zeros(len(angle), bool)
+    for back in range(1, min(_REPEAT_NODES, len(angle) - 1) + 1):
+        repeated[back:] |= (angle[back:] == angle[:-back]) & (distance[back:] == distance[:-back])
+    return repeated

@@ -264,7 +264,8 @@ class DenseCapsuleDecoder:
         if suspect.any():
             keep[suspect] &= (distances[suspect] == 0) | supported_by_neighbours(
                 distances[suspect], keep[suspect], self._noise.sigma_mm, step_rad)
-        if suspect.any() and self._framer.damage.withheld:
+        clean = np.array([f.clean for f in frames])
+        if suspect.any() and self._framer.damage.withheld(4 * clean.sum() < clean.size):
             # Nor one that passed its checksum: on such a line 1 in 256 damaged capsules does.
             keep &= distances == 0
         self._counts['rejected_samples'] += int(np.count_nonzero(~keep[placed]))

@@ -152,19 +152,23 @@ class ByteDamage:
         """Return the share of bytes damaged (corrupted plus lost or gained)."""
         return self._corrupted(self._broken) + self._moved
 
-    @property
-    def withheld(self) -> bool:
+    def withheld(self, doubtful: bool) -> bool:
         """
         Tell whether the line may damage too many bytes for a suspect sample to be published.
 
-        Judged on an upper bound of the share of broken headers (a broken one added to the
-        evidence, :data:`_BOUND_ERRORS` standard error above): a few intact headers at the start
-        of a damaged stream are no evidence of a clean line. Where few capsules keep their
-        length (a line that loses bytes) their headers bound nothing: once
-        :data:`_BYTE_DAMAGE_FIRST` capsules were framed, the share measured counts there.
+        Until :data:`_BYTE_DAMAGE_FIRST` capsules were framed, there is no evidence either way:
+        withheld where three in four capsules at hand failed their checksums. Then, where they
+        did, judged on an upper bound of the share of broken headers (a broken one added to the
+        evidence, :data:`_BOUND_ERRORS` standard error above), elsewhere on the share measured.
+        Where few capsules keep their length (a line that loses bytes) their headers bound
+        nothing: there the share measured counts.
+
+        :param doubtful: three in four of the capsules at hand failed their checksums
         """
+        if self._capsules < _BYTE_DAMAGE_FIRST:
+            return doubtful
         broken = self._broken
-        if self._capsules < _BYTE_DAMAGE_FIRST or 4 * self._headers >= self._capsules:
+        if doubtful and 4 * self._headers >= self._capsules:
             seen = min(self._headers, _BYTE_DAMAGE_MEMORY)
             broken = (broken * seen + 1.0) / (seen + 2.0)
             broken = min(broken + _BOUND_ERRORS * math.sqrt(
@@ -286,7 +290,11 @@ class CapsuleFramer:
                 for j in range(r.count)]
         self.damage.take(raw[np.array(kept, np.int64)[:, None] + np.arange(2)],
                          sum(r.count for r in regions),
-                         sum(max(r.lost, 0) for r in regions if not r.tangled), self._size)
+                         # A run of lost bytes (a capsule cut short) counts as the most bytes
+                         # scattered losses take: its loss is seen, they are not.
+                         sum(min(max(r.lost, 0), (r.count + 1) * self._max_shift // 2)
+                             for r in regions if not r.tangled),
+                         self._size)
         offset = self._offset
         self._buffer = buffer[pos:]
         self._offset += pos

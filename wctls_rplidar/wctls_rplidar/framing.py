@@ -87,6 +87,7 @@ _BOUND_ERRORS = 1.0
 # few seconds of capsules).
 _BYTE_DAMAGE_MEMORY = 256
 _BYTE_DAMAGE_FIRST = 32
+_BYTE_DAMAGE_FIRST_HEADERS = 8
 # A corrupted byte keeps its sync nibble with probability 15/255.
 _NIBBLE_CHANGED = 240.0 / 255.0
 
@@ -157,7 +158,8 @@ class ByteDamage:
         Tell whether the line may damage too many bytes for a suspect sample to be published.
 
         Until :data:`_BYTE_DAMAGE_FIRST` capsules were framed, there is no evidence either way:
-        withheld where three in four capsules at hand failed their checksums. Then, where they
+        withheld where three in four capsules at hand failed their checksums, or where
+        :data:`_BYTE_DAMAGE_FIRST_HEADERS` headers read twice the share withheld. Then, where they
         did, judged on an upper bound of the share of broken headers (a broken one added to the
         evidence, :data:`_BOUND_ERRORS` standard error above), elsewhere on the share measured.
         Where few capsules keep their length (a line that loses bytes) their headers bound
@@ -166,7 +168,8 @@ class ByteDamage:
         :param doubtful: three in four of the capsules at hand failed their checksums
         """
         if self._capsules < _BYTE_DAMAGE_FIRST:
-            return doubtful
+            return doubtful or (self._headers >= _BYTE_DAMAGE_FIRST_HEADERS
+                                and self.share >= 2.0 * WITHHELD_BYTE_DAMAGE)
         broken = self._broken
         if doubtful and 4 * self._headers >= self._capsules:
             seen = min(self._headers, _BYTE_DAMAGE_MEMORY)
@@ -290,9 +293,9 @@ class CapsuleFramer:
                 for j in range(r.count)]
         self.damage.take(raw[np.array(kept, np.int64)[:, None] + np.arange(2)],
                          sum(r.count for r in regions),
-                         # A run of lost bytes (a capsule cut short) counts as the most bytes
-                         # scattered losses take: its loss is seen, they are not.
-                         sum(min(max(r.lost, 0), (r.count + 1) * self._max_shift // 2)
+                         # A run of lost bytes (a capsule cut short) counts as twice the most
+                         # bytes scattered losses take: its loss is seen, theirs are not.
+                         sum(min(max(r.lost, 0), (r.count + 1) * self._max_shift)
                              for r in regions if not r.tangled),
                          self._size)
         offset = self._offset

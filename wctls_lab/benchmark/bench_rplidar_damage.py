@@ -17,7 +17,8 @@ format and damage kind: the beams published at each rate, as a share of the clea
 with the share of them that is wrong; a published scan sweeping more than one rotation (plus
 5 %), or starting less than 0.9 of a rotation period after the one before it, is a bad
 scan, marked with its count.
-Usage: python bench_rplidar_damage.py [seconds per stream] (default 2).
+Usage: python bench_rplidar_damage.py [seconds per stream] [format] (default 2; every format, or
+those whose name holds the text given).
 """
 
 import math
@@ -74,12 +75,15 @@ def judge(turns, period_s: float) -> tuple:
 def main():
     """Print the table."""
     seconds = float(sys.argv[1]) if len(sys.argv) > 1 else 2.0
+    only = sys.argv[2] if len(sys.argv) > 2 else ''
     print(f'{seconds:g} s of stream per case; load average {open("/proc/loadavg").read()[:14]}')
     print("Each cell: beams published (share of the clean stream's) / wrong (share of those "
           'published); !N: N bad scans (sweeping more than a turn, or early).')
     print('| format | damage | ' + ' | '.join(f'{rate:.0%}' for rate in RATES) + ' |')
     print('|---|---|' + '---|' * len(RATES))
     for name, modes, mode_id in FORMATS:
+        if only not in name:
+            continue
         mode = modes[mode_id]
         _, clean_turns = run(mode, emulated_stream(modes, mode_id, seconds=seconds), seconds)
         period_s = float(np.median([t.period_s for t in clean_turns]))

@@ -110,9 +110,11 @@ def test_checked_as_on_a_damaged_link_real_geometry_is_rarely_rejected(pose):
     np.testing.assert_array_equal(samples.distance_mm[kept], reference[kept, 1])
 
 
-@pytest.mark.parametrize('corrupt, drop, right_share', [(0.01, 0.0, 0.96), (0.05, 0.0, 0.85),
-                                                        (0.0, 0.01, 0.96), (0.0, 0.05, 0.78),
-                                                        (0.02, 0.02, 0.87)])
+# At 5 % (and 2 + 2 %) the damage measured reaches the heavy-damage bound (8 %) at times: those
+# stretches are withheld.
+@pytest.mark.parametrize('corrupt, drop, right_share', [(0.01, 0.0, 0.96), (0.05, 0.0, 0.8),
+                                                        (0.0, 0.01, 0.96), (0.0, 0.05, 0.74),
+                                                        (0.02, 0.02, 0.8)])
 def test_a_damaged_stream_keeps_most_samples_right_and_almost_none_wrong(corrupt, drop,
                                                                          right_share):
     intact = denseboost_stream(seconds=5.0)

@@ -55,6 +55,7 @@ On an undamaged stream the output is exactly the SDK's, and nothing is rejected.
 """
 
 import math
+import statistics
 from typing import Optional
 
 import numpy as np
@@ -263,6 +264,10 @@ class DenseCapsuleDecoder:
         if suspect.any():
             keep[suspect] &= (distances[suspect] == 0) | supported_by_neighbours(
                 distances[suspect], keep[suspect], self._noise.sigma_mm, step_rad)
+        clean = np.array([f.clean for f in frames])
+        if suspect.any() and self._framer.damage.withheld(4 * clean.sum() < clean.size):
+            # Nor one that passed its checksum: on such a line 1 in 256 damaged capsules does.
+            keep &= distances == 0
         self._counts['rejected_samples'] += int(np.count_nonzero(~keep[placed]))
         return np.where(keep, distances, 0.0)
 
@@ -325,13 +330,19 @@ class RangeNoise:
     The range noise scale, from the median second difference along capsules.
 
     A damaged sample spoils three second differences: while fewer than half are, their median
-    is the noise's. Until a capsule's worth is measured, the S1's datasheet accuracy.
+    is the noise's (a lower quantile, scaled as for Gaussian noise, holds while fewer than that
+    share are). Until a capsule's worth is measured, the S1's datasheet accuracy.
 
     :param samples_per_capsule: samples per capsule of the format measured
+    :param quantile: the quantile of the absolute second differences measured
     """
 
-    def __init__(self, samples_per_capsule: int = SAMPLES_PER_CAPSULE):
+    def __init__(self, samples_per_capsule: int = SAMPLES_PER_CAPSULE, quantile: float = 0.5):
         self.sigma_mm = _SIGMA_PRIOR_MM
+        # The quantile of |N(0, 6 sigma^2)|, a second difference's, in sigmas (0.5: 1.65).
+        self._quantile = quantile
+        self._to_sigma = 1.0 / (statistics.NormalDist().inv_cdf(0.5 + 0.5 * quantile)
+                                * math.sqrt(6.0))
         self._first = samples_per_capsule
         self._window = []
         self._unmeasured = 0
@@ -352,7 +363,8 @@ class RangeNoise:
         # A quarter of the window is new (a capsule's worth at first): take the median.
         window = np.concatenate(self._window)[-_SIGMA_WINDOW:]
         self._window, self._unmeasured, self._measured = [window], 0, True
-        self.sigma_mm = max(_SIGMA_FLOOR_MM, _MAD_TO_SIGMA * float(np.median(window)))
+        self.sigma_mm = max(_SIGMA_FLOOR_MM, self._to_sigma * float(np.quantile(
+            window, self._quantile)))
 
 
 def _flip_deltas(distances: np.ndarray) -> tuple:

@@ -26,6 +26,7 @@ import numpy as np
 
 from .capsules import RangeNoise, supported_by_neighbours
 from .checked import SteadyDeviceTimes
+from .framing import WITHHELD_BYTE_DAMAGE
 from .protocol import Samples, StreamCounts
 
 HQ_SYNC = 0xA5
@@ -40,6 +41,8 @@ _CRC_PADDING = b'\0' * (4 - (HQ_CAPSULE_SIZE - 4) % 4)
 _NODE_FLAGS = (1, 2)
 # A damaged capsule's node angle may differ from its neighbours' step by this share of a step.
 _ANGLE_STEP_SHARE = 0.25
+# Capsules the share of corrupted bytes is measured over (a running mean up to it).
+_DAMAGE_MEMORY = 32
 
 
 def hq_crc(body: bytes) -> int:
@@ -86,13 +89,17 @@ class HqCapsuleDecoder:
     it is still read when it lies in sequence, 781 bytes after the one before and the sync byte
     of the next (or of the one after, if the next one's was hit) 781 bytes on: a line loses
     bytes, it does not add them, so its nodes are where they belong. Each node is then judged
-    by itself and its neighbours, whose bytes are their own: its angle must continue its
-    neighbours' steps (within a quarter step: a damaged angle byte is a jump) and its distance
-    must be predicted by a neighbour pair as in dense capsules (its bits above the mode's range,
-    always clear, are cleared first: they can only carry damage); its start flag counts only
-    when the flag byte is one of the two the device sends. Other nodes are published as no
-    return, at the angle their believed neighbours put them at. Its timestamp is believed when
-    it continues the step of the two capsules before it
+    by itself and its neighbours, whose bytes are their own: its angle must lie the capsule's
+    median step from both neighbours' (within a quarter step: a damaged angle byte is a jump,
+    and packets delivered out of order move runs of nodes) and its distance must be predicted
+    by a neighbour pair as in dense capsules (its bits above the mode's range, always clear, are
+    cleared first: they can only carry damage); its start flag counts only when the flag byte
+    is one of the two the device sends. Other nodes are published as no return, at the angle
+    their believed neighbours put them at. The top byte of every distance is clear (40 m is
+    below 2^18 quarter millimetres): the share of those set measures the share of bytes
+    corrupted, and from :data:`~wctls_rplidar.framing.WITHHELD_BYTE_DAMAGE` on no node of a
+    damaged capsule is published (there neighbour pairs vouch for wrong distances). Its
+    timestamp is believed when it continues the step of the two capsules before it
     (:class:`~wctls_rplidar.checked.SteadyDeviceTimes`).
 
     :param us_per_sample: the scan mode's microseconds per sample (unused: the samples carry
@@ -112,6 +119,8 @@ class HqCapsuleDecoder:
         self._noise = RangeNoise(HQ_SAMPLES_PER_CAPSULE)
         self._device_times = SteadyDeviceTimes(clock_bits=64)
         self._counts = dict.fromkeys(StreamCounts.__dataclass_fields__, 0)
+        self._corrupted = 0.0       # share of the distances' top bytes set
+        self._capsules = 0
 
     @property
     def counts(self) -> StreamCounts:
@@ -184,6 +193,9 @@ class HqCapsuleDecoder:
         distance_q2 = nodes['distance_q2'].astype(np.int64)
         angle_deg = nodes['angle_z_q14'] * 90.0 / 16384.0
         start = (nodes['flag'] & 1).astype(bool)
+        self._capsules += count
+        self._corrupted += (np.mean(distance_q2 >> 24 != 0) - self._corrupted) * min(
+            count / min(self._capsules, _DAMAGE_MEMORY), 1.0)
         # The distance's bits above the mode's range are always clear: in a damaged capsule
         # they carry no information, only damage, and are cleared.
         distance_q2[~clean] &= (1 << self._max_q2.bit_length()) - 1
@@ -200,6 +212,8 @@ class HqCapsuleDecoder:
                     distance_q2[damaged] / 4.0, in_range[damaged], self._noise.sigma_mm,
                     math.radians(step_deg)))
             angle_deg[damaged] = _fill_angles(angle_deg[damaged], believed_angle)
+            if self._corrupted >= WITHHELD_BYTE_DAMAGE:
+                keep[damaged] &= distance_q2[damaged] == 0
             # A damaged flag byte spoils only the start flag, not the node.
             start[damaged] &= believed_angle & np.isin(nodes['flag'][damaged], _NODE_FLAGS)
             # A capsule without a believed angle cannot be placed: it is lost.
@@ -233,9 +247,11 @@ def _continues_steps(angle_deg: np.ndarray) -> np.ndarray:
     """
     Tell which nodes' angles continue their neighbours' steps, capsule by capsule.
 
-    A node's angle is believed when a neighbour pair (both sides, or two on one side) steps to
-    it as they step to each other, within a quarter of the capsule's median step: a damaged
-    angle byte moves a node's angle alone.
+    A node's angle is believed when it lies the capsule's median step after its predecessor's
+    and before its successor's, within a quarter of that step: a damaged angle byte moves a
+    node's angle alone, and a node of packets delivered out of order (or twice) starts or ends a
+    run of nodes that lies elsewhere, or repeats its neighbour's angle (a step of nothing). A
+    capsule's first and last nodes, with one neighbour in it, are not believed.
 
     :param angle_deg: shape (capsules, 96), degrees
     :return: ``(believed, step_deg)``: shape (capsules, 96), bool, and the median step of all,
@@ -243,22 +259,10 @@ def _continues_steps(angle_deg: np.ndarray) -> np.ndarray:
     """
     steps = (np.diff(angle_deg, axis=1) + 180.0) % 360.0 - 180.0
     step = np.median(steps, axis=1, keepdims=True)
-    forward = np.full(angle_deg.shape, np.nan)
-    forward[:, 1:] = steps                  # into node k from k - 1
-    backward = np.full(angle_deg.shape, np.nan)
-    backward[:, :-1] = steps                # from node k to k + 1
     tolerance = np.abs(step) * _ANGLE_STEP_SHARE
-    with np.errstate(invalid='ignore'):
-        increasing = step > 0
-
-        def agree(first, second):
-            return (np.abs(first - second) <= tolerance) & increasing
-
-        before = np.full(angle_deg.shape, np.nan)
-        before[:, 1:] = forward[:, :-1]     # into node k - 1 from k - 2
-        after = np.full(angle_deg.shape, np.nan)
-        after[:, :-1] = backward[:, 1:]     # from node k + 1 to k + 2
-        believed = agree(forward, backward) | agree(forward, before) | agree(backward, after)
+    regular = (np.abs(steps - step) <= tolerance) & (step > 0)
+    believed = np.zeros(angle_deg.shape, bool)
+    believed[:, 1:-1] = regular[:, :-1] & regular[:, 1:]
     return believed, float(np.abs(np.median(step)))
 
 

@@ -207,7 +207,8 @@ def test_the_urg_office_corner_drawn_across_beams_without_returns_is_no_corner()
     # recess's wall meet at (0.55, -2.67) across beams that return 0 (the URG's no echo).
     scans, truth = labelled_recording('urg04lx_office')
     stop = truth.last_scan + 1
-    assert np.all(scans.ranges[truth.first_scan:stop, 117:121] < scans.range_min)
+    dark = scans.ranges[truth.first_scan:stop, 110:130] < scans.range_min
+    assert np.all(np.count_nonzero(dark, axis=1) >= 5)
     assert scans_with_a_corner_near(scans, truth.first_scan, stop, (0.55, -2.67), 0.1) == 0
     # Its labelled corners, whose walls' ends all returned, are found as before.
     for corner in truth.xy_m[0]:
@@ -215,11 +216,15 @@ def test_the_urg_office_corner_drawn_across_beams_without_returns_is_no_corner()
 
 
 def test_the_lms111_corner_hidden_behind_an_occluder_is_kept():
-    # Its south-west corner is hidden behind an object in front of its walls' extension (their
-    # ends unseen), not an opening: every beam there returns.
+    # Its south-west corner is hidden behind an object in front of the west wall (beams 78-85,
+    # the wall's end unseen), not an opening: every beam from the wall's last return to the
+    # south wall returns. It is found in most scans (the labels do not ask for it; the other
+    # rules drop it in some), the run of dark beams in none.
     scans, truth = labelled_recording('sick_lms111_static')
+    assert np.all((scans.ranges[:, 76:91] >= scans.range_min)
+                  & (scans.ranges[:, 76:91] <= scans.range_max))
     hidden = truth.xy_m[0, list(truth.ids).index(1)]
-    assert scans_with_a_corner_near(scans, 0, len(scans), hidden, 0.1) >= 0.95 * len(scans)
+    assert scans_with_a_corner_near(scans, 0, len(scans), hidden, 0.1) >= 0.85 * len(scans)
 
 
 def test_a_corner_behind_a_pole_is_no_corner_and_one_behind_a_leg_in_mid_wall_is():

@@ -20,7 +20,7 @@ second, written out entry by entry, and the rejected pairs are dropped in one st
 """
 
 import math
-from typing import Optional
+from typing import Optional, Union
 
 import numpy as np
 
@@ -645,7 +645,7 @@ def _wrap(angle_rad: np.ndarray) -> np.ndarray:
 
 
 def _along_line(wall: WallAtCorner[FloatArray], bearing: np.ndarray, sense: np.ndarray,
-                start: np.ndarray, stop: np.ndarray) -> np.ndarray:
+                start: Union[float, np.ndarray], stop: Union[float, np.ndarray]) -> np.ndarray:
     """
     Return the length of a wall's line between two lines of sight (0 when they do not follow).
 

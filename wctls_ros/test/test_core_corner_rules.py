@@ -11,6 +11,7 @@ the behaviour the rule replaced).
 
 import math
 
+from conftest import REAL_DATA
 import numpy as np
 import pytest
 from wctls_lab.simulation import floor_plan_from_dict, NoiseModel, simulate_recording
@@ -138,6 +139,92 @@ def test_seen_through_needs_the_other_walls_returns_behind_the_wall_together(see
     # Returns on the other wall whose sight lines cross the line within the tolerance of the
     # corner: not.
     assert not test(-0.01 * t, 1.0 + 0.01 * t)
+
+
+def dark_wall_of(core):
+    """Return one core's dark-wall test for one corner, its walls given as numbers."""
+    if core == 'numba':
+        return compiled.dark_wall
+
+    def one(corner_x, corner_y, first, second, contour, after_first, before_second, step_rad):
+        as_arrays = [WallAtCorner(*np.array(wall, dtype=float)[:, None])
+                     for wall in (first, second)]
+        return numpy_corners.dark_wall(np.array([corner_x]), np.array([corner_y]), *as_arrays,
+                                       contour, np.array([after_first]), np.array([before_second]),
+                                       step_rad)[0]
+    return one
+
+
+@pytest.mark.parametrize('core', ['numba', 'numpy'])
+def test_a_run_of_beams_without_a_return_where_a_wall_would_reach_the_corner_is_an_opening(core):
+    dark_wall = dark_wall_of(core)
+    # The L corner (2, 1): wall x = 2 below it, wall y = 1 beyond its bearing. The first wall's
+    # facing end one beam before the corner's bearing, the second's ``missing`` beams after
+    # the corner's beam, none of the beams between returning.
+    first = WallAtCorner(1.0, 0.0, 2.0, 0.0, -1.0, 0.0, 0.0, 0.0)
+    second = WallAtCorner(0.0, 1.0, 1.0, -1.0, 0.0, 0.0, 0.0, 0.0)
+    apex = math.atan2(1.0, 2.0)
+
+    def dark(missing, step_rad):
+        bearing = apex + step_rad * np.array([-1.0, missing])
+        range_m = np.array([2.0 / math.cos(bearing[0]), 1.0 / math.sin(bearing[1])])
+        x, y = range_m * np.cos(bearing), range_m * np.sin(bearing)
+        contour = Returns(np.array([0, missing + 1]), range_m, bearing, x, y)
+        return bool(dark_wall(2.0, 1.0, first, second, contour, 0, 1, step_rad))
+
+    # 0.25 deg beams meet wall y = 1 every 2.2 cm there: 12 dark beams leave 0.25 m of it
+    # unseen (an opening), 8 leave 0.17 m (a dark patch on the wall).
+    step = math.radians(0.25)
+    assert dark(12, step)
+    assert not dark(8, step)
+    # Beams 4 deg apart: two dark beams are a dropout however much wall they span; three are a
+    # run.
+    assert not dark(2, math.radians(4.0))
+    assert dark(3, math.radians(4.0))
+
+
+def labelled_recording(name):
+    """Return a labelled recording's scans and its hand-labelled corners."""
+    from wctls_lab.evaluation.score_cli import load_recording
+    from wctls_lab.evaluation.truth import load_truth
+    return (load_recording(REAL_DATA / name, None),
+            load_truth(REAL_DATA / 'labels' / f'{name}.yaml'))
+
+
+def scans_with_a_corner_near(scans, first, stop, xy, within):
+    """Return in how many of the scans first to stop - 1 the node's defaults find a corner."""
+    config = feature_settings(load_parameters(None)).config
+    found = 0
+    for ranges in scans.ranges[first:stop]:
+        corners = extract_features(ranges, scans.angle_min, scans.angle_increment, config,
+                                   scans.range_min, scans.range_max).corners
+        found += bool(len(corners)) and bool(np.any(np.hypot(*(corners.xy_m - xy).T) < within))
+    return found
+
+
+def test_the_urg_office_corner_drawn_across_beams_without_returns_is_no_corner():
+    # The labels say beams 60-135 of the office hold no corner; its far south wall and the
+    # recess's wall meet at (0.55, -2.67) across beams that return 0 (the URG's no echo).
+    scans, truth = labelled_recording('urg04lx_office')
+    stop = truth.last_scan + 1
+    dark = scans.ranges[truth.first_scan:stop, 110:130] < scans.range_min
+    assert np.all(np.count_nonzero(dark, axis=1) >= 5)
+    assert scans_with_a_corner_near(scans, truth.first_scan, stop, (0.55, -2.67), 0.1) == 0
+    # Its labelled corners, whose walls' ends all returned, are found as before.
+    for corner in truth.xy_m[0]:
+        assert scans_with_a_corner_near(scans, truth.first_scan, stop, corner, 0.1) >= 20
+
+
+def test_the_lms111_corner_hidden_behind_an_occluder_is_kept():
+    # Its south-west corner is hidden behind an object in front of the west wall (beams 78-85,
+    # the wall's end unseen), not an opening: every beam from the wall's last return to the
+    # south wall returns. It is found in most scans (the labels do not ask for it; the other
+    # rules drop it in some), the run of dark beams in none.
+    scans, truth = labelled_recording('sick_lms111_static')
+    assert np.all((scans.ranges[:, 76:91] >= scans.range_min)
+                  & (scans.ranges[:, 76:91] <= scans.range_max))
+    hidden = truth.xy_m[0, list(truth.ids).index(1)]
+    assert scans_with_a_corner_near(scans, 0, len(scans), hidden, 0.1) >= 0.85 * len(scans)
 
 
 def test_a_corner_behind_a_pole_is_no_corner_and_one_behind_a_leg_in_mid_wall_is():

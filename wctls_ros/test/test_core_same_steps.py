@@ -26,7 +26,7 @@ STEPS = [
     (numpy_corners, compiled_corners, (
         'corner_candidates', 'corner_covariance', 'end_window', 'along_wall', 'corner_zone',
         'without_object_in_front', 'reaches', 'goes_on', 'blocked', 'short_of_corner',
-        'seen_through', 'walls_end_at')),
+        'dark_wall', 'seen_through', 'walls_end_at')),
 ]
 SAME_ARGUMENTS = [(numpy_module, compiled_module, name)
                   for numpy_module, compiled_module, names in STEPS for name in names]

@@ -24,7 +24,7 @@ import numpy as np
 from ._jit import jit, jit_inline
 from ._order import wrapped
 from ..records import AlongWall, CornerCandidates, EndWindow, WallAtCorner
-from ..rules import CORNER_MISSING_BEAMS
+from ..rules import CORNER_DARK_WALL_M, CORNER_MISSING_BEAMS
 
 # The upper triangle of the symmetric (x, y, yaw) covariance, row by row: (row, column) of each
 # of its six entries.
@@ -477,6 +477,64 @@ def seen_through(corner_x_m, corner_y_m, wall, other, contour, start, stop, nois
     return run > 0 and behind / math.sqrt(run) > rule.run_sigmas
 
 
+@jit
+def dark_wall(corner_x_m, corner_y_m, first, second, contour, after_first, before_second,
+              step_rad):
+    """
+    Compiled twin of :func:`..numpy_core.corners.dark_wall`, one corner at a time.
+
+    :param corner_x_m: x of the corner, m
+    :param corner_y_m: y of the corner, m
+    :param first: the first wall at the corner
+    :param second: the second wall
+    :param contour: the returns in circular order
+    :param after_first: position of the first wall's last return
+    :param before_second: position of the second wall's first return
+    :param step_rad: bearing step between beams, rad
+    :return: whether a dark run crosses the walls' reach
+    """
+    count = contour.bearing_rad.size
+    apex = math.atan2(corner_y_m, corner_x_m)
+    low = 0.5 * step_rad
+    for step in range((before_second - after_first - 1) % count + 1):
+        here = contour.bearing_rad[wrapped(after_first + step, count)]
+        gap = _wrap(contour.bearing_rad[wrapped(after_first + step + 1, count)] - here)
+        width = abs(gap)
+        if np.rint(width / step_rad) - 1.0 <= 1.0 + CORNER_MISSING_BEAMS:
+            continue
+        sense = math.copysign(1.0, gap)
+        to_apex = _wrap(apex - here) * sense
+        high = width - low                        # the missing beams' own widths
+        unseen = (_along_line(first, here, sense, low, min(high, to_apex))
+                  + _along_line(second, here, sense, max(low, to_apex), high))
+        if unseen > CORNER_DARK_WALL_M:
+            return True
+    return False
+
+
+@jit
+def _wrap(angle_rad):
+    """Return an angle taken into [-pi, pi), rad."""
+    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@jit
+def _along_line(wall, bearing, sense, start, stop):
+    """
+    Compiled twin of :func:`..numpy_core.corners._along_line`, for one gap.
+
+    :return: m
+    """
+    if stop <= start:
+        return 0.0
+    near, far = bearing + sense * start, bearing + sense * stop
+    near_along = ((math.sin(near) * wall.normal_x - math.cos(near) * wall.normal_y)
+                  / (math.cos(near) * wall.normal_x + math.sin(near) * wall.normal_y))
+    far_along = ((math.sin(far) * wall.normal_x - math.cos(far) * wall.normal_y)
+                 / (math.cos(far) * wall.normal_x + math.sin(far) * wall.normal_y))
+    return wall.radius_m * abs(far_along - near_along)
+
+
 @jit_inline
 def walls_end_at(candidates, walls, positions, contour, step_rad, noise, rule):
     """
@@ -537,7 +595,9 @@ def walls_end_at(candidates, walls, positions, contour, step_rad, noise, rule):
                    and not blocked(window, first, second, first_placed, second_placed,
                                    first_here, second_here, at_corner)
                    and first_short <= 1.0 + CORNER_MISSING_BEAMS
-                   and second_short <= 1.0 + CORNER_MISSING_BEAMS)
+                   and second_short <= 1.0 + CORNER_MISSING_BEAMS
+                   and not dark_wall(corner_x, corner_y, first, second, contour, after_first,
+                                     before_second, step_rad))
         if keep[c] and rule.run_sigmas > 0.0:
             # The first wall's stretch is crossed by the sight lines after its last return, up
             # to the second wall's last; the second's by those from the first wall's first

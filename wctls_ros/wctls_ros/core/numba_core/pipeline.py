@@ -133,8 +133,8 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
     if segments is None:
         return Features(config.method, SegmentSet.empty(), CornerSet.empty(), work_limited,
                         range_sigma_m, noise_implausible)
-    features = Features(config.method, SegmentSet(*segments), CornerSet(*corners),
-                        work_limited, range_sigma_m)
+    features = Features.of_scan(config.method, SegmentSet.of_fields(segments),
+                                CornerSet.of_fields(corners), work_limited, range_sigma_m)
     return features if keep_segment is None else kept(features, keep_segment, keep_corner)
 
 

@@ -407,7 +407,9 @@ def test_scaling_both_sigmas_by_k_scales_covariances_by_k_squared(seed, k, metho
     sigmas = (0.03, math.radians(0.2))
     base = fit_lines(method, returns, *sigmas)
     scaled = fit_lines(method, returns, k * sigmas[0], k * sigmas[1])
-    np.testing.assert_allclose(scaled.line, base.line, rtol=1e-9, atol=0)
+    # The same line up to rounding: the ML iteration's last step (below ML_STEP_TOLERANCE, or
+    # cut at ML_MAX_ITERATIONS) can round differently under scaled weights (1.1e-9 seen).
+    np.testing.assert_allclose(scaled.line, base.line, rtol=1e-8, atol=0)
     np.testing.assert_allclose(scaled.normal_covariance, k * k * base.normal_covariance,
                                rtol=1e-8)
 

@@ -87,7 +87,7 @@ _SIGMA_PRIOR_MM = 50.0
 _SIGMA_WINDOW = 512
 # A double bit flip: a repaired spike lies this many sigmas from its prediction, after a change
 # of at least this many tolerances (the check's at its usual sigmas).
-_REPAIR_SIGMAS = 2.0
+_REPAIR_SIGMAS = 1.0
 _REPAIR_MIN_TOLERANCES = 2.0
 # The share of a capsule's samples that may be spikes for one to tell of a flipped bit.
 _MAX_SPIKE_SHARE = 1.0 / 8.0
@@ -642,8 +642,8 @@ def flip_repairs(distances: np.ndarray, usable: np.ndarray, deltas: np.ndarray,
         change[:, 2:-2] = deltas[rows, :, b]
         trial = np.where(lone[rows], d[rows] + change, d[rows])
         fits = (lone[rows] & (trial > 0) & (np.abs(change) >= least_mm)
-                & supported_by_neighbours(trial, ok[rows], sigma_mm, step_rad, _REPAIR_SIGMAS,
-                                          True))[:, 2:-2] & (bits[rows, :, b] >= 0)
+                & supported_by_neighbours(trial, ok[rows] & ~lone[rows], sigma_mm, step_rad,
+                                          _REPAIR_SIGMAS, True))[:, 2:-2] & (bits[rows, :, b] >= 0)
         capsule, sample = np.nonzero(fits)
         found.append((rows[capsule], sample * spacing, bits[rows[capsule], sample, b]))
     return tuple(np.concatenate(column) if found else np.zeros(0, np.int64)

@@ -144,8 +144,9 @@ def test_a_scan_round_trips_through_encoder_and_decoder(count, seed, scale):
 
 # Cluttered scenes whose far points two at a time lie a flipped bit (at one bit position) from
 # their neighbours' prediction: once taken for two bits flipped where the checksum cannot see,
-# and the batch's clutter rejected (49, 117 and 2 samples). The last two's far points each lie
-# within two sigmas of a flip's repair, the last's second one only 1.9 sigmas.
+# and the batch's clutter rejected (49, 117 and 45 samples). In the first two, two far points
+# side by side vouched for each other's repair; in the last each of two lies within the
+# repair's tolerance of its neighbours on its own, on an intact line (the sign is then weak).
 @pytest.mark.parametrize('count, seed, scale', [(6, 45, 3000), (12, 3325, 25000),
                                                 (12, 173, 25000)])
 def test_clutter_on_an_intact_link_is_not_taken_for_bits_flipped(count, seed, scale):

@@ -584,9 +584,9 @@ def believed_flips(placer: CapsulePlacer, shown: np.ndarray, sigma_mm: float,
     flip is likely only on a line that damages bytes, which shows it otherwise too
     (:meth:`~wctls_rplidar.framing.CapsulePlacer.shows_damage`). So on a line that shows no
     damage the sign is believed at once only where t is at most
-    :data:`_CLEAN_LINE_TOLERANCE_SHARE` of the mode's range; elsewhere it is noted as a weak
-    sign, and believed when it comes again within the placer's memory: a line that flips bits
-    keeps showing it.
+    :data:`_CLEAN_LINE_TOLERANCE_SHARE` of the mode's range (or two capsules show it);
+    elsewhere it is noted as a weak sign, and believed when it comes again within the placer's
+    memory: a line that flips bits keeps showing it.
 
     :param placer: the decoder's placer (told of the sign)
     :param shown: the capsules that show a double flip (:func:`unseen_flips`)
@@ -597,7 +597,8 @@ def believed_flips(placer: CapsulePlacer, shown: np.ndarray, sigma_mm: float,
     if not shown.any():
         return False
     tolerance_mm = _REPAIR_SIGMAS * math.sqrt(1.5) * sigma_mm
-    if not placer.shows_damage() and tolerance_mm > _CLEAN_LINE_TOLERANCE_SHARE * max_mm:
+    if (not placer.shows_damage() and np.count_nonzero(shown) < 2
+            and tolerance_mm > _CLEAN_LINE_TOLERANCE_SHARE * max_mm):
         placer.note_weak_sign()
         return False
     placer.note_unseen_damage()

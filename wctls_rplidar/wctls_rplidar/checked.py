@@ -29,8 +29,8 @@ from typing import Optional
 
 import numpy as np
 
-from .capsules import (CapsuleSamples, flip_repairs, RangeNoise, supported_by_neighbours,
-                       unseen_flips)
+from .capsules import (believed_flips, CapsuleSamples, flip_repairs, RangeNoise,
+                       supported_by_neighbours, unseen_flips)
 from .framing import AngleTrack, CapsuleFramer, CapsulePlacer, placeable
 from .protocol import Samples, StreamCounts
 
@@ -329,9 +329,8 @@ class CheckedCapsuleDecoder:
             shown = self._layout.unseen_flips(
                 np.array(whole)[trusted], distances[trusted], usable[trusted],
                 self._noise.sigma_mm, step_rad, np.array([f.slot for f in frames])[trusted])
-            if shown.any():
+            if believed_flips(self._placer, shown, self._noise.sigma_mm, self._max_mm):
                 # The checksum let damage by: no capsule of the batch vouches for its samples.
-                self._placer.note_unseen_damage()
                 suspect[:] = True
         vouched = usable & ~suspect[:, None]
         if suspect.any():

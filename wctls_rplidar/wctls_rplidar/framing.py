@@ -573,6 +573,7 @@ class CapsulePlacer:
         self._recent = collections.deque()     # (slot, bytes) of recent intact capsules
         self._contradictions = 0
         self._since_unseen_damage = _UNSEEN_DAMAGE_MEMORY
+        self._weak_sign_at = -math.inf          # when (in capsules placed) one was last taken
         self._placed = 0                        # capsules placed so far
         self._contradicted = collections.deque()   # when (in capsules placed) they were
         self._moved_bytes_until = 0
@@ -580,6 +581,22 @@ class CapsulePlacer:
     def note_unseen_damage(self):
         """Take a sign of damage the checksum cannot see that the samples showed."""
         self._since_unseen_damage = 0
+
+    def shows_damage(self) -> bool:
+        """
+        Tell whether the line showed damage lately: any the checksum sees or cannot see.
+
+        Bytes damaged (:attr:`CapsuleFramer.damage`), most recent capsules failing, a sign of
+        damage the checksum cannot see (:meth:`note_unseen_damage`) or a weak one
+        (:meth:`note_weak_sign`) within :data:`_UNSEEN_DAMAGE_MEMORY` capsules.
+        """
+        return (self._framer.damage.share > 0.0 or self._damage > _DAMAGED_SHARE
+                or self._since_unseen_damage < _UNSEEN_DAMAGE_MEMORY
+                or self._placed - self._weak_sign_at <= _UNSEEN_DAMAGE_MEMORY)
+
+    def note_weak_sign(self):
+        """Take a sign of damage the checksum cannot see too weak to believe on a clean line."""
+        self._weak_sign_at = self._placed
 
     def place(self, frames: list, next_field: int):
         """

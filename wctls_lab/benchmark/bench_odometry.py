@@ -25,7 +25,9 @@ With ``--kiss PYTHON``: KISS-ICP too, in the interpreter PYTHON of a virtual env
 has it (``pip install kiss-icp``; not a dependency of ours): the scans as z = 0 clouds of their
 finite returns within range, deskew off, voxel 0.1 m, scored by the same code with its fixed
 0.1 covariance, its time per scan its ``register_frame``'s.
-Usage: python bench_odometry.py [--wheel] [--kiss PYTHON] [recording ...]
+With ``--rf2o BINARY``: rf2o_laser_odometry too, its ``CLaserOdometry2D`` built stand-alone
+(never committed; the interface in :func:`rf2o`), scored with the covariance it computes.
+Usage: python bench_odometry.py [--wheel] [--kiss PYTHON] [--rf2o BINARY] [recording ...]
 """
 
 import math
@@ -139,9 +141,7 @@ np.savez(sys.argv[2], poses=np.array(poses), seconds=spent / max(len(poses), 1))
 
 def kiss_icp(name: str, python: str) -> str:
     """Return one table row of KISS-ICP on a moving recording, run by another interpreter."""
-    folder = DATA / name
-    _, sigma_m, sigma_deg = MOVING[name]
-    scans = load_scans(folder)
+    scans = load_scans(DATA / name)
     angles = scans.angle_min + scans.angle_increment * np.arange(scans.ranges.shape[1])
     clouds = {'max_range': np.array(scans.range_max), 'count': np.array(len(scans.ranges))}
     for k, ranges in enumerate(scans.ranges):
@@ -155,21 +155,69 @@ def kiss_icp(name: str, python: str) -> str:
         subprocess.run([python, '-c', KISS_ICP, str(inputs), str(outputs)], check=True)
         result = np.load(outputs)
         laser, seconds = result['poses'], float(result['seconds'])
+    # Its published covariance: a fixed 0.1.
+    covariances = np.repeat(0.1 * np.eye(3)[None], len(laser), axis=0)
+    return external_row(name, 'KISS-ICP', scans, laser, covariances, seconds)
+
+
+def rf2o(name: str, binary: str) -> str:
+    """
+    Return one table row of rf2o_laser_odometry on a moving recording, run by a local build.
+
+    BINARY reads a text file, a line ``count width angle_min angle_max angle_increment`` then
+    per scan ``stamp_s`` and its ``width`` ranges (0 where invalid), runs rf2o's
+    ``CLaserOdometry2D`` as its node does (``init`` on the first scan, ``odometryCalculation``
+    on each next, the laser at the robot's origin) and prints per scan the laser's pose, the
+    upper triangle of ``cov_odo`` and the milliseconds of the call:
+    ``x y yaw c00 c01 c02 c11 c12 c22 ms``. rf2o publishes no covariance (all zero); ``cov_odo``
+    is the one it computes, of the finest level's step in the laser frame, scored here.
+    """
+    scans = load_scans(DATA / name)
+    ranges = np.where(np.isfinite(scans.ranges) & (scans.ranges >= scans.range_min)
+                      & (scans.ranges <= scans.range_max), scans.ranges, 0.0)
+    width = ranges.shape[1]
+    angle_max = scans.angle_min + scans.angle_increment * (width - 1)
+    with tempfile.TemporaryDirectory() as folder_out:
+        inputs = pathlib.Path(folder_out, 'scans.txt')
+        with inputs.open('w') as out:
+            out.write(f'{len(ranges)} {width} {float(scans.angle_min)!r} {float(angle_max)!r} '
+                      f'{float(scans.angle_increment)!r}\n')
+            for stamp_ns, row in zip(scans.stamps_ns, ranges):
+                out.write(f'{float(stamp_ns) * 1e-9!r} ' + ' '.join(map('{:.6g}'.format, row))
+                          + '\n')
+        printed = subprocess.run([binary, str(inputs)], check=True, capture_output=True,
+                                 text=True).stdout
+    rows = np.array([line.split() for line in printed.splitlines()], dtype=float)
+    laser, upper = rows[:, :3], rows[:, 3:9]
+    covariances = upper[:, [0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(-1, 3, 3)
+    return external_row(name, 'rf2o', scans, laser, covariances, rows[1:, 9].mean() * 1e-3)
+
+
+def external_row(name: str, label: str, scans, laser: np.ndarray, covariances: np.ndarray,
+                 seconds: float) -> str:
+    """
+    Return the table row of another odometry's laser poses, scored as ours.
+
+    :param laser: its laser poses in its own odom frame, one per scan, shape (T, 3)
+    :param covariances: its step covariances in the laser frame, shape (T, 3, 3)
+    :param seconds: its time per scan, s
+    """
+    folder = DATA / name
+    _, sigma_m, sigma_deg = MOVING[name]
     mount = load_without_aliases((folder / 'laser_mount.yaml').read_text())
     mount = np.array([mount['x_m'], mount['y_m'], mount['yaw_rad']])
-    # Started at the mount, as ours: odom is the robot's first pose.
+    # The laser's poses, started at the mount as ours: odom is the robot's first pose.
     poses = np.array([compose(mount, pose) for pose in laser])
     steps = np.zeros_like(poses)
     steps[1:] = [compose(inverse(a), b) for a, b in zip(poses[:-1], poses[1:])]
     reference = poses_at(load_poses(folder / 'poses.csv'), scans.stamps_ns * 1e-9, tuple(mount))
     known = np.isfinite(reference).all(axis=1)
-    errors = trajectory_errors(poses[known], steps[known],
-                               np.repeat(0.1 * np.eye(3)[None], known.sum(), axis=0),
+    errors = trajectory_errors(poses[known], steps[known], covariances[known],
                                reference[known], sigma_m, math.radians(sigma_deg))
-    return (f'| {name} | KISS-ICP | {errors.rpe_percent_per_m:.2f} | '
+    return (f'| {name} | {label} | {errors.rpe_percent_per_m:.2f} | '
             f'{errors.rpe_deg_per_m:.2f} | {errors.ate_m:.3f} | {100 * errors.steps_within:.1f} '
             f'| {errors.nees_mean:.3g} | {100 * errors.nees_in_gate:.1f} | - | '
-            f'{1e3 * seconds:.1f} |')
+            f'{1e3 * seconds:.2f} |')
 
 
 def still(name: str, reference: str) -> str:
@@ -183,10 +231,11 @@ def still(name: str, reference: str) -> str:
 
 def main(names) -> None:
     """Print the tables."""
-    kiss = None
-    if '--kiss' in names:
-        at = names.index('--kiss')
-        kiss, names = names[at + 1], names[:at] + names[at + 2:]
+    peers = {}
+    for option in ('--kiss', '--rf2o'):
+        if option in names:
+            at = names.index(option)
+            peers[option], names = names[at + 1], names[:at] + names[at + 2:]
     if names and names[0] == '--wheel':
         print('| recording | prior | RPE %/m | RPE deg/m | ATE m | steps within 10 cm, 2 deg % '
               '| step NEES mean (3) | inside 95 % gate % | statuses | wheel steps taken / '
@@ -210,8 +259,10 @@ def main(names) -> None:
     for name in (n for n in names if n in MOVING):
         for reference in REFERENCES:
             print(moving(name, reference), flush=True)
-        if kiss:
-            print(kiss_icp(name, kiss), flush=True)
+        if '--kiss' in peers:
+            print(kiss_icp(name, peers['--kiss']), flush=True)
+        if '--rf2o' in peers:
+            print(rf2o(name, peers['--rf2o']), flush=True)
     print('\n| still recording | reference | scans | drift at the end mm | largest drift mm | '
           'odometry ms/scan |')
     print('|---|---|---|---|---|---|')

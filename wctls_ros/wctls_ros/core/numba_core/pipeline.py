@@ -13,7 +13,7 @@ the rare scan whose features the plausibility bounds drop, :func:`..plausibility
 
 import functools
 import math
-from typing import NamedTuple, Optional
+from typing import NamedTuple
 
 import numpy as np
 
@@ -30,6 +30,7 @@ from .segmentation import (breakpoints_of, chains_of, merge_segments, pass_budge
 from ..config import FeatureConfig, METHODS
 from ..features import CornerSet, Features, SegmentSet
 from ..plausibility import kept
+from ..prepared import LatestPrepared
 from ..records import (BeamGrid, CornerArrays, CornerEndRule, Lines, Noise, Returns,
                        SegmentArrays, Segments, Settings)
 from ..scan import beam_density, scan_geometry, ScanError
@@ -75,40 +76,15 @@ class _Prepared(NamedTuple):
     density: _AtDensity
 
 
-class _LatestPrepared:
-    """
-    The arguments prepared for the latest configuration and beam layout.
-
-    A node or a bag replay extracts every scan with the same FeatureConfig object and layout:
-    comparing them by identity costs well under a microsecond, where hashing the configuration
-    (about 40 fields) for the caches above costs several. One record, replaced whole, so that
-    threads extracting at once each see a consistent one.
-    """
-
-    def __init__(self) -> None:
-        self.prepared: Optional[_Prepared] = None
-
-    def get(self, config: FeatureConfig, angle_increment_rad: float,
-            beam_count: int) -> _Prepared:
-        """
-        Return the arguments for a configuration and beam layout, prepared at most once in a row.
-
-        :param config: the configuration
-        :param angle_increment_rad: the scan's bearing step, rad
-        :param beam_count: the scan's number of beams
-        :return: the prepared arguments
-        """
-        prepared = self.prepared
-        if (prepared is None or prepared.config is not config
-                or prepared.angle_increment_rad != angle_increment_rad
-                or prepared.beam_count != beam_count):
-            prepared = _Prepared(config, angle_increment_rad, beam_count, _settings(config),
-                                 _at_density(angle_increment_rad, beam_count, config))
-            self.prepared = prepared
-        return prepared
+def _prepare(config: FeatureConfig, angle_increment_rad: float, beam_count: int) -> _Prepared:
+    """Return the compiled pipeline's arguments for a configuration and beam layout."""
+    return _Prepared(config, angle_increment_rad, beam_count, _settings(config),
+                     _at_density(angle_increment_rad, beam_count, config))
 
 
-_LATEST = _LatestPrepared()
+# The arguments of the latest configuration and layout, compared by identity (see
+# :class:`..prepared.LatestPrepared`) before the caches above are asked.
+_LATEST = LatestPrepared(_prepare)
 
 
 def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,

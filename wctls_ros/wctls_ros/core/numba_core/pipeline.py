@@ -13,8 +13,10 @@ the rare scan whose features the plausibility bounds drop, :func:`..plausibility
 
 import functools
 import math
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
+from numba import typeof
+from numba.core.dispatcher import Dispatcher
 import numpy as np
 
 from ._jit import jit, jit_inline, use_disk_cache
@@ -51,11 +53,17 @@ class _AtDensity(NamedTuple):
 @functools.lru_cache(maxsize=64)
 def _at_density(angle_increment_rad: float, beam_count: int,
                 config: FeatureConfig) -> _AtDensity:
-    """Return the rules that count returns for a scan (one per spacing, size and config)."""
+    """
+    Return the rules that count returns for a scan (one per spacing, size and config).
+
+    As floats and ints whatever the configuration holds (an int sigma, kept as it is at the
+    tuned spacing, would be a record of another type: another compile of the pipeline).
+    """
     density = beam_density(angle_increment_rad, beam_count)
-    return _AtDensity(density.breakpoint_sigmas, density.rarer(config.iepf_noise_sigmas),
-                      density.rarer(config.corner_end_sigmas), density.end_window,
-                      density.corner_window)
+    return _AtDensity(float(density.breakpoint_sigmas),
+                      float(density.rarer(config.iepf_noise_sigmas)),
+                      float(density.rarer(config.corner_end_sigmas)), int(density.end_window),
+                      int(density.corner_window))
 
 
 @functools.lru_cache(maxsize=64)
@@ -67,19 +75,47 @@ def _settings(config: FeatureConfig) -> Settings:
 
 
 class _Prepared(NamedTuple):
-    """The compiled pipeline's arguments that depend on the configuration and beam layout."""
+    """
+    The compiled pipeline's arguments that depend on the configuration and beam layout.
+
+    :ivar compiled: the version of :func:`_features_of_scan` compiled for the types of these
+        arguments and of a scan's (:func:`_compiled_version`)
+    """
 
     config: FeatureConfig
     angle_increment_rad: float
     beam_count: int
     settings: Settings
     density: _AtDensity
+    compiled: Callable
+
+
+def _compiled_version(settings: Settings, density: _AtDensity) -> Callable:
+    """
+    Return :func:`_features_of_scan` compiled for a configuration's records, past the dispatcher.
+
+    numba's dispatcher works out the type of every argument on every call, about 8 us a scan
+    (docs/performance.md): here that is done once per configuration and beam layout, and the
+    compiled version for those types (compiled, or loaded from the cache, now if need be) is
+    called directly. Its arguments' types are the same on every scan: those of the results of
+    :func:`..scan.scan_geometry` (of any scan: the types of a sample's), Python floats, and the
+    prepared records. Anything else than a dispatcher in its place (a benchmark's clock) is
+    called as it is.
+    """
+    compiled = _features_of_scan
+    if not isinstance(compiled, Dispatcher):
+        return compiled
+    ranges, full_turn, cos, sin = scan_geometry(np.zeros(1), 0.0, 1.0)
+    return compiled.compile(tuple(typeof(argument) for argument in (
+        ranges, cos, sin, 0.0, 0.0, 0.0, 0.0, full_turn, settings, density)))
 
 
 def _prepare(config: FeatureConfig, angle_increment_rad: float, beam_count: int) -> _Prepared:
     """Return the compiled pipeline's arguments for a configuration and beam layout."""
-    return _Prepared(config, angle_increment_rad, beam_count, _settings(config),
-                     _at_density(angle_increment_rad, beam_count, config))
+    settings = _settings(config)
+    density = _at_density(angle_increment_rad, beam_count, config)
+    return _Prepared(config, angle_increment_rad, beam_count, settings, density,
+                     _compiled_version(settings, density))
 
 
 # The arguments of the latest configuration and layout, compared by identity (see
@@ -102,7 +138,7 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
     ranges, full_turn, cos, sin = scan_geometry(ranges_m, angle_min_rad, angle_increment_rad)
     prepared = _LATEST.get(config, float(angle_increment_rad), ranges.size)
     (segments, corners, keep_segment, keep_corner, work_limited, range_sigma_m,
-     noise_implausible) = _features_of_scan(
+     noise_implausible) = prepared.compiled(
         ranges, cos, sin, float(angle_min_rad), prepared.angle_increment_rad,
         float(max(range_min_m, config.range_min_m)), float(min(range_max_m, config.range_max_m)),
         full_turn, prepared.settings, prepared.density)

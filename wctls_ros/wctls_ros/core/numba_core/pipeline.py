@@ -225,7 +225,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
                                settings.end_offset_sigmas, density.end_window)
     # #utls, #wtls, #wctls or #maximum-likelihood: the configured fit with its covariance, in
     # scan order of the walls' first returns.
-    start, stop = _in_scan_order(contour.beam_index, ranges_m.size, segments.start, segments.stop)
+    start, stop = _in_scan_order(contour.beam_index, segments.start, segments.stop)
     walls, positions = _fit_walls(contour, start, stop, noise, settings)
     if walls.angle_rad.size == 0:
         return None, None, None, None, work_limited, range_sigma, False
@@ -279,21 +279,33 @@ def _in_circular_order(returns, joinable, order):
     """
     Return the returns and their joinable flags in circular order (a rotation of beam order).
 
-    In one pass, and none when the rotation is none (a scan short of a full turn, or one whose
-    first return starts a chain): the returns themselves then.
+    None when the rotation is none (a scan short of a full turn, or one whose first return
+    starts a chain): the returns themselves then. Else beam order from ``order[0]`` on, then
+    up to it (:func:`.segmentation.chains_of`): each array in two runs of contiguous copies,
+    which the compiler vectorises (an index array read per return it does not; 0.9 against 1.8
+    us per array of 4320).
     """
     n = order.size
     if n == 0 or order[0] == 0:
         return returns, joinable
-    beam_index, joinable_in_order = np.empty(n, np.intp), np.empty(n, np.bool_)
-    range_m, bearing, x, y = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    for position in range(n):
-        i = order[position]
-        beam_index[position], range_m[position] = returns.beam_index[i], returns.range_m[i]
-        bearing[position], x[position], y[position] = (returns.bearing_rad[i], returns.x_m[i],
-                                                       returns.y_m[i])
-        joinable_in_order[position] = joinable[i]
-    return Returns(beam_index, range_m, bearing, x, y), joinable_in_order
+    first = order[0]
+    return (Returns(_rotated(returns.beam_index, first), _rotated(returns.range_m, first),
+                    _rotated(returns.bearing_rad, first), _rotated(returns.x_m, first),
+                    _rotated(returns.y_m, first)),
+            _rotated(joinable, first))
+
+
+@jit
+def _rotated(values, first):
+    """Return ``values[first:]`` followed by ``values[:first]``, a new array."""
+    rotated = np.empty_like(values)
+    source, target = values[first:], rotated[:values.size - first]
+    for k in range(source.size):
+        target[k] = source[k]
+    source, target = values[:first], rotated[values.size - first:]
+    for k in range(source.size):
+        target[k] = source[k]
+    return rotated
 
 
 @jit
@@ -310,24 +322,15 @@ def _large_enough(x, y, segments, settings):
 
 
 @jit
-def _in_scan_order(beam_of_position, beam_count, start, stop):
+def _in_scan_order(beam_of_position, start, stop):
     """
     Return the segments sorted by the beam index of their first return.
 
-    Every segment starts at a different return, so each beam index holds at most one: placing
-    them by beam index sorts them in O(beams).
+    Every segment starts at a different return, so no two have the same beam index: any sort
+    gives the one order, and a sort of the S segments costs less than a pass over the beams.
     """
-    segment_at_beam = np.full(beam_count, -1, np.intp)
-    for s in range(start.size):
-        segment_at_beam[beam_of_position[start[s]]] = s
-    sorted_start, sorted_stop = np.empty_like(start), np.empty_like(stop)
-    placed = 0
-    for beam in range(beam_count):
-        s = segment_at_beam[beam]
-        if s >= 0:
-            sorted_start[placed], sorted_stop[placed] = start[s], stop[s]
-            placed += 1
-    return sorted_start, sorted_stop
+    order = np.argsort(beam_of_position[start])
+    return start[order], stop[order]
 
 
 @jit_inline
@@ -342,17 +345,23 @@ def _fit_walls(contour, start, stop, noise, settings):
     """
     rho, theta, x, y = contour.range_m, contour.bearing_rad, contour.x_m, contour.y_m
     count, segments = x.size, start.size
-    counts, offsets = np.empty(segments, np.intp), np.empty(segments, np.intp)
-    total = 0
-    for s in range(segments):
-        counts[s], offsets[s] = stop[s] - start[s], total
-        total += counts[s]
-    rho_w, theta_w, x_w, y_w = np.empty(total), np.empty(total), np.empty(total), np.empty(total)
-    for s in range(segments):
-        for k in range(counts[s]):
-            i = wrapped(start[s] + k, count)
-            at = offsets[s] + k
-            rho_w[at], theta_w[at], x_w[at], y_w[at] = rho[i], theta[i], x[i], y[i]
+    counts = stop - start
+    # The fits read each segment's returns as one run: the contour's own, unless one crosses
+    # the seam; then the returns of every segment are laid end to end in new arrays.
+    rho_w, theta_w, x_w, y_w, offsets = rho, theta, x, y, start
+    if segments > 0 and stop.max() > count:
+        offsets = np.empty(segments, np.intp)
+        total = 0
+        for s in range(segments):
+            offsets[s] = total
+            total += counts[s]
+        rho_w, theta_w, x_w = np.empty(total), np.empty(total), np.empty(total)
+        y_w = np.empty(total)
+        for s in range(segments):
+            for k in range(counts[s]):
+                i = wrapped(start[s] + k, count)
+                at = offsets[s] + k
+                rho_w[at], theta_w[at], x_w[at], y_w[at] = rho[i], theta[i], x[i], y[i]
     (line, line_covariance, angle, radius, normal_covariance, line_offset,
      _) = fit_segments(settings.method_code, rho_w, theta_w, x_w, y_w, offsets, counts, noise)
     chi2_dof = residual_chi2_dof(rho_w, x_w, y_w, offsets, counts, Lines(angle, radius), noise)

@@ -6,9 +6,10 @@ The per-scan pipeline of the paper's Algorithm 1: returns -> segments -> lines -
 
 One compiled function (:func:`_features_of_scan`) runs every step on a scan, as loops over its
 returns (numba), the plausibility bounds included; :func:`extract_features` checks the scan's
-geometry, hands it the configuration prepared once per configuration and beam layout, and wraps
-the arrays it returns in the frozen result dataclasses: no other Python runs per scan (but on
-the rare scan whose features the plausibility bounds drop, :func:`..plausibility.kept`).
+geometry, hands it the configuration prepared once per configuration and beam layout (its
+compiled version for their types with it: no dispatcher per scan), and wraps the arrays it
+returns in the frozen result dataclasses: no other Python runs per scan (but on the rare scan
+whose features the plausibility bounds drop, :func:`..plausibility.kept`).
 """
 
 import functools
@@ -94,13 +95,13 @@ def _compiled_version(settings: Settings, density: _AtDensity) -> Callable:
     """
     Return :func:`_features_of_scan` compiled for a configuration's records, past the dispatcher.
 
-    numba's dispatcher works out the type of every argument on every call, about 8 us a scan
+    numba's dispatcher works out the type of every argument on every call, 2.5-2.8 us a scan
     (docs/performance.md): here that is done once per configuration and beam layout, and the
     compiled version for those types (compiled, or loaded from the cache, now if need be) is
     called directly. Its arguments' types are the same on every scan: those of the results of
     :func:`..scan.scan_geometry` (of any scan: the types of a sample's), Python floats, and the
-    prepared records. Anything else than a dispatcher in its place (a benchmark's clock) is
-    called as it is.
+    prepared records. Whatever stands in its place and is no dispatcher (a benchmark's clock)
+    is called as it is.
     """
     compiled = _features_of_scan
     if not isinstance(compiled, Dispatcher):
@@ -137,6 +138,7 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
                         f'({config.max_beams})')
     ranges, full_turn, cos, sin = scan_geometry(ranges_m, angle_min_rad, angle_increment_rad)
     prepared = _LATEST.get(config, float(angle_increment_rad), ranges.size)
+    # Arguments of the types the version was compiled for (:func:`_compiled_version`).
     (segments, corners, keep_segment, keep_corner, work_limited, range_sigma_m,
      noise_implausible) = prepared.compiled(
         ranges, cos, sin, float(angle_min_rad), prepared.angle_increment_rad,

@@ -311,9 +311,11 @@ class Features:
         keep their defaults.
         """
         features = object.__new__(cls)
-        features.__dict__.update(_FEATURES_DEFAULTS, method=method, segments=segments,
-                                 corners=corners, work_limited=work_limited,
-                                 range_sigma_m=range_sigma_m)
+        values = features.__dict__
+        values.update(_FEATURES_DEFAULTS)
+        # One by one: keywords to update() would build a dict of them first (0.15 us more).
+        values['method'], values['segments'], values['corners'] = method, segments, corners
+        values['work_limited'], values['range_sigma_m'] = work_limited, range_sigma_m
         return features
 
 

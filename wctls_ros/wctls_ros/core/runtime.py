@@ -12,7 +12,7 @@ after which it loads from numba's disk cache in about a second. The numpy one
 (:mod:`.numpy_core`) needs numpy alone. The landmark tracker's compiled kernels
 (:mod:`.numba_core.tracking`) and the dock's fit to the returns (:mod:`.numba_core.dock`) are
 compiled and loaded with the compiled pipeline, and serve while it serves
-(:func:`compiled_tracker`, :func:`compiled_dock`).
+(:func:`compiled_kernels`).
 
 The environment variable ``WCTLS_ROS_CORE`` chooses:
 
@@ -39,7 +39,7 @@ import subprocess
 import sys
 import threading
 import time
-from typing import Any, Callable, List, Optional
+from typing import Any, Callable, Dict, List, Optional
 
 from . import numpy_core
 from .config import FeatureConfig
@@ -56,6 +56,9 @@ INSTALL_NUMBA = f"pip install 'numba>={'.'.join(map(str, OLDEST_NUMBA))}'"
 # in alternating processes by benchmark/bench_core.py (18x; 11x at 4320 beams, 30x on 541-beam
 # SICK scans: docs/performance.md).
 SPEEDUP = 20
+# The modules of numba_core whose kernels are compiled and loaded with the compiled pipeline
+# (:func:`compiled_kernels`): the landmark tracker's and the dock's.
+COMPILED_KERNELS = ('tracking', 'dock')
 
 
 class CoreUnavailable(RuntimeError):
@@ -114,10 +117,8 @@ class CoreStatus:
 Listener = Callable[[CoreStatus], None]
 _lock = threading.Lock()
 _extract: Callable[..., Features] = numpy_core.extract_features
-# The compiled tracker's kernels (numba_core.tracking), loaded with the compiled pipeline.
-_tracker: Any = None
-# The dock's compiled fit (numba_core.dock), loaded with it.
-_dock: Any = None
+# The modules of numba_core loaded with the compiled pipeline, by name, once it serves.
+_kernels: Dict[str, Any] = {}
 _status: Optional[CoreStatus] = None
 _compiler: Optional[subprocess.Popen] = None
 _listeners: List[Listener] = []
@@ -155,40 +156,34 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
                     range_max_m)
 
 
-def compiled_tracker(wait: bool = False) -> Any:
+def compiled_kernels(name: str, wait: bool = False) -> Any:
     """
-    Return the landmark tracker's compiled kernels while the compiled core serves, else None.
+    Return a module of compiled kernels beside the pipeline while the compiled core serves.
 
-    The kernels (:mod:`.numba_core.tracking`, the twin of
-    :class:`wctls_ros.frontend.tracking.Tracker`'s numpy steps) are compiled and loaded with
-    the compiled pipeline: None while numba is missing, too old or failed, while the compiled
-    core is still loading or compiling, before :func:`start`, and with ``WCTLS_ROS_CORE=numpy``.
+    The landmark tracker's (``'tracking'``: :mod:`.numba_core.tracking`, the twin of
+    :class:`wctls_ros.frontend.tracking.Tracker`'s numpy steps) and the dock's fit to the
+    returns (``'dock'``: :mod:`.numba_core.dock`, the twin of
+    :func:`wctls_ros.frontend.dock.fit_returns`) are compiled and loaded with the compiled
+    pipeline: None while numba is missing, too old or failed, while the compiled core is still
+    loading or compiling, before :func:`start`, and with ``WCTLS_ROS_CORE=numpy``.
 
+    :param name: which: one of :data:`COMPILED_KERNELS`
     :param wait: start the choice first and wait for the compiled core (``start(wait=True)``)
     :return: the module of the kernels, or None
+    :raises ValueError: on another name
     :raises CoreUnavailable: with ``wait``, when ``WCTLS_ROS_CORE=numba`` and numba cannot give
         the core
     """
+    if name not in COMPILED_KERNELS:
+        raise ValueError(f'no compiled kernels {name!r}: one of {", ".join(COMPILED_KERNELS)}')
     if wait:
         start(wait=True)
-    return _tracker
+    return _kernels.get(name)
 
 
-def compiled_dock(wait: bool = False) -> Any:
-    """
-    Return the dock's compiled fit to the returns while the compiled core serves, else None.
-
-    The kernel (:mod:`.numba_core.dock`, the twin of :func:`wctls_ros.frontend.dock.fit_returns`)
-    is compiled and loaded with the compiled pipeline, as :func:`compiled_tracker`'s are.
-
-    :param wait: start the choice first and wait for the compiled core (``start(wait=True)``)
-    :return: the module of the kernel, or None
-    :raises CoreUnavailable: with ``wait``, when ``WCTLS_ROS_CORE=numba`` and numba cannot give
-        the core
-    """
-    if wait:
-        start(wait=True)
-    return _dock
+# The tracker's and the dock's kernels by what they serve (:func:`compiled_kernels`).
+compiled_tracker = functools.partial(compiled_kernels, 'tracking')
+compiled_dock = functools.partial(compiled_kernels, 'dock')
 
 
 def status() -> Optional[CoreStatus]:
@@ -344,11 +339,11 @@ def _bring_in_compiled(asked: str, on_compile: Optional[Callable[[], None]],
     :return: the status: numba, or numpy with the reason the compiled core failed
     :raises CoreUnavailable: when ``asked`` is 'numba' and the compiled core fails
     """
-    global _extract, _tracker, _dock
+    global _extract, _kernels
     started = time.perf_counter()
     try:
         import numba
-        from .numba_core import dock, pipeline, precompile, tracking
+        from .numba_core import pipeline, precompile
         compiled_here = not precompile.pipeline_is_cached()
         if compiled_here:
             if on_compile is not None:
@@ -362,8 +357,8 @@ def _bring_in_compiled(asked: str, on_compile: Optional[Callable[[], None]],
             raise CoreUnavailable(reason) from error
         return CoreStatus('numpy', reason)
     _extract = pipeline.extract_features
-    _tracker = tracking
-    _dock = dock
+    _kernels = {name: importlib.import_module(f'.numba_core.{name}', __package__)
+                for name in COMPILED_KERNELS}
     return CoreStatus('numba', f'numba {numba.__version__}', seconds=time.perf_counter() - started,
                       compiled_here=compiled_here)
 

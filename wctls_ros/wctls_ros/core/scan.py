@@ -204,12 +204,18 @@ def scan_geometry(ranges_m, angle_min_rad: float, angle_increment_rad: float):
     :param ranges_m: ranges, shape (N,), m
     :param angle_min_rad: bearing of the first beam, rad
     :param angle_increment_rad: bearing step between beams, rad (non-zero, either sign)
-    :return: (the ranges as a new float64 array (N,), whether the beams cover a full turn,
-        cos and sin of every beam's bearing (N,) each, read-only)
+    :return: (the ranges as a contiguous, writable float64 array (N,): ``ranges_m`` itself when
+        it is one, else a copy; whether the beams cover a full turn; cos and sin of every
+        beam's bearing (N,) each, read-only)
     :raises ScanError: on ranges that are not one-dimensional, a non-finite or zero increment,
         or more than a full turn of beams
     """
-    ranges = np.array(ranges_m, dtype=np.float64)       # a copy: contiguous and writable
+    # Of one numba type whatever the caller's array (the compiled pipeline is compiled for it),
+    # copied only when it is not of it already: the copy of a 4320-beam scan took 3 us.
+    ranges = np.asarray(ranges_m, dtype=np.float64)
+    flags = ranges.flags
+    if not (flags.c_contiguous and flags.writeable and flags.aligned):
+        ranges = ranges.copy()
     if ranges.ndim != 1:
         raise ScanError(f'ranges must be one-dimensional, got shape {ranges.shape}')
     if not (math.isfinite(angle_min_rad) and math.isfinite(angle_increment_rad)):

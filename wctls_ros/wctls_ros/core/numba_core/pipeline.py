@@ -6,15 +6,18 @@ The per-scan pipeline of the paper's Algorithm 1: returns -> segments -> lines -
 
 One compiled function (:func:`_features_of_scan`) runs every step on a scan, as loops over its
 returns (numba), the plausibility bounds included; :func:`extract_features` checks the scan's
-geometry, hands it the configuration prepared once per configuration and beam layout, and wraps
-the arrays it returns in the frozen result dataclasses: no other Python runs per scan (but on
-the rare scan whose features the plausibility bounds drop, :func:`..plausibility.kept`).
+geometry, hands it the configuration prepared once per configuration and beam layout (its
+compiled version for their types with it: no dispatcher per scan), and wraps the arrays it
+returns in the frozen result dataclasses: no other Python runs per scan (but on the rare scan
+whose features the plausibility bounds drop, :func:`..plausibility.kept`).
 """
 
 import functools
 import math
-from typing import NamedTuple, Optional
+from typing import Callable, NamedTuple
 
+from numba import typeof
+from numba.core.dispatcher import Dispatcher
 import numpy as np
 
 from ._jit import jit, jit_inline, use_disk_cache
@@ -30,6 +33,7 @@ from .segmentation import (breakpoints_of, chains_of, merge_segments, pass_budge
 from ..config import FeatureConfig, METHODS
 from ..features import CornerSet, Features, SegmentSet
 from ..plausibility import kept
+from ..prepared import LatestPrepared
 from ..records import (BeamGrid, CornerArrays, CornerEndRule, Lines, Noise, Returns,
                        SegmentArrays, Segments, Settings)
 from ..scan import beam_density, scan_geometry, ScanError
@@ -50,11 +54,17 @@ class _AtDensity(NamedTuple):
 @functools.lru_cache(maxsize=64)
 def _at_density(angle_increment_rad: float, beam_count: int,
                 config: FeatureConfig) -> _AtDensity:
-    """Return the rules that count returns for a scan (one per spacing, size and config)."""
+    """
+    Return the rules that count returns for a scan (one per spacing, size and config).
+
+    As floats and ints whatever the configuration holds (an int sigma, kept as it is at the
+    tuned spacing, would be a record of another type: another compile of the pipeline).
+    """
     density = beam_density(angle_increment_rad, beam_count)
-    return _AtDensity(density.breakpoint_sigmas, density.rarer(config.iepf_noise_sigmas),
-                      density.rarer(config.corner_end_sigmas), density.end_window,
-                      density.corner_window)
+    return _AtDensity(float(density.breakpoint_sigmas),
+                      float(density.rarer(config.iepf_noise_sigmas)),
+                      float(density.rarer(config.corner_end_sigmas)), int(density.end_window),
+                      int(density.corner_window))
 
 
 @functools.lru_cache(maxsize=64)
@@ -66,49 +76,52 @@ def _settings(config: FeatureConfig) -> Settings:
 
 
 class _Prepared(NamedTuple):
-    """The compiled pipeline's arguments that depend on the configuration and beam layout."""
+    """
+    The compiled pipeline's arguments that depend on the configuration and beam layout.
+
+    :ivar compiled: the version of :func:`_features_of_scan` compiled for the types of these
+        arguments and of a scan's (:func:`_compiled_version`)
+    """
 
     config: FeatureConfig
     angle_increment_rad: float
     beam_count: int
     settings: Settings
     density: _AtDensity
+    compiled: Callable
 
 
-class _LatestPrepared:
+def _compiled_version(settings: Settings, density: _AtDensity) -> Callable:
     """
-    The arguments prepared for the latest configuration and beam layout.
+    Return :func:`_features_of_scan` compiled for a configuration's records, past the dispatcher.
 
-    A node or a bag replay extracts every scan with the same FeatureConfig object and layout:
-    comparing them by identity costs well under a microsecond, where hashing the configuration
-    (about 40 fields) for the caches above costs several. One record, replaced whole, so that
-    threads extracting at once each see a consistent one.
+    numba's dispatcher works out the type of every argument on every call, 2.5-2.8 us a scan
+    (docs/performance.md): here that is done once per configuration and beam layout, and the
+    compiled version for those types (compiled, or loaded from the cache, now if need be) is
+    called directly. Its arguments' types are the same on every scan: those of the results of
+    :func:`..scan.scan_geometry` (of any scan: the types of a sample's), Python floats, and the
+    prepared records. Whatever stands in its place and is no dispatcher (a benchmark's clock)
+    is called as it is.
     """
-
-    def __init__(self) -> None:
-        self.prepared: Optional[_Prepared] = None
-
-    def get(self, config: FeatureConfig, angle_increment_rad: float,
-            beam_count: int) -> _Prepared:
-        """
-        Return the arguments for a configuration and beam layout, prepared at most once in a row.
-
-        :param config: the configuration
-        :param angle_increment_rad: the scan's bearing step, rad
-        :param beam_count: the scan's number of beams
-        :return: the prepared arguments
-        """
-        prepared = self.prepared
-        if (prepared is None or prepared.config is not config
-                or prepared.angle_increment_rad != angle_increment_rad
-                or prepared.beam_count != beam_count):
-            prepared = _Prepared(config, angle_increment_rad, beam_count, _settings(config),
-                                 _at_density(angle_increment_rad, beam_count, config))
-            self.prepared = prepared
-        return prepared
+    compiled = _features_of_scan
+    if not isinstance(compiled, Dispatcher):
+        return compiled
+    ranges, full_turn, cos, sin = scan_geometry(np.zeros(1), 0.0, 1.0)
+    return compiled.compile(tuple(typeof(argument) for argument in (
+        ranges, cos, sin, 0.0, 0.0, 0.0, 0.0, full_turn, settings, density)))
 
 
-_LATEST = _LatestPrepared()
+def _prepare(config: FeatureConfig, angle_increment_rad: float, beam_count: int) -> _Prepared:
+    """Return the compiled pipeline's arguments for a configuration and beam layout."""
+    settings = _settings(config)
+    density = _at_density(angle_increment_rad, beam_count, config)
+    return _Prepared(config, angle_increment_rad, beam_count, settings, density,
+                     _compiled_version(settings, density))
+
+
+# The arguments of the latest configuration and layout, compared by identity (see
+# :class:`..prepared.LatestPrepared`) before the caches above are asked.
+_LATEST = LatestPrepared(_prepare)
 
 
 def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
@@ -125,8 +138,9 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
                         f'({config.max_beams})')
     ranges, full_turn, cos, sin = scan_geometry(ranges_m, angle_min_rad, angle_increment_rad)
     prepared = _LATEST.get(config, float(angle_increment_rad), ranges.size)
+    # Arguments of the types the version was compiled for (:func:`_compiled_version`).
     (segments, corners, keep_segment, keep_corner, work_limited, range_sigma_m,
-     noise_implausible) = _features_of_scan(
+     noise_implausible) = prepared.compiled(
         ranges, cos, sin, float(angle_min_rad), prepared.angle_increment_rad,
         float(max(range_min_m, config.range_min_m)), float(min(range_max_m, config.range_max_m)),
         full_turn, prepared.settings, prepared.density)
@@ -213,7 +227,7 @@ def _features_of_scan(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, ra
                                settings.end_offset_sigmas, density.end_window)
     # #utls, #wtls, #wctls or #maximum-likelihood: the configured fit with its covariance, in
     # scan order of the walls' first returns.
-    start, stop = _in_scan_order(contour.beam_index, ranges_m.size, segments.start, segments.stop)
+    start, stop = _in_scan_order(contour.beam_index, segments.start, segments.stop)
     walls, positions = _fit_walls(contour, start, stop, noise, settings)
     if walls.angle_rad.size == 0:
         return None, None, None, None, work_limited, range_sigma, False
@@ -267,21 +281,33 @@ def _in_circular_order(returns, joinable, order):
     """
     Return the returns and their joinable flags in circular order (a rotation of beam order).
 
-    In one pass, and none when the rotation is none (a scan short of a full turn, or one whose
-    first return starts a chain): the returns themselves then.
+    None when the rotation is none (a scan short of a full turn, or one whose first return
+    starts a chain): the returns themselves then. Else beam order from ``order[0]`` on, then
+    up to it (:func:`.segmentation.chains_of`): each array in two runs of contiguous copies,
+    which the compiler vectorises (an index array read per return it does not; 0.9 against 1.8
+    us per array of 4320).
     """
     n = order.size
     if n == 0 or order[0] == 0:
         return returns, joinable
-    beam_index, joinable_in_order = np.empty(n, np.intp), np.empty(n, np.bool_)
-    range_m, bearing, x, y = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    for position in range(n):
-        i = order[position]
-        beam_index[position], range_m[position] = returns.beam_index[i], returns.range_m[i]
-        bearing[position], x[position], y[position] = (returns.bearing_rad[i], returns.x_m[i],
-                                                       returns.y_m[i])
-        joinable_in_order[position] = joinable[i]
-    return Returns(beam_index, range_m, bearing, x, y), joinable_in_order
+    first = order[0]
+    return (Returns(_rotated(returns.beam_index, first), _rotated(returns.range_m, first),
+                    _rotated(returns.bearing_rad, first), _rotated(returns.x_m, first),
+                    _rotated(returns.y_m, first)),
+            _rotated(joinable, first))
+
+
+@jit
+def _rotated(values, first):
+    """Return ``values[first:]`` followed by ``values[:first]``, a new array."""
+    rotated = np.empty_like(values)
+    source, target = values[first:], rotated[:values.size - first]
+    for k in range(source.size):
+        target[k] = source[k]
+    source, target = values[:first], rotated[values.size - first:]
+    for k in range(source.size):
+        target[k] = source[k]
+    return rotated
 
 
 @jit
@@ -298,24 +324,15 @@ def _large_enough(x, y, segments, settings):
 
 
 @jit
-def _in_scan_order(beam_of_position, beam_count, start, stop):
+def _in_scan_order(beam_of_position, start, stop):
     """
     Return the segments sorted by the beam index of their first return.
 
-    Every segment starts at a different return, so each beam index holds at most one: placing
-    them by beam index sorts them in O(beams).
+    Every segment starts at a different return, so no two have the same beam index: any sort
+    gives the one order, and a sort of the S segments costs less than a pass over the beams.
     """
-    segment_at_beam = np.full(beam_count, -1, np.intp)
-    for s in range(start.size):
-        segment_at_beam[beam_of_position[start[s]]] = s
-    sorted_start, sorted_stop = np.empty_like(start), np.empty_like(stop)
-    placed = 0
-    for beam in range(beam_count):
-        s = segment_at_beam[beam]
-        if s >= 0:
-            sorted_start[placed], sorted_stop[placed] = start[s], stop[s]
-            placed += 1
-    return sorted_start, sorted_stop
+    order = np.argsort(beam_of_position[start])
+    return start[order], stop[order]
 
 
 @jit_inline
@@ -330,17 +347,23 @@ def _fit_walls(contour, start, stop, noise, settings):
     """
     rho, theta, x, y = contour.range_m, contour.bearing_rad, contour.x_m, contour.y_m
     count, segments = x.size, start.size
-    counts, offsets = np.empty(segments, np.intp), np.empty(segments, np.intp)
-    total = 0
-    for s in range(segments):
-        counts[s], offsets[s] = stop[s] - start[s], total
-        total += counts[s]
-    rho_w, theta_w, x_w, y_w = np.empty(total), np.empty(total), np.empty(total), np.empty(total)
-    for s in range(segments):
-        for k in range(counts[s]):
-            i = wrapped(start[s] + k, count)
-            at = offsets[s] + k
-            rho_w[at], theta_w[at], x_w[at], y_w[at] = rho[i], theta[i], x[i], y[i]
+    counts = stop - start
+    # The fits read each segment's returns as one run: the contour's own, unless one crosses
+    # the seam; then the returns of every segment are laid end to end in new arrays.
+    rho_w, theta_w, x_w, y_w, offsets = rho, theta, x, y, start
+    if segments > 0 and stop.max() > count:
+        offsets = np.empty(segments, np.intp)
+        total = 0
+        for s in range(segments):
+            offsets[s] = total
+            total += counts[s]
+        rho_w, theta_w, x_w = np.empty(total), np.empty(total), np.empty(total)
+        y_w = np.empty(total)
+        for s in range(segments):
+            for k in range(counts[s]):
+                i = wrapped(start[s] + k, count)
+                at = offsets[s] + k
+                rho_w[at], theta_w[at], x_w[at], y_w[at] = rho[i], theta[i], x[i], y[i]
     (line, line_covariance, angle, radius, normal_covariance, line_offset,
      _) = fit_segments(settings.method_code, rho_w, theta_w, x_w, y_w, offsets, counts, noise)
     chi2_dof = residual_chi2_dof(rho_w, x_w, y_w, offsets, counts, Lines(angle, radius), noise)

@@ -26,20 +26,18 @@ def valid_returns(ranges_m, cos, sin, angle_min_rad, angle_increment_rad, range_
     :return: the returns (:class:`~.records.Returns`)
     """
     farthest = min(range_max_m, _LARGEST_RANGE)
-    index = np.empty(ranges_m.size, np.intp)
+    # One pass, each return written where the count of valid ones has got to (a second pass
+    # through the indices of the valid ones took 12 against 8.4 us at 4320 beams).
+    beams = ranges_m.size
+    index = np.empty(beams, np.intp)
+    range_m, bearing, x, y = np.empty(beams), np.empty(beams), np.empty(beams), np.empty(beams)
     count = 0
-    for i in range(ranges_m.size):
+    for i in range(beams):
         r = ranges_m[i]
         # NaN fails every comparison, +-inf one of the two.
         if (r >= range_min_m if range_min_m > 0.0 else r > 0.0) and r <= farthest:
-            index[count] = i
+            index[count], range_m[count] = i, r
+            bearing[count] = angle_min_rad + i * angle_increment_rad
+            x[count], y[count] = r * cos[i], r * sin[i]
             count += 1
-    index = index[:count]
-    range_m = np.empty(count)
-    bearing, x, y = np.empty(count), np.empty(count), np.empty(count)
-    for k in range(count):
-        i = index[k]
-        range_m[k] = ranges_m[i]
-        bearing[k] = angle_min_rad + i * angle_increment_rad
-        x[k], y[k] = range_m[k] * cos[i], range_m[k] * sin[i]
-    return Returns(index, range_m, bearing, x, y)
+    return Returns(index[:count], range_m[:count], bearing[:count], x[:count], y[:count])

@@ -6,7 +6,7 @@
 from dataclasses import dataclass
 import functools
 import math
-from typing import NamedTuple, Optional, TypeVar
+from typing import NamedTuple, TypeVar
 
 import numpy as np
 
@@ -21,6 +21,7 @@ from ..config import FeatureConfig
 from ..features import (CornerSet, Features, LineFits, segment_returns, SegmentReturns,
                         SegmentSet)
 from ..plausibility import implausible_scan, noise_is_plausible, plausible
+from ..prepared import LatestPrepared
 from ..records import CornerEndRule, Lines, Noise, Returns
 from ..scan import beam_density, BeamDensity, scan_to_points, ScanError, ScanPoints
 
@@ -61,39 +62,9 @@ def _prepare(config: FeatureConfig, angle_increment_rad: float, beam_count: int)
                      math.sin(config.min_wall_beam_angle_rad))
 
 
-class _LatestPrepared:
-    """
-    The rules prepared for the latest configuration and beam layout.
-
-    A node or a bag replay extracts every scan with the same FeatureConfig object and layout:
-    comparing them by identity costs well under a microsecond, where hashing the configuration
-    for the cache of :func:`_prepare` costs several. One record, replaced whole, so that threads
-    extracting at once each see a consistent one.
-    """
-
-    def __init__(self) -> None:
-        self.prepared: Optional[_Prepared] = None
-
-    def get(self, config: FeatureConfig, angle_increment_rad: float,
-            beam_count: int) -> _Prepared:
-        """
-        Return the rules for a configuration and beam layout, prepared at most once in a row.
-
-        :param config: the configuration
-        :param angle_increment_rad: the scan's bearing step, rad
-        :param beam_count: the scan's number of beams
-        :return: the prepared rules
-        """
-        prepared = self.prepared
-        if (prepared is None or prepared.config is not config
-                or prepared.angle_increment_rad != angle_increment_rad
-                or prepared.beam_count != beam_count):
-            prepared = _prepare(config, angle_increment_rad, beam_count)
-            self.prepared = prepared
-        return prepared
-
-
-_LATEST = _LatestPrepared()
+# The rules of the latest configuration and layout, compared by identity (see
+# :class:`..prepared.LatestPrepared`) before the cache of :func:`_prepare` is asked.
+_LATEST = LatestPrepared(_prepare)
 
 
 def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,

@@ -60,7 +60,7 @@ from typing import Optional
 
 import numpy as np
 
-from .framing import AngleTrack, CapsuleFramer, CapsulePlacer, placeable
+from .framing import AngleTrack, CapsuleFramer, CapsulePlacer, LinkDamage, placeable
 from .protocol import (CAPSULE_SIZE, DENSE_RETURN_QUALITY, Samples, SAMPLES_PER_CAPSULE,
                        StreamCounts)
 
@@ -148,11 +148,17 @@ class DenseCapsuleDecoder:
         self._placer = CapsulePlacer(self._angles, self._framer, self._counts)
         self._stream = CapsuleSamples(SAMPLES_PER_CAPSULE, self._counts)
         self._noise = RangeNoise()
+        self._withheld = False
 
     @property
     def counts(self) -> StreamCounts:
         """Return what the decoder has met so far (capsules, damage, repairs, losses)."""
         return StreamCounts(**self._counts)
+
+    @property
+    def damage(self) -> LinkDamage:
+        """Return the share of bytes damaged and whether the last samples were withheld."""
+        return LinkDamage(self._framer.damage.share, self._withheld)
 
     def feed(self, data: bytes) -> Samples:
         """
@@ -268,7 +274,9 @@ class DenseCapsuleDecoder:
             keep[suspect] &= (distances[suspect] == 0) | supported_by_neighbours(
                 distances[suspect], keep[suspect], self._noise.sigma_mm, step_rad)
         clean = np.array([f.clean for f in frames])
-        if suspect.any() and self._framer.damage.withheld(4 * clean.sum() < clean.size):
+        self._withheld = bool(suspect.any()) and self._framer.damage.withheld(
+            4 * clean.sum() < clean.size)
+        if self._withheld:
             # Nor one that passed its checksum: on such a line 1 in 256 damaged capsules does.
             keep &= distances == 0
         self._counts['rejected_samples'] += int(np.count_nonzero(~keep[placed]))

@@ -31,7 +31,7 @@ import numpy as np
 
 from .capsules import (believed_flips, CapsuleSamples, flip_repairs, RangeNoise,
                        supported_by_neighbours, unseen_flips)
-from .framing import AngleTrack, CapsuleFramer, CapsulePlacer, placeable
+from .framing import AngleTrack, CapsuleFramer, CapsulePlacer, LinkDamage, placeable
 from .protocol import Samples, StreamCounts
 
 # The sweep assumed until one is measured: the turn at 10 Hz, degrees per second.
@@ -244,11 +244,17 @@ class CheckedCapsuleDecoder:
         self._stream = CapsuleSamples(layout.samples, self._counts)
         self._noise = RangeNoise(layout.samples)
         self._device_times = SteadyDeviceTimes(layout.clock_bits)
+        self._withheld = False
 
     @property
     def counts(self) -> StreamCounts:
         """Return what the decoder has met so far (capsules, damage, losses)."""
         return StreamCounts(**self._counts)
+
+    @property
+    def damage(self) -> LinkDamage:
+        """Return the share of bytes damaged and whether the last samples were withheld."""
+        return LinkDamage(self._framer.damage.share, self._withheld)
 
     def feed(self, data: bytes) -> Samples:
         """
@@ -338,7 +344,9 @@ class CheckedCapsuleDecoder:
                                                usable[suspect], self._noise.sigma_mm, step_rad)
             vouched[suspect] = usable[suspect] & (distances[suspect] > 0) & plausible
         clean = np.array([f.clean for f in frames])
-        if suspect.any() and self._framer.damage.withheld(4 * clean.sum() < clean.size):
+        self._withheld = bool(suspect.any()) and self._framer.damage.withheld(
+            4 * clean.sum() < clean.size)
+        if self._withheld:
             # Nor one that passed its checksum: on such a line 1 in 256 damaged capsules does.
             vouched[:] = False
         keep = vouched | (readable & (distances == 0))

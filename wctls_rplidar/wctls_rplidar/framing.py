@@ -131,6 +131,23 @@ class Region(NamedTuple):
         return self.lost < 0 or self.tangled
 
 
+@dataclass(frozen=True)
+class LinkDamage:
+    """
+    What a stream decoder measured of its link's damage, for diagnostics.
+
+    :ivar byte_share: the share of the stream's bytes damaged (corrupted, lost or gained), as
+        the decoder measures it (capsule formats: :class:`ByteDamage`; HQ capsules: the top
+        bytes of their distances); None for a format that does not measure it (standard nodes)
+    :ivar withheld: the samples last decoded were withheld (published as no return), the line
+        too damaged to vouch for them: from :data:`WITHHELD_BYTE_DAMAGE` on in the capsule
+        formats, beyond the sequence checks' reach in standard nodes
+    """
+
+    byte_share: Optional[float] = None
+    withheld: bool = False
+
+
 class ByteDamage:
     """
     The share of a capsule stream's bytes damaged: corrupted, lost or gained.

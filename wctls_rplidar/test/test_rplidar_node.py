@@ -455,6 +455,31 @@ def test_a_standard_stream_too_damaged_to_trust_publishes_nothing_and_says_so(
     assert 'damaged link' in report.message and float(values['samples rejected (%)']) > 50.0
 
 
+def test_a_link_too_damaged_to_vouch_for_says_how_damaged_and_that_scans_are_withheld(
+        executor, ros_context, own_emulator):
+    # At 12 % corrupted bytes (beyond the 8 % bound) the DenseBoost decoder publishes its turns
+    # without their returns; /diagnostics says so, with the share of bytes it measures.
+    device = own_emulator('--corrupt-rate', '0.12')
+    node, listener = start(executor, ros_context, serial_port=device.link)
+
+    def withheld():
+        return [report for report in listener.diagnostics
+                if {v.key: v.value for v in report.values}.get('publishing state') == 'withheld']
+
+    assert spin_until(executor, lambda: len(withheld()) >= 3, LIVENESS_S)
+    report = withheld()[-1]
+    values = {value.key: value.value for value in report.values}
+    assert report.level == DiagnosticStatus.WARN, report.message
+    assert 'link damaged' in report.message and 'scans withheld' in report.message
+    # The decoder's estimate over a few seconds of capsules: within a third of the rate.
+    assert 8.0 <= float(values['bytes damaged (%)']) <= 16.0, values['bytes damaged (%)']
+    assert ' % of bytes corrupted or lost, scans withheld' in report.message
+    assert 0 < int(values['turns withheld']) <= int(values['turns published'])
+    # No return of a withheld turn is published.
+    assert listener.scans and not any(np.isfinite(scan.ranges).any()
+                                      for scan, _ in listener.scans[-3:])
+
+
 def test_use_sim_time_stamps_turns_on_the_simulated_clock_once_it_runs(
         executor, ros_context, own_emulator, capfd):
     device = own_emulator()

@@ -60,7 +60,7 @@ from typing import Optional
 
 import numpy as np
 
-from .framing import AngleTrack, CapsuleFramer, CapsulePlacer, placeable
+from .framing import AngleTrack, CapsuleFramer, CapsulePlacer, LinkDamage, placeable
 from .protocol import (CAPSULE_SIZE, DENSE_RETURN_QUALITY, Samples, SAMPLES_PER_CAPSULE,
                        StreamCounts)
 
@@ -148,11 +148,17 @@ class DenseCapsuleDecoder:
         self._placer = CapsulePlacer(self._angles, self._framer, self._counts)
         self._stream = CapsuleSamples(SAMPLES_PER_CAPSULE, self._counts)
         self._noise = RangeNoise()
+        self._withheld = False
 
     @property
     def counts(self) -> StreamCounts:
         """Return what the decoder has met so far (capsules, damage, repairs, losses)."""
         return StreamCounts(**self._counts)
+
+    @property
+    def damage(self) -> LinkDamage:
+        """Return the share of bytes damaged and whether the last samples were withheld."""
+        return LinkDamage(self._framer.damage.share, self._withheld)
 
     def feed(self, data: bytes) -> Samples:
         """
@@ -268,7 +274,9 @@ class DenseCapsuleDecoder:
             keep[suspect] &= (distances[suspect] == 0) | supported_by_neighbours(
                 distances[suspect], keep[suspect], self._noise.sigma_mm, step_rad)
         clean = np.array([f.clean for f in frames])
-        if suspect.any() and self._framer.damage.withheld(4 * clean.sum() < clean.size):
+        self._withheld = bool(suspect.any()) and self._framer.damage.withheld(
+            4 * clean.sum() < clean.size)
+        if self._withheld:
             # Nor one that passed its checksum: on such a line 1 in 256 damaged capsules does.
             keep &= distances == 0
         self._counts['rejected_samples'] += int(np.count_nonzero(~keep[placed]))
@@ -596,13 +604,47 @@ def believed_flips(placer: CapsulePlacer, shown: np.ndarray, sigma_mm: float,
     """
     if not shown.any():
         return False
-    tolerance_mm = _REPAIR_SIGMAS * math.sqrt(1.5) * sigma_mm
     if (not placer.shows_damage() and np.count_nonzero(shown) < 2
-            and tolerance_mm > _CLEAN_LINE_TOLERANCE_SHARE * max_mm):
+            and not sharp_repairs(sigma_mm, max_mm)):
         placer.note_weak_sign()
         return False
     placer.note_unseen_damage()
     return True
+
+
+def sharp_repairs(sigma_mm: float, max_mm: float) -> bool:
+    """
+    Tell whether a flip's repair is too tight for clutter to forge: a smooth scene's.
+
+    :param sigma_mm: the range noise scale, mm
+    :param max_mm: the mode's farthest range, mm
+    :return: the repair's tolerance is at most :data:`_CLEAN_LINE_TOLERANCE_SHARE` of the range
+    """
+    return _REPAIR_SIGMAS * math.sqrt(1.5) * sigma_mm <= _CLEAN_LINE_TOLERANCE_SHARE * max_mm
+
+
+def repaired_samples(slots: np.ndarray, per: int, repairs: tuple,
+                     reach: tuple = (0,)) -> np.ndarray:
+    """
+    Mark the samples of lone spikes that one flipped bit repairs (:func:`flip_repairs`).
+
+    :param slots: the capsules' stream indices (a sample reached beyond a capsule's ends is in
+        the capsule before or after it, when that one is among them)
+    :param per: samples per capsule
+    :param repairs: ``(capsule, sample, bit)`` arrays of :func:`flip_repairs`
+    :param reach: the samples (offsets from a repair's) its repaired value is read into
+    :return: shape (capsules, per), bool
+    """
+    slots = np.asarray(slots)
+    marked = np.zeros((len(slots), per), bool)
+    capsule, sample, _ = repairs
+    for offset in reach:
+        moved, at = np.divmod(sample + offset, per)
+        target = capsule + moved
+        inside = (target >= 0) & (target < len(slots))
+        inside[inside] &= slots[target[inside]] - slots[capsule[inside]] == moved[inside]
+        marked[target[inside], at[inside]] = True
+    return marked
 
 
 def unseen_flips(count: int, *repairs: tuple) -> np.ndarray:
@@ -634,7 +676,8 @@ def unseen_flips(count: int, *repairs: tuple) -> np.ndarray:
 
 def flip_repairs(distances: np.ndarray, usable: np.ndarray, deltas: np.ndarray,
                  bits: np.ndarray, sigma_mm: float, step_rad: float,
-                 slots: Optional[np.ndarray] = None, spacing: int = 1) -> tuple:
+                 slots: Optional[np.ndarray] = None, spacing: int = 1,
+                 between: bool = True) -> tuple:
     """
     Find the lone spikes of capsules that one flipped bit each repairs.
 
@@ -667,6 +710,9 @@ def flip_repairs(distances: np.ndarray, usable: np.ndarray, deltas: np.ndarray,
     :param step_rad: angle between the samples given, rad
     :param slots: the capsules' stream indices (consecutive ones are neighbours)
     :param spacing: the capsule's samples between two given (their index in the repairs)
+    :param between: only the neighbours on both sides vouch for a repair (False: also a pair
+        on either side where the other side's neighbour has no return, as at the edge of a
+        surface; evidence enough to reject the spike, not to believe a line flips bits)
     :return: ``(capsule, sample, bit)`` of each repair, arrays
     """
     count, per = distances.shape
@@ -686,14 +732,23 @@ def flip_repairs(distances: np.ndarray, usable: np.ndarray, deltas: np.ndarray,
     # Among neighbours that agree: where the scene has spikes of its own, they tell of no flip.
     rows = np.flatnonzero(lone.any(axis=1) & (np.count_nonzero(lone, axis=1) <= _MAX_SPIKES))
     least_mm = _REPAIR_MIN_TOLERANCES * _SIGMAS * math.sqrt(1.5) * sigma_mm
+    predicting = ok[rows] & ~lone[rows]
+    # One side vouches only beside a sample without a return: an edge with returns on both
+    # sides is a scene's, which a one-sided repair fits now and then.
+    beside_none = np.zeros(predicting.shape, bool)
+    beside_none[:, 1:-1] = ~predicting[:, :-2] | ~predicting[:, 2:]
     found = []
     for b in range(deltas.shape[2]):
         change = np.zeros((rows.size, per + 4))
         change[:, 2:-2] = deltas[rows, :, b]
         trial = np.where(lone[rows], d[rows] + change, d[rows])
+        supported = supported_by_neighbours(trial, predicting, sigma_mm, step_rad,
+                                            _REPAIR_SIGMAS, True)
+        if not between:
+            supported |= beside_none & supported_by_neighbours(
+                trial, predicting, sigma_mm, step_rad, _REPAIR_SIGMAS, False)
         fits = (lone[rows] & (trial > 0) & (np.abs(change) >= least_mm)
-                & supported_by_neighbours(trial, ok[rows] & ~lone[rows], sigma_mm, step_rad,
-                                          _REPAIR_SIGMAS, True))[:, 2:-2] & (bits[rows, :, b] >= 0)
+                & supported)[:, 2:-2] & (bits[rows, :, b] >= 0)
         capsule, sample = np.nonzero(fits)
         found.append((rows[capsule], sample * spacing, bits[rows[capsule], sample, b]))
     return tuple(np.concatenate(column) if found else np.zeros(0, np.int64)

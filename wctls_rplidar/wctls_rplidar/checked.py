@@ -30,8 +30,8 @@ from typing import Optional
 import numpy as np
 
 from .capsules import (believed_flips, CapsuleSamples, flip_repairs, RangeNoise,
-                       supported_by_neighbours, unseen_flips)
-from .framing import AngleTrack, CapsuleFramer, CapsulePlacer, placeable
+                       repaired_samples, sharp_repairs, supported_by_neighbours, unseen_flips)
+from .framing import AngleTrack, CapsuleFramer, CapsulePlacer, LinkDamage, placeable
 from .protocol import Samples, StreamCounts
 
 # The sweep assumed until one is measured: the turn at 10 Hz, degrees per second.
@@ -40,6 +40,9 @@ _NO_ANGLE_FIELD = 0x7FFF       # a start angle field beyond 360 degrees: no angl
 # How far a damaged capsule's timestamp may lie from continuing the step of the two before it,
 # microseconds (the device rounds each to a microsecond).
 STEADY_TIME_US = 2
+# What a sample of an intact capsule is, as its layout's flip check finds it (unseen_flips).
+SPIKE = 1
+SPIKE_RUN = 2
 
 
 class CapsuleLayout:
@@ -89,9 +92,9 @@ class CapsuleLayout:
         return supported_by_neighbours(distance_mm, usable, sigma_mm, step_rad)
 
     def unseen_flips(self, capsules: np.ndarray, distance_mm: np.ndarray, usable: np.ndarray,
-                     sigma_mm: float, step_rad: float, slots: np.ndarray) -> np.ndarray:
+                     sigma_mm: float, step_rad: float, slots: np.ndarray) -> tuple:
         """
-        Tell which intact capsules show bits flipped that their checksum cannot see.
+        Tell which intact capsules show bits flipped that their checksum cannot see, and where.
 
         By default :func:`~wctls_rplidar.capsules.unseen_flips` of the repairs
         :meth:`flip_deltas` allows.
@@ -102,13 +105,18 @@ class CapsuleLayout:
         :param sigma_mm: the range noise scale, mm
         :param step_rad: angle between samples, rad
         :param slots: the capsules' stream indices
-        :return: the capsules that show a double flip, shape (n,)
+        :return: ``(shown, spikes)``: the capsules that show a double flip, shape (n,), and
+            per sample, shape (n, samples), int: :data:`SPIKE` where it is a lone spike one
+            flipped bit repairs, :data:`SPIKE_RUN` where it is one of a run of samples one
+            flipped bit moved together (read from one field), else 0
         """
         flips = self.flip_deltas(capsules, distance_mm)
         if flips is None:
-            return np.zeros(len(capsules), bool)
-        return unseen_flips(len(capsules), flip_repairs(
-            distance_mm, usable, *flips, sigma_mm, step_rad, slots))
+            return np.zeros(len(capsules), bool), np.zeros(distance_mm.shape, np.int8)
+        return (unseen_flips(len(capsules), flip_repairs(distance_mm, usable, *flips, sigma_mm,
+                                                         step_rad, slots)),
+                SPIKE * repaired_samples(slots, distance_mm.shape[1], flip_repairs(
+                    distance_mm, usable, *flips, sigma_mm, step_rad, slots, between=False)))
 
     def flip_deltas(self, capsules: np.ndarray, distance_mm: np.ndarray) -> Optional[tuple]:
         """
@@ -244,11 +252,19 @@ class CheckedCapsuleDecoder:
         self._stream = CapsuleSamples(layout.samples, self._counts)
         self._noise = RangeNoise(layout.samples)
         self._device_times = SteadyDeviceTimes(layout.clock_bits)
+        self._withheld = False
+        # (slot, bytes, distances, usable) of the last intact capsule judged for flips.
+        self._last_intact = None
 
     @property
     def counts(self) -> StreamCounts:
         """Return what the decoder has met so far (capsules, damage, losses)."""
         return StreamCounts(**self._counts)
+
+    @property
+    def damage(self) -> LinkDamage:
+        """Return the share of bytes damaged and whether the last samples were withheld."""
+        return LinkDamage(self._framer.damage.share, self._withheld)
 
     def feed(self, data: bytes) -> Samples:
         """
@@ -307,6 +323,43 @@ class CheckedCapsuleDecoder:
         self._counts['damaged_frames'] += sum(not f.clean for f in frames)
         return frames
 
+    def _flip_signs(self, capsules: np.ndarray, distances: np.ndarray, usable: np.ndarray,
+                    slots: np.ndarray, step_rad: float, after: Optional[tuple]) -> tuple:
+        """
+        Return the layout's signs of unseen flips of intact capsules (``unseen_flips``).
+
+        The capsules are judged between the last intact one before them (when it was the
+        capsule just before the first: a spike among the first samples is lone only against
+        their predecessors) and the intact capsule after the last (whose first cabin the last
+        one's last sample is read with, in a layout that reads its successor).
+
+        :param after: ``(slot, bytes, distances, usable)`` of the capsule after the last, None
+            when it is not intact or not the next one
+        """
+        before = self._last_intact
+        self._last_intact = (int(slots[-1]), capsules[-1], distances[-1], usable[-1])
+        rows = [before] if before is not None and before[0] == slots[0] - 1 else []
+        rows += [(int(slot), *columns) for slot, *columns in zip(slots, capsules, distances,
+                                                                 usable)]
+        rows += [after] if after is not None else []
+        first = 1 if before is not None and before[0] == slots[0] - 1 else 0
+        slot, raw, distance, use = (np.array(column) for column in zip(*rows))
+        shown, spikes = self._layout.unseen_flips(raw, distance, use, self._noise.sigma_mm,
+                                                  step_rad, slot)
+        return shown[first:first + len(slots)], spikes[first:first + len(slots)]
+
+    def _intact_after(self, frame, successor) -> Optional[tuple]:
+        """Return the successor of a capsule as :meth:`_flip_signs` takes it, if intact."""
+        if successor is None or successor.raw is None or not successor.clean or (
+                successor.slot != frame.slot + 1):
+            return None
+        size = self._layout.size
+        distances, _ = self._layout.read(
+            successor.raw[None], np.zeros((1, size), np.uint8) if self._layout.reads_successor
+            else None)
+        return (successor.slot, successor.raw, distances[0],
+                (distances[0] >= 0) & (distances[0] <= self._max_mm))
+
     def _samples(self, frames: list, successors: list) -> Samples:
         """Lay out the placed capsules' samples; reject those not vouched for."""
         count, per = len(frames), self._layout.samples
@@ -325,20 +378,34 @@ class CheckedCapsuleDecoder:
         usable = readable & (distances <= self._max_mm)
         step_rad = math.radians(self._angles.sweep_deg() / per)
         trusted = ~suspect & readable.any(axis=1)
+        spiked = np.zeros(distances.shape, bool)
         if trusted.any():
-            shown = self._layout.unseen_flips(
+            shown, spikes = self._flip_signs(
                 np.array(whole)[trusted], distances[trusted], usable[trusted],
-                self._noise.sigma_mm, step_rad, np.array([f.slot for f in frames])[trusted])
+                np.array([f.slot for f in frames])[trusted], step_rad,
+                self._intact_after(frames[-1], successors[-1]) if trusted[-1] else None)
             if believed_flips(self._placer, shown, self._noise.sigma_mm, self._max_mm):
                 # The checksum let damage by: no capsule of the batch vouches for its samples.
                 suspect[:] = True
-        vouched = usable & ~suspect[:, None]
+            elif sharp_repairs(self._noise.sigma_mm, self._max_mm):
+                # A double flip whose second bit moved a sample too little to show leaves one
+                # spike. On a smooth scene a run of samples that one flip moved together is no
+                # clutter's; a lone sample may be, and is left out only on a line that shows
+                # damage (an intact line's clutter is published as it is).
+                spiked[trusted] = spikes >= (SPIKE if self._placer.shows_damage() else SPIKE_RUN)
+        vouched = usable & ~suspect[:, None] & ~spiked
+        clean = np.array([f.clean for f in frames])
         if suspect.any():
             plausible = self._layout.plausible(distances[suspect], corrections[suspect],
                                                usable[suspect], self._noise.sigma_mm, step_rad)
-            vouched[suspect] = usable[suspect] & (distances[suspect] > 0) & plausible
-        clean = np.array([f.clean for f in frames])
-        if suspect.any() and self._framer.damage.withheld(4 * clean.sum() < clean.size):
+            # Until the line's damage is measured, neighbours vouch for no capsule that failed
+            # its checksum: packets swapped in the first capsules move a capsule's samples
+            # into another whole, and they agree with each other.
+            vouched[suspect] = (usable[suspect] & (distances[suspect] > 0) & plausible
+                                & (self._framer.damage.measured | clean[suspect])[:, None])
+        self._withheld = bool(suspect.any()) and self._framer.damage.withheld(
+            4 * clean.sum() < clean.size)
+        if self._withheld:
             # Nor one that passed its checksum: on such a line 1 in 256 damaged capsules does.
             vouched[:] = False
         keep = vouched | (readable & (distances == 0))

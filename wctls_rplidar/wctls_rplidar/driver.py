@@ -46,6 +46,7 @@ import numpy as np
 
 from .capsules import DenseCapsuleDecoder
 from .express import ExpressCapsuleDecoder
+from .framing import LinkDamage
 from .hq import HqCapsuleDecoder
 from .protocol import (ACC_BOARD_MAJOR_IDS, AccBoardFlag, AnswerType, Command, ConfType,
                        decode_conf_value, DESCRIPTOR_SIZE, DeviceHealth, DeviceInfo,
@@ -185,8 +186,13 @@ class DriverStatus:
     :ivar dropped_turns: turns not handed over: without a usable angle step or a turn boundary
         in sight, not one plausible rotation (:class:`~wctls_rplidar.turns.PublishGate`:
         a damaged stream), or whose publishing failed
+    :ivar withheld_turns: turns handed over (counted in ``turns`` too) that hold samples the
+        decoder withheld, the link too damaged to vouch for them (:class:`LinkDamage`): their
+        returns were published as none
     :ivar stream: what the scan stream decoders met, summed over sessions (frames, damage,
         repairs, losses, rejected samples)
+    :ivar damage: the share of bytes damaged the session's decoder measures and whether it
+        withholds the samples it decodes (:class:`~wctls_rplidar.framing.LinkDamage`)
     :ivar flushed_bytes: stale bytes discarded before a session or while the motor is stopped
     :ivar reconnects: sessions that ended in an error
     :ivar backoff_s: the wait before the next attempt after a failure, s (doubles with each
@@ -207,7 +213,9 @@ class DriverStatus:
     mode: Optional[ScanMode] = None
     turns: int = 0
     dropped_turns: int = 0
+    withheld_turns: int = 0
     stream: StreamCounts = StreamCounts()
+    damage: LinkDamage = LinkDamage()
     flushed_bytes: int = 0
     reconnects: int = 0
     backoff_s: float = BACKOFF_FIRST_S
@@ -736,7 +744,7 @@ class RplidarDriver:
         if descriptor.send_mode != SendMode.MULTIPLE or descriptor.length != decoder.FRAME_SIZE:
             raise DeviceError(f'unexpected scan descriptor {descriptor}')
         assembler = TurnAssembler(mode.us_per_sample, decoder.FRAME_SIZE * link.byte_time_s)
-        self._update(state=DriverState.SCANNING, mode=mode,
+        self._update(state=DriverState.SCANNING, mode=mode, damage=decoder.damage,
                      message=f'scanning in {mode.name}')
         self._log.info(f'{device.describe()}; scanning {mode.describe()} on {link.name}')
         self._stream(link, decoder, assembler, mode, data)
@@ -746,6 +754,8 @@ class RplidarDriver:
         """Decode the stream into turns until closing or a motor stop request."""
         offsets, times, pending = [], [], []
         gate = PublishGate()
+        # Whether samples of the turn under way were withheld (judged per decoded chunk).
+        withheld = False
         stream_end = 0
         earlier = self.status().stream
         seen = (StreamCounts(), 0)
@@ -765,14 +775,20 @@ class RplidarDriver:
                 samples = decoder.feed(b''.join(pending))
                 pending.clear()
                 next_decode_s = now + STREAM_READ_PERIOD_S
+                damage = decoder.damage
+                if damage != self.status().damage:
+                    self._update(damage=damage)
                 if len(samples):
                     last_samples_s = now
+                    withheld |= damage.withheld
                     chunk = np.minimum(np.searchsorted(offsets, samples.frame_end), len(times) - 1)
                     for turn in assembler.push(samples, np.asarray(times)[chunk]):
                         if gate.admit(turn):
-                            self._hand_over(turn, mode)
+                            self._hand_over(turn, mode, withheld)
                         else:
                             self._update(add_dropped_turns=1)
+                        # The chunk's samples after the turn's end begin the next one.
+                        withheld = damage.withheld
                 counts = (decoder.counts, assembler.dropped_turns)
                 if counts != seen:
                     self._update(stream=earlier + counts[0],
@@ -804,8 +820,12 @@ class RplidarDriver:
             data = link.read(STREAM_READ_TIMEOUT_S)
             now = time.monotonic()
 
-    def _hand_over(self, turn, mode: ScanMode):
-        """Give a turn to the callback (a success: the back-off restarts); never fatal."""
+    def _hand_over(self, turn, mode: ScanMode, withheld: bool):
+        """
+        Give a turn to the callback (a success: the back-off restarts); never fatal.
+
+        :param withheld: it holds samples the decoder withheld (counted once handed over)
+        """
         try:
             self._on_turn(turn, mode)
         except Exception as error:  # the callback must not end the reader
@@ -813,4 +833,4 @@ class RplidarDriver:
                             throttle_duration_sec=LOG_THROTTLE_S)
             self._update(add_dropped_turns=1)
             return
-        self._update(add_turns=1, backoff_s=BACKOFF_FIRST_S)
+        self._update(add_turns=1, add_withheld_turns=int(withheld), backoff_s=BACKOFF_FIRST_S)

@@ -131,6 +131,23 @@ class Region(NamedTuple):
         return self.lost < 0 or self.tangled
 
 
+@dataclass(frozen=True)
+class LinkDamage:
+    """
+    What a stream decoder measured of its link's damage, for diagnostics.
+
+    :ivar byte_share: the share of the stream's bytes damaged (corrupted, lost or gained), as
+        the decoder measures it (capsule formats: :class:`ByteDamage`; HQ capsules: the top
+        bytes of their distances); None for a format that does not measure it (standard nodes)
+    :ivar withheld: the samples last decoded were withheld (published as no return), the line
+        too damaged to vouch for them: from :data:`WITHHELD_BYTE_DAMAGE` on in the capsule
+        formats, beyond the sequence checks' reach in standard nodes
+    """
+
+    byte_share: Optional[float] = None
+    withheld: bool = False
+
+
 class ByteDamage:
     """
     The share of a capsule stream's bytes damaged: corrupted, lost or gained.
@@ -153,6 +170,11 @@ class ByteDamage:
         """Return the share of bytes damaged (corrupted plus lost or gained)."""
         return self._corrupted(self._broken) + self._moved
 
+    @property
+    def measured(self) -> bool:
+        """Tell whether enough capsules were framed (:data:`_BYTE_DAMAGE_FIRST`) to measure."""
+        return self._capsules >= _BYTE_DAMAGE_FIRST
+
     def withheld(self, doubtful: bool) -> bool:
         """
         Tell whether the line may damage too many bytes for a suspect sample to be published.
@@ -167,7 +189,7 @@ class ByteDamage:
 
         :param doubtful: three in four of the capsules at hand failed their checksums
         """
-        if self._capsules < _BYTE_DAMAGE_FIRST:
+        if not self.measured:
             return doubtful or (self._headers >= _BYTE_DAMAGE_FIRST_HEADERS
                                 and self.share >= 2.0 * WITHHELD_BYTE_DAMAGE)
         broken = self._broken
@@ -834,8 +856,14 @@ class AngleTrack:
             return abs(ahead - self._sweep) <= tolerance
         if self._previous is not None and self._previous[0] == slot - 1 and (
                 self._previous[1] is not None):
+            # An intact capsule too, where the step behind it is a plausible sweep: a replayed
+            # one is intact, and its steps disagree. After a step no sweep makes the capsule
+            # before is no evidence: the SDK's rule.
             behind = (observed - self._previous[1]) % FULL_TURN_Q8
-            return abs(ahead - behind) <= _ANGLE_TOLERANCE_Q8 or clean
+            if clean and not 0 < behind <= self._max_sweep_q8:
+                return True
+            return abs(ahead - behind) <= (max(behind / _CLEAN_ANGLE_SHARE, _ANGLE_TOLERANCE_Q8)
+                                           if clean else _ANGLE_TOLERANCE_Q8)
         # At the start of a stream, nothing to compare with: the SDK's rule, for intact capsules.
         return clean
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from .capsules import RangeNoise, supported_by_neighbours
 from .checked import SteadyDeviceTimes
-from .framing import WITHHELD_BYTE_DAMAGE
+from .framing import LinkDamage, WITHHELD_BYTE_DAMAGE
 from .protocol import Samples, StreamCounts
 
 HQ_SYNC = 0xA5
@@ -121,11 +121,22 @@ class HqCapsuleDecoder:
         self._counts = dict.fromkeys(StreamCounts.__dataclass_fields__, 0)
         self._corrupted = 0.0       # share of the distances' top bytes set
         self._capsules = 0
+        self._withheld = False
 
     @property
     def counts(self) -> StreamCounts:
         """Return what the decoder has met so far."""
         return StreamCounts(**self._counts)
+
+    @property
+    def damage(self) -> LinkDamage:
+        """
+        Return the share of bytes corrupted and whether the last damaged nodes were withheld.
+
+        A corrupted byte is one of the 255 other values: a top byte set, the share measured, is
+        255/256 of a share corrupted.
+        """
+        return LinkDamage(self._corrupted * 256.0 / 255.0, self._withheld)
 
     def feed(self, data: bytes) -> Samples:
         """
@@ -203,6 +214,7 @@ class HqCapsuleDecoder:
         self._noise.update(np.where(in_range, distance_q2 / 4.0, 0.0))
         keep = in_range.copy()
         published = np.ones(count, bool)
+        self._withheld = False
         if not clean.all():
             damaged = ~clean
             believed_angle, step_deg = _continues_steps(angle_deg[damaged])
@@ -212,7 +224,8 @@ class HqCapsuleDecoder:
                     distance_q2[damaged] / 4.0, in_range[damaged], self._noise.sigma_mm,
                     math.radians(step_deg)))
             angle_deg[damaged] = _fill_angles(angle_deg[damaged], believed_angle)
-            if self._corrupted >= WITHHELD_BYTE_DAMAGE:
+            self._withheld = self._corrupted >= WITHHELD_BYTE_DAMAGE
+            if self._withheld:
                 keep[damaged] &= distance_q2[damaged] == 0
             # A damaged flag byte spoils only the start flag, not the node.
             start[damaged] &= believed_angle & np.isin(nodes['flag'][damaged], _NODE_FLAGS)

@@ -118,7 +118,7 @@ class RplidarNode(LifecycleNode):
         self._active = False
         self._latency_lock = threading.Lock()
         self._latencies_s = []
-        self._last_report = (0, StreamCounts(), time.monotonic())
+        self._last_report = (0, 0, StreamCounts(), time.monotonic())
         self._scan_pub = self.create_lifecycle_publisher(LaserScan, 'scan', SCAN_QOS)
         self._fixed_scan_pub = (self.create_lifecycle_publisher(LaserScan, 'scan_fixed', SCAN_QOS)
                                 if self._fixed_beams else None)
@@ -349,10 +349,11 @@ class RplidarNode(LifecycleNode):
             return
         status = driver.status()
         now = time.monotonic()
-        turns, stream, since = self._last_report
+        turns, withheld_turns, stream, since = self._last_report
         rate_hz = (status.turns - turns) / max(now - since, 1e-9)
         recent = status.stream - stream
-        self._last_report = (status.turns, status.stream, now)
+        recent_withheld = status.withheld_turns - withheld_turns
+        self._last_report = (status.turns, status.withheld_turns, status.stream, now)
         latencies = self.publish_latencies_s()[-100:]
         level = _LEVELS[status.state]
         message = status.message
@@ -371,6 +372,17 @@ class RplidarNode(LifecycleNode):
             level = max(level, DiagnosticStatus.WARN)
             message = (f'{message}; implausible handshake answers replaced: '
                        f'{"; ".join(status.handshake_warnings)}')
+        byte_share = status.damage.byte_share
+        withholding = status.state == DriverState.SCANNING and (
+            status.damage.withheld or recent_withheld > 0)
+        if withholding:
+            # The decoder publishes no return it cannot vouch for: say so in plain words.
+            level = max(level, DiagnosticStatus.WARN)
+            measured = ('' if byte_share is None
+                        else f' {100 * byte_share:.0f} % of bytes corrupted or lost,')
+            count = (f' ({recent_withheld} turns published without their returns in the last '
+                     f'{DIAGNOSTICS_PERIOD_S:g} s)' if recent_withheld else '')
+            message = f'{message}; link damaged:{measured} scans withheld{count}'
         damaged = _share(recent.damaged_frames + recent.lost_frames, recent.frames)
         rejected = _share(recent.rejected_samples, recent.samples)
         if recent.resyncs or max(damaged, rejected) >= DAMAGED_LINK_SHARE:
@@ -390,6 +402,9 @@ class RplidarNode(LifecycleNode):
             'scan rate (Hz)': f'{rate_hz:.2f}',
             'turns published': str(status.turns),
             'turns dropped': str(status.dropped_turns),
+            'publishing state': 'withheld' if withholding else 'publishing',
+            'turns withheld': str(status.withheld_turns),
+            'bytes damaged (%)': 'n/a' if byte_share is None else f'{100 * byte_share:.2f}',
             # Rates over the last report period, then totals since the start.
             'frames damaged or lost (%)': f'{100 * damaged:.2f}',
             'frames realigned (%)': f'{100 * _share(recent.realigned_frames, recent.frames):.2f}',

@@ -39,6 +39,7 @@ from typing import Optional
 import numpy as np
 
 from .capsules import RangeNoise, supported_by_neighbours
+from .framing import LinkDamage
 from .protocol import NODE_SIZE, Samples, StandardNodeDecoder, StreamCounts
 
 FULL_TURN_DEG = 360.0
@@ -80,6 +81,7 @@ class CheckedStandardNodeDecoder(StandardNodeDecoder):
         self._seen_resyncs = 0
         # (nodes, resyncs, nodes dropped) of the recent chunks, for their shares per node.
         self._recent: list = []
+        self._withheld = False
 
     @property
     def counts(self) -> StreamCounts:
@@ -88,6 +90,11 @@ class CheckedStandardNodeDecoder(StandardNodeDecoder):
         return StreamCounts(frames=counts.frames, samples=counts.samples,
                             resyncs=counts.resyncs, discarded_bytes=counts.discarded_bytes,
                             rejected_samples=self._rejected)
+
+    @property
+    def damage(self) -> LinkDamage:
+        """Return whether the last nodes were withheld (no share of bytes: none is measured)."""
+        return LinkDamage(None, self._withheld)
 
     def feed(self, data: bytes) -> Samples:
         """
@@ -111,8 +118,9 @@ class CheckedStandardNodeDecoder(StandardNodeDecoder):
         while sum(nodes for nodes, _, _ in self._recent[1:]) >= DAMAGE_MEMORY_NODES:
             del self._recent[0]
         recent_nodes, recent_resyncs, recent_dropped = np.sum(self._recent, axis=0)
-        if (recent_resyncs > MAX_RESYNC_SHARE * recent_nodes
-                or recent_dropped > MAX_OUT_OF_SEQUENCE_SHARE * recent_nodes):
+        self._withheld = bool(recent_resyncs > MAX_RESYNC_SHARE * recent_nodes
+                              or recent_dropped > MAX_OUT_OF_SEQUENCE_SHARE * recent_nodes)
+        if self._withheld:
             kept[:] = False             # beyond what the checks sort out: nothing
         self._nodes_since_damage = 0 if damaged else self._nodes_since_damage + len(samples)
         self._rejected += int(np.count_nonzero(~kept))

@@ -36,10 +36,12 @@ framed; where the successor is not intact, the samples that depend on its first 
 unreadable, as is a distance that decodes negative.
 """
 
+from typing import Optional
+
 import numpy as np
 
-from .capsules import flip_repairs, unseen_flips
-from .checked import CapsuleLayout, CheckedCapsuleDecoder, with_checksum
+from .capsules import flip_repairs, repaired_samples, unseen_flips
+from .checked import CapsuleLayout, CheckedCapsuleDecoder, SPIKE, SPIKE_RUN, with_checksum
 
 ULTRA_CAPSULE_SIZE = 132
 ULTRA_SAMPLES_PER_CAPSULE = 96
@@ -208,20 +210,28 @@ class UltraLayout(CapsuleLayout):
         distances = decode_ultra_capsules(capsules, next_majors)
         return distances, offset_deg(np.maximum(distances, 0))
 
-    def flip_deltas(self, capsules: np.ndarray, distance_mm: np.ndarray) -> tuple:
+    def flip_deltas(self, capsules: np.ndarray, distance_mm: np.ndarray,
+                    next_scaled: Optional[np.ndarray] = None) -> tuple:
         """
         Return each predicted sample's change by a flip of one bit of its prediction, and which.
 
         A major's bits move three samples together, which no lone spike shows: they are left
-        out, as is the last cabin's third sample (its base is the next capsule's major).
+        out, as is the last cabin's third sample (its base is the next capsule's major) where
+        that major is not known.
+
+        :param next_scaled: each capsule's successor's first scaled major, shape (n,); negative
+            where unknown (None: unknown for all)
         """
         count = len(capsules)
         combined = np.ascontiguousarray(capsules[:, 4:]).view('<u4').astype(np.int64)
         scaled = combined & 0xFFF
-        _, level = varbitscale_decode(scaled)
-        major, _ = varbitscale_decode(scaled)
-        level_after = np.concatenate([level[:, 1:], np.zeros((count, 1), np.int64)], axis=1)
-        major_after = np.concatenate([major[:, 1:], np.zeros((count, 1), np.int64)], axis=1)
+        major, level = varbitscale_decode(scaled)
+        known = np.zeros(count, bool) if next_scaled is None else np.asarray(next_scaled) >= 0
+        next_major, next_level = varbitscale_decode(np.where(known, next_scaled, 0)
+                                                    if next_scaled is not None
+                                                    else np.zeros(count, np.int64))
+        level_after = np.concatenate([level[:, 1:], next_level[:, None]], axis=1)
+        major_after = np.concatenate([major[:, 1:], next_major[:, None]], axis=1)
         first_level = np.where((major == 0) & (major_after != 0), level_after, level)
         i = np.arange(10)
         deltas = np.zeros((count, _CABINS, 3, 10))
@@ -234,17 +244,18 @@ class UltraLayout(CapsuleLayout):
             deltas[:, :, k] = np.where(sendable, (after - before) << shift[..., None], 0)
             bits[:, :, k] = np.where(sendable, (cabin_at + (first_bit + i) // 8) * 8
                                      + (first_bit + i) % 8, -1)
-        bits[:, -1, 2] = -1
+        bits[~known, -1, 2] = -1
         return (deltas.reshape(count, ULTRA_SAMPLES_PER_CAPSULE, 10),
                 bits.reshape(count, ULTRA_SAMPLES_PER_CAPSULE, 10))
 
     def unseen_flips(self, capsules: np.ndarray, distance_mm: np.ndarray, usable: np.ndarray,
-                     sigma_mm: float, step_rad: float, slots: np.ndarray) -> np.ndarray:
+                     sigma_mm: float, step_rad: float, slots: np.ndarray) -> tuple:
         """
-        Tell which intact capsules show bits flipped that their checksum cannot see.
+        Tell which intact capsules show bits flipped that their checksum cannot see, and where.
 
         In the predictions' bits as every layout's; in the majors' among the majors alone,
-        three samples apart (a flipped major moves its three samples together).
+        three samples apart (a flipped major moves its three samples together: the sample
+        before, predicted from it, its own and the next).
         """
         combined = np.ascontiguousarray(capsules[:, 4:]).view('<u4').astype(np.int64)
         scaled = combined & 0xFFF
@@ -252,13 +263,38 @@ class UltraLayout(CapsuleLayout):
         j = np.arange(12)
         flipped, _ = varbitscale_decode(scaled[..., None] ^ (1 << j))
         bits = (4 + 4 * np.arange(_CABINS)[:, None] + j // 8) * 8 + j % 8
-        majors = flip_repairs(major.astype(np.float64), usable[:, 0::3],
-                              (flipped - major[..., None]).astype(np.float64),
-                              np.broadcast_to(bits, flipped.shape), sigma_mm, 3.0 * step_rad,
-                              slots, spacing=3)
-        predictions = flip_repairs(distance_mm, usable, *self.flip_deltas(capsules, distance_mm),
-                                   sigma_mm, step_rad, slots)
-        return unseen_flips(len(capsules), majors, predictions)
+        following = np.r_[np.asarray(slots)[1:] == np.asarray(slots)[:-1] + 1, False]
+        flips = self.flip_deltas(capsules, distance_mm,
+                                 np.where(following, np.r_[scaled[1:, 0], 0], -1))
+        found = []
+        for between in (True, False):
+            found.append((
+                flip_repairs(major.astype(np.float64), usable[:, 0::3],
+                             (flipped - major[..., None]).astype(np.float64),
+                             np.broadcast_to(bits, flipped.shape), sigma_mm, 3.0 * step_rad,
+                             slots, spacing=3, between=between),
+                flip_repairs(distance_mm, usable, *flips, sigma_mm, step_rad, slots,
+                             between=between)))
+        (majors, predictions), (major_spikes, prediction_spikes) = found
+        # A run: the samples read from the major beside it moved with it (nearer it than the
+        # flip's change); a far major of clutter has its predicted neighbours near the scene.
+        capsule, sample, bit = major_spikes
+        change = np.abs(flipped - major[..., None])[capsule, sample // 3,
+                                                    bit - (4 + 4 * (sample // 3)) * 8]
+        run = np.ones(capsule.size, bool)
+        for offset in (-1, 1):
+            at = np.clip(sample + offset, 0, ULTRA_SAMPLES_PER_CAPSULE - 1)
+            run &= (np.abs(distance_mm[capsule, at] - distance_mm[capsule, sample])
+                    < 0.5 * change)
+        return (unseen_flips(len(capsules), majors, predictions),
+                np.maximum.reduce([
+                    SPIKE_RUN * repaired_samples(slots, ULTRA_SAMPLES_PER_CAPSULE,
+                                                 tuple(c[run] for c in major_spikes),
+                                                 (-1, 0, 1)),
+                    SPIKE * repaired_samples(slots, ULTRA_SAMPLES_PER_CAPSULE,
+                                             tuple(c[~run] for c in major_spikes), (-1, 0, 1)),
+                    SPIKE * repaired_samples(slots, ULTRA_SAMPLES_PER_CAPSULE,
+                                             prediction_spikes)]))
 
     def plausible(self, distance_mm: np.ndarray, correction_deg: np.ndarray,
                   usable: np.ndarray, sigma_mm: float, step_rad: float) -> np.ndarray:

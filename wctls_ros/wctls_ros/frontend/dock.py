@@ -7,16 +7,17 @@ A docking station seen by a 2D LiDAR: two straight faces meeting at an apex, fou
 A dock is described by :class:`DockShape`: the length of its right and left faces and the
 opening angle between them through the side the robot sees (below 180 deg a V the robot faces
 into, above 180 deg a wedge pointing at the robot, 90 deg an L), with tolerances. Its pose is
-the dock frame: origin at the apex, x along the bisector away from the robot's side (the way
-a robot docking forwards faces), y to the left, moved to a stated reference point.
-:func:`find_docks` starts from the corners and the pairs of segments near the dock's angle,
-fits the apex frame to the lines knowing the opening angle (eq. D1), then to the scan's
-returns themselves (:func:`fit_returns`, eq. D5-D7), and keeps the fits whose faces reach
-their ends and no farther, are straight and meet at the angle (eq. D8-D10); without the
-returns, the corners that match, with their line fit. The pose is moved to the reference
-point with its covariance (eq. D2-D3; docs/docking.md). :func:`track_dock` keeps the
-candidates that agree with the last ones (a chi2 gate over the pose difference, with the
-motion allowed in between, eq. D4) and confirms a dock only after a few agreeing scans.
+the dock frame: origin at the apex, x along the bisector away from the robot's side (the way a
+robot docking forwards faces), y to the left, moved to a stated reference point.
+:func:`find_docks` starts from the corners and the pairs of segments near the dock's angle (and
+from one segment alone where the other face is seen, eq. D11), fits the apex frame to the lines
+knowing the opening angle (eq. D1), then to the scan's returns themselves (:func:`fit_returns`,
+eq. D5-D7), and keeps the fits whose faces reach their ends and no farther, are straight and
+meet at the angle (eq. D8-D10); without the returns, the corners that match, with their line
+fit. The pose is moved to the reference point with its covariance (eq. D2-D3; docs/docking.md).
+:func:`track_dock` keeps the candidates that agree with the last ones (a chi2 gate over the
+pose difference, with the motion allowed in between, eq. D4) and confirms a dock only after a
+few agreeing scans.
 
 Everything is in the scan's frame: m, rad. Pure numpy; no ROS.
 """
@@ -766,11 +767,13 @@ def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape,
     (:func:`fit_returns`, eq. D5-D9) from starts: the corners whose opening angle is within
     twice the tolerance of the dock's, and when none of them is the dock, every two segments
     neighbouring in scan order, or with one between them, whose lines meet at that angle near
-    their facing ends (the corner need not have been found). A fit is kept when each face's
-    reach (its returns on its line from the apex outward, the ones the extraction left out
-    of its segment too) is as long as the face, at most ``face_tolerance_m`` longer and at
-    most ``face_shortfall_m`` plus one return spacing shorter, and the faces' own lines meet
-    at the dock's angle within ``angle_tolerance_rad``.
+    their facing ends (the corner need not have been found), and when those give no dock
+    either, each segment alone as one face where the other face is seen (eq. D11; its fit
+    made twice). A fit is kept when each face's reach (its returns on its line from the apex
+    outward, the ones the extraction left out of its segment too) is as long as the face, at
+    most ``face_tolerance_m`` longer and at most ``face_shortfall_m`` plus one return spacing
+    shorter, and the faces' own lines meet at the dock's angle within
+    ``angle_tolerance_rad``.
 
     Without the returns, from the corners alone (eq. D1): a corner matches when both its
     walls are seen up to it, its opening angle is within the tolerance of the dock's, its
@@ -866,8 +869,8 @@ def _docks_of_returns(returns: DockReturns, starts: list, shape: DockShape,
     """
     Return the fits from the starts that have the dock's shape, one per dock.
 
-    With ``refit``, each fit is made again from its own pose (the one segment's starts: 5-9 cm
-    and up to 20 deg off, their first assignment of the returns is partly wrong).
+    With ``refit``, each fit is made again from its own pose (the one segment's starts, eq.
+    D11: 6-10 cm and up to 20 deg off, their first assignment of the returns is partly wrong).
     """
     docks: List[DockPose] = []
     apexes: List[Tuple[float, float]] = []
@@ -1055,7 +1058,7 @@ def _segment_starts(segments: SegmentSet, returns: DockReturns,
     BEYOND_M, of SINGLE_SEGMENT_RETURNS returns or more, is tried as either face, either end
     the apex, along its line; the sensor must see both faces' fronts. A start is kept when the
     other face, where it predicts it, is seen (:func:`_other_face_seen`): the cheap test that
-    spares most of them the fit.
+    spares most of them the fit (eq. D11 of docs/docking.md).
     """
     starts: List[Tuple[float, float, float]] = []
     half = 0.5 * shape.opening_angle_rad

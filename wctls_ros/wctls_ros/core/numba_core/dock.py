@@ -18,7 +18,9 @@ The dock is given as the tuple ``shape`` = (right face m, left face m, opening a
 tolerance m, angle tolerance rad) and the scan's noise model as ``noise`` = (range sigma m,
 bearing sigma rad, model error sigma m, common range sigma m, flatness sigma m);
 :func:`fit_returns` gives its results in one array (``FIT_SIZE`` values, laid out as its
-docstring says), empty when the numpy twin gives None.
+docstring says), empty when the numpy twin gives None. The starts are compiled too: from the
+corners (:func:`corner_starts`), the pairs of segments (:func:`segment_pair_starts`) and one
+segment alone with its test of the other face (:func:`segment_starts`, eq. D11).
 """
 
 import math

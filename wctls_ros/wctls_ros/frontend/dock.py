@@ -7,16 +7,17 @@ A docking station seen by a 2D LiDAR: two straight faces meeting at an apex, fou
 A dock is described by :class:`DockShape`: the length of its right and left faces and the
 opening angle between them through the side the robot sees (below 180 deg a V the robot faces
 into, above 180 deg a wedge pointing at the robot, 90 deg an L), with tolerances. Its pose is
-the dock frame: origin at the apex, x along the bisector away from the robot's side (the way
-a robot docking forwards faces), y to the left, moved to a stated reference point.
-:func:`find_docks` starts from the corners and the pairs of segments near the dock's angle,
-fits the apex frame to the lines knowing the opening angle (eq. D1), then to the scan's
-returns themselves (:func:`fit_returns`, eq. D5-D7), and keeps the fits whose faces reach
-their ends and no farther, are straight and meet at the angle (eq. D8-D10); without the
-returns, the corners that match, with their line fit. The pose is moved to the reference
-point with its covariance (eq. D2-D3; docs/docking.md). :func:`track_dock` keeps the
-candidates that agree with the last ones (a chi2 gate over the pose difference, with the
-motion allowed in between, eq. D4) and confirms a dock only after a few agreeing scans.
+the dock frame: origin at the apex, x along the bisector away from the robot's side (the way a
+robot docking forwards faces), y to the left, moved to a stated reference point.
+:func:`find_docks` starts from the corners and the pairs of segments near the dock's angle (and
+from one segment alone where the other face is seen, eq. D11), fits the apex frame to the lines
+knowing the opening angle (eq. D1), then to the scan's returns themselves (:func:`fit_returns`,
+eq. D5-D7), and keeps the fits whose faces reach their ends and no farther, are straight and
+meet at the angle (eq. D8-D10); without the returns, the corners that match, with their line
+fit. The pose is moved to the reference point with its covariance (eq. D2-D3; docs/docking.md).
+:func:`track_dock` keeps the candidates that agree with the last ones (a chi2 gate over the
+pose difference, with the motion allowed in between, eq. D4) and confirms a dock only after a
+few agreeing scans.
 
 Everything is in the scan's frame: m, rad. Pure numpy; no ROS.
 """
@@ -264,6 +265,12 @@ WINDOW_MARGIN_M = 0.05
 STRAIGHT_BRIDGE = 1.2
 # Two fits whose apexes are closer than this are one dock, m.
 SAME_DOCK_M = 0.05
+# A segment this long or longer may start the fit alone, as one face (at 0.3 m), m.
+SINGLE_SEGMENT_M = 0.1
+# ... and of this many returns or more: the faces merged at the apex are seen close by (55-206
+# returns on a face's segment at 0.3 m); faces of 8-16 returns (3 m) have look-alikes that
+# pass the fit's tests, and there the core gives each face a segment of its own.
+SINGLE_SEGMENT_RETURNS = 30
 
 
 @dataclass(frozen=True)
@@ -738,15 +745,9 @@ def _fit_returns_compiled(kernels: Any, returns: DockReturns,
                           start: Tuple[float, float, float],
                           shape: DockShape) -> Optional[ReturnsFit]:
     """Run :func:`fit_returns` by its compiled twin (``numba_core/dock.py``)."""
-    # Always the same argument types: numba compiles one version, the precompiled one.
-    values = kernels.fit_returns(
-        np.ascontiguousarray(returns.ranges_m, dtype=float), float(returns.angle_min_rad),
-        float(returns.angle_increment_rad), bool(returns.full_turn),
-        (float(returns.range_min_m), float(returns.range_max_m)),
-        (float(returns.range_sigma_m), float(returns.bearing_sigma_rad),
-         float(returns.model_error_sigma_m), float(returns.common_range_sigma_m),
-         float(returns.flatness_sigma_m)), bool(returns.residual_scaling),
-        (float(start[0]), float(start[1]), float(start[2])), _shape_tuple(shape))
+    values = kernels.fit_returns(*_twin_returns(returns),
+                                 (float(start[0]), float(start[1]), float(start[2])),
+                                 _shape_tuple(shape))
     if not len(values):
         return None
     v = values.tolist()
@@ -766,11 +767,13 @@ def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape,
     (:func:`fit_returns`, eq. D5-D9) from starts: the corners whose opening angle is within
     twice the tolerance of the dock's, and when none of them is the dock, every two segments
     neighbouring in scan order, or with one between them, whose lines meet at that angle near
-    their facing ends (the corner need not have been found). A fit is kept when each face's
-    reach (its returns on its line from the apex outward, the ones the extraction left out
-    of its segment too) is as long as the face, at most ``face_tolerance_m`` longer and at
-    most ``face_shortfall_m`` plus one return spacing shorter, and the faces' own lines meet
-    at the dock's angle within ``angle_tolerance_rad``.
+    their facing ends (the corner need not have been found), and when those give no dock
+    either, each segment alone as one face where the other face is seen (eq. D11; its fit
+    made twice). A fit is kept when each face's reach (its returns on its line from the apex
+    outward, the ones the extraction left out of its segment too) is as long as the face, at
+    most ``face_tolerance_m`` longer and at most ``face_shortfall_m`` plus one return spacing
+    shorter, and the faces' own lines meet at the dock's angle within
+    ``angle_tolerance_rad``.
 
     Without the returns, from the corners alone (eq. D1): a corner matches when both its
     walls are seen up to it, its opening angle is within the tolerance of the dock's, its
@@ -804,6 +807,11 @@ def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape,
             docks = _docks_of_returns(returns, kernels.segment_pair_starts(
                 *arrays[:6], _shape_tuple(shape), bool(returns.full_turn)).tolist(), shape,
                 kernels)
+        if not docks:
+            docks = _docks_of_returns(returns, kernels.segment_starts(
+                arrays[3], np.ascontiguousarray(segments.num_points, dtype=np.int64),
+                *_twin_returns(returns)[:6], _shape_tuple(shape)).tolist(), shape, kernels,
+                refit=True)
         return sorted(docks, key=lambda dock: dock.misfit)
     tried: set = set()
     docks = _docks_of_returns(returns, _corner_starts(segments, corners, shape, tried), shape,
@@ -812,7 +820,26 @@ def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape,
         docks = _docks_of_returns(
             returns, _segment_pair_starts(segments, shape, returns.full_turn, tried), shape,
             None)
+    if not docks:
+        docks = _docks_of_returns(returns, _segment_starts(segments, returns, shape), shape,
+                                  None, refit=True)
     return sorted(docks, key=lambda dock: dock.misfit)
+
+
+def _twin_returns(returns: DockReturns) -> tuple:
+    """
+    Return the returns as the compiled twins take them (``numba_core/dock.py``).
+
+    The ranges, angle_min, increment, full turn, (range_min, range_max), the noise (range,
+    bearing, model error, common range, flatness sigmas) and the residual scaling; always the
+    same argument types: numba compiles one version, the precompiled one.
+    """
+    return (np.ascontiguousarray(returns.ranges_m, dtype=float), float(returns.angle_min_rad),
+            float(returns.angle_increment_rad), bool(returns.full_turn),
+            (float(returns.range_min_m), float(returns.range_max_m)),
+            (float(returns.range_sigma_m), float(returns.bearing_sigma_rad),
+             float(returns.model_error_sigma_m), float(returns.common_range_sigma_m),
+             float(returns.flatness_sigma_m)), bool(returns.residual_scaling))
 
 
 def _twin_arrays(segments: SegmentSet, corners: CornerSet) -> tuple:
@@ -838,13 +865,23 @@ def _shape_tuple(shape: DockShape) -> Tuple[float, float, float, float, float]:
 
 
 def _docks_of_returns(returns: DockReturns, starts: list, shape: DockShape,
-                      kernels: Any) -> List[DockPose]:
-    """Return the fits from the starts that have the dock's shape, one per dock."""
+                      kernels: Any, refit: bool = False) -> List[DockPose]:
+    """
+    Return the fits from the starts that have the dock's shape, one per dock.
+
+    With ``refit``, each fit is made again from its own pose (the one segment's starts, eq.
+    D11: 6-10 cm and up to 20 deg off, their first assignment of the returns is partly wrong).
+    """
     docks: List[DockPose] = []
     apexes: List[Tuple[float, float]] = []
     for start in starts:
-        fit = (_fit_returns_numpy(returns, start, shape) if kernels is None
-               else _fit_returns_compiled(kernels, returns, start, shape))
+        fit = None
+        for _ in range(2 if refit else 1):
+            fit = (_fit_returns_numpy(returns, start, shape) if kernels is None
+                   else _fit_returns_compiled(kernels, returns, start, shape))
+            if fit is None:
+                break
+            start = tuple(fit.pose.tolist())
         if fit is None:
             continue
         misfit = returns_misfit(fit, shape)
@@ -1009,6 +1046,87 @@ def _segment_pair_starts(segments: SegmentSet, shape: DockShape, full_turn: bool
             if start is not None:
                 starts.append(start)
     return starts
+
+
+def _segment_starts(segments: SegmentSet, returns: DockReturns,
+                    shape: DockShape) -> List[Tuple[float, float, float]]:
+    """
+    Return the apex frames where one segment alone may be a face of the dock.
+
+    At 0.3 m the core often gives one face no segment of its own (merged with the apex of the
+    other, or split): each segment of SINGLE_SEGMENT_M up to its face's length, tolerance and
+    BEYOND_M, of SINGLE_SEGMENT_RETURNS returns or more, is tried as either face, either end
+    the apex, along its line; the sensor must see both faces' fronts. A start is kept when the
+    other face, where it predicts it, is seen (:func:`_other_face_seen`): the cheap test that
+    spares most of them the fit (eq. D11 of docs/docking.md).
+    """
+    starts: List[Tuple[float, float, float]] = []
+    half = 0.5 * shape.opening_angle_rad
+    concave = 1.0 if shape.opening_angle_rad < math.pi else -1.0
+    faces = ((-math.cos(half), -math.sin(half), shape.right_face_m),
+             (-math.cos(half), math.sin(half), shape.left_face_m))
+    for (sx, sy, ex, ey), points in zip(_segment_ends(segments), segments.num_points.tolist()):
+        length = math.hypot(ex - sx, ey - sy)
+        if not (SINGLE_SEGMENT_M <= length <= max(shape.right_face_m, shape.left_face_m) + (
+                shape.face_tolerance_m + BEYOND_M) and points >= SINGLE_SEGMENT_RETURNS):
+            continue
+        for ax, ay, bx, by in ((sx, sy, ex, ey), (ex, ey, sx, sy)):
+            dx, dy = (bx - ax) / length, (by - ay) / length       # outward along the face
+            for k in range(2):
+                fx, fy, face_m = faces[k]
+                if length > face_m + shape.face_tolerance_m + BEYOND_M:
+                    continue
+                yaw = _wrap(math.atan2(dy, dx) - math.atan2(fy, fx))
+                c, s = math.cos(yaw), math.sin(yaw)
+                ox, oy, other_m = faces[1 - k]
+                ux, uy = c * ox - s * oy, s * ox + c * oy         # the other face, outward
+                # Both faces' fronts towards the sensor: on the inner side of both lines for
+                # a V, the outer for a wedge (cross products with the sensor at (0, 0)).
+                turn = dx * uy - dy * ux
+                if not (concave * turn * (ax * dy - ay * dx) > 0.0
+                        and concave * turn * (ay * ux - ax * uy) > 0.0):
+                    continue
+                if _other_face_seen(returns, ax, ay, ux, uy, other_m):
+                    starts.append((ax, ay, yaw))
+    return starts
+
+
+def _other_face_seen(returns: DockReturns, ax: float, ay: float, ux: float, uy: float,
+                     length_m: float) -> bool:
+    """
+    Tell whether a face from (ax, ay) along (ux, uy) is seen by at least half of its beams.
+
+    The beams between the bearings of its two ends whose rays meet it: their returns within
+    D5's gate of it (eq. D5), MIN_FACE_RETURNS at least.
+    """
+    increment, count = returns.angle_increment_rad, len(returns.ranges_m)
+    apex_bearing = math.atan2(ay, ax)
+    centre = (apex_bearing - returns.angle_min_rad) / increment
+    if returns.full_turn:
+        centre %= count
+    end = centre + _wrap(math.atan2(ay + length_m * uy, ax + length_m * ux)
+                         - apex_bearing) / increment
+    index = np.arange(math.ceil(min(centre, end)), math.floor(max(centre, end)) + 1)
+    index = index % count if returns.full_turn else index[(index >= 0) & (index < count)]
+    bearing = returns.angle_min_rad + increment * index
+    cos_b, sin_b = np.cos(bearing), np.sin(bearing)
+    nx, ny = -uy, ux
+    cosine = nx * cos_b + ny * sin_b
+    rho = returns.ranges_m[index]
+    with np.errstate(divide='ignore', invalid='ignore'):
+        hit = (nx * ax + ny * ay) / cosine
+        along = hit * (ux * cos_b + uy * sin_b) - (ux * ax + uy * ay)
+        meets = (hit > 0.0) & (along >= 0.0) & (along <= length_m)
+        valid = (np.isfinite(rho) & (rho > 0.0) & (rho >= returns.range_min_m)
+                 & (rho <= returns.range_max_m))
+        rho = np.where(valid, rho, 1.0)
+        offset = (rho - hit) * cosine
+        across = ON_FACE_SIGMAS ** 2 * (returns.range_sigma_m ** 2
+                                        + returns.model_error_sigma_m ** 2)
+        spread = (ON_FACE_SIGMAS * returns.bearing_sigma_rad) ** 2 * rho * rho
+        on = meets & valid & (offset * offset <= (across - spread) * cosine * cosine + spread)
+    seen = int(np.count_nonzero(on))
+    return seen >= MIN_FACE_RETURNS and 2 * seen >= int(np.count_nonzero(meets))
 
 
 def _docks_of_corners(segments: SegmentSet, corners: CornerSet,

@@ -18,7 +18,9 @@ The dock is given as the tuple ``shape`` = (right face m, left face m, opening a
 tolerance m, angle tolerance rad) and the scan's noise model as ``noise`` = (range sigma m,
 bearing sigma rad, model error sigma m, common range sigma m, flatness sigma m);
 :func:`fit_returns` gives its results in one array (``FIT_SIZE`` values, laid out as its
-docstring says), empty when the numpy twin gives None.
+docstring says), empty when the numpy twin gives None. The starts are compiled too: from the
+corners (:func:`corner_starts`), the pairs of segments (:func:`segment_pair_starts`) and one
+segment alone with its test of the other face (:func:`segment_starts`, eq. D11).
 """
 
 import math
@@ -33,6 +35,8 @@ ON_FACE_SIGMAS = 3.0
 MIN_FACE_RETURNS = 4
 BEYOND_M = 0.05
 WINDOW_MARGIN_M = 0.05
+SINGLE_SEGMENT_M = 0.1
+SINGLE_SEGMENT_RETURNS = 30
 # The values of a fit: pose 3, covariance 9, counts 2, reach 2, spacing 2, past end 4, the own
 # lines' opening angle 1, bends 2, chi2 1.
 FIT_SIZE = 26
@@ -654,4 +658,95 @@ def segment_pair_starts(angle, radius, covariance, ends, first, second, shape, f
             yaw = math.atan2(-by, -bx) if concave else math.atan2(by, bx)
             made = _pair_start(angle, radius, covariance, ends, i, j, px, py, yaw, shape[2],
                                starts, made)
+    return starts[:made]
+
+
+@jit
+def _other_face_seen(ranges, angle_min, increment, full_turn, range_limits, noise, ax, ay, ux,
+                     uy, length):
+    """Compiled twin of ``_other_face_seen``: half of the face's beams see it, 4 at least."""
+    count = ranges.size
+    apex_bearing = math.atan2(ay, ax)
+    centre = (apex_bearing - angle_min) / increment
+    if full_turn:
+        centre %= count
+    end = centre + _wrap(math.atan2(ay + length * uy, ax + length * ux)
+                         - apex_bearing) / increment
+    nx, ny = -uy, ux
+    across = ON_FACE_SIGMAS ** 2 * (noise[0] * noise[0] + noise[2] * noise[2])
+    seen = meeting = 0
+    for beam in range(math.ceil(min(centre, end)), math.floor(max(centre, end)) + 1):
+        if full_turn:
+            beam %= count
+        elif not 0 <= beam < count:
+            continue
+        bearing = angle_min + increment * beam
+        cos_b, sin_b = math.cos(bearing), math.sin(bearing)
+        cosine = nx * cos_b + ny * sin_b
+        if cosine == 0.0:
+            continue
+        hit = (nx * ax + ny * ay) / cosine
+        along = hit * (ux * cos_b + uy * sin_b) - (ux * ax + uy * ay)
+        if not (hit > 0.0 and along >= 0.0 and along <= length):
+            continue
+        meeting += 1
+        rho = ranges[beam]
+        if not (math.isfinite(rho) and rho > 0.0 and rho >= range_limits[0]
+                and rho <= range_limits[1]):
+            continue
+        offset = (rho - hit) * cosine
+        spread = (ON_FACE_SIGMAS * noise[1]) ** 2 * rho * rho
+        if offset * offset <= (across - spread) * cosine * cosine + spread:
+            seen += 1
+    return seen >= MIN_FACE_RETURNS and 2 * seen >= meeting
+
+
+@jit
+def segment_starts(ends, points, ranges, angle_min, increment, full_turn, range_limits, noise,
+                   shape):
+    """
+    Compiled twin of the frontend's ``_segment_starts``: one segment as either face.
+
+    :param ends: the segments' (start x, start y, end x, end y), shape (N, 4), m
+    :param points: their returns, shape (N,)
+    :param ranges: the scan's ranges, shape (M,), m
+    :param angle_min: bearing of beam 0, rad
+    :param increment: bearing step, rad
+    :param full_turn: the beams go all the way round
+    :param range_limits: (shortest, longest) valid range, m
+    :param noise: as :func:`fit_returns`'s
+    :param shape: as :func:`fit_returns`'s
+    :return: the starts (x, y, yaw), shape (S, 3)
+    """
+    half = 0.5 * shape[2]
+    concave = 1.0 if shape[2] < math.pi else -1.0
+    face_x = np.array([-math.cos(half), -math.cos(half)])
+    face_y = np.array([-math.sin(half), math.sin(half)])
+    longest = max(shape[0], shape[1]) + shape[3] + BEYOND_M
+    starts = np.empty((4 * ends.shape[0], 3))
+    made = 0
+    for wall in range(ends.shape[0]):
+        sx, sy, ex, ey = ends[wall, 0], ends[wall, 1], ends[wall, 2], ends[wall, 3]
+        length = math.hypot(ex - sx, ey - sy)
+        if not (SINGLE_SEGMENT_M <= length and length <= longest
+                and points[wall] >= SINGLE_SEGMENT_RETURNS):
+            continue
+        for flip in range(2):
+            ax, ay, bx, by = (sx, sy, ex, ey) if flip == 0 else (ex, ey, sx, sy)
+            dx, dy = (bx - ax) / length, (by - ay) / length
+            for k in range(2):
+                if length > shape[k] + shape[3] + BEYOND_M:
+                    continue
+                yaw = _wrap(math.atan2(dy, dx) - math.atan2(face_y[k], face_x[k]))
+                c, s = math.cos(yaw), math.sin(yaw)
+                ox, oy = face_x[1 - k], face_y[1 - k]
+                ux, uy = c * ox - s * oy, s * ox + c * oy
+                turn = dx * uy - dy * ux
+                if not (concave * turn * (ax * dy - ay * dx) > 0.0
+                        and concave * turn * (ay * ux - ax * uy) > 0.0):
+                    continue
+                if _other_face_seen(ranges, angle_min, increment, full_turn, range_limits,
+                                    noise, ax, ay, ux, uy, shape[1 - k]):
+                    starts[made, 0], starts[made, 1], starts[made, 2] = ax, ay, yaw
+                    made += 1
     return starts[:made]

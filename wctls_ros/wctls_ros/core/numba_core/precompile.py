@@ -26,7 +26,7 @@ from ..records import TrackRules
 
 # The compiled functions that Python calls, each compiled once for the types it is called with.
 _ENTRY_POINTS = (_features_of_scan, tracking.update_tracks, dock.fit_returns,
-                 dock.corner_starts, dock.segment_pair_starts)
+                 dock.corner_starts, dock.segment_pair_starts, dock.segment_starts)
 
 
 def warm_up() -> float:
@@ -72,7 +72,7 @@ def _track_once(ranges_m: np.ndarray, angle_min_rad: float, angle_increment_rad:
 
 def _dock_once(ranges_m: np.ndarray, angle_min_rad: float, angle_increment_rad: float) -> None:
     """
-    Compile the dock's kernels: the starts of two segments and a corner, the fit from one.
+    Compile the dock's kernels: the starts of a corner, two segments and one, the fit.
 
     With the argument types :func:`wctls_ros.frontend.dock.find_docks` calls them with.
     """
@@ -83,6 +83,9 @@ def _dock_once(ranges_m: np.ndarray, angle_min_rad: float, angle_increment_rad: 
     dock.corner_starts(*segments, np.array([2.1]), np.array([[1.8, 0.0]]), np.array([0.0]),
                        shape)
     dock.segment_pair_starts(*segments, shape, True)
+    dock.segment_starts(segments[3], np.array([40, 40]), ranges_m, angle_min_rad,
+                        angle_increment_rad, True, (0.0, math.inf), (0.01, 0.001, 0.0, 0.0, 0.0),
+                        shape)
     dock.fit_returns(ranges_m, angle_min_rad, angle_increment_rad, True, (0.0, math.inf),
                      (0.01, 0.001, 0.0, 0.0, 0.0), True, (1.9, 1.9, 0.785), shape)
 

@@ -8,9 +8,10 @@ The numpy steps of :mod:`wctls_ros.frontend.odometry` are the specification; the
 twin (``core/numba_core/odometry.py``: the hypothesis search, its scoring and refinements, and
 the fit), which the odometry runs whenever the compiled core serves, must give:
 
-- the search's chi-squares of every corner and line pair under every hypothesis as numpy does
-  within 1e-12 relative, inf (segments inside the gate that do not overlap) where it does, and
-  the hypotheses' scores exactly, on the first 40 steps of every shipped moving recording;
+- the hypotheses as numpy does (the same number, in its order, within 1e-12 m and rad), the
+  search's chi-squares of every corner and line pair under every hypothesis inside the gate
+  where numpy's are (segments that do not overlap outside) and there within 1e-12 relative,
+  and the hypotheses' scores exactly, on the first 40 steps of every shipped moving recording;
 - a fit of a well-posed association within 1e-9 (its sums are taken in another order);
 - on the first 200 scans of the shipped moving recordings, matched against a keyframe, scan to
   scan and with a wheel odometry as the prior, the same statuses, counts of corners and lines,
@@ -91,43 +92,56 @@ def recordings(compiled_core):
 
 
 def assert_chi2_close(compiled, reference, what):
-    """Hold chi-squares to numpy's: inf where it is, else within 1e-12 relative."""
+    """Hold chi-squares to numpy's: inside the gate where it is, and there within 1e-12."""
     assert compiled.shape == reference.shape, what
-    assert np.array_equal(np.isinf(compiled), np.isinf(reference)), what
-    finite = np.isfinite(reference)
-    assert np.allclose(compiled[finite], reference[finite], rtol=1e-12, atol=0.0), what
+    inside = reference <= odometry.CHI2_2DOF_99
+    assert np.array_equal(compiled <= odometry.CHI2_2DOF_99, inside), what
+    assert np.allclose(compiled[inside], reference[inside], rtol=1e-12, atol=0.0), what
 
 
 def test_the_compiled_search_chi2_are_the_numpy_ones(compiled_core, recordings):
-    compared = inside = outside_by_overlap = 0
+    compared = inside = outside_by_overlap = hypotheses = 0
     for name, (_, landmarks, _) in recordings.items():
         for previous, current in zip(landmarks[:40], landmarks[1:41]):
             steps = odometry._hypotheses(previous, current, OdometryConfig(), np.zeros((1, 3)))
+            best = odometry._best_known(previous), odometry._best_known(current)
+            ours = compiled_core.hypotheses(*odometry._arrays(best[0])[:4],
+                                            *odometry._arrays(best[1])[:4])
+            theirs = np.concatenate([odometry.corner_hypotheses(*best),
+                                     odometry.line_hypotheses(*best),
+                                     odometry.corner_line_hypotheses(*best)])
+            assert ours.shape == theirs.shape, name
+            assert np.allclose(ours, theirs, rtol=0.0, atol=1e-12), name
+            hypotheses += len(theirs)
             corners, lines = odometry._search_chi2(previous, current, steps)
             prev, cur = odometry._arrays(previous), odometry._arrays(current)
             if corners is not None:
                 twin = compiled_core._corner_chi2(prev[0], prev[1], cur[0], cur[1], steps,
-                                                  odometry.SEARCH_SLACK_M ** 2)
+                                                  odometry.SEARCH_SLACK_M ** 2, False)
                 assert_chi2_close(twin, corners, (name, 'corners'))
                 compared += corners.size
             if lines is not None:
                 twin = compiled_core._line_chi2(
                     prev[2], prev[3], prev[4], cur[2], cur[3], cur[4], steps,
-                    odometry.SEARCH_SLACK_RAD ** 2, odometry.SEARCH_SLACK_M ** 2)
+                    odometry.SEARCH_SLACK_RAD ** 2, odometry.SEARCH_SLACK_M ** 2, False)
                 assert_chi2_close(twin, lines, (name, 'lines'))
                 compared += lines.size
                 inside += int((lines <= odometry.CHI2_2DOF_99).sum())
-                # The covariances are positive definite: an inf is a pair the overlap refused.
+                # numpy's inf is a pair inside the gate that the overlap refused.
                 outside_by_overlap += int(np.isinf(lines).sum())
             scores = odometry.score_hypotheses((corners, lines), len(steps))
+            # The scores from each current landmark's least chi2, as the compiled search takes
+            # them.
             twin_scores = np.zeros(len(steps))
-            compiled_core._scores(corners if corners is not None else np.zeros((len(steps), 0, 0)),
-                                  twin_scores)
-            compiled_core._scores(lines if lines is not None else np.zeros((len(steps), 0, 0)),
-                                  twin_scores)
+            compiled_core._scores(compiled_core._corner_chi2(
+                prev[0], prev[1], cur[0], cur[1], steps, odometry.SEARCH_SLACK_M ** 2, True),
+                twin_scores)
+            compiled_core._scores(compiled_core._line_chi2(
+                prev[2], prev[3], prev[4], cur[2], cur[3], cur[4], steps,
+                odometry.SEARCH_SLACK_RAD ** 2, odometry.SEARCH_SLACK_M ** 2, True), twin_scores)
             assert np.array_equal(twin_scores, scores), name
-    assert compared > 1e5 and inside > 1000 and outside_by_overlap > 0, (
-        compared, inside, outside_by_overlap)
+    assert compared > 1e5 and inside > 1000 and outside_by_overlap > 0 and hypotheses > 1e4, (
+        compared, inside, outside_by_overlap, hypotheses)
 
 
 def test_a_compiled_fit_of_a_well_posed_association_is_the_numpy_one(compiled_core,

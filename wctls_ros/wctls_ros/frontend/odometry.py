@@ -961,18 +961,22 @@ def _search(previous: Landmarks, current: Landmarks, steps: np.ndarray, prior_st
 
 
 def _hypotheses(previous: Landmarks, current: Landmarks, config: OdometryConfig,
-                extra: np.ndarray, keep=None) -> np.ndarray:
+                extra: np.ndarray, keep=None, kernels: Any = None) -> np.ndarray:
     """
     Return the steps to score: ``extra`` first, then those of the landmark pairs.
 
     The pairs' steps beyond ``max_step_m`` are dropped, and those ``keep`` (a function of the
     steps, shape (H, 3) -> (H,) bool) refuses; at most ``max_hypotheses`` of them, drawn at
-    random (seeded).
+    random (seeded). With ``kernels`` (:func:`_odometry_kernels`) the pairs' steps are one
+    call of the compiled twin.
     """
     search_prev, search_cur = _best_known(previous), _best_known(current)
-    steps = np.concatenate([corner_hypotheses(search_prev, search_cur),
-                            line_hypotheses(search_prev, search_cur),
-                            corner_line_hypotheses(search_prev, search_cur)])
+    if kernels is not None:
+        steps = kernels.hypotheses(*_arrays(search_prev)[:4], *_arrays(search_cur)[:4])
+    else:
+        steps = np.concatenate([corner_hypotheses(search_prev, search_cur),
+                                line_hypotheses(search_prev, search_cur),
+                                corner_line_hypotheses(search_prev, search_cur)])
     steps = steps[np.hypot(steps[:, 0], steps[:, 1]) <= config.max_step_m]
     if keep is not None and len(steps):
         steps = steps[keep(steps)]
@@ -1027,7 +1031,7 @@ def _with_prior(previous: Landmarks, current: Landmarks, prior: Prior, config: O
         away[:, 2] = wrap_angle(away[:, 2])
         return np.einsum('hi,ij,hj->h', away, spread, away) <= gate
 
-    steps = _hypotheses(previous, current, config, prior.step, inside)
+    steps = _hypotheses(previous, current, config, prior.step, inside, kernels)
     zero = np.zeros((1, 3))
     if inside(zero)[0]:
         steps = np.concatenate([steps[:1], zero, steps[1:]])
@@ -1137,7 +1141,7 @@ def _estimate(previous: Landmarks, current: Landmarks, prior_step: np.ndarray,
     if min(landmarks_prev, landmarks_cur) < 2:
         return StepEstimate(prior_step.copy(), prior_covariance.copy(), 'prior')
     steps = _hypotheses(previous, current, config,
-                        np.concatenate([prior_step[None], np.zeros((1, 3))]))
+                        np.concatenate([prior_step[None], np.zeros((1, 3))]), kernels=kernels)
     step, corners, lines = _search(previous, current, steps, prior_step, prior_covariance,
                                    config, fused, kernels)
     matched = len(corners) + len(lines)

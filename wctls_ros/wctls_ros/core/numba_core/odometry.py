@@ -2,50 +2,290 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-The odometry's hypothesis search and fit compiled: the scoring, the refinements, Gauss-Newton.
+The odometry's hypotheses, search and fit compiled: the pairs' steps, scoring, refinements.
 
-The compiled twin of :func:`wctls_ros.frontend.odometry._search` and
-:func:`wctls_ros.frontend.odometry.fit`, whose numpy steps stay the specification
-(docs/odometry.md#hypotheses, #the-fit). :func:`search` is one compiled call per hypothesis
-set: the chi-squares of every corner and line pair under every hypothesis in the search's gate
-(a line pair's segments tested for overlap where inside the gate), the scores, and the
-refinements of the best few, each associated (one to one, nearest first), fitted and
-associated again, twice, and ranked. :func:`fit` is the fit of one association. The numpy
-steps pay numpy's cost per call thousands of times per scan; here each step is a loop.
+The compiled twin of the steps of the landmark pairs (``corner_hypotheses``,
+``line_hypotheses``, ``corner_line_hypotheses``), of ``_search`` and of ``fit`` of
+:mod:`wctls_ros.frontend.odometry`, whose numpy steps stay the specification
+(docs/odometry.md#hypotheses, #the-fit). :func:`hypotheses` is one call per pair of scans;
+:func:`search` one call per hypothesis set: the chi-squares of every corner and line pair
+under every hypothesis in the search's gate (a line pair's segments tested for overlap where
+inside the gate), the scores, and the refinements of the best few, each associated (one to
+one, nearest first), fitted and associated again, twice, and ranked. :func:`fit` is the fit of
+one association. The numpy steps pay numpy's cost per call thousands of times per scan; here
+each step is a loop, and a loop over pairs visits only those an angle can bring inside a gate
+(the lines sorted by angle; a chi-square outside the gate is inf, its only use being whether
+a pair lies inside).
 
-The chi-squares take the numpy twin's operations in its order (the same gate decisions). The
-fit's sums are taken in the order of the pairs, and its 3x3 systems solved by elimination
-with partial pivoting (numpy's matrix products and LAPACK's solve round otherwise): a fit of a
-single line pair, a singular system whose outcome is rounding noise, may then end elsewhere;
-the tests hold both to the same statuses, counts and trajectories within a stated tolerance.
+The hypotheses and the chi-squares take the numpy twin's operations in its order (the same
+hypotheses in the same order, the same gate decisions, the same scores). The fit's sums are
+taken in the order of the pairs, and its 3x3 systems solved by elimination with partial
+pivoting (numpy's matrix products and LAPACK's solve round otherwise): a fit of a single line
+pair, a singular system whose outcome is rounding noise, may then end elsewhere; the tests
+hold both to the same statuses, counts and trajectories within a stated tolerance.
 
 A scan's landmarks are given as their arrays (corner xy (C, 2), covariances (C, 2, 2), lines
 (L, 2), covariances (L, 2, 2), ends (L, 2, 2)); pairs as (previous index, current index) rows
 of an (K, 2) integer array.
 """
-
 import math
 
 import numpy as np
 
 from ._jit import jit
-from ._order import stable_order
+from ._order import sorted_copy, stable_order
 
 # The numpy twin's constants (wctls_ros.frontend.odometry), which the compiled code cannot
 # import (the frontend imports no compiled code); the tests hold both to the same results.
+CHI2_1DOF_99 = 6.635
 CHI2_2DOF_99 = 9.210
+MIN_PAIR_DISTANCE_M = 0.3
+MIN_PAIR_ANGLE_RAD = math.radians(20.0)
 SEARCH_SLACK_M = 0.05
 SEARCH_SLACK_RAD = math.radians(2.0)
 FIT_ITERATIONS = 6
 REFINED_HYPOTHESES = 6
 ENOUGH_SHARE = 0.9
 PRIOR_PAIR_CHI2 = 16.27
+# A pair whose first error alone lies this far beyond the gate (e0^2 / S00 bounds e^T S^-1 e
+# from below) is outside it: inf, without the quadratic form. The margin covers rounding.
+_OUTSIDE = CHI2_2DOF_99 * (1.0 + 1e-9)
 
 
 @jit
 def _wrap(angle):
-    """Compiled twin of ``frames.wrap_angle``: an angle into (-pi, pi], rad."""
-    return np.pi - np.mod(np.pi - angle, 2 * np.pi)
+    """
+    Compiled twin of ``frames.wrap_angle``: an angle into (-pi, pi], rad.
+
+    pi - mod(pi - angle, 2 pi), the modulo skipped where it is the identity (pi - angle
+    already in [0, 2 pi)): the same rounding, without a division for most angles.
+    """
+    turned = np.pi - angle
+    if 0.0 <= turned < 2 * np.pi:
+        return np.pi - turned
+    return np.pi - np.mod(turned, 2 * np.pi)
+
+
+@jit
+def _grown(out, count):
+    """Return ``out`` (N, 3) with room for one more row after ``count`` (doubled when full)."""
+    if count < out.shape[0]:
+        return out
+    grown = np.empty((2 * out.shape[0], 3))
+    grown[:count] = out[:count]
+    return grown
+
+
+@jit
+def _pair_spread(xy, cov, a, b):
+    """Return the vector a -> b between two corners, its length, and its variance along it."""
+    dx, dy = xy[b, 0] - xy[a, 0], xy[b, 1] - xy[a, 1]
+    length = np.hypot(dx, dy)
+    ux, uy = dx / max(length, 1e-12), dy / max(length, 1e-12)
+    s = cov[a] + cov[b]
+    var = ux * s[0, 0] * ux + ux * s[0, 1] * uy + uy * s[1, 0] * ux + uy * s[1, 1] * uy
+    return dx, dy, length, var
+
+
+@jit
+def corner_hypotheses(prev_xy, prev_cov, cur_xy, cur_cov):
+    """
+    Compiled twin of ``corner_hypotheses``: the steps of two corners seen in both scans.
+
+    The pairs i < j of the previous scan against the ordered pairs k != l of the current one,
+    in numpy's order (row-major), gated on their distances.
+
+    :return: steps (dx m, dy m, dyaw rad), shape (H, 3)
+    """
+    previous, current = prev_xy.shape[0], cur_xy.shape[0]
+    if previous < 2 or current < 2:
+        return np.zeros((0, 3))
+    spread_cur = np.empty((current * (current - 1), 6))
+    k = 0
+    for a in range(current):
+        for b in range(current):
+            if a != b:
+                dx, dy, length, var = _pair_spread(cur_xy, cur_cov, a, b)
+                spread_cur[k, 0], spread_cur[k, 1], spread_cur[k, 2] = dx, dy, length
+                spread_cur[k, 3], spread_cur[k, 4], spread_cur[k, 5] = var, a, b
+                k += 1
+    out = np.empty((16, 3))
+    count = 0
+    for i in range(previous):
+        for j in range(i + 1, previous):
+            dx, dy, length, var = _pair_spread(prev_xy, prev_cov, i, j)
+            if not length >= MIN_PAIR_DISTANCE_M:
+                continue
+            for k in range(spread_cur.shape[0]):
+                other = spread_cur[k]
+                if not (other[2] >= MIN_PAIR_DISTANCE_M and (length - other[2]) ** 2
+                        <= CHI2_1DOF_99 * (var + other[3])):
+                    continue
+                out = _grown(out, count)
+                yaw = _wrap(np.arctan2(dy, dx) - np.arctan2(other[1], other[0]))
+                c, m = int(other[4]), int(other[5])
+                mid_x = 0.5 * (cur_xy[c, 0] + cur_xy[m, 0])
+                mid_y = 0.5 * (cur_xy[c, 1] + cur_xy[m, 1])
+                cos, sin = np.cos(yaw), np.sin(yaw)
+                out[count, 0] = 0.5 * (prev_xy[i, 0] + prev_xy[j, 0]) - (cos * mid_x - sin * mid_y)
+                out[count, 1] = 0.5 * (prev_xy[i, 1] + prev_xy[j, 1]) - (sin * mid_x + cos * mid_y)
+                out[count, 2] = yaw
+                count += 1
+    return out[:count].copy()
+
+
+@jit
+def _within(ordered, order, angle, reach, out):
+    """
+    Write into ``out`` the indices (unordered) of the angles within ``reach`` of ``angle``, rad.
+
+    :param ordered: the angles sorted, in (-pi, pi]
+    :param order: their indices (ordered = angles[order])
+    :return: how many were written
+    """
+    if reach >= np.pi:
+        for k in range(order.size):
+            out[k] = order[k]
+        return order.size
+    count = 0
+    for low, high, needed in ((angle - reach, angle + reach, True),
+                              (angle - reach + 2 * np.pi, np.inf, angle - reach < -np.pi),
+                              (-np.inf, angle + reach - 2 * np.pi, angle + reach > np.pi)):
+        if not needed:
+            continue
+        for k in range(np.searchsorted(ordered, low, side='left'),
+                       np.searchsorted(ordered, high, side='right')):
+            out[count] = order[k]
+            count += 1
+    return count
+
+
+@jit
+def line_hypotheses(prev_line, prev_line_cov, cur_line, cur_line_cov):
+    """
+    Compiled twin of ``line_hypotheses``: the steps of two lines seen in both scans.
+
+    The pairs i < j of the previous scan against the ordered pairs k != l of the current one,
+    in numpy's order, gated on the angles between their normals (never flipped).
+
+    :return: steps (dx m, dy m, dyaw rad), shape (H, 3), the finite ones
+    """
+    previous, current = prev_line.shape[0], cur_line.shape[0]
+    if previous < 2 or current < 2:
+        return np.zeros((0, 3))
+    least = np.sin(MIN_PAIR_ANGLE_RAD)
+    # The current scan's pairs not close to parallel, in order: the only ones a pair can take.
+    between_cur = np.empty((current * (current - 1), 4))
+    k = 0
+    for a in range(current):
+        for b in range(current):
+            angle = _wrap(cur_line[b, 0] - cur_line[a, 0])
+            if a != b and abs(np.sin(angle)) >= least:
+                between_cur[k, 0] = angle
+                between_cur[k, 1] = cur_line_cov[a, 0, 0] + cur_line_cov[b, 0, 0]
+                between_cur[k, 2], between_cur[k, 3] = a, b
+                k += 1
+    between_cur = between_cur[:k]
+    # Sorted by angle, so that a previous pair visits only those within its widest gate.
+    order = stable_order(between_cur[:, 0])
+    ordered = between_cur[:, 0][order]
+    widest = between_cur[:, 1].max() if k else 0.0
+    candidates = np.empty(k)
+    out = np.empty((16, 3))
+    count = 0
+    for i in range(previous):
+        for j in range(i + 1, previous):
+            angle = _wrap(prev_line[j, 0] - prev_line[i, 0])
+            var = prev_line_cov[i, 0, 0] + prev_line_cov[j, 0, 0]
+            if not abs(np.sin(angle)) >= least:
+                continue
+            a1, b1 = np.cos(prev_line[i, 0]), np.sin(prev_line[i, 0])
+            a2, b2 = np.cos(prev_line[j, 0]), np.sin(prev_line[j, 0])
+            det = a1 * b2 - a2 * b1
+            found = _within(ordered, order, angle,
+                            np.sqrt(CHI2_1DOF_99 * (var + widest)) * (1.0 + 1e-9) + 1e-12,
+                            candidates)
+            for k in sorted_copy(candidates[:found]):
+                other = between_cur[int(k)]
+                if not _wrap(angle - other[0]) ** 2 <= CHI2_1DOF_99 * (var + other[1]):
+                    continue
+                c, m = int(other[2]), int(other[3])
+                r1 = prev_line[i, 1] - cur_line[c, 1]
+                r2 = prev_line[j, 1] - cur_line[m, 1]
+                dx, dy = (r1 * b2 - r2 * b1) / det, (a1 * r2 - a2 * r1) / det
+                yaw = _wrap(prev_line[i, 0] - cur_line[c, 0])
+                if np.isfinite(dx) and np.isfinite(dy) and np.isfinite(yaw):
+                    out = _grown(out, count)
+                    out[count, 0], out[count, 1], out[count, 2] = dx, dy, yaw
+                    count += 1
+    return out[:count].copy()
+
+
+@jit
+def _corner_line_distances(xy, cov, line, line_cov):
+    """Return every corner's signed distance from every line and its variance, (C L, 2)."""
+    out = np.empty((xy.shape[0] * line.shape[0], 2))
+    for c in range(xy.shape[0]):
+        for m in range(line.shape[0]):
+            nx, ny = np.cos(line[m, 0]), np.sin(line[m, 0])
+            lever = -xy[c, 0] * ny + xy[c, 1] * nx
+            s, q = cov[c], line_cov[m]
+            out[c * line.shape[0] + m, 0] = xy[c, 0] * nx + xy[c, 1] * ny - line[m, 1]
+            out[c * line.shape[0] + m, 1] = (
+                nx * s[0, 0] * nx + nx * s[0, 1] * ny + ny * s[1, 0] * nx + ny * s[1, 1] * ny
+                + lever ** 2 * q[0, 0] - 2.0 * lever * q[0, 1] + q[1, 1])
+    return out
+
+
+@jit
+def corner_line_hypotheses(prev_xy, prev_cov, prev_line, prev_line_cov, cur_xy, cur_cov,
+                           cur_line, cur_line_cov):
+    """
+    Compiled twin of ``corner_line_hypotheses``: the steps of a corner and a line in both scans.
+
+    Every (corner, line) of the previous scan against every one of the current scan, in numpy's
+    order, gated on the corner's signed distance from the line.
+
+    :return: steps (dx m, dy m, dyaw rad), shape (H, 3)
+    """
+    if not (prev_xy.shape[0] and prev_line.shape[0] and cur_xy.shape[0]
+            and cur_line.shape[0]):
+        return np.zeros((0, 3))
+    before = _corner_line_distances(prev_xy, prev_cov, prev_line, prev_line_cov)
+    after = _corner_line_distances(cur_xy, cur_cov, cur_line, cur_line_cov)
+    out = np.empty((16, 3))
+    count = 0
+    for p in range(before.shape[0]):
+        for c in range(after.shape[0]):
+            if not ((before[p, 0] - after[c, 0]) ** 2
+                    <= CHI2_1DOF_99 * (before[p, 1] + after[c, 1])):
+                continue
+            corner_p, line_p = p // prev_line.shape[0], p % prev_line.shape[0]
+            corner_c, line_c = c // cur_line.shape[0], c % cur_line.shape[0]
+            yaw = _wrap(prev_line[line_p, 0] - cur_line[line_c, 0])
+            cos, sin = np.cos(yaw), np.sin(yaw)
+            qx, qy = cur_xy[corner_c, 0], cur_xy[corner_c, 1]
+            out = _grown(out, count)
+            out[count, 0] = prev_xy[corner_p, 0] - (cos * qx - sin * qy)
+            out[count, 1] = prev_xy[corner_p, 1] - (sin * qx + cos * qy)
+            out[count, 2] = yaw
+            count += 1
+    return out[:count].copy()
+
+
+@jit
+def hypotheses(prev_xy, prev_cov, prev_line, prev_line_cov, cur_xy, cur_cov, cur_line,
+               cur_line_cov):
+    """Return the steps of the corner pairs, the line pairs and the corner-line pairs, (H, 3)."""
+    corners = corner_hypotheses(prev_xy, prev_cov, cur_xy, cur_cov)
+    lines = line_hypotheses(prev_line, prev_line_cov, cur_line, cur_line_cov)
+    mixed = corner_line_hypotheses(prev_xy, prev_cov, prev_line, prev_line_cov, cur_xy,
+                                   cur_cov, cur_line, cur_line_cov)
+    out = np.empty((corners.shape[0] + lines.shape[0] + mixed.shape[0], 3))
+    out[:corners.shape[0]] = corners
+    out[corners.shape[0]:corners.shape[0] + lines.shape[0]] = lines
+    out[corners.shape[0] + lines.shape[0]:] = mixed
+    return out
 
 
 @jit
@@ -57,10 +297,15 @@ def _quadratic(error_0, error_1, s00, s01, s10, s11):
 
 
 @jit
-def _corner_chi2(prev_xy, prev_cov, cur_xy, cur_cov, steps, slack):
-    """Compiled twin of ``_corner_chi2``: every corner pair's chi2 under each step, (H, P, C)."""
+def _corner_chi2(prev_xy, prev_cov, cur_xy, cur_cov, steps, slack, best):
+    """
+    Compiled twin of ``_corner_chi2``: every corner pair's chi2 under each step, (H, P, C).
+
+    Those outside the gate are inf (its only use is whether a pair lies inside). With ``best``
+    only the least over the previous corners, (H, 1, C): all the scores read.
+    """
     count, previous, current = steps.shape[0], prev_xy.shape[0], cur_xy.shape[0]
-    chi2 = np.empty((count, previous, current))
+    chi2 = np.full((count, min(previous, 1) if best else previous, current), np.inf)
     for h in range(count):
         cos, sin = np.cos(steps[h, 2]), np.sin(steps[h, 2])
         for c in range(current):
@@ -76,9 +321,16 @@ def _corner_chi2(prev_xy, prev_cov, cur_xy, cur_cov, steps, slack):
             m11 = rc10 * sin + rc11 * cos + slack
             for p in range(previous):
                 prev = prev_cov[p]
-                chi2[h, p, c] = _quadratic(prev_xy[p, 0] - moved_x, prev_xy[p, 1] - moved_y,
-                                           prev[0, 0] + m00, prev[0, 1] + m01,
-                                           prev[1, 0] + m10, prev[1, 1] + m11)
+                error_x = prev_xy[p, 0] - moved_x
+                s00 = prev[0, 0] + m00
+                if error_x * error_x > _OUTSIDE * s00:
+                    continue
+                value = _quadratic(error_x, prev_xy[p, 1] - moved_y, s00, prev[0, 1] + m01,
+                                   prev[1, 0] + m10, prev[1, 1] + m11)
+                if best:
+                    chi2[h, 0, c] = min(chi2[h, 0, c], value)
+                else:
+                    chi2[h, p, c] = value
     return chi2
 
 
@@ -97,14 +349,24 @@ def _overlap(ax, ay, bx, by, other):
 
 @jit
 def _line_chi2(prev_line, prev_cov, prev_ends, cur_line, cur_cov, cur_ends, steps, slack_rad,
-               slack_m):
+               slack_m, best):
     """
     Compiled twin of ``_line_chi2``: every line pair's chi2 under each step, (H, P, C).
 
-    A pair inside the 99 % gate whose segments do not overlap along the line is inf.
+    A pair inside the 99 % gate whose segments do not overlap along the line is inf; so are
+    those outside the gate. With ``best`` only the least over the previous lines, (H, 1, C).
+    Each moved line visits only the previous lines whose angle lies within the widest gate of
+    its angle error (the previous lines sorted by angle).
     """
     count, previous, current = steps.shape[0], prev_line.shape[0], cur_line.shape[0]
-    chi2 = np.empty((count, previous, current))
+    chi2 = np.full((count, min(previous, 1) if best else previous, current), np.inf)
+    angles = np.empty(previous)
+    for p in range(previous):
+        angles[p] = _wrap(prev_line[p, 0])
+    order = stable_order(angles)
+    ordered = angles[order]
+    widest = prev_cov[:, 0, 0].max() if previous else 0.0
+    candidates = np.empty(previous)
     for h in range(count):
         cos_h, sin_h = np.cos(steps[h, 2]), np.sin(steps[h, 2])
         for c in range(current):
@@ -123,14 +385,24 @@ def _line_chi2(prev_line, prev_cov, prev_ends, cur_line, cur_cov, cur_ends, step
             ay = steps[h, 1] + sin_h * ends[0, 0] + cos_h * ends[0, 1]
             bx = steps[h, 0] + cos_h * ends[1, 0] - sin_h * ends[1, 1]
             by = steps[h, 1] + sin_h * ends[1, 0] + cos_h * ends[1, 1]
-            for p in range(previous):
+            found = _within(ordered, order, _wrap(angle),
+                            np.sqrt(_OUTSIDE * (widest + m00)) * (1.0 + 1e-9) + 1e-12,
+                            candidates)
+            for k in range(found):
+                p = int(candidates[k])
                 prev = prev_cov[p]
-                value = _quadratic(_wrap(angle - prev_line[p, 0]), radius - prev_line[p, 1],
-                                   prev[0, 0] + m00, prev[0, 1] + m01, prev[1, 0] + jc10,
-                                   prev[1, 1] + m11)
+                error_angle = _wrap(angle - prev_line[p, 0])
+                s00 = prev[0, 0] + m00
+                if error_angle * error_angle > _OUTSIDE * s00:
+                    continue
+                value = _quadratic(error_angle, radius - prev_line[p, 1], s00, prev[0, 1] + m01,
+                                   prev[1, 0] + jc10, prev[1, 1] + m11)
                 if value <= CHI2_2DOF_99 and not _overlap(ax, ay, bx, by, prev_ends[p]):
                     value = np.inf
-                chi2[h, p, c] = value
+                if best:
+                    chi2[h, 0, c] = min(chi2[h, 0, c], value)
+                else:
+                    chi2[h, p, c] = value
     return chi2
 
 
@@ -215,9 +487,9 @@ def _associate(prev_xy, prev_cov, prev_line, prev_line_cov, prev_ends, cur_xy, c
     """Compiled twin of ``_associate`` in the unwidened gate: corner, line pairs, chi2 sum."""
     steps = step.reshape(1, 3)
     corners, corner_chi2 = _one_to_one(_corner_chi2(prev_xy, prev_cov, cur_xy, cur_cov, steps,
-                                                    0.0)[0])
+                                                    0.0, False)[0])
     lines, line_chi2 = _one_to_one(_line_chi2(prev_line, prev_line_cov, prev_ends, cur_line,
-                                              cur_line_cov, cur_ends, steps, 0.0, 0.0)[0])
+                                              cur_line_cov, cur_ends, steps, 0.0, 0.0, False)[0])
     return corners, lines, corner_chi2 + line_chi2
 
 
@@ -372,6 +644,10 @@ def search(prev_xy, prev_cov, prev_line, prev_line_cov, prev_ends, cur_xy, cur_c
     """
     Compiled twin of ``odometry._search``: the best association of the hypotheses.
 
+    The scores take each current landmark's least chi2 over the previous ones, computed
+    without keeping every pair's; a refined hypothesis's pairs are computed again, as the
+    scores took them.
+
     :param steps: the hypotheses (H, 3)
     :param prior_term: each hypothesis's chi2 from the prior over PRIOR_PAIR_CHI2 (H,)
     :param prior_step: the prior's step
@@ -381,12 +657,11 @@ def search(prev_xy, prev_cov, prev_line, prev_line_cov, prev_ends, cur_xy, cur_c
     :param fewest: the landmarks of the scan that has fewer
     :return: (the step, corner pairs (Kc, 2), line pairs (Kl, 2))
     """
-    corner_chi2 = _corner_chi2(prev_xy, prev_cov, cur_xy, cur_cov, steps, SEARCH_SLACK_M ** 2)
-    line_chi2 = _line_chi2(prev_line, prev_line_cov, prev_ends, cur_line, cur_line_cov,
-                           cur_ends, steps, SEARCH_SLACK_RAD ** 2, SEARCH_SLACK_M ** 2)
     scores = np.zeros(steps.shape[0])
-    _scores(corner_chi2, scores)
-    _scores(line_chi2, scores)
+    _scores(_corner_chi2(prev_xy, prev_cov, cur_xy, cur_cov, steps, SEARCH_SLACK_M ** 2, True),
+            scores)
+    _scores(_line_chi2(prev_line, prev_line_cov, prev_ends, cur_line, cur_line_cov, cur_ends,
+                       steps, SEARCH_SLACK_RAD ** 2, SEARCH_SLACK_M ** 2, True), scores)
     best_rank, best_chi2 = -np.inf, np.inf
     step = prior_step.copy()
     corners, lines = np.empty((0, 2), np.int64), np.empty((0, 2), np.int64)
@@ -403,10 +678,15 @@ def search(prev_xy, prev_cov, prev_line, prev_line_cov, prev_ends, cur_xy, cur_c
             continue
         starts[taken] = start
         taken += 1
-        # The refinement: the search's pairs, then fit and associate again, twice.
+        # The refinement: the search's pairs (their chi2 as the scores took them), then fit and
+        # associate again, twice.
         refined = start.copy()
-        refined_corners, _ = _one_to_one(corner_chi2[index])
-        refined_lines, _ = _one_to_one(line_chi2[index])
+        one = steps[index:index + 1].copy()
+        refined_corners, _ = _one_to_one(_corner_chi2(prev_xy, prev_cov, cur_xy, cur_cov, one,
+                                                      SEARCH_SLACK_M ** 2, False)[0])
+        refined_lines, _ = _one_to_one(_line_chi2(
+            prev_line, prev_line_cov, prev_ends, cur_line, cur_line_cov, cur_ends, one,
+            SEARCH_SLACK_RAD ** 2, SEARCH_SLACK_M ** 2, False)[0])
         fit_chi2 = np.nan
         for _ in range(2):
             if refined_corners.shape[0] + refined_lines.shape[0] < 2:

@@ -27,7 +27,8 @@ from ..records import TrackRules
 
 # The compiled functions that Python calls, each compiled once for the types it is called with.
 _ENTRY_POINTS = (_features_of_scan, tracking.update_tracks, dock.fit_returns,
-                 dock.corner_starts, dock.segment_pair_starts, odometry.search, odometry.fit)
+                 dock.corner_starts, dock.segment_pair_starts, odometry.hypotheses,
+                 odometry.search, odometry.fit)
 
 
 def warm_up() -> float:
@@ -91,7 +92,7 @@ def _dock_once(ranges_m: np.ndarray, angle_min_rad: float, angle_increment_rad: 
 
 def _odometry_once() -> None:
     """
-    Compile the odometry's kernels: the search and a fit, two corners and two lines a side.
+    Compile the odometry's kernels: hypotheses, search and fit, two corners and lines a side.
 
     With the argument types :func:`wctls_ros.frontend.odometry.estimate_step` calls them with.
     """
@@ -99,8 +100,8 @@ def _odometry_once() -> None:
     lines, line_cov = np.array([[0.0, 2.0], [1.5, 1.0]]), np.tile(1e-4 * np.eye(2), (2, 1, 1))
     ends = np.array([[[2.0, -1.0], [2.0, 1.0]], [[-1.0, 1.0], [1.0, 1.0]]])
     scan = (corners, corner_cov, lines, line_cov, ends)
-    steps, information = np.zeros((2, 3)), np.eye(3)
-    step, corner_pairs, line_pairs = odometry.search(*scan, *scan, steps, np.zeros(2),
+    steps, information = odometry.hypotheses(*scan[:4], *scan[:4]), np.eye(3)
+    step, corner_pairs, line_pairs = odometry.search(*scan, *scan, steps, np.zeros(len(steps)),
                                                      np.zeros(3), information, False, 2.0, 4)
     odometry.fit(*scan[:4], *scan[:4], corner_pairs, line_pairs, step, np.zeros(3), information,
                  True)

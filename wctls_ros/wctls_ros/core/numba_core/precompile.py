@@ -7,10 +7,10 @@ The pipeline's, tracker's, dock's and odometry's kernels compiled before the fir
 From the cache the compiled pipeline loads in a fraction of a second. Without it (the first run
 on a machine, or after an upgrade) numba compiles it: 16-22 s of CPU on a 2-core EPYC VM, and
 the tracker's kernels 8 s more (21.6 s against 29.7 s measured one after the other), the
-dock's about 10 s more (at load 8), the odometry's about 8 s more (at load 1). Nobody waits for
-that: :mod:`..runtime` runs it in a process of its own while the numpy pipeline serves (helper
-processes that compiled kernels beside it once saved a third of the wait, when the first scan
-waited for it).
+dock's about 10 s more (at load 8), the odometry's about 15 s more (at load 2.5). Nobody waits
+for that: :mod:`..runtime` runs it in a process of its own while the numpy pipeline serves
+(helper processes that compiled kernels beside it once saved a third of the wait, when the
+first scan waited for it).
 """
 
 import glob

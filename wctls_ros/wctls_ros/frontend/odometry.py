@@ -28,7 +28,7 @@ landmarks: it gates the hypothesis search and joins every fit by its information
 landmarks fix and the prior contradicts rejects it (docs/odometry.md#wheel-odometry-as-the-prior).
 
 All units SI: m, rad; covariances in m^2, m rad, rad^2. No ROS. These numpy steps are the
-specification; the hypothesis search and the fit have a compiled twin (numba,
+specification; the pairs' steps, the hypothesis search and the fit have a compiled twin (numba,
 ``core/numba_core/odometry.py``) that runs whenever the compiled core serves
 (:func:`_odometry_kernels`; docs/odometry.md#time-per-scan).
 """
@@ -1207,7 +1207,7 @@ class Odometry:
         """
         if compiled:
             _odometry_kernels(True)
-        self.compiled = compiled
+        self._compiled = compiled
         self.config = config
         self.pose = np.asarray(pose, dtype=float)
         self.pose_covariance = np.zeros((3, 3))
@@ -1317,7 +1317,7 @@ class Odometry:
         else:
             frame, frame_jacobian = self._map.in_frame()
             estimate = estimate_step(frame, landmarks, prior_step, prior_covariance,
-                                     self.config, wheel, self.compiled)
+                                     self.config, wheel, self._compiled)
             step = estimate.step
             if estimate.status == 'reinitialized':
                 # Nothing consistent associates: the map starts again from this scan.
@@ -1372,7 +1372,7 @@ class Odometry:
                 *self._relative(wheel.step, wheel.covariance))
             estimate = estimate_step(self._reference, landmarks, prior_relative,
                                      prior_relative_covariance, self.config, wheel_relative,
-                                     self.compiled)
+                                     self._compiled)
         if estimate.prior_source == PRIOR_SOURCES[1] and wheel is not None:
             prior_step = wheel.step
         matched = estimate.status in ('tracking', 'degenerate')

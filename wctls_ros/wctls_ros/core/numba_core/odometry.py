@@ -297,6 +297,15 @@ def _quadratic(error_0, error_1, s00, s01, s10, s11):
 
 
 @jit
+def _keep(chi2, h, p, c, best, value):
+    """Store a pair's chi2 in ``chi2``, or with ``best`` the least over the previous ones."""
+    if best:
+        chi2[h, 0, c] = min(chi2[h, 0, c], value)
+    else:
+        chi2[h, p, c] = value
+
+
+@jit
 def _corner_chi2(prev_xy, prev_cov, cur_xy, cur_cov, steps, slack, best):
     """
     Compiled twin of ``_corner_chi2``: every corner pair's chi2 under each step, (H, P, C).
@@ -325,12 +334,9 @@ def _corner_chi2(prev_xy, prev_cov, cur_xy, cur_cov, steps, slack, best):
                 s00 = prev[0, 0] + m00
                 if error_x * error_x > _OUTSIDE * s00:
                     continue
-                value = _quadratic(error_x, prev_xy[p, 1] - moved_y, s00, prev[0, 1] + m01,
-                                   prev[1, 0] + m10, prev[1, 1] + m11)
-                if best:
-                    chi2[h, 0, c] = min(chi2[h, 0, c], value)
-                else:
-                    chi2[h, p, c] = value
+                _keep(chi2, h, p, c, best,
+                      _quadratic(error_x, prev_xy[p, 1] - moved_y, s00, prev[0, 1] + m01,
+                                 prev[1, 0] + m10, prev[1, 1] + m11))
     return chi2
 
 
@@ -399,10 +405,7 @@ def _line_chi2(prev_line, prev_cov, prev_ends, cur_line, cur_cov, cur_ends, step
                                    prev[1, 0] + jc10, prev[1, 1] + m11)
                 if value <= CHI2_2DOF_99 and not _overlap(ax, ay, bx, by, prev_ends[p]):
                     value = np.inf
-                if best:
-                    chi2[h, 0, c] = min(chi2[h, 0, c], value)
-                else:
-                    chi2[h, p, c] = value
+                _keep(chi2, h, p, c, best, value)
     return chi2
 
 

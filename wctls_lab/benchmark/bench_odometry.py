@@ -27,7 +27,12 @@ finite returns within range, deskew off, voxel 0.1 m, scored by the same code wi
 0.1 covariance, its time per scan its ``register_frame``'s.
 With ``--rf2o BINARY``: rf2o_laser_odometry too, its ``CLaserOdometry2D`` built stand-alone
 (never committed; the interface in :func:`rf2o`), scored with the covariance it computes.
-Usage: python bench_odometry.py [--wheel] [--kiss PYTHON] [--rf2o BINARY] [recording ...]
+With ``--twins``: the odometry's time per scan by its numpy steps and by their compiled twin
+(docs/odometry.md#time-per-scan), side by side on the same landmarks (extracted once),
+alternating in one process, best of three passes, the slowest scan and the median too; and
+whether both give the same statuses and counts on every scan, and how far their poses lie
+apart, m.
+Usage: python bench_odometry.py [--wheel | --twins] [--kiss PYTHON] [--rf2o BINARY] [recording ...]
 """
 
 import math
@@ -35,6 +40,7 @@ import pathlib
 import subprocess
 import sys
 import tempfile
+import time
 
 import numpy as np
 
@@ -43,7 +49,9 @@ from wctls_lab.evaluation.scans import load_scans
 from wctls_lab.evaluation.score_cli import node_config
 from wctls_lab.evaluation.trajectory import (drift, reference_step_covariance, run_odometry,
                                              trajectory_errors)
-from wctls_ros.frontend.odometry import compose, inverse, OdometryConfig
+from wctls_ros.core import extract_features
+from wctls_ros.frontend.frames import landmarks_from_features
+from wctls_ros.frontend.odometry import compose, inverse, Odometry, OdometryConfig
 from wctls_ros.frontend.wheel import laser_prior, WheelModel
 from wctls_ros.plain_yaml import load_without_aliases
 
@@ -229,6 +237,38 @@ def still(name: str, reference: str) -> str:
             f'{1e3 * distance.max():.1f} | {1e3 * run.odometry_s:.1f} |')
 
 
+def twins(name: str) -> str:
+    """Return one table row of the odometry's numpy steps against its compiled twin."""
+    scans = load_scans(DATA / name)
+    config = node_config(None, MOVING[name][0] if name in MOVING else None)
+    landmarks = [landmarks_from_features(extract_features(
+        ranges, scans.angle_min, scans.angle_increment, config, scans.range_min,
+        scans.range_max), config.max_landmark_angle_sigma_rad) for ranges in scans.ranges]
+    stamps = scans.stamps_ns * 1e-9
+    Odometry(compiled=True)                 # the compiled core loaded (or compiled) first
+    best = {False: math.inf, True: math.inf}
+    slowest, median, updates = dict(best), {}, {}
+    for _ in range(3):
+        for compiled in (False, True):
+            odometry, spent, taken = Odometry(compiled=compiled), [], []
+            for stamp, scan in zip(stamps, landmarks):
+                start = time.perf_counter()
+                taken.append(odometry.update(stamp, scan))
+                spent.append(time.perf_counter() - start)
+            slowest[compiled] = min(slowest[compiled], max(spent))
+            if np.mean(spent) < best[compiled]:
+                best[compiled], median[compiled] = float(np.mean(spent)), np.median(spent)
+            updates[compiled] = taken
+    same = sum((a.status, a.corners, a.lines) == (b.status, b.corners, b.lines)
+               for a, b in zip(updates[False], updates[True]))
+    apart = max(float(np.abs(a.pose - b.pose).max())
+                for a, b in zip(updates[False], updates[True]))
+    return (f'| {name} | {1e3 * best[False]:.2f} | {1e3 * best[True]:.3f} | '
+            f'{best[False] / best[True]:.1f} | {1e3 * slowest[False]:.1f} | '
+            f'{1e3 * slowest[True]:.2f} | {1e3 * median[False]:.2f} | {1e3 * median[True]:.3f} '
+            f'| {same} / {len(landmarks)} | {apart:.1e} |')
+
+
 def main(names) -> None:
     """Print the tables."""
     peers = {}
@@ -236,6 +276,14 @@ def main(names) -> None:
         if option in names:
             at = names.index(option)
             peers[option], names = names[at + 1], names[:at] + names[at + 2:]
+    if names and names[0] == '--twins':
+        print('| recording | numpy ms/scan | compiled ms/scan | ratio | numpy slowest ms | '
+              'compiled slowest ms | numpy median ms | compiled median ms | same statuses and '
+              'counts | poses apart m |')
+        print('|---|---|---|---|---|---|---|---|---|---|')
+        for name in names[1:] or list(MOVING) + list(STILL):
+            print(twins(name), flush=True)
+        return
     if names and names[0] == '--wheel':
         print('| recording | prior | RPE %/m | RPE deg/m | ATE m | steps within 10 cm, 2 deg % '
               '| step NEES mean (3) | inside 95 % gate % | statuses | wheel steps taken / '

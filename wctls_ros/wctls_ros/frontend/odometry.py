@@ -27,17 +27,21 @@ covariance (:class:`Prior`: wheel odometry). A handed-in prior is independent of
 landmarks: it gates the hypothesis search and joins every fit by its information; a step the
 landmarks fix and the prior contradicts rejects it (docs/odometry.md#wheel-odometry-as-the-prior).
 
-All units SI: m, rad; covariances in m^2, m rad, rad^2. Pure numpy, no ROS.
+All units SI: m, rad; covariances in m^2, m rad, rad^2. No ROS. These numpy steps are the
+specification; the pairs' steps, the hypothesis search and the fit have a compiled twin (numba,
+``core/numba_core/odometry.py``) that runs whenever the compiled core serves
+(:func:`_odometry_kernels`; docs/odometry.md#time-per-scan).
 """
 
 from dataclasses import dataclass, replace
 import math
-from typing import List, Optional, Tuple
+from typing import Any, List, Optional, Tuple
 
 import numpy as np
 
 from .frames import finite_only, Landmarks, overlapping, rotation, wrap_angle
 from .local_map import fit_sensitivity, LocalMap, noise_covariance
+from ..core import runtime
 
 STATUSES = ('tracking', 'degenerate', 'prior', 'reinitialized')
 # Where a step's prior came from: the constant velocity of the last good step, or handed in.
@@ -68,6 +72,62 @@ PAIR_LANDMARKS = 32
 # A refined hypothesis this far from the prior (its chi-square, 3 dof at 99.9 %) counts one
 # associated landmark less: to win outside the prior's gate it must associate one more.
 PRIOR_PAIR_CHI2 = 16.27
+
+
+def _odometry_kernels(compiled: Optional[bool]) -> Any:
+    """
+    Return the compiled twins' module (``core/numba_core/odometry.py``), or None for numpy's.
+
+    They are compiled and loaded with the compiled core (``numba_core/precompile.py``), as the
+    tracker's and the dock's are: they serve whenever it serves.
+
+    :param compiled: None: the compiled twins while the compiled core serves, else the numpy
+        steps; True: the compiled twins (the compiled core is loaded, or compiled, first);
+        False: the numpy steps
+    :raises wctls_ros.core.CoreUnavailable: with ``compiled`` True, when numba cannot give the
+        compiled core
+    """
+    if compiled is False:
+        return None
+    if compiled:
+        runtime.start(wait=True)
+    status = runtime.status()
+    if status is None or status.name != 'numba':
+        if compiled:
+            raise runtime.CoreUnavailable(
+                'the compiled odometry needs the compiled core: '
+                + (status.reason if status is not None else 'not started'))
+        return None
+    from ..core.numba_core import odometry as kernels
+    return kernels
+
+
+def _typed(values, shape: Tuple[int, ...]) -> np.ndarray:
+    """
+    Return values as the compiled twins were compiled for: contiguous, writable float64.
+
+    numba compiles a function again for another layout or a read-only array (a message's
+    buffer), seconds on the scan that meets it.
+    """
+    array = np.ascontiguousarray(values, dtype=float).reshape(shape)
+    return array if array.flags.writeable else array.copy()
+
+
+def _arrays(landmarks: Landmarks) -> Tuple[np.ndarray, ...]:
+    """Return a scan's landmarks as the compiled twins take them (:func:`_typed`)."""
+    return (_typed(landmarks.corner_xy, (-1, 2)), _typed(landmarks.corner_cov, (-1, 2, 2)),
+            _typed(landmarks.line, (-1, 2)), _typed(landmarks.line_cov, (-1, 2, 2)),
+            _typed(landmarks.line_ends, (-1, 2, 2)))
+
+
+def _pair_rows(pairs) -> np.ndarray:
+    """Return (previous, current) pairs as the compiled twins take them, shape (K, 2)."""
+    return np.array(pairs, dtype=np.int64).reshape(-1, 2)
+
+
+def _pair_list(rows: np.ndarray) -> List[Tuple[int, int]]:
+    """Return a compiled twin's pairs (K, 2) as the numpy steps give them."""
+    return [(int(p), int(c)) for p, c in rows.tolist()]
 
 
 @dataclass(frozen=True)
@@ -771,6 +831,21 @@ def fit(previous: Landmarks, current: Landmarks, start: np.ndarray, corners, lin
     return step, information, float(np.einsum('ki,kij,kj->', error, weight, error))
 
 
+def _fit(kernels: Any, previous: Landmarks, current: Landmarks, start: np.ndarray, corners,
+         lines, prior: Optional[Tuple[np.ndarray, np.ndarray]] = None):
+    """Return :func:`fit`, by its compiled twin where ``kernels`` (:func:`_odometry_kernels`)."""
+    if kernels is None:
+        return fit(previous, current, start, corners, lines, prior)
+    corner_xy, corner_cov, line, line_cov, _ = _arrays(previous)
+    current_xy, current_cov, current_line, current_line_cov, _ = _arrays(current)
+    step, information, chi2 = kernels.fit(
+        corner_xy, corner_cov, line, line_cov, current_xy, current_cov, current_line,
+        current_line_cov, _pair_rows(corners), _pair_rows(lines),
+        _typed(start, (3,)).copy(), np.zeros(3) if prior is None else _typed(prior[0], (3,)),
+        np.zeros((3, 3)) if prior is None else np.linalg.inv(prior[1]), prior is not None)
+    return step, information, float(chi2)
+
+
 def _chi2(previous: Landmarks, current: Landmarks, step: np.ndarray, corners, lines) -> float:
     """Return the chi-square of the pairs' residuals at a step."""
     _, _, error, weight = _normal_equations(_gather(previous, current, corners, lines),
@@ -825,23 +900,32 @@ def is_degenerate(information: np.ndarray, config: OdometryConfig) -> bool:
 
 
 def _search(previous: Landmarks, current: Landmarks, steps: np.ndarray, prior_step: np.ndarray,
-            prior_covariance: np.ndarray, config: OdometryConfig, fused: bool = False):
+            prior_covariance: np.ndarray, config: OdometryConfig, fused: bool = False,
+            kernels: Any = None):
     """
     Return the best association of the hypotheses: (its step, corner pairs, line pairs).
 
     The best-scored hypotheses, one per motion, are each refined (with ``fused``, by fits that
     take the prior as a measurement); the one with most pairs less its chi-square from the
     prior over PRIOR_PAIR_CHI2 wins, on a tie the one nearer the prior by its covariance
-    (docs/odometry.md#hypotheses).
+    (docs/odometry.md#hypotheses). With ``kernels`` (:func:`_odometry_kernels`) all of it but
+    the prior's word in the scores is one call of the compiled twin.
     """
     fewest = min(len(previous.corner_xy) + len(previous.line),
                  len(current.corner_xy) + len(current.line))
-    chi2s = _search_chi2(previous, current, steps)
     # Scored as they are ranked once refined: the landmarks less the prior's word.
     away = steps - prior_step
     away[:, 2] = wrap_angle(away[:, 2])
-    scores = score_hypotheses(chi2s, len(steps)) - np.einsum(
-        'hi,ij,hj->h', away, np.linalg.inv(prior_covariance), away) / PRIOR_PAIR_CHI2
+    prior_information = np.linalg.inv(prior_covariance)
+    prior_term = np.einsum('hi,ij,hj->h', away, prior_information, away) / PRIOR_PAIR_CHI2
+    if kernels is not None:
+        step, corners, lines = kernels.search(
+            *_arrays(previous), *_arrays(current), _typed(steps, (-1, 3)), prior_term,
+            _typed(prior_step, (3,)), prior_information, bool(fused), float(config.max_step_m),
+            int(fewest))
+        return step, _pair_list(corners), _pair_list(lines)
+    chi2s = _search_chi2(previous, current, steps)
+    scores = score_hypotheses(chi2s, len(steps)) - prior_term
     best_rank, best_chi2 = -math.inf, math.inf
     step, corners, lines = prior_step, [], []
     # The best few hypotheses are each refined: a hypothesis from a short baseline can lie
@@ -877,18 +961,22 @@ def _search(previous: Landmarks, current: Landmarks, steps: np.ndarray, prior_st
 
 
 def _hypotheses(previous: Landmarks, current: Landmarks, config: OdometryConfig,
-                extra: np.ndarray, keep=None) -> np.ndarray:
+                extra: np.ndarray, keep=None, kernels: Any = None) -> np.ndarray:
     """
     Return the steps to score: ``extra`` first, then those of the landmark pairs.
 
     The pairs' steps beyond ``max_step_m`` are dropped, and those ``keep`` (a function of the
     steps, shape (H, 3) -> (H,) bool) refuses; at most ``max_hypotheses`` of them, drawn at
-    random (seeded).
+    random (seeded). With ``kernels`` (:func:`_odometry_kernels`) the pairs' steps are one
+    call of the compiled twin.
     """
     search_prev, search_cur = _best_known(previous), _best_known(current)
-    steps = np.concatenate([corner_hypotheses(search_prev, search_cur),
-                            line_hypotheses(search_prev, search_cur),
-                            corner_line_hypotheses(search_prev, search_cur)])
+    if kernels is not None:
+        steps = kernels.hypotheses(*_arrays(search_prev)[:4], *_arrays(search_cur)[:4])
+    else:
+        steps = np.concatenate([corner_hypotheses(search_prev, search_cur),
+                                line_hypotheses(search_prev, search_cur),
+                                corner_line_hypotheses(search_prev, search_cur)])
     steps = steps[np.hypot(steps[:, 0], steps[:, 1]) <= config.max_step_m]
     if keep is not None and len(steps):
         steps = steps[keep(steps)]
@@ -925,8 +1013,8 @@ def prior_innovation(information: np.ndarray, step: np.ndarray, prior: Prior,
     return float(away @ weighted + weighted @ inverse_information @ weighted)
 
 
-def _with_prior(previous: Landmarks, current: Landmarks, prior: Prior,
-                config: OdometryConfig) -> Tuple[Optional[StepEstimate], bool]:
+def _with_prior(previous: Landmarks, current: Landmarks, prior: Prior, config: OdometryConfig,
+                kernels: Any = None) -> Tuple[Optional[StepEstimate], bool]:
     """
     Return the step from the hypotheses inside a handed-in prior's gate, fused with the prior.
 
@@ -943,17 +1031,17 @@ def _with_prior(previous: Landmarks, current: Landmarks, prior: Prior,
         away[:, 2] = wrap_angle(away[:, 2])
         return np.einsum('hi,ij,hj->h', away, spread, away) <= gate
 
-    steps = _hypotheses(previous, current, config, prior.step, inside)
+    steps = _hypotheses(previous, current, config, prior.step, inside, kernels)
     zero = np.zeros((1, 3))
     if inside(zero)[0]:
         steps = np.concatenate([steps[:1], zero, steps[1:]])
     step, corners, lines = _search(previous, current, steps, prior.step, prior.covariance,
-                                   config, True)
+                                   config, True, kernels)
     matched = len(corners) + len(lines)
     if not matched:
         return None, False
-    step, information, chi2 = fit(previous, current, step, corners, lines,
-                                  (prior.step, prior.covariance))
+    step, information, chi2 = _fit(kernels, previous, current, step, corners, lines,
+                                   (prior.step, prior.covariance))
     # The statuses are the landmarks' (their information at the fused step), as without it.
     degenerate = matched < config.min_matches or is_degenerate(information, config)
     if not np.isfinite(step).all() or not np.isfinite(information).all():
@@ -978,7 +1066,7 @@ def _with_prior(previous: Landmarks, current: Landmarks, prior: Prior,
 
 def estimate_step(previous: Landmarks, current: Landmarks, prior_step: np.ndarray,
                   prior_covariance: np.ndarray, config: OdometryConfig = OdometryConfig(),
-                  wheel: Optional[Prior] = None) -> StepEstimate:
+                  wheel: Optional[Prior] = None, compiled: Optional[bool] = None) -> StepEstimate:
     """
     Return the motion between two scans from their landmarks.
 
@@ -995,24 +1083,32 @@ def estimate_step(previous: Landmarks, current: Landmarks, prior_step: np.ndarra
     :param prior_covariance: its covariance, shape (3, 3)
     :param config: the settings
     :param wheel: a step from another source with its covariance (wheel odometry), or None
+    :param compiled: None: the search and the fits by their compiled twin while the compiled
+        core serves, else by the numpy steps; True: the compiled twin; False: the numpy steps
+        (:func:`_odometry_kernels`)
     :return: the estimate (never NaN)
+    :raises wctls_ros.core.CoreUnavailable: with ``compiled`` True, when numba cannot give the
+        compiled core
     """
+    kernels = _odometry_kernels(compiled)
     prior_step = np.asarray(prior_step, dtype=float)
     prior_covariance = np.asarray(prior_covariance, dtype=float)
     fewest = min(len(previous.corner_xy) + len(previous.line),
                  len(current.corner_xy) + len(current.line))
     if wheel is None:
-        return _estimate(previous, current, prior_step, prior_covariance, config)
+        return _estimate(previous, current, prior_step, prior_covariance, config,
+                         kernels=kernels)
     if fewest < 2:
         return StepEstimate(wheel.step.copy(), wheel.covariance.copy(), 'prior',
                             prior_source=PRIOR_SOURCES[1])
-    fused, contradicted = _with_prior(previous, current, wheel, config)
+    fused, contradicted = _with_prior(previous, current, wheel, config, kernels)
     matched = 0 if fused is None else fused.corners + fused.lines
     if fused is not None and matched >= ENOUGH_SHARE * fewest:
         return fused
     # Refined with the constant velocity as a measurement: two parallel walls alone then
     # still say the turn and the distance across, against which the prior is judged.
-    estimate = _estimate(previous, current, prior_step, prior_covariance, config, True)
+    estimate = _estimate(previous, current, prior_step, prior_covariance, config, True,
+                         kernels)
     if (estimate.status in ('tracking', 'degenerate') and (fused is None or (
             estimate.corners + estimate.lines >= max(REJECTING_SHARE * matched,
                                                      config.min_matches)))) or contradicted:
@@ -1033,20 +1129,21 @@ def estimate_step(previous: Landmarks, current: Landmarks, prior_step: np.ndarra
 
 def _estimate(previous: Landmarks, current: Landmarks, prior_step: np.ndarray,
               prior_covariance: np.ndarray, config: OdometryConfig,
-              fused: bool = False) -> StepEstimate:
+              fused: bool = False, kernels: Any = None) -> StepEstimate:
     """
     Return :func:`estimate_step` with the constant-velocity prior alone.
 
-    With ``fused`` the refinements' fits take the prior as a measurement (:func:`_search`).
+    With ``fused`` the refinements' fits take the prior as a measurement (:func:`_search`);
+    with ``kernels`` the search and the fits are the compiled twin's.
     """
     landmarks_prev = len(previous.corner_xy) + len(previous.line)
     landmarks_cur = len(current.corner_xy) + len(current.line)
     if min(landmarks_prev, landmarks_cur) < 2:
         return StepEstimate(prior_step.copy(), prior_covariance.copy(), 'prior')
     steps = _hypotheses(previous, current, config,
-                        np.concatenate([prior_step[None], np.zeros((1, 3))]))
+                        np.concatenate([prior_step[None], np.zeros((1, 3))]), kernels=kernels)
     step, corners, lines = _search(previous, current, steps, prior_step, prior_covariance,
-                                   config, fused)
+                                   config, fused, kernels)
     matched = len(corners) + len(lines)
     reinit = StepEstimate(prior_step.copy(), np.diag(
         [config.reinit_sigma_m ** 2, config.reinit_sigma_m ** 2, config.reinit_sigma_rad ** 2])
@@ -1056,13 +1153,13 @@ def _estimate(previous: Landmarks, current: Landmarks, prior_step: np.ndarray,
         # or two of them is only too little to say.
         return reinit if min(landmarks_prev, landmarks_cur) >= config.min_matches else (
             StepEstimate(prior_step.copy(), prior_covariance.copy(), 'prior'))
-    step, information, chi2 = fit(previous, current, step, corners, lines)
+    step, information, chi2 = _fit(kernels, previous, current, step, corners, lines)
     dof = 2 * matched - 3
     status = 'tracking'
     if matched < config.min_matches or is_degenerate(information, config):
         status = 'degenerate'
-        step, information, chi2 = fit(previous, current, step, corners, lines,
-                                      (prior_step, prior_covariance))
+        step, information, chi2 = _fit(kernels, previous, current, step, corners, lines,
+                                       (prior_step, prior_covariance))
         prior_information = np.linalg.inv(prior_covariance)
         difference = step - prior_step
         difference[2] = float(wrap_angle(difference[2]))
@@ -1095,13 +1192,22 @@ class Odometry:
     """
 
     def __init__(self, config: OdometryConfig = OdometryConfig(),
-                 pose: Tuple[float, float, float] = (0.0, 0.0, 0.0)):
+                 pose: Tuple[float, float, float] = (0.0, 0.0, 0.0),
+                 compiled: Optional[bool] = None):
         """
         Start at a pose.
 
         :param config: the settings
         :param pose: the starting pose in odom (x m, y m, yaw rad), known exactly
+        :param compiled: None: the compiled twin of the search and the fits on every scan the
+            compiled core serves, the numpy steps on the others; True: the compiled twin
+            always (the compiled core is loaded, or compiled, first); False: the numpy steps
+        :raises wctls_ros.core.CoreUnavailable: with ``compiled`` True, when numba cannot give
+            the compiled core
         """
+        if compiled:
+            _odometry_kernels(True)
+        self._compiled = compiled
         self.config = config
         self.pose = np.asarray(pose, dtype=float)
         self.pose_covariance = np.zeros((3, 3))
@@ -1211,7 +1317,7 @@ class Odometry:
         else:
             frame, frame_jacobian = self._map.in_frame()
             estimate = estimate_step(frame, landmarks, prior_step, prior_covariance,
-                                     self.config, wheel)
+                                     self.config, wheel, self._compiled)
             step = estimate.step
             if estimate.status == 'reinitialized':
                 # Nothing consistent associates: the map starts again from this scan.
@@ -1265,7 +1371,8 @@ class Odometry:
             wheel_relative = None if wheel is None else Prior(
                 *self._relative(wheel.step, wheel.covariance))
             estimate = estimate_step(self._reference, landmarks, prior_relative,
-                                     prior_relative_covariance, self.config, wheel_relative)
+                                     prior_relative_covariance, self.config, wheel_relative,
+                                     self._compiled)
         if estimate.prior_source == PRIOR_SOURCES[1] and wheel is not None:
             prior_step = wheel.step
         matched = estimate.status in ('tracking', 'degenerate')

@@ -2,14 +2,15 @@
 # SPDX-License-Identifier: Apache-2.0
 
 """
-The pipeline's, the tracker's and the dock's kernels compiled before the first scan, or loaded.
+The pipeline's, tracker's, dock's and odometry's kernels compiled before the first scan, or loaded.
 
 From the cache the compiled pipeline loads in a fraction of a second. Without it (the first run
 on a machine, or after an upgrade) numba compiles it: 16-22 s of CPU on a 2-core EPYC VM, and
 the tracker's kernels 8 s more (21.6 s against 29.7 s measured one after the other), the
-dock's about 10 s more (at load 8). Nobody waits for that: :mod:`..runtime` runs it in a
-process of its own while the numpy pipeline serves (helper processes that compiled kernels
-beside it once saved a third of the wait, when the first scan waited for it).
+dock's about 10 s more (at load 8), the odometry's about 15 s more (at load 2.5). Nobody waits
+for that: :mod:`..runtime` runs it in a process of its own while the numpy pipeline serves
+(helper processes that compiled kernels beside it once saved a third of the wait, when the
+first scan waited for it).
 """
 
 import glob
@@ -19,14 +20,15 @@ import time
 
 import numpy as np
 
-from . import dock, tracking
+from . import dock, odometry, tracking
 from ._jit import cache_folder, use_disk_cache
 from .pipeline import _features_of_scan, extract_features
 from ..records import TrackRules
 
 # The compiled functions that Python calls, each compiled once for the types it is called with.
 _ENTRY_POINTS = (_features_of_scan, tracking.update_tracks, dock.fit_returns,
-                 dock.corner_starts, dock.segment_pair_starts, dock.segment_starts)
+                 dock.corner_starts, dock.segment_pair_starts, dock.segment_starts,
+                 odometry.hypotheses, odometry.search, odometry.fit)
 
 
 def warm_up() -> float:
@@ -47,6 +49,7 @@ def warm_up() -> float:
     extract_features(square_room, angle_min, increment)
     _track_once(square_room, angle_min, increment)
     _dock_once(square_room, angle_min, increment)
+    _odometry_once()
     return time.perf_counter() - started
 
 
@@ -88,6 +91,23 @@ def _dock_once(ranges_m: np.ndarray, angle_min_rad: float, angle_increment_rad: 
                         shape)
     dock.fit_returns(ranges_m, angle_min_rad, angle_increment_rad, True, (0.0, math.inf),
                      (0.01, 0.001, 0.0, 0.0, 0.0), True, (1.9, 1.9, 0.785), shape)
+
+
+def _odometry_once() -> None:
+    """
+    Compile the odometry's kernels: hypotheses, search and fit, two corners and lines a side.
+
+    With the argument types :func:`wctls_ros.frontend.odometry.estimate_step` calls them with.
+    """
+    corners, corner_cov = np.array([[2.0, 1.0], [2.0, -1.0]]), np.tile(1e-4 * np.eye(2), (2, 1, 1))
+    lines, line_cov = np.array([[0.0, 2.0], [1.5, 1.0]]), np.tile(1e-4 * np.eye(2), (2, 1, 1))
+    ends = np.array([[[2.0, -1.0], [2.0, 1.0]], [[-1.0, 1.0], [1.0, 1.0]]])
+    scan = (corners, corner_cov, lines, line_cov, ends)
+    steps, information = odometry.hypotheses(*scan[:4], *scan[:4]), np.eye(3)
+    step, corner_pairs, line_pairs = odometry.search(*scan, *scan, steps, np.zeros(len(steps)),
+                                                     np.zeros(3), information, False, 2.0, 4)
+    odometry.fit(*scan[:4], *scan[:4], corner_pairs, line_pairs, step, np.zeros(3), information,
+                 True)
 
 
 def pipeline_is_cached() -> bool:

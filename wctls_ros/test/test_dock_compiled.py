@@ -112,7 +112,7 @@ CASES = {
 @pytest.fixture(scope='module')
 def compiled_core():
     """Make the compiled core serve (loaded, or compiled, now); return the dock's kernel."""
-    kernels = runtime.compiled_dock(wait=True)
+    kernels = runtime.compiled_kernels('dock', True)
     assert kernels is not None, runtime.status()
     return kernels
 
@@ -209,7 +209,7 @@ def test_a_compiled_fit_without_the_compiled_core_is_refused_with_the_reason():
     code = ('from wctls_ros.frontend.dock import DockReturns, DockShape, fit_returns\n'
             'from wctls_ros.core import CoreUnavailable, runtime\n'
             'import numpy as np\n'
-            'assert runtime.compiled_dock() is None\n'
+            "assert runtime.compiled_kernels('dock') is None\n"
             'returns = DockReturns(np.ones(360), -3.14, 0.0174, 0.01, 0.001)\n'
             'try:\n'
             '    fit_returns(returns, (1.0, 0.0, 0.0), DockShape(), compiled=True)\n'

@@ -36,7 +36,7 @@ from wctls_lab.evaluation.poses import load_poses, poses_at
 from wctls_lab.evaluation.scans import load_scans
 from wctls_lab.evaluation.score_cli import node_config
 from wctls_lab.evaluation.trajectory import landmarks_from_features
-from wctls_ros.core import extract_features
+from wctls_ros.core import extract_features, runtime
 from wctls_ros.frontend import odometry
 from wctls_ros.frontend.odometry import compose, inverse, Odometry, OdometryConfig
 from wctls_ros.frontend.wheel import laser_prior, WheelModel
@@ -79,8 +79,7 @@ def recording(name, scans=SCANS):
 @pytest.fixture(scope='module')
 def compiled_core():
     """Make the compiled core serve (loaded, or compiled, now); return the odometry's kernels."""
-    Odometry(compiled=True)
-    kernels = odometry._odometry_kernels(None)
+    kernels = runtime.compiled_kernels('odometry', True)
     assert kernels is not None
     return kernels
 

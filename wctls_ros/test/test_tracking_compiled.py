@@ -158,7 +158,7 @@ CASES = {
 @pytest.fixture(scope='module')
 def compiled_core():
     """Make the compiled core serve (loaded, or compiled, now); return the tracker's kernels."""
-    kernels = runtime.compiled_tracker(wait=True)
+    kernels = runtime.compiled_kernels('tracking', True)
     assert kernels is not None, runtime.status()
     return kernels
 

@@ -57,8 +57,8 @@ INSTALL_NUMBA = f"pip install 'numba>={'.'.join(map(str, OLDEST_NUMBA))}'"
 # SICK scans: docs/performance.md).
 SPEEDUP = 20
 # The modules of numba_core whose kernels are compiled and loaded with the compiled pipeline
-# (:func:`compiled_kernels`): the landmark tracker's and the dock's.
-COMPILED_KERNELS = ('tracking', 'dock')
+# (:func:`compiled_kernels`), each with what its kernels are, for a refusal's message.
+COMPILED_KERNELS = {'tracking': 'tracker', 'dock': 'dock fit', 'odometry': 'odometry'}
 
 
 class CoreUnavailable(RuntimeError):
@@ -156,34 +156,39 @@ def extract_features(ranges_m, angle_min_rad: float, angle_increment_rad: float,
                     range_max_m)
 
 
-def compiled_kernels(name: str, wait: bool = False) -> Any:
+def compiled_kernels(name: str, compiled: Optional[bool] = None) -> Any:
     """
-    Return a module of compiled kernels beside the pipeline while the compiled core serves.
+    Return a module of compiled kernels beside the pipeline, as a caller's choice asks.
 
     The landmark tracker's (``'tracking'``: :mod:`.numba_core.tracking`, the twin of
-    :class:`wctls_ros.frontend.tracking.Tracker`'s numpy steps) and the dock's fit to the
-    returns (``'dock'``: :mod:`.numba_core.dock`, the twin of
-    :func:`wctls_ros.frontend.dock.fit_returns`) are compiled and loaded with the compiled
-    pipeline: None while numba is missing, too old or failed, while the compiled core is still
-    loading or compiling, before :func:`start`, and with ``WCTLS_ROS_CORE=numpy``.
+    :class:`wctls_ros.frontend.tracking.Tracker`'s numpy steps), the dock's fit to the returns
+    (``'dock'``: :mod:`.numba_core.dock`, the twin of :func:`wctls_ros.frontend.dock.fit_returns`)
+    and the odometry's search and fit (``'odometry'``: :mod:`.numba_core.odometry`, the twin of
+    :func:`wctls_ros.frontend.odometry.estimate_step`'s numpy steps) are compiled and loaded with
+    the compiled pipeline. Without them (numba missing, too old or failed, the compiled core
+    still loading or compiling, before :func:`start`, ``WCTLS_ROS_CORE=numpy``) the caller runs
+    its numpy steps.
 
     :param name: which: one of :data:`COMPILED_KERNELS`
-    :param wait: start the choice first and wait for the compiled core (``start(wait=True)``)
+    :param compiled: None: the kernels while the compiled core serves, else None; True: the
+        kernels, the compiled core started and waited for first; False: None (the numpy steps)
     :return: the module of the kernels, or None
     :raises ValueError: on another name
-    :raises CoreUnavailable: with ``wait``, when ``WCTLS_ROS_CORE=numba`` and numba cannot give
-        the core
+    :raises CoreUnavailable: with ``compiled`` True, when the compiled core cannot serve (the
+        reason said)
     """
     if name not in COMPILED_KERNELS:
         raise ValueError(f'no compiled kernels {name!r}: one of {", ".join(COMPILED_KERNELS)}')
-    if wait:
+    if compiled is False:
+        return None
+    if compiled:
         start(wait=True)
+        if name not in _kernels:
+            state = status()
+            raise CoreUnavailable(f'the compiled {COMPILED_KERNELS[name]} needs the compiled '
+                                  'core: ' + (state.reason if state is not None else
+                                              'not started'))
     return _kernels.get(name)
-
-
-# The tracker's and the dock's kernels by what they serve (:func:`compiled_kernels`).
-compiled_tracker = functools.partial(compiled_kernels, 'tracking')
-compiled_dock = functools.partial(compiled_kernels, 'dock')
 
 
 def status() -> Optional[CoreStatus]:

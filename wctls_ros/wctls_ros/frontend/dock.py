@@ -650,7 +650,7 @@ def fit_returns(returns: DockReturns, start: Tuple[float, float, float], shape: 
 
     These numpy steps are the specification; their compiled twin (numba,
     ``core/numba_core/dock.py``) gives the same fit within 1e-9 relative in one compiled call,
-    and runs whenever the compiled core serves (:func:`wctls_ros.core.runtime.compiled_dock`).
+    and runs whenever the compiled core serves (:func:`wctls_ros.core.runtime.compiled_kernels`).
 
     :param returns: the scan's returns and noise model
     :param start: the apex frame's start (x, y, yaw), m, m, rad
@@ -663,24 +663,10 @@ def fit_returns(returns: DockReturns, start: Tuple[float, float, float], shape: 
     :raises wctls_ros.core.CoreUnavailable: with ``compiled`` True, when numba cannot give the
         compiled core
     """
-    kernels = _dock_kernels(compiled)
+    kernels = runtime.compiled_kernels('dock', compiled)
     if kernels is not None:
         return _fit_returns_compiled(kernels, returns, start, shape)
     return _fit_returns_numpy(returns, start, shape)
-
-
-def _dock_kernels(compiled: Optional[bool]) -> Any:
-    """Return the compiled twins' module (``numba_core/dock.py``), or None for numpy's steps."""
-    if compiled is None:
-        return runtime.compiled_dock()
-    if not compiled:
-        return None
-    kernels = runtime.compiled_dock(wait=True)
-    if kernels is None:
-        status = runtime.status()
-        raise runtime.CoreUnavailable('the compiled dock fit needs the compiled core: '
-                                      + (status.reason if status is not None else 'not started'))
-    return kernels
 
 
 def _fit_returns_numpy(returns: DockReturns, start: Tuple[float, float, float],
@@ -796,7 +782,7 @@ def find_docks(segments: SegmentSet, corners: CornerSet, shape: DockShape,
     """
     if returns is None:
         return _docks_of_corners(segments, corners, shape)
-    kernels = _dock_kernels(compiled)
+    kernels = runtime.compiled_kernels('dock', compiled)
     if kernels is not None:
         # The compiled twins of the starts too: numpy's calls on a few segments would cost
         # more than the fit.

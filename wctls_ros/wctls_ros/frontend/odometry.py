@@ -30,7 +30,7 @@ landmarks fix and the prior contradicts rejects it (docs/odometry.md#wheel-odome
 All units SI: m, rad; covariances in m^2, m rad, rad^2. No ROS. These numpy steps are the
 specification; the pairs' steps, the hypothesis search and the fit have a compiled twin (numba,
 ``core/numba_core/odometry.py``) that runs whenever the compiled core serves
-(:func:`_odometry_kernels`; docs/odometry.md#time-per-scan).
+(:func:`wctls_ros.core.runtime.compiled_kernels`; docs/odometry.md#time-per-scan).
 """
 
 from dataclasses import dataclass, replace
@@ -72,34 +72,6 @@ PAIR_LANDMARKS = 32
 # A refined hypothesis this far from the prior (its chi-square, 3 dof at 99.9 %) counts one
 # associated landmark less: to win outside the prior's gate it must associate one more.
 PRIOR_PAIR_CHI2 = 16.27
-
-
-def _odometry_kernels(compiled: Optional[bool]) -> Any:
-    """
-    Return the compiled twins' module (``core/numba_core/odometry.py``), or None for numpy's.
-
-    They are compiled and loaded with the compiled core (``numba_core/precompile.py``), as the
-    tracker's and the dock's are: they serve whenever it serves.
-
-    :param compiled: None: the compiled twins while the compiled core serves, else the numpy
-        steps; True: the compiled twins (the compiled core is loaded, or compiled, first);
-        False: the numpy steps
-    :raises wctls_ros.core.CoreUnavailable: with ``compiled`` True, when numba cannot give the
-        compiled core
-    """
-    if compiled is False:
-        return None
-    if compiled:
-        runtime.start(wait=True)
-    status = runtime.status()
-    if status is None or status.name != 'numba':
-        if compiled:
-            raise runtime.CoreUnavailable(
-                'the compiled odometry needs the compiled core: '
-                + (status.reason if status is not None else 'not started'))
-        return None
-    from ..core.numba_core import odometry as kernels
-    return kernels
 
 
 def _typed(values, shape: Tuple[int, ...]) -> np.ndarray:
@@ -833,7 +805,7 @@ def fit(previous: Landmarks, current: Landmarks, start: np.ndarray, corners, lin
 
 def _fit(kernels: Any, previous: Landmarks, current: Landmarks, start: np.ndarray, corners,
          lines, prior: Optional[Tuple[np.ndarray, np.ndarray]] = None):
-    """Return :func:`fit`, by its compiled twin where ``kernels`` (:func:`_odometry_kernels`)."""
+    """Return :func:`fit`, by its compiled twin where ``kernels`` (``compiled_kernels``)."""
     if kernels is None:
         return fit(previous, current, start, corners, lines, prior)
     corner_xy, corner_cov, line, line_cov, _ = _arrays(previous)
@@ -908,8 +880,9 @@ def _search(previous: Landmarks, current: Landmarks, steps: np.ndarray, prior_st
     The best-scored hypotheses, one per motion, are each refined (with ``fused``, by fits that
     take the prior as a measurement); the one with most pairs less its chi-square from the
     prior over PRIOR_PAIR_CHI2 wins, on a tie the one nearer the prior by its covariance
-    (docs/odometry.md#hypotheses). With ``kernels`` (:func:`_odometry_kernels`) all of it but
-    the prior's word in the scores is one call of the compiled twin.
+    (docs/odometry.md#hypotheses). With ``kernels``
+    (:func:`wctls_ros.core.runtime.compiled_kernels`) all of it but the prior's word in the
+    scores is one call of the compiled twin.
     """
     fewest = min(len(previous.corner_xy) + len(previous.line),
                  len(current.corner_xy) + len(current.line))
@@ -967,8 +940,8 @@ def _hypotheses(previous: Landmarks, current: Landmarks, config: OdometryConfig,
 
     The pairs' steps beyond ``max_step_m`` are dropped, and those ``keep`` (a function of the
     steps, shape (H, 3) -> (H,) bool) refuses; at most ``max_hypotheses`` of them, drawn at
-    random (seeded). With ``kernels`` (:func:`_odometry_kernels`) the pairs' steps are one
-    call of the compiled twin.
+    random (seeded). With ``kernels`` (:func:`wctls_ros.core.runtime.compiled_kernels`) the
+    pairs' steps are one call of the compiled twin.
     """
     search_prev, search_cur = _best_known(previous), _best_known(current)
     if kernels is not None:
@@ -1085,12 +1058,12 @@ def estimate_step(previous: Landmarks, current: Landmarks, prior_step: np.ndarra
     :param wheel: a step from another source with its covariance (wheel odometry), or None
     :param compiled: None: the search and the fits by their compiled twin while the compiled
         core serves, else by the numpy steps; True: the compiled twin; False: the numpy steps
-        (:func:`_odometry_kernels`)
+        (:func:`wctls_ros.core.runtime.compiled_kernels`)
     :return: the estimate (never NaN)
     :raises wctls_ros.core.CoreUnavailable: with ``compiled`` True, when numba cannot give the
         compiled core
     """
-    kernels = _odometry_kernels(compiled)
+    kernels = runtime.compiled_kernels('odometry', compiled)
     prior_step = np.asarray(prior_step, dtype=float)
     prior_covariance = np.asarray(prior_covariance, dtype=float)
     fewest = min(len(previous.corner_xy) + len(previous.line),
@@ -1206,7 +1179,7 @@ class Odometry:
             the compiled core
         """
         if compiled:
-            _odometry_kernels(True)
+            runtime.compiled_kernels('odometry', True)
         self._compiled = compiled
         self.config = config
         self.pose = np.asarray(pose, dtype=float)

@@ -44,7 +44,7 @@ unseen for ``memory_scans`` scans is forgotten. Ids start at 1 and are never reu
 **Two implementations.** The numpy steps of :class:`Tracker` are the specification; compiled
 twins of them (numba, ``core/numba_core/tracking.py``) take one compiled call per kind of
 landmark and scan, with the same ids and estimates within 1e-9. The tracker runs the compiled
-one whenever the compiled feature pipeline serves (:func:`wctls_ros.core.runtime.compiled_tracker`:
+one whenever the compiled feature pipeline serves (:func:`wctls_ros.core.runtime.compiled_kernels`:
 numba installed, the core loaded), the numpy one otherwise; ``Tracker(compiled=...)`` forces
 either. No rclpy, and no numba import here.
 """
@@ -419,7 +419,7 @@ class Tracker:
 
         :param config: the rules (defaults: :class:`TrackerConfig`)
         :param compiled: None: the compiled twin on every scan the compiled core serves
-            (:func:`~wctls_ros.core.runtime.compiled_tracker`), the numpy steps on the others;
+            (:func:`~wctls_ros.core.runtime.compiled_kernels`), the numpy steps on the others;
             True: the compiled twin always (the compiled core is loaded, or compiled, first);
             False: the numpy steps always
         :raises wctls_ros.core.CoreUnavailable: with ``compiled`` True, when numba cannot give
@@ -434,13 +434,8 @@ class Tracker:
         self._white = 1.0 - self.config.persistent_share
         self._compiled = compiled
         self._forced_kernels: Any = None
-        if compiled:
-            self._forced_kernels = runtime.compiled_tracker(wait=True)
-            if self._forced_kernels is None:
-                status = runtime.status()
-                raise runtime.CoreUnavailable(
-                    'the compiled tracker needs the compiled core: '
-                    f'{status.reason if status is not None else "not started"}')
+        if compiled is not None:
+            self._forced_kernels = runtime.compiled_kernels('tracking', compiled)
         rules = self.config
         self._rules = TrackRules(float(self._white), int(rules.confirm_hits),
                                  int(rules.drop_tentative_misses), int(rules.lose_misses),
@@ -465,7 +460,7 @@ class Tracker:
     def _kernels(self) -> Any:
         """Return the compiled tracker's kernels for this scan, or None for the numpy steps."""
         if self._compiled is None:
-            return runtime.compiled_tracker()
+            return runtime.compiled_kernels('tracking')
         return self._forced_kernels
 
     def update(self, detections: Detections, motion: Motion,

@@ -630,6 +630,8 @@ def dark_wall(corner_x_m: np.ndarray, corner_y_m: np.ndarray, first: WallAtCorne
     width = np.abs(gap)
     dark = ((steps <= between[:, None])
             & (np.rint(width / step_rad) - 1.0 > 1.0 + CORNER_MISSING_BEAMS))
+    if not np.count_nonzero(dark):          # the usual case: the lengths below are not needed
+        return np.zeros(between.size, dtype=bool)
     sense = np.copysign(1.0, gap)
     to_apex = _wrap(np.arctan2(corner_y_m, corner_x_m)[:, None] - here) * sense
     low, high = 0.5 * step_rad, width - 0.5 * step_rad     # the missing beams' own widths

@@ -446,6 +446,8 @@ def without_object_in_front(window: EndWindow[IndexArray], wall: WallAtCorner[Fl
         return placed.on_line
     claimed = placed.on_line & (placed.along_m >= -wall.tolerance_m[..., None]) & ~at_corner
     claimed[..., 0] = claimed[..., -1] = False
+    if not np.count_nonzero(claimed):            # the usual case: nothing claimed, no run
+        return placed.on_line
     run = np.add.reduce(claimed, axis=-1)
     together = (np.add.reduce(np.where(claimed, placed.in_front_m / window.sigma_m, 0.0), axis=-1)
                 / np.sqrt(np.maximum(run, 1)))
@@ -503,13 +505,15 @@ def blocked(window: EndWindow[IndexArray], first: WallAtCorner[FloatArray],
 
     :return: shape (C,)
     """
+    interrupts = window.in_window & ~first_here & ~second_here
+    if not np.count_nonzero(interrupts):         # every return reached: nothing in between
+        return np.zeros(at_corner.shape[0], dtype=bool)
     steps = np.arange(at_corner.shape[1])
     first_anchor = np.maximum.reduce(np.where(first_here & ~at_corner, steps, 0), axis=1)
     second_anchor = np.minimum.reduce(np.where(second_here & ~at_corner, steps, steps[-1]),
                                       axis=1)
     occluder = (window.in_window & (first_placed.in_front_m > window.line_tolerance_m)
                 & (second_placed.in_front_m > window.line_tolerance_m))
-    interrupts = window.in_window & ~first_here & ~second_here
     outside = (steps < first_anchor[:, None]) | (steps > second_anchor[:, None])
     return np.logical_or.reduce(interrupts & (~occluder | ~outside), axis=1)
 
@@ -586,6 +590,8 @@ def seen_through(corner_x_m: np.ndarray, corner_y_m: np.ndarray, wall: WallAtCor
         along = (x * to_line - corner_x) * inward_x + (y * to_line - corner_y) * inward_y
         tested = ((on_other <= line_tolerance) & (offset > 0.0)
                   & (radius - offset <= line_tolerance) & (along > tolerance))
+        if not np.count_nonzero(tested):         # the usual case: no sight line crosses
+            return np.zeros(lengths.size, dtype=bool)
         run = np.bincount(test[tested], minlength=lengths.size)
         behind = np.bincount(test[tested], ((offset - radius) / sigma)[tested], lengths.size)
         return (run > 0) & (behind / np.sqrt(run) > rule.run_sigmas)

@@ -329,8 +329,9 @@ def end_window(contour: Returns, after_first: np.ndarray, before_second: np.ndar
     position[:, -1] = before_second
     x, y = x_m.take(position, mode='wrap'), y_m.take(position, mode='wrap')
     sigma = np.sqrt(noise.deciding_sigma_m ** 2 + (x * x + y * y) * noise.bearing_sigma_rad ** 2)
-    return EndWindow(x, y, sigma, rule.sigmas * sigma + rule.floor_m,
-                     (steps <= between[:, None]) | (steps == rule.window + 1), between)
+    in_window = steps <= between[:, None]
+    in_window[:, -1] = True                      # the second wall's facing end
+    return EndWindow(x, y, sigma, rule.sigmas * sigma + rule.floor_m, in_window, between)
 
 
 def wall_at_corner(walls: SegmentSet, wall: np.ndarray, corner_xy_m: np.ndarray,

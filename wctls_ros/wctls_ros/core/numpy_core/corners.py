@@ -575,24 +575,31 @@ def seen_through(corner_x_m: np.ndarray, corner_y_m: np.ndarray, wall: WallAtCor
     test = np.arange(lengths.size).repeat(lengths)
     ends = np.add.accumulate(lengths)
     crossing = np.arange(ends[-1]) + (start - (ends - lengths)).repeat(lengths)
-    # Every per-test number at every return of its test's stretch, in one gather.
-    (radius, normal_x, normal_y, inward_x, inward_y, tolerance, other_radius, other_normal_x,
-     other_normal_y, corner_x, corner_y) = np.array(
+    # Every per-test number the crossing needs at every return of its test's stretch, in one
+    # gather.
+    radius, normal_x, normal_y, inward_x, inward_y, tolerance, corner_x, corner_y = np.array(
         [wall.radius_m, wall.normal_x, wall.normal_y, wall.inward_x, wall.inward_y,
-         wall.tolerance_m, other.radius_m, other.normal_x, other.normal_y, corner_x_m,
-         corner_y_m], dtype=float).reshape(11, -1).take(test, axis=1)
+         wall.tolerance_m, corner_x_m, corner_y_m], dtype=float).reshape(8, -1).take(test, axis=1)
     x, y = contour.x_m.take(crossing, mode='wrap'), contour.y_m.take(crossing, mode='wrap')
-    sigma = np.sqrt(noise.deciding_sigma_m ** 2 + (x ** 2 + y ** 2) * noise.bearing_sigma_rad ** 2)
-    line_tolerance = rule.sigmas * sigma + rule.floor_m
     offset = x * normal_x + y * normal_y
-    on_other = np.abs(other_radius - x * other_normal_x - y * other_normal_y)
     with np.errstate(divide='ignore', invalid='ignore'):
         to_line = radius / offset
         along = (x * to_line - corner_x) * inward_x + (y * to_line - corner_y) * inward_y
-        tested = ((on_other <= line_tolerance) & (offset > 0.0)
-                  & (radius - offset <= line_tolerance) & (along > tolerance))
-        if not np.count_nonzero(tested):         # the usual case: no sight line crosses
+        # Where the sight line crosses the wall is the test few returns pass (on 1080-beam room
+        # scans 1 in 150): the others are asked of those alone.
+        crosses = ((offset > 0.0) & (along > tolerance)).nonzero()[0]
+        if not crosses.size:
             return np.zeros(lengths.size, dtype=bool)
+        test, x, y = test[crosses], x[crosses], y[crosses]
+        offset, radius = offset[crosses], radius[crosses]
+        other_radius, other_normal_x, other_normal_y = np.array(
+            [other.radius_m, other.normal_x, other.normal_y], dtype=float).reshape(3, -1).take(
+                test, axis=1)
+        sigma = np.sqrt(noise.deciding_sigma_m ** 2
+                        + (x ** 2 + y ** 2) * noise.bearing_sigma_rad ** 2)
+        line_tolerance = rule.sigmas * sigma + rule.floor_m
+        on_other = np.abs(other_radius - x * other_normal_x - y * other_normal_y)
+        tested = (on_other <= line_tolerance) & (radius - offset <= line_tolerance)
         run = np.bincount(test[tested], minlength=lengths.size)
         behind = np.bincount(test[tested], ((offset - radius) / sigma)[tested], lengths.size)
         return (run > 0) & (behind / np.sqrt(run) > rule.run_sigmas)

@@ -750,16 +750,19 @@ def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.
             & (short[0] <= 1.0 + CORNER_MISSING_BEAMS)
             & (short[1] <= 1.0 + CORNER_MISSING_BEAMS))
     kept = keep.nonzero()[0]
-    if kept.size:
-        keep[kept] = ~dark_wall(corner_x[kept], corner_y[kept], _row(both, 0, kept),
-                                _row(both, 1, kept), contour, after_first[kept],
-                                before_second[kept], step_rad)
-        kept = keep.nonzero()[0]
+    if not kept.size:
+        return keep, np.ascontiguousarray((short <= 1.0).T)
+    every_field = np.array(both)                 # (8, 2, C): both walls' fields, as rows
+    fields = every_field.take(kept, axis=2)
+    keep[kept] = ~dark_wall(corner_x[kept], corner_y[kept], WallAtCorner(*fields[:, 0]),
+                            WallAtCorner(*fields[:, 1]), contour, after_first[kept],
+                            before_second[kept], step_rad)
+    kept = keep.nonzero()[0]
     if rule.run_sigmas > 0.0 and kept.size:
         # The first wall's stretch is crossed by the sight lines after its last return up to the
         # second wall's last; the second's by those from the first wall's first return up to
         # its own first: both tests of every corner left, in one call, the first walls' first.
-        fields = np.array(both).take(kept, axis=2)
+        fields = every_field.take(kept, axis=2)
         twice = np.concatenate((kept, kept))
         seen = seen_through(
             corner_x[twice], corner_y[twice], WallAtCorner(*fields.reshape(8, -1)),
@@ -770,8 +773,6 @@ def walls_end_at(candidates: CornerCandidates, walls: SegmentSet, positions: np.
     return keep, np.ascontiguousarray((short <= 1.0).T)
 
 
-def _row(record, row: int, columns: Optional[np.ndarray] = None):
-    """Return one wall's record from one holding both walls' rows (only the columns given)."""
-    if columns is None:
-        return type(record)(*(field[row] for field in record))
-    return type(record)(*(field[row].take(columns) for field in record))
+def _row(record, row: int):
+    """Return one wall's record from one holding both walls' rows."""
+    return type(record)(*(field[row] for field in record))

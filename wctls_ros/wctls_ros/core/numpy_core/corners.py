@@ -576,10 +576,11 @@ def seen_through(corner_x_m: np.ndarray, corner_y_m: np.ndarray, wall: WallAtCor
     ends = np.add.accumulate(lengths)
     crossing = np.arange(ends[-1]) + (start - (ends - lengths)).repeat(lengths)
     # Every per-test number the crossing needs at every return of its test's stretch, in one
-    # gather.
+    # repeat (twice as fast as a take by ``test``).
     radius, normal_x, normal_y, inward_x, inward_y, tolerance, corner_x, corner_y = np.array(
         [wall.radius_m, wall.normal_x, wall.normal_y, wall.inward_x, wall.inward_y,
-         wall.tolerance_m, corner_x_m, corner_y_m], dtype=float).reshape(8, -1).take(test, axis=1)
+         wall.tolerance_m, corner_x_m, corner_y_m], dtype=float).reshape(8, -1).repeat(lengths,
+                                                                                       axis=1)
     x, y = contour.x_m.take(crossing, mode='wrap'), contour.y_m.take(crossing, mode='wrap')
     offset = x * normal_x + y * normal_y
     with np.errstate(divide='ignore', invalid='ignore'):

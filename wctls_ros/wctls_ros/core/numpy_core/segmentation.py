@@ -388,7 +388,7 @@ def iterative_end_point_fit(x_m: np.ndarray, y_m: np.ndarray, start: np.ndarray,
     # Keep the straight pieces inside a run (not the returns between runs) with enough returns.
     run = np.searchsorted(start, first, side='right') - 1
     keep = (edges[1:] - first >= MIN_FIT_RETURNS) & (run >= 0) & (first < stop[run]) & ~split
-    return SegmentRanges(first[keep], edges[1:][keep], chain[run[keep]]), splits > 0
+    return SegmentRanges(first[keep], edges[1:][keep], chain[run[keep]]), bool(splits)
 
 
 def merge_collinear(segments: SegmentRanges, circular: bool, contour_length: int,

@@ -274,7 +274,8 @@ def _fit_walls(contour: _Contour, segments: SegmentRanges, noise: Noise, prepare
     :return: (the walls in scan order, their first and last positions in the contour (2, S))
     """
     n, config = len(contour), prepared.config
-    segments = segments.select(np.argsort(contour.index[segments.start], kind='stable'))
+    if contour.points.full_turn:     # else the circular order is the beam order: sorted already
+        segments = segments.select(np.argsort(contour.index[segments.start], kind='stable'))
     returns = _returns_of(contour, segments)
     counts = returns.counts
     fits = fit_lines(config.method, returns, noise.range_sigma_m, noise.bearing_sigma_rad)

@@ -375,20 +375,20 @@ def iterative_end_point_fit(x_m: np.ndarray, y_m: np.ndarray, start: np.ndarray,
         # A chord too short to have a direction never splits (it would at distance 0).
         split = (farthest * farthest > chord2) & (chord2 > MIN_CHORD_M ** 2)
         # count_nonzero, not split.any(): a reduction method costs several us a call here.
-        if not np.count_nonzero(split):
+        splits = np.count_nonzero(split)
+        if not splits:
             break
         if level == max_levels:                  # out of passes: drop what is not straight
             break
         cut = (cross == np.where(split, farthest, np.inf).repeat(counts)).nonzero()[0]
-        if cut.size > np.count_nonzero(split):       # ties: the first return at the maximum
+        if cut.size > splits:                    # ties: the first return at the maximum
             piece = np.arange(first.size).repeat(counts)
             cut = cut[np.concatenate(([True], piece[cut[1:]] != piece[cut[:-1]]))]
         boundary[cut] = boundary[cut + 1] = True
     # Keep the straight pieces inside a run (not the returns between runs) with enough returns.
     run = np.searchsorted(start, first, side='right') - 1
     keep = (edges[1:] - first >= MIN_FIT_RETURNS) & (run >= 0) & (first < stop[run]) & ~split
-    return (SegmentRanges(first[keep], edges[1:][keep], chain[run[keep]]),
-            bool(np.count_nonzero(split)))
+    return SegmentRanges(first[keep], edges[1:][keep], chain[run[keep]]), bool(splits)
 
 
 def merge_collinear(segments: SegmentRanges, circular: bool, contour_length: int,
@@ -647,7 +647,8 @@ def trim_offset(segments: SegmentRanges, x_m: np.ndarray, y_m: np.ndarray, lines
         np.concatenate((whole, whole), axis=1)[:, None, :] - np.add.accumulate(near[:5], axis=1))
     sum_z, sum_w, sum_tw = np.add.accumulate(np.array([e * weight, weight, t * weight]), axis=1)
     k = np.arange(1, window + 1)[:, None]
-    m = np.concatenate((returns, returns)) - k
+    both_ends = np.concatenate((returns, returns))            # columns as in ``near``
+    m = both_ends - k
     with np.errstate(divide='ignore', invalid='ignore'):
         mean_t, mean_e = rest_t / m, rest_e / m
         spread = rest_tt - m * mean_t * mean_t                              # S_tt
@@ -656,11 +657,11 @@ def trim_offset(segments: SegmentRanges, x_m: np.ndarray, y_m: np.ndarray, lines
         total = sum_z - mean_e * sum_w - slope * lever
         scatter = range_sigma_m ** 2 + bearing_sigma_rad ** 2 * rest_rr / m
         score = total * total / (k + scatter * (sum_w * sum_w / m + lever * lever / spread))
-    room = (stop - start - min_returns) // 2
+    room = (both_ends - min_returns) // 2
     # Too few returns left for a cut, or a NaN line (never kept by the pipeline): no cut; nor
     # from the first k whose other returns lie at one point along the line (no line of theirs).
     spread_left = np.logical_and.accumulate(spread > 0.0, axis=0)
-    score[(k > np.concatenate((room, room))) | np.isnan(score) | ~spread_left] = -np.inf
+    score[(k > room) | np.isnan(score) | ~spread_left] = -np.inf
     over = np.maximum.reduce(score, axis=0) > threshold_sigmas * threshold_sigmas
     if not np.count_nonzero(over):
         return segments

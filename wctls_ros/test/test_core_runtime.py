@@ -198,3 +198,33 @@ def _alive(pid: int) -> bool:
             return stat.read().split(')')[-1].split()[0] != 'Z'
     except FileNotFoundError:
         return False
+
+
+# Each front end's compiled choice without the compiled core: the caller, its refusal.
+REFUSALS = {
+    'tracking': ('from wctls_ros.frontend.tracking import Tracker\n'
+                 'assert Tracker()._kernels() is None\n'
+                 'Tracker(compiled=True)\n', 'the compiled tracker needs the compiled core'),
+    'dock': ('from wctls_ros.frontend.dock import DockReturns, DockShape, fit_returns\n'
+             'import numpy as np\n'
+             'returns = DockReturns(np.ones(360), -3.14, 0.0174, 0.01, 0.001)\n'
+             'fit_returns(returns, (1.0, 0.0, 0.0), DockShape(), compiled=True)\n',
+             'the compiled dock fit needs the compiled core'),
+    'odometry': ('from wctls_ros.frontend.odometry import Odometry\n'
+                 'Odometry(compiled=True)\n', 'the compiled odometry needs the compiled core'),
+}
+
+
+@pytest.mark.parametrize('name', sorted(runtime.COMPILED_KERNELS))
+def test_a_front_end_forced_compiled_without_the_compiled_core_is_refused_with_the_reason(name):
+    caller, refusal = REFUSALS[name]
+    code = ('from wctls_ros.core import CoreUnavailable, runtime\n'
+            f'assert runtime.compiled_kernels({name!r}) is None\n'
+            'try:\n'
+            + ''.join(f'    {line}\n' for line in caller.splitlines())
+            + 'except CoreUnavailable as error:\n'
+            '    print(error)\n')
+    done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                          env=dict(os.environ, WCTLS_ROS_CORE='numpy'), timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == f'{refusal}: WCTLS_ROS_CORE=numpy'

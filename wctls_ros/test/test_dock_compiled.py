@@ -22,9 +22,6 @@ Skipped only where numba is not installed (the stock-install venv).
 
 from dataclasses import replace
 import math
-import os
-import subprocess
-import sys
 
 from conftest import REAL_DATA
 import numpy as np
@@ -203,20 +200,3 @@ def test_find_docks_runs_the_compiled_fit_while_the_compiled_core_serves(compile
     assert not calls
     assert find_docks(features.segments, features.corners, DockShape(), returns)
     assert calls
-
-
-def test_a_compiled_fit_without_the_compiled_core_is_refused_with_the_reason():
-    code = ('from wctls_ros.frontend.dock import DockReturns, DockShape, fit_returns\n'
-            'from wctls_ros.core import CoreUnavailable, runtime\n'
-            'import numpy as np\n'
-            "assert runtime.compiled_kernels('dock') is None\n"
-            'returns = DockReturns(np.ones(360), -3.14, 0.0174, 0.01, 0.001)\n'
-            'try:\n'
-            '    fit_returns(returns, (1.0, 0.0, 0.0), DockShape(), compiled=True)\n'
-            'except CoreUnavailable as error:\n'
-            '    print(error)\n')
-    done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
-                          env=dict(os.environ, WCTLS_ROS_CORE='numpy'), timeout=120)
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == ('the compiled dock fit needs the compiled core: '
-                                   'WCTLS_ROS_CORE=numpy')

@@ -25,10 +25,7 @@ Skipped only where numba is not installed (the stock-install venv).
 """
 
 import math
-import os
 import pathlib
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -203,17 +200,3 @@ def test_the_odometry_runs_the_compiled_twin_while_the_compiled_core_serves(
         for stamp, scan in zip(stamps[:3], landmarks[:3]):
             run.update(stamp, scan)
         assert len(calls) == expected
-
-
-def test_a_compiled_odometry_without_the_compiled_core_is_refused_with_the_reason():
-    code = ('from wctls_ros.frontend.odometry import Odometry\n'
-            'from wctls_ros.core import CoreUnavailable\n'
-            'try:\n'
-            '    Odometry(compiled=True)\n'
-            'except CoreUnavailable as error:\n'
-            '    print(error)\n')
-    done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
-                          env=dict(os.environ, WCTLS_ROS_CORE='numpy'), timeout=120)
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == ('the compiled odometry needs the compiled core: '
-                                   'WCTLS_ROS_CORE=numpy')

@@ -22,9 +22,6 @@ at the oldest numba and numpy we support.
 """
 
 import math
-import os
-import subprocess
-import sys
 
 from conftest import REAL_DATA
 import numpy as np
@@ -220,19 +217,3 @@ def test_the_tracker_runs_the_compiled_twin_while_the_compiled_core_serves(compi
     assert Tracker()._kernels() is compiled_core
     assert Tracker(compiled=True)._kernels() is compiled_core
     assert Tracker(compiled=False)._kernels() is None
-
-
-def test_a_compiled_tracker_without_the_compiled_core_is_refused_with_the_reason():
-    code = ('from wctls_ros.frontend.tracking import Tracker\n'
-            'from wctls_ros.core import CoreUnavailable\n'
-            'assert Tracker()._kernels() is None\n'
-            'try:\n'
-            '    Tracker(compiled=True)\n'
-            'except CoreUnavailable as error:\n'
-            '    print(error)\n')
-    done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
-                          env=dict(os.environ, WCTLS_ROS_CORE='numpy'),
-                          timeout=120)
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == ('the compiled tracker needs the compiled core: '
-                                   'WCTLS_ROS_CORE=numpy')

@@ -259,6 +259,10 @@ def finite_only(landmarks: Landmarks) -> Landmarks:
     :param landmarks: a scan's landmarks
     :return: the finite ones (corner_lines of a dropped line become -1)
     """
+    values = (landmarks.corner_xy, landmarks.corner_cov, landmarks.line, landmarks.line_cov,
+              landmarks.line_ends)
+    if np.isfinite(np.concatenate([np.ravel(v) for v in values])).all():
+        return landmarks                # every value finite (the usual scan): one pass
     corners = (np.isfinite(landmarks.corner_xy).all(axis=1)
                & np.isfinite(landmarks.corner_cov).all(axis=(1, 2)))
     lines = (np.isfinite(landmarks.line).all(axis=1)

@@ -34,6 +34,7 @@ specification; the pairs' steps, the hypothesis search and the fit have a compil
 """
 
 from dataclasses import dataclass, replace
+from functools import lru_cache
 import math
 from typing import Any, List, Optional, Tuple
 
@@ -72,6 +73,8 @@ PAIR_LANDMARKS = 32
 # A refined hypothesis this far from the prior (its chi-square, 3 dof at 99.9 %) counts one
 # associated landmark less: to win outside the prior's gate it must associate one more.
 PRIOR_PAIR_CHI2 = 16.27
+# Where :func:`_arrays` keeps a Landmarks object's arrays for the compiled twins.
+_ARRAYS = '_compiled_arrays'
 
 
 def _typed(values, shape: Tuple[int, ...]) -> np.ndarray:
@@ -86,10 +89,34 @@ def _typed(values, shape: Tuple[int, ...]) -> np.ndarray:
 
 
 def _arrays(landmarks: Landmarks) -> Tuple[np.ndarray, ...]:
-    """Return a scan's landmarks as the compiled twins take them (:func:`_typed`)."""
-    return (_typed(landmarks.corner_xy, (-1, 2)), _typed(landmarks.corner_cov, (-1, 2, 2)),
-            _typed(landmarks.line, (-1, 2)), _typed(landmarks.line_cov, (-1, 2, 2)),
-            _typed(landmarks.line_ends, (-1, 2, 2)))
+    """
+    Return a scan's landmarks as the compiled twins take them (:func:`_typed`).
+
+    Prepared once per Landmarks object and kept in its ``__dict__`` (as
+    :func:`functools.cached_property` keeps its values; the dataclass is frozen, its fields
+    untouched): a scan is matched against its keyframe on many scans, and each scan's search
+    and fits take its arrays several times.
+    """
+    arrays = landmarks.__dict__.get(_ARRAYS)
+    if arrays is None:
+        arrays = (_typed(landmarks.corner_xy, (-1, 2)), _typed(landmarks.corner_cov, (-1, 2, 2)),
+                  _typed(landmarks.line, (-1, 2)), _typed(landmarks.line_cov, (-1, 2, 2)),
+                  _typed(landmarks.line_ends, (-1, 2, 2)))
+        landmarks.__dict__[_ARRAYS] = arrays
+    return arrays
+
+
+@lru_cache(maxsize=256)
+def _drawn(seed: int, count: int, size: int) -> np.ndarray:
+    """
+    Return the seeded draw of ``size`` of ``count`` hypotheses, without replacement.
+
+    A generator seeded anew draws the same indices for the same counts: they are drawn once
+    (read-only) and looked up on the scans after.
+    """
+    drawn = np.random.default_rng(seed).choice(count, size, replace=False)
+    drawn.setflags(write=False)
+    return drawn
 
 
 def _pair_rows(pairs) -> np.ndarray:
@@ -247,6 +274,16 @@ class OdometryUpdate:
     prior_rejected: bool = False
 
 
+def _wrapped(angle: float) -> float:
+    """
+    Return :func:`.frames.wrap_angle` of one angle in Python floats, rad: the same value.
+
+    numpy's remainder of floats and Python's are one algorithm (fmod, then the divisor's sign),
+    without numpy's cost per call.
+    """
+    return math.pi - (math.pi - angle) % (2.0 * math.pi)
+
+
 def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """
     Return the SE(2) composition a (+) b: b given in a's frame, expressed in a's parent.
@@ -257,7 +294,7 @@ def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """
     cos, sin = math.cos(a[2]), math.sin(a[2])
     return np.array([a[0] + cos * b[0] - sin * b[1], a[1] + sin * b[0] + cos * b[1],
-                     float(wrap_angle(a[2] + b[2]))])
+                     _wrapped(a[2] + b[2])])
 
 
 def compose_jacobians(a: np.ndarray, b: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
@@ -787,7 +824,7 @@ def fit(previous: Landmarks, current: Landmarks, start: np.ndarray, corners, lin
         information, gradient, _, _ = _normal_equations(pairs, step)
         if prior is not None:
             difference = step - prior[0]
-            difference[2] = float(wrap_angle(difference[2]))
+            difference[2] = _wrapped(difference[2])
             gradient = gradient + prior_information @ difference
         try:
             update = -np.linalg.solve(information + prior_information, gradient)
@@ -796,7 +833,7 @@ def fit(previous: Landmarks, current: Landmarks, start: np.ndarray, corners, lin
         if not np.isfinite(update).all():
             break
         step = step + update
-        step[2] = float(wrap_angle(step[2]))
+        step[2] = _wrapped(step[2])
         if np.abs(update).max() < 1e-6:
             break
     information, _, error, weight = _normal_equations(pairs, step)
@@ -863,9 +900,10 @@ def is_degenerate(information: np.ndarray, config: OdometryConfig) -> bool:
     :param config: the thresholds
     :return: True when degenerate
     """
-    scale = np.diag([config.degenerate_sigma_m, config.degenerate_sigma_m,
-                     config.degenerate_sigma_rad])
-    scaled = scale @ information @ scale
+    scale = np.array([config.degenerate_sigma_m, config.degenerate_sigma_m,
+                      config.degenerate_sigma_rad])
+    # D I D by elements, (D_ii I_ij) D_jj: what the products by a diagonal D give.
+    scaled = scale[:, None] * information * scale
     if not np.isfinite(scaled).all():
         return True
     return bool(np.linalg.eigvalsh(0.5 * (scaled + scaled.T))[0] < 1.0)
@@ -910,7 +948,7 @@ def _search(previous: Landmarks, current: Landmarks, steps: np.ndarray, prior_st
             break
         # Hypotheses of one motion from different pairs: refining one of them is enough.
         if any(abs(start[0] - other[0]) + abs(start[1] - other[1]) < SEARCH_SLACK_M
-               and abs(float(wrap_angle(start[2] - other[2]))) < SEARCH_SLACK_RAD
+               and abs(_wrapped(start[2] - other[2])) < SEARCH_SLACK_RAD
                for other in starts):
             continue
         starts.append(start)
@@ -921,7 +959,7 @@ def _search(previous: Landmarks, current: Landmarks, steps: np.ndarray, prior_st
         # Ranked by the landmarks associated less the prior's word (PRIOR_PAIR_CHI2); equal
         # (a symmetric room): the motion the prior expects, then the better fit.
         away = refined - prior_step
-        away[2] = float(wrap_angle(away[2]))
+        away[2] = _wrapped(away[2])
         prior_chi2 = float(away @ np.linalg.solve(prior_covariance, away))
         chi2 = fit_chi2 + prior_chi2 if count else math.inf
         rank = count - prior_chi2 / PRIOR_PAIR_CHI2 if count else -1.0
@@ -950,13 +988,14 @@ def _hypotheses(previous: Landmarks, current: Landmarks, config: OdometryConfig,
         steps = np.concatenate([corner_hypotheses(search_prev, search_cur),
                                 line_hypotheses(search_prev, search_cur),
                                 corner_line_hypotheses(search_prev, search_cur)])
-    steps = steps[np.hypot(steps[:, 0], steps[:, 1]) <= config.max_step_m]
-    if keep is not None and len(steps):
-        steps = steps[keep(steps)]
-    if len(steps) > config.max_hypotheses:
-        rng = np.random.default_rng(config.seed)
-        steps = steps[rng.choice(len(steps), config.max_hypotheses, replace=False)]
-    return np.concatenate([np.asarray(extra, dtype=float).reshape(-1, 3), steps])
+    # The rows kept, then taken once (take: a row index's copy without fancy indexing's cost).
+    kept = np.flatnonzero(np.hypot(steps[:, 0], steps[:, 1]) <= config.max_step_m)
+    if keep is not None and len(kept):
+        kept = kept[keep(steps.take(kept, axis=0))]
+    if len(kept) > config.max_hypotheses:
+        kept = kept[_drawn(config.seed, len(kept), config.max_hypotheses)]
+    return np.concatenate([np.asarray(extra, dtype=float).reshape(-1, 3),
+                           steps.take(kept, axis=0)])
 
 
 def prior_innovation(information: np.ndarray, step: np.ndarray, prior: Prior,
@@ -976,7 +1015,7 @@ def prior_innovation(information: np.ndarray, step: np.ndarray, prior: Prior,
     :return: the chi-square
     """
     away = np.asarray(step, dtype=float) - prior.step
-    away[2] = float(wrap_angle(away[2]))
+    away[2] = _wrapped(away[2])
     weighted = np.linalg.solve(prior.covariance, away)
     scale = np.diag([config.degenerate_sigma_m, config.degenerate_sigma_m,
                      config.degenerate_sigma_rad])
@@ -1021,7 +1060,7 @@ def _with_prior(previous: Landmarks, current: Landmarks, prior: Prior, config: O
         return None, False
     prior_information = np.linalg.inv(prior.covariance)
     away = step - prior.step
-    away[2] = float(wrap_angle(away[2]))
+    away[2] = _wrapped(away[2])
     chi2 += float(away @ prior_information @ away)
     dof = 2 * matched
     if (chi2 > chi2_quantile(config.consistency_probability, dof)
@@ -1118,13 +1157,17 @@ def _estimate(previous: Landmarks, current: Landmarks, prior_step: np.ndarray,
     step, corners, lines = _search(previous, current, steps, prior_step, prior_covariance,
                                    config, fused, kernels)
     matched = len(corners) + len(lines)
-    reinit = StepEstimate(prior_step.copy(), np.diag(
-        [config.reinit_sigma_m ** 2, config.reinit_sigma_m ** 2, config.reinit_sigma_rad ** 2])
-        + prior_covariance, 'reinitialized', len(corners), len(lines))
+
+    def reinit() -> StepEstimate:
+        return StepEstimate(prior_step.copy(), np.diag(
+            [config.reinit_sigma_m ** 2, config.reinit_sigma_m ** 2,
+             config.reinit_sigma_rad ** 2]) + prior_covariance, 'reinitialized', len(corners),
+            len(lines))
+
     if not matched:
         # Landmarks on both sides that nothing associates: a kidnap or another scene; a scan
         # or two of them is only too little to say.
-        return reinit if min(landmarks_prev, landmarks_cur) >= config.min_matches else (
+        return reinit() if min(landmarks_prev, landmarks_cur) >= config.min_matches else (
             StepEstimate(prior_step.copy(), prior_covariance.copy(), 'prior'))
     step, information, chi2 = _fit(kernels, previous, current, step, corners, lines)
     dof = 2 * matched - 3
@@ -1135,17 +1178,17 @@ def _estimate(previous: Landmarks, current: Landmarks, prior_step: np.ndarray,
                                        (prior_step, prior_covariance))
         prior_information = np.linalg.inv(prior_covariance)
         difference = step - prior_step
-        difference[2] = float(wrap_angle(difference[2]))
+        difference[2] = _wrapped(difference[2])
         chi2 += float(difference @ prior_information @ difference)
         information = information + prior_information
         dof += 3
     if not np.isfinite(step).all() or (dof > 0 and chi2 > chi2_quantile(
             config.consistency_probability, dof)):
-        return reinit
+        return reinit()
     covariance = np.linalg.inv(information)
     covariance = 0.5 * (covariance + covariance.T)
     if not np.isfinite(covariance).all():
-        return reinit
+        return reinit()
     return StepEstimate(step, covariance, status, len(corners), len(lines),
                         chi2 / dof if dof > 0 else math.nan,
                         pairs=(tuple(corners), tuple(lines)))
@@ -1336,11 +1379,13 @@ class Odometry:
         if self.config.map_memory_scans > 0:
             return self._update_map(stamp_s, dt_s, landmarks, wheel, prior_step,
                                     prior_covariance)
-        # The priors of the scan's pose in the keyframe's frame: the last one's, one step on.
-        prior_relative, prior_relative_covariance = self._relative(prior_step, prior_covariance)
         if self._reference is None:
             estimate = StepEstimate(np.zeros(3), np.zeros((3, 3)), 'prior')
         else:
+            # The priors of the scan's pose in the keyframe's frame: the last one's, one step
+            # on.
+            prior_relative, prior_relative_covariance = self._relative(prior_step,
+                                                                       prior_covariance)
             wheel_relative = None if wheel is None else Prior(
                 *self._relative(wheel.step, wheel.covariance))
             estimate = estimate_step(self._reference, landmarks, prior_relative,
@@ -1349,9 +1394,6 @@ class Odometry:
         if estimate.prior_source == PRIOR_SOURCES[1] and wheel is not None:
             prior_step = wheel.step
         matched = estimate.status in ('tracking', 'degenerate')
-        # The step from the last scan: last^-1 (+) relative.
-        step = compose(inverse(self._last), estimate.step)
-        step_covariance = self._step_covariance(estimate, wheel)
         if not matched:
             # The prior or a reinitialization: its covariance is the step's own.
             step = self._unmatched(estimate, prior_step)
@@ -1363,6 +1405,9 @@ class Odometry:
             self.pose_covariance = (by_pose @ self.pose_covariance @ by_pose.T
                                     + by_step @ step_covariance @ by_step.T)
         else:
+            # The step from the last scan: last^-1 (+) relative.
+            step = compose(inverse(self._last), estimate.step)
+            step_covariance = self._step_covariance(estimate, wheel)
             by_pose, by_step = compose_jacobians(self._reference_pose, estimate.step)
             self.pose = compose(self._reference_pose, estimate.step)
             self.pose_covariance = (by_pose @ self._reference_covariance @ by_pose.T

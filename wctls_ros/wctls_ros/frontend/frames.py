@@ -60,6 +60,10 @@ def wrap_angle(angle):
     :param angle: angles, rad (any shape)
     :return: the same angles in (-pi, pi]
     """
+    if isinstance(angle, float):
+        # One angle in Python floats, the same value: numpy's remainder of floats and Python's
+        # are one algorithm (fmod, then the divisor's sign), without numpy's cost per call.
+        return math.pi - (math.pi - angle) % (2.0 * math.pi)
     return np.pi - np.mod(np.pi - angle, 2 * np.pi)
 
 

@@ -274,16 +274,6 @@ class OdometryUpdate:
     prior_rejected: bool = False
 
 
-def _wrapped(angle: float) -> float:
-    """
-    Return :func:`.frames.wrap_angle` of one angle in Python floats, rad: the same value.
-
-    numpy's remainder of floats and Python's are one algorithm (fmod, then the divisor's sign),
-    without numpy's cost per call.
-    """
-    return math.pi - (math.pi - angle) % (2.0 * math.pi)
-
-
 def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """
     Return the SE(2) composition a (+) b: b given in a's frame, expressed in a's parent.
@@ -294,7 +284,7 @@ def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """
     cos, sin = math.cos(a[2]), math.sin(a[2])
     return np.array([a[0] + cos * b[0] - sin * b[1], a[1] + sin * b[0] + cos * b[1],
-                     _wrapped(a[2] + b[2])])
+                     wrap_angle(a[2] + b[2])])
 
 
 def compose_jacobians(a: np.ndarray, b: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
@@ -824,7 +814,7 @@ def fit(previous: Landmarks, current: Landmarks, start: np.ndarray, corners, lin
         information, gradient, _, _ = _normal_equations(pairs, step)
         if prior is not None:
             difference = step - prior[0]
-            difference[2] = _wrapped(difference[2])
+            difference[2] = wrap_angle(difference[2])
             gradient = gradient + prior_information @ difference
         try:
             update = -np.linalg.solve(information + prior_information, gradient)
@@ -833,7 +823,7 @@ def fit(previous: Landmarks, current: Landmarks, start: np.ndarray, corners, lin
         if not np.isfinite(update).all():
             break
         step = step + update
-        step[2] = _wrapped(step[2])
+        step[2] = wrap_angle(step[2])
         if np.abs(update).max() < 1e-6:
             break
     information, _, error, weight = _normal_equations(pairs, step)
@@ -948,7 +938,7 @@ def _search(previous: Landmarks, current: Landmarks, steps: np.ndarray, prior_st
             break
         # Hypotheses of one motion from different pairs: refining one of them is enough.
         if any(abs(start[0] - other[0]) + abs(start[1] - other[1]) < SEARCH_SLACK_M
-               and abs(_wrapped(start[2] - other[2])) < SEARCH_SLACK_RAD
+               and abs(wrap_angle(start[2] - other[2])) < SEARCH_SLACK_RAD
                for other in starts):
             continue
         starts.append(start)
@@ -959,7 +949,7 @@ def _search(previous: Landmarks, current: Landmarks, steps: np.ndarray, prior_st
         # Ranked by the landmarks associated less the prior's word (PRIOR_PAIR_CHI2); equal
         # (a symmetric room): the motion the prior expects, then the better fit.
         away = refined - prior_step
-        away[2] = _wrapped(away[2])
+        away[2] = wrap_angle(away[2])
         prior_chi2 = float(away @ np.linalg.solve(prior_covariance, away))
         chi2 = fit_chi2 + prior_chi2 if count else math.inf
         rank = count - prior_chi2 / PRIOR_PAIR_CHI2 if count else -1.0
@@ -1015,7 +1005,7 @@ def prior_innovation(information: np.ndarray, step: np.ndarray, prior: Prior,
     :return: the chi-square
     """
     away = np.asarray(step, dtype=float) - prior.step
-    away[2] = _wrapped(away[2])
+    away[2] = wrap_angle(away[2])
     weighted = np.linalg.solve(prior.covariance, away)
     scale = np.diag([config.degenerate_sigma_m, config.degenerate_sigma_m,
                      config.degenerate_sigma_rad])
@@ -1060,7 +1050,7 @@ def _with_prior(previous: Landmarks, current: Landmarks, prior: Prior, config: O
         return None, False
     prior_information = np.linalg.inv(prior.covariance)
     away = step - prior.step
-    away[2] = _wrapped(away[2])
+    away[2] = wrap_angle(away[2])
     chi2 += float(away @ prior_information @ away)
     dof = 2 * matched
     if (chi2 > chi2_quantile(config.consistency_probability, dof)
@@ -1178,7 +1168,7 @@ def _estimate(previous: Landmarks, current: Landmarks, prior_step: np.ndarray,
                                        (prior_step, prior_covariance))
         prior_information = np.linalg.inv(prior_covariance)
         difference = step - prior_step
-        difference[2] = _wrapped(difference[2])
+        difference[2] = wrap_angle(difference[2])
         chi2 += float(difference @ prior_information @ difference)
         information = information + prior_information
         dof += 3
